@@ -1,0 +1,93 @@
+#include "calib/plate_camera.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "core/error.h"
+
+namespace compose::calib {
+
+void PinholeCamera::ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const {
+  const glm::dvec3 camDir(px - 0.5 * width, -(py - 0.5 * height), -focalPx);
+  origin = position();
+  direction = glm::normalize(glm::dvec3(worldFromCamera * glm::dvec4(camDir, 0.0)));
+}
+
+bool PinholeCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
+  const glm::dvec3 c = glm::dvec3(glm::inverse(worldFromCamera) * glm::dvec4(world, 1.0));
+  if (c.z >= -1e-9) return false;
+  pixel.x = 0.5 * width + focalPx * c.x / -c.z;
+  pixel.y = 0.5 * height - focalPx * c.y / -c.z;
+  return true;
+}
+
+PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif, const CameraOptions& options) {
+  if (width <= 0 || height <= 0) throw Error("camera", "plate has no pixels");
+  if (!(options.height > 0.0) || !std::isfinite(options.height)) {
+    throw Error("camera", "camera height must be positive, got " + std::to_string(options.height));
+  }
+  if (!(std::abs(options.pitchDegrees) < 89.0)) {
+    throw Error("camera", "camera pitch must be within ±89 degrees, got " + std::to_string(options.pitchDegrees));
+  }
+  PinholeCamera cam;
+  cam.width = width;
+  cam.height = height;
+  if (options.focal35mm) {
+    if (!(*options.focal35mm > 0.0) || !std::isfinite(*options.focal35mm)) {
+      throw Error("camera", "focal length must be positive, got " + std::to_string(*options.focal35mm));
+    }
+    cam.focal35mm = *options.focal35mm;
+    cam.focalSource = "--focal35";
+  } else if (exif.focalLength35mm) {
+    cam.focal35mm = *exif.focalLength35mm;
+    cam.focalSource = "EXIF FocalLengthIn35mmFilm";
+  } else {
+    cam.focal35mm = kDefaultFocal35mm;
+    cam.focalSource = "default (no 35 mm equivalent focal length in EXIF)";
+  }
+  const double diagonalPx = std::hypot(double(width), double(height));
+  cam.focalPx = cam.focal35mm / kFullFrameDiagonalMm * diagonalPx;
+  const double pitch = options.pitchDegrees * std::numbers::pi / 180.0;
+  cam.worldFromCamera = glm::translate(glm::dmat4(1.0), glm::dvec3(0.0, options.height, 0.0)) *
+                        glm::rotate(glm::dmat4(1.0), -pitch, glm::dvec3(1.0, 0.0, 0.0));
+  return cam;
+}
+
+glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement, const glm::dvec3& lo,
+                         const glm::dvec3& hi) {
+  const glm::dvec2 p = placement.imagePoint;
+  if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
+    throw Error("camera", "--place must be within [0,1] x [0,1] of the plate, got " + std::to_string(p.x) + "," +
+                              std::to_string(p.y));
+  }
+  if (!(placement.heightFraction > 0.0 && placement.heightFraction <= 10.0)) {
+    throw Error("camera", "--scale must be in (0, 10], got " + std::to_string(placement.heightFraction));
+  }
+  if (!std::isfinite(placement.yawDegrees)) throw Error("camera", "--yaw must be a finite number of degrees");
+  glm::dvec3 origin, dir;
+  camera.ray(p.x * camera.width, p.y * camera.height, origin, dir);
+  if (!(dir.y < -1e-6)) {
+    throw Error("camera", "--place " + std::to_string(p.x) + "," + std::to_string(p.y) +
+                              " is at or above the horizon, so it does not see the ground; choose a lower point"
+                              " or pitch the camera down");
+  }
+  const glm::dvec3 ground = origin + dir * (-origin.y / dir.y);
+  // Depth of the ground point along the optical axis sets the world size of one pixel there.
+  const glm::dvec3 axis = glm::dvec3(camera.worldFromCamera * glm::dvec4(0, 0, -1, 0));
+  const double depth = glm::dot(ground - origin, axis);
+  const double worldHeight = placement.heightFraction * camera.height * depth / camera.focalPx;
+  const double meshHeight = hi.y - lo.y;
+  const double meshSize = std::max({hi.x - lo.x, meshHeight, hi.z - lo.z});
+  COMPOSE_CHECK(meshSize > 0.0);
+  const double scale = worldHeight / (meshHeight > 1e-6 * meshSize ? meshHeight : meshSize);
+  const glm::dvec3 base(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
+  const double yaw = placement.yawDegrees * std::numbers::pi / 180.0;
+  return glm::translate(glm::dmat4(1.0), ground) * glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)) *
+         glm::scale(glm::dmat4(1.0), glm::dvec3(scale)) * glm::translate(glm::dmat4(1.0), -base);
+}
+
+}  // namespace compose::calib

@@ -1,0 +1,283 @@
+#include "pipeline/compose_job.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <numbers>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "composite/composite.h"
+#include "core/error.h"
+#include "ingest/image_io.h"
+#include "lighting/environment.h"
+#include "lighting/lighting.h"
+#include "render/mesh.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+
+const std::vector<std::string>& stageNames() {
+  static const std::vector<std::string> names = {"ingest", "merge",  "stitch",    "color",
+                                                 "precompute", "render", "composite", "output"};
+  return names;
+}
+
+fs::path samplesDirectory() {
+  if (const char* dir = std::getenv("COMPOSE_SAMPLES_DIR"); dir && *dir) return dir;
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return fs::path(xdg) / "compose" / "samples";
+  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "compose" / "samples";
+  return fs::path(".cache") / "compose" / "samples";
+}
+
+fs::path defaultEnvironment() { return samplesDirectory() / "forest.exr"; }
+
+namespace {
+
+fs::path outputBase(const ComposeJob& job) {
+  fs::path base = job.output;
+  std::string ext = base.extension().string();
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".exr" || ext == ".jpg" || ext == ".jpeg" || ext == ".png") base.replace_extension();
+  return base;
+}
+
+fs::path environmentPath(const ComposeJob& job) {
+  return job.environment.empty() ? defaultEnvironment() : job.environment;
+}
+
+// Makes any image RGB: grey is replicated, extra channels (alpha) are dropped.
+Image toRgb(const Image& in) {
+  if (in.channels == 3) return in;
+  Image out(in.width, in.height, 3, {"R", "G", "B"});
+  out.colorSpace = in.colorSpace;
+  for (size_t i = 0; i < in.pixelCount(); ++i) {
+    const float* s = in.pixels.data() + i * size_t(in.channels);
+    float* d = out.pixels.data() + i * 3;
+    if (in.channels < 3) {
+      d[0] = d[1] = d[2] = s[0];
+    } else {
+      d[0] = s[0];
+      d[1] = s[1];
+      d[2] = s[2];
+    }
+  }
+  return out;
+}
+
+bool isHdrFormat(const std::string& format) {
+  return format == "openexr" || format == "hdr" || format == "tiff" || format == "raw";
+}
+
+// Auto exposure: the plate and the environment look at the same kind of place, so the
+// environment's radiance in the directions the camera sees should match the plate's linear
+// values. Returns plate mean / environment mean over the camera's field of view (means of RGB).
+double autoExposure(const Image& plateLinear, const lighting::Environment& env, const calib::PinholeCamera& camera,
+                    const glm::mat3& envFromWorld) {
+  constexpr int kGrid = 64;
+  double plateSum = 0.0, envSum = 0.0;
+  for (int j = 0; j < kGrid; ++j) {
+    for (int i = 0; i < kGrid; ++i) {
+      const double px = (i + 0.5) / kGrid * camera.width, py = (j + 0.5) / kGrid * camera.height;
+      glm::dvec3 origin, dir;
+      camera.ray(px, py, origin, dir);
+      const glm::vec3 L = env.lookup(envFromWorld * glm::vec3(dir));
+      envSum += double(L.x + L.y + L.z);
+      const float* p = plateLinear.at(std::min(int(px), plateLinear.width - 1), std::min(int(py), plateLinear.height - 1));
+      plateSum += double(p[0] + p[1] + p[2]);
+    }
+  }
+  if (!(envSum > 0.0) || !(plateSum > 0.0)) return 1.0;
+  return plateSum / envSum;
+}
+
+class StageTimer {
+ public:
+  explicit StageTimer(StageRecord& record) : record_(record), start_(std::chrono::steady_clock::now()) {}
+  ~StageTimer() {
+    record_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  StageRecord& record_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+StageRecord& stage(std::vector<StageRecord>& stages, const std::string& name) {
+  for (auto& s : stages) {
+    if (s.name == name) return s;
+  }
+  COMPOSE_CHECK(false);
+  return stages.front();
+}
+
+}  // namespace
+
+fs::path exrPathFor(const ComposeJob& job) {
+  fs::path p = outputBase(job);
+  p += ".exr";
+  return p;
+}
+
+fs::path displayPathFor(const ComposeJob& job) {
+  std::string ext = job.output.extension().string();
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  fs::path p = outputBase(job);
+  p += (ext == ".png") ? ".png" : ".jpg";
+  return p;
+}
+
+std::vector<StageRecord> plan(const ComposeJob& job) {
+  const fs::path env = environmentPath(job);
+  std::vector<StageRecord> s;
+  s.push_back({"ingest", true, "read the plate " + job.plate.string() + ", the object " + job.object.string() +
+                                   " and the environment " + env.string()});
+  s.push_back({"merge", false, "the environment is a single HDR image, no exposure bracket to merge"});
+  s.push_back({"stitch", false, "the environment is already a lat-long map, no faces to stitch"});
+  s.push_back({"color", true, "plate and environment to the working space (role scene_linear)"});
+  s.push_back({"precompute", true, "project the environment onto the '" + job.lighting + "' lighting basis"});
+  s.push_back({"render", true, "ray-cast the object with " + std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
+                                   " samples per pixel; no self-shadowing or ground shadow yet"});
+  s.push_back({"composite", true, "premultiplied over, in scene-linear light"});
+  s.push_back({"output", true, "write " + exrPathFor(job).string() + " and " + displayPathFor(job).string()});
+  return s;
+}
+
+ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors, const Progress& progress) {
+  ComposeResult result;
+  result.stages = plan(job);
+  result.exrPath = exrPathFor(job);
+  result.displayPath = displayPathFor(job);
+  const fs::path envPath = environmentPath(job);
+  if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
+    throw Error("render", "--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
+  }
+  if (job.exposureStops && !std::isfinite(*job.exposureStops)) {
+    throw Error("render", "--exposure must be a finite number of stops");
+  }
+
+  // Lighting basis first: a misspelt name should fail before any pixel is read.
+  auto lighting = lighting::createLighting(job.lighting, ParamSet::parse(job.lightingParams, "lighting"));
+
+  // ingest
+  ingest::LoadedImage plate, env;
+  render::Mesh mesh;
+  {
+    StageTimer t(stage(result.stages, "ingest"));
+    if (job.environment.empty() && !fs::exists(envPath)) {
+      throw Error("ingest", "no --env given and the sample environment is missing; run samples/fetch.sh", envPath);
+    }
+    plate = ingest::readImage(job.plate, "ingest");
+    env = ingest::readImage(envPath, "ingest");
+    mesh = render::loadMesh(job.object);
+    report(progress, "ingest", 1.0);
+  }
+  result.width = plate.image.width;
+  result.height = plate.image.height;
+  if (!mesh.normalsFromFile) result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
+  if (!isHdrFormat(env.info.format)) {
+    result.notes.push_back("the environment is a " + env.info.format +
+                           " file, not HDR: bright light sources are clipped and the lighting will be too dark");
+  }
+
+  // color
+  Image plateLinear = toRgb(plate.image);
+  Image envLinear = toRgb(env.image);
+  const std::string working = colors.workingSpace();
+  {
+    StageTimer t(stage(result.stages, "color"));
+    plateLinear.colorSpace = job.plateSpace.empty()
+                                 ? colors.inputSpaceFor(job.plate, plate.info.fileColorSpace)
+                                 : colors.resolve(job.plateSpace, "--plate-space");
+    envLinear.colorSpace = job.environmentSpace.empty() ? colors.inputSpaceFor(envPath, env.info.fileColorSpace)
+                                                        : colors.resolve(job.environmentSpace, "--env-space");
+    result.notes.push_back("plate read as '" + plateLinear.colorSpace + "', environment as '" + envLinear.colorSpace +
+                           "', working space '" + working + "' (config: " + colors.source() + ")");
+    colors.convert(plateLinear, working);
+    colors.convert(envLinear, working);
+  }
+
+  // precompute
+  lighting::Environment environment;
+  {
+    StageTimer t(stage(result.stages, "precompute"));
+    lighting::SanitizeReport sanitized;
+    environment = lighting::Environment::fromLatLong(envLinear, envPath, &sanitized);
+    if (sanitized.negativeTexels > 0) {
+      result.notes.push_back(std::to_string(sanitized.negativeTexels) +
+                             " environment texels had negative values (as low as " +
+                             std::to_string(sanitized.mostNegative) + "): clamped to 0");
+    }
+    lighting->project(environment, progress);
+    stage(result.stages, "precompute").reason += ": " + lighting->describe();
+  }
+
+  // render
+  render::RenderOutput rendered;
+  {
+    StageTimer t(stage(result.stages, "render"));
+    const calib::PinholeCamera camera =
+        calib::plateCamera(plateLinear.width, plateLinear.height, plate.info, job.camera);
+    result.notes.push_back("camera: " + std::to_string(int(std::lround(camera.focal35mm))) + " mm equivalent, " +
+                           camera.focalSource);
+    const glm::dmat4 worldFromObject =
+        calib::placeOnGround(camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+    render::RenderSettings settings;
+    settings.samplesPerAxis = job.samplesPerAxis;
+    settings.albedo = job.albedo;
+    const double yaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
+    settings.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)));
+    if (job.exposureStops) {
+      settings.exposure = float(std::exp2(*job.exposureStops));
+    } else {
+      const double scale = autoExposure(plateLinear, environment, camera, settings.envFromWorld);
+      settings.exposure = float(scale);
+      char line[160];
+      std::snprintf(line, sizeof line, "auto exposure: %+.2f stops (environment matched to the plate's mean)",
+                    std::log2(scale));
+      result.notes.push_back(line);
+    }
+    result.exposure = settings.exposure;
+    rendered = render::renderDiffuse(mesh, worldFromObject, camera, *lighting, settings, progress);
+    rendered.beauty.colorSpace = working;
+  }
+
+  // composite
+  Image composite;
+  {
+    StageTimer t(stage(result.stages, "composite"));
+    composite = composite::over(rendered.beauty, plateLinear);
+  }
+
+  // output: RGBA composite (opaque), the object layer, the normal AOV.
+  {
+    StageTimer t(stage(result.stages, "output"));
+    Image exr(composite.width, composite.height, 11,
+              {"R", "G", "B", "A", "object.R", "object.G", "object.B", "object.A", "N.X", "N.Y", "N.Z"});
+    exr.colorSpace = working;
+    for (size_t i = 0; i < composite.pixelCount(); ++i) {
+      float* d = exr.pixels.data() + i * 11;
+      const float* c = composite.pixels.data() + i * 3;
+      const float* b = rendered.beauty.pixels.data() + i * 4;
+      const float* n = rendered.normals.pixels.data() + i * 3;
+      d[0] = c[0], d[1] = c[1], d[2] = c[2], d[3] = 1.0f;
+      d[4] = b[0], d[5] = b[1], d[6] = b[2], d[7] = b[3];
+      d[8] = n[0], d[9] = n[1], d[10] = n[2];
+      result.objectPixels += b[3];
+    }
+    ingest::WriteOptions exrOptions;
+    exrOptions.depth = ingest::WriteOptions::Depth::Half;
+    exrOptions.alphaChannel = 3;
+    const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
+    const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
+    Image shown = colors.toDisplay(composite, display, view);
+    ingest::writeImage(result.exrPath, exr, exrOptions);
+    ingest::writeImage(result.displayPath, shown, {});
+    report(progress, "output", 1.0);
+  }
+  return result;
+}
+
+}  // namespace compose::pipeline

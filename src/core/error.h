@@ -1,0 +1,51 @@
+// Errors in compose come in two kinds (see the stage contract in pipeline/compose_job.h):
+//
+//  * A broken invariant is a bug. It is checked with COMPOSE_CHECK, which prints the failed
+//    condition with its source location and aborts.
+//  * Bad user input or bad data is not a bug. It is reported by throwing compose::Error, which
+//    carries the stage that noticed it and the file involved (if any). Only main() catches it and
+//    prints `compose: error: <stage>: <what> (<file>)` with a non-zero exit status.
+#pragma once
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+
+namespace compose {
+
+class Error : public std::runtime_error {
+ public:
+  // `stage` is a short lower-case name ("ingest", "color", "lighting", "render", "composite",
+  // "cli", ...). `file` may be empty when no file is involved.
+  Error(std::string stage, const std::string& what, std::filesystem::path file = {})
+      : std::runtime_error(what), stage_(std::move(stage)), file_(std::move(file)) {}
+
+  const std::string& stage() const { return stage_; }
+  const std::filesystem::path& file() const { return file_; }
+
+  // "<stage>: <what> (<file>)", the form main() prints after "compose: error: ".
+  std::string describe() const {
+    std::string s = stage_.empty() ? std::string(what()) : stage_ + ": " + what();
+    if (!file_.empty()) s += " (" + file_.string() + ")";
+    return s;
+  }
+
+ private:
+  std::string stage_;
+  std::filesystem::path file_;
+};
+
+namespace detail {
+[[noreturn]] inline void checkFailed(const char* cond, const char* file, int line) {
+  std::fprintf(stderr, "compose: internal error: check failed: %s at %s:%d\n", cond, file, line);
+  std::abort();
+}
+}  // namespace detail
+
+}  // namespace compose
+
+// Invariant check, active in every build type.
+#define COMPOSE_CHECK(cond) \
+  ((cond) ? (void)0 : ::compose::detail::checkFailed(#cond, __FILE__, __LINE__))

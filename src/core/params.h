@@ -1,0 +1,101 @@
+// ParamSet: named parameters for things created by name (lighting bases, later stages), in the
+// manner of pbrt's ParameterDictionary. Values arrive as text ("order=2,window=hanning" on the
+// command line); a creator reads what it understands, and unusedNames() reports the rest so that a
+// misspelt parameter is an error instead of being silently ignored.
+#pragma once
+
+#include <charconv>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+
+namespace compose {
+
+class ParamSet {
+ public:
+  ParamSet() = default;
+
+  // Parses "key=value,key=value". Throws compose::Error (stage `stage`) on malformed text.
+  static ParamSet parse(const std::string& text, const std::string& stage) {
+    ParamSet p;
+    size_t start = 0;
+    while (start < text.size()) {
+      size_t end = text.find(',', start);
+      if (end == std::string::npos) end = text.size();
+      const std::string item = text.substr(start, end - start);
+      const size_t eq = item.find('=');
+      if (eq == std::string::npos || eq == 0) {
+        throw Error(stage, "malformed parameter '" + item + "', expected key=value");
+      }
+      p.set(item.substr(0, eq), item.substr(eq + 1));
+      start = end + 1;
+    }
+    return p;
+  }
+
+  void set(const std::string& key, const std::string& value) { values_[key] = Entry{value, false}; }
+  bool has(const std::string& key) const { return values_.count(key) != 0; }
+
+  int getInt(const std::string& key, int fallback, const std::string& stage) {
+    auto it = values_.find(key);
+    if (it == values_.end()) return fallback;
+    it->second.used = true;
+    int v = 0;
+    const std::string& s = it->second.value;
+    auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || ptr != s.data() + s.size()) {
+      throw Error(stage, "parameter " + key + "='" + s + "' is not an integer");
+    }
+    return v;
+  }
+
+  double getDouble(const std::string& key, double fallback, const std::string& stage) {
+    auto it = values_.find(key);
+    if (it == values_.end()) return fallback;
+    it->second.used = true;
+    const std::string& s = it->second.value;
+    try {
+      size_t n = 0;
+      double v = std::stod(s, &n);
+      if (n != s.size()) throw std::invalid_argument(s);
+      return v;
+    } catch (const std::exception&) {
+      throw Error(stage, "parameter " + key + "='" + s + "' is not a number");
+    }
+  }
+
+  std::string getString(const std::string& key, const std::string& fallback) {
+    auto it = values_.find(key);
+    if (it == values_.end()) return fallback;
+    it->second.used = true;
+    return it->second.value;
+  }
+
+  std::vector<std::string> unusedNames() const {
+    std::vector<std::string> out;
+    for (const auto& [k, e] : values_) {
+      if (!e.used) out.push_back(k);
+    }
+    return out;
+  }
+
+  // Throws if any parameter was never read by whoever consumed this set.
+  void requireAllUsed(const std::string& stage, const std::string& consumer) const {
+    const auto unused = unusedNames();
+    if (unused.empty()) return;
+    std::string list;
+    for (const auto& k : unused) list += (list.empty() ? "" : ", ") + k;
+    throw Error(stage, consumer + " does not take parameter(s): " + list);
+  }
+
+ private:
+  struct Entry {
+    std::string value;
+    bool used = false;
+  };
+  std::map<std::string, Entry> values_;
+};
+
+}  // namespace compose

@@ -1,0 +1,55 @@
+// Image input and output over OpenImageIO.
+//
+// readImage() decodes any format OpenImageIO can read (JPEG, PNG, TIFF, EXR, HDR, camera RAW where
+// the plugin is present) to float, applies the EXIF orientation so that pixel (0, 0) is the top
+// left of the picture as a person sees it, and returns the capture metadata that later stages need
+// (exposure for merging, focal length for the camera). Values are returned as stored: an 8-bit
+// sRGB JPEG comes back as encoded values in [0, 1], tagged with the colour space the file declares.
+//
+// writeImage() never leaves a half-written file at the destination: it writes a temporary file in
+// the same folder and renames it into place only when the write has succeeded.
+//
+// Errors (missing file, undecodable data, unwritable folder) throw compose::Error with stage
+// "ingest" (or "output" for writes) and the file name.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "core/image.h"
+
+namespace compose::ingest {
+
+// Capture metadata from EXIF (and the file header). Absent fields are empty.
+struct CaptureInfo {
+  std::optional<double> exposureTime;     // seconds
+  std::optional<double> fNumber;
+  std::optional<double> iso;
+  std::optional<double> focalLengthMm;    // true focal length
+  std::optional<double> focalLength35mm;  // 35 mm equivalent focal length
+  int orientation = 1;                    // EXIF orientation of the file (already applied)
+  std::string cameraMake, cameraModel;
+  std::string fileColorSpace;             // colour space the file or its reader declares
+  std::string format;                     // reader name, e.g. "jpeg", "openexr"
+  int fileWidth = 0, fileHeight = 0;      // as stored, before orientation
+};
+
+struct LoadedImage {
+  Image image;  // float, channels as stored (1-4 or more), orientation applied
+  CaptureInfo info;
+};
+
+// Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.
+LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest");
+
+struct WriteOptions {
+  enum class Depth { Auto, UInt8, Half, Float } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
+  int jpegQuality = 95;
+  int alphaChannel = -1;  // index of the alpha channel, or -1
+};
+
+// Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
+void writeImage(const std::filesystem::path& path, const Image& image, const WriteOptions& options = {});
+
+}  // namespace compose::ingest

@@ -1,0 +1,122 @@
+#include "lighting/environment.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+#include "core/error.h"
+
+namespace compose::lighting {
+
+namespace {
+constexpr double kPi = std::numbers::pi;
+}
+
+void Environment::buildTables() {
+  rowSolidAngle_.resize(size_t(height_));
+  sinLat_.resize(size_t(height_));
+  cosLat_.resize(size_t(height_));
+  const double dPhi = 2.0 * kPi / width_;
+  for (int y = 0; y < height_; ++y) {
+    const double top = kPi * (0.5 - double(y) / height_);
+    const double bottom = kPi * (0.5 - double(y + 1) / height_);
+    const double centre = kPi * (0.5 - (y + 0.5) / height_);
+    rowSolidAngle_[size_t(y)] = dPhi * (std::sin(top) - std::sin(bottom));
+    sinLat_[size_t(y)] = float(std::sin(centre));
+    cosLat_[size_t(y)] = float(std::cos(centre));
+  }
+  sinLon_.resize(size_t(width_));
+  cosLon_.resize(size_t(width_));
+  for (int x = 0; x < width_; ++x) {
+    const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / width_);
+    sinLon_[size_t(x)] = float(std::sin(lon));
+    cosLon_[size_t(x)] = float(std::cos(lon));
+  }
+}
+
+glm::vec3 Environment::direction(int x, int y) const {
+  const float cl = cosLat_[size_t(y)];
+  return {sinLon_[size_t(x)] * cl, sinLat_[size_t(y)], cosLon_[size_t(x)] * cl};
+}
+
+Environment Environment::fromLatLong(const Image& image, const std::filesystem::path& file,
+                                     SanitizeReport* report) {
+  if (image.channels < 3) {
+    throw Error("lighting", "environment needs RGB channels, the image has " + std::to_string(image.channels), file);
+  }
+  if (image.height < 2 || image.width != 2 * image.height) {
+    throw Error("lighting",
+                "not a lat-long (equirectangular) map: " + std::to_string(image.width) + "x" +
+                    std::to_string(image.height) + ", expected width = 2 x height",
+                file);
+  }
+  Environment env;
+  env.width_ = image.width;
+  env.height_ = image.height;
+  env.colorSpace_ = image.colorSpace;
+  env.texels_.resize(image.pixelCount() * 3);
+  SanitizeReport local;
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      const float* src = image.at(x, y);
+      float* dst = env.texels_.data() + (size_t(y) * size_t(image.width) + size_t(x)) * 3;
+      bool negative = false;
+      for (int c = 0; c < 3; ++c) {
+        float v = src[c];
+        if (!std::isfinite(v)) {
+          throw Error("lighting",
+                      std::string(std::isnan(v) ? "NaN" : "infinite") + " radiance at texel (" +
+                          std::to_string(x) + ", " + std::to_string(y) + ")",
+                      file);
+        }
+        if (v < 0.0f) {
+          local.mostNegative = std::min(local.mostNegative, v);
+          negative = true;
+          v = 0.0f;
+        }
+        dst[c] = v;
+      }
+      if (negative) ++local.negativeTexels;
+    }
+  }
+  if (report) *report = local;
+  env.buildTables();
+  return env;
+}
+
+Environment Environment::constant(glm::vec3 value, int width) {
+  COMPOSE_CHECK(width >= 2 && width % 2 == 0);
+  Environment env;
+  env.width_ = width;
+  env.height_ = width / 2;
+  env.texels_.resize(size_t(env.width_) * size_t(env.height_) * 3);
+  for (size_t i = 0; i < env.texels_.size(); i += 3) {
+    env.texels_[i] = value.x;
+    env.texels_[i + 1] = value.y;
+    env.texels_[i + 2] = value.z;
+  }
+  env.buildTables();
+  return env;
+}
+
+glm::vec3 Environment::lookup(const glm::vec3& d) const {
+  const double len = std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
+  COMPOSE_CHECK(len > 0.0);
+  const double lat = std::asin(std::clamp(d.y / len, -1.0, 1.0));
+  const double lon = std::atan2(double(d.x), double(d.z));
+  // Continuous coordinates with texel centres at integer + 0.5.
+  const double u = (1.0 - lon / kPi) * 0.5 * width_ - 0.5;
+  const double v = (0.5 - lat / kPi) * height_ - 0.5;
+  const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
+  const float fx = float(u - x0), fy = float(v - y0);
+  auto texel = [&](int x, int y) {
+    x = ((x % width_) + width_) % width_;
+    y = std::clamp(y, 0, height_ - 1);
+    return radiance(x, y);
+  };
+  return (texel(x0, y0) * (1 - fx) + texel(x0 + 1, y0) * fx) * (1 - fy) +
+         (texel(x0, y0 + 1) * (1 - fx) + texel(x0 + 1, y0 + 1) * fx) * fy;
+}
+
+}  // namespace compose::lighting

@@ -1,0 +1,73 @@
+// Environment: distant incoming radiance L(ω) stored as a lat-long (equirectangular) map.
+//
+// Conventions (written down once, here; tests/lighting/environment_test.cpp pins them with a map
+// that has one bright texel):
+//  * World frame: right-handed, +Y up, the camera looks along -Z.
+//  * Axes follow OpenEXR's Imf::LatLongMap: longitude φ = atan2(x, z), latitude λ = asin(y);
+//    direction(λ, φ) = (sin φ cos λ, sin λ, cos φ cos λ). The top row is straight up (+Y), the
+//    centre column looks along +Z, and longitude decreases from +π at the left edge to -π at the
+//    right edge (so +X is a quarter of the way in from the left).
+//  * Texel (x, y) covers φ ∈ π(1 - 2[x, x+1]/W) and λ ∈ π(1/2 - [y, y+1]/H); its value is the
+//    mean radiance over that cell and its direction is the cell centre. The solid angle of a
+//    texel is exact: Δφ (sin λ_top - sin λ_bottom); the sum over the map is 4π.
+//
+// Values are radiance (W sr^-1 m^-2 or any consistent scale), RGB, in the working colour space.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "core/image.h"
+
+namespace compose::lighting {
+
+// What fromLatLong() did to make the data usable.
+struct SanitizeReport {
+  int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
+  float mostNegative = 0.0f;
+};
+
+class Environment {
+ public:
+  Environment() = default;
+
+  // Takes an RGB (or RGBA: alpha is dropped) lat-long image of radiance. The width must be twice
+  // the height. NaN or infinite texels are rejected (compose::Error naming `file` and the first bad
+  // texel); negative values, which lossy HDR codecs produce near zero, are clamped to 0 and
+  // counted in `report`.
+  static Environment fromLatLong(const Image& image, const std::filesystem::path& file = {},
+                                 SanitizeReport* report = nullptr);
+
+  // A constant environment of radiance `value` (the white-furnace test).
+  static Environment constant(glm::vec3 value, int width = 64);
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  const std::string& colorSpace() const { return colorSpace_; }
+
+  glm::vec3 radiance(int x, int y) const {
+    const float* p = texels_.data() + (size_t(y) * size_t(width_) + size_t(x)) * 3;
+    return {p[0], p[1], p[2]};
+  }
+  // Direction of the centre of texel (x, y).
+  glm::vec3 direction(int x, int y) const;
+  // Solid angle of any texel of row y (all texels of a row have the same).
+  double rowSolidAngle(int y) const { return rowSolidAngle_[size_t(y)]; }
+
+  // Direction → (continuous) texel coordinates, and a bilinear radiance lookup with wrap-around in
+  // longitude. Used by sampling bases; not prefiltered.
+  glm::vec3 lookup(const glm::vec3& direction) const;
+
+ private:
+  int width_ = 0, height_ = 0;
+  std::vector<float> texels_;  // RGB, row-major
+  std::vector<double> rowSolidAngle_;
+  std::vector<float> sinLon_, cosLon_, sinLat_, cosLat_;
+  std::string colorSpace_;
+  void buildTables();
+};
+
+}  // namespace compose::lighting

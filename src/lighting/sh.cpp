@@ -1,0 +1,151 @@
+#include "lighting/sh.h"
+
+#include <cmath>
+#include <numbers>
+#include <string>
+
+#include "core/error.h"
+#include "core/parallel.h"
+
+namespace compose::lighting {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// Normalisation K_lm = sqrt((2l+1)/(4π) (l-m)!/(l+m)!), with the √2 of the real basis folded in
+// for m > 0. Computed once.
+struct ShNorm {
+  std::array<double, shCount(kMaxShOrder)> k{};
+  ShNorm() {
+    for (int l = 0; l <= kMaxShOrder; ++l) {
+      for (int m = 0; m <= l; ++m) {
+        double ratio = 1.0;  // (l-m)!/(l+m)!
+        for (int i = l - m + 1; i <= l + m; ++i) ratio /= i;
+        double v = std::sqrt((2 * l + 1) / (4 * kPi) * ratio);
+        if (m > 0) v *= std::numbers::sqrt2;
+        k[size_t(l * (l + 1) + m)] = v;
+      }
+    }
+  }
+};
+const ShNorm& shNorm() {
+  static const ShNorm norm;
+  return norm;
+}
+
+// Y_lm through the "reduced" associated Legendre functions Q_l^m(z) = P_l^m(z) / sin^m θ and
+// (x + iy)^m = sin^m θ e^{imφ}, which avoids trigonometry and the pole singularity.
+template <class T>
+void evalShImpl(int order, T xs, T ys, T zs, T* out) {
+  COMPOSE_CHECK(order >= 0 && order <= kMaxShOrder);
+  const auto& k = shNorm().k;
+  T cm = 1, sm = 0;     // Re, Im of (x + iy)^m
+  T qmm = 1;            // Q_m^m = (2m-1)!!
+  for (int m = 0; m <= order; ++m) {
+    if (m > 0) {
+      const T c = cm * xs - sm * ys;
+      sm = cm * ys + sm * xs;
+      cm = c;
+      qmm *= T(2 * m - 1);
+    }
+    T q2 = 0, q1 = qmm;  // Q_{l-2}^m, Q_{l-1}^m
+    for (int l = m; l <= order; ++l) {
+      T q;
+      if (l == m) {
+        q = qmm;
+      } else if (l == m + 1) {
+        q = T(2 * m + 1) * zs * qmm;
+      } else {
+        q = (T(2 * l - 1) * zs * q1 - T(l + m - 1) * q2) / T(l - m);
+      }
+      if (l > m) {
+        q2 = q1;
+        q1 = q;
+      }
+      const int base = l * (l + 1);
+      const T kq = T(k[size_t(base + m)]) * q;
+      if (m == 0) {
+        out[base] = kq;
+      } else {
+        out[base + m] = kq * cm;
+        out[base - m] = kq * sm;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+// World (x, y, z) → SH frame (z_w, x_w, y_w): the pole is world +Y.
+void evalSh(int order, const glm::vec3& d, float* out) { evalShImpl<float>(order, d.z, d.x, d.y, out); }
+void evalSh(int order, const glm::dvec3& d, double* out) { evalShImpl<double>(order, d.z, d.x, d.y, out); }
+
+double shCosineLobe(int l) {
+  if (l == 0) return kPi;
+  if (l == 1) return 2.0 * kPi / 3.0;
+  if (l % 2 == 1) return 0.0;
+  // 2π (-1)^(l/2-1) / ((l+2)(l-1)) · l! / (2^l ((l/2)!)^2)
+  double binom = 1.0;  // l! / ((l/2)!)^2 / 2^l
+  for (int i = 1; i <= l / 2; ++i) binom *= double(l / 2 + i) / double(i) / 4.0;
+  const double sign = ((l / 2 - 1) % 2 == 0) ? 1.0 : -1.0;
+  return 2.0 * kPi * sign / (double(l + 2) * double(l - 1)) * binom;
+}
+
+ShLighting::ShLighting(int order) : order_(order) {
+  if (order < 0 || order > kMaxShOrder) {
+    throw Error("lighting", "sh order must be in 0.." + std::to_string(kMaxShOrder) + ", got " +
+                                std::to_string(order));
+  }
+}
+
+std::string ShLighting::describe() const {
+  return "sh order=" + std::to_string(order_) + " (" + std::to_string(shCount(order_)) +
+         " coefficients/channel)";
+}
+
+void ShLighting::project(const Environment& env, const Progress& progress) {
+  const int count = shCount(order_);
+  const int w = env.width(), h = env.height();
+  // Per-row partial sums, reduced in row order so the result does not depend on scheduling.
+  std::vector<glm::dvec3> rows(size_t(h) * size_t(count), glm::dvec3(0.0));
+  std::atomic<int> done{0};
+  parallelFor(0, h, [&](int64_t y) {
+    std::array<double, shCount(kMaxShOrder)> basis{};
+    glm::dvec3* acc = rows.data() + size_t(y) * size_t(count);
+    const double omega = env.rowSolidAngle(int(y));
+    for (int x = 0; x < w; ++x) {
+      const glm::vec3 L = env.radiance(x, int(y));
+      if (L.x == 0.0f && L.y == 0.0f && L.z == 0.0f) continue;
+      evalSh(order_, glm::dvec3(env.direction(x, int(y))), basis.data());
+      const glm::dvec3 Lw = glm::dvec3(L) * omega;
+      for (int i = 0; i < count; ++i) acc[i] += Lw * basis[size_t(i)];
+    }
+    const int d = ++done;
+    if (d % 64 == 0) report(progress, "lighting", double(d) / h);
+  });
+  radiance_.assign(size_t(count), glm::dvec3(0.0));
+  for (int y = 0; y < h; ++y) {
+    for (int i = 0; i < count; ++i) radiance_[size_t(i)] += rows[size_t(y) * size_t(count) + size_t(i)];
+  }
+  irradiance_.resize(size_t(count));
+  for (int l = 0; l <= order_; ++l) {
+    const double a = shCosineLobe(l);
+    for (int m = -l; m <= l; ++m) {
+      const size_t i = size_t(l * (l + 1) + m);
+      irradiance_[i] = glm::vec3(radiance_[i] * a);
+    }
+  }
+  report(progress, "lighting", 1.0);
+}
+
+glm::vec3 ShLighting::irradiance(const glm::vec3& n) const {
+  COMPOSE_CHECK(!irradiance_.empty());
+  std::array<float, shCount(kMaxShOrder)> basis;
+  evalSh(order_, n, basis.data());
+  glm::vec3 e(0.0f);
+  for (size_t i = 0; i < irradiance_.size(); ++i) e += irradiance_[i] * basis[i];
+  return e;
+}
+
+}  // namespace compose::lighting

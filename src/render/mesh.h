@@ -1,0 +1,35 @@
+// Triangle meshes for rendering: loading, validation, normals.
+//
+// loadMesh() reads Wavefront OBJ (through tinyobjloader; polygons are triangulated). Vertices are
+// split where a position is used with different normals. A mesh without normals, or with
+// normals missing on some faces, gets smooth area-weighted vertex normals; normals of zero length
+// or NaN in the file are an error. Positions must be finite and there must be at least one
+// triangle. Errors throw compose::Error (stage "mesh") naming the file.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+namespace compose::render {
+
+struct Mesh {
+  std::vector<glm::vec3> positions;  // object space
+  std::vector<glm::vec3> normals;    // unit, one per position
+  std::vector<uint32_t> indices;     // three per triangle, counter-clockwise seen from outside
+  bool normalsFromFile = false;      // false: computed by computeVertexNormals()
+
+  size_t triangleCount() const { return indices.size() / 3; }
+  glm::vec3 boundsMin() const;
+  glm::vec3 boundsMax() const;
+};
+
+Mesh loadMesh(const std::filesystem::path& path);
+
+// Smooth vertex normals: the area-weighted mean of the adjacent face normals.
+void computeVertexNormals(Mesh& mesh);
+
+}  // namespace compose::render
