@@ -15,7 +15,7 @@ class ExactLighting final : public DiffuseLighting {
  public:
   std::string name() const override { return "exact"; }
   std::string describe() const override;
-  void project(const Environment& environment, const Progress& progress) override;
+  void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
   int coefficientsPerChannel() const override { return int(directions_.size()); }
   size_t floatsStored() const override { return directions_.size() * 6; }

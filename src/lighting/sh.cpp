@@ -1,5 +1,7 @@
 #include "lighting/sh.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -104,22 +106,74 @@ std::string ShLighting::describe() const {
          " coefficients/channel)";
 }
 
+// Projection integrates each basis function over each texel instead of point-sampling it at the
+// centre. With the pole on +Y, the SH azimuth is the map's longitude and cos θ = sin(latitude), so
+// Y_lm = N_lm P_l^m(z) {cos, sin}(mφ) separates over a texel's z-interval and φ-interval:
+//   ∫_texel Y_lm dω = N_lm ∫_{z0}^{z1} P_l^m(z) dz · ∫_{φ0}^{φ1} {cos, sin}(mφ) dφ.
+// The φ integral is closed-form; the z integral uses 5-point Gauss–Legendre per row (exact for
+// the polynomial m-even terms up to band 9). A texel's value is the mean radiance over the texel
+// (box filter), so L_lm = Σ_t L_t ∫_t Y_lm dω is the exact projection of that piecewise-constant
+// map: a constant map projects to band 0 alone and the white furnace gives π to float precision.
 void ShLighting::project(const Environment& env, const Progress& progress) {
   const int count = shCount(order_);
   const int w = env.width(), h = env.height();
-  // Per-row partial sums, reduced in row order so the result does not depend on scheduling.
+
+  // Per column: ∫ cos(mφ) dφ and ∫ sin(mφ) dφ over the texel, m = 0..order.
+  const int mCount = order_ + 1;
+  std::vector<double> colCos(size_t(w) * size_t(mCount)), colSin(size_t(w) * size_t(mCount));
+  for (int x = 0; x < w; ++x) {
+    const double left = kPi * (1.0 - 2.0 * x / w), right = kPi * (1.0 - 2.0 * (x + 1) / w);
+    colCos[size_t(x * mCount)] = left - right;
+    colSin[size_t(x * mCount)] = 0.0;
+    for (int m = 1; m <= order_; ++m) {
+      colCos[size_t(x * mCount + m)] = (std::sin(m * left) - std::sin(m * right)) / m;
+      colSin[size_t(x * mCount + m)] = (std::cos(m * right) - std::cos(m * left)) / m;
+    }
+  }
+
+  // Per row: Σ_x L(x, y) ∫cos / ∫sin, then times N_lm ∫P_l^m dz; summed in row order afterwards
+  // so that the result does not depend on scheduling.
   std::vector<glm::dvec3> rows(size_t(h) * size_t(count), glm::dvec3(0.0));
   std::atomic<int> done{0};
-  parallelFor(0, h, [&](int64_t y) {
-    std::array<double, shCount(kMaxShOrder)> basis{};
-    glm::dvec3* acc = rows.data() + size_t(y) * size_t(count);
-    const double omega = env.rowSolidAngle(int(y));
+  parallelFor(0, h, [&](int64_t yy) {
+    const int y = int(yy);
+    std::array<glm::dvec3, kMaxShOrder + 1> sc{}, ss{};
     for (int x = 0; x < w; ++x) {
-      const glm::vec3 L = env.radiance(x, int(y));
-      if (L.x == 0.0f && L.y == 0.0f && L.z == 0.0f) continue;
-      evalSh(order_, glm::dvec3(env.direction(x, int(y))), basis.data());
-      const glm::dvec3 Lw = glm::dvec3(L) * omega;
-      for (int i = 0; i < count; ++i) acc[i] += Lw * basis[size_t(i)];
+      const glm::dvec3 L(env.radiance(x, y));
+      if (L.x == 0.0 && L.y == 0.0 && L.z == 0.0) continue;
+      for (int m = 0; m <= order_; ++m) {
+        sc[size_t(m)] += L * colCos[size_t(x * mCount + m)];
+        ss[size_t(m)] += L * colSin[size_t(x * mCount + m)];
+      }
+    }
+    // 5-point Gauss–Legendre on [z0, z1].
+    static constexpr double kNodes[5] = {0.0, -0.5384693101056831, 0.5384693101056831, -0.9061798459386640,
+                                         0.9061798459386640};
+    static constexpr double kWeights[5] = {0.5688888888888889, 0.4786286704993665, 0.4786286704993665,
+                                           0.2369268850561891, 0.2369268850561891};
+    const double z1 = std::sin(kPi * (0.5 - double(y) / h)), z0 = std::sin(kPi * (0.5 - double(y + 1) / h));
+    std::array<double, shCount(kMaxShOrder)> zInt{};
+    std::array<double, shCount(kMaxShOrder)> basis{};
+    for (int g = 0; g < 5; ++g) {
+      const double z = 0.5 * (z0 + z1) + 0.5 * (z1 - z0) * kNodes[g];
+      const double wg = 0.5 * (z1 - z0) * kWeights[g];
+      // (x_sh, y_sh, z_sh) = (sin θ, 0, z): φ = 0, so Y_lm for m >= 0 is N_lm P_l^m(z) and the
+      // m < 0 entries vanish; divide N back out below.
+      const double st = std::sqrt(std::max(0.0, 1.0 - z * z));
+      evalSh(order_, glm::dvec3(0.0, z, st), basis.data());  // world (x, y, z) = (y_sh, z_sh, x_sh)
+      for (int i = 0; i < count; ++i) zInt[size_t(i)] += wg * basis[size_t(i)];
+    }
+    glm::dvec3* acc = rows.data() + size_t(y) * size_t(count);
+    for (int l = 0; l <= order_; ++l) {
+      for (int m = 0; m <= l; ++m) {
+        const double pz = zInt[size_t(l * (l + 1) + m)];  // N_lm ∫ P_l^m dz (N includes the √2)
+        if (m == 0) {
+          acc[l * (l + 1)] += sc[0] * pz;
+        } else {
+          acc[l * (l + 1) + m] += sc[size_t(m)] * pz;
+          acc[l * (l + 1) - m] += ss[size_t(m)] * pz;
+        }
+      }
     }
     const int d = ++done;
     if (d % 64 == 0) report(progress, "lighting", double(d) / h);

@@ -29,7 +29,7 @@ class ShLighting final : public DiffuseLighting {
 
   std::string name() const override { return "sh"; }
   std::string describe() const override;
-  void project(const Environment& environment, const Progress& progress) override;
+  void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
   int coefficientsPerChannel() const override { return shCount(order_); }
   size_t floatsStored() const override { return size_t(3 * shCount(order_)); }

@@ -10,8 +10,8 @@
 //
 // Numerical contract
 //   * TchebichefBasis is accurate at any order: max|T·Tᵀ − I| ≤ 1e-10 for every N ≤ 16384 at full
-//     order (measured: tests/bench/tchebichef_bench.cpp). It does NOT use the textbook recurrence in
-//     n, which loses orthonormality from order ≈ 55 at N = 64 (DESIGN.md §4.1);
+//     order (measured: tests/bench/tchebichef_bench.cpp). It does NOT use the textbook recurrence
+//     in n, which loses orthonormality from order ≈ 55 at N = 64 (DESIGN.md §4.1);
 //     tchebichefNaive() keeps that recurrence only for comparison.
 //   * Values below ~1e-308 (edges of very high orders at large N) are returned as 0 or subnormals.
 //   * Cost: O(N·K) time, K·N doubles plus K·N floats of memory. A full-order N = 16384 basis is
@@ -74,7 +74,8 @@ extern template std::vector<double> tchebichefNaive<double>(int, int);
 extern template std::vector<float> tchebichefNaive<float>(int, int);
 
 // max over all 0 ≤ m, n < order of |Σ_x M(m, x) M(n, x) − δ_mn| for a row-major order×size matrix
-// M, accumulated in double. Costs O(order²·size): about a second at N = K = 2048. Throws
+// M, accumulated in double; +inf if any entry of M·Mᵀ is not finite (the naive recurrence
+// overflows at large N). Costs O(order²·size): about a second at N = K = 2048. Throws
 // std::invalid_argument if m.size() != order·size.
 double orthonormalityError(std::span<const double> m, int order, int size);
 double orthonormalityError(std::span<const float> m, int order, int size);
@@ -105,8 +106,7 @@ std::vector<double> moments2d(const TchebichefBasis& rowBasis, const TchebichefB
                               std::span<const float> image, int order);
 
 // Returns rows×cols samples, row-major, from K×K moments (row-major).
-std::vector<double> reconstruct2d(const TchebichefBasis& rowBasis,
-                                  const TchebichefBasis& colBasis,
+std::vector<double> reconstruct2d(const TchebichefBasis& rowBasis, const TchebichefBasis& colBasis,
                                   std::span<const double> moments, int order);
 
 }  // namespace compose::lighting

@@ -27,14 +27,22 @@ glm::vec3 Mesh::boundsMax() const {
 }
 
 void computeVertexNormals(Mesh& mesh) {
+  // Angle-weighted face normals (Thürmer & Wüthrich 1998): unlike area weighting, the result does
+  // not depend on how polygons were split into triangles.
   mesh.normals.assign(mesh.positions.size(), glm::vec3(0.0f));
   for (size_t t = 0; t < mesh.indices.size(); t += 3) {
-    const uint32_t a = mesh.indices[t], b = mesh.indices[t + 1], c = mesh.indices[t + 2];
-    // The cross product's length is twice the area: area weighting for free.
-    const glm::vec3 n = glm::cross(mesh.positions[b] - mesh.positions[a], mesh.positions[c] - mesh.positions[a]);
-    mesh.normals[a] += n;
-    mesh.normals[b] += n;
-    mesh.normals[c] += n;
+    const uint32_t v[3] = {mesh.indices[t], mesh.indices[t + 1], mesh.indices[t + 2]};
+    const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+    const glm::vec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
+    const float len = glm::length(n);
+    if (!(len > 0.0f)) continue;  // degenerate triangle
+    for (int k = 0; k < 3; ++k) {
+      const glm::vec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
+      const float la = glm::length(a), lb = glm::length(b);
+      if (!(la > 0.0f && lb > 0.0f)) continue;
+      const float angle = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0f, 1.0f));
+      mesh.normals[v[k]] += n * (angle / len);
+    }
   }
   for (auto& n : mesh.normals) {
     const float len = glm::length(n);

@@ -29,7 +29,7 @@ struct Mesh {
 
 Mesh loadMesh(const std::filesystem::path& path);
 
-// Smooth vertex normals: the area-weighted mean of the adjacent face normals.
+// Smooth vertex normals: the angle-weighted mean of the adjacent face normals.
 void computeVertexNormals(Mesh& mesh);
 
 }  // namespace compose::render

@@ -1,0 +1,107 @@
+#include "color/color.h"
+
+#include <cmath>
+#include <cstdlib>
+
+#include "pipeline/compose_job.h"
+#include "test_util.h"
+
+namespace compose::color {
+namespace {
+
+// IEC 61966-2-1 decode, written out independently of OpenColorIO.
+double srgbToLinear(double v) { return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4); }
+
+// OCIO's lossless CPU path evaluates in float: a few float ulps.
+constexpr float kFloatTolerance = 2e-6f;
+
+TEST(ColorConfig, BuiltinWorkingSpaceIsAcescg) {
+  const ColorConfig c = ColorConfig::builtin();
+  EXPECT_EQ(c.source(), "built-in");
+  EXPECT_EQ(c.workingSpace(), "ACEScg");
+  EXPECT_EQ(c.resolve("srgb_tx", "test"), "sRGB - Texture");
+  EXPECT_EQ(c.resolve("lin_rec709", "test"), "Linear Rec.709 (sRGB)");
+  EXPECT_EQ(c.defaultDisplay(), "sRGB");
+  EXPECT_EQ(c.defaultView("sRGB"), "Standard");
+}
+
+TEST(ColorConfig, DecodesSrgbAndConvertsToAcescg) {
+  const ColorConfig c = ColorConfig::builtin();
+  Image img(3, 1, 4, {"R", "G", "B", "A"});
+  const float values[] = {0.0f, 0.5f, 1.0f};
+  for (int x = 0; x < 3; ++x) {
+    float* p = img.at(x, 0);
+    p[0] = values[x], p[1] = values[x], p[2] = values[x], p[3] = 0.25f;
+  }
+  img.colorSpace = "sRGB";
+  Image lin = img;
+  c.convert(lin, "lin_rec709");
+  EXPECT_EQ(lin.colorSpace, "Linear Rec.709 (sRGB)");
+  for (int x = 0; x < 3; ++x) {
+    EXPECT_NEAR(lin.at(x, 0)[0], srgbToLinear(values[x]), kFloatTolerance);
+    EXPECT_EQ(lin.at(x, 0)[3], 0.25f) << "alpha must pass through";
+  }
+  // Grey stays grey in ACEScg (the Bradford-adapted matrix maps D65 white to the ACES white).
+  Image cg = lin;
+  c.convert(cg, "ACEScg");
+  EXPECT_NEAR(cg.at(1, 0)[0], lin.at(1, 0)[0], 1e-6f);
+  EXPECT_NEAR(cg.at(1, 0)[2], lin.at(1, 0)[0], 1e-6f);
+  // A saturated red: first column of the Rec.709 → AP1 matrix.
+  Image red(1, 1, 3);
+  red.pixels = {1.0f, 0.0f, 0.0f};
+  red.colorSpace = "lin_rec709";
+  c.convert(red, "ACEScg");
+  EXPECT_NEAR(red.pixels[0], 0.6130973f, kFloatTolerance);
+  EXPECT_NEAR(red.pixels[1], 0.0701942f, kFloatTolerance);
+  EXPECT_NEAR(red.pixels[2], 0.0206156f, kFloatTolerance);
+}
+
+TEST(ColorConfig, DisplayTransformEncodesSrgbAndClips) {
+  const ColorConfig c = ColorConfig::builtin();
+  Image img(2, 1, 3);
+  img.pixels = {0.214041144f, 0.214041144f, 0.214041144f, 4.0f, 4.0f, 4.0f};
+  img.colorSpace = "lin_rec709";
+  const Image shown = c.toDisplay(img, "sRGB", "Standard");
+  EXPECT_NEAR(shown.pixels[0], 0.5f, 1e-5f);
+  EXPECT_NEAR(shown.pixels[3], 1.0f, 1e-6f);
+  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "P3", "Standard"), "unknown display 'P3'; the config has: sRGB");
+  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "sRGB", "Filmic"), "unknown view 'Filmic' for display 'sRGB'");
+}
+
+TEST(ColorConfig, UnknownSpaceListsTheValidOnes) {
+  const ColorConfig c = ColorConfig::builtin();
+  COMPOSE_EXPECT_ERROR(c.resolve("Rec.2020", "--plate-space"),
+                       "unknown colour space 'Rec.2020' for --plate-space; the config (built-in) has: "
+                       "Linear Rec.709 (sRGB), ACEScg");
+}
+
+TEST(ColorConfig, PicksInputSpacesFromFileDeclarationsAndRules) {
+  const ColorConfig c = ColorConfig::builtin();
+  EXPECT_EQ(c.inputSpaceFor("plate.jpg", "sRGB"), "sRGB - Texture");
+  EXPECT_EQ(c.inputSpaceFor("sky.exr", ""), "Linear Rec.709 (sRGB)");
+  EXPECT_EQ(c.inputSpaceFor("plate.png", "no-such-space"), "sRGB - Texture");
+}
+
+TEST(ColorConfig, MissingConfigFileIsAnError) {
+  COMPOSE_EXPECT_ERROR(ColorConfig::fromFile("/nonexistent/config.ocio"),
+                       "color: OpenColorIO config not found (/nonexistent/config.ocio)");
+}
+
+// $OCIO is honoured: a real third-party config (Blender's, from the sample data).
+TEST(ColorConfig, HonoursOcioEnvironmentVariable) {
+  const auto blender = pipeline::samplesDirectory() / "ocio" / "blender" / "config.ocio";
+  if (!std::filesystem::exists(blender)) GTEST_SKIP() << "sample data not fetched: " << blender;
+  ::setenv("OCIO", blender.c_str(), 1);
+  const ColorConfig c = ColorConfig::fromEnvironment();
+  ::unsetenv("OCIO");
+  EXPECT_EQ(c.source(), blender.string());
+  EXPECT_NE(c.workingSpace(), "ACEScg");  // Blender's scene_linear is linear Rec.709
+  Image img(1, 1, 3);
+  img.pixels = {0.5f, 0.5f, 0.5f};
+  img.colorSpace = "sRGB";
+  c.convert(img, c.workingSpace());
+  EXPECT_NEAR(img.pixels[0], srgbToLinear(0.5), 1e-3);  // Blender's sRGB may be a LUT: 1e-3
+}
+
+}  // namespace
+}  // namespace compose::color

@@ -1,0 +1,91 @@
+#include "lighting/environment.h"
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "lighting/exact.h"
+#include "test_util.h"
+
+namespace compose::lighting {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+Image blackLatLong(int width) {
+  Image img(width, width / 2, 3, {"R", "G", "B"});
+  img.colorSpace = "ACEScg";
+  return img;
+}
+
+TEST(Environment, SolidAnglesSumToFourPi) {
+  for (int w : {4, 16, 1024}) {
+    const Environment env = Environment::constant(glm::vec3(1.0f), w);
+    double total = 0.0;
+    for (int y = 0; y < env.height(); ++y) total += env.rowSolidAngle(y) * env.width();
+    // Exact per-row formula: only double rounding remains.
+    EXPECT_NEAR(total, 4.0 * kPi, 1e-12) << "width " << w;
+  }
+}
+
+TEST(Environment, AxesFollowOpenExrLatLong) {
+  const Environment env = Environment::constant(glm::vec3(1.0f), 64);
+  const int w = env.width(), h = env.height();
+  // Centre column looks along +Z, a quarter in from the left along +X, three quarters along -X.
+  // Texel centres sit half a texel off the exact axis: allow that angle.
+  const float halfTexel = float(std::sin(kPi / h));
+  EXPECT_NEAR(env.direction(w / 2, h / 2).z, 1.0f, halfTexel);
+  EXPECT_NEAR(env.direction(w / 4, h / 2).x, 1.0f, halfTexel);
+  EXPECT_NEAR(env.direction(3 * w / 4, h / 2).x, -1.0f, halfTexel);
+  EXPECT_NEAR(env.direction(0, h / 2).z, -1.0f, halfTexel);
+  EXPECT_GT(env.direction(w / 2, 0).y, 0.99f);       // top row is up
+  EXPECT_LT(env.direction(w / 2, h - 1).y, -0.99f);  // bottom row is down
+}
+
+TEST(Environment, OneBrightTexelLightsTheNormalFacingIt) {
+  // One texel of radiance 1000 a quarter in from the left on the equator: direction +X.
+  Image img = blackLatLong(256);
+  const int x = 256 / 4, y = 128 / 2;
+  img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = 1000.0f;
+  const Environment env = Environment::fromLatLong(img);
+  ExactLighting exact;
+  exact.project(env);
+  const glm::vec3 d = env.direction(x, y);
+  const double expected = 1000.0 * env.rowSolidAngle(y) * d.x;  // cos between +X and the texel
+  EXPECT_NEAR(exact.irradiance({1, 0, 0}).x, expected, 1e-6 * expected);
+  EXPECT_EQ(exact.irradiance({-1, 0, 0}).x, 0.0f);
+  const double alsoZ = 1000.0 * env.rowSolidAngle(y) * std::max(0.0f, d.z);
+  EXPECT_NEAR(exact.irradiance({0, 0, 1}).x, alsoZ, 1e-6 * alsoZ);
+  // The bilinear lookup finds the texel in that direction.
+  EXPECT_NEAR(env.lookup(d).x, 1000.0f, 1e-3f);
+}
+
+TEST(Environment, RejectsNonFiniteRadianceNamingTheTexel) {
+  Image img = blackLatLong(16);
+  img.at(3, 2)[1] = std::numeric_limits<float>::quiet_NaN();
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"), "NaN radiance at texel (3, 2) (sky.exr)");
+  img.at(3, 2)[1] = std::numeric_limits<float>::infinity();
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"), "infinite radiance at texel (3, 2)");
+}
+
+TEST(Environment, ClampsAndCountsNegativeRadiance) {
+  Image img = blackLatLong(16);
+  img.at(0, 0)[0] = -0.5f;
+  img.at(0, 0)[2] = -0.25f;
+  img.at(5, 3)[1] = -0.125f;
+  SanitizeReport report;
+  const Environment env = Environment::fromLatLong(img, {}, &report);
+  EXPECT_EQ(report.negativeTexels, 2);
+  EXPECT_EQ(report.mostNegative, -0.5f);
+  EXPECT_EQ(env.radiance(0, 0), glm::vec3(0.0f));
+}
+
+TEST(Environment, RejectsMapsThatAreNotLatLong) {
+  Image img(30, 20, 3);
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "cross.exr"), "not a lat-long (equirectangular) map: 30x20");
+  Image grey(32, 16, 1);
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(grey, "grey.exr"), "needs RGB channels");
+}
+
+}  // namespace
+}  // namespace compose::lighting

@@ -1,0 +1,130 @@
+#include "lighting/sh.h"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include <glm/geometric.hpp>
+
+#include "lighting/exact.h"
+#include "test_util.h"
+
+namespace compose::lighting {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+std::vector<glm::vec3> randomNormals(int count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g;
+  std::vector<glm::vec3> out;
+  while (int(out.size()) < count) {
+    glm::vec3 v(g(rng), g(rng), g(rng));
+    const float len = std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+    if (len > 1e-3f) out.push_back(v / len);
+  }
+  return out;
+}
+
+// An environment whose radiance is a known function of direction, on a w x w/2 map.
+template <class F>
+Environment analyticEnvironment(int width, F radiance) {
+  const Environment probe = Environment::constant(glm::vec3(0.0f), width);
+  Image img(width, width / 2, 3);
+  for (int y = 0; y < img.height; ++y) {
+    for (int x = 0; x < img.width; ++x) {
+      const glm::vec3 L = radiance(probe.direction(x, y));
+      img.at(x, y)[0] = L.x;
+      img.at(x, y)[1] = L.y;
+      img.at(x, y)[2] = L.z;
+    }
+  }
+  return Environment::fromLatLong(img);
+}
+
+TEST(Sh, CosineLobeWeightsMatchRamamoorthiHanrahan) {
+  EXPECT_DOUBLE_EQ(shCosineLobe(0), kPi);
+  EXPECT_DOUBLE_EQ(shCosineLobe(1), 2.0 * kPi / 3.0);
+  EXPECT_NEAR(shCosineLobe(2), kPi / 4.0, 1e-15);
+  EXPECT_EQ(shCosineLobe(3), 0.0);
+  EXPECT_NEAR(shCosineLobe(4), -kPi / 24.0, 1e-15);
+  EXPECT_NEAR(shCosineLobe(6), kPi / 64.0, 1e-15);
+}
+
+TEST(Sh, BasisIsOrthonormalOverTheSphere) {
+  // Quadrature on a fine lat-long grid: exact solid angles, midpoint rule, error ~1e-5 at order 8.
+  const int order = kMaxShOrder, count = shCount(order);
+  const Environment grid = Environment::constant(glm::vec3(1.0f), 1024);
+  std::vector<double> gram(size_t(count * count), 0.0);
+  auto y = std::vector<double>(size_t(count));
+  for (int r = 0; r < grid.height(); ++r) {
+    for (int c = 0; c < grid.width(); ++c) {
+      evalSh(order, glm::dvec3(grid.direction(c, r)), y.data());
+      for (int i = 0; i < count; ++i)
+        for (int j = 0; j <= i; ++j) gram[size_t(i * count + j)] += y[size_t(i)] * y[size_t(j)] * grid.rowSolidAngle(r);
+    }
+  }
+  constexpr double kQuadratureTolerance = 2e-4;  // midpoint rule on 1024x512 at band 8
+  for (int i = 0; i < count; ++i)
+    for (int j = 0; j <= i; ++j)
+      EXPECT_NEAR(gram[size_t(i * count + j)], i == j ? 1.0 : 0.0, kQuadratureTolerance) << i << "," << j;
+}
+
+TEST(Sh, FirstBandsHaveTheTextbookForm) {
+  // Y_00 = 1/(2√π); Y_1m ∝ (world x, y, z) with the pole on +Y: index 2 (m=0) is y.
+  const glm::dvec3 d = glm::normalize(glm::dvec3(0.3, -0.5, 0.8));
+  std::vector<double> y(9);
+  evalSh(2, d, y.data());
+  const double k1 = std::sqrt(3.0 / (4.0 * kPi));
+  EXPECT_NEAR(y[0], 0.5 / std::sqrt(kPi), 1e-15);
+  EXPECT_NEAR(y[2], k1 * d.y, 1e-15);
+  EXPECT_NEAR(y[3], k1 * d.z, 1e-15);
+  EXPECT_NEAR(y[1], k1 * d.x, 1e-15);
+}
+
+// White furnace: radiance 1 everywhere gives E = π for every normal.
+TEST(WhiteFurnace, ShAndExactGivePi) {
+  const Environment env = Environment::constant(glm::vec3(1.0f), 256);
+  constexpr double kRelative = 1e-5;  // the bound; float evaluation gives ~1e-7
+  for (int order : {0, 1, 2, 4, 8}) {
+    ShLighting sh(order);
+    sh.project(env);
+    for (const auto& n : randomNormals(200, 1)) {
+      EXPECT_NEAR(sh.irradiance(n).y, kPi, kRelative * kPi) << "order " << order;
+    }
+  }
+  ExactLighting exact;
+  exact.project(env);
+  for (const auto& n : randomNormals(50, 2)) {
+    // A constant map is not exactly constant in cos: the midpoint rule leaves ~1e-5 at 256x128.
+    EXPECT_NEAR(exact.irradiance(n).x, kPi, 1e-4 * kPi);
+  }
+}
+
+// L(ω) = a + b·ω lies in bands 0 and 1, so E(n) = π a + (2π/3) b·n exactly; SH of any order ≥ 1
+// and the exact quadrature must both find it.
+TEST(Irradiance, LinearRadianceHasAClosedForm) {
+  const glm::vec3 b(0.3f, 0.5f, -0.2f);
+  const Environment env = analyticEnvironment(512, [&](glm::vec3 w) { return glm::vec3(1.0f + glm::dot(b, w)); });
+  ShLighting sh(2);
+  sh.project(env);
+  ExactLighting exact;
+  exact.project(env);
+  for (const auto& n : randomNormals(100, 3)) {
+    const double expected = kPi + 2.0 * kPi / 3.0 * glm::dot(b, n);
+    constexpr double kQuadrature = 2e-4;  // midpoint rule on 512x256, relative
+    EXPECT_NEAR(sh.irradiance(n).x, expected, kQuadrature * expected);
+    EXPECT_NEAR(exact.irradiance(n).x, expected, kQuadrature * expected);
+  }
+}
+
+TEST(Lighting, CreatesByNameAndReportsMistakes) {
+  EXPECT_EQ(createLighting("sh")->coefficientsPerChannel(), 9);
+  EXPECT_EQ(createLighting("sh", ParamSet::parse("order=4", "t"))->coefficientsPerChannel(), 25);
+  COMPOSE_EXPECT_ERROR(createLighting("chebyshev"), "unknown lighting basis 'chebyshev'; valid: sh, exact");
+  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("ordr=4", "t")), "does not take parameter(s): ordr");
+  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("order=9", "t")), "sh order must be in 0..8");
+}
+
+}  // namespace
+}  // namespace compose::lighting

@@ -1,0 +1,66 @@
+#include "render/mesh.h"
+
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
+#include "test_util.h"
+
+namespace compose::render {
+namespace {
+
+using compose::testing::TempDir;
+using compose::testing::writeText;
+
+// A unit cube, 8 positions, 6 quads, no normals.
+constexpr const char* kCube =
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+    "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n";
+
+TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {
+  TempDir dir;
+  writeText(dir / "cube.obj", kCube);
+  const Mesh m = loadMesh(dir / "cube.obj");
+  EXPECT_FALSE(m.normalsFromFile);
+  EXPECT_EQ(m.triangleCount(), 12u);
+  EXPECT_EQ(m.positions.size(), 8u);
+  // Corner normals of a cube point out along the diagonal from the centre.
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const glm::vec3 out = glm::normalize(m.positions[i] - glm::vec3(0.5f));
+    EXPECT_GT(glm::dot(m.normals[i], out), 0.99f) << "vertex " << i;
+  }
+  EXPECT_EQ(m.boundsMin(), glm::vec3(0.0f));
+  EXPECT_EQ(m.boundsMax(), glm::vec3(1.0f));
+}
+
+TEST(Mesh, KeepsFileNormalsAndSplitsVerticesPerNormal) {
+  TempDir dir;
+  // Two triangles sharing an edge with different normals per corner, CRLF line endings, and a
+  // material library that does not exist (as in real exports): both must be fine.
+  writeText(dir / "flat.obj",
+            "mtllib missing.mtl\r\nv 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nv 1 1 0\r\n"
+            "vn 0 0 2\r\nvn 0 0 -1\r\nf 1//1 2//1 3//1\r\nf 2//2 4//2 3//2\r\n");
+  const Mesh m = loadMesh(dir / "flat.obj");
+  EXPECT_TRUE(m.normalsFromFile);
+  EXPECT_EQ(m.triangleCount(), 2u);
+  EXPECT_EQ(m.positions.size(), 6u);  // vertices 2 and 3 are used with two normals each
+  EXPECT_EQ(m.normals[0], glm::vec3(0, 0, 1)) << "normals are normalised";
+}
+
+TEST(Mesh, ErrorsNameTheFileAndTheProblem) {
+  TempDir dir;
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "nope.obj"), "mesh: file not found");
+  writeText(dir / "empty.obj", "# nothing\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "empty.obj"), "mesh has no triangles (");
+  writeText(dir / "nan.obj", "v 0 0 0\nv 1e999 0 0\nv 0 1 0\nf 1 2 3\n");  // overflows to inf
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "nan.obj"), "vertex 2 has a non-finite coordinate");
+  writeText(dir / "point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "point.obj"), "zero size");
+  writeText(dir / "zeron.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nf 1//1 2//1 3//1\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "zeron.obj"), "normal of vertex 1 is zero");
+  writeText(dir / "model.stl", "solid x\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "model.stl"), "unsupported mesh format '.stl'");
+}
+
+}  // namespace
+}  // namespace compose::render
