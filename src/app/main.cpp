@@ -82,7 +82,7 @@ int main(int argc, char** argv) {
   app.add_option("--plate", job.plate, "Background photograph (JPEG, PNG, TIFF, EXR, ...)")->required();
   app.add_option("--object", job.object, "Mesh to insert (Wavefront OBJ)")->required();
   app.add_option("--env", job.environment,
-                 "HDR environment, lat-long (equirectangular) map [default: the courtyard sample HDRI]");
+                 "HDR environment, lat-long (equirectangular) map [default: the forest sample HDRI]");
   app.add_option("--out", job.output, "Output base path; writes BASE.exr and BASE.jpg (or .png)")
       ->capture_default_str();
   app.add_option("--lighting", job.lighting, "Lighting basis: " + join(compose::lighting::lightingNames()))

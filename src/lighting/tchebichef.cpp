@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -174,16 +175,24 @@ void buildStable(int size, int order, double* out, float* outF) {
     startExp[n] = startExp[n - 1] + de;
   }
 
+  // Rows are independent: blocks of kInterleave rows, in parallel, with at least ~64k values per
+  // task so that small bases are built inline.
   constexpr int kInterleave = 4;
-  std::vector<int> rescaledAt(static_cast<std::size_t>(kInterleave) * half);
-  int n = 0;
-  for (; n + kInterleave <= order; n += kInterleave) {
-    buildRows<kInterleave>(size, n, xc, startMant.data(), startExp.data(), out, outF,
-                           rescaledAt.data());
-  }
-  for (; n < order; ++n) {
-    buildRows<1>(size, n, xc, startMant.data(), startExp.data(), out, outF, rescaledAt.data());
-  }
+  const int blocks = (order + kInterleave - 1) / kInterleave;
+  const int64_t grain = std::max<int64_t>(1, (int64_t{1} << 16) / (int64_t{kInterleave} * size));
+  auto buildBlock = [&](int64_t block) {
+    const int n0 = static_cast<int>(block) * kInterleave;
+    std::vector<int> rescaledAt(static_cast<std::size_t>(kInterleave) * half);
+    if (n0 + kInterleave <= order) {
+      buildRows<kInterleave>(size, n0, xc, startMant.data(), startExp.data(), out, outF,
+                             rescaledAt.data());
+    } else {
+      for (int n = n0; n < order; ++n) {
+        buildRows<1>(size, n, xc, startMant.data(), startExp.data(), out, outF, rescaledAt.data());
+      }
+    }
+  };
+  parallelFor(0, blocks, buildBlock, grain);
 }
 
 // Sizes `v` to `count` value-initialised elements. A full-order basis is large (192 MiB at

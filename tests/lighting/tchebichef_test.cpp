@@ -20,9 +20,9 @@ constexpr double kOrthonormalTol = 1e-10;
 // gives f; what is left is rounding in two K×K×N products, ~1e-14.
 constexpr double kRoundTripTol = 1e-10;
 // Element-wise agreement with independent references computed in long double (Gram–Schmidt,
-// closed forms), relative to the largest |t_n(x)| of the row. The basis is built from a handful
-// of correctly rounded operations per element plus a recurrence whose error grows slowly with N;
-// measured worst cases are ~1e-15 at N ≤ 8 and ~1e-13 at N = 4096.
+// closed forms), relative to the largest |t_n(x)| of the row. The recurrence's error grows slowly
+// with N; measured worst cases: ~1e-15 for N ≤ 9, 1.6e-14 for t_1 at N = 16384, 4e-14 for
+// t_{N−1} at N = 4096. 25× headroom over the worst.
 constexpr double kReferenceRelTol = 1e-12;
 // The float copy is the double basis rounded to float: each value moves by ≤ 2^-24 relatively, so
 // by Cauchy–Schwarz each entry of T·Tᵀ moves by ≤ 2·2^-24 ≈ 1.2e-7. Twice that bound.
@@ -121,7 +121,7 @@ TEST(TchebichefBasis, OrthonormalAtFullOrder) {
     ASSERT_EQ(basis.order(), n);
     ASSERT_EQ(basis.matrix().size(), static_cast<std::size_t>(n) * n);
     EXPECT_LE(orthonormalityError(basis.matrix(), n, n), kOrthonormalTol);
-    if (n <= 1024) {
+    if (n <= 512) {  // The float bound is analytic; small sizes suffice and keep the test fast.
       EXPECT_LE(orthonormalityError(basis.matrixF(), n, n), kFloatCopyOrthonormalTol);
     }
   }
