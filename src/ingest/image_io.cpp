@@ -122,11 +122,16 @@ void writeImage(const fs::path& path, const Image& image, const WriteOptions& op
   if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
   spec.attribute("Software", "compose");
   if (isExr) spec.attribute("compression", "zip");
-  if (ext == ".jpg" || ext == ".jpeg") spec.attribute("Compression", "jpeg:" + std::to_string(options.jpegQuality));
+  if (ext == ".jpg" || ext == ".jpeg") {
+    spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
+  }
 
   // Same folder, so that the final rename cannot cross file systems.
   fs::path temp = path;
-  temp.replace_filename("." + path.filename().string() + ".partial-" + std::to_string(::getpid()));
+  std::string tempName = path.filename().string();
+  tempName.insert(tempName.begin(), '.');
+  tempName.append(".partial-").append(std::to_string(::getpid()));
+  temp.replace_filename(tempName);
   auto fail = [&](const std::string& what) {
     std::string why = output->geterror();
     output.reset();
