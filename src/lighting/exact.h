@@ -1,13 +1,16 @@
 // The exact reference: irradiance by brute-force quadrature over every texel of the environment,
 //   E(n) = Σ_texels L_t max(0, n·ω_t) Ω_t,
 // with ω_t the texel centre and Ω_t its exact solid angle. No truncation and no noise: this is the
-// gold standard for the discrete map (unshadowed). It costs O(texels) per query, so it is meant
+// gold standard for the discrete map (unshadowed). The sum is evaluated through RadianceCells
+// (whole coarse cells above the horizon in closed form, texels only along the horizon), which
+// gives the same number up to rounding at about 1/20 of the brute-force cost; it is still meant
 // for references and tests, not for rendering whole frames.
 #pragma once
 
 #include <vector>
 
 #include "lighting/lighting.h"
+#include "lighting/radiance_cells.h"
 
 namespace compose::lighting {
 
@@ -17,12 +20,11 @@ class ExactLighting final : public DiffuseLighting {
   std::string describe() const override;
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
-  int coefficientsPerChannel() const override { return int(directions_.size()); }
-  size_t floatsStored() const override { return directions_.size() * 6; }
+  int coefficientsPerChannel() const override { return int(cells_.cellCount()); }
+  size_t floatsStored() const override { return cells_.floatsStored(); }
 
  private:
-  std::vector<glm::vec3> directions_;  // texel centres, texels with zero radiance dropped
-  std::vector<glm::vec3> weighted_;    // L_t Ω_t
+  RadianceCells cells_;
 };
 
 }  // namespace compose::lighting

@@ -1,13 +1,15 @@
 #include "lighting/lighting.h"
 
 #include "core/error.h"
+#include "lighting/chebyshev.h"
 #include "lighting/exact.h"
+#include "lighting/monte_carlo.h"
 #include "lighting/sh.h"
 
 namespace compose::lighting {
 
 const std::vector<std::string>& lightingNames() {
-  static const std::vector<std::string> names = {"sh", "exact"};
+  static const std::vector<std::string> names = {"cheb-local", "cheb-latlong", "cheb-face", "sh", "mc", "exact"};
   return names;
 }
 
@@ -15,6 +17,19 @@ std::unique_ptr<DiffuseLighting> createLighting(const std::string& name, ParamSe
   std::unique_ptr<DiffuseLighting> basis;
   if (name == "sh") {
     basis = std::make_unique<ShLighting>(params.getInt("order", 2, "lighting"));
+  } else if (name == "cheb-local") {
+    basis = std::make_unique<ChebLocalLighting>(ChebParams::from(params, name, ChebParams{}));
+  } else if (name == "cheb-latlong") {
+    basis = std::make_unique<ChebLatLongLighting>(ChebParams::from(params, name, ChebParams{}));
+  } else if (name == "cheb-face") {
+    ChebParams d;
+    d.samples = 8;
+    d.subsamples = 2;
+    basis = std::make_unique<ChebFaceLighting>(ChebParams::from(params, name, d));
+  } else if (name == "mc") {
+    const int samples = params.getInt("samples", 1024, "lighting");
+    const int seed = params.getInt("seed", 1, "lighting");
+    basis = std::make_unique<MonteCarloLighting>(samples, uint64_t(uint32_t(seed)));
   } else if (name == "exact") {
     basis = std::make_unique<ExactLighting>();
   } else {

@@ -288,7 +288,7 @@ TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
                                 " --lighting wavelets",
                             dir_.path());
   EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: sh, exact"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: cheb-local, cheb-latlong, cheb-face, sh, mc, exact"), std::string::npos) << r.err;
 }
 
 TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {

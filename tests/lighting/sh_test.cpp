@@ -121,7 +121,7 @@ TEST(Irradiance, LinearRadianceHasAClosedForm) {
 TEST(Lighting, CreatesByNameAndReportsMistakes) {
   EXPECT_EQ(createLighting("sh")->coefficientsPerChannel(), 9);
   EXPECT_EQ(createLighting("sh", ParamSet::parse("order=4", "t"))->coefficientsPerChannel(), 25);
-  COMPOSE_EXPECT_ERROR(createLighting("chebyshev"), "unknown lighting basis 'chebyshev'; valid: sh, exact");
+  COMPOSE_EXPECT_ERROR(createLighting("chebyshev"), "unknown lighting basis 'chebyshev'; valid: cheb-local, cheb-latlong, cheb-face, sh, mc, exact");
   COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("ordr=4", "t")), "does not take parameter(s): ordr");
   COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("order=9", "t")), "sh order must be in 0..8");
 }

@@ -1,0 +1,405 @@
+#include "lighting/chebyshev.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <numbers>
+
+#include <glm/geometric.hpp>
+
+#include "core/error.h"
+#include "core/parallel.h"
+#include "lighting/cubemap.h"
+#include "lighting/radiance_cells.h"
+
+namespace compose::lighting {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// atan2 to float precision without library calls: Abramowitz & Stegun 4.4.49 (|error| <= 2e-8
+// on [0, 1]) plus octant folding. Used on the hot paths that locate a direction on a grid.
+inline float fastAtan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float mx = std::max(ax, ay), mn = std::min(ax, ay);
+  if (mx == 0.0f) return 0.0f;
+  const float a = mn / mx, s = a * a;
+  float r = a * (1.0f + s * (-0.3333314528f + s * (0.1999355085f + s * (-0.1420889944f + s * (0.1065626393f +
+                 s * (-0.0752896400f + s * (0.0429096138f + s * (-0.0161657367f + s * 0.0028662257f))))))));
+  if (ay > ax) r = 1.57079637f - r;
+  if (x < 0.0f) r = 3.14159274f - r;
+  return y < 0.0f ? -r : r;
+}
+
+// Moments of one channel of an RGB grid (rows x cols, interleaved) into out[c * k² ...].
+void rgbMoments(const TchebichefBasis& rows, const TchebichefBasis& cols, const std::vector<double>& rgb, int k,
+                float* out) {
+  const size_t count = size_t(rows.size()) * size_t(cols.size());
+  std::vector<double> channel(count);
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < count; ++i) channel[i] = rgb[3 * i + size_t(c)];
+    const std::vector<double> m = moments2d(rows, cols, channel, k);
+    for (size_t i = 0; i < m.size(); ++i) out[size_t(c) * m.size() + i] = float(m[i]);
+  }
+}
+
+// Per-row solid angle of an s-row lat-long grid (exact), and the sub-cell layout used to integrate
+// the cosine over cells.
+double latitudeOfRow(double row, int rows) { return kPi * (0.5 - row / rows); }
+
+}  // namespace
+
+// --- parameters -------------------------------------------------------------------------------
+
+void ChebParams::validate(const std::string& basis) const {
+  auto fail = [&](const std::string& what) { throw Error("lighting", basis + ": " + what); };
+  if (samples < 1 || samples > 1024) fail("samples (grid size s) must be in 1..1024, got " + std::to_string(samples));
+  if (order < 1 || order > std::min(samples, 32)) {
+    fail("order k must be in 1..min(samples, 32) (samples = " + std::to_string(samples) + "), got " +
+         std::to_string(order));
+  }
+  if (normalRows < 3 || normalRows > 1025) fail("rows must be in 3..1025, got " + std::to_string(normalRows));
+  if (normalCols < 4 || normalCols > 2048) fail("cols must be in 4..2048, got " + std::to_string(normalCols));
+  if (subsamples < 1 || subsamples > 16) fail("subsamples must be in 1..16, got " + std::to_string(subsamples));
+}
+
+ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebParams d) {
+  ChebParams p;
+  p.order = params.getInt("order", d.order, "lighting");
+  p.samples = params.getInt("samples", d.samples, "lighting");
+  p.normalRows = params.getInt("rows", d.normalRows, "lighting");
+  p.normalCols = params.getInt("cols", d.normalCols, "lighting");
+  p.subsamples = params.getInt("subsamples", d.subsamples, "lighting");
+  p.validate(basis);
+  return p;
+}
+
+// --- normal grid ------------------------------------------------------------------------------
+
+NormalGrid::NormalGrid(int rows, int cols) : rows_(rows), cols_(cols) { COMPOSE_CHECK(rows >= 2 && cols >= 1); }
+
+glm::vec3 NormalGrid::normal(size_t node) const {
+  const int r = int(node / size_t(cols_)), c = int(node % size_t(cols_));
+  const double lat = kPi * (0.5 - double(r) / (rows_ - 1));
+  const double lon = 2.0 * kPi * c / cols_;
+  return glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)), float(std::cos(lon) * std::cos(lat)));
+}
+
+void NormalGrid::frame(size_t node, glm::vec3& east, glm::vec3& north) const {
+  const int c = int(node % size_t(cols_));
+  const double lon = 2.0 * kPi * c / cols_;
+  east = glm::vec3(float(std::cos(lon)), 0.0f, float(-std::sin(lon)));
+  north = glm::cross(normal(node), east);
+}
+
+void NormalGrid::interpolation(const glm::vec3& n, size_t nodes[4], float weights[4]) const {
+  const double lat = fastAtan2(n.y, std::sqrt(n.x * n.x + n.z * n.z));
+  double lon = fastAtan2(n.x, n.z);
+  if (lon < 0.0) lon += 2.0 * kPi;
+  const double u = (0.5 - lat / kPi) * (rows_ - 1);
+  const double v = lon / (2.0 * kPi) * cols_;
+  const int r0 = std::clamp(int(std::floor(u)), 0, rows_ - 2);
+  const int c0 = int(std::floor(v)) % cols_;
+  const int c1 = (c0 + 1) % cols_;
+  const float fu = float(std::clamp(u - r0, 0.0, 1.0)), fv = float(v - std::floor(v));
+  nodes[0] = size_t(r0) * size_t(cols_) + size_t(c0);
+  nodes[1] = size_t(r0) * size_t(cols_) + size_t(c1);
+  nodes[2] = size_t(r0 + 1) * size_t(cols_) + size_t(c0);
+  nodes[3] = size_t(r0 + 1) * size_t(cols_) + size_t(c1);
+  weights[0] = (1 - fu) * (1 - fv);
+  weights[1] = (1 - fu) * fv;
+  weights[2] = fu * (1 - fv);
+  weights[3] = fu * fv;
+}
+
+// --- shared -----------------------------------------------------------------------------------
+
+ChebBase::ChebBase(std::string name, ChebParams params)
+    : name_(std::move(name)), params_(params), grid_(params.normalRows, params.normalCols) {
+  params_.validate(name_);
+}
+
+std::string ChebBase::describe() const {
+  return name_ + " order=" + std::to_string(params_.order) + " samples=" + std::to_string(params_.samples) +
+         " normals=" + std::to_string(params_.normalRows) + "x" + std::to_string(params_.normalCols) + " (" +
+         std::to_string(coefficientsPerChannel()) + " coefficients/channel, " + std::to_string(floatsStored()) +
+         " floats)";
+}
+
+size_t ChebBase::floatsStored() const { return table_.size() + global_.size(); }
+
+void ChebBase::interpolate(const glm::vec3& n, float* out) const {
+  COMPOSE_CHECK(!table_.empty());
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolation(n, nodes, w);
+  std::fill(out, out + stride_, 0.0f);
+  for (int q = 0; q < 4; ++q) {
+    if (w[q] == 0.0f) continue;
+    const float* src = table_.data() + nodes[q] * stride_;
+    for (size_t i = 0; i < stride_; ++i) out[i] += w[q] * src[i];
+  }
+}
+
+// --- cheb-latlong -----------------------------------------------------------------------------
+
+ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {}
+
+void ChebLatLongLighting::project(const Environment& env, const Progress& progress) {
+  const int s = params_.samples, k = params_.order, q = params_.subsamples;
+  const TchebichefBasis basis(s, k);
+  // Lighting: L_in(i, j) = mean radiance over the cell, Σ L_t Ω_t / Σ Ω_t over the texels whose
+  // centre lies in it. The solid angle and the cosine both go to the BRDF side, so a constant
+  // environment has only a T_00 moment and the white furnace holds at every order.
+  std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0), area(size_t(s) * size_t(s), 0.0);
+  for (int y = 0; y < env.height(); ++y) {
+    const int i = std::min(s - 1, int((y + 0.5) * s / env.height()));
+    const double omega = env.rowSolidAngle(y);
+    for (int x = 0; x < env.width(); ++x) {
+      const int j = std::min(s - 1, int((x + 0.5) * s / env.width()));
+      const glm::vec3 L = env.radiance(x, y);
+      const size_t idx = size_t(i) * size_t(s) + size_t(j);
+      double* cell = lin.data() + 3 * idx;
+      cell[0] += L.x * omega;
+      cell[1] += L.y * omega;
+      cell[2] += L.z * omega;
+      area[idx] += omega;
+    }
+  }
+  for (size_t idx = 0; idx < area.size(); ++idx) {
+    for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] = area[idx] > 0.0 ? lin[3 * idx + size_t(c)] / area[idx] : 0.0;
+  }
+  global_.assign(size_t(3 * k * k), 0.0f);
+  rgbMoments(basis, basis, lin, k, global_.data());
+
+  // BRDF side per normal: f_c(i, j) = ∫_cell max(0, n·ω) dω, by q x q sub-cells (midpoint rule).
+  const int sq = s * q;
+  std::vector<glm::vec3> subDir(size_t(sq) * size_t(sq));
+  std::vector<double> subOmega(subDir.size());
+  for (int a = 0; a < sq; ++a) {
+    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq), mid = latitudeOfRow(a + 0.5, sq);
+    const double omega = 2.0 * kPi / sq * (std::sin(top) - std::sin(bottom));
+    for (int b = 0; b < sq; ++b) {
+      const double lon = kPi * (1.0 - 2.0 * (b + 0.5) / sq);
+      const size_t idx = size_t(a) * size_t(sq) + size_t(b);
+      subDir[idx] = glm::vec3(float(std::sin(lon) * std::cos(mid)), float(std::sin(mid)),
+                              float(std::cos(lon) * std::cos(mid)));
+      subOmega[idx] = omega;
+    }
+  }
+  stride_ = size_t(k) * size_t(k);
+  table_.assign(grid_.size() * stride_, 0.0f);
+  std::atomic<size_t> done{0};
+  parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
+    const glm::vec3 n = grid_.normal(size_t(node));
+    std::vector<double> fc(size_t(s) * size_t(s), 0.0);
+    for (int a = 0; a < sq; ++a) {
+      for (int b = 0; b < sq; ++b) {
+        const size_t idx = size_t(a) * size_t(sq) + size_t(b);
+        const float c = glm::dot(n, subDir[idx]);
+        if (c > 0.0f) fc[size_t(a / q) * size_t(s) + size_t(b / q)] += c * subOmega[idx];
+      }
+    }
+    const std::vector<double> m = moments2d(basis, basis, fc, k);
+    std::transform(m.begin(), m.end(), table_.begin() + ptrdiff_t(size_t(node) * stride_),
+                   [](double v) { return float(v); });
+    const size_t d = ++done;
+    if (d % 256 == 0) report(progress, "lighting", double(d) / double(grid_.size()));
+  });
+  report(progress, "lighting", 1.0);
+}
+
+glm::vec3 ChebLatLongLighting::irradiance(const glm::vec3& n) const {
+  std::array<float, 1024> tf;
+  COMPOSE_CHECK(stride_ <= tf.size());
+  interpolate(n, tf.data());
+  glm::vec3 e(0.0f);
+  for (size_t i = 0; i < stride_; ++i) {
+    e.x += global_[i] * tf[i];
+    e.y += global_[stride_ + i] * tf[i];
+    e.z += global_[2 * stride_ + i] * tf[i];
+  }
+  return e;
+}
+
+// --- cheb-face --------------------------------------------------------------------------------
+
+ChebFaceLighting::ChebFaceLighting(ChebParams params) : ChebBase("cheb-face", params) { blocks_ = kCubeFaces; }
+
+void ChebFaceLighting::project(const Environment& env, const Progress& progress) {
+  const int s = params_.samples, k = params_.order, q = params_.subsamples;
+  const TchebichefBasis basis(s, k);
+  const size_t faceTexels = size_t(s) * size_t(s);
+  // Lighting: mean radiance over each cube texel, from the environment texels whose centre
+  // direction falls in it (solid angle and cosine on the BRDF side, as for cheb-latlong).
+  std::vector<double> lin(kCubeFaces * faceTexels * 3, 0.0), area(kCubeFaces * faceTexels, 0.0);
+  for (int y = 0; y < env.height(); ++y) {
+    const double omega = env.rowSolidAngle(y);
+    for (int x = 0; x < env.width(); ++x) {
+      int face = 0;
+      double u = 0, v = 0;
+      cubeFaceCoordinates(env.direction(x, y), face, u, v);
+      const int i = std::clamp(int((v + 1.0) * 0.5 * s), 0, s - 1);  // row from v
+      const int j = std::clamp(int((u + 1.0) * 0.5 * s), 0, s - 1);  // column from u
+      const glm::vec3 L = env.radiance(x, y);
+      const size_t idx = size_t(face) * faceTexels + size_t(i) * size_t(s) + size_t(j);
+      double* cell = lin.data() + 3 * idx;
+      cell[0] += L.x * omega;
+      cell[1] += L.y * omega;
+      cell[2] += L.z * omega;
+      area[idx] += omega;
+    }
+  }
+  // A cube texel smaller than the environment's texels may receive no centre at all: it takes
+  // the radiance in its own direction instead.
+  for (size_t idx = 0; idx < area.size(); ++idx) {
+    if (area[idx] > 0.0) {
+      for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
+    } else {
+      const int f = int(idx / faceTexels), i = int((idx % faceTexels) / size_t(s)), j = int(idx % size_t(s));
+      const glm::vec3 L = env.lookup(cubeDirection(f, -1.0 + (2.0 * j + 1.0) / s, -1.0 + (2.0 * i + 1.0) / s));
+      lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
+    }
+  }
+  const size_t kk = size_t(k) * size_t(k);
+  global_.assign(kCubeFaces * 3 * kk, 0.0f);
+  for (int f = 0; f < kCubeFaces; ++f) {
+    const std::vector<double> faceLin(lin.begin() + ptrdiff_t(size_t(f) * faceTexels * 3),
+                                      lin.begin() + ptrdiff_t(size_t(f + 1) * faceTexels * 3));
+    rgbMoments(basis, basis, faceLin, k, global_.data() + size_t(f) * 3 * kk);
+  }
+
+  // BRDF side: ∫ max(0, n·ω) dω over each cube texel, by q x q sub-texels with exact solid angles.
+  const int sq = s * q;
+  std::vector<glm::vec3> subDir(kCubeFaces * size_t(sq) * size_t(sq));
+  std::vector<double> subOmega(subDir.size());
+  for (int f = 0; f < kCubeFaces; ++f) {
+    for (int a = 0; a < sq; ++a) {
+      const double v0 = -1.0 + 2.0 * a / sq, v1 = -1.0 + 2.0 * (a + 1) / sq;
+      for (int b = 0; b < sq; ++b) {
+        const double u0 = -1.0 + 2.0 * b / sq, u1 = -1.0 + 2.0 * (b + 1) / sq;
+        const size_t idx = (size_t(f) * size_t(sq) + size_t(a)) * size_t(sq) + size_t(b);
+        subDir[idx] = cubeDirection(f, 0.5 * (u0 + u1), 0.5 * (v0 + v1));
+        subOmega[idx] = cubeSolidAngle(u0, v0, u1, v1);
+      }
+    }
+  }
+  stride_ = kCubeFaces * kk;
+  table_.assign(grid_.size() * stride_, 0.0f);
+  std::atomic<size_t> done{0};
+  parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
+    const glm::vec3 n = grid_.normal(size_t(node));
+    std::vector<double> fc(kCubeFaces * faceTexels, 0.0);
+    for (size_t idx = 0; idx < subDir.size(); ++idx) {
+      const float c = glm::dot(n, subDir[idx]);
+      if (c <= 0.0f) continue;
+      const size_t f = idx / (size_t(sq) * size_t(sq));
+      const size_t a = (idx / size_t(sq)) % size_t(sq), b = idx % size_t(sq);
+      fc[f * faceTexels + (a / size_t(q)) * size_t(s) + b / size_t(q)] += c * subOmega[idx];
+    }
+    for (int f = 0; f < kCubeFaces; ++f) {
+      const std::vector<double> m =
+          moments2d(basis, basis, std::span<const double>(fc.data() + size_t(f) * faceTexels, faceTexels), k);
+      std::transform(m.begin(), m.end(), table_.begin() + ptrdiff_t(size_t(node) * stride_ + size_t(f) * kk),
+                     [](double v) { return float(v); });
+    }
+    const size_t d = ++done;
+    if (d % 256 == 0) report(progress, "lighting", double(d) / double(grid_.size()));
+  });
+  report(progress, "lighting", 1.0);
+}
+
+glm::vec3 ChebFaceLighting::irradiance(const glm::vec3& n) const {
+  std::array<float, 6 * 1024> tf;
+  COMPOSE_CHECK(stride_ <= tf.size());
+  interpolate(n, tf.data());
+  const size_t kk = stride_ / kCubeFaces;
+  glm::vec3 e(0.0f);
+  for (int f = 0; f < kCubeFaces; ++f) {
+    const float* t = tf.data() + size_t(f) * kk;
+    const float* g = global_.data() + size_t(f) * 3 * kk;
+    for (size_t i = 0; i < kk; ++i) {
+      e.x += g[i] * t[i];
+      e.y += g[kk + i] * t[i];
+      e.z += g[2 * kk + i] * t[i];
+    }
+  }
+  return e;
+}
+
+// --- cheb-local -------------------------------------------------------------------------------
+
+ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local", params) {}
+
+void ChebLocalLighting::project(const Environment& env, const Progress& progress) {
+  const int s = params_.samples, k = params_.order;
+  const TchebichefBasis basis(s, k);
+  const size_t kk = size_t(k) * size_t(k);
+  // BRDF side, in the local frame: Lambertian f_c = 1 on every cell (the cosine is on the lighting
+  // side). Its moments are computed, not assumed; all but T_00 vanish to rounding.
+  global_.resize(kk);
+  {
+    const std::vector<double> ones(size_t(s) * size_t(s), 1.0);
+    const std::vector<double> m = moments2d(basis, basis, ones, k);
+    std::transform(m.begin(), m.end(), global_.begin(), [](double v) { return float(v); });
+  }
+  const RadianceCells cells(env);
+  stride_ = 3 * kk;
+  table_.assign(grid_.size() * stride_, 0.0f);
+  // Altitude cells by their cosine bounds: cell i holds cos θ in (cos((i+1)π/2s), cos(iπ/2s)].
+  std::vector<float> cosBound(static_cast<size_t>(s));
+  for (int i = 1; i <= s; ++i) cosBound[size_t(i - 1)] = float(std::cos(i * 0.5 * kPi / s));
+  const float phiScale = float(s / (2.0 * kPi));
+  std::atomic<size_t> done{0};
+  parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
+    const glm::vec3 n = grid_.normal(size_t(node));
+    std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0);
+    if (k == 1) {
+      // Only the mean of L_in is needed: T_00 = t_0 t_0 Σ L_in = E(n) / s. Same sum, no binning.
+      glm::dvec3 e(0.0);
+      cells.forEachAbove(n, [&](const glm::vec3&, const glm::vec3& value) { e += glm::dvec3(value); });
+      for (int c = 0; c < 3; ++c) lin[size_t(c)] = e[c];  // all in cell (0, 0): same T_00
+    } else {
+      glm::vec3 east, north;
+      grid_.frame(size_t(node), east, north);
+      // L_in(i, j) = ∫_cell L cos θ dω, exactly (RadianceCells), binned by altitude θ and azimuth φ.
+      cells.forEachAbove(n, [&](const glm::vec3& w, const glm::vec3& value) {
+        const float c = glm::dot(n, w);
+        int i = 0;
+        while (i < s - 1 && c <= cosBound[size_t(i)]) ++i;
+        float phi = fastAtan2(glm::dot(north, w), glm::dot(east, w));
+        if (phi < 0.0f) phi += float(2.0 * kPi);
+        const int j = std::min(s - 1, int(phi * phiScale));
+        double* cell = lin.data() + 3 * (size_t(i) * size_t(s) + size_t(j));
+        cell[0] += value.x;
+        cell[1] += value.y;
+        cell[2] += value.z;
+      });
+    }
+    if (k == 1) {
+      for (int c = 0; c < 3; ++c) table_[size_t(node) * stride_ + size_t(c)] = float(lin[size_t(c)] / s);
+    } else {
+      rgbMoments(basis, basis, lin, k, table_.data() + size_t(node) * stride_);
+    }
+    const size_t d = ++done;
+    if (d % 256 == 0) report(progress, "lighting", double(d) / double(grid_.size()));
+  });
+  report(progress, "lighting", 1.0);
+}
+
+glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
+  std::array<float, 3 * 1024> tl;
+  COMPOSE_CHECK(stride_ <= tl.size());
+  interpolate(n, tl.data());
+  const size_t kk = stride_ / 3;
+  glm::vec3 e(0.0f);
+  for (size_t i = 0; i < kk; ++i) {
+    e.x += tl[i] * global_[i];
+    e.y += tl[kk + i] * global_[i];
+    e.z += tl[2 * kk + i] * global_[i];
+  }
+  return e;
+}
+
+}  // namespace compose::lighting
