@@ -49,7 +49,7 @@ struct ComposeJob {
   std::string environmentSpace;  // empty: from the file
   std::string display, view;     // empty: the config's defaults
 
-  std::string lighting = "sh";
+  std::string lighting = "cheb-local";
   std::string lightingParams;    // "key=value,..." for the basis
   double environmentYawDegrees = 0.0;
 

@@ -87,7 +87,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--lighting", job.lighting, "Lighting basis: " + join(compose::lighting::lightingNames()))
       ->capture_default_str();
-  app.add_option("--lighting-params", lightingParams, "Basis parameters as key=value,... (sh: order=0..8)");
+  app.add_option("--lighting-params", lightingParams,
+                 "Basis parameters as key=value,... (cheb-*: order, samples, rows, cols, subsamples; sh: order=0..8;"
+                 " mc: samples, seed)");
   app.add_option("--place", place, "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");
   app.add_option("--scale", job.placement.heightFraction, "Object height as a fraction of the plate height")
       ->capture_default_str();

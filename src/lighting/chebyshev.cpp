@@ -357,8 +357,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
     std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0);
     if (k == 1) {
       // Only the mean of L_in is needed: T_00 = t_0 t_0 Σ L_in = E(n) / s. Same sum, no binning.
-      glm::dvec3 e(0.0);
-      cells.forEachAbove(n, [&](const glm::vec3&, const glm::vec3& value) { e += glm::dvec3(value); });
+      const glm::dvec3 e = cells.irradiance(n);
       for (int c = 0; c < 3; ++c) lin[size_t(c)] = e[c];  // all in cell (0, 0): same T_00
     } else {
       glm::vec3 east, north;

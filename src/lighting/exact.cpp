@@ -12,9 +12,7 @@ void ExactLighting::project(const Environment& env, const Progress& progress) {
 }
 
 glm::vec3 ExactLighting::irradiance(const glm::vec3& n) const {
-  glm::dvec3 e(0.0);
-  cells_.forEachAbove(n, [&](const glm::vec3&, const glm::vec3& v) { e += glm::dvec3(v); });
-  return glm::vec3(e);
+  return glm::vec3(cells_.irradiance(n));
 }
 
 }  // namespace compose::lighting

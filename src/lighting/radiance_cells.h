@@ -1,20 +1,19 @@
-// RadianceCells: a two-level view of an Environment for exact, fast cosine-weighted integrals.
+// RadianceCells: a multi-level view of an Environment for exact, fast cosine-weighted integrals.
 //
 // Each texel t is treated as what it is, the mean radiance L_t over its lat-long cell, and carries
 // the cell's exact vector moment m_t = ∫_cell ω dω. A texel wholly above the horizon of n adds
-// exactly ∫_cell L_t max(0, n·ω) dω = L_t (n·m_t); one that the horizon cuts is the only approximation, confined to a band of texels where the cosine is
-// nearly zero; its contribution is the exact integral of the cosine's linear model across the
-// texel clipped at the horizon (clippedMean), leaving only second-order error.
+// exactly ∫_cell L_t max(0, n·ω) dω = L_t (n·m_t). A texel that the horizon cuts adds the exact
+// integral of the cosine's linear model across the texel, clipped at the horizon (clippedMean):
+// the only approximation, second order, confined to a band of texels where the cosine is ~0.
 //
-// Texels are grouped into coarse cells of `factor` x `factor`. Each cell keeps its vector moment
-// V = Σ L_t m_t (per channel) and a cone (axis, half-angle) containing every point of every member
-// texel. For a normal n:
-//  * a cell whose cone lies entirely above n's horizon contributes n·V, with no per-texel work;
+// Texels are grouped into a pyramid of cells (2x2, 4x4, ... texels). Each cell keeps its vector
+// moment V = Σ L_t m_t (per channel) and a cone (axis, half-angle) containing every point of every
+// member texel. For a normal n, starting from the coarsest cells:
+//  * a cell whose cone lies entirely above n's horizon contributes n·V, with no further work;
 //  * a cell entirely below contributes nothing;
-//  * only the cells the horizon cuts are refined to their texels.
-// The result equals the texel-by-texel sum up to rounding, at a fraction of its cost (about
-// 2·width/factor refined cells per query instead of width·height texels). The exact reference and
-// the local-hemisphere bases use it.
+//  * a cell the horizon cuts is split into its four children, down to single texels.
+// The result equals the texel-by-texel sum up to rounding, at a small fraction of its cost (the
+// work follows the horizon's great circle). The exact reference and the local bases use it.
 #pragma once
 
 #include <cmath>
@@ -29,74 +28,95 @@ namespace compose::lighting {
 class RadianceCells {
  public:
   RadianceCells() = default;
-  explicit RadianceCells(const Environment& env, int factor = 8);
+  // `topFactor`: texels per side of the top-level cells (a power of two).
+  explicit RadianceCells(const Environment& env, int topFactor = 32);
 
-  // Calls visit(direction, value) for pieces of the hemisphere above n whose values sum to E(n).
-  // `value` is the cosine-weighted integral ∫ L max(0, n·ω) dω over the piece (RGB); `direction`
-  // is the piece's representative direction: the centroid axis for a whole cell, the texel
-  // centre for a refined texel.
+  // E(n) = Σ_t ∫_t L_t max(0, n·ω) dω, accumulated in double.
+  glm::dvec3 irradiance(const glm::vec3& n) const;
+
+  // Calls visit(direction, value) for pieces of the hemisphere above n whose values sum to E(n):
+  // whole cells (direction: their power-weighted centroid) and texels along the horizon
+  // (direction: their centre). `value` is the cosine-weighted integral over the piece (RGB).
   template <class Visit>
   void forEachAbove(const glm::vec3& n, Visit&& visit) const {
-    for (const Cell& c : cells_) {
-      const float d = n.x * c.axis.x + n.y * c.axis.y + n.z * c.axis.z;
-      if (d >= c.sinRadius) {
-        const glm::vec3 v(n.x * c.moment[0].x + n.y * c.moment[0].y + n.z * c.moment[0].z,
-                          n.x * c.moment[1].x + n.y * c.moment[1].y + n.z * c.moment[1].z,
-                          n.x * c.moment[2].x + n.y * c.moment[2].y + n.z * c.moment[2].z);
-        visit(c.centroid, v);
-      } else if (d > -c.sinRadius) {
-        for (int y = c.y0; y < c.y1; ++y) {
-          const Row& row = rows_[size_t(y)];
-          for (int x = c.x0; x < c.x1; ++x) {
-            const size_t t = size_t(y) * size_t(width_) + size_t(x);
-            const glm::vec3& w = centres_[t];
-            const float centre = n.x * w.x + n.y * w.y + n.z * w.z;
-            // Half-ranges of n·ω across the texel, along its north and east extents.
-            const float sinLon = sinLon_[size_t(x)], cosLon = cosLon_[size_t(x)];
-            const float alpha = row.halfHeight * (-n.x * sinLon * row.sinLat + n.y * row.cosLat - n.z * cosLon * row.sinLat);
-            const float beta = row.halfWidth * (n.x * cosLon - n.z * sinLon);
-            const float spread = std::abs(alpha) + std::abs(beta);
-            if (centre >= spread) {
-              const glm::vec3& m = directions_[t];
-              visit(m, weighted_[t] * (n.x * m.x + n.y * m.y + n.z * m.z));
-            } else if (centre > -spread) {
-              visit(w, power_[t] * clippedMean(centre, alpha, beta));
-            }
-          }
-        }
-      }
+    const int top = int(levels_.size()) - 1;
+    const Level& level = levels_[size_t(top)];
+    for (int cy = 0; cy < level.height; ++cy) {
+      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit);
     }
   }
+
+  size_t cellCount() const;
+  size_t floatsStored() const;
 
   // Mean over s, t ∈ [-1, 1] of max(0, c + s·a + t·b): the exact integral of a linear function
   // clipped at zero over a rectangle, by the corner formula with R(x) = max(0, x)³/6:
   //   ∫∫ max(0, c + s a + t b) ds dt = (1 / (a b)) Σ_{s,t = ±1} s t R(c + s a + t b).
-  // Used for texels the horizon cuts, where n·ω is close to linear across the texel.
   static float clippedMean(float c, float a, float b);
 
-  // E(n) by the two-level sum.
-  glm::vec3 irradiance(const glm::vec3& n) const;
-
-  size_t cellCount() const { return cells_.size(); }
-  size_t floatsStored() const { return cells_.size() * 19 + directions_.size() * 6; }
-
  private:
-  struct Cell {
-    glm::vec3 axis{0.0f};      // cone axis (unit)
-    float sinRadius = 1.0f;    // sin of the cone half-angle, padded for rounding
-    glm::vec3 centroid{0.0f};  // power-weighted mean direction (unit), or the axis if dark
-    glm::vec3 moment[3];       // V per channel: Σ L_c Ω ω
-    int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+  // One level of the pyramid: cells of 2^level x 2^level texels (clipped at the map's edges).
+  struct Level {
+    int width = 0, height = 0;
+    std::vector<float> axisX, axisY, axisZ, sinRadius;
+    std::vector<float> moment[9];  // V: [3 * channel + axis][cell]
+    std::vector<glm::vec3> centroid;
   };
-  int width_ = 0;
-  std::vector<Cell> cells_;
-  std::vector<glm::vec3> directions_;  // per texel: unit direction of its vector moment m_t
-  std::vector<glm::vec3> weighted_;    // per texel: L_t |m_t|
-  std::vector<glm::vec3> centres_;     // per texel: centre direction
-  std::vector<glm::vec3> power_;       // per texel: L_t Ω_t
+
+  template <class Visit>
+  void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit) const {
+    if (level == 0) {
+      visitTexel(cx, cy, n, visit);
+      return;
+    }
+    const Level& L = levels_[size_t(level)];
+    const size_t i = size_t(cy) * size_t(L.width) + size_t(cx);
+    const float d = n.x * L.axisX[i] + n.y * L.axisY[i] + n.z * L.axisZ[i];
+    if (d >= L.sinRadius[i]) {
+      visit(L.centroid[i], glm::vec3(n.x * L.moment[0][i] + n.y * L.moment[1][i] + n.z * L.moment[2][i],
+                                     n.x * L.moment[3][i] + n.y * L.moment[4][i] + n.z * L.moment[5][i],
+                                     n.x * L.moment[6][i] + n.y * L.moment[7][i] + n.z * L.moment[8][i]));
+    } else if (d > -L.sinRadius[i]) {
+      const Level& child = levels_[size_t(level - 1)];
+      const int x1 = std::min(2 * cx + 2, child.width), y1 = std::min(2 * cy + 2, child.height);
+      for (int y = 2 * cy; y < y1; ++y) {
+        for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit);
+      }
+    }
+  }
+
+  template <class Visit>
+  void visitTexel(int x, int y, const glm::vec3& n, Visit& visit) const {
+    const Row& row = rows_[size_t(y)];
+    const Texel& tx = texels_[size_t(y) * size_t(width_) + size_t(x)];
+    const glm::vec3& w = tx.centre;
+    const float centre = n.x * w.x + n.y * w.y + n.z * w.z;
+    const float sinLon = sinLon_[size_t(x)], cosLon = cosLon_[size_t(x)];
+    // Half-ranges of n·ω across the texel along its north and east extents.
+    const float alpha = row.halfHeight * (n.y * row.cosLat - (n.x * sinLon + n.z * cosLon) * row.sinLat);
+    const float beta = row.halfWidth * (n.x * cosLon - n.z * sinLon);
+    const float spread = std::abs(alpha) + std::abs(beta);
+    if (centre >= spread) {
+      const glm::vec3& m = tx.moment;
+      visit(w, tx.weighted * (n.x * m.x + n.y * m.y + n.z * m.z));
+    } else if (centre > -spread) {
+      visit(w, tx.power * clippedMean(centre, alpha, beta));
+    }
+  }
+
   struct Row {
-    float sinLat, cosLat, halfHeight, halfWidth;  // at the centre; half extents in radians of arc
+    float sinLat, cosLat, halfHeight, halfWidth;  // at the texel centre; half extents in radians of arc
   };
+  int width_ = 0, height_ = 0;
+  std::vector<Level> levels_;  // [0] is unused (texels are below), [1..] coarser and coarser
+  // Texels, one record each so that a texel along the horizon costs one cache line.
+  struct Texel {
+    glm::vec3 centre;    // centre direction
+    glm::vec3 moment;    // unit direction of the vector moment m_t
+    glm::vec3 weighted;  // L_t |m_t|
+    glm::vec3 power;     // L_t Ω_t
+  };
+  std::vector<Texel> texels_;
   std::vector<Row> rows_;
   std::vector<float> sinLon_, cosLon_;
 };
