@@ -18,6 +18,11 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
+// Cells of 8 x 8 texels on the horizon are integrated as uniform patches (RadianceCells): on the
+// sample maps this moves E by ~2e-5 relative (~90 dB), far below the normal-grid interpolation
+// error, at a tenth of the texel-exact cost.
+constexpr int kLeafLevel = 3;
+
 // atan2 to float precision without library calls: Abramowitz & Stegun 4.4.49 (|error| <= 2e-8
 // on [0, 1]) plus octant folding. Used on the hot paths that locate a direction on a grid.
 inline float fastAtan2(float y, float x) {
@@ -129,19 +134,6 @@ std::string ChebBase::describe() const {
 
 size_t ChebBase::floatsStored() const { return table_.size() + global_.size(); }
 
-void ChebBase::interpolate(const glm::vec3& n, float* out) const {
-  COMPOSE_CHECK(!table_.empty());
-  size_t nodes[4];
-  float w[4];
-  grid_.interpolation(n, nodes, w);
-  std::fill(out, out + stride_, 0.0f);
-  for (int q = 0; q < 4; ++q) {
-    if (w[q] == 0.0f) continue;
-    const float* src = table_.data() + nodes[q] * stride_;
-    for (size_t i = 0; i < stride_; ++i) out[i] += w[q] * src[i];
-  }
-}
-
 // --- cheb-latlong -----------------------------------------------------------------------------
 
 ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {}
@@ -211,14 +203,20 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
 }
 
 glm::vec3 ChebLatLongLighting::irradiance(const glm::vec3& n) const {
-  std::array<float, 1024> tf;
-  COMPOSE_CHECK(stride_ <= tf.size());
-  interpolate(n, tf.data());
+  // Σ_mn T^L_mn T^f_mn(n), with T^f(n) interpolated between grid normals: Σ_q w_q (T^L · T^f_q).
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolation(n, nodes, w);
   glm::vec3 e(0.0f);
-  for (size_t i = 0; i < stride_; ++i) {
-    e.x += global_[i] * tf[i];
-    e.y += global_[stride_ + i] * tf[i];
-    e.z += global_[2 * stride_ + i] * tf[i];
+  for (int q = 0; q < 4; ++q) {
+    const float* tf = table_.data() + nodes[q] * stride_;
+    glm::vec3 dot(0.0f);
+    for (size_t i = 0; i < stride_; ++i) {
+      dot.x += global_[i] * tf[i];
+      dot.y += global_[stride_ + i] * tf[i];
+      dot.z += global_[2 * stride_ + i] * tf[i];
+    }
+    e += w[q] * dot;
   }
   return e;
 }
@@ -311,19 +309,24 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
 }
 
 glm::vec3 ChebFaceLighting::irradiance(const glm::vec3& n) const {
-  std::array<float, 6 * 1024> tf;
-  COMPOSE_CHECK(stride_ <= tf.size());
-  interpolate(n, tf.data());
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolation(n, nodes, w);
   const size_t kk = stride_ / kCubeFaces;
   glm::vec3 e(0.0f);
-  for (int f = 0; f < kCubeFaces; ++f) {
-    const float* t = tf.data() + size_t(f) * kk;
-    const float* g = global_.data() + size_t(f) * 3 * kk;
-    for (size_t i = 0; i < kk; ++i) {
-      e.x += g[i] * t[i];
-      e.y += g[kk + i] * t[i];
-      e.z += g[2 * kk + i] * t[i];
+  for (int q = 0; q < 4; ++q) {
+    const float* tf = table_.data() + nodes[q] * stride_;
+    glm::vec3 dot(0.0f);
+    for (int f = 0; f < kCubeFaces; ++f) {
+      const float* t = tf + size_t(f) * kk;
+      const float* g = global_.data() + size_t(f) * 3 * kk;
+      for (size_t i = 0; i < kk; ++i) {
+        dot.x += g[i] * t[i];
+        dot.y += g[kk + i] * t[i];
+        dot.z += g[2 * kk + i] * t[i];
+      }
     }
+    e += w[q] * dot;
   }
   return e;
 }
@@ -357,7 +360,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
     std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0);
     if (k == 1) {
       // Only the mean of L_in is needed: T_00 = t_0 t_0 Σ L_in = E(n) / s. Same sum, no binning.
-      const glm::dvec3 e = cells.irradiance(n);
+      const glm::dvec3 e = cells.irradiance(n, kLeafLevel);
       for (int c = 0; c < 3; ++c) lin[size_t(c)] = e[c];  // all in cell (0, 0): same T_00
     } else {
       glm::vec3 east, north;
@@ -374,7 +377,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
         cell[0] += value.x;
         cell[1] += value.y;
         cell[2] += value.z;
-      });
+      }, kLeafLevel);
     }
     if (k == 1) {
       for (int c = 0; c < 3; ++c) table_[size_t(node) * stride_ + size_t(c)] = float(lin[size_t(c)] / s);
@@ -388,15 +391,21 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
 }
 
 glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
-  std::array<float, 3 * 1024> tl;
-  COMPOSE_CHECK(stride_ <= tl.size());
-  interpolate(n, tl.data());
+  // Σ_mn T^L_mn(n) T^f_mn, with T^L(n) interpolated between grid normals: Σ_q w_q (T^L_q · T^f).
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolation(n, nodes, w);
   const size_t kk = stride_ / 3;
   glm::vec3 e(0.0f);
-  for (size_t i = 0; i < kk; ++i) {
-    e.x += tl[i] * global_[i];
-    e.y += tl[kk + i] * global_[i];
-    e.z += tl[2 * kk + i] * global_[i];
+  for (int q = 0; q < 4; ++q) {
+    const float* tl = table_.data() + nodes[q] * stride_;
+    glm::vec3 dot(0.0f);
+    for (size_t i = 0; i < kk; ++i) {
+      dot.x += tl[i] * global_[i];
+      dot.y += tl[kk + i] * global_[i];
+      dot.z += tl[2 * kk + i] * global_[i];
+    }
+    e += w[q] * dot;
   }
   return e;
 }

@@ -75,9 +75,6 @@ class ChebBase : public DiffuseLighting {
   size_t floatsStored() const override;
 
  protected:
-  // Interpolates the per-node table at n into `out` (stride_ floats).
-  void interpolate(const glm::vec3& n, float* out) const;
-
   std::string name_;
   ChebParams params_;
   int blocks_ = 1;        // moment blocks per point (6 for cheb-face)

@@ -21,6 +21,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
   const size_t texels = size_t(w) * size_t(h);
   texels_.resize(texels);
   rows_.resize(size_t(h));
+  rowMoment_.resize(size_t(h));
+  rowOmega_.resize(size_t(h));
   sinLon_.resize(size_t(w));
   cosLon_.resize(size_t(w));
   for (int x = 0; x < w; ++x) {
@@ -39,6 +41,7 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
     const double cos2 = 0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
     const double sincos = 0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
     const double omega = env.rowSolidAngle(y);
+    rowOmega_[size_t(y)] = omega;
     for (int x = 0; x < w; ++x) {
       const double left = kPi * (1.0 - 2.0 * x / w), right = kPi * (1.0 - 2.0 * (x + 1) / w);
       const glm::dvec3 m((std::cos(right) - std::cos(left)) * cos2, (left - right) * sincos,
@@ -46,6 +49,7 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       const double len = glm::length(m);
       const size_t t = size_t(y) * size_t(w) + size_t(x);
       const glm::dvec3 L(env.radiance(x, y));
+      if (x == 0) rowMoment_[size_t(y)] = len;
       texels_[t] = Texel{env.direction(x, y), glm::vec3(m / len), glm::vec3(L * len), glm::vec3(L * omega)};
     }
   });
@@ -66,16 +70,24 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
     level.sinRadius.resize(cells);
     for (auto& m : level.moment) m.resize(cells);
     level.centroid.resize(cells);
+    level.power.resize(cells);
+    level.halfExtent.resize(cells);
+    level.meanDirection.resize(cells);
     parallelFor(0, int64_t(cells), [&](int64_t ii) {
       const size_t i = size_t(ii);
       const int x0 = int(i % size_t(level.width)) * size, y0 = int(i / size_t(level.width)) * size;
       const int x1 = std::min(x0 + size, w), y1 = std::min(y0 + size, h);
-      glm::dvec3 axis(0.0), centroid(0.0), moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
+      glm::dvec3 geometric(0.0);
+      double omega = 0.0;
+      glm::dvec3 axis(0.0), centroid(0.0), power(0.0), moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
       for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
           const size_t t = size_t(y) * size_t(w) + size_t(x);
           const glm::dvec3 m = glm::dvec3(texels_[t].moment);
           const glm::dvec3 lw(texels_[t].weighted);
+          power += glm::dvec3(texels_[t].power);
+          geometric += m * rowMoment_[size_t(y)];
+          omega += rowOmega_[size_t(y)];
           axis += glm::dvec3(texels_[t].centre);
           centroid += m * (lw.x + lw.y + lw.z);
           for (int k = 0; k < 3; ++k) moment[k] += m * lw[k];
@@ -98,6 +110,10 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       level.sinRadius[i] = radius >= 0.5 * kPi ? 2.0f : float(std::sin(radius));
       const double centroidLen = glm::length(centroid);
       level.centroid[i] = glm::vec3(centroidLen > 0.0 ? centroid / centroidLen : a);
+      level.power[i] = glm::vec3(power);
+      level.meanDirection[i] = glm::vec3(geometric / omega);
+      const double midLat = kPi * (0.5 - 0.5 * (y0 + y1) / double(h));
+      level.halfExtent[i] = glm::vec2(float(0.5 * kPi * (y1 - y0) / h), float(kPi * (x1 - x0) / w * std::cos(midLat)));
       for (int k = 0; k < 3; ++k) {
         level.moment[3 * k][i] = float(moment[k].x);
         level.moment[3 * k + 1][i] = float(moment[k].y);
@@ -135,9 +151,9 @@ float RadianceCells::clippedMean(float c, float a, float b) {
   return float((r(cd + ad + bd) - r(cd + ad - bd) - r(cd - ad + bd) + r(cd - ad - bd)) / (4.0 * ad * bd));
 }
 
-glm::dvec3 RadianceCells::irradiance(const glm::vec3& n) const {
+glm::dvec3 RadianceCells::irradiance(const glm::vec3& n, int leafLevel) const {
   glm::dvec3 total(0.0);
-  forEachAbove(n, [&](const glm::vec3&, const glm::vec3& v) { total += glm::dvec3(v); });
+  forEachAbove(n, [&](const glm::vec3&, const glm::vec3& v) { total += glm::dvec3(v); }, leafLevel);
   return total;
 }
 

@@ -16,8 +16,11 @@
 // work follows the horizon's great circle). The exact reference and the local bases use it.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
+
+#include <glm/vec2.hpp>
 
 #include <glm/vec3.hpp>
 
@@ -31,18 +34,22 @@ class RadianceCells {
   // `topFactor`: texels per side of the top-level cells (a power of two).
   explicit RadianceCells(const Environment& env, int topFactor = 32);
 
-  // E(n) = Σ_t ∫_t L_t max(0, n·ω) dω, accumulated in double.
-  glm::dvec3 irradiance(const glm::vec3& n) const;
+  // E(n) = Σ_t ∫_t L_t max(0, n·ω) dω, accumulated in double. `leafLevel` > 0 stops refining at
+  // cells of 2^leafLevel texels: a cut cell is then integrated with the clipped linear model over
+  // the whole cell, as if its radiance were uniform — faster, with an error confined to cells on
+  // the horizon (where the cosine is ~0). leafLevel 0 is the texel-exact reference.
+  glm::dvec3 irradiance(const glm::vec3& n, int leafLevel = 0) const;
 
   // Calls visit(direction, value) for pieces of the hemisphere above n whose values sum to E(n):
   // whole cells (direction: their power-weighted centroid) and texels along the horizon
   // (direction: their centre). `value` is the cosine-weighted integral over the piece (RGB).
   template <class Visit>
-  void forEachAbove(const glm::vec3& n, Visit&& visit) const {
+  void forEachAbove(const glm::vec3& n, Visit&& visit, int leafLevel = 0) const {
     const int top = int(levels_.size()) - 1;
     const Level& level = levels_[size_t(top)];
+    leafLevel = std::clamp(leafLevel, 0, top);
     for (int cy = 0; cy < level.height; ++cy) {
-      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit);
+      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit, leafLevel);
     }
   }
 
@@ -61,10 +68,13 @@ class RadianceCells {
     std::vector<float> axisX, axisY, axisZ, sinRadius;
     std::vector<float> moment[9];  // V: [3 * channel + axis][cell]
     std::vector<glm::vec3> centroid;
+    std::vector<glm::vec3> power;    // Σ L_t Ω_t
+    std::vector<glm::vec2> halfExtent;  // half height and half width of the cell, radians of arc
+    std::vector<glm::vec3> meanDirection;  // ∫_cell ω dω / Ω_cell (not unit length)
   };
 
   template <class Visit>
-  void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit) const {
+  void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit, int leafLevel) const {
     if (level == 0) {
       visitTexel(cx, cy, n, visit);
       return;
@@ -77,10 +87,25 @@ class RadianceCells {
                                      n.x * L.moment[3][i] + n.y * L.moment[4][i] + n.z * L.moment[5][i],
                                      n.x * L.moment[6][i] + n.y * L.moment[7][i] + n.z * L.moment[8][i]));
     } else if (d > -L.sinRadius[i]) {
+      if (level == leafLevel) {
+        // The cell as one uniform patch: the linear model of n·ω across it, clipped.
+        const glm::vec3 a(L.axisX[i], L.axisY[i], L.axisZ[i]);
+        const float h = std::sqrt(a.x * a.x + a.z * a.z);
+        const glm::vec3 east = h > 1e-6f ? glm::vec3(a.z / h, 0.0f, -a.x / h) : glm::vec3(1, 0, 0);
+        // north = axis x east
+        const glm::vec3 nn(a.y * east.z - a.z * east.y, a.z * east.x - a.x * east.z, a.x * east.y - a.y * east.x);
+        const float alpha = L.halfExtent[i].x * (n.x * nn.x + n.y * nn.y + n.z * nn.z);
+        const float beta = L.halfExtent[i].y * (n.x * east.x + n.y * east.y + n.z * east.z);
+        // The model's centre value is the mean of n·ω over the cell under its true solid-angle
+        // density (n·∫ω dω / Ω), which removes the first-order error of the cos λ density.
+        const glm::vec3& md = L.meanDirection[i];
+        visit(a, L.power[i] * clippedMean(n.x * md.x + n.y * md.y + n.z * md.z, alpha, beta));
+        return;
+      }
       const Level& child = levels_[size_t(level - 1)];
       const int x1 = std::min(2 * cx + 2, child.width), y1 = std::min(2 * cy + 2, child.height);
       for (int y = 2 * cy; y < y1; ++y) {
-        for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit);
+        for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit, leafLevel);
       }
     }
   }
@@ -118,6 +143,7 @@ class RadianceCells {
   };
   std::vector<Texel> texels_;
   std::vector<Row> rows_;
+  std::vector<double> rowMoment_, rowOmega_;  // per row: |m_t| and Ω_t (the same for every texel of a row)
   std::vector<float> sinLon_, cosLon_;
 };
 
