@@ -13,6 +13,7 @@
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 #include "lighting/lighting.h"
+#include "lighting/lighting_cache.h"
 #include "render/mesh.h"
 
 namespace compose::pipeline {
@@ -33,6 +34,13 @@ fs::path samplesDirectory() {
 }
 
 fs::path defaultEnvironment() { return samplesDirectory() / "forest.exr"; }
+
+fs::path lightingCacheDirectory() {
+  if (const char* dir = std::getenv("COMPOSE_CACHE_DIR"); dir && *dir) return dir;
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return fs::path(xdg) / "compose" / "lighting";
+  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "compose" / "lighting";
+  return fs::path(".cache") / "compose" / "lighting";
+}
 
 namespace {
 
@@ -137,7 +145,11 @@ std::vector<StageRecord> plan(const ComposeJob& job) {
   s.push_back({"merge", false, "the environment is a single HDR image, no exposure bracket to merge"});
   s.push_back({"stitch", false, "the environment is already a lat-long map, no faces to stitch"});
   s.push_back({"color", true, "plate and environment to the working space (role scene_linear)"});
-  s.push_back({"precompute", true, "project the environment onto the '" + job.lighting + "' lighting basis"});
+  s.push_back({"precompute", true,
+               "project the environment onto the '" + job.lighting + "' lighting basis" +
+                   (job.lightingCache.empty() ? std::string(" (cache off)")
+                                              : ", or reuse the cached projection in " + job.lightingCache.string() +
+                                                    " if this environment and these parameters were seen before")});
   s.push_back({"render", true, "ray-cast the object with " + std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
                                    " samples per pixel; no self-shadowing or ground shadow yet"});
   s.push_back({"composite", true, "premultiplied over, in scene-linear light"});
@@ -210,8 +222,25 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
                              " environment texels had negative values (as low as " +
                              std::to_string(sanitized.mostNegative) + "): clamped to 0");
     }
-    lighting->project(environment, progress);
-    stage(result.stages, "precompute").reason += ": " + lighting->describe();
+    StageRecord& record = stage(result.stages, "precompute");
+    bool reused = false;
+    if (!job.lightingCache.empty()) {
+      const lighting::LightingCache cache(job.lightingCache);
+      const std::string key = lighting::LightingCache::key(environment, *lighting);
+      reused = cache.load(key, *lighting);
+      if (reused) {
+        record.reason = "reused the cached projection " + cache.pathFor(key).string() +
+                        " (same environment pixels and basis parameters)";
+      } else {
+        lighting->project(environment, progress);
+        record.reason = "projected the environment";
+        if (cache.store(key, *lighting)) record.reason += " and cached it in " + cache.pathFor(key).string();
+      }
+    } else {
+      lighting->project(environment, progress);
+      record.reason = "projected the environment (cache off)";
+    }
+    record.reason += ": " + lighting->describe();
   }
 
   // render

@@ -36,6 +36,9 @@ const std::vector<std::string>& stageNames();
 std::filesystem::path samplesDirectory();
 // The environment used when none is given.
 std::filesystem::path defaultEnvironment();
+// Folder of the projected-lighting cache: $COMPOSE_CACHE_DIR, else $XDG_CACHE_HOME/compose/lighting,
+// else ~/.cache/compose/lighting.
+std::filesystem::path lightingCacheDirectory();
 
 struct ComposeJob {
   std::filesystem::path plate;
@@ -51,6 +54,9 @@ struct ComposeJob {
 
   std::string lighting = "cheb-local";
   std::string lightingParams;    // "key=value,..." for the basis
+  // Projected lighting is cached here, keyed by the environment's pixels and the basis
+  // parameters; empty disables the cache.
+  std::filesystem::path lightingCache = lightingCacheDirectory();
   double environmentYawDegrees = 0.0;
 
   calib::CameraOptions camera;
@@ -65,7 +71,7 @@ struct ComposeJob {
 struct StageRecord {
   std::string name;
   bool runs = true;
-  std::string reason;     // why it runs or is skipped
+  std::string reason;     // why it runs, is reused or is skipped
   double seconds = 0.0;   // filled in by runCompose
 };
 

@@ -110,6 +110,9 @@ int main(int argc, char** argv) {
   app.add_option("--env-space", job.environmentSpace, "Colour space of the environment [default: from the file]");
   app.add_option("--display", job.display, "OpenColorIO display for the JPEG/PNG [default: the config's]");
   app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
+  bool noCache = false;
+  app.add_option("--cache", job.lightingCache, "Folder for cached lighting projections")->capture_default_str();
+  app.add_flag("--no-cache", noCache, "Neither read nor write the lighting cache");
   app.add_flag("--explain", explain, "Say which stages run or are skipped and why, then exit");
   app.add_flag("-q,--quiet", quiet, "Print only the output paths and errors");
 
@@ -129,6 +132,7 @@ int main(int argc, char** argv) {
     if (!albedo.empty()) job.albedo = parseColour(albedo, "--albedo");
     if (app.count("--focal35")) job.camera.focal35mm = focal35;
     job.lightingParams = lightingParams;
+    if (noCache) job.lightingCache.clear();
     if (exposure != "auto") {
       try {
         size_t used = 0;
@@ -153,7 +157,7 @@ int main(int argc, char** argv) {
     if (!quiet) {
       for (const auto& note : result.notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
       for (const auto& s : result.stages) {
-        if (s.runs) std::fprintf(stderr, "compose: %-10s %7.3f s\n", s.name.c_str(), s.seconds);
+        if (s.runs) std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds, s.reason.c_str());
       }
     }
     std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());

@@ -134,9 +134,36 @@ std::string ChebBase::describe() const {
 
 size_t ChebBase::floatsStored() const { return table_.size() + global_.size(); }
 
+std::string ChebBase::parameterKey() const {
+  return name_ + " order=" + std::to_string(params_.order) + " samples=" + std::to_string(params_.samples) +
+         " rows=" + std::to_string(params_.normalRows) + " cols=" + std::to_string(params_.normalCols) +
+         " subsamples=" + std::to_string(params_.subsamples) + " version=1";
+}
+
+bool ChebBase::exportState(std::vector<float>& out) const {
+  if (table_.empty()) return false;
+  out.clear();
+  out.insert(out.end(), table_.begin(), table_.end());
+  out.insert(out.end(), global_.begin(), global_.end());
+  return true;
+}
+
+bool ChebBase::importState(const std::vector<float>& in) {
+  const size_t stride = size_t(blocks_) * size_t(params_.order) * size_t(params_.order) *
+                        (name_ == "cheb-local" ? 3 : 1);
+  const size_t tableSize = grid_.size() * stride;
+  if (in.size() != tableSize + globalSize_) return false;
+  stride_ = stride;
+  table_.assign(in.begin(), in.begin() + ptrdiff_t(tableSize));
+  global_.assign(in.begin() + ptrdiff_t(tableSize), in.end());
+  return true;
+}
+
 // --- cheb-latlong -----------------------------------------------------------------------------
 
-ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {}
+ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {
+  globalSize_ = 3 * size_t(params_.order) * size_t(params_.order);
+}
 
 void ChebLatLongLighting::project(const Environment& env, const Progress& progress) {
   const int s = params_.samples, k = params_.order, q = params_.subsamples;
@@ -223,7 +250,10 @@ glm::vec3 ChebLatLongLighting::irradiance(const glm::vec3& n) const {
 
 // --- cheb-face --------------------------------------------------------------------------------
 
-ChebFaceLighting::ChebFaceLighting(ChebParams params) : ChebBase("cheb-face", params) { blocks_ = kCubeFaces; }
+ChebFaceLighting::ChebFaceLighting(ChebParams params) : ChebBase("cheb-face", params) {
+  blocks_ = kCubeFaces;
+  globalSize_ = kCubeFaces * 3 * size_t(params_.order) * size_t(params_.order);
+}
 
 void ChebFaceLighting::project(const Environment& env, const Progress& progress) {
   const int s = params_.samples, k = params_.order, q = params_.subsamples;
@@ -333,7 +363,9 @@ glm::vec3 ChebFaceLighting::irradiance(const glm::vec3& n) const {
 
 // --- cheb-local -------------------------------------------------------------------------------
 
-ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local", params) {}
+ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local", params) {
+  globalSize_ = size_t(params_.order) * size_t(params_.order);
+}
 
 void ChebLocalLighting::project(const Environment& env, const Progress& progress) {
   const int s = params_.samples, k = params_.order;

@@ -73,11 +73,15 @@ class ChebBase : public DiffuseLighting {
   std::string describe() const override;
   int coefficientsPerChannel() const override { return blocks_ * params_.order * params_.order; }
   size_t floatsStored() const override;
+  std::string parameterKey() const override;
+  bool exportState(std::vector<float>& out) const override;
+  bool importState(const std::vector<float>& in) override;
 
  protected:
   std::string name_;
   ChebParams params_;
   int blocks_ = 1;        // moment blocks per point (6 for cheb-face)
+  size_t globalSize_ = 0; // floats in global_ once projected (set by each basis' constructor)
   NormalGrid grid_;
   size_t stride_ = 0;     // floats per node
   std::vector<float> table_;       // per node

@@ -52,6 +52,9 @@ class Environment {
     const float* p = texels_.data() + (size_t(y) * size_t(width_) + size_t(x)) * 3;
     return {p[0], p[1], p[2]};
   }
+  // The radiance, RGB interleaved, row-major (for hashing and copying).
+  const std::vector<float>& texels() const { return texels_; }
+
   // Direction of the centre of texel (x, y).
   glm::vec3 direction(int x, int y) const;
   // Solid angle of any texel of row y (all texels of a row have the same).

@@ -44,6 +44,15 @@ class DiffuseLighting {
   // Coefficients per colour channel, and the total number of floats stored for the lighting.
   virtual int coefficientsPerChannel() const = 0;
   virtual size_t floatsStored() const = 0;
+
+  // Everything that determines the projection besides the environment ("cheb-local order=1
+  // samples=8 ..."): part of the on-disk cache key (lighting_cache.h).
+  virtual std::string parameterKey() const { return describe(); }
+  // The projected state as plain floats, for the on-disk cache. A basis not worth caching (its
+  // projection costs less than reading it back) keeps the defaults and is always recomputed.
+  virtual bool exportState(std::vector<float>& /*out*/) const { return false; }
+  // Restores a state written by exportState for the same parameterKey(); false if it does not fit.
+  virtual bool importState(const std::vector<float>& /*in*/) { return false; }
 };
 
 // Names accepted by createLighting, in a stable order.

@@ -125,7 +125,8 @@ class ComposeEndToEnd : public ::testing::Test {
     dir_ = new TempDir();
     run_ = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) + " --object " +
                           quote((samples_ / "bunny.obj").string()) + " --exposure " + std::to_string(kExposureStops) +
-                          " --albedo " + std::to_string(kAlbedo) + " --out " + quote((dir_->path() / "comp").string()),
+                          " --albedo " + std::to_string(kAlbedo) + " --cache " + quote((dir_->path() / "cache").string()) +
+                          " --out " + quote((dir_->path() / "comp").string()),
                       dir_->path());
   }
   static void TearDownTestSuite() {
@@ -233,6 +234,33 @@ TEST_F(ComposeEndToEnd, ObjectPixelsMatchTheExactIrradianceReference) {
   std::printf("object pixels vs exact reference: SNR %.2f dB\n", snrDb);
 }
 
+// A second run with the same environment and lighting parameters loads the projection from the
+// cache instead of recomputing it, and produces the same pixels.
+TEST(ComposeCache, SecondRunReusesTheProjection) {
+  const fs::path samples = pipeline::samplesDirectory();
+  if (!fs::exists(samples / "meadow.jpg") || !fs::exists(samples / "bunny.obj") || !fs::exists(samples / "forest.exr")) {
+    GTEST_FAIL() << "sample data missing in " << samples << ": run samples/fetch.sh";
+  }
+  TempDir dir;
+  auto args = [&](const std::string& out) {
+    return "--plate " + quote((samples / "meadow.jpg").string()) + " --object " + quote((samples / "bunny.obj").string()) +
+           " --samples 1 --cache " + quote((dir.path() / "cache").string()) + " --out " + quote((dir.path() / out).string());
+  };
+  const RunResult first = runCompose(args("a"), dir.path());
+  ASSERT_EQ(first.status, 0) << first.err;
+  EXPECT_NE(first.err.find("projected the environment and cached it"), std::string::npos) << first.err;
+  const RunResult second = runCompose(args("b"), dir.path());
+  ASSERT_EQ(second.status, 0) << second.err;
+  EXPECT_NE(second.err.find("reused the cached projection"), std::string::npos) << second.err;
+  const Raster a = readRaster(dir.path() / "a.exr"), b = readRaster(dir.path() / "b.exr");
+  ASSERT_EQ(a.px.size(), b.px.size());
+  EXPECT_TRUE(a.px == b.px) << "cached lighting must give identical pixels";
+  // A different basis parameter is a different entry: recomputed, not reused.
+  const RunResult third = runCompose(args("c") + " --lighting-params rows=17,cols=32", dir.path());
+  ASSERT_EQ(third.status, 0) << third.err;
+  EXPECT_EQ(third.err.find("reused the cached projection"), std::string::npos) << third.err;
+}
+
 // --- error paths: clear message naming the file or option, non-zero exit, nothing written ---
 
 class ComposeErrors : public ::testing::Test {
@@ -244,7 +272,8 @@ class ComposeErrors : public ::testing::Test {
     }
   }
   std::string base(const std::string& plate, const std::string& object) const {
-    return "--plate " + quote(plate) + " --object " + quote(object) + " --out " + quote((dir_ / "x").string());
+    return "--plate " + quote(plate) + " --object " + quote(object) + " --no-cache --out " +
+           quote((dir_ / "x").string());
   }
   void expectNothingWritten() const {
     for (const auto& entry : fs::directory_iterator(dir_.path())) {

@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 
 #include "lighting/exact.h"
+#include "lighting/lighting_cache.h"
 #include "lighting/monte_carlo.h"
 #include "lighting/sh.h"
 #include "test_util.h"
@@ -178,6 +179,38 @@ TEST(MonteCarlo, ConvergesOnTheChebyshevTestMap) {
   MonteCarloLighting mc(16384, 7);
   mc.project(env);
   EXPECT_GT(snrDb(mc, exact, randomNormals(40, 5)), 35.0);  // measured ~40 dB; 5 dB for noise
+}
+
+}  // namespace
+}  // namespace compose::lighting
+
+namespace compose::lighting {
+namespace {
+
+TEST(LightingCache, StoresAndRestoresAProjection) {
+  compose::testing::TempDir dir;
+  const Environment env = sunAndSky(128, 300.0f);
+  const LightingCache cache(dir.path());
+  auto first = createLighting("cheb-local", ParamSet::parse("rows=9,cols=16", "t"));
+  const std::string key = LightingCache::key(env, *first);
+  EXPECT_FALSE(cache.load(key, *first)) << "empty cache";
+  first->project(env);
+  ASSERT_TRUE(cache.store(key, *first));
+  auto second = createLighting("cheb-local", ParamSet::parse("rows=9,cols=16", "t"));
+  ASSERT_TRUE(cache.load(key, *second));
+  for (const auto& n : randomNormals(50, 9)) EXPECT_EQ(first->irradiance(n), second->irradiance(n));
+  // Other parameters or other pixels give another key.
+  auto other = createLighting("cheb-local", ParamSet::parse("rows=9,cols=32", "t"));
+  EXPECT_NE(LightingCache::key(env, *other), key);
+  EXPECT_NE(LightingCache::key(sunAndSky(128, 301.0f), *first), key);
+  // A damaged entry is a miss, not a crash or a wrong answer.
+  std::filesystem::resize_file(cache.pathFor(key), 100);
+  auto third = createLighting("cheb-local", ParamSet::parse("rows=9,cols=16", "t"));
+  EXPECT_FALSE(cache.load(key, *third));
+  // Bases that are cheaper to project than to read are not cached.
+  ShLighting sh(2);
+  sh.project(env);
+  EXPECT_FALSE(cache.store(LightingCache::key(env, sh), sh));
 }
 
 }  // namespace

@@ -1,0 +1,33 @@
+// LightingCache: projected lighting kept on disk, so that a second run with the same environment
+// and the same basis parameters loads it instead of projecting again.
+//
+// The key is a 128-bit hash of the environment's radiance (every texel, bit for bit), its size,
+// and the basis' parameterKey(). Entries are single files named by the key, written atomically
+// (temporary file + rename); a file that is unreadable, truncated or does not match is ignored and
+// rewritten. Only bases whose exportState() returns true are cached.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "lighting/lighting.h"
+
+namespace compose::lighting {
+
+class LightingCache {
+ public:
+  explicit LightingCache(std::filesystem::path folder) : folder_(std::move(folder)) {}
+
+  static std::string key(const Environment& environment, const DiffuseLighting& basis);
+  std::filesystem::path pathFor(const std::string& key) const { return folder_ / (key + ".lighting"); }
+
+  // Restores `basis` from the entry for `key`; false on a miss or an entry that does not fit.
+  bool load(const std::string& key, DiffuseLighting& basis) const;
+  // Writes the entry; false (nothing left behind) if the basis is not cacheable or the write fails.
+  bool store(const std::string& key, const DiffuseLighting& basis) const;
+
+ private:
+  std::filesystem::path folder_;
+};
+
+}  // namespace compose::lighting
