@@ -14,6 +14,7 @@
 #include "lighting/environment.h"
 #include "lighting/lighting.h"
 #include "lighting/lighting_cache.h"
+#include "lighting/order_selector.h"
 #include "render/mesh.h"
 
 namespace compose::pipeline {
@@ -170,8 +171,19 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     throw Error("render", "--exposure must be a finite number of stops");
   }
 
-  // Lighting basis first: a misspelt name should fail before any pixel is read.
-  auto lighting = lighting::createLighting(job.lighting, ParamSet::parse(job.lightingParams, "lighting"));
+  // Lighting basis first: a misspelt name should fail before any pixel is read. order=auto (with
+  // an optional target=dB, default 45) defers the order to the environment's own tail energy.
+  ParamSet lightingParams = ParamSet::parse(job.lightingParams, "lighting");
+  const bool autoOrder = lightingParams.has("order") && lightingParams.getString("order", "") == "auto";
+  double targetDb = 45.0;
+  if (autoOrder) {
+    targetDb = lightingParams.getDouble("target", targetDb, "lighting");
+    lightingParams.erase("order");
+    lightingParams.erase("target");
+  } else if (lightingParams.has("target")) {
+    throw Error("lighting", "target=... needs order=auto");
+  }
+  auto lighting = lighting::createLighting(job.lighting, lightingParams);
 
   // ingest
   ingest::LoadedImage plate, env;
@@ -223,6 +235,17 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
                              std::to_string(sanitized.mostNegative) + "): clamped to 0");
     }
     StageRecord& record = stage(result.stages, "precompute");
+    if (autoOrder) {
+      const auto estimates = lighting::estimateOrders(job.lighting, environment, lightingParams);
+      const lighting::OrderEstimate pick = lighting::selectOrder(estimates, targetDb);
+      ParamSet chosen = lightingParams;
+      chosen.set("order", std::to_string(pick.order));
+      lighting = lighting::createLighting(job.lighting, chosen);
+      char line[200];
+      std::snprintf(line, sizeof line, "order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
+                    job.lighting.c_str(), pick.order, pick.estimatedSnrDb, targetDb);
+      result.notes.push_back(line);
+    }
     bool reused = false;
     if (!job.lightingCache.empty()) {
       const lighting::LightingCache cache(job.lightingCache);

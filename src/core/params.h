@@ -37,6 +37,7 @@ class ParamSet {
 
   void set(const std::string& key, const std::string& value) { values_[key] = Entry{value, false}; }
   bool has(const std::string& key) const { return values_.count(key) != 0; }
+  void erase(const std::string& key) { values_.erase(key); }
 
   int getInt(const std::string& key, int fallback, const std::string& stage) {
     auto it = values_.find(key);

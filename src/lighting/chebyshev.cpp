@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <glm/geometric.hpp>
@@ -159,6 +160,33 @@ bool ChebBase::importState(const std::vector<float>& in) {
   return true;
 }
 
+std::vector<double> ChebBase::truncationSnrDb() const {
+  COMPOSE_CHECK(!table_.empty());
+  const int order = params_.order;
+  std::vector<double> signal(size_t(order), 0.0), noise(size_t(order), 0.0);
+  // Nodes weighted by the solid angle they stand for (cos latitude; a pole node gets its share of
+  // the polar cap, Δ/8 in the same units), so that the estimate is over uniformly spread normals.
+  const double spacing = kPi / (grid_.rows() - 1);
+  for (size_t node = 0; node < grid_.size(); ++node) {
+    const int row = int(node / size_t(grid_.cols()));
+    const double weight = (row == 0 || row == grid_.rows() - 1) ? spacing / 8.0
+                                                                 : std::cos(kPi * (0.5 - double(row) / (grid_.rows() - 1)));
+    for (int c = 0; c < 3; ++c) {
+      const double full = truncatedProduct(node, c, order);
+      for (int k = 1; k <= order; ++k) {
+        const double d = full - truncatedProduct(node, c, k);
+        signal[size_t(k - 1)] += weight * full * full;
+        noise[size_t(k - 1)] += weight * d * d;
+      }
+    }
+  }
+  std::vector<double> out(static_cast<size_t>(order));
+  for (size_t i = 0; i < out.size(); ++i) {
+    out[i] = noise[i] > 0.0 ? 10.0 * std::log10(signal[i] / noise[i]) : std::numeric_limits<double>::infinity();
+  }
+  return out;
+}
+
 // --- cheb-latlong -----------------------------------------------------------------------------
 
 ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {
@@ -246,6 +274,16 @@ glm::vec3 ChebLatLongLighting::irradiance(const glm::vec3& n) const {
     e += w[q] * dot;
   }
   return e;
+}
+
+double ChebLatLongLighting::truncatedProduct(size_t node, int channel, int k) const {
+  const int K = params_.order;
+  const float* tf = table_.data() + node * stride_;
+  const float* tl = global_.data() + size_t(channel) * stride_;
+  double sum = 0.0;
+  for (int m = 0; m < k; ++m)
+    for (int n = 0; n < k; ++n) sum += double(tl[m * K + n]) * tf[m * K + n];
+  return sum;
 }
 
 // --- cheb-face --------------------------------------------------------------------------------
@@ -361,6 +399,19 @@ glm::vec3 ChebFaceLighting::irradiance(const glm::vec3& n) const {
   return e;
 }
 
+double ChebFaceLighting::truncatedProduct(size_t node, int channel, int k) const {
+  const int K = params_.order;
+  const size_t kk = size_t(K) * size_t(K);
+  double sum = 0.0;
+  for (int f = 0; f < kCubeFaces; ++f) {
+    const float* tf = table_.data() + node * stride_ + size_t(f) * kk;
+    const float* tl = global_.data() + (size_t(f) * 3 + size_t(channel)) * kk;
+    for (int m = 0; m < k; ++m)
+      for (int n = 0; n < k; ++n) sum += double(tl[m * K + n]) * tf[m * K + n];
+  }
+  return sum;
+}
+
 // --- cheb-local -------------------------------------------------------------------------------
 
 ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local", params) {
@@ -440,6 +491,16 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
     e += w[q] * dot;
   }
   return e;
+}
+
+double ChebLocalLighting::truncatedProduct(size_t node, int channel, int k) const {
+  const int K = params_.order;
+  const size_t kk = size_t(K) * size_t(K);
+  const float* tl = table_.data() + node * stride_ + size_t(channel) * kk;
+  double sum = 0.0;
+  for (int m = 0; m < k; ++m)
+    for (int n = 0; n < k; ++n) sum += double(tl[m * K + n]) * global_[size_t(m * K + n)];
+  return sum;
 }
 
 }  // namespace compose::lighting

@@ -77,7 +77,16 @@ class ChebBase : public DiffuseLighting {
   bool exportState(std::vector<float>& out) const override;
   bool importState(const std::vector<float>& in) override;
 
+  // Truncation estimate from the moments' tail: for each k = 1..order, the SNR of the order-k
+  // inner product against the full-order one, over the normal-grid nodes (all channels):
+  //   10 log10(Σ E_K² / Σ (E_K - E_k)²),  E_k = Σ_{m,n<k} T^L_mn T^f_mn.
+  // It measures what truncation costs, not the grid's own discretisation. Needs project().
+  std::vector<double> truncationSnrDb() const;
+
  protected:
+  // E_k at a grid node for one channel: the inner product over the top-left k x k moments.
+  virtual double truncatedProduct(size_t node, int channel, int k) const = 0;
+
   std::string name_;
   ChebParams params_;
   int blocks_ = 1;        // moment blocks per point (6 for cheb-face)
@@ -93,6 +102,9 @@ class ChebLatLongLighting final : public ChebBase {
   explicit ChebLatLongLighting(ChebParams params);
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
+
+ protected:
+  double truncatedProduct(size_t node, int channel, int k) const override;
 };
 
 class ChebFaceLighting final : public ChebBase {
@@ -100,6 +112,9 @@ class ChebFaceLighting final : public ChebBase {
   explicit ChebFaceLighting(ChebParams params);
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
+
+ protected:
+  double truncatedProduct(size_t node, int channel, int k) const override;
 };
 
 class ChebLocalLighting final : public ChebBase {
@@ -107,6 +122,9 @@ class ChebLocalLighting final : public ChebBase {
   explicit ChebLocalLighting(ChebParams params);
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
+
+ protected:
+  double truncatedProduct(size_t node, int channel, int k) const override;
 };
 
 }  // namespace compose::lighting

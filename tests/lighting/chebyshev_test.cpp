@@ -215,3 +215,59 @@ TEST(LightingCache, StoresAndRestoresAProjection) {
 
 }  // namespace
 }  // namespace compose::lighting
+
+#include "lighting/order_selector.h"
+
+namespace compose::lighting {
+namespace {
+
+// SH: the tail-energy estimate is Parseval over uniformly distributed normals, so it predicts the
+// SNR against band 8 measured on uniform random normals; against the exact reference it holds
+// while the tail beyond band 8 is small (low orders).
+TEST(OrderSelector, ShEstimateMatchesMeasuredSnr) {
+  const Environment env = sunAndSky(256, 50.0f);
+  const auto estimates = estimateOrders("sh", env, {});
+  ASSERT_EQ(estimates.size(), 9u);
+  ShLighting full(8);
+  full.project(env);
+  ExactLighting exact;
+  exact.project(env);
+  const auto normals = randomNormals(3000, 11);
+  for (int order : {0, 1, 2, 4}) {
+    ShLighting sh(order);
+    sh.project(env);
+    // 3000 random normals estimate a sphere integral to ~2% in energy: 0.5 dB.
+    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, full, normals), 0.5) << "order " << order;
+    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, exact, normals), 1.5) << "order " << order;
+  }
+  for (size_t i = 1; i < estimates.size(); ++i) EXPECT_GE(estimates[i].estimatedSnrDb, estimates[i - 1].estimatedSnrDb);
+  // Band 3 adds nothing (A_3 = 0), so asking for band 3's accuracy selects band 2.
+  EXPECT_EQ(selectOrder(estimates, estimates[3].estimatedSnrDb).order, 2);
+  EXPECT_EQ(selectOrder(estimates, estimates[4].estimatedSnrDb).order, 4);
+  EXPECT_EQ(selectOrder(estimates, 1e9).order, 8);
+}
+
+// Chebyshev: the estimate at the grid nodes predicts the truncated basis against the full-order
+// one at arbitrary normals; cheb-local (Lambertian) needs no more than k = 1.
+TEST(OrderSelector, ChebyshevEstimateMatchesTruncation) {
+  const Environment env = sunAndSky(256, 50.0f);
+  const ParamSet params = ParamSet::parse("samples=8,rows=17,cols=32", "t");
+  const auto estimates = estimateOrders("cheb-latlong", env, params);
+  ASSERT_EQ(estimates.size(), 8u);
+  auto full = createLighting("cheb-latlong", ParamSet::parse("order=8,samples=8,rows=17,cols=32", "t"));
+  full->project(env);
+  const auto normals = randomNormals(2000, 12);
+  for (int k : {1, 2, 3, 5}) {
+    auto truncated = createLighting("cheb-latlong", ParamSet::parse("order=" + std::to_string(k) + ",samples=8,rows=17,cols=32", "t"));
+    truncated->project(env);
+    // Nodes versus random normals: 1 dB.
+    EXPECT_NEAR(estimates[size_t(k - 1)].estimatedSnrDb, snrDb(*truncated, *full, normals), 1.0) << "k " << k;
+  }
+  const auto local = estimateOrders("cheb-local", env, ParamSet::parse("rows=9,cols=16", "t"));
+  EXPECT_GT(local.front().estimatedSnrDb, 100.0) << "Lambertian: only T_00 matters";
+  EXPECT_EQ(selectOrder(local, 60.0).order, 1);
+  COMPOSE_EXPECT_ERROR(estimateOrders("mc", env, {}), "no order selection for basis 'mc'");
+}
+
+}  // namespace
+}  // namespace compose::lighting
