@@ -68,6 +68,9 @@ void ChebParams::validate(const std::string& basis) const {
   if (normalRows < 3 || normalRows > 1025) fail("rows must be in 3..1025, got " + std::to_string(normalRows));
   if (normalCols < 4 || normalCols > 2048) fail("cols must be in 4..2048, got " + std::to_string(normalCols));
   if (subsamples < 1 || subsamples > 16) fail("subsamples must be in 1..16, got " + std::to_string(subsamples));
+  if (brdf != "lambert" && brdf != "oren-nayar") fail("brdf must be lambert or oren-nayar, got '" + brdf + "'");
+  if (!(sigma >= 0.0 && sigma <= 1.5)) fail("sigma (roughness, radians) must be in 0..1.5");
+  if (brdf == "oren-nayar" && basis != "cheb-local") fail("only cheb-local supports brdf=oren-nayar");
 }
 
 ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebParams d) {
@@ -77,6 +80,8 @@ ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebPara
   p.normalRows = params.getInt("rows", d.normalRows, "lighting");
   p.normalCols = params.getInt("cols", d.normalCols, "lighting");
   p.subsamples = params.getInt("subsamples", d.subsamples, "lighting");
+  p.brdf = params.getString("brdf", d.brdf);
+  p.sigma = params.getDouble("sigma", p.brdf == "oren-nayar" ? 0.3 : 0.0, "lighting");
   p.validate(basis);
   return p;
 }
@@ -416,6 +421,30 @@ double ChebFaceLighting::truncatedProduct(size_t node, int channel, int k) const
 
 ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local", params) {
   globalSize_ = size_t(params_.order) * size_t(params_.order);
+  const int s = params_.samples, k = params_.order;
+  const size_t kk = size_t(k) * size_t(k);
+  const TchebichefBasis basis(s, k);
+  if (params_.brdf == "oren-nayar") {
+    // BRDF moments in the local frame for every tabulated view direction: f_c(i, j) is the BRDF
+    // (times π/ρ) at the cell centre; the cosine is on the lighting side.
+    viewTable_.assign(size_t(kViewThetas) * kViewPhis * kk, 0.0f);
+    std::vector<double> fc(size_t(s) * size_t(s));
+    for (int a = 0; a < kViewThetas; ++a) {
+      const double thetaOut = 0.5 * kPi * a / (kViewThetas - 1);
+      for (int b = 0; b < kViewPhis; ++b) {
+        const double phiOut = 2.0 * kPi * b / kViewPhis;
+        for (int i = 0; i < s; ++i) {
+          for (int j = 0; j < s; ++j) {
+            fc[size_t(i) * size_t(s) + size_t(j)] =
+                orenNayar(params_.sigma, 0.5 * kPi * (i + 0.5) / s, 2.0 * kPi * (j + 0.5) / s, thetaOut, phiOut);
+          }
+        }
+        const std::vector<double> m = moments2d(basis, basis, fc, k);
+        std::transform(m.begin(), m.end(), viewTable_.begin() + ptrdiff_t((size_t(a) * kViewPhis + size_t(b)) * kk),
+                       [](double v) { return float(v); });
+      }
+    }
+  }
 }
 
 void ChebLocalLighting::project(const Environment& env, const Progress& progress) {
@@ -441,7 +470,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
     std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0);
-    if (k == 1) {
+    if (k == 1 && params_.brdf == "lambert") {
       // Only the mean of L_in is needed: T_00 = t_0 t_0 Σ L_in = E(n) / s. Same sum, no binning.
       const glm::dvec3 e = cells.irradiance(n, kLeafLevel);
       for (int c = 0; c < 3; ++c) lin[size_t(c)] = e[c];  // all in cell (0, 0): same T_00
@@ -462,7 +491,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
         cell[2] += value.z;
       }, kLeafLevel);
     }
-    if (k == 1) {
+    if (k == 1 && params_.brdf == "lambert") {
       for (int c = 0; c < 3; ++c) table_[size_t(node) * stride_ + size_t(c)] = float(lin[size_t(c)] / s);
     } else {
       rgbMoments(basis, basis, lin, k, table_.data() + size_t(node) * stride_);
@@ -489,6 +518,55 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
       dot.z += tl[2 * kk + i] * global_[i];
     }
     e += w[q] * dot;
+  }
+  return e;
+}
+
+std::string ChebLocalLighting::parameterKey() const {
+  return ChebBase::parameterKey() + " brdf=" + params_.brdf + " sigma=" + std::to_string(params_.sigma);
+}
+
+size_t ChebLocalLighting::floatsStored() const { return ChebBase::floatsStored() + viewTable_.size(); }
+
+double ChebLocalLighting::orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut, double phiOut) {
+  const double s2 = sigma * sigma;
+  const double a = 1.0 - 0.5 * s2 / (s2 + 0.33), b = 0.45 * s2 / (s2 + 0.09);
+  const double alpha = std::max(thetaIn, thetaOut), beta = std::min(thetaIn, thetaOut);
+  return a + b * std::max(0.0, std::cos(phiIn - phiOut)) * std::sin(alpha) * std::tan(beta);
+}
+
+glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n, const glm::vec3& view) const {
+  if (params_.brdf == "lambert") return irradiance(n);
+  // The view in the local frame of n (the same east/north construction as the grid nodes).
+  const float h = std::sqrt(n.x * n.x + n.z * n.z);
+  const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1.0f, 0.0f, 0.0f);
+  const glm::vec3 north = glm::cross(n, east);
+  const float cosOut = std::clamp(glm::dot(n, view), 0.0f, 1.0f);
+  const double thetaOut = std::acos(double(cosOut));
+  double phiOut = fastAtan2(glm::dot(north, view), glm::dot(east, view));
+  if (phiOut < 0.0) phiOut += 2.0 * kPi;
+  // Bilinear in (θo, φo) over the view table.
+  const double u = thetaOut / (0.5 * kPi) * (kViewThetas - 1), v = phiOut / (2.0 * kPi) * kViewPhis;
+  const int a0 = std::min(int(u), kViewThetas - 2), b0 = int(v) % kViewPhis, b1 = (b0 + 1) % kViewPhis;
+  const float fu = float(u - a0), fv = float(v - std::floor(v));
+  const size_t kk = stride_ / 3;
+  auto entry = [&](int a, int b) { return viewTable_.data() + (size_t(a) * kViewPhis + size_t(b)) * kk; };
+  const float* t00 = entry(a0, b0);
+  const float* t01 = entry(a0, b1);
+  const float* t10 = entry(a0 + 1, b0);
+  const float* t11 = entry(a0 + 1, b1);
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolation(n, nodes, w);
+  glm::vec3 e(0.0f);
+  for (size_t i = 0; i < kk; ++i) {
+    const float tf = (1 - fu) * ((1 - fv) * t00[i] + fv * t01[i]) + fu * ((1 - fv) * t10[i] + fv * t11[i]);
+    glm::vec3 tl(0.0f);
+    for (int q = 0; q < 4; ++q) {
+      const float* node = table_.data() + nodes[q] * stride_;
+      tl += w[q] * glm::vec3(node[i], node[kk + i], node[2 * kk + i]);
+    }
+    e += tl * tf;
   }
   return e;
 }

@@ -39,6 +39,10 @@ struct ChebParams {
   int normalRows = 33;  // normal-grid rows (pole to pole, both included)
   int normalCols = 64;  // normal-grid columns (longitude)
   int subsamples = 4;   // q x q sub-cells per grid cell when integrating the cosine (BRDF side)
+  // BRDF of the local basis: "lambert", or "oren-nayar" with roughness sigma (radians; the
+  // qualitative model of Oren & Nayar 1994), which is view dependent and uses the full k x k product.
+  std::string brdf = "lambert";
+  double sigma = 0.0;
 
   // Throws compose::Error (stage "lighting") naming the basis and the bad parameter.
   void validate(const std::string& basis) const;
@@ -122,6 +126,17 @@ class ChebLocalLighting final : public ChebBase {
   explicit ChebLocalLighting(ChebParams params);
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
+  glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& view) const override;
+  std::string parameterKey() const override;
+  size_t floatsStored() const override;
+
+  // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.
+  static double orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut, double phiOut);
+  // Table of BRDF moments over the view: kViewThetas x kViewPhis entries of k x k.
+  static constexpr int kViewThetas = 17, kViewPhis = 32;
+
+ private:
+  std::vector<float> viewTable_;  // BRDF moments per view direction (Oren–Nayar only)
 
  protected:
   double truncatedProduct(size_t node, int channel, int k) const override;

@@ -41,6 +41,11 @@ class DiffuseLighting {
   // Irradiance at unit world-space normal n. project() must have been called.
   virtual glm::vec3 irradiance(const glm::vec3& n) const = 0;
 
+  // For a view-dependent BRDF (Oren–Nayar), the Lambertian-equivalent irradiance π L_o / ρ seen
+  // from unit direction `view` (surface towards the eye), so that the renderer's ρ E / π is the
+  // outgoing radiance for every BRDF. Lambertian bases ignore the view.
+  virtual glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& /*view*/) const { return irradiance(n); }
+
   // Coefficients per colour channel, and the total number of floats stored for the lighting.
   virtual int coefficientsPerChannel() const = 0;
   virtual size_t floatsStored() const = 0;

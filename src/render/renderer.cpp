@@ -165,7 +165,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, 
         // Seen from behind (open meshes): shade the side the camera sees.
         const glm::vec3 ng(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
         if (glm::dot(ng, glm::vec3(dir)) > 0.0f) nrm = -nrm;
-        const glm::vec3 e = glm::max(lighting.irradiance(settings.envFromWorld * nrm), glm::vec3(0.0f));
+        const glm::vec3 view = -glm::vec3(dir);
+        const glm::vec3 e =
+            glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view), glm::vec3(0.0f));
         colour += reflect * e;
         normalSum += nrm;
         ++hits;

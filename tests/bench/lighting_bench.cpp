@@ -25,6 +25,7 @@
 #include "core/parallel.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
+#include "lighting/chebyshev.h"
 #include "lighting/exact.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
@@ -131,6 +132,33 @@ double timeCmgen(const fs::path& file, const fs::path& scratch) {
   return best;
 }
 
+// Oren–Nayar (rough diffuse, view dependent) reference: every texel, BRDF per texel in the local
+// frame the local basis uses.
+glm::dvec3 orenNayarReference(const lighting::Environment& env, double sigma, const glm::vec3& n, const glm::vec3& view) {
+  const float h = std::sqrt(n.x * n.x + n.z * n.z);
+  const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1, 0, 0);
+  const glm::vec3 north = glm::cross(n, east);
+  const double thetaOut = std::acos(std::clamp(double(glm::dot(n, view)), 0.0, 1.0));
+  const double phiOut = std::atan2(double(glm::dot(north, view)), double(glm::dot(east, view)));
+  glm::dvec3 e(0.0);
+  for (int y = 0; y < env.height(); ++y) {
+    for (int x = 0; x < env.width(); ++x) {
+      const glm::vec3 w = env.direction(x, y);
+      const double c = glm::dot(n, w);
+      if (c <= 0.0) continue;
+      const double phiIn = std::atan2(double(glm::dot(north, w)), double(glm::dot(east, w)));
+      e += glm::dvec3(env.radiance(x, y)) * env.rowSolidAngle(y) * c *
+           lighting::ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn, thetaOut, phiOut);
+    }
+  }
+  return e;
+}
+
+struct OrenNayarRow {
+  std::string env, params;
+  double snrDb = 0, precomputeMs = 0;
+};
+
 struct SideBySide {
   std::string env;
   double readMs = 0, chebPrecomputeMs = 0, chebEvalMs = 0, shPrecomputeMs = 0, shEvalMs = 0, cmgenMs = -1;
@@ -172,6 +200,7 @@ int main(int argc, char** argv) {
               sphere, sphere, samples.c_str());
 
   std::vector<Row> rows;
+  std::vector<OrenNayarRow> orenNayarRows;
   std::vector<SideBySide> sideBySide;
   const std::vector<glm::vec3> frame = frameNormals();
   const std::string defaultBasis = pipeline::ComposeJob{}.lighting;
@@ -259,6 +288,39 @@ int main(int argc, char** argv) {
                   row.basis.c_str(), row.params.c_str(), row.coefficients, row.floats, row.precomputeMs,
                   row.evalMsPerMillion, row.snrDb, row.relError);
       std::fflush(stdout);
+    }
+
+    // Oren–Nayar (sigma 0.3), the view-dependent case: a subset of the sphere's normals, each
+    // seen orthographically along ±Z, against the per-texel reference. "lambert" ignores the
+    // roughness altogether (the error of not modelling the BRDF).
+    if (only.empty() || only == "oren-nayar") {
+      constexpr double kSigma = 0.3;
+      const size_t step = std::max<size_t>(1, normals.size() / (quick ? 300 : 1500));
+      std::vector<size_t> picks;
+      for (size_t i = 0; i < normals.size(); i += step) picks.push_back(i);
+      std::vector<glm::dvec3> onRef(picks.size());
+      parallelFor(0, int64_t(picks.size()), [&](int64_t i) {
+        const glm::vec3 n = normals[picks[size_t(i)]];
+        onRef[size_t(i)] = orenNayarReference(env, kSigma, n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f));
+      });
+      for (const char* params : {"lambert", "order=1,samples=8", "order=2,samples=8", "order=4,samples=8",
+                                 "order=8,samples=8", "order=16,samples=16"}) {
+        const bool lambert = std::string(params) == "lambert";
+        auto basis = lighting::createLighting(
+            "cheb-local", ParamSet::parse(lambert ? std::string("order=1") : std::string(params) + ",brdf=oren-nayar,sigma=0.3", "bench"));
+        const auto a = Clock::now();
+        basis->project(env);
+        const double pre = 1e3 * seconds(a, Clock::now());
+        double signal = 0, noise = 0;
+        for (size_t i = 0; i < picks.size(); ++i) {
+          const glm::vec3 n = normals[picks[i]];
+          const glm::dvec3 g(basis->irradiance(n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f)));
+          signal += glm::dot(onRef[i], onRef[i]);
+          noise += glm::dot(onRef[i] - g, onRef[i] - g);
+        }
+        orenNayarRows.push_back({name, params, 10.0 * std::log10(signal / noise), pre});
+        std::printf("  oren-nayar   %-36s SNR %6.2f dB  pre %8.2f ms\n", params, orenNayarRows.back().snrDb, pre);
+      }
     }
   }
 
@@ -371,6 +433,23 @@ int main(int argc, char** argv) {
     md << "| " << basis << " | " << v->front()->params << " | " << v->front()->coefficients << " |";
     for (const Row* r : *v) md << " " << fmt("%.1f", r->snrDb) << " |";
     md << " " << v->front()->floats << " |\n";
+  }
+  if (!orenNayarRows.empty()) {
+    md << "\n## Oren–Nayar (sigma 0.3, view dependent), cheb-local\n\nSNR against a per-texel reference on "
+          "a subset of the sphere's normals, each seen along ±Z. `lambert` ignores the roughness.\n\n| params |";
+    for (const auto& sbs : sideBySide) md << " " << sbs.env << " SNR dB |";
+    md << "\n|---|";
+    for (size_t i = 0; i < sideBySide.size(); ++i) md << "---|";
+    md << "\n";
+    std::vector<std::string> order;
+    for (const auto& r : orenNayarRows)
+      if (std::find(order.begin(), order.end(), r.params) == order.end()) order.push_back(r.params);
+    for (const auto& p : order) {
+      md << "| " << p << " |";
+      for (const auto& r : orenNayarRows)
+        if (r.params == p) md << " " << fmt("%.1f", r.snrDb) << " |";
+      md << "\n";
+    }
   }
   md << "\n## Every configuration\n\n| environment | basis | params | coefficients | floats | precompute ms | "
         "eval ms/M | SNR dB | rel. error |\n|---|---|---|---|---|---|---|---|---|\n";
