@@ -16,7 +16,17 @@ const std::vector<std::string>& lightingNames() {
 std::unique_ptr<DiffuseLighting> createLighting(const std::string& name, ParamSet params) {
   std::unique_ptr<DiffuseLighting> basis;
   if (name == "sh") {
-    basis = std::make_unique<ShLighting>(params.getInt("order", 2, "lighting"));
+    const int order = params.getInt("order", 2, "lighting");
+    const std::string window = params.getString("window", "none");
+    ShWindow w = ShWindow::None;
+    if (window == "hanning") {
+      w = ShWindow::Hanning;
+    } else if (window == "lanczos") {
+      w = ShWindow::Lanczos;
+    } else if (window != "none") {
+      throw Error("lighting", "sh window must be none, hanning or lanczos, got '" + window + "'");
+    }
+    basis = std::make_unique<ShLighting>(order, w);
   } else if (name == "cheb-local") {
     // Lambertian: only T_00 carries weight (chebyshev.h), so k = 1 is the accurate and cheapest
     // choice; the benchmark shows k = 2, 3 giving the same SNR at 4x, 9x the storage.

@@ -94,7 +94,7 @@ double shCosineLobe(int l) {
   return 2.0 * kPi * sign / (double(l + 2) * double(l - 1)) * binom;
 }
 
-ShLighting::ShLighting(int order) : order_(order) {
+ShLighting::ShLighting(int order, ShWindow window) : order_(order), window_(window) {
   if (order < 0 || order > kMaxShOrder) {
     throw Error("lighting", "sh order must be in 0.." + std::to_string(kMaxShOrder) + ", got " +
                                 std::to_string(order));
@@ -102,8 +102,19 @@ ShLighting::ShLighting(int order) : order_(order) {
 }
 
 std::string ShLighting::describe() const {
-  return "sh order=" + std::to_string(order_) + " (" + std::to_string(shCount(order_)) +
+  const char* window = window_ == ShWindow::Hanning ? " window=hanning" : window_ == ShWindow::Lanczos ? " window=lanczos" : "";
+  return "sh order=" + std::to_string(order_) + window + " (" + std::to_string(shCount(order_)) +
          " coefficients/channel)";
+}
+
+double ShLighting::windowWeight(int l) const {
+  const double x = double(l) / double(order_ + 1);
+  switch (window_) {
+    case ShWindow::Hanning: return 0.5 * (1.0 + std::cos(kPi * x));
+    case ShWindow::Lanczos: return l == 0 ? 1.0 : std::sin(kPi * x) / (kPi * x);
+    case ShWindow::None: break;
+  }
+  return 1.0;
 }
 
 // Projection integrates each basis function over each texel instead of point-sampling it at the
@@ -184,7 +195,7 @@ void ShLighting::project(const Environment& env, const Progress& progress) {
   }
   irradiance_.resize(size_t(count));
   for (int l = 0; l <= order_; ++l) {
-    const double a = shCosineLobe(l);
+    const double a = shCosineLobe(l) * windowWeight(l);
     for (int m = -l; m <= l; ++m) {
       const size_t i = size_t(l * (l + 1) + m);
       irradiance_[i] = glm::vec3(radiance_[i] * a);

@@ -23,11 +23,19 @@ void evalSh(int order, const glm::dvec3& d, double* out);
 // Ramamoorthi–Hanrahan convolution weight A_l of the clamped cosine: E_lm = A_l L_lm.
 double shCosineLobe(int l);
 
+// Optional windowing (deringing) of the irradiance bands, reported separately from raw SH: each
+// band l is scaled by w_l before evaluation. "hanning": w_l = (1 + cos(π l / (L + 1))) / 2;
+// "lanczos": w_l = sinc(l / (L + 1)). A window damps the higher bands (less overshoot in the
+// reconstruction) at a cost in accuracy; it does not guarantee non-negative irradiance.
+enum class ShWindow { None, Hanning, Lanczos };
+
 class ShLighting final : public DiffuseLighting {
  public:
-  explicit ShLighting(int order);
+  explicit ShLighting(int order, ShWindow window = ShWindow::None);
 
   std::string name() const override { return "sh"; }
+  // w_l for this basis' order and window.
+  double windowWeight(int l) const;
   std::string describe() const override;
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
@@ -39,6 +47,7 @@ class ShLighting final : public DiffuseLighting {
 
  private:
   int order_;
+  ShWindow window_;
   std::vector<glm::dvec3> radiance_;  // L_lm
   std::vector<glm::vec3> irradiance_;  // A_l L_lm, float for evaluation
 };

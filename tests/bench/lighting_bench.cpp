@@ -71,6 +71,8 @@ struct Row {
 std::vector<Config> sweep(bool quick) {
   std::vector<Config> c;
   for (int order = 0; order <= 7; ++order) c.push_back({"sh", "order=" + std::to_string(order)});
+  // Windowed (deringed) SH, reported separately from raw SH.
+  for (int order : {2, 4, 6}) c.push_back({"sh", "order=" + std::to_string(order) + ",window=hanning"});
   for (int k = 1; k <= 8; ++k) {
     c.push_back({"cheb-latlong", "order=" + std::to_string(k) + ",samples=16"});
     if (!quick) c.push_back({"cheb-latlong", "order=" + std::to_string(k) + ",samples=32"});
@@ -355,6 +357,7 @@ int main(int argc, char** argv) {
     const auto grid = cfg.params.find("samples=");
     if (grid != std::string::npos && cfg.basis != "cheb-local") family += " s=" + cfg.params.substr(grid + 8);
     if (cfg.params.find("rows=") != std::string::npos) continue;
+    if (cfg.params.find("window=") != std::string::npos) family += " (hanning)";
     const double coeff = it->second.front()->coefficients;
     snrCurves[family].label = family;
     snrCurves[family].x.push_back(coeff);
