@@ -25,20 +25,23 @@ bool PinholeCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
   return true;
 }
 
-PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif, const CameraOptions& options) {
+PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
+                          const CameraOptions& options) {
   if (width <= 0 || height <= 0) throw Error("camera", "plate has no pixels");
   if (!(options.height > 0.0) || !std::isfinite(options.height)) {
     throw Error("camera", "camera height must be positive, got " + std::to_string(options.height));
   }
   if (!(std::abs(options.pitchDegrees) < 89.0)) {
-    throw Error("camera", "camera pitch must be within ±89 degrees, got " + std::to_string(options.pitchDegrees));
+    throw Error("camera", "camera pitch must be within ±89 degrees, got " +
+                              std::to_string(options.pitchDegrees));
   }
   PinholeCamera cam;
   cam.width = width;
   cam.height = height;
   if (options.focal35mm) {
     if (!(*options.focal35mm > 0.0) || !std::isfinite(*options.focal35mm)) {
-      throw Error("camera", "focal length must be positive, got " + std::to_string(*options.focal35mm));
+      throw Error("camera",
+                  "focal length must be positive, got " + std::to_string(*options.focal35mm));
     }
     cam.focal35mm = *options.focal35mm;
     cam.focalSource = "--focal35";
@@ -57,23 +60,27 @@ PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif
   return cam;
 }
 
-glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement, const glm::dvec3& lo,
-                         const glm::dvec3& hi) {
+glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement,
+                         const glm::dvec3& lo, const glm::dvec3& hi) {
   const glm::dvec2 p = placement.imagePoint;
   if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
-    throw Error("camera", "--place must be within [0,1] x [0,1] of the plate, got " + std::to_string(p.x) + "," +
-                              std::to_string(p.y));
+    throw Error("camera", "--place must be within [0,1] x [0,1] of the plate, got " +
+                              std::to_string(p.x) + "," + std::to_string(p.y));
   }
   if (!(placement.heightFraction > 0.0 && placement.heightFraction <= 10.0)) {
-    throw Error("camera", "--scale must be in (0, 10], got " + std::to_string(placement.heightFraction));
+    throw Error("camera",
+                "--scale must be in (0, 10], got " + std::to_string(placement.heightFraction));
   }
-  if (!std::isfinite(placement.yawDegrees)) throw Error("camera", "--yaw must be a finite number of degrees");
+  if (!std::isfinite(placement.yawDegrees))
+    throw Error("camera", "--yaw must be a finite number of degrees");
   glm::dvec3 origin, dir;
   camera.ray(p.x * camera.width, p.y * camera.height, origin, dir);
   if (!(dir.y < -1e-6)) {
-    throw Error("camera", "--place " + std::to_string(p.x) + "," + std::to_string(p.y) +
-                              " is at or above the horizon, so it does not see the ground; choose a lower point"
-                              " or pitch the camera down");
+    throw Error(
+        "camera",
+        "--place " + std::to_string(p.x) + "," + std::to_string(p.y) +
+            " is at or above the horizon, so it does not see the ground; choose a lower point"
+            " or pitch the camera down");
   }
   const glm::dvec3 ground = origin + dir * (-origin.y / dir.y);
   // Depth of the ground point along the optical axis sets the world size of one pixel there.
@@ -86,7 +93,8 @@ glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement
   const double scale = worldHeight / (meshHeight > 1e-6 * meshSize ? meshHeight : meshSize);
   const glm::dvec3 base(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
   const double yaw = placement.yawDegrees * std::numbers::pi / 180.0;
-  return glm::translate(glm::dmat4(1.0), ground) * glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)) *
+  return glm::translate(glm::dmat4(1.0), ground) *
+         glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)) *
          glm::scale(glm::dmat4(1.0), glm::dvec3(scale)) * glm::translate(glm::dmat4(1.0), -base);
 }
 

@@ -26,9 +26,9 @@ inline constexpr double kDefaultFocal35mm = 50.0;
 
 struct PinholeCamera {
   int width = 0, height = 0;
-  double focalPx = 0.0;        // focal length in pixels (square pixels)
-  double focal35mm = 0.0;      // the same as a 35 mm equivalent
-  std::string focalSource;     // where the focal length came from, for --explain
+  double focalPx = 0.0;     // focal length in pixels (square pixels)
+  double focal35mm = 0.0;   // the same as a 35 mm equivalent
+  std::string focalSource;  // where the focal length came from, for --explain
   glm::dmat4 worldFromCamera{1.0};
 
   // World-space ray through continuous pixel position (px, py); direction is unit length.
@@ -45,7 +45,8 @@ struct CameraOptions {
 };
 
 // Validates options (throws compose::Error, stage "camera") and builds the plate camera.
-PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif, const CameraOptions& options);
+PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
+                          const CameraOptions& options);
 
 // Where and how big the object stands. `imagePoint` is in [0, 1]² of the plate (0,0 top-left):
 // the object's base (centre of its bounding box's bottom face) stands on the ground point seen
@@ -59,7 +60,7 @@ struct Placement {
 
 // worldFromObject for a mesh with the given object-space bounds. Throws compose::Error (stage
 // "camera") if the point is above the horizon or the numbers are out of range.
-glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement, const glm::dvec3& boundsMin,
-                         const glm::dvec3& boundsMax);
+glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement,
+                         const glm::dvec3& boundsMin, const glm::dvec3& boundsMax);
 
 }  // namespace compose::calib

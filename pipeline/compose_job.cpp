@@ -22,24 +22,30 @@ namespace compose::pipeline {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& stageNames() {
-  static const std::vector<std::string> names = {"ingest", "merge",  "stitch",    "color",
+  static const std::vector<std::string> names = {"ingest",     "merge",  "stitch",    "color",
                                                  "precompute", "render", "composite", "output"};
   return names;
 }
 
 fs::path samplesDirectory() {
   if (const char* dir = std::getenv("COMPOSE_SAMPLES_DIR"); dir && *dir) return dir;
-  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return fs::path(xdg) / "compose" / "samples";
-  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "compose" / "samples";
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg)
+    return fs::path(xdg) / "compose" / "samples";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return fs::path(home) / ".cache" / "compose" / "samples";
   return fs::path(".cache") / "compose" / "samples";
 }
 
-fs::path defaultEnvironment() { return samplesDirectory() / "forest.exr"; }
+fs::path defaultEnvironment() {
+  return samplesDirectory() / "forest.exr";
+}
 
 fs::path lightingCacheDirectory() {
   if (const char* dir = std::getenv("COMPOSE_CACHE_DIR"); dir && *dir) return dir;
-  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return fs::path(xdg) / "compose" / "lighting";
-  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "compose" / "lighting";
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg)
+    return fs::path(xdg) / "compose" / "lighting";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return fs::path(home) / ".cache" / "compose" / "lighting";
   return fs::path(".cache") / "compose" / "lighting";
 }
 
@@ -83,8 +89,8 @@ bool isHdrFormat(const std::string& format) {
 // Auto exposure: the plate and the environment look at the same kind of place, so the
 // environment's radiance in the directions the camera sees should match the plate's linear
 // values. Returns plate mean / environment mean over the camera's field of view (means of RGB).
-double autoExposure(const Image& plateLinear, const lighting::Environment& env, const calib::PinholeCamera& camera,
-                    const glm::mat3& envFromWorld) {
+double autoExposure(const Image& plateLinear, const lighting::Environment& env,
+                    const calib::PinholeCamera& camera, const glm::mat3& envFromWorld) {
   constexpr int kGrid = 64;
   double plateSum = 0.0, envSum = 0.0;
   for (int j = 0; j < kGrid; ++j) {
@@ -94,7 +100,8 @@ double autoExposure(const Image& plateLinear, const lighting::Environment& env, 
       camera.ray(px, py, origin, dir);
       const glm::vec3 L = env.lookup(envFromWorld * glm::vec3(dir));
       envSum += double(L.x + L.y + L.z);
-      const float* p = plateLinear.at(std::min(int(px), plateLinear.width - 1), std::min(int(py), plateLinear.height - 1));
+      const float* p = plateLinear.at(std::min(int(px), plateLinear.width - 1),
+                                      std::min(int(py), plateLinear.height - 1));
       plateSum += double(p[0] + p[1] + p[2]);
     }
   }
@@ -104,9 +111,11 @@ double autoExposure(const Image& plateLinear, const lighting::Environment& env, 
 
 class StageTimer {
  public:
-  explicit StageTimer(StageRecord& record) : record_(record), start_(std::chrono::steady_clock::now()) {}
+  explicit StageTimer(StageRecord& record)
+      : record_(record), start_(std::chrono::steady_clock::now()) {}
   ~StageTimer() {
-    record_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    record_.seconds +=
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   }
 
  private:
@@ -141,24 +150,31 @@ fs::path displayPathFor(const ComposeJob& job) {
 std::vector<StageRecord> plan(const ComposeJob& job) {
   const fs::path env = environmentPath(job);
   std::vector<StageRecord> s;
-  s.push_back({"ingest", true, "read the plate " + job.plate.string() + ", the object " + job.object.string() +
-                                   " and the environment " + env.string()});
-  s.push_back({"merge", false, "the environment is a single HDR image, no exposure bracket to merge"});
+  s.push_back({"ingest", true,
+               "read the plate " + job.plate.string() + ", the object " + job.object.string() +
+                   " and the environment " + env.string()});
+  s.push_back(
+      {"merge", false, "the environment is a single HDR image, no exposure bracket to merge"});
   s.push_back({"stitch", false, "the environment is already a lat-long map, no faces to stitch"});
   s.push_back({"color", true, "plate and environment to the working space (role scene_linear)"});
   s.push_back({"precompute", true,
                "project the environment onto the '" + job.lighting + "' lighting basis" +
-                   (job.lightingCache.empty() ? std::string(" (cache off)")
-                                              : ", or reuse the cached projection in " + job.lightingCache.string() +
-                                                    " if this environment and these parameters were seen before")});
-  s.push_back({"render", true, "ray-cast the object with " + std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
-                                   " samples per pixel; no self-shadowing or ground shadow yet"});
+                   (job.lightingCache.empty()
+                        ? std::string(" (cache off)")
+                        : ", or reuse the cached projection in " + job.lightingCache.string() +
+                              " if this environment and these parameters were seen before")});
+  s.push_back({"render", true,
+               "ray-cast the object with " +
+                   std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
+                   " samples per pixel; no self-shadowing or ground shadow yet"});
   s.push_back({"composite", true, "premultiplied over, in scene-linear light"});
-  s.push_back({"output", true, "write " + exrPathFor(job).string() + " and " + displayPathFor(job).string()});
+  s.push_back({"output", true,
+               "write " + exrPathFor(job).string() + " and " + displayPathFor(job).string()});
   return s;
 }
 
-ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors, const Progress& progress) {
+ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
+                         const Progress& progress) {
   ComposeResult result;
   result.stages = plan(job);
   result.exrPath = exrPathFor(job);
@@ -174,7 +190,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   // Lighting basis first: a misspelt name should fail before any pixel is read. order=auto (with
   // an optional target=dB, default 45) defers the order to the environment's own tail energy.
   ParamSet lightingParams = ParamSet::parse(job.lightingParams, "lighting");
-  const bool autoOrder = lightingParams.has("order") && lightingParams.getString("order", "") == "auto";
+  const bool autoOrder =
+      lightingParams.has("order") && lightingParams.getString("order", "") == "auto";
   double targetDb = 45.0;
   if (autoOrder) {
     targetDb = lightingParams.getDouble("target", targetDb, "lighting");
@@ -191,7 +208,9 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   {
     StageTimer t(stage(result.stages, "ingest"));
     if (job.environment.empty() && !fs::exists(envPath)) {
-      throw Error("ingest", "no --env given and the sample environment is missing; run samples/fetch.sh", envPath);
+      throw Error("ingest",
+                  "no --env given and the sample environment is missing; run samples/fetch.sh",
+                  envPath);
     }
     plate = ingest::readImage(job.plate, "ingest");
     env = ingest::readImage(envPath, "ingest");
@@ -200,10 +219,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   }
   result.width = plate.image.width;
   result.height = plate.image.height;
-  if (!mesh.normalsFromFile) result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
+  if (!mesh.normalsFromFile)
+    result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
   if (!isHdrFormat(env.info.format)) {
-    result.notes.push_back("the environment is a " + env.info.format +
-                           " file, not HDR: bright light sources are clipped and the lighting will be too dark");
+    result.notes.push_back(
+        "the environment is a " + env.info.format +
+        " file, not HDR: bright light sources are clipped and the lighting will be too dark");
   }
 
   // color
@@ -215,10 +236,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     plateLinear.colorSpace = job.plateSpace.empty()
                                  ? colors.inputSpaceFor(job.plate, plate.info.fileColorSpace)
                                  : colors.resolve(job.plateSpace, "--plate-space");
-    envLinear.colorSpace = job.environmentSpace.empty() ? colors.inputSpaceFor(envPath, env.info.fileColorSpace)
-                                                        : colors.resolve(job.environmentSpace, "--env-space");
-    result.notes.push_back("plate read as '" + plateLinear.colorSpace + "', environment as '" + envLinear.colorSpace +
-                           "', working space '" + working + "' (config: " + colors.source() + ")");
+    envLinear.colorSpace = job.environmentSpace.empty()
+                               ? colors.inputSpaceFor(envPath, env.info.fileColorSpace)
+                               : colors.resolve(job.environmentSpace, "--env-space");
+    result.notes.push_back("plate read as '" + plateLinear.colorSpace + "', environment as '" +
+                           envLinear.colorSpace + "', working space '" + working +
+                           "' (config: " + colors.source() + ")");
     colors.convert(plateLinear, working);
     colors.convert(envLinear, working);
   }
@@ -242,7 +265,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       chosen.set("order", std::to_string(pick.order));
       lighting = lighting::createLighting(job.lighting, chosen);
       char line[200];
-      std::snprintf(line, sizeof line, "order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
+      std::snprintf(line, sizeof line,
+                    "order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
                     job.lighting.c_str(), pick.order, pick.estimatedSnrDb, targetDb);
       result.notes.push_back(line);
     }
@@ -257,7 +281,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       } else {
         lighting->project(environment, progress);
         record.reason = "projected the environment";
-        if (cache.store(key, *lighting)) record.reason += " and cached it in " + cache.pathFor(key).string();
+        if (cache.store(key, *lighting))
+          record.reason += " and cached it in " + cache.pathFor(key).string();
       }
     } else {
       lighting->project(environment, progress);
@@ -272,10 +297,10 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     StageTimer t(stage(result.stages, "render"));
     const calib::PinholeCamera camera =
         calib::plateCamera(plateLinear.width, plateLinear.height, plate.info, job.camera);
-    result.notes.push_back("camera: " + std::to_string(int(std::lround(camera.focal35mm))) + " mm equivalent, " +
-                           camera.focalSource);
-    const glm::dmat4 worldFromObject =
-        calib::placeOnGround(camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+    result.notes.push_back("camera: " + std::to_string(int(std::lround(camera.focal35mm))) +
+                           " mm equivalent, " + camera.focalSource);
+    const glm::dmat4 worldFromObject = calib::placeOnGround(
+        camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
     render::RenderSettings settings;
     settings.samplesPerAxis = job.samplesPerAxis;
     settings.albedo = job.albedo;
@@ -287,7 +312,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       const double scale = autoExposure(plateLinear, environment, camera, settings.envFromWorld);
       settings.exposure = float(scale);
       char line[160];
-      std::snprintf(line, sizeof line, "auto exposure: %+.2f stops (environment matched to the plate's mean)",
+      std::snprintf(line, sizeof line,
+                    "auto exposure: %+.2f stops (environment matched to the plate's mean)",
                     std::log2(scale));
       result.notes.push_back(line);
     }
@@ -306,8 +332,9 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   // output: RGBA composite (opaque), the object layer, the normal AOV.
   {
     StageTimer t(stage(result.stages, "output"));
-    Image exr(composite.width, composite.height, 11,
-              {"R", "G", "B", "A", "object.R", "object.G", "object.B", "object.A", "N.X", "N.Y", "N.Z"});
+    Image exr(
+        composite.width, composite.height, 11,
+        {"R", "G", "B", "A", "object.R", "object.G", "object.B", "object.A", "N.X", "N.Y", "N.Z"});
     exr.colorSpace = working;
     for (size_t i = 0; i < composite.pixelCount(); ++i) {
       float* d = exr.pixels.data() + i * 11;

@@ -36,8 +36,8 @@ const std::vector<std::string>& stageNames();
 std::filesystem::path samplesDirectory();
 // The environment used when none is given.
 std::filesystem::path defaultEnvironment();
-// Folder of the projected-lighting cache: $COMPOSE_CACHE_DIR, else $XDG_CACHE_HOME/compose/lighting,
-// else ~/.cache/compose/lighting.
+// Folder of the projected-lighting cache: $COMPOSE_CACHE_DIR, else
+// $XDG_CACHE_HOME/compose/lighting, else ~/.cache/compose/lighting.
 std::filesystem::path lightingCacheDirectory();
 
 struct ComposeJob {
@@ -53,7 +53,7 @@ struct ComposeJob {
   std::string display, view;     // empty: the config's defaults
 
   std::string lighting = "cheb-local";
-  std::string lightingParams;    // "key=value,..." for the basis
+  std::string lightingParams;  // "key=value,..." for the basis
   // Projected lighting is cached here, keyed by the environment's pixels and the basis
   // parameters; empty disables the cache.
   std::filesystem::path lightingCache = lightingCacheDirectory();
@@ -61,7 +61,7 @@ struct ComposeJob {
 
   calib::CameraOptions camera;
   calib::Placement placement;
-  glm::vec3 albedo{0.5f};        // in the working space (clay grey)
+  glm::vec3 albedo{0.5f};  // in the working space (clay grey)
   // Exposure of the object in stops; empty = auto (the environment's radiance in the camera's
   // field of view is scaled to match the plate's mean linear value).
   std::optional<double> exposureStops;
@@ -71,17 +71,18 @@ struct ComposeJob {
 struct StageRecord {
   std::string name;
   bool runs = true;
-  std::string reason;     // why it runs, is reused or is skipped
-  double seconds = 0.0;   // filled in by runCompose
+  std::string reason;    // why it runs, is reused or is skipped
+  double seconds = 0.0;  // filled in by runCompose
 };
 
 struct ComposeResult {
   std::filesystem::path exrPath, displayPath;
   std::vector<StageRecord> stages;
-  std::vector<std::string> notes;  // things the user should know (assumed colour spaces, clamping, ...)
+  std::vector<std::string>
+      notes;  // things the user should know (assumed colour spaces, clamping, ...)
   int width = 0, height = 0;
-  double objectPixels = 0.0;       // sum of alpha
-  float exposure = 1.0f;           // linear multiplier applied to the object's radiance
+  double objectPixels = 0.0;  // sum of alpha
+  float exposure = 1.0f;      // linear multiplier applied to the object's radiance
 };
 
 // Output paths for a job.
@@ -91,6 +92,7 @@ std::filesystem::path displayPathFor(const ComposeJob& job);
 // What would run, and why, without reading any pixels.
 std::vector<StageRecord> plan(const ComposeJob& job);
 
-ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors, const Progress& progress = {});
+ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
+                         const Progress& progress = {});
 
 }  // namespace compose::pipeline

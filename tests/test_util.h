@@ -19,8 +19,8 @@ class TempDir {
     static std::atomic<int> counter{0};
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
     path_ = std::filesystem::path(::testing::TempDir()) /
-            ("compose-" + std::string(info ? info->name() : "test") + "-" + std::to_string(::getpid()) + "-" +
-             std::to_string(counter++));
+            ("compose-" + std::string(info ? info->name() : "test") + "-" +
+             std::to_string(::getpid()) + "-" + std::to_string(counter++));
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
   }
@@ -43,13 +43,13 @@ inline void writeText(const std::filesystem::path& path, const std::string& text
 }  // namespace compose::testing
 
 // Expects `statement` to throw compose::Error whose describe() contains `needle`.
-#define COMPOSE_EXPECT_ERROR(statement, needle)                                                       \
-  do {                                                                                              \
-    try {                                                                                           \
-      statement;                                                                                    \
-      ADD_FAILURE() << "expected compose::Error containing '" << (needle) << "', nothing thrown";   \
-    } catch (const ::compose::Error& e) {                                                           \
-      EXPECT_NE(e.describe().find(needle), std::string::npos)                                       \
-          << "message: " << e.describe() << "\nexpected to contain: " << (needle);                 \
-    }                                                                                               \
+#define COMPOSE_EXPECT_ERROR(statement, needle)                                                   \
+  do {                                                                                            \
+    try {                                                                                         \
+      statement;                                                                                  \
+      ADD_FAILURE() << "expected compose::Error containing '" << (needle) << "', nothing thrown"; \
+    } catch (const ::compose::Error& e) {                                                         \
+      EXPECT_NE(e.describe().find(needle), std::string::npos)                                     \
+          << "message: " << e.describe() << "\nexpected to contain: " << (needle);                \
+    }                                                                                             \
   } while (0)

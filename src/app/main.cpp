@@ -56,7 +56,8 @@ class ProgressPrinter {
   void operator()(std::string_view stage, double fraction) {
     if (quiet_ || !tty_) return;
     std::lock_guard lock(mutex_);
-    std::fprintf(stderr, "\r  %-10.*s %3d%%", int(stage.size()), stage.data(), int(fraction * 100.0 + 0.5));
+    std::fprintf(stderr, "\r  %-10.*s %3d%%", int(stage.size()), stage.data(),
+                 int(fraction * 100.0 + 0.5));
     if (fraction >= 1.0) std::fprintf(stderr, "\r\033[K");
     std::fflush(stderr);
   }
@@ -70,8 +71,10 @@ class ProgressPrinter {
 
 int main(int argc, char** argv) {
   CLI::App app{
-      "compose: insert a synthetic diffuse object into a photograph, lit by an HDR environment of the place.\n"
-      "Writes <out>.exr (scene-linear, working space, with the object layer and a normal AOV) and <out>.jpg\n"
+      "compose: insert a synthetic diffuse object into a photograph, lit by an HDR environment of "
+      "the place.\n"
+      "Writes <out>.exr (scene-linear, working space, with the object layer and a normal AOV) and "
+      "<out>.jpg\n"
       "(through the OpenColorIO display transform).",
       "compose"};
   compose::pipeline::ComposeJob job;
@@ -79,39 +82,56 @@ int main(int argc, char** argv) {
   double focal35 = 0.0;
   bool explain = false, quiet = false;
 
-  app.add_option("--plate", job.plate, "Background photograph (JPEG, PNG, TIFF, EXR, ...)")->required();
+  app.add_option("--plate", job.plate, "Background photograph (JPEG, PNG, TIFF, EXR, ...)")
+      ->required();
   app.add_option("--object", job.object, "Mesh to insert (Wavefront OBJ)")->required();
-  app.add_option("--env", job.environment,
-                 "HDR environment, lat-long (equirectangular) map [default: the forest sample HDRI]");
+  app.add_option(
+      "--env", job.environment,
+      "HDR environment, lat-long (equirectangular) map [default: the forest sample HDRI]");
   app.add_option("--out", job.output, "Output base path; writes BASE.exr and BASE.jpg (or .png)")
       ->capture_default_str();
-  app.add_option("--lighting", job.lighting, "Lighting basis: " + join(compose::lighting::lightingNames()))
+  app.add_option("--lighting", job.lighting,
+                 "Lighting basis: " + join(compose::lighting::lightingNames()))
       ->capture_default_str();
   app.add_option("--lighting-params", lightingParams,
-                 "Basis parameters as key=value,... (cheb-*: order, samples, rows, cols, subsamples; sh: order=0..8;"
+                 "Basis parameters as key=value,... (cheb-*: order, samples, rows, cols, "
+                 "subsamples; sh: order=0..8;"
                  " mc: samples, seed)");
-  app.add_option("--place", place, "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");
-  app.add_option("--scale", job.placement.heightFraction, "Object height as a fraction of the plate height")
+  app.add_option("--place", place,
+                 "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");
+  app.add_option("--scale", job.placement.heightFraction,
+                 "Object height as a fraction of the plate height")
       ->capture_default_str();
-  app.add_option("--yaw", job.placement.yawDegrees, "Turn the object about the vertical axis, degrees")
+  app.add_option("--yaw", job.placement.yawDegrees,
+                 "Turn the object about the vertical axis, degrees")
       ->capture_default_str();
-  app.add_option("--env-yaw", job.environmentYawDegrees, "Turn the environment about the vertical axis, degrees")
+  app.add_option("--env-yaw", job.environmentYawDegrees,
+                 "Turn the environment about the vertical axis, degrees")
       ->capture_default_str();
-  app.add_option("--focal35", focal35, "35 mm equivalent focal length of the plate [default: EXIF, else 50]");
+  app.add_option("--focal35", focal35,
+                 "35 mm equivalent focal length of the plate [default: EXIF, else 50]");
   app.add_option("--camera-height", job.camera.height, "Camera height above the ground, metres")
       ->capture_default_str();
-  app.add_option("--pitch", job.camera.pitchDegrees, "Camera tilt down, degrees")->capture_default_str();
-  app.add_option("--albedo", albedo, "Object albedo, one value or R,G,B in the working space [default: 0.5]");
-  app.add_option("--exposure", exposure,
-                 "Exposure of the object in stops, or 'auto': match the environment to the plate's mean")
+  app.add_option("--pitch", job.camera.pitchDegrees, "Camera tilt down, degrees")
       ->capture_default_str();
-  app.add_option("--samples", job.samplesPerAxis, "Anti-aliasing: N x N samples per pixel")->capture_default_str();
-  app.add_option("--plate-space", job.plateSpace, "Colour space of the plate [default: from the file]");
-  app.add_option("--env-space", job.environmentSpace, "Colour space of the environment [default: from the file]");
-  app.add_option("--display", job.display, "OpenColorIO display for the JPEG/PNG [default: the config's]");
+  app.add_option("--albedo", albedo,
+                 "Object albedo, one value or R,G,B in the working space [default: 0.5]");
+  app.add_option(
+         "--exposure", exposure,
+         "Exposure of the object in stops, or 'auto': match the environment to the plate's mean")
+      ->capture_default_str();
+  app.add_option("--samples", job.samplesPerAxis, "Anti-aliasing: N x N samples per pixel")
+      ->capture_default_str();
+  app.add_option("--plate-space", job.plateSpace,
+                 "Colour space of the plate [default: from the file]");
+  app.add_option("--env-space", job.environmentSpace,
+                 "Colour space of the environment [default: from the file]");
+  app.add_option("--display", job.display,
+                 "OpenColorIO display for the JPEG/PNG [default: the config's]");
   app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
   bool noCache = false;
-  app.add_option("--cache", job.lightingCache, "Folder for cached lighting projections")->capture_default_str();
+  app.add_option("--cache", job.lightingCache, "Folder for cached lighting projections")
+      ->capture_default_str();
   app.add_flag("--no-cache", noCache, "Neither read nor write the lighting cache");
   app.add_flag("--explain", explain, "Say which stages run or are skipped and why, then exit");
   app.add_flag("-q,--quiet", quiet, "Print only the output paths and errors");
@@ -139,7 +159,8 @@ int main(int argc, char** argv) {
         job.exposureStops = std::stod(exposure, &used);
         if (used != exposure.size()) throw std::invalid_argument(exposure);
       } catch (const std::exception&) {
-        throw Error("cli", "--exposure expects a number of stops or 'auto', got '" + exposure + "'");
+        throw Error("cli",
+                    "--exposure expects a number of stops or 'auto', got '" + exposure + "'");
       }
     }
 
@@ -155,9 +176,12 @@ int main(int argc, char** argv) {
     const auto result = compose::pipeline::runCompose(
         job, colors, [&](std::string_view stage, double fraction) { printer(stage, fraction); });
     if (!quiet) {
-      for (const auto& note : result.notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
+      for (const auto& note : result.notes)
+        std::fprintf(stderr, "compose: note: %s\n", note.c_str());
       for (const auto& s : result.stages) {
-        if (s.runs) std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds, s.reason.c_str());
+        if (s.runs)
+          std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
+                       s.reason.c_str());
       }
     }
     std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());

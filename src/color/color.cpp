@@ -20,7 +20,8 @@ struct ColorConfig::Impl {
 
 namespace {
 
-ColorConfig::Impl load(const std::string& source, const std::function<OCIO::ConstConfigRcPtr()>& make,
+ColorConfig::Impl load(const std::string& source,
+                       const std::function<OCIO::ConstConfigRcPtr()>& make,
                        const std::filesystem::path& file) {
   try {
     ColorConfig::Impl impl{make(), source};
@@ -62,22 +63,22 @@ void applyRgb(const OCIO::ConstProcessorRcPtr& processor, Image& image) {
 
 ColorConfig ColorConfig::builtin() {
   ColorConfig c;
-  c.impl_ = std::make_shared<Impl>(load(
-      "built-in",
-      [] {
-        std::istringstream in(detail::kBuiltinConfig);
-        return OCIO::Config::CreateFromStream(in);
-      },
-      {}));
+  c.impl_ = std::make_shared<Impl>(load("built-in",
+                                        [] {
+                                          std::istringstream in(detail::kBuiltinConfig);
+                                          return OCIO::Config::CreateFromStream(in);
+                                        },
+                                        {}));
   return c;
 }
 
 ColorConfig ColorConfig::fromFile(const std::filesystem::path& file) {
   std::error_code ec;
-  if (!std::filesystem::exists(file, ec)) throw Error("color", "OpenColorIO config not found", file);
+  if (!std::filesystem::exists(file, ec))
+    throw Error("color", "OpenColorIO config not found", file);
   ColorConfig c;
-  c.impl_ = std::make_shared<Impl>(
-      load(file.string(), [&] { return OCIO::Config::CreateFromFile(file.string().c_str()); }, file));
+  c.impl_ = std::make_shared<Impl>(load(
+      file.string(), [&] { return OCIO::Config::CreateFromFile(file.string().c_str()); }, file));
   return c;
 }
 
@@ -87,7 +88,9 @@ ColorConfig ColorConfig::fromEnvironment() {
   return builtin();
 }
 
-const std::string& ColorConfig::source() const { return impl_->source; }
+const std::string& ColorConfig::source() const {
+  return impl_->source;
+}
 
 std::string ColorConfig::workingSpace() const {
   return resolve(OCIO::ROLE_SCENE_LINEAR, "the scene_linear role");
@@ -98,16 +101,17 @@ bool ColorConfig::has(const std::string& name) const {
 }
 
 std::string ColorConfig::resolve(const std::string& name, const std::string& what) const {
-  OCIO::ConstColorSpaceRcPtr cs = name.empty() ? nullptr : impl_->config->getColorSpace(name.c_str());
+  OCIO::ConstColorSpaceRcPtr cs =
+      name.empty() ? nullptr : impl_->config->getColorSpace(name.c_str());
   if (!cs) {
-    throw Error("color",
-                "unknown colour space '" + name + "' for " + what + "; the config (" + impl_->source +
-                    ") has: " + listSpaces(impl_->config));
+    throw Error("color", "unknown colour space '" + name + "' for " + what + "; the config (" +
+                             impl_->source + ") has: " + listSpaces(impl_->config));
   }
   return cs->getName();
 }
 
-std::string ColorConfig::inputSpaceFor(const std::filesystem::path& file, const std::string& declared) const {
+std::string ColorConfig::inputSpaceFor(const std::filesystem::path& file,
+                                       const std::string& declared) const {
   if (has(declared)) return resolve(declared, file.string());
   const char* byRule = impl_->config->getColorSpaceFromFilepath(file.string().c_str());
   if (byRule && has(byRule)) return resolve(byRule, file.string());
@@ -127,7 +131,9 @@ void ColorConfig::convert(Image& image, const std::string& to) const {
   image.colorSpace = dst;
 }
 
-std::string ColorConfig::defaultDisplay() const { return impl_->config->getDefaultDisplay(); }
+std::string ColorConfig::defaultDisplay() const {
+  return impl_->config->getDefaultDisplay();
+}
 
 std::string ColorConfig::defaultView(const std::string& display) const {
   return impl_->config->getDefaultView(display.c_str());
@@ -135,7 +141,8 @@ std::string ColorConfig::defaultView(const std::string& display) const {
 
 std::vector<std::string> ColorConfig::displays() const {
   std::vector<std::string> out;
-  for (int i = 0; i < impl_->config->getNumDisplays(); ++i) out.emplace_back(impl_->config->getDisplay(i));
+  for (int i = 0; i < impl_->config->getNumDisplays(); ++i)
+    out.emplace_back(impl_->config->getDisplay(i));
   return out;
 }
 
@@ -147,7 +154,8 @@ std::vector<std::string> ColorConfig::views(const std::string& display) const {
   return out;
 }
 
-Image ColorConfig::toDisplay(const Image& image, const std::string& display, const std::string& view) const {
+Image ColorConfig::toDisplay(const Image& image, const std::string& display,
+                             const std::string& view) const {
   auto join = [](const std::vector<std::string>& v) {
     std::string s;
     for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
@@ -159,8 +167,8 @@ Image ColorConfig::toDisplay(const Image& image, const std::string& display, con
   }
   const std::vector<std::string> knownViews = views(display);
   if (std::find(knownViews.begin(), knownViews.end(), view) == knownViews.end()) {
-    throw Error("color",
-                "unknown view '" + view + "' for display '" + display + "'; it has: " + join(knownViews));
+    throw Error("color", "unknown view '" + view + "' for display '" + display +
+                             "'; it has: " + join(knownViews));
   }
   Image out = image;
   try {
@@ -170,7 +178,8 @@ Image ColorConfig::toDisplay(const Image& image, const std::string& display, con
     t->setView(view.c_str());
     applyRgb(impl_->config->getProcessor(t), out);
   } catch (const OCIO::Exception& e) {
-    throw Error("color", "cannot apply display transform " + display + "/" + view + ": " + e.what());
+    throw Error("color",
+                "cannot apply display transform " + display + "/" + view + ": " + e.what());
   }
   out.colorSpace = display + "/" + view;
   return out;

@@ -17,19 +17,24 @@ struct Image {
   int width = 0;
   int height = 0;
   int channels = 0;
-  std::vector<float> pixels;               // width * height * channels, interleaved
-  std::vector<std::string> channelNames;   // one per channel ("R", "G", "B", "A", "N.X", ...)
-  std::string colorSpace;                  // OpenColorIO colour-space name; empty if unknown
+  std::vector<float> pixels;              // width * height * channels, interleaved
+  std::vector<std::string> channelNames;  // one per channel ("R", "G", "B", "A", "N.X", ...)
+  std::string colorSpace;                 // OpenColorIO colour-space name; empty if unknown
 
   Image() = default;
   Image(int w, int h, int c, std::vector<std::string> names = {})
-      : width(w), height(h), channels(c), pixels(size_t(w) * size_t(h) * size_t(c), 0.0f),
+      : width(w),
+        height(h),
+        channels(c),
+        pixels(size_t(w) * size_t(h) * size_t(c), 0.0f),
         channelNames(std::move(names)) {}
 
   bool empty() const { return pixels.empty(); }
   size_t pixelCount() const { return size_t(width) * size_t(height); }
 
-  float* at(int x, int y) { return pixels.data() + (size_t(y) * size_t(width) + size_t(x)) * channels; }
+  float* at(int x, int y) {
+    return pixels.data() + (size_t(y) * size_t(width) + size_t(x)) * channels;
+  }
   const float* at(int x, int y) const {
     return pixels.data() + (size_t(y) * size_t(width) + size_t(x)) * channels;
   }

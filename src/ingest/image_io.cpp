@@ -27,7 +27,8 @@ std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* na
 
 std::string lowerExtension(const fs::path& path) {
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
   return ext;
 }
 
@@ -74,7 +75,8 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
 
   if (info.orientation != 1) {
     OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(buf);
-    if (upright.has_error()) throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+    if (upright.has_error())
+      throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
     buf = std::move(upright);
   }
 
@@ -108,10 +110,18 @@ void writeImage(const fs::path& path, const Image& image, const WriteOptions& op
   const bool isExr = ext == ".exr";
   OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
   switch (options.depth) {
-    case WriteOptions::Depth::Auto: format = isExr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::UINT8; break;
-    case WriteOptions::Depth::UInt8: format = OIIO::TypeDesc::UINT8; break;
-    case WriteOptions::Depth::Half: format = OIIO::TypeDesc::HALF; break;
-    case WriteOptions::Depth::Float: format = OIIO::TypeDesc::FLOAT; break;
+    case WriteOptions::Depth::Auto:
+      format = isExr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::UINT8;
+      break;
+    case WriteOptions::Depth::UInt8:
+      format = OIIO::TypeDesc::UINT8;
+      break;
+    case WriteOptions::Depth::Half:
+      format = OIIO::TypeDesc::HALF;
+      break;
+    case WriteOptions::Depth::Float:
+      format = OIIO::TypeDesc::FLOAT;
+      break;
   }
   OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
   if (!image.channelNames.empty()) {

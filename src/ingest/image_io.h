@@ -23,16 +23,16 @@ namespace compose::ingest {
 
 // Capture metadata from EXIF (and the file header). Absent fields are empty.
 struct CaptureInfo {
-  std::optional<double> exposureTime;     // seconds
+  std::optional<double> exposureTime;  // seconds
   std::optional<double> fNumber;
   std::optional<double> iso;
   std::optional<double> focalLengthMm;    // true focal length
   std::optional<double> focalLength35mm;  // 35 mm equivalent focal length
   int orientation = 1;                    // EXIF orientation of the file (already applied)
   std::string cameraMake, cameraModel;
-  std::string fileColorSpace;             // colour space the file or its reader declares
-  std::string format;                     // reader name, e.g. "jpeg", "openexr"
-  int fileWidth = 0, fileHeight = 0;      // as stored, before orientation
+  std::string fileColorSpace;         // colour space the file or its reader declares
+  std::string format;                 // reader name, e.g. "jpeg", "openexr"
+  int fileWidth = 0, fileHeight = 0;  // as stored, before orientation
 };
 
 struct LoadedImage {
@@ -44,12 +44,18 @@ struct LoadedImage {
 LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest");
 
 struct WriteOptions {
-  enum class Depth { Auto, UInt8, Half, Float } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
+  enum class Depth {
+    Auto,
+    UInt8,
+    Half,
+    Float
+  } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
   int jpegQuality = 95;
   int alphaChannel = -1;  // index of the alpha channel, or -1
 };
 
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
-void writeImage(const std::filesystem::path& path, const Image& image, const WriteOptions& options = {});
+void writeImage(const std::filesystem::path& path, const Image& image,
+                const WriteOptions& options = {});
 
 }  // namespace compose::ingest

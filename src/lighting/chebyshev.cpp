@@ -31,16 +31,23 @@ inline float fastAtan2(float y, float x) {
   const float mx = std::max(ax, ay), mn = std::min(ax, ay);
   if (mx == 0.0f) return 0.0f;
   const float a = mn / mx, s = a * a;
-  float r = a * (1.0f + s * (-0.3333314528f + s * (0.1999355085f + s * (-0.1420889944f + s * (0.1065626393f +
-                 s * (-0.0752896400f + s * (0.0429096138f + s * (-0.0161657367f + s * 0.0028662257f))))))));
+  float r =
+      a *
+      (1.0f +
+       s * (-0.3333314528f +
+            s * (0.1999355085f +
+                 s * (-0.1420889944f +
+                      s * (0.1065626393f + s * (-0.0752896400f +
+                                                s * (0.0429096138f + s * (-0.0161657367f +
+                                                                          s * 0.0028662257f))))))));
   if (ay > ax) r = 1.57079637f - r;
   if (x < 0.0f) r = 3.14159274f - r;
   return y < 0.0f ? -r : r;
 }
 
 // Moments of one channel of an RGB grid (rows x cols, interleaved) into out[c * k² ...].
-void rgbMoments(const TchebichefBasis& rows, const TchebichefBasis& cols, const std::vector<double>& rgb, int k,
-                float* out) {
+void rgbMoments(const TchebichefBasis& rows, const TchebichefBasis& cols,
+                const std::vector<double>& rgb, int k, float* out) {
   const size_t count = size_t(rows.size()) * size_t(cols.size());
   std::vector<double> channel(count);
   for (int c = 0; c < 3; ++c) {
@@ -52,7 +59,9 @@ void rgbMoments(const TchebichefBasis& rows, const TchebichefBasis& cols, const 
 
 // Per-row solid angle of an s-row lat-long grid (exact), and the sub-cell layout used to integrate
 // the cosine over cells.
-double latitudeOfRow(double row, int rows) { return kPi * (0.5 - row / rows); }
+double latitudeOfRow(double row, int rows) {
+  return kPi * (0.5 - row / rows);
+}
 
 }  // namespace
 
@@ -60,17 +69,23 @@ double latitudeOfRow(double row, int rows) { return kPi * (0.5 - row / rows); }
 
 void ChebParams::validate(const std::string& basis) const {
   auto fail = [&](const std::string& what) { throw Error("lighting", basis + ": " + what); };
-  if (samples < 1 || samples > 1024) fail("samples (grid size s) must be in 1..1024, got " + std::to_string(samples));
+  if (samples < 1 || samples > 1024)
+    fail("samples (grid size s) must be in 1..1024, got " + std::to_string(samples));
   if (order < 1 || order > std::min(samples, 32)) {
-    fail("order k must be in 1..min(samples, 32) (samples = " + std::to_string(samples) + "), got " +
-         std::to_string(order));
+    fail("order k must be in 1..min(samples, 32) (samples = " + std::to_string(samples) +
+         "), got " + std::to_string(order));
   }
-  if (normalRows < 3 || normalRows > 1025) fail("rows must be in 3..1025, got " + std::to_string(normalRows));
-  if (normalCols < 4 || normalCols > 2048) fail("cols must be in 4..2048, got " + std::to_string(normalCols));
-  if (subsamples < 1 || subsamples > 16) fail("subsamples must be in 1..16, got " + std::to_string(subsamples));
-  if (brdf != "lambert" && brdf != "oren-nayar") fail("brdf must be lambert or oren-nayar, got '" + brdf + "'");
+  if (normalRows < 3 || normalRows > 1025)
+    fail("rows must be in 3..1025, got " + std::to_string(normalRows));
+  if (normalCols < 4 || normalCols > 2048)
+    fail("cols must be in 4..2048, got " + std::to_string(normalCols));
+  if (subsamples < 1 || subsamples > 16)
+    fail("subsamples must be in 1..16, got " + std::to_string(subsamples));
+  if (brdf != "lambert" && brdf != "oren-nayar")
+    fail("brdf must be lambert or oren-nayar, got '" + brdf + "'");
   if (!(sigma >= 0.0 && sigma <= 1.5)) fail("sigma (roughness, radians) must be in 0..1.5");
-  if (brdf == "oren-nayar" && basis != "cheb-local") fail("only cheb-local supports brdf=oren-nayar");
+  if (brdf == "oren-nayar" && basis != "cheb-local")
+    fail("only cheb-local supports brdf=oren-nayar");
 }
 
 ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebParams d) {
@@ -88,13 +103,16 @@ ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebPara
 
 // --- normal grid ------------------------------------------------------------------------------
 
-NormalGrid::NormalGrid(int rows, int cols) : rows_(rows), cols_(cols) { COMPOSE_CHECK(rows >= 2 && cols >= 1); }
+NormalGrid::NormalGrid(int rows, int cols) : rows_(rows), cols_(cols) {
+  COMPOSE_CHECK(rows >= 2 && cols >= 1);
+}
 
 glm::vec3 NormalGrid::normal(size_t node) const {
   const int r = int(node / size_t(cols_)), c = int(node % size_t(cols_));
   const double lat = kPi * (0.5 - double(r) / (rows_ - 1));
   const double lon = 2.0 * kPi * c / cols_;
-  return glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)), float(std::cos(lon) * std::cos(lat)));
+  return glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)),
+                   float(std::cos(lon) * std::cos(lat)));
 }
 
 void NormalGrid::frame(size_t node, glm::vec3& east, glm::vec3& north) const {
@@ -132,17 +150,22 @@ ChebBase::ChebBase(std::string name, ChebParams params)
 }
 
 std::string ChebBase::describe() const {
-  return name_ + " order=" + std::to_string(params_.order) + " samples=" + std::to_string(params_.samples) +
-         " normals=" + std::to_string(params_.normalRows) + "x" + std::to_string(params_.normalCols) + " (" +
-         std::to_string(coefficientsPerChannel()) + " coefficients/channel, " + std::to_string(floatsStored()) +
-         " floats)";
+  return name_ + " order=" + std::to_string(params_.order) +
+         " samples=" + std::to_string(params_.samples) +
+         " normals=" + std::to_string(params_.normalRows) + "x" +
+         std::to_string(params_.normalCols) + " (" + std::to_string(coefficientsPerChannel()) +
+         " coefficients/channel, " + std::to_string(floatsStored()) + " floats)";
 }
 
-size_t ChebBase::floatsStored() const { return table_.size() + global_.size(); }
+size_t ChebBase::floatsStored() const {
+  return table_.size() + global_.size();
+}
 
 std::string ChebBase::parameterKey() const {
-  return name_ + " order=" + std::to_string(params_.order) + " samples=" + std::to_string(params_.samples) +
-         " rows=" + std::to_string(params_.normalRows) + " cols=" + std::to_string(params_.normalCols) +
+  return name_ + " order=" + std::to_string(params_.order) +
+         " samples=" + std::to_string(params_.samples) +
+         " rows=" + std::to_string(params_.normalRows) +
+         " cols=" + std::to_string(params_.normalCols) +
          " subsamples=" + std::to_string(params_.subsamples) + " version=1";
 }
 
@@ -174,8 +197,9 @@ std::vector<double> ChebBase::truncationSnrDb() const {
   const double spacing = kPi / (grid_.rows() - 1);
   for (size_t node = 0; node < grid_.size(); ++node) {
     const int row = int(node / size_t(grid_.cols()));
-    const double weight = (row == 0 || row == grid_.rows() - 1) ? spacing / 8.0
-                                                                 : std::cos(kPi * (0.5 - double(row) / (grid_.rows() - 1)));
+    const double weight = (row == 0 || row == grid_.rows() - 1)
+                              ? spacing / 8.0
+                              : std::cos(kPi * (0.5 - double(row) / (grid_.rows() - 1)));
     for (int c = 0; c < 3; ++c) {
       const double full = truncatedProduct(node, c, order);
       for (int k = 1; k <= order; ++k) {
@@ -187,7 +211,8 @@ std::vector<double> ChebBase::truncationSnrDb() const {
   }
   std::vector<double> out(static_cast<size_t>(order));
   for (size_t i = 0; i < out.size(); ++i) {
-    out[i] = noise[i] > 0.0 ? 10.0 * std::log10(signal[i] / noise[i]) : std::numeric_limits<double>::infinity();
+    out[i] = noise[i] > 0.0 ? 10.0 * std::log10(signal[i] / noise[i])
+                            : std::numeric_limits<double>::infinity();
   }
   return out;
 }
@@ -220,7 +245,8 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
     }
   }
   for (size_t idx = 0; idx < area.size(); ++idx) {
-    for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] = area[idx] > 0.0 ? lin[3 * idx + size_t(c)] / area[idx] : 0.0;
+    for (int c = 0; c < 3; ++c)
+      lin[3 * idx + size_t(c)] = area[idx] > 0.0 ? lin[3 * idx + size_t(c)] / area[idx] : 0.0;
   }
   global_.assign(size_t(3 * k * k), 0.0f);
   rgbMoments(basis, basis, lin, k, global_.data());
@@ -230,7 +256,8 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
   std::vector<glm::vec3> subDir(size_t(sq) * size_t(sq));
   std::vector<double> subOmega(subDir.size());
   for (int a = 0; a < sq; ++a) {
-    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq), mid = latitudeOfRow(a + 0.5, sq);
+    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq),
+                 mid = latitudeOfRow(a + 0.5, sq);
     const double omega = 2.0 * kPi / sq * (std::sin(top) - std::sin(bottom));
     for (int b = 0; b < sq; ++b) {
       const double lon = kPi * (1.0 - 2.0 * (b + 0.5) / sq);
@@ -328,8 +355,10 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
     if (area[idx] > 0.0) {
       for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
     } else {
-      const int f = int(idx / faceTexels), i = int((idx % faceTexels) / size_t(s)), j = int(idx % size_t(s));
-      const glm::vec3 L = env.lookup(cubeDirection(f, -1.0 + (2.0 * j + 1.0) / s, -1.0 + (2.0 * i + 1.0) / s));
+      const int f = int(idx / faceTexels), i = int((idx % faceTexels) / size_t(s)),
+                j = int(idx % size_t(s));
+      const glm::vec3 L =
+          env.lookup(cubeDirection(f, -1.0 + (2.0 * j + 1.0) / s, -1.0 + (2.0 * i + 1.0) / s));
       lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
     }
   }
@@ -370,9 +399,10 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
       fc[f * faceTexels + (a / size_t(q)) * size_t(s) + b / size_t(q)] += c * subOmega[idx];
     }
     for (int f = 0; f < kCubeFaces; ++f) {
-      const std::vector<double> m =
-          moments2d(basis, basis, std::span<const double>(fc.data() + size_t(f) * faceTexels, faceTexels), k);
-      std::transform(m.begin(), m.end(), table_.begin() + ptrdiff_t(size_t(node) * stride_ + size_t(f) * kk),
+      const std::vector<double> m = moments2d(
+          basis, basis, std::span<const double>(fc.data() + size_t(f) * faceTexels, faceTexels), k);
+      std::transform(m.begin(), m.end(),
+                     table_.begin() + ptrdiff_t(size_t(node) * stride_ + size_t(f) * kk),
                      [](double v) { return float(v); });
     }
     const size_t d = ++done;
@@ -436,11 +466,13 @@ ChebLocalLighting::ChebLocalLighting(ChebParams params) : ChebBase("cheb-local",
         for (int i = 0; i < s; ++i) {
           for (int j = 0; j < s; ++j) {
             fc[size_t(i) * size_t(s) + size_t(j)] =
-                orenNayar(params_.sigma, 0.5 * kPi * (i + 0.5) / s, 2.0 * kPi * (j + 0.5) / s, thetaOut, phiOut);
+                orenNayar(params_.sigma, 0.5 * kPi * (i + 0.5) / s, 2.0 * kPi * (j + 0.5) / s,
+                          thetaOut, phiOut);
           }
         }
         const std::vector<double> m = moments2d(basis, basis, fc, k);
-        std::transform(m.begin(), m.end(), viewTable_.begin() + ptrdiff_t((size_t(a) * kViewPhis + size_t(b)) * kk),
+        std::transform(m.begin(), m.end(),
+                       viewTable_.begin() + ptrdiff_t((size_t(a) * kViewPhis + size_t(b)) * kk),
                        [](double v) { return float(v); });
       }
     }
@@ -477,22 +509,27 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
     } else {
       glm::vec3 east, north;
       grid_.frame(size_t(node), east, north);
-      // L_in(i, j) = ∫_cell L cos θ dω, exactly (RadianceCells), binned by altitude θ and azimuth φ.
-      cells.forEachAbove(n, [&](const glm::vec3& w, const glm::vec3& value) {
-        const float c = glm::dot(n, w);
-        int i = 0;
-        while (i < s - 1 && c <= cosBound[size_t(i)]) ++i;
-        float phi = fastAtan2(glm::dot(north, w), glm::dot(east, w));
-        if (phi < 0.0f) phi += float(2.0 * kPi);
-        const int j = std::min(s - 1, int(phi * phiScale));
-        double* cell = lin.data() + 3 * (size_t(i) * size_t(s) + size_t(j));
-        cell[0] += value.x;
-        cell[1] += value.y;
-        cell[2] += value.z;
-      }, kLeafLevel);
+      // L_in(i, j) = ∫_cell L cos θ dω, exactly (RadianceCells), binned by altitude θ and azimuth
+      // φ.
+      cells.forEachAbove(
+          n,
+          [&](const glm::vec3& w, const glm::vec3& value) {
+            const float c = glm::dot(n, w);
+            int i = 0;
+            while (i < s - 1 && c <= cosBound[size_t(i)]) ++i;
+            float phi = fastAtan2(glm::dot(north, w), glm::dot(east, w));
+            if (phi < 0.0f) phi += float(2.0 * kPi);
+            const int j = std::min(s - 1, int(phi * phiScale));
+            double* cell = lin.data() + 3 * (size_t(i) * size_t(s) + size_t(j));
+            cell[0] += value.x;
+            cell[1] += value.y;
+            cell[2] += value.z;
+          },
+          kLeafLevel);
     }
     if (k == 1 && params_.brdf == "lambert") {
-      for (int c = 0; c < 3; ++c) table_[size_t(node) * stride_ + size_t(c)] = float(lin[size_t(c)] / s);
+      for (int c = 0; c < 3; ++c)
+        table_[size_t(node) * stride_ + size_t(c)] = float(lin[size_t(c)] / s);
     } else {
       rgbMoments(basis, basis, lin, k, table_.data() + size_t(node) * stride_);
     }
@@ -523,12 +560,16 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
 }
 
 std::string ChebLocalLighting::parameterKey() const {
-  return ChebBase::parameterKey() + " brdf=" + params_.brdf + " sigma=" + std::to_string(params_.sigma);
+  return ChebBase::parameterKey() + " brdf=" + params_.brdf +
+         " sigma=" + std::to_string(params_.sigma);
 }
 
-size_t ChebLocalLighting::floatsStored() const { return ChebBase::floatsStored() + viewTable_.size(); }
+size_t ChebLocalLighting::floatsStored() const {
+  return ChebBase::floatsStored() + viewTable_.size();
+}
 
-double ChebLocalLighting::orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut, double phiOut) {
+double ChebLocalLighting::orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut,
+                                    double phiOut) {
   const double s2 = sigma * sigma;
   const double a = 1.0 - 0.5 * s2 / (s2 + 0.33), b = 0.45 * s2 / (s2 + 0.09);
   const double alpha = std::max(thetaIn, thetaOut), beta = std::min(thetaIn, thetaOut);
@@ -539,7 +580,8 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n, const glm::vec3& vie
   if (params_.brdf == "lambert") return irradiance(n);
   // The view in the local frame of n (the same east/north construction as the grid nodes).
   const float h = std::sqrt(n.x * n.x + n.z * n.z);
-  const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1.0f, 0.0f, 0.0f);
+  const glm::vec3 east =
+      h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1.0f, 0.0f, 0.0f);
   const glm::vec3 north = glm::cross(n, east);
   const float cosOut = std::clamp(glm::dot(n, view), 0.0f, 1.0f);
   const double thetaOut = std::acos(double(cosOut));
@@ -547,10 +589,13 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n, const glm::vec3& vie
   if (phiOut < 0.0) phiOut += 2.0 * kPi;
   // Bilinear in (θo, φo) over the view table.
   const double u = thetaOut / (0.5 * kPi) * (kViewThetas - 1), v = phiOut / (2.0 * kPi) * kViewPhis;
-  const int a0 = std::min(int(u), kViewThetas - 2), b0 = int(v) % kViewPhis, b1 = (b0 + 1) % kViewPhis;
+  const int a0 = std::min(int(u), kViewThetas - 2), b0 = int(v) % kViewPhis,
+            b1 = (b0 + 1) % kViewPhis;
   const float fu = float(u - a0), fv = float(v - std::floor(v));
   const size_t kk = stride_ / 3;
-  auto entry = [&](int a, int b) { return viewTable_.data() + (size_t(a) * kViewPhis + size_t(b)) * kk; };
+  auto entry = [&](int a, int b) {
+    return viewTable_.data() + (size_t(a) * kViewPhis + size_t(b)) * kk;
+  };
   const float* t00 = entry(a0, b0);
   const float* t01 = entry(a0, b1);
   const float* t10 = entry(a0 + 1, b0);
@@ -560,7 +605,8 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n, const glm::vec3& vie
   grid_.interpolation(n, nodes, w);
   glm::vec3 e(0.0f);
   for (size_t i = 0; i < kk; ++i) {
-    const float tf = (1 - fu) * ((1 - fv) * t00[i] + fv * t01[i]) + fu * ((1 - fv) * t10[i] + fv * t11[i]);
+    const float tf =
+        (1 - fu) * ((1 - fv) * t00[i] + fv * t01[i]) + fu * ((1 - fv) * t10[i] + fv * t11[i]);
     glm::vec3 tl(0.0f);
     for (int q = 0; q < 4; ++q) {
       const float* node = table_.data() + nodes[q] * stride_;

@@ -40,7 +40,8 @@ struct ChebParams {
   int normalCols = 64;  // normal-grid columns (longitude)
   int subsamples = 4;   // q x q sub-cells per grid cell when integrating the cosine (BRDF side)
   // BRDF of the local basis: "lambert", or "oren-nayar" with roughness sigma (radians; the
-  // qualitative model of Oren & Nayar 1994), which is view dependent and uses the full k x k product.
+  // qualitative model of Oren & Nayar 1994), which is view dependent and uses the full k x k
+  // product.
   std::string brdf = "lambert";
   double sigma = 0.0;
 
@@ -93,12 +94,12 @@ class ChebBase : public DiffuseLighting {
 
   std::string name_;
   ChebParams params_;
-  int blocks_ = 1;        // moment blocks per point (6 for cheb-face)
-  size_t globalSize_ = 0; // floats in global_ once projected (set by each basis' constructor)
+  int blocks_ = 1;         // moment blocks per point (6 for cheb-face)
+  size_t globalSize_ = 0;  // floats in global_ once projected (set by each basis' constructor)
   NormalGrid grid_;
-  size_t stride_ = 0;     // floats per node
-  std::vector<float> table_;       // per node
-  std::vector<float> global_;      // per environment (lighting or BRDF moments)
+  size_t stride_ = 0;          // floats per node
+  std::vector<float> table_;   // per node
+  std::vector<float> global_;  // per environment (lighting or BRDF moments)
 };
 
 class ChebLatLongLighting final : public ChebBase {
@@ -131,7 +132,8 @@ class ChebLocalLighting final : public ChebBase {
   size_t floatsStored() const override;
 
   // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.
-  static double orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut, double phiOut);
+  static double orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut,
+                          double phiOut);
   // Table of BRDF moments over the view: kViewThetas x kViewPhis entries of k x k.
   static constexpr int kViewThetas = 17, kViewPhis = 32;
 

@@ -43,7 +43,9 @@ glm::vec3 Environment::direction(int x, int y) const {
 Environment Environment::fromLatLong(const Image& image, const std::filesystem::path& file,
                                      SanitizeReport* report) {
   if (image.channels < 3) {
-    throw Error("lighting", "environment needs RGB channels, the image has " + std::to_string(image.channels), file);
+    throw Error("lighting",
+                "environment needs RGB channels, the image has " + std::to_string(image.channels),
+                file);
   }
   if (image.height < 2 || image.width != 2 * image.height) {
     throw Error("lighting",

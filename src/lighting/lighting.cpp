@@ -9,7 +9,8 @@
 namespace compose::lighting {
 
 const std::vector<std::string>& lightingNames() {
-  static const std::vector<std::string> names = {"cheb-local", "cheb-latlong", "cheb-face", "sh", "mc", "exact"};
+  static const std::vector<std::string> names = {"cheb-local", "cheb-latlong", "cheb-face",
+                                                 "sh",         "mc",           "exact"};
   return names;
 }
 

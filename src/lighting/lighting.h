@@ -44,7 +44,9 @@ class DiffuseLighting {
   // For a view-dependent BRDF (Oren–Nayar), the Lambertian-equivalent irradiance π L_o / ρ seen
   // from unit direction `view` (surface towards the eye), so that the renderer's ρ E / π is the
   // outgoing radiance for every BRDF. Lambertian bases ignore the view.
-  virtual glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& /*view*/) const { return irradiance(n); }
+  virtual glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& /*view*/) const {
+    return irradiance(n);
+  }
 
   // Coefficients per colour channel, and the total number of floats stored for the lighting.
   virtual int coefficientsPerChannel() const = 0;

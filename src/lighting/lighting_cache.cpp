@@ -54,12 +54,16 @@ bool LightingCache::load(const std::string& key, DiffuseLighting& basis) const {
   char magic[8];
   uint64_t keyLength = 0, count = 0;
   if (!in.read(magic, sizeof magic) || std::memcmp(magic, kMagic, sizeof magic) != 0) return false;
-  if (!in.read(reinterpret_cast<char*>(&keyLength), sizeof keyLength) || keyLength > 4096) return false;
+  if (!in.read(reinterpret_cast<char*>(&keyLength), sizeof keyLength) || keyLength > 4096)
+    return false;
   std::string storedKey(keyLength, '\0');
-  if (!in.read(storedKey.data(), std::streamsize(keyLength)) || storedKey != basis.parameterKey()) return false;
-  if (!in.read(reinterpret_cast<char*>(&count), sizeof count) || count > (uint64_t(1) << 32)) return false;
+  if (!in.read(storedKey.data(), std::streamsize(keyLength)) || storedKey != basis.parameterKey())
+    return false;
+  if (!in.read(reinterpret_cast<char*>(&count), sizeof count) || count > (uint64_t(1) << 32))
+    return false;
   std::vector<float> state(count);
-  if (!in.read(reinterpret_cast<char*>(state.data()), std::streamsize(count * sizeof(float)))) return false;
+  if (!in.read(reinterpret_cast<char*>(state.data()), std::streamsize(count * sizeof(float))))
+    return false;
   return basis.importState(state);
 }
 
@@ -79,7 +83,8 @@ bool LightingCache::store(const std::string& key, const DiffuseLighting& basis) 
     out.write(reinterpret_cast<const char*>(&keyLength), sizeof keyLength);
     out.write(paramKey.data(), std::streamsize(keyLength));
     out.write(reinterpret_cast<const char*>(&count), sizeof count);
-    out.write(reinterpret_cast<const char*>(state.data()), std::streamsize(state.size() * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(state.data()),
+              std::streamsize(state.size() * sizeof(float)));
     if (!out) {
       out.close();
       fs::remove(temp, ec);

@@ -19,7 +19,9 @@ class LightingCache {
   explicit LightingCache(std::filesystem::path folder) : folder_(std::move(folder)) {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);
-  std::filesystem::path pathFor(const std::string& key) const { return folder_ / (key + ".lighting"); }
+  std::filesystem::path pathFor(const std::string& key) const {
+    return folder_ / (key + ".lighting");
+  }
 
   // Restores `basis` from the entry for `key`; false on a miss or an entry that does not fit.
   bool load(const std::string& key, DiffuseLighting& basis) const;

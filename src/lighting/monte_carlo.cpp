@@ -67,7 +67,9 @@ constexpr float kPiF = std::numbers::pi_v<float>;
 constexpr double kBelowOne = 0x1.fffffffffffffp-1;  // largest double < 1
 constexpr float kBelowOneF = 0x1.fffffep-1f;
 
-constexpr double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g + 0.0722 * b; }
+constexpr double luminance(double r, double g, double b) {
+  return 0.2126 * r + 0.7152 * g + 0.0722 * b;
+}
 
 constexpr uint64_t splitmix64(uint64_t x) {
   x += 0x9e3779b97f4a7c15ULL;
@@ -103,7 +105,8 @@ class Pcg32 {
 };
 
 Pcg32 streamFor(uint64_t seed, const glm::vec3& n) {
-  const uint64_t xy = uint64_t(std::bit_cast<uint32_t>(n.x)) | (uint64_t(std::bit_cast<uint32_t>(n.y)) << 32);
+  const uint64_t xy =
+      uint64_t(std::bit_cast<uint32_t>(n.x)) | (uint64_t(std::bit_cast<uint32_t>(n.y)) << 32);
   const uint64_t z = std::bit_cast<uint32_t>(n.z);
   const uint64_t h = splitmix64(splitmix64(splitmix64(seed) ^ xy) ^ z);
   return Pcg32(h, splitmix64(h ^ 0x6a09e667f3bcc909ULL));
@@ -125,7 +128,8 @@ void validateSamples(int samples) {
 
 }  // namespace
 
-MonteCarloLighting::MonteCarloLighting(int samples, uint64_t seed) : samples_(samples), seed_(seed) {
+MonteCarloLighting::MonteCarloLighting(int samples, uint64_t seed)
+    : samples_(samples), seed_(seed) {
   validateSamples(samples);
 }
 
@@ -194,13 +198,16 @@ void MonteCarloLighting::project(const Environment& env, const Progress& progres
   report(progress, "lighting", 1.0);
 }
 
-glm::vec3 MonteCarloLighting::irradiance(const glm::vec3& n) const { return estimate(n, samples_); }
+glm::vec3 MonteCarloLighting::irradiance(const glm::vec3& n) const {
+  return estimate(n, samples_);
+}
 
 glm::vec3 MonteCarloLighting::irradiance(const glm::vec3& n, const VisibilityFn& visible) const {
   return estimate(n, samples_, &visible);
 }
 
-glm::vec3 MonteCarloLighting::estimate(const glm::vec3& nIn, int samples, const VisibilityFn* visible) const {
+glm::vec3 MonteCarloLighting::estimate(const glm::vec3& nIn, int samples,
+                                       const VisibilityFn* visible) const {
   validateSamples(samples);
   COMPOSE_CHECK(projected_);
   const float len = std::sqrt(nIn.x * nIn.x + nIn.y * nIn.y + nIn.z * nIn.z);
@@ -273,7 +280,8 @@ glm::vec3 MonteCarloLighting::estimate(const glm::vec3& nIn, int samples, const 
     for (int j0 = 0; j0 < nCos; j0 += kBatch) {
       const int count = std::min(kBatch, nCos - j0);
       for (int k = 0; k < count; ++k) {
-        const float u0 = std::min(float((double(j0 + k) + rng.uniformDouble()) / double(nCos)), kBelowOneF);
+        const float u0 =
+            std::min(float((double(j0 + k) + rng.uniformDouble()) / double(nCos)), kBelowOneF);
         const float u1 = rng.uniformFloat();
         const float c = std::sqrt(1.0f - u0);
         const float rd = std::sqrt(u0), phi = 2.0f * kPiF * u1;

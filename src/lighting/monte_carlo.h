@@ -1,4 +1,5 @@
-// The Monte Carlo gold standard ("mc"): irradiance by importance sampling, with optional visibility.
+// The Monte Carlo gold standard ("mc"): irradiance by importance sampling, with optional
+// visibility.
 //
 //   E(n) = ∫ L(ω) max(0, n·ω) V(ω) dω
 //
@@ -70,11 +71,11 @@ class MonteCarloLighting final : public DiffuseLighting {
   uint64_t seed_;
   int width_ = 0, height_ = 0;
   bool projected_ = false;
-  std::vector<float> radiance_;   // RGB, row-major, as in the environment
-  std::vector<double> zEdge_;     // sin(latitude) at row edges: zEdge_[y] top, zEdge_[y+1] bottom
-  std::vector<double> rowCdf_;    // marginal over rows, H+1 entries, 0 .. 1
-  std::vector<double> colCdf_;    // conditional over columns, per row W+1 entries, 0 .. 1
-  double invTotal_ = 0.0;         // 1 / Σ luminance·Ω; 0 for an all-zero map
+  std::vector<float> radiance_;  // RGB, row-major, as in the environment
+  std::vector<double> zEdge_;    // sin(latitude) at row edges: zEdge_[y] top, zEdge_[y+1] bottom
+  std::vector<double> rowCdf_;   // marginal over rows, H+1 entries, 0 .. 1
+  std::vector<double> colCdf_;   // conditional over columns, per row W+1 entries, 0 .. 1
+  double invTotal_ = 0.0;        // 1 / Σ luminance·Ω; 0 for an all-zero map
 
   glm::vec3 texel(int x, int y) const {
     const float* p = radiance_.data() + (size_t(y) * size_t(width_) + size_t(x)) * 3;

@@ -9,7 +9,8 @@
 
 namespace compose::lighting {
 
-std::vector<OrderEstimate> estimateOrders(const std::string& basis, const Environment& env, const ParamSet& params) {
+std::vector<OrderEstimate> estimateOrders(const std::string& basis, const Environment& env,
+                                          const ParamSet& params) {
   std::vector<OrderEstimate> out;
   if (basis == "sh") {
     ShLighting full(kMaxShOrder);
@@ -28,8 +29,9 @@ std::vector<OrderEstimate> estimateOrders(const std::string& basis, const Enviro
     for (int order = 0; order <= kMaxShOrder; ++order) {
       double tail = 0.0;
       for (int l = order + 1; l <= kMaxShOrder; ++l) tail += band[size_t(l)];
-      out.push_back({order, shCount(order),
-                     tail > 0.0 ? 10.0 * std::log10(total / tail) : std::numeric_limits<double>::infinity()});
+      out.push_back(
+          {order, shCount(order),
+           tail > 0.0 ? 10.0 * std::log10(total / tail) : std::numeric_limits<double>::infinity()});
     }
     return out;
   }

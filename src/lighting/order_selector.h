@@ -17,9 +17,9 @@
 namespace compose::lighting {
 
 struct OrderEstimate {
-  int order = 0;                 // sh: band limit L; cheb-*: k
+  int order = 0;  // sh: band limit L; cheb-*: k
   int coefficientsPerChannel = 0;
-  double estimatedSnrDb = 0.0;   // +inf when truncation costs nothing
+  double estimatedSnrDb = 0.0;  // +inf when truncation costs nothing
 };
 
 // Estimates for every order the basis can take with `params` (its `order`, if given, is ignored).

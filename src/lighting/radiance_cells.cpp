@@ -15,7 +15,8 @@ namespace {
 constexpr double kPi = std::numbers::pi;
 }
 
-RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env.width()), height_(env.height()) {
+RadianceCells::RadianceCells(const Environment& env, int topFactor)
+    : width_(env.width()), height_(env.height()) {
   COMPOSE_CHECK(topFactor >= 2 && (topFactor & (topFactor - 1)) == 0);
   const int w = width_, h = height_;
   const size_t texels = size_t(w) * size_t(h);
@@ -36,10 +37,12 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
     const int y = int(yy);
     const double top = kPi * (0.5 - double(y) / h), bottom = kPi * (0.5 - double(y + 1) / h);
     const double centreLat = kPi * (0.5 - (y + 0.5) / h);
-    rows_[size_t(y)] = Row{float(std::sin(centreLat)), float(std::cos(centreLat)), float(0.5 * kPi / h),
-                           float(kPi / w * std::cos(centreLat))};
-    const double cos2 = 0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
-    const double sincos = 0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
+    rows_[size_t(y)] = Row{float(std::sin(centreLat)), float(std::cos(centreLat)),
+                           float(0.5 * kPi / h), float(kPi / w * std::cos(centreLat))};
+    const double cos2 =
+        0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
+    const double sincos =
+        0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
     const double omega = env.rowSolidAngle(y);
     rowOmega_[size_t(y)] = omega;
     for (int x = 0; x < w; ++x) {
@@ -50,7 +53,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       const size_t t = size_t(y) * size_t(w) + size_t(x);
       const glm::dvec3 L(env.radiance(x, y));
       if (x == 0) rowMoment_[size_t(y)] = len;
-      texels_[t] = Texel{env.direction(x, y), glm::vec3(m / len), glm::vec3(L * len), glm::vec3(L * omega)};
+      texels_[t] =
+          Texel{env.direction(x, y), glm::vec3(m / len), glm::vec3(L * len), glm::vec3(L * omega)};
     }
   });
   // Every point of a texel lies within half its angular diagonal of its centre.
@@ -79,7 +83,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       const int x1 = std::min(x0 + size, w), y1 = std::min(y0 + size, h);
       glm::dvec3 geometric(0.0);
       double omega = 0.0;
-      glm::dvec3 axis(0.0), centroid(0.0), power(0.0), moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
+      glm::dvec3 axis(0.0), centroid(0.0), power(0.0),
+          moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
       for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
           const size_t t = size_t(y) * size_t(w) + size_t(x);
@@ -98,7 +103,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       double minCos = 1.0;
       for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
-          minCos = std::min(minCos, glm::dot(glm::dvec3(texels_[size_t(y) * size_t(w) + size_t(x)].centre), a));
+          minCos = std::min(
+              minCos, glm::dot(glm::dvec3(texels_[size_t(y) * size_t(w) + size_t(x)].centre), a));
         }
       }
       // Pad by 1e-5 rad so that float rounding in the horizon test cannot misclassify a texel; a
@@ -113,7 +119,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor) : width_(env
       level.power[i] = glm::vec3(power);
       level.meanDirection[i] = glm::vec3(geometric / omega);
       const double midLat = kPi * (0.5 - 0.5 * (y0 + y1) / double(h));
-      level.halfExtent[i] = glm::vec2(float(0.5 * kPi * (y1 - y0) / h), float(kPi * (x1 - x0) / w * std::cos(midLat)));
+      level.halfExtent[i] = glm::vec2(float(0.5 * kPi * (y1 - y0) / h),
+                                      float(kPi * (x1 - x0) / w * std::cos(midLat)));
       for (int k = 0; k < 3; ++k) {
         level.moment[3 * k][i] = float(moment[k].x);
         level.moment[3 * k + 1][i] = float(moment[k].y);
@@ -130,7 +137,9 @@ size_t RadianceCells::cellCount() const {
   return n;
 }
 
-size_t RadianceCells::floatsStored() const { return cellCount() * 16 + texels_.size() * 12; }
+size_t RadianceCells::floatsStored() const {
+  return cellCount() * 16 + texels_.size() * 12;
+}
 
 float RadianceCells::clippedMean(float c, float a, float b) {
   a = std::abs(a);
@@ -148,12 +157,14 @@ float RadianceCells::clippedMean(float c, float a, float b) {
     return p * p * p / 6.0;
   };
   const double cd = c, ad = a, bd = b;
-  return float((r(cd + ad + bd) - r(cd + ad - bd) - r(cd - ad + bd) + r(cd - ad - bd)) / (4.0 * ad * bd));
+  return float((r(cd + ad + bd) - r(cd + ad - bd) - r(cd - ad + bd) + r(cd - ad - bd)) /
+               (4.0 * ad * bd));
 }
 
 glm::dvec3 RadianceCells::irradiance(const glm::vec3& n, int leafLevel) const {
   glm::dvec3 total(0.0);
-  forEachAbove(n, [&](const glm::vec3&, const glm::vec3& v) { total += glm::dvec3(v); }, leafLevel);
+  forEachAbove(
+      n, [&](const glm::vec3&, const glm::vec3& v) { total += glm::dvec3(v); }, leafLevel);
   return total;
 }
 

@@ -68,8 +68,8 @@ class RadianceCells {
     std::vector<float> axisX, axisY, axisZ, sinRadius;
     std::vector<float> moment[9];  // V: [3 * channel + axis][cell]
     std::vector<glm::vec3> centroid;
-    std::vector<glm::vec3> power;    // Σ L_t Ω_t
-    std::vector<glm::vec2> halfExtent;  // half height and half width of the cell, radians of arc
+    std::vector<glm::vec3> power;          // Σ L_t Ω_t
+    std::vector<glm::vec2> halfExtent;     // half height and half width of the cell, radians of arc
     std::vector<glm::vec3> meanDirection;  // ∫_cell ω dω / Ω_cell (not unit length)
   };
 
@@ -83,9 +83,10 @@ class RadianceCells {
     const size_t i = size_t(cy) * size_t(L.width) + size_t(cx);
     const float d = n.x * L.axisX[i] + n.y * L.axisY[i] + n.z * L.axisZ[i];
     if (d >= L.sinRadius[i]) {
-      visit(L.centroid[i], glm::vec3(n.x * L.moment[0][i] + n.y * L.moment[1][i] + n.z * L.moment[2][i],
-                                     n.x * L.moment[3][i] + n.y * L.moment[4][i] + n.z * L.moment[5][i],
-                                     n.x * L.moment[6][i] + n.y * L.moment[7][i] + n.z * L.moment[8][i]));
+      visit(L.centroid[i],
+            glm::vec3(n.x * L.moment[0][i] + n.y * L.moment[1][i] + n.z * L.moment[2][i],
+                      n.x * L.moment[3][i] + n.y * L.moment[4][i] + n.z * L.moment[5][i],
+                      n.x * L.moment[6][i] + n.y * L.moment[7][i] + n.z * L.moment[8][i]));
     } else if (d > -L.sinRadius[i]) {
       if (level == leafLevel) {
         // The cell as one uniform patch: the linear model of n·ω across it, clipped.
@@ -93,7 +94,8 @@ class RadianceCells {
         const float h = std::sqrt(a.x * a.x + a.z * a.z);
         const glm::vec3 east = h > 1e-6f ? glm::vec3(a.z / h, 0.0f, -a.x / h) : glm::vec3(1, 0, 0);
         // north = axis x east
-        const glm::vec3 nn(a.y * east.z - a.z * east.y, a.z * east.x - a.x * east.z, a.x * east.y - a.y * east.x);
+        const glm::vec3 nn(a.y * east.z - a.z * east.y, a.z * east.x - a.x * east.z,
+                           a.x * east.y - a.y * east.x);
         const float alpha = L.halfExtent[i].x * (n.x * nn.x + n.y * nn.y + n.z * nn.z);
         const float beta = L.halfExtent[i].y * (n.x * east.x + n.y * east.y + n.z * east.z);
         // The model's centre value is the mean of n·ω over the cell under its true solid-angle
@@ -118,7 +120,8 @@ class RadianceCells {
     const float centre = n.x * w.x + n.y * w.y + n.z * w.z;
     const float sinLon = sinLon_[size_t(x)], cosLon = cosLon_[size_t(x)];
     // Half-ranges of n·ω across the texel along its north and east extents.
-    const float alpha = row.halfHeight * (n.y * row.cosLat - (n.x * sinLon + n.z * cosLon) * row.sinLat);
+    const float alpha =
+        row.halfHeight * (n.y * row.cosLat - (n.x * sinLon + n.z * cosLon) * row.sinLat);
     const float beta = row.halfWidth * (n.x * cosLon - n.z * sinLon);
     const float spread = std::abs(alpha) + std::abs(beta);
     if (centre >= spread) {
@@ -130,7 +133,8 @@ class RadianceCells {
   }
 
   struct Row {
-    float sinLat, cosLat, halfHeight, halfWidth;  // at the texel centre; half extents in radians of arc
+    float sinLat, cosLat, halfHeight,
+        halfWidth;  // at the texel centre; half extents in radians of arc
   };
   int width_ = 0, height_ = 0;
   std::vector<Level> levels_;  // [0] is unused (texels are below), [1..] coarser and coarser
@@ -143,7 +147,8 @@ class RadianceCells {
   };
   std::vector<Texel> texels_;
   std::vector<Row> rows_;
-  std::vector<double> rowMoment_, rowOmega_;  // per row: |m_t| and Ω_t (the same for every texel of a row)
+  std::vector<double> rowMoment_,
+      rowOmega_;  // per row: |m_t| and Ω_t (the same for every texel of a row)
   std::vector<float> sinLon_, cosLon_;
 };
 

@@ -42,8 +42,8 @@ template <class T>
 void evalShImpl(int order, T xs, T ys, T zs, T* out) {
   COMPOSE_CHECK(order >= 0 && order <= kMaxShOrder);
   const auto& k = shNorm().k;
-  T cm = 1, sm = 0;     // Re, Im of (x + iy)^m
-  T qmm = 1;            // Q_m^m = (2m-1)!!
+  T cm = 1, sm = 0;  // Re, Im of (x + iy)^m
+  T qmm = 1;         // Q_m^m = (2m-1)!!
   for (int m = 0; m <= order; ++m) {
     if (m > 0) {
       const T c = cm * xs - sm * ys;
@@ -80,8 +80,12 @@ void evalShImpl(int order, T xs, T ys, T zs, T* out) {
 }  // namespace
 
 // World (x, y, z) → SH frame (z_w, x_w, y_w): the pole is world +Y.
-void evalSh(int order, const glm::vec3& d, float* out) { evalShImpl<float>(order, d.z, d.x, d.y, out); }
-void evalSh(int order, const glm::dvec3& d, double* out) { evalShImpl<double>(order, d.z, d.x, d.y, out); }
+void evalSh(int order, const glm::vec3& d, float* out) {
+  evalShImpl<float>(order, d.z, d.x, d.y, out);
+}
+void evalSh(int order, const glm::dvec3& d, double* out) {
+  evalShImpl<double>(order, d.z, d.x, d.y, out);
+}
 
 double shCosineLobe(int l) {
   if (l == 0) return kPi;
@@ -102,7 +106,9 @@ ShLighting::ShLighting(int order, ShWindow window) : order_(order), window_(wind
 }
 
 std::string ShLighting::describe() const {
-  const char* window = window_ == ShWindow::Hanning ? " window=hanning" : window_ == ShWindow::Lanczos ? " window=lanczos" : "";
+  const char* window = window_ == ShWindow::Hanning   ? " window=hanning"
+                       : window_ == ShWindow::Lanczos ? " window=lanczos"
+                                                      : "";
   return "sh order=" + std::to_string(order_) + window + " (" + std::to_string(shCount(order_)) +
          " coefficients/channel)";
 }
@@ -110,9 +116,12 @@ std::string ShLighting::describe() const {
 double ShLighting::windowWeight(int l) const {
   const double x = double(l) / double(order_ + 1);
   switch (window_) {
-    case ShWindow::Hanning: return 0.5 * (1.0 + std::cos(kPi * x));
-    case ShWindow::Lanczos: return l == 0 ? 1.0 : std::sin(kPi * x) / (kPi * x);
-    case ShWindow::None: break;
+    case ShWindow::Hanning:
+      return 0.5 * (1.0 + std::cos(kPi * x));
+    case ShWindow::Lanczos:
+      return l == 0 ? 1.0 : std::sin(kPi * x) / (kPi * x);
+    case ShWindow::None:
+      break;
   }
   return 1.0;
 }
@@ -158,11 +167,13 @@ void ShLighting::project(const Environment& env, const Progress& progress) {
       }
     }
     // 5-point Gauss–Legendre on [z0, z1].
-    static constexpr double kNodes[5] = {0.0, -0.5384693101056831, 0.5384693101056831, -0.9061798459386640,
-                                         0.9061798459386640};
-    static constexpr double kWeights[5] = {0.5688888888888889, 0.4786286704993665, 0.4786286704993665,
-                                           0.2369268850561891, 0.2369268850561891};
-    const double z1 = std::sin(kPi * (0.5 - double(y) / h)), z0 = std::sin(kPi * (0.5 - double(y + 1) / h));
+    static constexpr double kNodes[5] = {0.0, -0.5384693101056831, 0.5384693101056831,
+                                         -0.9061798459386640, 0.9061798459386640};
+    static constexpr double kWeights[5] = {0.5688888888888889, 0.4786286704993665,
+                                           0.4786286704993665, 0.2369268850561891,
+                                           0.2369268850561891};
+    const double z1 = std::sin(kPi * (0.5 - double(y) / h)),
+                 z0 = std::sin(kPi * (0.5 - double(y + 1) / h));
     std::array<double, shCount(kMaxShOrder)> zInt{};
     std::array<double, shCount(kMaxShOrder)> basis{};
     for (int g = 0; g < 5; ++g) {
@@ -191,7 +202,8 @@ void ShLighting::project(const Environment& env, const Progress& progress) {
   });
   radiance_.assign(size_t(count), glm::dvec3(0.0));
   for (int y = 0; y < h; ++y) {
-    for (int i = 0; i < count; ++i) radiance_[size_t(i)] += rows[size_t(y) * size_t(count) + size_t(i)];
+    for (int i = 0; i < count; ++i)
+      radiance_[size_t(i)] += rows[size_t(y) * size_t(count) + size_t(i)];
   }
   irradiance_.resize(size_t(count));
   for (int l = 0; l <= order_; ++l) {

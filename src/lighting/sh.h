@@ -14,7 +14,9 @@
 namespace compose::lighting {
 
 inline constexpr int kMaxShOrder = 8;
-inline constexpr int shCount(int order) { return (order + 1) * (order + 1); }
+inline constexpr int shCount(int order) {
+  return (order + 1) * (order + 1);
+}
 
 // Evaluates all Y_lm, l ≤ order, at unit world direction d into `out` (size ≥ shCount(order)).
 void evalSh(int order, const glm::vec3& d, float* out);
@@ -48,7 +50,7 @@ class ShLighting final : public DiffuseLighting {
  private:
   int order_;
   ShWindow window_;
-  std::vector<glm::dvec3> radiance_;  // L_lm
+  std::vector<glm::dvec3> radiance_;   // L_lm
   std::vector<glm::vec3> irradiance_;  // A_l L_lm, float for evaluation
 };
 

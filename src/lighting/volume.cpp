@@ -15,13 +15,16 @@ void VolumeParams::validate() const {
     throw Error("lighting", "volume resolution must be at least 1 point per axis");
   }
   for (int a = 0; a < 3; ++a) {
-    if (!(boundsMax[a] >= boundsMin[a]) || !std::isfinite(boundsMin[a]) || !std::isfinite(boundsMax[a])) {
+    if (!(boundsMax[a] >= boundsMin[a]) || !std::isfinite(boundsMin[a]) ||
+        !std::isfinite(boundsMax[a])) {
       throw Error("lighting", "volume bounds must be finite with max >= min on every axis");
     }
   }
 }
 
-LightingVolume::LightingVolume(VolumeParams params) : params_(std::move(params)) { params_.validate(); }
+LightingVolume::LightingVolume(VolumeParams params) : params_(std::move(params)) {
+  params_.validate();
+}
 
 size_t LightingVolume::pointCount() const {
   return size_t(params_.resolution.x) * size_t(params_.resolution.y) * size_t(params_.resolution.z);
@@ -33,7 +36,8 @@ glm::vec3 LightingVolume::gridPoint(int i, int j, int k) const {
   for (int a = 0; a < 3; ++a) {
     const int n = params_.resolution[a];
     p[a] = n == 1 ? 0.5f * (params_.boundsMin[a] + params_.boundsMax[a])
-                  : params_.boundsMin[a] + (params_.boundsMax[a] - params_.boundsMin[a]) * float(idx[a]) / float(n - 1);
+                  : params_.boundsMin[a] + (params_.boundsMax[a] - params_.boundsMin[a]) *
+                                               float(idx[a]) / float(n - 1);
   }
   return p;
 }
@@ -54,7 +58,9 @@ void LightingVolume::build(const RadianceSource& source, const Progress& progres
       for (int i = 0; i < params_.resolution.x; ++i) {
         auto basis = createLighting(params_.basis, params_.basisParams);
         basis->project(source.at(gridPoint(i, j, k)));
-        const size_t index = (size_t(k) * size_t(params_.resolution.y) + size_t(j)) * size_t(params_.resolution.x) + size_t(i);
+        const size_t index =
+            (size_t(k) * size_t(params_.resolution.y) + size_t(j)) * size_t(params_.resolution.x) +
+            size_t(i);
         points_[index] = std::move(basis);
         report(progress, "lighting", double(++done) / double(points_.size()));
       }
@@ -74,8 +80,10 @@ glm::vec3 LightingVolume::irradiance(const glm::vec3& position, const glm::vec3&
       continue;
     }
     const float extent = params_.boundsMax[a] - params_.boundsMin[a];
-    const float u = extent > 0.0f ? std::clamp((position[a] - params_.boundsMin[a]) / extent, 0.0f, 1.0f) * float(res - 1)
-                                  : 0.0f;
+    const float u =
+        extent > 0.0f
+            ? std::clamp((position[a] - params_.boundsMin[a]) / extent, 0.0f, 1.0f) * float(res - 1)
+            : 0.0f;
     lo[a] = std::min(int(u), res - 2);
     t[a] = u - float(lo[a]);
   }
@@ -89,7 +97,9 @@ glm::vec3 LightingVolume::irradiance(const glm::vec3& position, const glm::vec3&
       idx[a] = std::min(lo[a] + bit, params_.resolution[a] - 1);
     }
     if (w == 0.0f) continue;
-    const size_t index = (size_t(idx[2]) * size_t(params_.resolution.y) + size_t(idx[1])) * size_t(params_.resolution.x) + size_t(idx[0]);
+    const size_t index = (size_t(idx[2]) * size_t(params_.resolution.y) + size_t(idx[1])) *
+                             size_t(params_.resolution.x) +
+                         size_t(idx[0]);
     e += w * points_[index]->irradiance(n);
   }
   return e;

@@ -5,8 +5,8 @@
 #include <limits>
 #include <unordered_map>
 
-#include <glm/geometric.hpp>
 #include <tiny_obj_loader.h>
+#include <glm/geometric.hpp>
 
 #include "core/error.h"
 
@@ -62,7 +62,8 @@ Mesh loadObj(const fs::path& path) {
   if (!reader.ParseFromFile(path.string(), config)) {
     std::string why = reader.Error();
     while (!why.empty() && (why.back() == '\n' || why.back() == '\r')) why.pop_back();
-    throw Error("mesh", "cannot parse OBJ: " + (why.empty() ? std::string("unknown reason") : why), path);
+    throw Error("mesh", "cannot parse OBJ: " + (why.empty() ? std::string("unknown reason") : why),
+                path);
   }
   const tinyobj::attrib_t& attrib = reader.GetAttrib();
   const size_t vertexCount = attrib.vertices.size() / 3;
@@ -81,17 +82,22 @@ Mesh loadObj(const fs::path& path) {
   for (const auto& shape : reader.GetShapes()) {
     const auto& m = shape.mesh;
     for (size_t f = 0; f < m.num_face_vertices.size(); ++f) {
-      if (m.num_face_vertices[f] != 3) throw Error("mesh", "face is not a triangle after triangulation", path);
+      if (m.num_face_vertices[f] != 3)
+        throw Error("mesh", "face is not a triangle after triangulation", path);
     }
     for (const auto& idx : m.indices) {
       if (idx.vertex_index < 0 || size_t(idx.vertex_index) >= vertexCount) {
-        throw Error("mesh", "face refers to vertex " + std::to_string(idx.vertex_index + 1) +
-                                " but the file has " + std::to_string(vertexCount), path);
+        throw Error("mesh",
+                    "face refers to vertex " + std::to_string(idx.vertex_index + 1) +
+                        " but the file has " + std::to_string(vertexCount),
+                    path);
       }
       const int ni = allNormals ? idx.normal_index : -1;
       if (allNormals && size_t(ni) >= normalCount) {
-        throw Error("mesh", "face refers to normal " + std::to_string(ni + 1) + " but the file has " +
-                                std::to_string(normalCount), path);
+        throw Error("mesh",
+                    "face refers to normal " + std::to_string(ni + 1) + " but the file has " +
+                        std::to_string(normalCount),
+                    path);
       }
       const uint64_t key = (uint64_t(uint32_t(idx.vertex_index)) << 32) | uint32_t(ni + 1);
       auto [it, inserted] = remap.try_emplace(key, uint32_t(mesh.positions.size()));
@@ -127,7 +133,8 @@ void validate(Mesh& mesh, const fs::path& path) {
       glm::vec3& n = mesh.normals[i];
       const float len = glm::length(n);
       if (!std::isfinite(len) || len == 0.0f) {
-        throw Error("mesh", "normal of vertex " + std::to_string(i + 1) + " is zero or not finite", path);
+        throw Error("mesh", "normal of vertex " + std::to_string(i + 1) + " is zero or not finite",
+                    path);
       }
       n /= len;
     }
@@ -143,7 +150,8 @@ Mesh loadMesh(const fs::path& path) {
   if (!fs::exists(path, ec)) throw Error("mesh", "file not found", path);
   if (fs::is_directory(path, ec)) throw Error("mesh", "is a folder, expected a mesh file", path);
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
   Mesh mesh;
   if (ext == ".obj") {
     mesh = loadObj(path);

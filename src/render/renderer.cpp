@@ -50,9 +50,10 @@ float hash01(uint32_t x) {
 
 }  // namespace
 
-RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, const calib::PinholeCamera& camera,
-                           const lighting::DiffuseLighting& lighting, const RenderSettings& settings,
-                           const Progress& progress) {
+RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject,
+                           const calib::PinholeCamera& camera,
+                           const lighting::DiffuseLighting& lighting,
+                           const RenderSettings& settings, const Progress& progress) {
   COMPOSE_CHECK(settings.samplesPerAxis >= 1);
   COMPOSE_CHECK(!mesh.indices.empty() && mesh.normals.size() == mesh.positions.size());
 
@@ -70,17 +71,20 @@ RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, 
   scene.handle = rtcNewScene(device.handle);
   rtcSetSceneBuildQuality(scene.handle, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry geom = rtcNewGeometry(device.handle, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                               3 * sizeof(float), mesh.positions.size()));
-  auto* triangles = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                   3 * sizeof(uint32_t), mesh.triangleCount()));
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                               RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                               mesh.positions.size()));
+  auto* triangles = static_cast<uint32_t*>(
+      rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                              3 * sizeof(uint32_t), mesh.triangleCount()));
   if (!vertices || !triangles) {
     rtcReleaseGeometry(geom);
     throw Error("render", "Embree could not allocate the mesh buffers");
   }
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
   for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    const glm::dvec3 p = glm::dvec3(worldFromObject * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
+    const glm::dvec3 p =
+        glm::dvec3(worldFromObject * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
     lo = glm::min(lo, p);
     hi = glm::max(hi, p);
     vertices[3 * i] = float(p.x);
@@ -92,7 +96,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, 
   rtcAttachGeometry(scene.handle, geom);
   rtcReleaseGeometry(geom);
   rtcCommitScene(scene.handle);
-  if (rtcGetDeviceError(device.handle) != RTC_ERROR_NONE) throw Error("render", "Embree failed to build the scene");
+  if (rtcGetDeviceError(device.handle) != RTC_ERROR_NONE)
+    throw Error("render", "Embree failed to build the scene");
 
   RenderOutput out;
   out.beauty = Image(camera.width, camera.height, 4, {"R", "G", "B", "A"});
@@ -140,7 +145,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, 
       glm::vec3 colour(0.0f), normalSum(0.0f);
       int hits = 0;
       for (int s = 0; s < n * n; ++s) {
-        const uint32_t seed = (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
+        const uint32_t seed =
+            (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
         const double px = x + (s % n + double(hash01(2 * seed))) / n;
         const double py = y + (s / n + double(hash01(2 * seed + 1))) / n;
         glm::dvec3 org, dir;
@@ -161,13 +167,15 @@ RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, 
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         const uint32_t* tri = &mesh.indices[3 * size_t(rh.hit.primID)];
         const float u = rh.hit.u, v = rh.hit.v;
-        glm::vec3 nrm = glm::normalize((1.0f - u - v) * normals[tri[0]] + u * normals[tri[1]] + v * normals[tri[2]]);
+        glm::vec3 nrm = glm::normalize((1.0f - u - v) * normals[tri[0]] + u * normals[tri[1]] +
+                                       v * normals[tri[2]]);
         // Seen from behind (open meshes): shade the side the camera sees.
         const glm::vec3 ng(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
         if (glm::dot(ng, glm::vec3(dir)) > 0.0f) nrm = -nrm;
         const glm::vec3 view = -glm::vec3(dir);
         const glm::vec3 e =
-            glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view), glm::vec3(0.0f));
+            glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view),
+                     glm::vec3(0.0f));
         colour += reflect * e;
         normalSum += nrm;
         ++hits;

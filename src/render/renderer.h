@@ -27,21 +27,23 @@
 namespace compose::render {
 
 struct RenderSettings {
-  int samplesPerAxis = 4;            // n x n samples per pixel
-  glm::vec3 albedo{0.8f};            // in the working space
-  float exposure = 1.0f;             // linear multiplier on the object's radiance
+  int samplesPerAxis = 4;  // n x n samples per pixel
+  glm::vec3 albedo{0.8f};  // in the working space
+  float exposure = 1.0f;   // linear multiplier on the object's radiance
   glm::mat3 envFromWorld{1.0f};
 };
 
 struct RenderOutput {
   Image beauty;   // RGBA, premultiplied, working space
-  Image normals;  // N.X N.Y N.Z: world-space unit normal (mean over the pixel's hits), 0 off the object
+  Image normals;  // N.X N.Y N.Z: world-space unit normal (mean over the pixel's hits), 0 off the
+                  // object
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // traced rectangle [x0, x1) x [y0, y1)
   int64_t rays = 0;
 };
 
-RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject, const calib::PinholeCamera& camera,
-                           const lighting::DiffuseLighting& lighting, const RenderSettings& settings,
-                           const Progress& progress = {});
+RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject,
+                           const calib::PinholeCamera& camera,
+                           const lighting::DiffuseLighting& lighting,
+                           const RenderSettings& settings, const Progress& progress = {});
 
 }  // namespace compose::render

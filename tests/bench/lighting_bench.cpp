@@ -24,8 +24,8 @@
 
 #include "core/parallel.h"
 #include "ingest/image_io.h"
-#include "lighting/environment.h"
 #include "lighting/chebyshev.h"
+#include "lighting/environment.h"
 #include "lighting/exact.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
@@ -37,7 +37,9 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+double seconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
 
 // Normals of a sphere seen orthographically from +Z and from -Z: every direction, weighted as a
 // rendered image would weight it.
@@ -72,7 +74,8 @@ std::vector<Config> sweep(bool quick) {
   std::vector<Config> c;
   for (int order = 0; order <= 7; ++order) c.push_back({"sh", "order=" + std::to_string(order)});
   // Windowed (deringed) SH, reported separately from raw SH.
-  for (int order : {2, 4, 6}) c.push_back({"sh", "order=" + std::to_string(order) + ",window=hanning"});
+  for (int order : {2, 4, 6})
+    c.push_back({"sh", "order=" + std::to_string(order) + ",window=hanning"});
   for (int k = 1; k <= 8; ++k) {
     c.push_back({"cheb-latlong", "order=" + std::to_string(k) + ",samples=16"});
     if (!quick) c.push_back({"cheb-latlong", "order=" + std::to_string(k) + ",samples=32"});
@@ -89,7 +92,8 @@ std::vector<Config> sweep(bool quick) {
     c.push_back({"mc", "samples=" + std::to_string(n)});
   }
   if (!quick) {
-    for (int k : {4, 6, 8}) c.push_back({"cheb-local", "order=" + std::to_string(k) + ",samples=8"});
+    for (int k : {4, 6, 8})
+      c.push_back({"cheb-local", "order=" + std::to_string(k) + ",samples=8"});
     c.push_back({"cheb-local", "order=3,samples=8,rows=17,cols=32"});
     c.push_back({"cheb-local", "order=3,samples=8,rows=65,cols=128"});
   }
@@ -112,7 +116,8 @@ std::vector<glm::vec3> frameNormals() {
         r2 = u * u + v * v;
         z = -1.0;
       }
-      out[size_t(y) * kW + size_t(x)] = glm::vec3(float(u), float(v), float(z * std::sqrt(std::max(0.0, 1.0 - r2))));
+      out[size_t(y) * kW + size_t(x)] =
+          glm::vec3(float(u), float(v), float(z * std::sqrt(std::max(0.0, 1.0 - r2))));
     }
   }
   return out;
@@ -121,8 +126,9 @@ std::vector<glm::vec3> frameNormals() {
 // Runs Filament's cmgen the way its users would (--sh=3 --sh-window=no -i) on `file`, best of 3
 // wall-clock runs; a negative number if cmgen is missing or fails.
 double timeCmgen(const fs::path& file, const fs::path& scratch) {
-  const std::string cmd = "cmgen --sh=3 --sh-window=no -i -q --sh-output='" + (scratch / "cmgen_sh.txt").string() +
-                          "' '" + file.string() + "' >/dev/null 2>&1";
+  const std::string cmd = "cmgen --sh=3 --sh-window=no -i -q --sh-output='" +
+                          (scratch / "cmgen_sh.txt").string() + "' '" + file.string() +
+                          "' >/dev/null 2>&1";
   double best = -1.0;
   for (int i = 0; i < 3; ++i) {
     const auto t0 = Clock::now();
@@ -136,7 +142,8 @@ double timeCmgen(const fs::path& file, const fs::path& scratch) {
 
 // Oren–Nayar (rough diffuse, view dependent) reference: every texel, BRDF per texel in the local
 // frame the local basis uses.
-glm::dvec3 orenNayarReference(const lighting::Environment& env, double sigma, const glm::vec3& n, const glm::vec3& view) {
+glm::dvec3 orenNayarReference(const lighting::Environment& env, double sigma, const glm::vec3& n,
+                              const glm::vec3& view) {
   const float h = std::sqrt(n.x * n.x + n.z * n.z);
   const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1, 0, 0);
   const glm::vec3 north = glm::cross(n, east);
@@ -150,7 +157,8 @@ glm::dvec3 orenNayarReference(const lighting::Environment& env, double sigma, co
       if (c <= 0.0) continue;
       const double phiIn = std::atan2(double(glm::dot(north, w)), double(glm::dot(east, w)));
       e += glm::dvec3(env.radiance(x, y)) * env.rowSolidAngle(y) * c *
-           lighting::ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn, thetaOut, phiOut);
+           lighting::ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn,
+                                                  thetaOut, phiOut);
     }
   }
   return e;
@@ -163,7 +171,8 @@ struct OrenNayarRow {
 
 struct SideBySide {
   std::string env;
-  double readMs = 0, chebPrecomputeMs = 0, chebEvalMs = 0, shPrecomputeMs = 0, shEvalMs = 0, cmgenMs = -1;
+  double readMs = 0, chebPrecomputeMs = 0, chebEvalMs = 0, shPrecomputeMs = 0, shEvalMs = 0,
+         cmgenMs = -1;
 };
 
 std::string fmt(const char* f, double v) {
@@ -191,15 +200,16 @@ int main(int argc, char** argv) {
     } else if (a == "--sphere" && i + 1 < argc) {
       sphere = std::atoi(argv[++i]);
     } else {
-      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--sphere N] [--only BASIS]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--sphere N] [--only BASIS]\n",
+                   argv[0]);
       return 2;
     }
   }
   fs::create_directories(outDir);
   const fs::path samples = pipeline::samplesDirectory();
   const std::vector<glm::vec3> normals = sphereNormals(sphere);
-  std::printf("lighting benchmark: %zu sphere normals (%dx%d, front and back), samples in %s\n", normals.size(),
-              sphere, sphere, samples.c_str());
+  std::printf("lighting benchmark: %zu sphere normals (%dx%d, front and back), samples in %s\n",
+              normals.size(), sphere, sphere, samples.c_str());
 
   std::vector<Row> rows;
   std::vector<OrenNayarRow> orenNayarRows;
@@ -232,7 +242,9 @@ int main(int argc, char** argv) {
           basis->project(env);
           const auto b = Clock::now();
           std::vector<glm::vec3> out(frame.size());
-          parallelFor(0, int64_t(frame.size()), [&](int64_t i) { out[size_t(i)] = basis->irradiance(frame[size_t(i)]); }, 4096);
+          parallelFor(
+              0, int64_t(frame.size()),
+              [&](int64_t i) { out[size_t(i)] = basis->irradiance(frame[size_t(i)]); }, 4096);
           const auto c = Clock::now();
           bestPre = std::min(bestPre, 1e3 * seconds(a, b));
           bestEval = std::min(bestEval, 1e3 * seconds(b, c));
@@ -246,9 +258,11 @@ int main(int argc, char** argv) {
       ingest::writeImage(plain, img.image, opt);
       side.cmgenMs = 1e3 * timeCmgen(plain, outDir);
       fs::remove(plain);
-      std::printf("%s: 1920x1080 normals: %s %.1f + %.1f ms, sh9 %.1f + %.1f ms, cmgen --sh=3 %.1f ms (ratio %.2f)\n",
-                  name, defaultBasis.c_str(), side.chebPrecomputeMs, side.chebEvalMs, side.shPrecomputeMs,
-                  side.shEvalMs, side.cmgenMs, (side.chebPrecomputeMs + side.chebEvalMs) / side.cmgenMs);
+      std::printf(
+          "%s: 1920x1080 normals: %s %.1f + %.1f ms, sh9 %.1f + %.1f ms, cmgen --sh=3 %.1f ms "
+          "(ratio %.2f)\n",
+          name, defaultBasis.c_str(), side.chebPrecomputeMs, side.chebEvalMs, side.shPrecomputeMs,
+          side.shEvalMs, side.cmgenMs, (side.chebPrecomputeMs + side.chebEvalMs) / side.cmgenMs);
       sideBySide.push_back(side);
     }
 
@@ -256,7 +270,9 @@ int main(int argc, char** argv) {
     const auto t0 = Clock::now();
     exact.project(env);
     std::vector<glm::dvec3> ref(normals.size());
-    parallelFor(0, int64_t(normals.size()), [&](int64_t i) { ref[size_t(i)] = glm::dvec3(exact.irradiance(normals[size_t(i)])); }, 64);
+    parallelFor(
+        0, int64_t(normals.size()),
+        [&](int64_t i) { ref[size_t(i)] = glm::dvec3(exact.irradiance(normals[size_t(i)])); }, 64);
     std::printf("\n%s: exact reference %.2f s\n", name, seconds(t0, Clock::now()));
 
     for (const Config& cfg : sweep(quick)) {
@@ -272,7 +288,12 @@ int main(int argc, char** argv) {
       const size_t stride = std::max<size_t>(1, normals.size() / subset);
       std::vector<glm::vec3> got(normals.size());
       const int64_t evaluated = int64_t((normals.size() + stride - 1) / stride);
-      parallelFor(0, evaluated, [&](int64_t i) { got[size_t(i) * stride] = basis->irradiance(normals[size_t(i) * stride]); }, 16);
+      parallelFor(
+          0, evaluated,
+          [&](int64_t i) {
+            got[size_t(i) * stride] = basis->irradiance(normals[size_t(i) * stride]);
+          },
+          16);
       const auto p2 = Clock::now();
       double signal = 0, noise = 0, rel = 0;
       for (size_t i = 0; i < normals.size(); i += stride) {
@@ -280,15 +301,24 @@ int main(int argc, char** argv) {
         signal += glm::dot(r, r);
         noise += glm::dot(r - g, r - g);
         const double l1 = std::abs(r.x) + std::abs(r.y) + std::abs(r.z);
-        rel += (std::abs(r.x - g.x) + std::abs(r.y - g.y) + std::abs(r.z - g.z)) / std::max(l1, 1e-30);
+        rel +=
+            (std::abs(r.x - g.x) + std::abs(r.y - g.y) + std::abs(r.z - g.z)) / std::max(l1, 1e-30);
       }
-      Row row{name, cfg.basis, cfg.params, basis->coefficientsPerChannel(), basis->floatsStored(),
-              1e3 * seconds(p0, p1), 1e3 * seconds(p1, p2) * 1e6 / double(evaluated),
-              10.0 * std::log10(signal / std::max(noise, 1e-300)), rel / double(evaluated)};
+      Row row{name,
+              cfg.basis,
+              cfg.params,
+              basis->coefficientsPerChannel(),
+              basis->floatsStored(),
+              1e3 * seconds(p0, p1),
+              1e3 * seconds(p1, p2) * 1e6 / double(evaluated),
+              10.0 * std::log10(signal / std::max(noise, 1e-300)),
+              rel / double(evaluated)};
       rows.push_back(row);
-      std::printf("  %-12s %-36s coeff %4d  floats %8zu  pre %8.2f ms  eval %8.1f ms/M  SNR %6.2f dB  rel %.2e\n",
-                  row.basis.c_str(), row.params.c_str(), row.coefficients, row.floats, row.precomputeMs,
-                  row.evalMsPerMillion, row.snrDb, row.relError);
+      std::printf(
+          "  %-12s %-36s coeff %4d  floats %8zu  pre %8.2f ms  eval %8.1f ms/M  SNR %6.2f dB  rel "
+          "%.2e\n",
+          row.basis.c_str(), row.params.c_str(), row.coefficients, row.floats, row.precomputeMs,
+          row.evalMsPerMillion, row.snrDb, row.relError);
       std::fflush(stdout);
     }
 
@@ -303,35 +333,43 @@ int main(int argc, char** argv) {
       std::vector<glm::dvec3> onRef(picks.size());
       parallelFor(0, int64_t(picks.size()), [&](int64_t i) {
         const glm::vec3 n = normals[picks[size_t(i)]];
-        onRef[size_t(i)] = orenNayarReference(env, kSigma, n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f));
+        onRef[size_t(i)] =
+            orenNayarReference(env, kSigma, n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f));
       });
-      for (const char* params : {"lambert", "order=1,samples=8", "order=2,samples=8", "order=4,samples=8",
-                                 "order=8,samples=8", "order=16,samples=16"}) {
+      for (const char* params : {"lambert", "order=1,samples=8", "order=2,samples=8",
+                                 "order=4,samples=8", "order=8,samples=8", "order=16,samples=16"}) {
         const bool lambert = std::string(params) == "lambert";
         auto basis = lighting::createLighting(
-            "cheb-local", ParamSet::parse(lambert ? std::string("order=1") : std::string(params) + ",brdf=oren-nayar,sigma=0.3", "bench"));
+            "cheb-local",
+            ParamSet::parse(lambert ? std::string("order=1")
+                                    : std::string(params) + ",brdf=oren-nayar,sigma=0.3",
+                            "bench"));
         const auto a = Clock::now();
         basis->project(env);
         const double pre = 1e3 * seconds(a, Clock::now());
         double signal = 0, noise = 0;
         for (size_t i = 0; i < picks.size(); ++i) {
           const glm::vec3 n = normals[picks[i]];
-          const glm::dvec3 g(basis->irradiance(n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f)));
+          const glm::dvec3 g(
+              basis->irradiance(n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f)));
           signal += glm::dot(onRef[i], onRef[i]);
           noise += glm::dot(onRef[i] - g, onRef[i] - g);
         }
         orenNayarRows.push_back({name, params, 10.0 * std::log10(signal / noise), pre});
-        std::printf("  oren-nayar   %-36s SNR %6.2f dB  pre %8.2f ms\n", params, orenNayarRows.back().snrDb, pre);
+        std::printf("  oren-nayar   %-36s SNR %6.2f dB  pre %8.2f ms\n", params,
+                    orenNayarRows.back().snrDb, pre);
       }
     }
   }
 
   std::ofstream csv(outDir / "lighting.csv");
-  csv << "environment,basis,params,coefficients_per_channel,floats_stored,precompute_ms,eval_ms_per_million,snr_db,"
+  csv << "environment,basis,params,coefficients_per_channel,floats_stored,precompute_ms,eval_ms_"
+         "per_million,snr_db,"
          "relative_error\n";
   for (const Row& r : rows) {
-    csv << r.env << "," << r.basis << ",\"" << r.params << "\"," << r.coefficients << "," << r.floats << ","
-        << r.precomputeMs << "," << r.evalMsPerMillion << "," << r.snrDb << "," << r.relError << "\n";
+    csv << r.env << "," << r.basis << ",\"" << r.params << "\"," << r.coefficients << ","
+        << r.floats << "," << r.precomputeMs << "," << r.evalMsPerMillion << "," << r.snrDb << ","
+        << r.relError << "\n";
   }
   std::printf("\nwrote %s\n", (outDir / "lighting.csv").c_str());
 
@@ -339,7 +377,9 @@ int main(int argc, char** argv) {
   // the environments) and the Pareto view (error against total time per million points).
   struct Key {
     std::string basis, params;
-    bool operator<(const Key& o) const { return std::tie(basis, params) < std::tie(o.basis, o.params); }
+    bool operator<(const Key& o) const {
+      return std::tie(basis, params) < std::tie(o.basis, o.params);
+    }
   };
   std::map<Key, std::vector<const Row*>> byConfig;
   for (const Row& r : rows) byConfig[{r.basis, r.params}].push_back(&r);
@@ -355,7 +395,8 @@ int main(int argc, char** argv) {
     if (it == byConfig.end() || cfg.basis == "mc") continue;
     std::string family = cfg.basis;
     const auto grid = cfg.params.find("samples=");
-    if (grid != std::string::npos && cfg.basis != "cheb-local") family += " s=" + cfg.params.substr(grid + 8);
+    if (grid != std::string::npos && cfg.basis != "cheb-local")
+      family += " s=" + cfg.params.substr(grid + 8);
     if (cfg.params.find("rows=") != std::string::npos) continue;
     if (cfg.params.find("window=") != std::string::npos) family += " (hanning)";
     const double coeff = it->second.front()->coefficients;
@@ -387,7 +428,8 @@ int main(int argc, char** argv) {
   rel.logX = rel.logY = true;
   for (auto& [k, v] : relCurves) rel.series.push_back(v);
   bench::Chart front;
-  front.title = "Accuracy against time: precompute + evaluation of 1M points (mean of 4 environments)";
+  front.title =
+      "Accuracy against time: precompute + evaluation of 1M points (mean of 4 environments)";
   front.xLabel = "time (ms)";
   front.yLabel = "SNR (dB)";
   front.logX = true;
@@ -400,23 +442,30 @@ int main(int argc, char** argv) {
   // --- Markdown summary.
   std::ofstream md(outDir / "lighting.md");
   md << "# Lighting bases: accuracy against cost\n\n"
-     << "Sphere seen from the front and the back (" << normals.size() << " normals, every direction), "
+     << "Sphere seen from the front and the back (" << normals.size()
+     << " normals, every direction), "
      << "irradiance against the exact reference (quadrature over every texel of the 1024x512 map). "
      << "SNR = 10 log10(Σ ref² / Σ (ref - x)²); relative error = mean |ref - x|₁ / |ref|₁. Times: "
      << "precompute (projection) once per environment, evaluation per million points, 2 cores.\n\n";
   md << "## Side by side with Filament cmgen, 1920x1080 normals\n\n"
-     << "| environment | " << defaultBasis << " precompute + evaluation (ms) | SH9 precompute + evaluation (ms) "
-     << "| cmgen --sh=3 wall (ms) | ratio " << defaultBasis << " / cmgen |\n|---|---|---|---|---|\n";
+     << "| environment | " << defaultBasis
+     << " precompute + evaluation (ms) | SH9 precompute + evaluation (ms) "
+     << "| cmgen --sh=3 wall (ms) | ratio " << defaultBasis
+     << " / cmgen |\n|---|---|---|---|---|\n";
   for (const auto& sbs : sideBySide) {
-    md << "| " << sbs.env << " | " << fmt("%.1f", sbs.chebPrecomputeMs) << " + " << fmt("%.1f", sbs.chebEvalMs)
-       << " | " << fmt("%.1f", sbs.shPrecomputeMs) << " + " << fmt("%.1f", sbs.shEvalMs) << " | "
+    md << "| " << sbs.env << " | " << fmt("%.1f", sbs.chebPrecomputeMs) << " + "
+       << fmt("%.1f", sbs.chebEvalMs) << " | " << fmt("%.1f", sbs.shPrecomputeMs) << " + "
+       << fmt("%.1f", sbs.shEvalMs) << " | "
        << (sbs.cmgenMs > 0 ? fmt("%.1f", sbs.cmgenMs) : std::string("not installed")) << " | "
-       << (sbs.cmgenMs > 0 ? fmt("%.2f", (sbs.chebPrecomputeMs + sbs.chebEvalMs) / sbs.cmgenMs) : std::string("-"))
+       << (sbs.cmgenMs > 0 ? fmt("%.2f", (sbs.chebPrecomputeMs + sbs.chebEvalMs) / sbs.cmgenMs)
+                           : std::string("-"))
        << " |\n";
   }
   md << "\ncmgen's time is its whole run (reading the EXR included); reading the EXR here takes "
-     << fmt("%.0f", sideBySide.empty() ? 0.0 : sideBySide.front().readMs) << " ms and is not counted above.\n\n";
-  md << "## At most 9 coefficients per point and channel (best SNR of each basis)\n\n| basis | params | coefficients |";
+     << fmt("%.0f", sideBySide.empty() ? 0.0 : sideBySide.front().readMs)
+     << " ms and is not counted above.\n\n";
+  md << "## At most 9 coefficients per point and channel (best SNR of each basis)\n\n| basis | "
+        "params | coefficients |";
   for (const auto& sbs : sideBySide) md << " " << sbs.env << " SNR dB |";
   md << " floats stored |\n|---|---|---|";
   for (size_t i = 0; i < sideBySide.size(); ++i) md << "---|";
@@ -438,8 +487,10 @@ int main(int argc, char** argv) {
     md << " " << v->front()->floats << " |\n";
   }
   if (!orenNayarRows.empty()) {
-    md << "\n## Oren–Nayar (sigma 0.3, view dependent), cheb-local\n\nSNR against a per-texel reference on "
-          "a subset of the sphere's normals, each seen along ±Z. `lambert` ignores the roughness.\n\n| params |";
+    md << "\n## Oren–Nayar (sigma 0.3, view dependent), cheb-local\n\nSNR against a per-texel "
+          "reference on "
+          "a subset of the sphere's normals, each seen along ±Z. `lambert` ignores the "
+          "roughness.\n\n| params |";
     for (const auto& sbs : sideBySide) md << " " << sbs.env << " SNR dB |";
     md << "\n|---|";
     for (size_t i = 0; i < sideBySide.size(); ++i) md << "---|";
@@ -454,14 +505,17 @@ int main(int argc, char** argv) {
       md << "\n";
     }
   }
-  md << "\n## Every configuration\n\n| environment | basis | params | coefficients | floats | precompute ms | "
+  md << "\n## Every configuration\n\n| environment | basis | params | coefficients | floats | "
+        "precompute ms | "
         "eval ms/M | SNR dB | rel. error |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const Row& r : rows) {
-    md << "| " << r.env << " | " << r.basis << " | " << r.params << " | " << r.coefficients << " | " << r.floats
-       << " | " << fmt("%.1f", r.precomputeMs) << " | " << fmt("%.1f", r.evalMsPerMillion) << " | "
-       << fmt("%.2f", r.snrDb) << " | " << fmt("%.2e", r.relError) << " |\n";
+    md << "| " << r.env << " | " << r.basis << " | " << r.params << " | " << r.coefficients << " | "
+       << r.floats << " | " << fmt("%.1f", r.precomputeMs) << " | "
+       << fmt("%.1f", r.evalMsPerMillion) << " | " << fmt("%.2f", r.snrDb) << " | "
+       << fmt("%.2e", r.relError) << " |\n";
   }
-  md << "\nPlots: snr_vs_coefficients.svg, relerr_vs_coefficients.svg, snr_vs_time.svg. Monte Carlo rows are "
+  md << "\nPlots: snr_vs_coefficients.svg, relerr_vs_coefficients.svg, snr_vs_time.svg. Monte "
+        "Carlo rows are "
         "evaluated on an even subset of about 2000 normals (500 at 262144 samples).\n";
   std::printf("wrote %s and the plots\n", (outDir / "lighting.md").c_str());
   return 0;

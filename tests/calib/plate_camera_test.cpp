@@ -75,7 +75,8 @@ TEST(PlateCamera, RejectsImpossiblePlacements) {
   COMPOSE_EXPECT_ERROR(placeOnGround(cam, sky, {0, 0, 0}, {1, 1, 1}), "above the horizon");
   Placement outside;
   outside.imagePoint = {1.5, 0.8};
-  COMPOSE_EXPECT_ERROR(placeOnGround(cam, outside, {0, 0, 0}, {1, 1, 1}), "--place must be within [0,1]");
+  COMPOSE_EXPECT_ERROR(placeOnGround(cam, outside, {0, 0, 0}, {1, 1, 1}),
+                       "--place must be within [0,1]");
   CameraOptions bad;
   bad.height = -1.0;
   COMPOSE_EXPECT_ERROR(plateCamera(10, 10, {}, bad), "camera height must be positive");

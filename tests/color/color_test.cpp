@@ -10,7 +10,9 @@ namespace compose::color {
 namespace {
 
 // IEC 61966-2-1 decode, written out independently of OpenColorIO.
-double srgbToLinear(double v) { return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4); }
+double srgbToLinear(double v) {
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
 
 // OCIO's lossless CPU path evaluates in float: a few float ulps.
 constexpr float kFloatTolerance = 2e-6f;
@@ -64,15 +66,18 @@ TEST(ColorConfig, DisplayTransformEncodesSrgbAndClips) {
   const Image shown = c.toDisplay(img, "sRGB", "Standard");
   EXPECT_NEAR(shown.pixels[0], 0.5f, 1e-5f);
   EXPECT_NEAR(shown.pixels[3], 1.0f, 1e-6f);
-  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "P3", "Standard"), "unknown display 'P3'; the config has: sRGB");
-  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "sRGB", "Filmic"), "unknown view 'Filmic' for display 'sRGB'");
+  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "P3", "Standard"),
+                       "unknown display 'P3'; the config has: sRGB");
+  COMPOSE_EXPECT_ERROR(c.toDisplay(img, "sRGB", "Filmic"),
+                       "unknown view 'Filmic' for display 'sRGB'");
 }
 
 TEST(ColorConfig, UnknownSpaceListsTheValidOnes) {
   const ColorConfig c = ColorConfig::builtin();
-  COMPOSE_EXPECT_ERROR(c.resolve("Rec.2020", "--plate-space"),
-                       "unknown colour space 'Rec.2020' for --plate-space; the config (built-in) has: "
-                       "Linear Rec.709 (sRGB), ACEScg");
+  COMPOSE_EXPECT_ERROR(
+      c.resolve("Rec.2020", "--plate-space"),
+      "unknown colour space 'Rec.2020' for --plate-space; the config (built-in) has: "
+      "Linear Rec.709 (sRGB), ACEScg");
 }
 
 TEST(ColorConfig, PicksInputSpacesFromFileDeclarationsAndRules) {

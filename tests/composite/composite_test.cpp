@@ -7,7 +7,7 @@ namespace {
 
 TEST(Over, PremultipliedPorterDuff) {
   Image fg(2, 1, 4), bg(2, 1, 3);
-  fg.pixels = {0.2f, 0.1f, 0.0f, 0.5f,  /* second pixel transparent */ 0, 0, 0, 0};
+  fg.pixels = {0.2f, 0.1f, 0.0f, 0.5f, /* second pixel transparent */ 0, 0, 0, 0};
   bg.pixels = {1.0f, 2.0f, 4.0f, 0.3f, 0.6f, 0.9f};
   const Image out = over(fg, bg);
   ASSERT_EQ(out.channels, 3);

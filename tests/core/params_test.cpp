@@ -18,7 +18,8 @@ TEST(ParamSet, ReportsUnusedParameters) {
   ParamSet p = ParamSet::parse("order=3,ordr=4", "lighting");
   p.getInt("order", 0, "lighting");
   ASSERT_EQ(p.unusedNames(), std::vector<std::string>{"ordr"});
-  COMPOSE_EXPECT_ERROR(p.requireAllUsed("lighting", "basis 'sh'"), "basis 'sh' does not take parameter(s): ordr");
+  COMPOSE_EXPECT_ERROR(p.requireAllUsed("lighting", "basis 'sh'"),
+                       "basis 'sh' does not take parameter(s): ordr");
 }
 
 TEST(ParamSet, RejectsMalformedText) {

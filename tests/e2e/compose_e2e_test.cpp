@@ -33,12 +33,14 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+std::string quote(const std::string& s) {
+  return "'" + s + "'";
+}
 
 RunResult runCompose(const std::string& args, const fs::path& scratch) {
   const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out.string()) + " 2>" +
-                          quote(err.string()) + " </dev/null";
+  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out.string()) +
+                          " 2>" + quote(err.string()) + " </dev/null";
   const int raw = std::system(cmd.c_str());
   RunResult r;
   r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
@@ -57,7 +59,9 @@ struct Raster {
     ADD_FAILURE() << "no channel " << name;
     return 0;
   }
-  float at(int x, int y, int c) const { return px[(size_t(y) * size_t(width) + size_t(x)) * size_t(channels) + size_t(c)]; }
+  float at(int x, int y, int c) const {
+    return px[(size_t(y) * size_t(width) + size_t(x)) * size_t(channels) + size_t(c)];
+  }
 };
 
 Raster readRaster(const fs::path& path) {
@@ -78,12 +82,15 @@ Raster readRaster(const fs::path& path) {
 }
 
 // Written out here, independently of src/color: sRGB decode and Rec.709 → ACEScg (Bradford).
-double srgbDecode(double v) { return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4); }
+double srgbDecode(double v) {
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
 constexpr double kRec709ToAp1[3][3] = {{0.6130973, 0.3395229, 0.0473793},
                                        {0.0701942, 0.9163556, 0.0134526},
                                        {0.0206156, 0.1095698, 0.8698151}};
 void toAp1(const double in[3], double out[3]) {
-  for (int i = 0; i < 3; ++i) out[i] = kRec709ToAp1[i][0] * in[0] + kRec709ToAp1[i][1] * in[1] + kRec709ToAp1[i][2] * in[2];
+  for (int i = 0; i < 3; ++i)
+    out[i] = kRec709ToAp1[i][0] * in[0] + kRec709ToAp1[i][1] * in[1] + kRec709ToAp1[i][2] * in[2];
 }
 
 // Exact irradiance of a lat-long map (OpenEXR axes, texel centres, exact solid angles), Rec.709.
@@ -97,7 +104,8 @@ struct ExactReference {
       const double omega = 2.0 * kPi / w * (std::sin(top) - std::sin(bottom));
       for (int x = 0; x < w; ++x) {
         const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / w);
-        dir.insert(dir.end(), {std::sin(lon) * std::cos(lat), std::sin(lat), std::cos(lon) * std::cos(lat)});
+        dir.insert(dir.end(),
+                   {std::sin(lon) * std::cos(lat), std::sin(lat), std::cos(lon) * std::cos(lat)});
         for (int c = 0; c < 3; ++c) weighted.push_back(std::max(0.0f, env.at(x, y, c)) * omega);
       }
     }
@@ -124,9 +132,10 @@ class ComposeEndToEnd : public ::testing::Test {
     }
     dir_ = new TempDir();
     run_ = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) + " --object " +
-                          quote((samples_ / "bunny.obj").string()) + " --exposure " + std::to_string(kExposureStops) +
-                          " --albedo " + std::to_string(kAlbedo) + " --cache " + quote((dir_->path() / "cache").string()) +
-                          " --out " + quote((dir_->path() / "comp").string()),
+                          quote((samples_ / "bunny.obj").string()) + " --exposure " +
+                          std::to_string(kExposureStops) + " --albedo " + std::to_string(kAlbedo) +
+                          " --cache " + quote((dir_->path() / "cache").string()) + " --out " +
+                          quote((dir_->path() / "comp").string()),
                       dir_->path());
   }
   static void TearDownTestSuite() {
@@ -134,7 +143,8 @@ class ComposeEndToEnd : public ::testing::Test {
     dir_ = nullptr;
   }
   void SetUp() override {
-    ASSERT_TRUE(missing_.empty()) << "sample data missing (" << missing_ << "): run samples/fetch.sh";
+    ASSERT_TRUE(missing_.empty()) << "sample data missing (" << missing_
+                                  << "): run samples/fetch.sh";
     ASSERT_EQ(run_.status, 0) << "compose failed:\n" << run_.err;
   }
 
@@ -158,7 +168,8 @@ TEST_F(ComposeEndToEnd, WritesBothOutputsAtThePlateSizeAndPrintsTheirPaths) {
   EXPECT_EQ(e.height, plate.height);
   EXPECT_EQ(j.width, plate.width);
   EXPECT_EQ(j.height, plate.height);
-  for (const char* c : {"R", "G", "B", "A", "object.A", "N.X", "N.Y", "N.Z"}) EXPECT_GE(e.channel(c), 0);
+  for (const char* c : {"R", "G", "B", "A", "object.A", "N.X", "N.Y", "N.Z"})
+    EXPECT_GE(e.channel(c), 0);
 }
 
 TEST_F(ComposeEndToEnd, DiffersFromThePlateOnlyUnderTheObject) {
@@ -178,7 +189,8 @@ TEST_F(ComposeEndToEnd, DiffersFromThePlateOnlyUnderTheObject) {
       }
       toAp1(lin, cg);
       double diff = 0.0;
-      for (int c = 0; c < 3; ++c) diff = std::max(diff, std::abs(e.at(x, y, r + c) - cg[c]) / std::max(cg[c], 1e-2));
+      for (int c = 0; c < 3; ++c)
+        diff = std::max(diff, std::abs(e.at(x, y, r + c) - cg[c]) / std::max(cg[c], 1e-2));
       if (e.at(x, y, a) == 0.0f) {
         ++outside;
         worst = std::max(worst, diff);
@@ -238,17 +250,20 @@ TEST_F(ComposeEndToEnd, ObjectPixelsMatchTheExactIrradianceReference) {
 // cache instead of recomputing it, and produces the same pixels.
 TEST(ComposeCache, SecondRunReusesTheProjection) {
   const fs::path samples = pipeline::samplesDirectory();
-  if (!fs::exists(samples / "meadow.jpg") || !fs::exists(samples / "bunny.obj") || !fs::exists(samples / "forest.exr")) {
+  if (!fs::exists(samples / "meadow.jpg") || !fs::exists(samples / "bunny.obj") ||
+      !fs::exists(samples / "forest.exr")) {
     GTEST_FAIL() << "sample data missing in " << samples << ": run samples/fetch.sh";
   }
   TempDir dir;
   auto args = [&](const std::string& out) {
-    return "--plate " + quote((samples / "meadow.jpg").string()) + " --object " + quote((samples / "bunny.obj").string()) +
-           " --samples 1 --cache " + quote((dir.path() / "cache").string()) + " --out " + quote((dir.path() / out).string());
+    return "--plate " + quote((samples / "meadow.jpg").string()) + " --object " +
+           quote((samples / "bunny.obj").string()) + " --samples 1 --cache " +
+           quote((dir.path() / "cache").string()) + " --out " + quote((dir.path() / out).string());
   };
   const RunResult first = runCompose(args("a"), dir.path());
   ASSERT_EQ(first.status, 0) << first.err;
-  EXPECT_NE(first.err.find("projected the environment and cached it"), std::string::npos) << first.err;
+  EXPECT_NE(first.err.find("projected the environment and cached it"), std::string::npos)
+      << first.err;
   const RunResult second = runCompose(args("b"), dir.path());
   ASSERT_EQ(second.status, 0) << second.err;
   EXPECT_NE(second.err.find("reused the cached projection"), std::string::npos) << second.err;
@@ -287,9 +302,12 @@ class ComposeErrors : public ::testing::Test {
 };
 
 TEST_F(ComposeErrors, MissingPlate) {
-  const auto r = runCompose(base("/no/such/plate.jpg", (samples_ / "bunny.obj").string()), dir_.path());
+  const auto r =
+      runCompose(base("/no/such/plate.jpg", (samples_ / "bunny.obj").string()), dir_.path());
   EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("compose: error: ingest: file not found (/no/such/plate.jpg)"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("compose: error: ingest: file not found (/no/such/plate.jpg)"),
+            std::string::npos)
+      << r.err;
   expectNothingWritten();
 }
 
@@ -304,9 +322,10 @@ TEST_F(ComposeErrors, CorruptPlate) {
 }
 
 TEST_F(ComposeErrors, UnknownOption) {
-  const auto r = runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
-                                " --frobnicate 3",
-                            dir_.path());
+  const auto r =
+      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
+                     " --frobnicate 3",
+                 dir_.path());
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.err.find("compose: error: cli:"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--frobnicate"), std::string::npos) << r.err;
@@ -314,11 +333,15 @@ TEST_F(ComposeErrors, UnknownOption) {
 }
 
 TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
-  const auto r = runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
-                                " --lighting wavelets",
-                            dir_.path());
+  const auto r =
+      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
+                     " --lighting wavelets",
+                 dir_.path());
   EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: cheb-local, cheb-latlong, cheb-face, sh, mc, exact"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: cheb-local, cheb-latlong, "
+                       "cheb-face, sh, mc, exact"),
+            std::string::npos)
+      << r.err;
 }
 
 TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
@@ -332,11 +355,14 @@ TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
     out->close();
   }
   compose::testing::writeText(dir_ / "x.exr", "previous result");
-  const auto r = runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
-                                " --env " + quote(env.string()),
-                            dir_.path());
+  const auto r =
+      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
+                     " --env " + quote(env.string()),
+                 dir_.path());
   EXPECT_EQ(r.status, 1);
-  EXPECT_NE(r.err.find("lighting: NaN radiance at texel (5, 2) (" + env.string() + ")"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("lighting: NaN radiance at texel (5, 2) (" + env.string() + ")"),
+            std::string::npos)
+      << r.err;
   EXPECT_EQ(slurp(dir_ / "x.exr"), "previous result");
   EXPECT_FALSE(fs::exists(dir_ / "x.jpg"));
 }

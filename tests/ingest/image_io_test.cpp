@@ -70,7 +70,8 @@ TEST(ImageIo, ReadErrorsNameTheFile) {
   COMPOSE_EXPECT_ERROR(readImage(dir / "missing.jpg"), "ingest: file not found");
   COMPOSE_EXPECT_ERROR(readImage(dir.path()), "is a folder");
   // A JPEG header followed by garbage.
-  compose::testing::writeText(dir / "corrupt.jpg", std::string("\xFF\xD8\xFF\xE0", 4) + std::string(200, 'x'));
+  compose::testing::writeText(dir / "corrupt.jpg",
+                              std::string("\xFF\xD8\xFF\xE0", 4) + std::string(200, 'x'));
   COMPOSE_EXPECT_ERROR(readImage(dir / "corrupt.jpg", "plate"), "corrupt.jpg)");
   COMPOSE_EXPECT_ERROR(readImage(dir / "corrupt.jpg", "plate"), "plate: cannot");
   compose::testing::writeText(dir / "empty.exr", "");

@@ -36,7 +36,8 @@ Environment sunAndSky(int width, float sun) {
   for (int y = 0; y < img.height; ++y) {
     for (int x = 0; x < img.width; ++x) {
       const glm::vec3 d = probe.direction(x, y);
-      glm::vec3 L = glm::vec3(0.3f, 0.5f, 0.9f) * (0.6f + 0.4f * d.y) + glm::vec3(0.2f, 0.15f, 0.1f) * (d.y < 0 ? 1.0f : 0.0f);
+      glm::vec3 L = glm::vec3(0.3f, 0.5f, 0.9f) * (0.6f + 0.4f * d.y) +
+                    glm::vec3(0.2f, 0.15f, 0.1f) * (d.y < 0 ? 1.0f : 0.0f);
       if (glm::dot(d, sunDir) > 0.9995f) L += glm::vec3(sun);
       img.at(x, y)[0] = L.x, img.at(x, y)[1] = L.y, img.at(x, y)[2] = L.z;
     }
@@ -44,7 +45,8 @@ Environment sunAndSky(int width, float sun) {
   return Environment::fromLatLong(img);
 }
 
-double snrDb(const DiffuseLighting& basis, const DiffuseLighting& reference, const std::vector<glm::vec3>& normals) {
+double snrDb(const DiffuseLighting& basis, const DiffuseLighting& reference,
+             const std::vector<glm::vec3>& normals) {
   double signal = 0, noise = 0;
   for (const auto& n : normals) {
     const glm::dvec3 r(reference.irradiance(n)), g(basis.irradiance(n));
@@ -60,7 +62,8 @@ TEST(WhiteFurnace, ExactReferenceGivesPi) {
   ExactLighting exact;
   exact.project(Environment::constant(glm::vec3(1.0f), 1024));
   constexpr double kFurnace = 1e-6;  // the bound, at the sample maps' 1024x512
-  for (const auto& n : randomNormals(64, 1)) EXPECT_NEAR(exact.irradiance(n).y, kPi, kFurnace * kPi);
+  for (const auto& n : randomNormals(64, 1))
+    EXPECT_NEAR(exact.irradiance(n).y, kPi, kFurnace * kPi);
 }
 
 TEST(WhiteFurnace, ChebyshevBasesGivePi) {
@@ -128,9 +131,12 @@ TEST(Chebyshev, LocalBasisMatchesTheExactReference) {
 }
 
 TEST(Chebyshev, CoefficientAndStorageAccounting) {
-  auto local = createLighting("cheb-local", ParamSet::parse("order=3,samples=8,rows=17,cols=32", "t"));
-  auto face = createLighting("cheb-face", ParamSet::parse("order=3,samples=8,rows=17,cols=32", "t"));
-  auto latlong = createLighting("cheb-latlong", ParamSet::parse("order=2,samples=16,rows=17,cols=32", "t"));
+  auto local =
+      createLighting("cheb-local", ParamSet::parse("order=3,samples=8,rows=17,cols=32", "t"));
+  auto face =
+      createLighting("cheb-face", ParamSet::parse("order=3,samples=8,rows=17,cols=32", "t"));
+  auto latlong =
+      createLighting("cheb-latlong", ParamSet::parse("order=2,samples=16,rows=17,cols=32", "t"));
   const Environment env = Environment::constant(glm::vec3(1.0f), 64);
   local->project(env);
   face->project(env);
@@ -149,7 +155,8 @@ TEST(Chebyshev, ParametersAreValidated) {
                        "cheb-local: order k must be in 1..min(samples, 32)");
   COMPOSE_EXPECT_ERROR(createLighting("cheb-latlong", ParamSet::parse("samples=0", "t")),
                        "cheb-latlong: samples (grid size s) must be in 1..1024");
-  COMPOSE_EXPECT_ERROR(createLighting("cheb-face", ParamSet::parse("rows=2", "t")), "rows must be in 3..1025");
+  COMPOSE_EXPECT_ERROR(createLighting("cheb-face", ParamSet::parse("rows=2", "t")),
+                       "rows must be in 3..1025");
   COMPOSE_EXPECT_ERROR(createLighting("cheb-local", ParamSet::parse("ordre=2", "t")),
                        "does not take parameter(s): ordre");
 }
@@ -237,10 +244,13 @@ TEST(OrderSelector, ShEstimateMatchesMeasuredSnr) {
     ShLighting sh(order);
     sh.project(env);
     // 3000 random normals estimate a sphere integral to ~2% in energy: 0.5 dB.
-    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, full, normals), 0.5) << "order " << order;
-    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, exact, normals), 1.5) << "order " << order;
+    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, full, normals), 0.5)
+        << "order " << order;
+    EXPECT_NEAR(estimates[size_t(order)].estimatedSnrDb, snrDb(sh, exact, normals), 1.5)
+        << "order " << order;
   }
-  for (size_t i = 1; i < estimates.size(); ++i) EXPECT_GE(estimates[i].estimatedSnrDb, estimates[i - 1].estimatedSnrDb);
+  for (size_t i = 1; i < estimates.size(); ++i)
+    EXPECT_GE(estimates[i].estimatedSnrDb, estimates[i - 1].estimatedSnrDb);
   // Band 3 adds nothing (A_3 = 0), so asking for band 3's accuracy selects band 2.
   EXPECT_EQ(selectOrder(estimates, estimates[3].estimatedSnrDb).order, 2);
   EXPECT_EQ(selectOrder(estimates, estimates[4].estimatedSnrDb).order, 4);
@@ -254,14 +264,18 @@ TEST(OrderSelector, ChebyshevEstimateMatchesTruncation) {
   const ParamSet params = ParamSet::parse("samples=8,rows=17,cols=32", "t");
   const auto estimates = estimateOrders("cheb-latlong", env, params);
   ASSERT_EQ(estimates.size(), 8u);
-  auto full = createLighting("cheb-latlong", ParamSet::parse("order=8,samples=8,rows=17,cols=32", "t"));
+  auto full =
+      createLighting("cheb-latlong", ParamSet::parse("order=8,samples=8,rows=17,cols=32", "t"));
   full->project(env);
   const auto normals = randomNormals(2000, 12);
   for (int k : {1, 2, 3, 5}) {
-    auto truncated = createLighting("cheb-latlong", ParamSet::parse("order=" + std::to_string(k) + ",samples=8,rows=17,cols=32", "t"));
+    auto truncated = createLighting(
+        "cheb-latlong",
+        ParamSet::parse("order=" + std::to_string(k) + ",samples=8,rows=17,cols=32", "t"));
     truncated->project(env);
     // Nodes versus random normals: 1 dB.
-    EXPECT_NEAR(estimates[size_t(k - 1)].estimatedSnrDb, snrDb(*truncated, *full, normals), 1.0) << "k " << k;
+    EXPECT_NEAR(estimates[size_t(k - 1)].estimatedSnrDb, snrDb(*truncated, *full, normals), 1.0)
+        << "k " << k;
   }
   const auto local = estimateOrders("cheb-local", env, ParamSet::parse("rows=9,cols=16", "t"));
   EXPECT_GT(local.front().estimatedSnrDb, 100.0) << "Lambertian: only T_00 matters";
@@ -282,7 +296,8 @@ struct OrenNayarCase {
   glm::vec3 n, view;
 };
 
-glm::vec3 orenNayarReference(const Environment& env, double sigma, const glm::vec3& n, const glm::vec3& view) {
+glm::vec3 orenNayarReference(const Environment& env, double sigma, const glm::vec3& n,
+                             const glm::vec3& view) {
   const float h = std::sqrt(n.x * n.x + n.z * n.z);
   const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1, 0, 0);
   const glm::vec3 north = glm::cross(n, east);
@@ -295,7 +310,8 @@ glm::vec3 orenNayarReference(const Environment& env, double sigma, const glm::ve
       const double c = glm::dot(n, w);
       if (c <= 0.0) continue;
       const double phiIn = std::atan2(double(glm::dot(north, w)), double(glm::dot(east, w)));
-      const double f = ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn, thetaOut, phiOut);
+      const double f =
+          ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn, thetaOut, phiOut);
       e += glm::dvec3(env.radiance(x, y)) * env.rowSolidAngle(y) * c * f;
     }
   }
@@ -304,8 +320,11 @@ glm::vec3 orenNayarReference(const Environment& env, double sigma, const glm::ve
 
 TEST(OrenNayar, ZeroRoughnessIsLambertian) {
   const Environment env = sunAndSky(128, 100.0f);
-  auto lambert = createLighting("cheb-local", ParamSet::parse("order=4,samples=8,rows=9,cols=16", "t"));
-  auto smooth = createLighting("cheb-local", ParamSet::parse("order=4,samples=8,rows=9,cols=16,brdf=oren-nayar,sigma=0", "t"));
+  auto lambert =
+      createLighting("cheb-local", ParamSet::parse("order=4,samples=8,rows=9,cols=16", "t"));
+  auto smooth = createLighting(
+      "cheb-local",
+      ParamSet::parse("order=4,samples=8,rows=9,cols=16,brdf=oren-nayar,sigma=0", "t"));
   lambert->project(env);
   smooth->project(env);
   for (const auto& n : randomNormals(20, 21)) {
@@ -320,7 +339,8 @@ TEST(OrenNayar, FullProductConvergesToTheReference) {
   constexpr double kSigma = 0.5;
   std::vector<OrenNayarCase> cases;
   for (const auto& n : randomNormals(24, 22)) {
-    for (const glm::vec3 tilt : {glm::vec3(0.0f), glm::vec3(0.6f, 0.2f, -0.3f), glm::vec3(-0.5f, 0.7f, 0.4f)}) {
+    for (const glm::vec3 tilt :
+         {glm::vec3(0.0f), glm::vec3(0.6f, 0.2f, -0.3f), glm::vec3(-0.5f, 0.7f, 0.4f)}) {
       glm::vec3 v = glm::normalize(n + tilt);
       if (glm::dot(v, n) < 0.05f) v = n;
       cases.push_back({n, v});
@@ -329,7 +349,8 @@ TEST(OrenNayar, FullProductConvergesToTheReference) {
   std::vector<glm::vec3> reference;
   for (const auto& c : cases) reference.push_back(orenNayarReference(env, kSigma, c.n, c.view));
   auto snr = [&](const std::string& params) {
-    auto basis = createLighting("cheb-local", ParamSet::parse(params + ",brdf=oren-nayar,sigma=0.5", "t"));
+    auto basis =
+        createLighting("cheb-local", ParamSet::parse(params + ",brdf=oren-nayar,sigma=0.5", "t"));
     basis->project(env);
     double signal = 0, noise = 0;
     for (size_t i = 0; i < cases.size(); ++i) {
@@ -339,9 +360,12 @@ TEST(OrenNayar, FullProductConvergesToTheReference) {
     }
     return 10.0 * std::log10(signal / noise);
   };
-  const double k1 = snr("order=1,samples=8"), k4 = snr("order=4,samples=8"), k8 = snr("order=8,samples=8");
+  const double k1 = snr("order=1,samples=8"), k4 = snr("order=4,samples=8"),
+               k8 = snr("order=8,samples=8");
   const double k16 = snr("order=16,samples=16");
-  std::printf("Oren-Nayar sigma=0.5: k=1 %.1f dB, k=4 %.1f dB, k=8 (s=8) %.1f dB, k=16 (s=16) %.1f dB\n", k1, k4, k8, k16);
+  std::printf(
+      "Oren-Nayar sigma=0.5: k=1 %.1f dB, k=4 %.1f dB, k=8 (s=8) %.1f dB, k=16 (s=16) %.1f dB\n",
+      k1, k4, k8, k16);
   RecordProperty("k1_db", std::to_string(k1));
   RecordProperty("k8_db", std::to_string(k8));
   // Measured: k=1 39.4 dB, k=4 46.4 dB, k=8 47.7 dB, k=16 at s=16 50.4 dB.

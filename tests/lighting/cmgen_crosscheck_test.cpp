@@ -42,8 +42,8 @@
 // still checked (Equirect), at the measured resampling limit, to pin cmgen's own lat-long axes;
 // a mirrored or rotated axis gives errors of 0.3-0.7 there.
 //
-// Error measure: per channel, max over 100 Fibonacci-sphere normals of |E_cmgen − E_ours| divided by
-// max over the normals of |E_ours|. Per-normal relative error is ill-defined: for sun-lit maps
+// Error measure: per channel, max over 100 Fibonacci-sphere normals of |E_cmgen − E_ours| divided
+// by max over the normals of |E_ours|. Per-normal relative error is ill-defined: for sun-lit maps
 // SH9 irradiance comes near zero (or rings below it) on the far side.
 #include <sys/wait.h>
 
@@ -122,13 +122,14 @@ struct CmgenRun {
 
 // Runs `cmgen --sh=3 --sh-window=no -i <extra> --sh-output=... input` and parses its output.
 // Adds a failure (with cmgen's console output) and returns nothing if anything is off.
-std::optional<CmgenRun> runCmgen(const fs::path& cmgen, const fs::path& input, const std::string& extra,
-                                 const fs::path& scratch) {
+std::optional<CmgenRun> runCmgen(const fs::path& cmgen, const fs::path& input,
+                                 const std::string& extra, const fs::path& scratch) {
   const fs::path out = scratch / (input.stem().string() + "_sh.txt");
   const fs::path log = scratch / (input.stem().string() + "_cmgen.log");
   fs::remove(out);
-  const std::string cmd = quote(cmgen) + " --sh=3 --sh-window=no -i " + extra + " --sh-output=" + quote(out) +
-                          " " + quote(input) + " >" + quote(log) + " 2>&1 </dev/null";
+  const std::string cmd = quote(cmgen) + " --sh=3 --sh-window=no -i " + extra +
+                          " --sh-output=" + quote(out) + " " + quote(input) + " >" + quote(log) +
+                          " 2>&1 </dev/null";
   const auto start = std::chrono::steady_clock::now();
   const int raw = std::system(cmd.c_str());
   CmgenRun run;
@@ -152,7 +153,8 @@ std::optional<CmgenRun> runCmgen(const fs::path& cmgen, const fs::path& input, c
     }
     const size_t open = line.find('('), close = line.find(')');
     const size_t label = line.find("//");
-    std::string values = line.substr(open + 1, close == std::string::npos ? std::string::npos : close - open - 1);
+    std::string values =
+        line.substr(open + 1, close == std::string::npos ? std::string::npos : close - open - 1);
     std::replace(values.begin(), values.end(), ',', ' ');
     std::istringstream vs(values);
     glm::dvec3 c;
@@ -160,7 +162,8 @@ std::optional<CmgenRun> runCmgen(const fs::path& cmgen, const fs::path& input, c
     const std::string expected = std::string(kLabels[n]) + ", irradiance";
     if (!(vs >> c.x >> c.y >> c.z) || close == std::string::npos || label == std::string::npos ||
         line.find(expected, label) == std::string::npos) {
-      ADD_FAILURE() << "unexpected cmgen output line " << n << " (wanted \"" << expected << "\"): " << line;
+      ADD_FAILURE() << "unexpected cmgen output line " << n << " (wanted \"" << expected
+                    << "\"): " << line;
       return std::nullopt;
     }
     run.irradiance[size_t(n++)] = c;
@@ -202,8 +205,12 @@ glm::dvec3 cmgenIrradiance(const Coefficients& c, const glm::dvec3& n) {
 
 // Lat-long texel (x, y) of a W x H map (environment.h): φ ∈ π(1 - 2[x, x+1]/W) with
 // φ = atan2(x_w, z_w), z_w = sin(latitude) ∈ [zBottom(y), zTop(y)].
-double zTop(int y, int h) { return std::sin(kPi * (0.5 - double(y) / h)); }
-double zBottom(int y, int h) { return std::sin(kPi * (0.5 - double(y + 1) / h)); }
+double zTop(int y, int h) {
+  return std::sin(kPi * (0.5 - double(y) / h));
+}
+double zBottom(int y, int h) {
+  return std::sin(kPi * (0.5 - double(y + 1) / h));
+}
 glm::dvec3 latLongDirection(double phi, double z) {
   const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
   return {r * std::sin(phi), z, r * std::cos(phi)};
@@ -234,7 +241,9 @@ CubeTexel cubeAddress(const glm::dvec3& d, int size) {
     sc = d.z >= 0 ? d.x : -d.x;
     tc = -d.y;
   }
-  const auto texel = [&](double s) { return std::clamp(int((s / ma + 1.0) * 0.5 * size), 0, size - 1); };
+  const auto texel = [&](double s) {
+    return std::clamp(int((s / ma + 1.0) * 0.5 * size), 0, size - 1);
+  };
   return {face, texel(sc), texel(tc)};
 }
 constexpr int kCrossX[6] = {2, 0, 1, 1, 1, 3};  // in face sizes, indexed by Face
@@ -242,7 +251,9 @@ constexpr int kCrossY[6] = {1, 1, 0, 2, 1, 1};
 
 // Exact solid angle of cube texel (x, y) of a size x size face.
 double cubeTexelSolidAngle(int x, int y, int size) {
-  const auto corner = [](double a, double b) { return std::atan2(a * b, std::sqrt(a * a + b * b + 1.0)); };
+  const auto corner = [](double a, double b) {
+    return std::atan2(a * b, std::sqrt(a * a + b * b + 1.0));
+  };
   const double s0 = 2.0 * x / size - 1.0, s1 = 2.0 * (x + 1) / size - 1.0;
   const double t0 = 2.0 * y / size - 1.0, t1 = 2.0 * (y + 1) / size - 1.0;
   return corner(s0, t0) - corner(s0, t1) - corner(s1, t0) + corner(s1, t1);
@@ -277,7 +288,8 @@ Image cubeCross(const Environment& env, int size) {
         for (int i = 0; i < k; ++i) {
           const double phi = kPi * (1.0 - 2.0 * (x + (i + 0.5) / k) / w);
           const CubeTexel t = cubeAddress(latLongDirection(phi, z), size);
-          power[(size_t(t.face) * size_t(size) + size_t(t.y)) * size_t(size) + size_t(t.x)] += cellPower;
+          power[(size_t(t.face) * size_t(size) + size_t(t.y)) * size_t(size) + size_t(t.x)] +=
+              cellPower;
         }
       }
     }
@@ -286,8 +298,9 @@ Image cubeCross(const Environment& env, int size) {
   for (int face = 0; face < 6; ++face) {
     for (int y = 0; y < size; ++y) {
       for (int x = 0; x < size; ++x) {
-        const glm::dvec3 L = power[(size_t(face) * size_t(size) + size_t(y)) * size_t(size) + size_t(x)] /
-                             cubeTexelSolidAngle(x, y, size);
+        const glm::dvec3 L =
+            power[(size_t(face) * size_t(size) + size_t(y)) * size_t(size) + size_t(x)] /
+            cubeTexelSolidAngle(x, y, size);
         float* px = cross.at(kCrossX[face] * size + x, kCrossY[face] * size + y);
         px[0] = float(L.x);
         px[1] = float(L.y);
@@ -375,15 +388,18 @@ class CmgenCrosscheck : public ::testing::TestWithParam<const char*> {
       GTEST_FAIL() << kInstallCmgen;
     }
     file_ = pipeline::samplesDirectory() / (std::string(GetParam()) + ".exr");
-    if (!fs::exists(file_)) GTEST_FAIL() << "sample HDRI missing: " << file_ << ": run samples/fetch.sh";
+    if (!fs::exists(file_))
+      GTEST_FAIL() << "sample HDRI missing: " << file_ << ": run samples/fetch.sh";
     loaded_ = ingest::readImage(file_).image;
     env_ = Environment::fromLatLong(loaded_, file_);
     sh_.project(env_);
   }
 
   void report(const char* path, const Agreement& a, double seconds) {
-    std::printf("[ cmgen    ] %-9s %-8s E max rel %.2e %.2e %.2e  rms %.2e %.2e %.2e  (cmgen %.2f s)\n", GetParam(),
-                path, a.maxRel.x, a.maxRel.y, a.maxRel.z, a.rmsRel.x, a.rmsRel.y, a.rmsRel.z, seconds);
+    std::printf(
+        "[ cmgen    ] %-9s %-8s E max rel %.2e %.2e %.2e  rms %.2e %.2e %.2e  (cmgen %.2f s)\n",
+        GetParam(), path, a.maxRel.x, a.maxRel.y, a.maxRel.z, a.rmsRel.x, a.rmsRel.y, a.rmsRel.z,
+        seconds);
   }
 
   fs::path cmgen_, file_;
@@ -398,13 +414,14 @@ TEST_P(CmgenCrosscheck, CubeCrossIrradianceWithin1e3) {
   constexpr int kSize = 256;  // larger cubes lose accuracy in cmgen's float solid angles
   const fs::path cross = scratch_ / (std::string(GetParam()) + "_cross.exr");
   writeFloatExr(cross, cubeCross(env_, kSize));
-  const auto run = runCmgen(cmgen_, cross, "--no-mirror --size=" + std::to_string(kSize) + " -q", scratch_.path());
+  const auto run = runCmgen(cmgen_, cross, "--no-mirror --size=" + std::to_string(kSize) + " -q",
+                            scratch_.path());
   ASSERT_TRUE(run);
 
   const Agreement a = compareIrradiance(sh_, run->irradiance);
   report("cube", a, run->seconds);
-  EXPECT_LT(a.worst(), 1e-3) << "E(n) from cmgen vs ShLighting(2), max relative error per channel: " << a.maxRel.x
-                             << " " << a.maxRel.y << " " << a.maxRel.z;
+  EXPECT_LT(a.worst(), 1e-3) << "E(n) from cmgen vs ShLighting(2), max relative error per channel: "
+                             << a.maxRel.x << " " << a.maxRel.y << " " << a.maxRel.z;
 
   // The coefficient vectors, once cmgen's are expressed in our basis.
   const auto m = basisChange();
@@ -412,7 +429,8 @@ TEST_P(CmgenCrosscheck, CubeCrossIrradianceWithin1e3) {
     for (size_t j = 0; j < size_t(kCoefficients); ++j) {
       double dot = 0.0;
       for (size_t k = 0; k < size_t(kCoefficients); ++k) dot += m[k][i] * m[k][j];
-      ASSERT_NEAR(dot, i == j ? 1.0 : 0.0, 1e-9) << "basis change not orthogonal at " << i << "," << j;
+      ASSERT_NEAR(dot, i == j ? 1.0 : 0.0, 1e-9)
+          << "basis change not orthogonal at " << i << "," << j;
     }
   }
   const auto& radiance = sh_.radianceCoefficients();
@@ -427,8 +445,9 @@ TEST_P(CmgenCrosscheck, CubeCrossIrradianceWithin1e3) {
   for (size_t i = 0; i < size_t(kCoefficients); ++i) {
     const glm::dvec3 rel = glm::abs(mapped[i] - ours[i]) / scale;
     EXPECT_LT(std::max({rel.x, rel.y, rel.z}), 1e-3)
-        << "irradiance coefficient " << i << ": ours (" << ours[i].x << ", " << ours[i].y << ", " << ours[i].z
-        << "), cmgen in our basis (" << mapped[i].x << ", " << mapped[i].y << ", " << mapped[i].z << ")";
+        << "irradiance coefficient " << i << ": ours (" << ours[i].x << ", " << ours[i].y << ", "
+        << ours[i].z << "), cmgen in our basis (" << mapped[i].x << ", " << mapped[i].y << ", "
+        << mapped[i].z << ")";
   }
 }
 
@@ -438,19 +457,26 @@ TEST_P(CmgenCrosscheck, CubeCrossIrradianceWithin1e3) {
 // mistake, which costs 0.3-0.7.
 TEST_P(CmgenCrosscheck, EquirectIrradianceWithinResamplingLimit) {
   const std::string name = GetParam();
-  const double bound = name == "courtyard" ? 0.015 : name == "forest" ? 0.02 : name == "interior" ? 0.12 : 0.025;
+  const double bound = name == "courtyard"  ? 0.015
+                       : name == "forest"   ? 0.02
+                       : name == "interior" ? 0.12
+                                            : 0.025;
   const fs::path copy = scratch_ / (name + "_float.exr");
   writeFloatExr(copy, loaded_);
   const auto run = runCmgen(cmgen_, copy, "-q", scratch_.path());
   ASSERT_TRUE(run);
   const Agreement a = compareIrradiance(sh_, run->irradiance);
   report("equirect", a, run->seconds);
-  EXPECT_LT(a.worst(), bound) << "E(n) from cmgen's equirect path vs ShLighting(2), max relative error per channel: "
-                              << a.maxRel.x << " " << a.maxRel.y << " " << a.maxRel.z;
+  EXPECT_LT(a.worst(), bound)
+      << "E(n) from cmgen's equirect path vs ShLighting(2), max relative error per channel: "
+      << a.maxRel.x << " " << a.maxRel.y << " " << a.maxRel.z;
 }
 
-INSTANTIATE_TEST_SUITE_P(SampleHdris, CmgenCrosscheck, ::testing::Values("courtyard", "forest", "interior", "sunset"),
-                         [](const ::testing::TestParamInfo<const char*>& p) { return std::string(p.param); });
+INSTANTIATE_TEST_SUITE_P(SampleHdris, CmgenCrosscheck,
+                         ::testing::Values("courtyard", "forest", "interior", "sunset"),
+                         [](const ::testing::TestParamInfo<const char*>& p) {
+                           return std::string(p.param);
+                         });
 
 // cmgen's own lat-long reader puts a bright cap where our convention says it is: the band-1
 // coefficients (-L11, -L1-1, L10), Condon-Shortley signs included, point at the cap.
@@ -476,9 +502,9 @@ TEST(CmgenConventions, EquirectAxesMatchOpenExrLatLong) {
     ASSERT_TRUE(run);
     const Coefficients& c = run->irradiance;
     const glm::dvec3 seen = glm::normalize(glm::dvec3(-c[3].x, -c[1].x, c[2].x));
-    EXPECT_GT(glm::dot(seen, target), 0.999) << "cap at (" << target.x << ", " << target.y << ", " << target.z
-                                             << ") seen by cmgen at (" << seen.x << ", " << seen.y << ", "
-                                             << seen.z << ")";
+    EXPECT_GT(glm::dot(seen, target), 0.999)
+        << "cap at (" << target.x << ", " << target.y << ", " << target.z << ") seen by cmgen at ("
+        << seen.x << ", " << seen.y << ", " << seen.z << ")";
   }
 }
 

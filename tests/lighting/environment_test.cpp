@@ -66,9 +66,11 @@ TEST(Environment, OneBrightTexelLightsTheNormalFacingIt) {
 TEST(Environment, RejectsNonFiniteRadianceNamingTheTexel) {
   Image img = blackLatLong(16);
   img.at(3, 2)[1] = std::numeric_limits<float>::quiet_NaN();
-  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"), "NaN radiance at texel (3, 2) (sky.exr)");
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"),
+                       "NaN radiance at texel (3, 2) (sky.exr)");
   img.at(3, 2)[1] = std::numeric_limits<float>::infinity();
-  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"), "infinite radiance at texel (3, 2)");
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"),
+                       "infinite radiance at texel (3, 2)");
 }
 
 TEST(Environment, ClampsAndCountsNegativeRadiance) {
@@ -85,7 +87,8 @@ TEST(Environment, ClampsAndCountsNegativeRadiance) {
 
 TEST(Environment, RejectsMapsThatAreNotLatLong) {
   Image img(30, 20, 3);
-  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "cross.exr"), "not a lat-long (equirectangular) map: 30x20");
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "cross.exr"),
+                       "not a lat-long (equirectangular) map: 30x20");
   Image grey(32, 16, 1);
   COMPOSE_EXPECT_ERROR(Environment::fromLatLong(grey, "grey.exr"), "needs RGB channels");
 }

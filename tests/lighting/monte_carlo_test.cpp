@@ -53,7 +53,9 @@ void setTexel(Image& img, int x, int y, glm::vec3 L) {
   img.at(x, y)[2] = L.z;
 }
 
-bool finite(const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+bool finite(const glm::vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
 
 TEST(MonteCarlo, DescribesItselfAndCountsStorage) {
   MonteCarloLighting mc(1024, 7);
@@ -66,14 +68,17 @@ TEST(MonteCarlo, DescribesItselfAndCountsStorage) {
 }
 
 TEST(MonteCarlo, RejectsInvalidSampleCounts) {
-  COMPOSE_EXPECT_ERROR(MonteCarloLighting(0, 1), "lighting: mc samples must be in 1..16777216, got 0");
+  COMPOSE_EXPECT_ERROR(MonteCarloLighting(0, 1),
+                       "lighting: mc samples must be in 1..16777216, got 0");
   COMPOSE_EXPECT_ERROR(MonteCarloLighting(-5, 1), "mc samples must be in 1..16777216, got -5");
-  COMPOSE_EXPECT_ERROR(MonteCarloLighting(16777217, 1), "mc samples must be in 1..16777216, got 16777217");
+  COMPOSE_EXPECT_ERROR(MonteCarloLighting(16777217, 1),
+                       "mc samples must be in 1..16777216, got 16777217");
   EXPECT_NO_THROW(MonteCarloLighting(1, 1));
   EXPECT_NO_THROW(MonteCarloLighting(kMaxMcSamples, 1));
   MonteCarloLighting mc(16, 1);
   mc.project(Environment::constant(glm::vec3(1.0f), 16));
-  COMPOSE_EXPECT_ERROR(mc.estimate(glm::vec3(0, 1, 0), 0), "mc samples must be in 1..16777216, got 0");
+  COMPOSE_EXPECT_ERROR(mc.estimate(glm::vec3(0, 1, 0), 0),
+                       "mc samples must be in 1..16777216, got 0");
   EXPECT_TRUE(finite(mc.estimate(glm::vec3(0, 1, 0), 1)));  // n_c = 0: environment sampling alone
 }
 
@@ -119,8 +124,8 @@ TEST(MonteCarlo, WhiteFurnaceGivesPiWithinItsNoise) {
   // The scatter stays below the i.i.d. σ: the sample RMS of 400 draws is within ±3.5% (1σ) of
   // the true std-dev, so 1.15 leaves over 4σ of slack.
   EXPECT_LT(rms, 1.15 * sigma);
-  std::printf("white furnace, %d samples: i.i.d. sigma %.3g (%.3g%% of pi), measured rms %.3g\n", kSamples, sigma,
-              100 * sigma / kPi, rms);
+  std::printf("white furnace, %d samples: i.i.d. sigma %.3g (%.3g%% of pi), measured rms %.3g\n",
+              kSamples, sigma, 100 * sigma / kPi, rms);
 }
 
 // A single texel 1e5 times brighter than a dim grey sky: the sun holds ~95% of Σ luminance·Ω. The
@@ -139,7 +144,8 @@ TEST(MonteCarlo, SunTexelConvergesToTheExactReference) {
 
   // Nearest-texel lookup, as the estimator does, for the cosine-only comparison below.
   auto texelOf = [&](glm::vec3 d) {
-    const double lat = std::asin(std::clamp(double(d.y), -1.0, 1.0)), lon = std::atan2(double(d.x), double(d.z));
+    const double lat = std::asin(std::clamp(double(d.y), -1.0, 1.0)),
+                 lon = std::atan2(double(d.x), double(d.z));
     const int y = std::clamp(int((0.5 - lat / kPi) * env.height()), 0, env.height() - 1);
     const int x = std::clamp(int((1.0 - lon / kPi) * 0.5 * env.width()), 0, env.width() - 1);
     return env.radiance(x, y);
@@ -147,12 +153,14 @@ TEST(MonteCarlo, SunTexelConvergesToTheExactReference) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
   auto cosineOnly = [&](glm::vec3 n, int samples) {
-    const glm::vec3 t = glm::normalize(glm::cross(std::abs(n.x) > 0.5f ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0), n));
+    const glm::vec3 t = glm::normalize(
+        glm::cross(std::abs(n.x) > 0.5f ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0), n));
     const glm::vec3 b = glm::cross(n, t);
     glm::dvec3 sum(0.0);
     for (int i = 0; i < samples; ++i) {
       const float u = uni(rng), phi = float(2.0 * kPi) * uni(rng), r = std::sqrt(u);
-      sum += glm::dvec3(texelOf(t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * std::sqrt(1.0f - u)));
+      sum += glm::dvec3(
+          texelOf(t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * std::sqrt(1.0f - u)));
     }
     return glm::vec3(sum * (kPi / samples));
   };
@@ -181,8 +189,8 @@ TEST(MonteCarlo, SunTexelConvergesToTheExactReference) {
   }
   ASSERT_GT(checked, 50);
   const double misRms = std::sqrt(misSq / checked), cosRms = std::sqrt(cosSq / checked);
-  std::printf("sun, 4096 samples: rms relative error MIS %.3g%%, cosine-only %.3g%%\n", 100 * misRms,
-              100 * cosRms);
+  std::printf("sun, 4096 samples: rms relative error MIS %.3g%%, cosine-only %.3g%%\n",
+              100 * misRms, 100 * cosRms);
   // Cosine sampling alone misses the sun most of the time (~95% RMS error against ~0.2%); ask
   // for a factor of ten.
   EXPECT_GT(cosRms, 10.0 * misRms);
@@ -197,7 +205,8 @@ TEST(MonteCarlo, ConvergesAtThreeDecibelsPerDoubling) {
   const Environment env = makeEnvironment(
       kWidth,
       [](glm::vec3 d) {
-        const float s = 0.6f + 0.4f * d.y + 0.15f * std::sin(3.0f * std::atan2(d.x, d.z)) * (1.0f - d.y * d.y);
+        const float s =
+            0.6f + 0.4f * d.y + 0.15f * std::sin(3.0f * std::atan2(d.x, d.z)) * (1.0f - d.y * d.y);
         return glm::vec3(0.8f, 0.9f, 1.2f) * std::max(s, 0.05f);
       },
       [](Image& img) {
@@ -224,7 +233,8 @@ TEST(MonteCarlo, ConvergesAtThreeDecibelsPerDoubling) {
       mc.project(env);
       std::vector<double> err(normals.size());
       parallelFor(0, int64_t(normals.size()), [&](int64_t i) {
-        const glm::dvec3 d = glm::dvec3(ref[size_t(i)]) - glm::dvec3(mc.irradiance(normals[size_t(i)]));
+        const glm::dvec3 d =
+            glm::dvec3(ref[size_t(i)]) - glm::dvec3(mc.irradiance(normals[size_t(i)]));
         err[size_t(i)] = glm::dot(d, d);
       });
       for (double e : err) noise += e / repeats;
@@ -258,7 +268,8 @@ TEST(MonteCarlo, IsDeterministicAndThreadSafe) {
   const auto normals = randomNormals(256, 6);
   std::vector<glm::vec3> sequential(normals.size()), concurrent(normals.size());
   for (size_t i = 0; i < normals.size(); ++i) sequential[i] = a.irradiance(normals[i]);
-  parallelFor(0, int64_t(normals.size()), [&](int64_t i) { concurrent[size_t(i)] = a.irradiance(normals[size_t(i)]); });
+  parallelFor(0, int64_t(normals.size()),
+              [&](int64_t i) { concurrent[size_t(i)] = a.irradiance(normals[size_t(i)]); });
   int differentSeed = 0;
   for (size_t i = 0; i < normals.size(); ++i) {
     // Bitwise equality: same seed and normal bits, same stream, same order of summation.

@@ -61,13 +61,15 @@ TEST(Sh, BasisIsOrthonormalOverTheSphere) {
     for (int c = 0; c < grid.width(); ++c) {
       evalSh(order, glm::dvec3(grid.direction(c, r)), y.data());
       for (int i = 0; i < count; ++i)
-        for (int j = 0; j <= i; ++j) gram[size_t(i * count + j)] += y[size_t(i)] * y[size_t(j)] * grid.rowSolidAngle(r);
+        for (int j = 0; j <= i; ++j)
+          gram[size_t(i * count + j)] += y[size_t(i)] * y[size_t(j)] * grid.rowSolidAngle(r);
     }
   }
   constexpr double kQuadratureTolerance = 2e-4;  // midpoint rule on 1024x512 at band 8
   for (int i = 0; i < count; ++i)
     for (int j = 0; j <= i; ++j)
-      EXPECT_NEAR(gram[size_t(i * count + j)], i == j ? 1.0 : 0.0, kQuadratureTolerance) << i << "," << j;
+      EXPECT_NEAR(gram[size_t(i * count + j)], i == j ? 1.0 : 0.0, kQuadratureTolerance)
+          << i << "," << j;
 }
 
 TEST(Sh, FirstBandsHaveTheTextbookForm) {
@@ -105,7 +107,8 @@ TEST(WhiteFurnace, ShAndExactGivePi) {
 // and the exact quadrature must both find it.
 TEST(Irradiance, LinearRadianceHasAClosedForm) {
   const glm::vec3 b(0.3f, 0.5f, -0.2f);
-  const Environment env = analyticEnvironment(512, [&](glm::vec3 w) { return glm::vec3(1.0f + glm::dot(b, w)); });
+  const Environment env =
+      analyticEnvironment(512, [&](glm::vec3 w) { return glm::vec3(1.0f + glm::dot(b, w)); });
   ShLighting sh(2);
   sh.project(env);
   ExactLighting exact;
@@ -129,7 +132,8 @@ TEST(Sh, WindowingDeringsAndKeepsTheFurnace) {
   EXPECT_NEAR(hanning.irradiance({0, 1, 0}).x, kPi, 1e-6 * kPi);
   // On a bright cap at +Y the windowed irradiance is Σ_l w_l A_l L_lm Y_lm(n), recomputed here from
   // the raw coefficients.
-  const Environment cap = analyticEnvironment(256, [](glm::vec3 w) { return glm::vec3(w.y > 0.98f ? 1000.0f : 0.0f); });
+  const Environment cap =
+      analyticEnvironment(256, [](glm::vec3 w) { return glm::vec3(w.y > 0.98f ? 1000.0f : 0.0f); });
   ShLighting windowed(4, ShWindow::Lanczos);
   windowed.project(cap);
   std::vector<double> y(size_t(shCount(4)));
@@ -139,19 +143,25 @@ TEST(Sh, WindowingDeringsAndKeepsTheFurnace) {
     for (int l = 0; l <= 4; ++l)
       for (int m = -l; m <= l; ++m) {
         const size_t i = size_t(l * (l + 1) + m);
-        expected += windowed.windowWeight(l) * shCosineLobe(l) * windowed.radianceCoefficients()[i].x * y[i];
+        expected += windowed.windowWeight(l) * shCosineLobe(l) *
+                    windowed.radianceCoefficients()[i].x * y[i];
       }
     EXPECT_NEAR(windowed.irradiance(n).x, expected, 1e-4 * std::abs(expected) + 1e-3);
   }
-  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("window=gauss", "t")), "sh window must be none, hanning or lanczos");
+  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("window=gauss", "t")),
+                       "sh window must be none, hanning or lanczos");
 }
 
 TEST(Lighting, CreatesByNameAndReportsMistakes) {
   EXPECT_EQ(createLighting("sh")->coefficientsPerChannel(), 9);
   EXPECT_EQ(createLighting("sh", ParamSet::parse("order=4", "t"))->coefficientsPerChannel(), 25);
-  COMPOSE_EXPECT_ERROR(createLighting("chebyshev"), "unknown lighting basis 'chebyshev'; valid: cheb-local, cheb-latlong, cheb-face, sh, mc, exact");
-  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("ordr=4", "t")), "does not take parameter(s): ordr");
-  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("order=9", "t")), "sh order must be in 0..8");
+  COMPOSE_EXPECT_ERROR(createLighting("chebyshev"),
+                       "unknown lighting basis 'chebyshev'; valid: cheb-local, cheb-latlong, "
+                       "cheb-face, sh, mc, exact");
+  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("ordr=4", "t")),
+                       "does not take parameter(s): ordr");
+  COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("order=9", "t")),
+                       "sh order must be in 0..8");
 }
 
 }  // namespace

@@ -94,7 +94,8 @@ TEST(Stress, FloatAndDoubleMomentAccumulationAgree) {
   // Input rounding to float (2^-24 relative per pixel), summed in double: ≤ 1e-6 of the largest.
   EXPECT_LT(worst / largest, 1e-6);
   RecordProperty("float_vs_double_relative", std::to_string(worst / largest));
-  std::printf("moments from float vs double input: max difference %.3g of the largest moment\n", worst / largest);
+  std::printf("moments from float vs double input: max difference %.3g of the largest moment\n",
+              worst / largest);
 }
 
 TEST(Stress, OrdersAndSizesAtTheirLimits) {
@@ -107,9 +108,11 @@ TEST(Stress, OrdersAndSizesAtTheirLimits) {
   // Bases at their order limits still give finite, furnace-correct answers.
   const Environment env = Environment::constant(glm::vec3(1.0f), 128);
   for (const char* spec : {"sh:order=8", "cheb-latlong:order=32,samples=32,rows=9,cols=16",
-                           "cheb-local:order=8,samples=8,rows=9,cols=16", "cheb-face:order=1,samples=1,rows=9,cols=16"}) {
+                           "cheb-local:order=8,samples=8,rows=9,cols=16",
+                           "cheb-face:order=1,samples=1,rows=9,cols=16"}) {
     const std::string s(spec);
-    auto basis = createLighting(s.substr(0, s.find(':')), ParamSet::parse(s.substr(s.find(':') + 1), "t"));
+    auto basis =
+        createLighting(s.substr(0, s.find(':')), ParamSet::parse(s.substr(s.find(':') + 1), "t"));
     basis->project(env);
     for (const auto& n : fibonacciNormals(50)) {
       const float e = basis->irradiance(n).x;

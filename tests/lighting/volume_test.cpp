@@ -14,7 +14,8 @@ constexpr double kPi = std::numbers::pi;
 TEST(LightingVolume, DistantSourceIsProjectedOnceAndEqualEverywhere) {
   Image img(64, 32, 3);
   for (int y = 0; y < 32; ++y)
-    for (int x = 0; x < 64; ++x) img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = 1.0f + float(y) / 8.0f;
+    for (int x = 0; x < 64; ++x)
+      img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = 1.0f + float(y) / 8.0f;
   const Environment env = Environment::fromLatLong(img);
   VolumeParams params;
   params.basis = "sh";
@@ -48,7 +49,8 @@ TEST(LightingVolume, InterpolatesTrilinearlyAndClampsOutside) {
   EXPECT_EQ(projections, 12);
   const glm::vec3 n(0.3f, 0.4f, std::sqrt(1.0f - 0.25f));
   for (float x : {0.0f, 0.25f, 1.0f, 1.7f, 2.0f}) {
-    EXPECT_NEAR(volume.irradiance({x, 0.5f, 0.3f}, n).x, kPi * (1.0 + x), 1e-4 * kPi * (1.0 + x)) << x;
+    EXPECT_NEAR(volume.irradiance({x, 0.5f, 0.3f}, n).x, kPi * (1.0 + x), 1e-4 * kPi * (1.0 + x))
+        << x;
   }
   EXPECT_NEAR(volume.irradiance({-3.0f, 0.5f, 0.5f}, n).x, kPi, 1e-4 * kPi);
   EXPECT_NEAR(volume.irradiance({9.0f, 0.5f, 0.5f}, n).x, 3.0 * kPi, 1e-4 * 3.0 * kPi);

@@ -57,7 +57,8 @@ TEST(Renderer, WhiteFurnaceGivesTheAlbedo) {
   RenderSettings settings;
   settings.albedo = glm::vec3(0.25f, 0.5f, 0.75f);
   settings.exposure = 2.0f;
-  const RenderOutput out = renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
+  const RenderOutput out =
+      renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
   int covered = 0;
   double alphaSum = 0.0;
   for (int y = 0; y < out.beauty.height; ++y) {
@@ -102,7 +103,8 @@ TEST(Renderer, ShadingFollowsTheNormalAov) {
   // Turn the environment by 90° about +Y: world +X is environment -Z... check with the matrix.
   const float c = 0.0f, s = 1.0f;
   settings.envFromWorld = glm::mat3(glm::vec3(c, 0, -s), glm::vec3(0, 1, 0), glm::vec3(s, 0, c));
-  const RenderOutput out = renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
+  const RenderOutput out =
+      renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
   int checked = 0;
   for (int y = 0; y < out.beauty.height; ++y) {
     for (int x = 0; x < out.beauty.width; ++x) {
