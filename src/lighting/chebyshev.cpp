@@ -57,11 +57,27 @@ void rgbMoments(const TchebichefBasis& rows, const TchebichefBasis& cols,
   }
 }
 
-// Per-row solid angle of an s-row lat-long grid (exact), and the sub-cell layout used to integrate
-// the cosine over cells.
+// Latitude of a (fractional) row boundary of an s-row lat-long grid.
 double latitudeOfRow(double row, int rows) {
   return kPi * (0.5 - row / rows);
 }
+
+// A piece of a grid cell over which the BRDF side integrates the cosine: its solid angle Ω, its
+// mean direction m = ∫ω dω / Ω (exact), and half-extent vectors a, b across it. ∫ max(0, n·ω) dω
+// is Ω (n·m) when the piece lies above n's horizon, and otherwise the clipped linear model
+// (RadianceCells::clippedMean), so only pieces the horizon cuts carry a (second-order) error.
+struct SubCell {
+  glm::vec3 mean, halfA, halfB;
+  float omega;
+  uint32_t cell;
+  float cosineIntegral(const glm::vec3& n) const {
+    const float c = glm::dot(n, mean), a = glm::dot(n, halfA), b = glm::dot(n, halfB);
+    const float spread = std::abs(a) + std::abs(b);
+    if (c >= spread) return omega * c;
+    if (c <= -spread) return 0.0f;
+    return omega * RadianceCells::clippedMean(c, a, b);
+  }
+};
 
 }  // namespace
 
@@ -251,20 +267,26 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
   global_.assign(size_t(3 * k * k), 0.0f);
   rgbMoments(basis, basis, lin, k, global_.data());
 
-  // BRDF side per normal: f_c(i, j) = ∫_cell max(0, n·ω) dω, by q x q sub-cells (midpoint rule).
+  // BRDF side per normal: f_c(i, j) = ∫_cell max(0, n·ω) dω over q x q sub-cells whose vector
+  // moments are exact (closed form, as for texels in RadianceCells).
   const int sq = s * q;
-  std::vector<glm::vec3> subDir(size_t(sq) * size_t(sq));
-  std::vector<double> subOmega(subDir.size());
+  std::vector<SubCell> subs;
+  subs.reserve(size_t(sq) * size_t(sq));
   for (int a = 0; a < sq; ++a) {
-    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq),
-                 mid = latitudeOfRow(a + 0.5, sq);
+    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq), mid = latitudeOfRow(a + 0.5, sq);
     const double omega = 2.0 * kPi / sq * (std::sin(top) - std::sin(bottom));
+    const double cos2 = 0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
+    const double sincos = 0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
     for (int b = 0; b < sq; ++b) {
-      const double lon = kPi * (1.0 - 2.0 * (b + 0.5) / sq);
-      const size_t idx = size_t(a) * size_t(sq) + size_t(b);
-      subDir[idx] = glm::vec3(float(std::sin(lon) * std::cos(mid)), float(std::sin(mid)),
-                              float(std::cos(lon) * std::cos(mid)));
-      subOmega[idx] = omega;
+      const double left = kPi * (1.0 - 2.0 * b / sq), right = kPi * (1.0 - 2.0 * (b + 1) / sq);
+      const double lon = 0.5 * (left + right);
+      const glm::dvec3 m((std::cos(right) - std::cos(left)) * cos2, (left - right) * sincos,
+                         (std::sin(left) - std::sin(right)) * cos2);
+      const glm::dvec3 north(-std::sin(lon) * std::sin(mid), std::cos(mid), -std::cos(lon) * std::sin(mid));
+      const glm::dvec3 east(std::cos(lon), 0.0, -std::sin(lon));
+      subs.push_back({glm::vec3(m / omega), glm::vec3(north * (0.5 * (top - bottom))),
+                      glm::vec3(east * (0.5 * (left - right) * std::cos(mid))), float(omega),
+                      uint32_t((a / q) * s + b / q)});
     }
   }
   stride_ = size_t(k) * size_t(k);
@@ -273,13 +295,7 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
     std::vector<double> fc(size_t(s) * size_t(s), 0.0);
-    for (int a = 0; a < sq; ++a) {
-      for (int b = 0; b < sq; ++b) {
-        const size_t idx = size_t(a) * size_t(sq) + size_t(b);
-        const float c = glm::dot(n, subDir[idx]);
-        if (c > 0.0f) fc[size_t(a / q) * size_t(s) + size_t(b / q)] += c * subOmega[idx];
-      }
-    }
+    for (const SubCell& sub : subs) fc[sub.cell] += sub.cosineIntegral(n);
     const std::vector<double> m = moments2d(basis, basis, fc, k);
     std::transform(m.begin(), m.end(), table_.begin() + ptrdiff_t(size_t(node) * stride_),
                    [](double v) { return float(v); });
@@ -370,18 +386,35 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
     rgbMoments(basis, basis, faceLin, k, global_.data() + size_t(f) * 3 * kk);
   }
 
-  // BRDF side: ∫ max(0, n·ω) dω over each cube texel, by q x q sub-texels with exact solid angles.
+  // BRDF side: ∫ max(0, n·ω) dω over each cube texel, by q x q sub-texels with exact solid angles
+  // and mean directions from 4 x 4 Gauss–Legendre over the sub-texel (ω dω = (u, v, 1)/r³ du dv on
+  // a face: smooth, so the rule is accurate to ~1e-10).
+  static constexpr double kNodes[4] = {-0.8611363115940526, -0.3399810435848563, 0.3399810435848563,
+                                       0.8611363115940526};
+  static constexpr double kWeights[4] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
+                                         0.3478548451374538};
   const int sq = s * q;
-  std::vector<glm::vec3> subDir(kCubeFaces * size_t(sq) * size_t(sq));
-  std::vector<double> subOmega(subDir.size());
+  std::vector<SubCell> subs;
+  subs.reserve(kCubeFaces * size_t(sq) * size_t(sq));
   for (int f = 0; f < kCubeFaces; ++f) {
     for (int a = 0; a < sq; ++a) {
-      const double v0 = -1.0 + 2.0 * a / sq, v1 = -1.0 + 2.0 * (a + 1) / sq;
+      const double v0 = -1.0 + 2.0 * a / sq, v1 = -1.0 + 2.0 * (a + 1) / sq, vc = 0.5 * (v0 + v1);
       for (int b = 0; b < sq; ++b) {
-        const double u0 = -1.0 + 2.0 * b / sq, u1 = -1.0 + 2.0 * (b + 1) / sq;
-        const size_t idx = (size_t(f) * size_t(sq) + size_t(a)) * size_t(sq) + size_t(b);
-        subDir[idx] = cubeDirection(f, 0.5 * (u0 + u1), 0.5 * (v0 + v1));
-        subOmega[idx] = cubeSolidAngle(u0, v0, u1, v1);
+        const double u0 = -1.0 + 2.0 * b / sq, u1 = -1.0 + 2.0 * (b + 1) / sq, uc = 0.5 * (u0 + u1);
+        glm::dvec3 moment(0.0);
+        for (int gi = 0; gi < 4; ++gi) {
+          for (int gj = 0; gj < 4; ++gj) {
+            const double u = uc + 0.5 * (u1 - u0) * kNodes[gi], v = vc + 0.5 * (v1 - v0) * kNodes[gj];
+            const double r2 = 1.0 + u * u + v * v;
+            const double jac = 0.25 * (u1 - u0) * (v1 - v0) * kWeights[gi] * kWeights[gj] / (r2 * std::sqrt(r2));
+            moment += glm::dvec3(cubeDirection(f, u, v)) * jac;
+          }
+        }
+        const double omega = cubeSolidAngle(u0, v0, u1, v1);
+        const glm::dvec3 du = 0.5 * (glm::dvec3(cubeDirection(f, u1, vc)) - glm::dvec3(cubeDirection(f, u0, vc)));
+        const glm::dvec3 dv = 0.5 * (glm::dvec3(cubeDirection(f, uc, v1)) - glm::dvec3(cubeDirection(f, uc, v0)));
+        subs.push_back({glm::vec3(moment / omega), glm::vec3(dv), glm::vec3(du), float(omega),
+                        uint32_t(size_t(f) * faceTexels + size_t(a / q) * size_t(s) + size_t(b / q))});
       }
     }
   }
@@ -391,13 +424,7 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
     std::vector<double> fc(kCubeFaces * faceTexels, 0.0);
-    for (size_t idx = 0; idx < subDir.size(); ++idx) {
-      const float c = glm::dot(n, subDir[idx]);
-      if (c <= 0.0f) continue;
-      const size_t f = idx / (size_t(sq) * size_t(sq));
-      const size_t a = (idx / size_t(sq)) % size_t(sq), b = idx % size_t(sq);
-      fc[f * faceTexels + (a / size_t(q)) * size_t(s) + b / size_t(q)] += c * subOmega[idx];
-    }
+    for (const SubCell& sub : subs) fc[sub.cell] += sub.cosineIntegral(n);
     for (int f = 0; f < kCubeFaces; ++f) {
       const std::vector<double> m = moments2d(
           basis, basis, std::span<const double>(fc.data() + size_t(f) * faceTexels, faceTexels), k);

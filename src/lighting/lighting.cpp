@@ -40,7 +40,7 @@ std::unique_ptr<DiffuseLighting> createLighting(const std::string& name, ParamSe
   } else if (name == "cheb-face") {
     ChebParams d;
     d.samples = 8;
-    d.subsamples = 2;
+    d.subsamples = 4;
     basis = std::make_unique<ChebFaceLighting>(ChebParams::from(params, name, d));
   } else if (name == "mc") {
     const int samples = params.getInt("samples", 1024, "lighting");

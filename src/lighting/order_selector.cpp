@@ -38,7 +38,7 @@ std::vector<OrderEstimate> estimateOrders(const std::string& basis, const Enviro
   if (basis == "cheb-latlong" || basis == "cheb-face" || basis == "cheb-local") {
     ParamSet p = params;
     ChebParams defaults;
-    if (basis == "cheb-face") defaults.samples = 8, defaults.subsamples = 2;
+    if (basis == "cheb-face") defaults.samples = 8, defaults.subsamples = 4;
     if (basis == "cheb-local") defaults.samples = 8;
     const int samples = p.getInt("samples", defaults.samples, "lighting");
     p.set("samples", std::to_string(samples));
