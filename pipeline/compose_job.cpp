@@ -183,8 +183,14 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
     throw Error("render", "--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
   }
-  if (job.exposureStops && !std::isfinite(*job.exposureStops)) {
-    throw Error("render", "--exposure must be a finite number of stops");
+  if (!std::isfinite(job.environmentYawDegrees))
+    throw Error("render", "--env-yaw must be a finite number of degrees");
+  for (int c = 0; c < 3; ++c) {
+    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
+      throw Error("render", "--albedo must be within [0, 1]");
+  }
+  if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
+    throw Error("render", "--exposure must be a number of stops within ±64");
   }
 
   // Lighting basis first: a misspelt name should fail before any pixel is read. order=auto (with

@@ -260,9 +260,19 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
       area[idx] += omega;
     }
   }
+  // A cell finer than the map's texels may hold no texel centre: it takes the radiance in the
+  // direction of its own centre.
   for (size_t idx = 0; idx < area.size(); ++idx) {
-    for (int c = 0; c < 3; ++c)
-      lin[3 * idx + size_t(c)] = area[idx] > 0.0 ? lin[3 * idx + size_t(c)] / area[idx] : 0.0;
+    if (area[idx] > 0.0) {
+      for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
+    } else {
+      const int i = int(idx / size_t(s)), j = int(idx % size_t(s));
+      const double lat = latitudeOfRow(i + 0.5, s), lon = kPi * (1.0 - 2.0 * (j + 0.5) / s);
+      const glm::vec3 L =
+          env.lookup(glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)),
+                               float(std::cos(lon) * std::cos(lat))));
+      lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
+    }
   }
   global_.assign(size_t(3 * k * k), 0.0f);
   rgbMoments(basis, basis, lin, k, global_.data());
@@ -273,16 +283,20 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
   std::vector<SubCell> subs;
   subs.reserve(size_t(sq) * size_t(sq));
   for (int a = 0; a < sq; ++a) {
-    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq), mid = latitudeOfRow(a + 0.5, sq);
+    const double top = latitudeOfRow(a, sq), bottom = latitudeOfRow(a + 1, sq),
+                 mid = latitudeOfRow(a + 0.5, sq);
     const double omega = 2.0 * kPi / sq * (std::sin(top) - std::sin(bottom));
-    const double cos2 = 0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
-    const double sincos = 0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
+    const double cos2 =
+        0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
+    const double sincos =
+        0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
     for (int b = 0; b < sq; ++b) {
       const double left = kPi * (1.0 - 2.0 * b / sq), right = kPi * (1.0 - 2.0 * (b + 1) / sq);
       const double lon = 0.5 * (left + right);
       const glm::dvec3 m((std::cos(right) - std::cos(left)) * cos2, (left - right) * sincos,
                          (std::sin(left) - std::sin(right)) * cos2);
-      const glm::dvec3 north(-std::sin(lon) * std::sin(mid), std::cos(mid), -std::cos(lon) * std::sin(mid));
+      const glm::dvec3 north(-std::sin(lon) * std::sin(mid), std::cos(mid),
+                             -std::cos(lon) * std::sin(mid));
       const glm::dvec3 east(std::cos(lon), 0.0, -std::sin(lon));
       subs.push_back({glm::vec3(m / omega), glm::vec3(north * (0.5 * (top - bottom))),
                       glm::vec3(east * (0.5 * (left - right) * std::cos(mid))), float(omega),
@@ -404,17 +418,22 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
         glm::dvec3 moment(0.0);
         for (int gi = 0; gi < 4; ++gi) {
           for (int gj = 0; gj < 4; ++gj) {
-            const double u = uc + 0.5 * (u1 - u0) * kNodes[gi], v = vc + 0.5 * (v1 - v0) * kNodes[gj];
+            const double u = uc + 0.5 * (u1 - u0) * kNodes[gi],
+                         v = vc + 0.5 * (v1 - v0) * kNodes[gj];
             const double r2 = 1.0 + u * u + v * v;
-            const double jac = 0.25 * (u1 - u0) * (v1 - v0) * kWeights[gi] * kWeights[gj] / (r2 * std::sqrt(r2));
+            const double jac =
+                0.25 * (u1 - u0) * (v1 - v0) * kWeights[gi] * kWeights[gj] / (r2 * std::sqrt(r2));
             moment += glm::dvec3(cubeDirection(f, u, v)) * jac;
           }
         }
         const double omega = cubeSolidAngle(u0, v0, u1, v1);
-        const glm::dvec3 du = 0.5 * (glm::dvec3(cubeDirection(f, u1, vc)) - glm::dvec3(cubeDirection(f, u0, vc)));
-        const glm::dvec3 dv = 0.5 * (glm::dvec3(cubeDirection(f, uc, v1)) - glm::dvec3(cubeDirection(f, uc, v0)));
-        subs.push_back({glm::vec3(moment / omega), glm::vec3(dv), glm::vec3(du), float(omega),
-                        uint32_t(size_t(f) * faceTexels + size_t(a / q) * size_t(s) + size_t(b / q))});
+        const glm::dvec3 du =
+            0.5 * (glm::dvec3(cubeDirection(f, u1, vc)) - glm::dvec3(cubeDirection(f, u0, vc)));
+        const glm::dvec3 dv =
+            0.5 * (glm::dvec3(cubeDirection(f, uc, v1)) - glm::dvec3(cubeDirection(f, uc, v0)));
+        subs.push_back(
+            {glm::vec3(moment / omega), glm::vec3(dv), glm::vec3(du), float(omega),
+             uint32_t(size_t(f) * faceTexels + size_t(a / q) * size_t(s) + size_t(b / q))});
       }
     }
   }

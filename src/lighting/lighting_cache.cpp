@@ -59,8 +59,15 @@ bool LightingCache::load(const std::string& key, DiffuseLighting& basis) const {
   std::string storedKey(keyLength, '\0');
   if (!in.read(storedKey.data(), std::streamsize(keyLength)) || storedKey != basis.parameterKey())
     return false;
-  if (!in.read(reinterpret_cast<char*>(&count), sizeof count) || count > (uint64_t(1) << 32))
-    return false;
+  if (!in.read(reinterpret_cast<char*>(&count), sizeof count)) return false;
+  {
+    // Never trust the stored count further than the bytes actually present.
+    const std::streamoff here = in.tellg();
+    in.seekg(0, std::ios::end);
+    const std::streamoff end = in.tellg();
+    in.seekg(here);
+    if (here < 0 || end < here || count != uint64_t(end - here) / sizeof(float)) return false;
+  }
   std::vector<float> state(count);
   if (!in.read(reinterpret_cast<char*>(state.data()), std::streamsize(count * sizeof(float))))
     return false;
@@ -85,8 +92,8 @@ bool LightingCache::store(const std::string& key, const DiffuseLighting& basis) 
     out.write(reinterpret_cast<const char*>(&count), sizeof count);
     out.write(reinterpret_cast<const char*>(state.data()),
               std::streamsize(state.size() * sizeof(float)));
+    out.close();
     if (!out) {
-      out.close();
       fs::remove(temp, ec);
       return false;
     }

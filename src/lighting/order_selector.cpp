@@ -37,6 +37,10 @@ std::vector<OrderEstimate> estimateOrders(const std::string& basis, const Enviro
   }
   if (basis == "cheb-latlong" || basis == "cheb-face" || basis == "cheb-local") {
     ParamSet p = params;
+    if (p.getString("brdf", "lambert") != "lambert") {
+      throw Error("lighting", "order=auto estimates Lambertian truncation only; give brdf=" +
+                                  p.getString("brdf", "") + " an explicit order");
+    }
     ChebParams defaults;
     if (basis == "cheb-face") defaults.samples = 8, defaults.subsamples = 4;
     if (basis == "cheb-local") defaults.samples = 8;

@@ -138,7 +138,7 @@ size_t RadianceCells::cellCount() const {
 }
 
 size_t RadianceCells::floatsStored() const {
-  return cellCount() * 16 + texels_.size() * 12;
+  return cellCount() * 24 + texels_.size() * 12;
 }
 
 float RadianceCells::clippedMean(float c, float a, float b) {

@@ -1,6 +1,7 @@
 #include "lighting/chebyshev.h"
 
 #include <cmath>
+#include <fstream>
 #include <numbers>
 #include <random>
 
@@ -370,6 +371,50 @@ TEST(OrenNayar, FullProductConvergesToTheReference) {
   EXPECT_GT(k4, k1 + 5.0) << "the view-dependent BRDF needs more than T_00";
   EXPECT_GE(k8, k4 - 0.5);
   EXPECT_GT(k16, 45.0);
+}
+
+}  // namespace
+}  // namespace compose::lighting
+
+namespace compose::lighting {
+namespace {
+
+// A grid finer than the map: cells holding no texel centre take the radiance in their direction,
+// so no light is lost (white furnace on a 16x8 map with s = 32).
+TEST(Chebyshev, LatLongGridFinerThanTheMapKeepsAllLight) {
+  const Environment env = Environment::constant(glm::vec3(1.0f), 16);
+  auto basis =
+      createLighting("cheb-latlong", ParamSet::parse("order=4,samples=32,rows=9,cols=16", "t"));
+  basis->project(env);
+  for (const auto& n : randomNormals(20, 31)) EXPECT_NEAR(basis->irradiance(n).x, kPi, 1e-5 * kPi);
+}
+
+TEST(OrderSelector, RefusesViewDependentBrdf) {
+  COMPOSE_EXPECT_ERROR(estimateOrders("cheb-local", Environment::constant(glm::vec3(1.0f), 32),
+                                      ParamSet::parse("brdf=oren-nayar", "t")),
+                       "order=auto estimates Lambertian truncation only");
+}
+
+// A cache entry whose stored count does not match its size is a miss, without a huge allocation.
+TEST(LightingCache, LyingCountIsAMiss) {
+  compose::testing::TempDir dir;
+  const Environment env = Environment::constant(glm::vec3(1.0f), 32);
+  const LightingCache cache(dir.path());
+  auto basis = createLighting("cheb-local", ParamSet::parse("rows=5,cols=8", "t"));
+  basis->project(env);
+  const std::string key = LightingCache::key(env, *basis);
+  ASSERT_TRUE(cache.store(key, *basis));
+  {
+    std::fstream f(cache.pathFor(key), std::ios::in | std::ios::out | std::ios::binary);
+    uint64_t keyLength = 0;
+    f.seekg(8);
+    f.read(reinterpret_cast<char*>(&keyLength), sizeof keyLength);
+    const uint64_t lie = 0xFFFFFFFFull;
+    f.seekp(std::streamoff(16 + keyLength));
+    f.write(reinterpret_cast<const char*>(&lie), sizeof lie);
+  }
+  auto again = createLighting("cheb-local", ParamSet::parse("rows=5,cols=8", "t"));
+  EXPECT_FALSE(cache.load(key, *again));
 }
 
 }  // namespace
