@@ -3,6 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
 #include <atomic>
 #include <filesystem>
 #include <fstream>
@@ -34,6 +40,19 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// `count` unit vectors spread uniformly over the sphere, reproducible from `seed`.
+inline std::vector<glm::vec3> randomNormals(int count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g;
+  std::vector<glm::vec3> out;
+  while (int(out.size()) < count) {
+    const glm::vec3 v(g(rng), g(rng), g(rng));
+    const float len = std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+    if (len > 1e-3f) out.push_back(v / len);
+  }
+  return out;
+}
 
 inline void writeText(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);

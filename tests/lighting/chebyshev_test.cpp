@@ -18,16 +18,7 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-std::vector<glm::vec3> randomNormals(int count, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<float> g;
-  std::vector<glm::vec3> out;
-  while (int(out.size()) < count) {
-    const glm::vec3 v(g(rng), g(rng), g(rng));
-    if (glm::length(v) > 1e-3f) out.push_back(glm::normalize(v));
-  }
-  return out;
-}
+using compose::testing::randomNormals;
 
 // A smooth sky with a small, very bright sun: the hard case for low-order representations.
 Environment sunAndSky(int width, float sun) {

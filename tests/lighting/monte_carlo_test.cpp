@@ -18,17 +18,7 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-std::vector<glm::vec3> randomNormals(int count, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<float> g;
-  std::vector<glm::vec3> out;
-  while (int(out.size()) < count) {
-    glm::vec3 v(g(rng), g(rng), g(rng));
-    const float len = std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
-    if (len > 1e-3f) out.push_back(v / len);
-  }
-  return out;
-}
+using compose::testing::randomNormals;
 
 // A w x w/2 map: radiance(direction of texel centre), then `edit` may change single texels.
 template <class F, class G>
