@@ -27,4 +27,10 @@ class ExactLighting final : public DiffuseLighting {
   RadianceCells cells_;
 };
 
+// The Oren–Nayar counterpart of the exact reference: π L_o / ρ seen from unit direction `view`,
+// by brute force over every texel (texel centres), with the BRDF evaluated per texel in the same
+// local frame as ChebLocalLighting (east = ∂n/∂φ, north = n x east). O(texels) per call.
+glm::dvec3 orenNayarReference(const Environment& environment, double sigma, const glm::vec3& n,
+                              const glm::vec3& view);
+
 }  // namespace compose::lighting

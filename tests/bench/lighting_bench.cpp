@@ -140,30 +140,6 @@ double timeCmgen(const fs::path& file, const fs::path& scratch) {
   return best;
 }
 
-// Oren–Nayar (rough diffuse, view dependent) reference: every texel, BRDF per texel in the local
-// frame the local basis uses.
-glm::dvec3 orenNayarReference(const lighting::Environment& env, double sigma, const glm::vec3& n,
-                              const glm::vec3& view) {
-  const float h = std::sqrt(n.x * n.x + n.z * n.z);
-  const glm::vec3 east = h > 1e-6f ? glm::vec3(n.z / h, 0.0f, -n.x / h) : glm::vec3(1, 0, 0);
-  const glm::vec3 north = glm::cross(n, east);
-  const double thetaOut = std::acos(std::clamp(double(glm::dot(n, view)), 0.0, 1.0));
-  const double phiOut = std::atan2(double(glm::dot(north, view)), double(glm::dot(east, view)));
-  glm::dvec3 e(0.0);
-  for (int y = 0; y < env.height(); ++y) {
-    for (int x = 0; x < env.width(); ++x) {
-      const glm::vec3 w = env.direction(x, y);
-      const double c = glm::dot(n, w);
-      if (c <= 0.0) continue;
-      const double phiIn = std::atan2(double(glm::dot(north, w)), double(glm::dot(east, w)));
-      e += glm::dvec3(env.radiance(x, y)) * env.rowSolidAngle(y) * c *
-           lighting::ChebLocalLighting::orenNayar(sigma, std::acos(std::min(c, 1.0)), phiIn,
-                                                  thetaOut, phiOut);
-    }
-  }
-  return e;
-}
-
 struct OrenNayarRow {
   std::string env, params;
   double snrDb = 0, precomputeMs = 0;
@@ -333,8 +309,8 @@ int main(int argc, char** argv) {
       std::vector<glm::dvec3> onRef(picks.size());
       parallelFor(0, int64_t(picks.size()), [&](int64_t i) {
         const glm::vec3 n = normals[picks[size_t(i)]];
-        onRef[size_t(i)] =
-            orenNayarReference(env, kSigma, n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f));
+        onRef[size_t(i)] = lighting::orenNayarReference(
+            env, kSigma, n, glm::vec3(0.0f, 0.0f, n.z >= 0.0f ? 1.0f : -1.0f));
       });
       for (const char* params : {"lambert", "order=1,samples=8", "order=2,samples=8",
                                  "order=4,samples=8", "order=8,samples=8", "order=16,samples=16"}) {

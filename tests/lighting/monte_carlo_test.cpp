@@ -10,6 +10,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/parallel.h"
+#include "environment_util.h"
 #include "lighting/exact.h"
 #include "test_util.h"
 
@@ -20,22 +21,7 @@ constexpr double kPi = std::numbers::pi;
 
 using compose::testing::randomNormals;
 
-// A w x w/2 map: radiance(direction of texel centre), then `edit` may change single texels.
-template <class F, class G>
-Environment makeEnvironment(int width, F radiance, G edit) {
-  const Environment probe = Environment::constant(glm::vec3(0.0f), width);
-  Image img(width, width / 2, 3);
-  for (int y = 0; y < img.height; ++y) {
-    for (int x = 0; x < img.width; ++x) {
-      const glm::vec3 L = radiance(probe.direction(x, y));
-      img.at(x, y)[0] = L.x;
-      img.at(x, y)[1] = L.y;
-      img.at(x, y)[2] = L.z;
-    }
-  }
-  edit(img);
-  return Environment::fromLatLong(img);
-}
+using compose::testing::makeEnvironment;
 
 void setTexel(Image& img, int x, int y, glm::vec3 L) {
   img.at(x, y)[0] = L.x;

@@ -6,6 +6,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "environment_util.h"
 #include "lighting/exact.h"
 #include "test_util.h"
 
@@ -16,21 +17,7 @@ constexpr double kPi = std::numbers::pi;
 
 using compose::testing::randomNormals;
 
-// An environment whose radiance is a known function of direction, on a w x w/2 map.
-template <class F>
-Environment analyticEnvironment(int width, F radiance) {
-  const Environment probe = Environment::constant(glm::vec3(0.0f), width);
-  Image img(width, width / 2, 3);
-  for (int y = 0; y < img.height; ++y) {
-    for (int x = 0; x < img.width; ++x) {
-      const glm::vec3 L = radiance(probe.direction(x, y));
-      img.at(x, y)[0] = L.x;
-      img.at(x, y)[1] = L.y;
-      img.at(x, y)[2] = L.z;
-    }
-  }
-  return Environment::fromLatLong(img);
-}
+using compose::testing::analyticEnvironment;
 
 TEST(Sh, CosineLobeWeightsMatchRamamoorthiHanrahan) {
   EXPECT_DOUBLE_EQ(shCosineLobe(0), kPi);
