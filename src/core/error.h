@@ -37,6 +37,13 @@ class Error : public std::runtime_error {
   std::filesystem::path file_;
 };
 
+// Bad command-line usage (an option out of range, a malformed value): exit status 2, reported
+// before any file is read. Its stage is "cli".
+class UsageError : public Error {
+ public:
+  explicit UsageError(const std::string& what) : Error("cli", what) {}
+};
+
 namespace detail {
 [[noreturn]] inline void checkFailed(const char* cond, const char* file, int line) {
   std::fprintf(stderr, "compose: internal error: check failed: %s at %s:%d\n", cond, file, line);

@@ -1,0 +1,69 @@
+#include "app/cli.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace compose::app {
+
+ProgressPrinter::ProgressPrinter(const Globals& globals)
+    : globals_(globals), tty_(::isatty(STDERR_FILENO) != 0) {}
+
+void ProgressPrinter::operator()(std::string_view stage, double fraction) {
+  if (globals_.quiet || !tty_) return;
+  std::lock_guard lock(mutex_);
+  std::fprintf(stderr, "\r  %-10.*s %3d%%", int(stage.size()), stage.data(),
+               int(fraction * 100.0 + 0.5));
+  if (fraction >= 1.0) std::fprintf(stderr, "\r\033[K");
+  std::fflush(stderr);
+}
+
+const std::vector<Command>& commands() {
+  static const std::vector<Command> list = {};
+  return list;
+}
+
+glm::dvec2 parsePair(const std::string& text, const std::string& option) {
+  std::istringstream in(text);
+  double a = 0, b = 0;
+  char comma = 0;
+  if (!(in >> a >> comma >> b) || comma != ',' || !in.eof()) {
+    throw UsageError(option + " expects two numbers as X,Y, got '" + text + "'");
+  }
+  return {a, b};
+}
+
+glm::vec3 parseColour(const std::string& text, const std::string& option) {
+  std::istringstream in(text);
+  float r = 0, g = 0, b = 0;
+  char c1 = 0, c2 = 0;
+  if ((in >> r) && in.eof()) return glm::vec3(r);
+  in.clear();
+  in.str(text);
+  if (!(in >> r >> c1 >> g >> c2 >> b) || c1 != ',' || c2 != ',' || !in.eof()) {
+    throw UsageError(option + " expects one value or R,G,B, got '" + text + "'");
+  }
+  return {r, g, b};
+}
+
+double parseNumber(const std::string& text, const std::string& option) {
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used != text.size()) throw std::invalid_argument(text);
+    return v;
+  } catch (const std::exception&) {
+    throw UsageError(option + " expects a number, got '" + text + "'");
+  }
+}
+
+std::string join(const std::vector<std::string>& items, const std::string& separator) {
+  std::string s;
+  for (const auto& i : items) s += (s.empty() ? "" : separator) + i;
+  return s;
+}
+
+}  // namespace compose::app

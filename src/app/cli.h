@@ -1,0 +1,66 @@
+// Shared pieces of the compose command line: the command list, option parsers and the progress
+// printer. Commands only parse options, load, call the libraries and save; the work is elsewhere.
+#pragma once
+
+#include <functional>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/progress.h"
+
+namespace compose::app {
+
+// Options every command honours.
+struct Globals {
+  bool quiet = false;
+};
+
+// Progress on stderr, one line per stage, redrawn in place on a terminal; nothing when quiet or
+// when stderr is not a terminal.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(const Globals& globals);
+  void operator()(std::string_view stage, double fraction);
+  Progress callback() {
+    return [this](std::string_view stage, double fraction) { (*this)(stage, fraction); };
+  }
+
+ private:
+  const Globals& globals_;
+  bool tty_;
+  std::mutex mutex_;
+};
+
+// What a command runs once the command line is parsed; returns the exit status. Bad input throws
+// compose::Error (exit 1) or compose::UsageError (exit 2).
+using Runner = std::function<int()>;
+
+// A command adds its options (and its --help text with a worked example) to `command`, an
+// already created subcommand of `compose`, and returns its runner.
+struct Command {
+  std::string name;
+  std::string summary;
+  Runner (*setup)(CLI::App& command, const Globals& globals);
+};
+
+// The explicit list of `compose <command>` subcommands.
+const std::vector<Command>& commands();
+
+// The one-shot `compose --plate ... --object ...`: its options live on the top-level app.
+Runner setupCompose(CLI::App& app, const Globals& globals);
+
+// "X,Y" → two numbers; throws UsageError naming `option`.
+glm::dvec2 parsePair(const std::string& text, const std::string& option);
+// "V" or "R,G,B" → three numbers; throws UsageError naming `option`.
+glm::vec3 parseColour(const std::string& text, const std::string& option);
+// A number, or throws UsageError naming `option`.
+double parseNumber(const std::string& text, const std::string& option);
+std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
+
+}  // namespace compose::app

@@ -1,0 +1,112 @@
+// The one-shot command: compose --plate PHOTO --object MESH [--env ENV] [--out BASE].
+#include <cstdio>
+
+#include "app/cli.h"
+#include "color/color.h"
+#include "core/error.h"
+#include "lighting/lighting.h"
+#include "pipeline/compose_job.h"
+
+namespace compose::app {
+
+namespace {
+
+struct ComposeOptions {
+  pipeline::ComposeJob job;
+  std::string place, albedo, lightingParams, exposure = "auto";
+  double focal35 = 0.0;
+  bool explain = false, noCache = false;
+};
+
+}  // namespace
+
+Runner setupCompose(CLI::App& app, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  pipeline::ComposeJob& job = o->job;
+  app.add_option("--plate", job.plate, "Background photograph (JPEG, PNG, TIFF, EXR, ...)");
+  app.add_option("--object", job.object, "Mesh to insert (Wavefront OBJ)");
+  app.add_option(
+      "--env", job.environment,
+      "HDR environment, lat-long (equirectangular) map [default: the forest sample HDRI]");
+  app.add_option("--out", job.output, "Output base path; writes BASE.exr and BASE.jpg (or .png)")
+      ->capture_default_str();
+  app.add_option("--lighting", job.lighting, "Lighting basis: " + join(lighting::lightingNames()))
+      ->capture_default_str();
+  app.add_option("--lighting-params", o->lightingParams,
+                 "Basis parameters as key=value,... (cheb-*: order, samples, rows, cols, "
+                 "subsamples; sh: order=0..8; mc: samples, seed)");
+  app.add_option("--place", o->place,
+                 "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");
+  app.add_option("--scale", job.placement.heightFraction,
+                 "Object height as a fraction of the plate height")
+      ->capture_default_str();
+  app.add_option("--yaw", job.placement.yawDegrees,
+                 "Turn the object about the vertical axis, degrees")
+      ->capture_default_str();
+  app.add_option("--env-yaw", job.environmentYawDegrees,
+                 "Turn the environment about the vertical axis, degrees")
+      ->capture_default_str();
+  app.add_option("--focal35", o->focal35,
+                 "35 mm equivalent focal length of the plate [default: EXIF, else 50]");
+  app.add_option("--camera-height", job.camera.height, "Camera height above the ground, metres")
+      ->capture_default_str();
+  app.add_option("--pitch", job.camera.pitchDegrees, "Camera tilt down, degrees")
+      ->capture_default_str();
+  app.add_option("--albedo", o->albedo,
+                 "Object albedo, one value or R,G,B in the working space [default: 0.5]");
+  app.add_option("--exposure", o->exposure,
+                 "Exposure of the object in stops, or 'auto': match the environment to the plate")
+      ->capture_default_str();
+  app.add_option("--samples", job.samplesPerAxis, "Anti-aliasing: N x N samples per pixel")
+      ->capture_default_str();
+  app.add_option("--plate-space", job.plateSpace,
+                 "Colour space of the plate [default: from the file]");
+  app.add_option("--env-space", job.environmentSpace,
+                 "Colour space of the environment [default: from the file]");
+  app.add_option("--display", job.display,
+                 "OpenColorIO display for the JPEG/PNG [default: the config's]");
+  app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
+  app.add_option("--cache", job.lightingCache, "Folder for cached lighting projections")
+      ->capture_default_str();
+  app.add_flag("--no-cache", o->noCache, "Neither read nor write the lighting cache");
+  app.add_flag("--explain", o->explain, "Say which stages run or are skipped and why, then exit");
+
+  return [o, &app, &globals]() -> int {
+    pipeline::ComposeJob& j = o->job;
+    if (j.plate.empty() || j.object.empty()) {
+      throw UsageError(
+          "the one-shot command needs --plate and --object (or a command; see "
+          "compose --help)");
+    }
+    if (!o->place.empty()) j.placement.imagePoint = parsePair(o->place, "--place");
+    if (!o->albedo.empty()) j.albedo = parseColour(o->albedo, "--albedo");
+    if (app.count("--focal35")) j.camera.focal35mm = o->focal35;
+    j.lightingParams = o->lightingParams;
+    if (o->noCache) j.lightingCache.clear();
+    if (o->exposure != "auto") j.exposureStops = parseNumber(o->exposure, "--exposure");
+
+    if (o->explain) {
+      for (const auto& s : pipeline::plan(j)) {
+        std::printf("%-10s %-4s %s\n", s.name.c_str(), s.runs ? "run" : "skip", s.reason.c_str());
+      }
+      return 0;
+    }
+
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    ProgressPrinter printer(globals);
+    const auto result = pipeline::runCompose(j, colors, printer.callback());
+    if (!globals.quiet) {
+      for (const auto& note : result.notes)
+        std::fprintf(stderr, "compose: note: %s\n", note.c_str());
+      for (const auto& s : result.stages) {
+        if (s.runs)
+          std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
+                       s.reason.c_str());
+      }
+    }
+    std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());
+    return 0;
+  };
+}
+
+}  // namespace compose::app
