@@ -1,0 +1,229 @@
+#include "calib/lens.h"
+
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/output_files.h"
+
+namespace compose::calib {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+double coefficient(const std::vector<double>& d, size_t i) {
+  return i < d.size() ? d[i] : 0.0;
+}
+
+// Brown–Conrady (OpenCV): undistorted normalised (x, y) → distorted.
+glm::dvec2 distortRectilinear(const std::vector<double>& d, glm::dvec2 p) {
+  const double k1 = coefficient(d, 0), k2 = coefficient(d, 1), p1 = coefficient(d, 2),
+               p2 = coefficient(d, 3), k3 = coefficient(d, 4);
+  const double r2 = p.x * p.x + p.y * p.y;
+  const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+  return {p.x * radial + 2.0 * p1 * p.x * p.y + p2 * (r2 + 2.0 * p.x * p.x),
+          p.y * radial + p1 * (r2 + 2.0 * p.y * p.y) + 2.0 * p2 * p.x * p.y};
+}
+
+// θ → θ_d of OpenCV's fisheye model.
+double distortTheta(const std::vector<double>& d, double theta) {
+  const double t2 = theta * theta;
+  return theta * (1.0 + t2 * (coefficient(d, 0) +
+                              t2 * (coefficient(d, 1) +
+                                    t2 * (coefficient(d, 2) + t2 * coefficient(d, 3)))));
+}
+
+}  // namespace
+
+Lens Lens::fromFieldOfView(int width, int height, double fovDegrees, Projection projection) {
+  Lens lens;
+  lens.width = width;
+  lens.height = height;
+  lens.projection = projection;
+  const double half = 0.5 * fovDegrees * kPi / 180.0;
+  lens.fx = lens.fy =
+      projection == Projection::Rectilinear ? 0.5 * width / std::tan(half) : 0.5 * width / half;
+  lens.cx = 0.5 * width;
+  lens.cy = 0.5 * height;
+  lens.source = "field of view " + std::to_string(fovDegrees) + " degrees";
+  return lens;
+}
+
+bool Lens::hasDistortion() const {
+  for (double d : distortion)
+    if (d != 0.0) return true;
+  return false;
+}
+
+bool Lens::direction(double px, double py, glm::dvec3& dir) const {
+  const glm::dvec2 distorted((px - cx) / fx, (py - cy) / fy);
+  if (projection == Projection::Rectilinear) {
+    glm::dvec2 p = distorted;
+    if (hasDistortion()) {
+      // Fixed-point inversion, as OpenCV's undistortPoints, checked for convergence.
+      bool converged = false;
+      for (int it = 0; it < 100 && !converged; ++it) {
+        const glm::dvec2 err = distortRectilinear(distortion, p) - distorted;
+        p -= err;
+        converged = std::abs(err.x) + std::abs(err.y) < 1e-12;
+      }
+      if (!converged || !std::isfinite(p.x) || !std::isfinite(p.y)) return false;
+    }
+    dir = glm::normalize(glm::dvec3(p.x, -p.y, -1.0));
+    return true;
+  }
+  const double thetaD = glm::length(distorted);
+  if (thetaD < 1e-15) {
+    dir = glm::dvec3(0.0, 0.0, -1.0);
+    return true;
+  }
+  double theta = thetaD;
+  if (hasDistortion()) {
+    // Newton on θ_d(θ) = target; the derivative is computed numerically.
+    bool converged = false;
+    for (int it = 0; it < 50 && !converged; ++it) {
+      const double f = distortTheta(distortion, theta) - thetaD;
+      const double h = 1e-7;
+      const double df =
+          (distortTheta(distortion, theta + h) - distortTheta(distortion, theta - h)) / (2.0 * h);
+      if (!(df > 0.0)) return false;
+      theta -= f / df;
+      converged = std::abs(f) < 1e-13;
+    }
+    if (!converged) return false;
+  }
+  if (!(theta >= 0.0 && theta < kPi)) return false;
+  const double s = std::sin(theta) / thetaD;
+  dir = glm::dvec3(distorted.x * s, -distorted.y * s, -std::cos(theta));
+  return true;
+}
+
+bool Lens::project(const glm::dvec3& d, glm::dvec2& pixel) const {
+  if (projection == Projection::Rectilinear) {
+    if (!(d.z < 0.0)) return false;
+    glm::dvec2 p(d.x / -d.z, -d.y / -d.z);
+    if (hasDistortion()) p = distortRectilinear(distortion, p);
+    pixel = glm::dvec2(fx * p.x + cx, fy * p.y + cy);
+    return std::isfinite(pixel.x) && std::isfinite(pixel.y);
+  }
+  const double r = std::sqrt(d.x * d.x + d.y * d.y);
+  const double theta = std::atan2(r, -d.z);
+  if (!(theta < kPi)) return false;
+  if (r < 1e-300) {
+    pixel = glm::dvec2(cx, cy);
+    return true;
+  }
+  const double thetaD = hasDistortion() ? distortTheta(distortion, theta) : theta;
+  pixel = glm::dvec2(fx * thetaD * d.x / r + cx, fy * thetaD * -d.y / r + cy);
+  return std::isfinite(pixel.x) && std::isfinite(pixel.y);
+}
+
+Lens Lens::resized(int newWidth, int newHeight) const {
+  Lens l = *this;
+  const double sx = double(newWidth) / width, sy = double(newHeight) / height;
+  l.width = newWidth;
+  l.height = newHeight;
+  l.fx *= sx;
+  l.cx *= sx;
+  l.fy *= sy;
+  l.cy *= sy;
+  return l;
+}
+
+double Lens::horizontalFovDegrees() const {
+  glm::dvec3 left, right;
+  if (!direction(0.0, cy, left) || !direction(double(width), cy, right)) return 0.0;
+  return std::acos(std::clamp(glm::dot(left, right), -1.0, 1.0)) * 180.0 / kPi;
+}
+
+void Lens::validate(const fs::path& file) const {
+  auto fail = [&](const std::string& what) { throw Error("calib", what, file); };
+  if (width <= 0 || height <= 0) fail("lens image size must be positive");
+  if (!(fx > 0.0 && fy > 0.0 && std::isfinite(fx) && std::isfinite(fy)))
+    fail("focal lengths fx, fy must be positive numbers of pixels");
+  if (!std::isfinite(cx) || !std::isfinite(cy)) fail("principal point cx, cy must be finite");
+  const size_t maxCoefficients = projection == Projection::Rectilinear ? 5 : 4;
+  if (distortion.size() > maxCoefficients) {
+    fail(std::string(projection == Projection::Rectilinear ? "rectilinear" : "equidistant") +
+         " lenses take at most " + std::to_string(maxCoefficients) +
+         " distortion coefficients, got " + std::to_string(distortion.size()));
+  }
+  for (double d : distortion)
+    if (!std::isfinite(d)) fail("distortion coefficients must be finite");
+}
+
+Lens readLens(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
+  std::ifstream in(file);
+  if (!in) throw Error("calib", "cannot open the lens file", file);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error("calib", std::string("not a valid JSON lens file: ") + e.what(), file);
+  }
+  if (!j.is_object()) throw Error("calib", "lens file must hold a JSON object", file);
+  auto number = [&](const char* key) -> double {
+    if (!j.contains(key) || !j[key].is_number())
+      throw Error("calib", std::string("lens file needs a number '") + key + "'", file);
+    return j[key].get<double>();
+  };
+  Lens lens;
+  const std::string model = j.value("model", std::string("rectilinear"));
+  if (model == "rectilinear") {
+    lens.projection = Projection::Rectilinear;
+  } else if (model == "equidistant") {
+    lens.projection = Projection::Equidistant;
+  } else {
+    throw Error("calib", "unknown lens model '" + model + "'; valid: rectilinear, equidistant",
+                file);
+  }
+  const double w = number("width"), h = number("height");
+  if (!(w >= 1 && w <= 1e6 && h >= 1 && h <= 1e6 && w == std::floor(w) && h == std::floor(h)))
+    throw Error("calib", "lens width and height must be whole numbers of pixels", file);
+  lens.width = int(w);
+  lens.height = int(h);
+  lens.fx = number("fx");
+  lens.fy = number("fy");
+  lens.cx = number("cx") + 0.5;  // OpenCV's convention → continuous coordinates
+  lens.cy = number("cy") + 0.5;
+  if (j.contains("dist")) {
+    if (!j["dist"].is_array()) throw Error("calib", "'dist' must be an array of numbers", file);
+    for (const auto& v : j["dist"]) {
+      if (!v.is_number()) throw Error("calib", "'dist' must be an array of numbers", file);
+      lens.distortion.push_back(v.get<double>());
+    }
+  }
+  if (j.contains("rms")) lens.rms = number("rms");
+  lens.source = "lens file " + file.string();
+  lens.validate(file);
+  return lens;
+}
+
+void writeLens(const fs::path& file, const Lens& lens) {
+  lens.validate(file);
+  nlohmann::ordered_json j;
+  j["model"] = lens.projection == Projection::Rectilinear ? "rectilinear" : "equidistant";
+  j["width"] = lens.width;
+  j["height"] = lens.height;
+  j["fx"] = lens.fx;
+  j["fy"] = lens.fy;
+  j["cx"] = lens.cx - 0.5;
+  j["cy"] = lens.cy - 0.5;
+  j["dist"] = lens.distortion;
+  j["rms"] = lens.rms;
+  j["convention"] =
+      "pixels as OpenCV: (0, 0) is the centre of the top-left pixel; camera looks along -Z, +Y up";
+  writeTextFile(file, j.dump(2) + "\n", "calib");
+}
+
+}  // namespace compose::calib

@@ -1,0 +1,73 @@
+// Lens: the intrinsics of a camera (focal lengths, principal point, distortion) and the mapping
+// between pixels and directions in the camera's frame. Used by the renderer (the plate camera),
+// the virtual camera, stitching and lens calibration, so that all of them agree on one model.
+//
+// Frames and pixels:
+//  * Camera frame: +X right, +Y up, the camera looks along -Z (OpenGL / glTF, as the world).
+//  * Pixels: continuous coordinates with the origin at the top-left CORNER of the image, +y down;
+//    pixel (x, y) covers [x, x+1) x [y, y+1) and its centre is (x + 0.5, y + 0.5).
+//  * The principal point (cx, cy) and focal lengths (fx, fy) are stored in this continuous
+//    convention. OpenCV puts pixel centres on integers, so cx_opencv = cx - 0.5 (likewise cy);
+//    the JSON file (readLens / writeLens) stores OpenCV's convention, as OpenCV users expect.
+//
+// Projections (r is the distance from the principal point in normalised coordinates, θ the angle
+// between the ray and the optical axis):
+//  * Rectilinear (pinhole) with the Brown–Conrady distortion of OpenCV's calibrateCamera:
+//    x' = x (1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2x²), and likewise y'
+//    (distortion = {k1, k2, p1, p2, k3}).
+//  * Equidistant fisheye as OpenCV's fisheye model: r_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)
+//    (distortion = {k1, k2, k3, k4}); no distortion gives the ideal equidistant lens r = f θ.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+namespace compose::calib {
+
+enum class Projection { Rectilinear, Equidistant };
+
+struct Lens {
+  int width = 0, height = 0;  // image size the intrinsics belong to
+  double fx = 0.0, fy = 0.0;  // focal lengths in pixels
+  double cx = 0.0, cy = 0.0;  // principal point, continuous pixel coordinates (see above)
+  Projection projection = Projection::Rectilinear;
+  std::vector<double> distortion;  // see above; empty = none
+  double rms = 0.0;                // reprojection error of the calibration, pixels (0: unknown)
+  std::string source;              // where the intrinsics came from, for messages
+
+  // An ideal lens (no distortion, principal point at the centre) with the given horizontal field
+  // of view in degrees.
+  static Lens fromFieldOfView(int width, int height, double horizontalFovDegrees,
+                              Projection projection = Projection::Rectilinear);
+
+  // Unit direction in the camera frame of the ray through continuous pixel (px, py). Returns
+  // false where no ray exists (beyond a fisheye's 180° or a distortion model's valid range).
+  bool direction(double px, double py, glm::dvec3& dir) const;
+  // Continuous pixel of a direction in the camera frame (need not be unit). Returns false for a
+  // direction the lens cannot see (behind a rectilinear lens, beyond 180° for a fisheye). The
+  // pixel may lie outside the image; the caller checks.
+  bool project(const glm::dvec3& dir, glm::dvec2& pixel) const;
+
+  bool hasDistortion() const;
+  // The same lens for the image resized to width x height (focal lengths and principal point
+  // scale with the image; distortion is in normalised coordinates and does not change).
+  Lens resized(int newWidth, int newHeight) const;
+  // Horizontal field of view in degrees across the image's width through the principal point.
+  double horizontalFovDegrees() const;
+
+  // Throws compose::Error (stage "calib") if a value is not usable; `file` names the source.
+  void validate(const std::filesystem::path& file = {}) const;
+};
+
+// Lens file (JSON): {"model": "rectilinear"|"equidistant", "width", "height", "fx", "fy", "cx",
+// "cy", "dist": [...], "rms"}, with cx, cy in OpenCV's pixel convention. Errors throw
+// compose::Error (stage "calib") naming the file and the field.
+Lens readLens(const std::filesystem::path& file);
+// Written atomically (temporary file + rename).
+void writeLens(const std::filesystem::path& file, const Lens& lens);
+
+}  // namespace compose::calib

@@ -1,0 +1,134 @@
+#include "core/output_files.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
+#include "core/error.h"
+
+namespace compose {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// A name unique to this process and call, in the destination's folder, keeping the extension.
+fs::path temporaryNear(const fs::path& destination, const char* tag) {
+  static std::atomic<unsigned> counter{0};
+  fs::path temp = destination;
+  // Appended piece by piece: GCC 12 warns (-Wrestrict, falsely) on a chain of operator+.
+  std::string name(1, '.');
+  name.append(destination.stem().string()).append(1, '.').append(tag).append(1, '-');
+  name.append(std::to_string(::getpid())).append(1, '-').append(std::to_string(counter++));
+  name.append(destination.extension().string());
+  temp.replace_filename(name);
+  return temp;
+}
+
+}  // namespace
+
+std::string withSystemReason(const std::string& what, int error) {
+  return what + ": " + std::strerror(error);
+}
+
+OutputFiles::~OutputFiles() {
+  if (committed_) return;
+  std::error_code ec;
+  for (const Entry& e : entries_) fs::remove(e.temporary, ec);
+}
+
+fs::path OutputFiles::add(const fs::path& destination) {
+  std::error_code ec;
+  if (destination.filename().empty())
+    throw Error(stage_, "output path names a folder, not a file", destination);
+  if (fs::is_directory(destination, ec))
+    throw Error(stage_, "output path is an existing folder", destination);
+  const fs::path dir = destination.parent_path();
+  if (!dir.empty() && !fs::exists(dir, ec)) {
+    fs::create_directories(dir, ec);
+    if (ec) throw Error(stage_, "cannot create the output folder: " + ec.message(), dir);
+  }
+  if (!dir.empty() && !fs::is_directory(dir, ec))
+    throw Error(stage_, "the output folder is not a folder", dir);
+  Entry e{temporaryNear(destination, "partial"), destination};
+  entries_.push_back(e);
+  return e.temporary;
+}
+
+void OutputFiles::commit() {
+  COMPOSE_CHECK(!committed_);
+  // Keep the previous outputs under backup names (hard links: the originals stay in place until
+  // they are replaced), so that a failed move can put them back.
+  struct Moved {
+    fs::path destination, backup;
+    bool hadPrevious;
+  };
+  std::vector<Moved> moved;
+  auto rollback = [&] {
+    std::error_code ec;
+    for (auto it = moved.rbegin(); it != moved.rend(); ++it) {
+      if (it->hadPrevious) {
+        fs::rename(it->backup, it->destination, ec);
+      } else {
+        fs::remove(it->destination, ec);
+      }
+    }
+    for (const Entry& e : entries_) fs::remove(e.temporary, ec);
+  };
+  std::vector<fs::path> backups;
+  for (const Entry& e : entries_) {
+    std::error_code ec;
+    if (fs::is_directory(e.destination, ec)) {
+      rollback();
+      throw Error(stage_, "output path is an existing folder", e.destination);
+    }
+    const bool hadPrevious = fs::exists(fs::symlink_status(e.destination, ec));
+    fs::path backup;
+    if (hadPrevious) {
+      backup = temporaryNear(e.destination, "previous");
+      if (::link(e.destination.c_str(), backup.c_str()) != 0) {
+        // No hard links on this file system: fall back to a copy.
+        fs::copy_file(e.destination, backup, fs::copy_options::overwrite_existing, ec);
+        if (ec) {
+          const int err = ec.value();
+          rollback();
+          throw Error(stage_, withSystemReason("cannot keep the previous file", err),
+                      e.destination);
+        }
+      }
+    }
+    if (::rename(e.temporary.c_str(), e.destination.c_str()) != 0) {
+      const int err = errno;
+      if (hadPrevious) fs::remove(backup, ec);
+      rollback();
+      throw Error(stage_, withSystemReason("cannot move the finished file into place", err),
+                  e.destination);
+    }
+    moved.push_back({e.destination, backup, hadPrevious});
+  }
+  committed_ = true;
+  std::error_code ec;
+  for (const Moved& m : moved) {
+    if (m.hadPrevious) fs::remove(m.backup, ec);
+  }
+}
+
+void writeTextFile(const fs::path& file, const std::string& text, const std::string& stage) {
+  OutputFiles outputs(stage);
+  const fs::path temp = outputs.add(file);
+  {
+    errno = 0;
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out) throw Error(stage, withSystemReason("cannot open for writing", errno), file);
+    out << text;
+    out.close();
+    if (!out) throw Error(stage, withSystemReason("cannot write", errno ? errno : EIO), file);
+  }
+  outputs.commit();
+}
+
+}  // namespace compose

@@ -1,0 +1,50 @@
+// Output files that appear together or not at all.
+//
+// A command that writes several files (an EXR and a JPEG, a cube map and its preview) must never
+// leave a mix of new and old results, nor a half-written file. OutputFiles hands out a temporary
+// path in the destination's folder for every output; when all of them have been written, commit()
+// moves them into place. If a move fails, the outputs already moved are put back as they were
+// (previous files restored, new ones removed), so a failure leaves every previous output
+// untouched. Temporaries that were never committed are removed when the object goes away.
+//
+// Errors throw compose::Error with the given stage, the file, and the operating system's reason.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace compose {
+
+class OutputFiles {
+ public:
+  explicit OutputFiles(std::string stage = "output") : stage_(std::move(stage)) {}
+  OutputFiles(const OutputFiles&) = delete;
+  OutputFiles& operator=(const OutputFiles&) = delete;
+  ~OutputFiles();
+
+  // Checks that `destination` can be written (its folder exists or can be made, it is not a
+  // folder itself) and returns a fresh temporary path next to it, with the same extension so that
+  // writers that choose a format by extension pick the right one.
+  std::filesystem::path add(const std::filesystem::path& destination);
+
+  // Moves every temporary into place. On failure, restores what was there and throws.
+  void commit();
+
+ private:
+  struct Entry {
+    std::filesystem::path temporary, destination;
+  };
+  std::string stage_;
+  std::vector<Entry> entries_;
+  bool committed_ = false;
+};
+
+// Writes `text` to `file` atomically (temporary + rename). Throws compose::Error (stage `stage`).
+void writeTextFile(const std::filesystem::path& file, const std::string& text,
+                   const std::string& stage);
+
+// "<what>: <strerror(errno)>" for error messages that keep the operating system's reason.
+std::string withSystemReason(const std::string& what, int error);
+
+}  // namespace compose

@@ -1,0 +1,112 @@
+#include "calib/lens.h"
+
+#include <cmath>
+#include <numbers>
+
+#include <glm/geometric.hpp>
+
+#include "test_util.h"
+
+namespace compose::calib {
+namespace {
+
+using compose::testing::TempDir;
+
+// Round trips are exact up to the iterative inversions' convergence (1e-12 normalised).
+constexpr double kPixelTolerance = 1e-6;
+
+void expectRoundTrip(const Lens& lens) {
+  for (double px : {0.5, 100.25, 0.5 * lens.width, lens.width - 0.5}) {
+    for (double py : {0.5, 0.5 * lens.height, lens.height - 3.0}) {
+      glm::dvec3 d;
+      ASSERT_TRUE(lens.direction(px, py, d)) << px << ", " << py;
+      EXPECT_NEAR(glm::length(d), 1.0, 1e-12);
+      glm::dvec2 back;
+      ASSERT_TRUE(lens.project(d * 3.0, back));
+      EXPECT_NEAR(back.x, px, kPixelTolerance);
+      EXPECT_NEAR(back.y, py, kPixelTolerance);
+    }
+  }
+}
+
+TEST(Lens, FieldOfViewAndAxes) {
+  const Lens lens = Lens::fromFieldOfView(800, 600, 90.0);
+  EXPECT_NEAR(lens.fx, 400.0, 1e-9);
+  EXPECT_NEAR(lens.horizontalFovDegrees(), 90.0, 1e-9);
+  glm::dvec3 d;
+  ASSERT_TRUE(lens.direction(400.0, 300.0, d));
+  EXPECT_NEAR(d.z, -1.0, 1e-12);  // the centre looks along -Z
+  ASSERT_TRUE(lens.direction(800.0, 300.0, d));
+  EXPECT_GT(d.x, 0.0);  // the right edge looks right (+X)
+  EXPECT_NEAR(std::atan2(d.x, -d.z), std::numbers::pi / 4, 1e-12);
+  ASSERT_TRUE(lens.direction(400.0, 0.0, d));
+  EXPECT_GT(d.y, 0.0);  // the top row looks up (+Y)
+  glm::dvec2 px;
+  EXPECT_FALSE(lens.project(glm::dvec3(0, 0, 1), px)) << "behind a rectilinear lens";
+}
+
+TEST(Lens, RectilinearWithDistortionRoundTrips) {
+  Lens lens = Lens::fromFieldOfView(640, 480, 70.0);
+  expectRoundTrip(lens);
+  // The opencv-doc left camera's calibration is of this size: barrel distortion.
+  lens.distortion = {-0.29, 0.11, 0.001, -0.0006, 0.0};
+  expectRoundTrip(lens);
+  // Distortion moves a corner pixel's ray away from the ideal one.
+  Lens ideal = lens;
+  ideal.distortion.clear();
+  glm::dvec3 a, b;
+  ASSERT_TRUE(lens.direction(0.5, 0.5, a));
+  ASSERT_TRUE(ideal.direction(0.5, 0.5, b));
+  EXPECT_GT(std::acos(glm::dot(a, b)), 0.02);
+}
+
+TEST(Lens, EquidistantFisheye) {
+  Lens lens = Lens::fromFieldOfView(1000, 1000, 180.0, Projection::Equidistant);
+  glm::dvec3 d;
+  ASSERT_TRUE(lens.direction(1000.0, 500.0, d));  // the right edge is 90° off axis
+  EXPECT_NEAR(d.x, 1.0, 1e-12);
+  EXPECT_NEAR(d.z, 0.0, 1e-12);
+  glm::dvec2 px;
+  ASSERT_TRUE(lens.project(glm::dvec3(0.0, 1.0, 0.0), px));  // straight up: top edge
+  EXPECT_NEAR(px.x, 500.0, 1e-9);
+  EXPECT_NEAR(px.y, 0.0, 1e-9);
+  expectRoundTrip(lens);
+  lens.distortion = {0.02, -0.01, 0.002, 0.0};
+  expectRoundTrip(lens);
+}
+
+TEST(Lens, FileRoundTripUsesOpenCvPixelCentres) {
+  TempDir dir;
+  Lens lens = Lens::fromFieldOfView(640, 480, 60.0);
+  lens.cx = 342.5;
+  lens.distortion = {-0.3, 0.1, 0.0, 0.0, 0.0};
+  lens.rms = 0.41;
+  writeLens(dir / "camera.json", lens);
+  std::ifstream in(dir / "camera.json");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\"cx\": 342.0"), std::string::npos) << text;
+  const Lens back = readLens(dir / "camera.json");
+  EXPECT_DOUBLE_EQ(back.cx, lens.cx);
+  EXPECT_DOUBLE_EQ(back.fx, lens.fx);
+  EXPECT_EQ(back.distortion, lens.distortion);
+  EXPECT_DOUBLE_EQ(back.rms, 0.41);
+}
+
+TEST(Lens, BadFilesNameTheProblem) {
+  TempDir dir;
+  COMPOSE_EXPECT_ERROR(readLens(dir / "none.json"), "lens file not found");
+  compose::testing::writeText(dir / "a.json", "{\"width\": 640}");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "a.json"), "needs a number 'height'");
+  compose::testing::writeText(dir / "b.json", "not json");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "b.json"), "not a valid JSON lens file");
+  compose::testing::writeText(
+      dir / "c.json",
+      R"({"model":"pinhole","width":640,"height":480,"fx":500,"fy":500,"cx":320,"cy":240})");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "c.json"), "unknown lens model 'pinhole'");
+  compose::testing::writeText(dir / "d.json",
+                              R"({"width":640,"height":480,"fx":-5,"fy":500,"cx":320,"cy":240})");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "d.json"), "focal lengths fx, fy must be positive");
+}
+
+}  // namespace
+}  // namespace compose::calib

@@ -1,0 +1,83 @@
+#include "core/output_files.h"
+
+#include <fstream>
+#include <sstream>
+
+#include "test_util.h"
+
+namespace compose {
+namespace {
+
+using compose::testing::TempDir;
+using compose::testing::writeText;
+namespace fs = std::filesystem;
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+size_t fileCount(const fs::path& dir) {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
+  return n;
+}
+
+TEST(OutputFiles, CommitMovesEveryFileIntoPlace) {
+  TempDir dir;
+  writeText(dir / "a.txt", "old a");
+  OutputFiles out;
+  const fs::path ta = out.add(dir / "a.txt"), tb = out.add(dir / "b.txt");
+  EXPECT_EQ(ta.extension(), ".txt");
+  writeText(ta, "new a");
+  writeText(tb, "new b");
+  EXPECT_EQ(slurp(dir / "a.txt"), "old a") << "nothing moves before commit";
+  out.commit();
+  EXPECT_EQ(slurp(dir / "a.txt"), "new a");
+  EXPECT_EQ(slurp(dir / "b.txt"), "new b");
+  EXPECT_EQ(fileCount(dir.path()), 2u) << "no temporaries or backups left";
+}
+
+TEST(OutputFiles, AFailedMoveRestoresThePreviousFiles) {
+  TempDir dir;
+  writeText(dir / "a.exr", "old a");
+  OutputFiles out;
+  const fs::path ta = out.add(dir / "a.exr"), tb = out.add(dir / "b.jpg");
+  writeText(ta, "new a");
+  writeText(tb, "new b");
+  // Something takes the second name before the commit: a folder cannot be replaced by a file.
+  fs::create_directory(dir / "b.jpg");
+  writeText(dir / "b.jpg" / "inside", "x");
+  COMPOSE_EXPECT_ERROR(out.commit(), "is an existing folder");
+  EXPECT_EQ(slurp(dir / "a.exr"), "old a") << "the first output must be restored";
+  EXPECT_EQ(fileCount(dir.path()), 2u) << "no temporaries left";
+}
+
+TEST(OutputFiles, UncommittedTemporariesAreRemoved) {
+  TempDir dir;
+  {
+    OutputFiles out;
+    writeText(out.add(dir / "x.png"), "partial");
+  }
+  EXPECT_EQ(fileCount(dir.path()), 0u);
+}
+
+TEST(OutputFiles, RefusesAFolderAsDestination) {
+  TempDir dir;
+  fs::create_directory(dir / "out.jpg");
+  OutputFiles out;
+  COMPOSE_EXPECT_ERROR(out.add(dir / "out.jpg"), "is an existing folder");
+}
+
+TEST(OutputFiles, WriteErrorsKeepTheSystemReason) {
+  TempDir dir;
+  writeText(dir / "file", "x");
+  // A path under a regular file cannot be created: "Not a directory".
+  COMPOSE_EXPECT_ERROR(writeTextFile(dir / "file" / "sub" / "t.txt", "y", "output"),
+                       "cannot create the output folder: Not a directory");
+}
+
+}  // namespace
+}  // namespace compose
