@@ -42,6 +42,9 @@ struct CameraOptions {
   std::optional<double> focal35mm;  // overrides EXIF
   double height = 1.6;              // metres above the ground
   double pitchDegrees = 0.0;        // positive tilts the camera down
+
+  // Throws compose::UsageError naming the option when a value is out of range.
+  void validate() const;
 };
 
 // Validates options (throws compose::Error, stage "camera") and builds the plate camera.
@@ -56,6 +59,9 @@ struct Placement {
   glm::dvec2 imagePoint{0.5, 0.72};
   double heightFraction = 0.3;
   double yawDegrees = 0.0;
+
+  // Throws compose::UsageError naming the option when a value is out of range.
+  void validate() const;
 };
 
 // worldFromObject for a mesh with the given object-space bounds. Throws compose::Error (stage

@@ -10,6 +10,7 @@
 
 #include "composite/composite.h"
 #include "core/error.h"
+#include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 #include "lighting/lighting.h"
@@ -53,6 +54,10 @@ namespace {
 
 fs::path outputBase(const ComposeJob& job) {
   fs::path base = job.output;
+  std::error_code ec;
+  if (!base.empty() && (!base.has_filename() || fs::is_directory(base, ec))) {
+    return base / "compose";
+  }
   std::string ext = base.extension().string();
   for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".exr" || ext == ".jpg" || ext == ".jpeg" || ext == ".png") base.replace_extension();
@@ -109,6 +114,35 @@ double autoExposure(const Image& plateLinear, const lighting::Environment& env,
   return plateSum / envSum;
 }
 
+// Brings an input image to the working space and says how it was read. An explicit colour space
+// (--plate-space, --env-space) wins; an OpenEXR file that carries chromaticities is taken by
+// them (as the colour space of the config with those primaries, or converted by matrix);
+// otherwise the space the file declares, else the config's file rules.
+std::string toWorkingSpace(Image& image, const fs::path& file, const ingest::CaptureInfo& info,
+                           const std::string& explicitSpace, const std::string& option,
+                           const color::ColorConfig& colors) {
+  const std::string working = colors.workingSpace();
+  if (!explicitSpace.empty()) {
+    image.colorSpace = colors.resolve(explicitSpace, option);
+    colors.convert(image, working);
+    return "'" + image.colorSpace + "' (" + option + ")";
+  }
+  if (info.chromaticities) {
+    const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
+    if (!named.empty()) {
+      image.colorSpace = named;
+      colors.convert(image, working);
+      return "'" + named + "' (by the chromaticities in its header)";
+    }
+    colors.convertFromChromaticities(image, *info.chromaticities, working);
+    return "the RGB space of the chromaticities in its header (converted by matrix)";
+  }
+  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
+  const std::string read = image.colorSpace;
+  colors.convert(image, working);
+  return "'" + read + "'";
+}
+
 class StageTimer {
  public:
   explicit StageTimer(StageRecord& record)
@@ -147,6 +181,42 @@ fs::path displayPathFor(const ComposeJob& job) {
   return p;
 }
 
+void validate(const ComposeJob& job) {
+  if (job.plate.empty()) throw UsageError("--plate is required");
+  if (job.object.empty()) throw UsageError("--object is required");
+  if (job.output.empty()) throw UsageError("--out must not be empty");
+  if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
+    throw UsageError("--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
+  }
+  if (!std::isfinite(job.environmentYawDegrees))
+    throw UsageError("--env-yaw must be a finite number of degrees");
+  for (int c = 0; c < 3; ++c) {
+    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
+      throw UsageError("--albedo must be within [0, 1]");
+  }
+  if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
+    throw UsageError("--exposure must be a number of stops within ±64");
+  }
+  job.camera.validate();
+  job.placement.validate();
+  // The lighting basis and its parameters: a misspelt name fails before any pixel is read.
+  try {
+    ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
+    if (params.has("order") && params.getString("order", "") == "auto") {
+      params.getDouble("target", 45.0, "lighting");
+      params.erase("order");
+      params.erase("target");
+    } else if (params.has("target")) {
+      throw Error("lighting", "target=... needs order=auto");
+    }
+    lighting::createLighting(job.lighting, params);
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    throw UsageError(e.what(), e.stage());
+  }
+}
+
 std::vector<StageRecord> plan(const ComposeJob& job) {
   const fs::path env = environmentPath(job);
   std::vector<StageRecord> s;
@@ -180,18 +250,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   result.exrPath = exrPathFor(job);
   result.displayPath = displayPathFor(job);
   const fs::path envPath = environmentPath(job);
-  if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
-    throw Error("render", "--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
-  }
-  if (!std::isfinite(job.environmentYawDegrees))
-    throw Error("render", "--env-yaw must be a finite number of degrees");
-  for (int c = 0; c < 3; ++c) {
-    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
-      throw Error("render", "--albedo must be within [0, 1]");
-  }
-  if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
-    throw Error("render", "--exposure must be a number of stops within ±64");
-  }
+  validate(job);
 
   // Lighting basis first: a misspelt name should fail before any pixel is read. order=auto (with
   // an optional target=dB, default 45) defers the order to the environment's own tail energy.
@@ -227,6 +286,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   result.height = plate.image.height;
   if (!mesh.normalsFromFile)
     result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
+  for (const std::string& w : mesh.warnings) result.notes.push_back("object: " + w);
   if (!isHdrFormat(env.info.format)) {
     result.notes.push_back(
         "the environment is a " + env.info.format +
@@ -239,17 +299,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   const std::string working = colors.workingSpace();
   {
     StageTimer t(stage(result.stages, "color"));
-    plateLinear.colorSpace = job.plateSpace.empty()
-                                 ? colors.inputSpaceFor(job.plate, plate.info.fileColorSpace)
-                                 : colors.resolve(job.plateSpace, "--plate-space");
-    envLinear.colorSpace = job.environmentSpace.empty()
-                               ? colors.inputSpaceFor(envPath, env.info.fileColorSpace)
-                               : colors.resolve(job.environmentSpace, "--env-space");
-    result.notes.push_back("plate read as '" + plateLinear.colorSpace + "', environment as '" +
-                           envLinear.colorSpace + "', working space '" + working +
-                           "' (config: " + colors.source() + ")");
-    colors.convert(plateLinear, working);
-    colors.convert(envLinear, working);
+    const std::string plateRead =
+        toWorkingSpace(plateLinear, job.plate, plate.info, job.plateSpace, "--plate-space", colors);
+    const std::string envRead =
+        toWorkingSpace(envLinear, envPath, env.info, job.environmentSpace, "--env-space", colors);
+    result.notes.push_back("plate read as " + plateRead + ", environment as " + envRead +
+                           ", working space '" + working + "' (config: " + colors.source() + ")");
   }
 
   // precompute
@@ -326,6 +381,19 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     result.exposure = settings.exposure;
     rendered = render::renderDiffuse(mesh, worldFromObject, camera, *lighting, settings, progress);
     rendered.beauty.colorSpace = working;
+    double coverage = 0.0;
+    for (size_t i = 3; i < rendered.beauty.pixels.size(); i += 4)
+      coverage += rendered.beauty.pixels[i];
+    if (!(coverage > 0.0)) {
+      throw Error("render",
+                  "the object covers no pixel of the plate (--scale " +
+                      std::to_string(job.placement.heightFraction) +
+                      " of the plate height at --place " +
+                      std::to_string(job.placement.imagePoint.x) + "," +
+                      std::to_string(job.placement.imagePoint.y) +
+                      "): make it larger or place it inside the frame",
+                  job.object);
+    }
   }
 
   // composite
@@ -355,11 +423,29 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     ingest::WriteOptions exrOptions;
     exrOptions.depth = ingest::WriteOptions::Depth::Half;
     exrOptions.alphaChannel = 3;
+    exrOptions.chromaticities = colors.chromaticities(working);
+    if (!exrOptions.chromaticities) {
+      result.notes.push_back("the config (" + colors.source() +
+                             ") does not say what the primaries of the working space '" + working +
+                             "' are: the EXR carries its name but no chromaticities");
+    }
     const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
     const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
     Image shown = colors.toDisplay(composite, display, view);
-    ingest::writeImage(result.exrPath, exr, exrOptions);
-    ingest::writeImage(result.displayPath, shown, {});
+    // Both files appear together or not at all: a failure keeps every previous output.
+    OutputFiles outputs("output");
+    const ingest::WriteReport written =
+        ingest::writeImage(outputs, result.exrPath, exr, exrOptions);
+    ingest::writeImage(outputs, result.displayPath, shown, {});
+    outputs.commit();
+    if (written.promotedToFloat) {
+      char line[200];
+      std::snprintf(line, sizeof line,
+                    "values up to %g exceed half float's range (65504): the EXR is written as "
+                    "32-bit float",
+                    double(written.largestMagnitude));
+      result.notes.push_back(line);
+    }
     report(progress, "output", 1.0);
   }
   return result;

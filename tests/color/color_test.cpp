@@ -110,3 +110,50 @@ TEST(ColorConfig, HonoursOcioEnvironmentVariable) {
 
 }  // namespace
 }  // namespace compose::color
+
+namespace compose::color {
+namespace {
+
+void expectChromaticities(const std::optional<Chromaticities>& got, const Chromaticities& want) {
+  ASSERT_TRUE(got.has_value());
+  for (size_t i = 0; i < want.size(); ++i) EXPECT_NEAR((*got)[i], want[i], 1e-6) << "entry " << i;
+}
+
+TEST(Chromaticities, OfTheBuiltinSpacesThroughTheInterchangeRole) {
+  const ColorConfig c = ColorConfig::builtin();
+  expectChromaticities(c.chromaticities("ACEScg"), kAcesAp1Chromaticities);
+  expectChromaticities(c.chromaticities("lin_rec709"), kRec709Chromaticities);
+  expectChromaticities(c.chromaticities("ACES2065-1"), kAcesAp0Chromaticities);
+  EXPECT_FALSE(c.chromaticities("sRGB - Texture").has_value()) << "an encoded space is not linear";
+  EXPECT_FALSE(c.chromaticities("Raw").has_value());
+  EXPECT_EQ(c.spaceWithChromaticities(kAcesAp1Chromaticities), "ACEScg");
+  EXPECT_EQ(c.spaceWithChromaticities(kRec709Chromaticities), "Linear Rec.709 (sRGB)");
+  Chromaticities odd = kRec709Chromaticities;
+  odd[0] = 0.66;
+  EXPECT_EQ(c.spaceWithChromaticities(odd), "");
+}
+
+TEST(Chromaticities, OfAThirdPartyConfig) {
+  const auto file = pipeline::samplesDirectory() / "ocio" / "blender" / "config.ocio";
+  if (!std::filesystem::exists(file)) GTEST_FAIL() << "sample data missing: " << file;
+  const ColorConfig c = ColorConfig::fromFile(file);
+  expectChromaticities(c.chromaticities("Linear"), kRec709Chromaticities);
+  expectChromaticities(c.chromaticities("Linear ACEScg"), kAcesAp1Chromaticities);
+}
+
+TEST(Chromaticities, ConversionAgreesWithTheConfigsOwn) {
+  const ColorConfig c = ColorConfig::builtin();
+  Image a(2, 1, 3, {"R", "G", "B"});
+  const float px[6] = {0.2f, 0.5f, 0.9f, 3.0f, 0.01f, 0.4f};
+  std::copy(px, px + 6, a.pixels.begin());
+  a.colorSpace = "lin_rec709";
+  Image b = a;
+  c.convert(a, "ACEScg");
+  c.convertFromChromaticities(b, kRec709Chromaticities, "ACEScg");
+  EXPECT_EQ(b.colorSpace, "ACEScg");
+  // The config's matrix is printed to 7 digits: agreement to ~1e-6 relative.
+  for (size_t i = 0; i < 6; ++i) EXPECT_NEAR(a.pixels[i], b.pixels[i], 2e-6 * (1 + a.pixels[i]));
+}
+
+}  // namespace
+}  // namespace compose::color

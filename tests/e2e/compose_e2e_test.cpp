@@ -337,7 +337,7 @@ TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
                      " --lighting wavelets",
                  dir_.path());
-  EXPECT_EQ(r.status, 1);
+  EXPECT_EQ(r.status, 2) << "a misspelt command-line value is a usage error";
   EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: cheb-local, cheb-latlong, "
                        "cheb-face, sh, mc, exact"),
             std::string::npos)
