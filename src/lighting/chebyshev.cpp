@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 
@@ -178,11 +179,19 @@ size_t ChebBase::floatsStored() const {
 }
 
 std::string ChebBase::parameterKey() const {
+  // Every parameter, and the internal constants of the integrators, that changes the numbers.
+  char constants[160];
+  std::snprintf(constants, sizeof constants,
+                " leaf=%d piece=%.17g patch=%.17g cell-factor=%d view-table=%dx%d", kLeafLevel,
+                RadianceCells::kMaxPieceExtent, RadianceCells::kMaxPatchExtent,
+                RadianceCells::kFinestFactor, ChebLocalLighting::kViewThetas,
+                ChebLocalLighting::kViewPhis);
   return name_ + " order=" + std::to_string(params_.order) +
          " samples=" + std::to_string(params_.samples) +
          " rows=" + std::to_string(params_.normalRows) +
          " cols=" + std::to_string(params_.normalCols) +
-         " subsamples=" + std::to_string(params_.subsamples) + " version=1";
+         " subsamples=" + std::to_string(params_.subsamples) + " brdf=" + params_.brdf +
+         " sigma=" + std::to_string(params_.sigma) + constants;
 }
 
 bool ChebBase::exportState(std::vector<float>& out) const {
@@ -603,11 +612,6 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
     e += w[q] * dot;
   }
   return e;
-}
-
-std::string ChebLocalLighting::parameterKey() const {
-  return ChebBase::parameterKey() + " brdf=" + params_.brdf +
-         " sigma=" + std::to_string(params_.sigma);
 }
 
 size_t ChebLocalLighting::floatsStored() const {

@@ -128,7 +128,6 @@ class ChebLocalLighting final : public ChebBase {
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
   glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& view) const override;
-  std::string parameterKey() const override;
   size_t floatsStored() const override;
 
   // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.
