@@ -24,7 +24,7 @@ TEST(ColorConfig, BuiltinWorkingSpaceIsAcescg) {
   EXPECT_EQ(c.resolve("srgb_tx", "test"), "sRGB - Texture");
   EXPECT_EQ(c.resolve("lin_rec709", "test"), "Linear Rec.709 (sRGB)");
   EXPECT_EQ(c.defaultDisplay(), "sRGB");
-  EXPECT_EQ(c.defaultView("sRGB"), "Standard");
+  EXPECT_EQ(c.defaultView("sRGB"), "Soft Clip") << "the default view rolls highlights off";
 }
 
 TEST(ColorConfig, DecodesSrgbAndConvertsToAcescg) {
@@ -70,6 +70,37 @@ TEST(ColorConfig, DisplayTransformEncodesSrgbAndClips) {
                        "unknown display 'P3'; the config has: sRGB");
   COMPOSE_EXPECT_ERROR(c.toDisplay(img, "sRGB", "Filmic"),
                        "unknown view 'Filmic' for display 'sRGB'");
+}
+
+// Soft Clip: the same as Standard up to linear 0.8 (a plate decoded from sRGB keeps its look), a
+// shoulder above it (y = t + (1-t) u/(1+u), u = (x-t)/(1-t), t = 0.8) where Standard clips.
+TEST(ColorConfig, SoftClipViewRollsHighlightsOffAndKeepsTheRest) {
+  const ColorConfig c = ColorConfig::builtin();
+  const float in[] = {0.0f, 0.05f, 0.18f, 0.5f, 0.79f, 1.0f, 2.0f, 10.0f, 1000.0f};
+  Image img(9, 1, 3);
+  for (int i = 0; i < 9; ++i) img.at(i, 0)[0] = img.at(i, 0)[1] = img.at(i, 0)[2] = in[i];
+  img.colorSpace = "lin_rec709";
+  const Image soft = c.toDisplay(img, "sRGB", "Soft Clip");
+  const Image hard = c.toDisplay(img, "sRGB", "Standard");
+  auto encode = [](double v) {
+    return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+  };
+  auto shoulder = [](double x) {
+    const double t = 0.8, u = (x - t) / (1 - t);
+    return x <= t ? x : t + (1 - t) * u / (1 + u);
+  };
+  for (int i = 0; i < 9; ++i) {
+    const double got = soft.at(i, 0)[0];
+    if (in[i] <= 0.8f) {
+      // Identical to Standard below the knee: within float and 1e-5 log-offset rounding.
+      EXPECT_NEAR(got, hard.at(i, 0)[0], 2e-5) << "input " << in[i];
+    } else {
+      // The spline follows the shoulder within 0.001 in linear light.
+      EXPECT_NEAR(got, encode(shoulder(in[i])), 2e-3) << "input " << in[i];
+      EXPECT_LT(got, 1.0f) << "input " << in[i] << " must not clip";
+    }
+  }
+  EXPECT_LT(soft.at(6, 0)[0], soft.at(7, 0)[0]) << "monotonic: 2 shows darker than 10";
 }
 
 TEST(ColorConfig, UnknownSpaceListsTheValidOnes) {
