@@ -1,7 +1,7 @@
 // The plate camera: a pinhole model of the camera that took the background photograph, and where
 // a synthetic object stands in front of it.
 //
-// Frames (see DESIGN.md §3): world is right-handed, +Y up, the ground plane is y = 0. The camera
+// Frames (see docs/design.md §2): world is right-handed, +Y up, the ground plane is y = 0. The camera
 // sits at (0, height, 0) and looks along -Z, tilted down by `pitch`. Image pixel (px, py) has its
 // origin at the top-left corner of the picture, +y down; the principal point is the image centre.
 //

@@ -20,7 +20,7 @@
 // 1024-wide map). A larger texel cut by the horizon is split into exact lat-long sub-rectangles
 // (same radiance, exact vector moments) until its pieces are that small, and a coarse cell is
 // only taken as a uniform patch (leafLevel) when it is at most kMaxPatchExtent across. The
-// white furnace then holds within 1e-6 at every map size from 2x1 up.
+// white furnace then holds within 2e-6 at every map size from 2x1 up.
 //
 // Memory: 12 bytes per texel (its radiance; the geometry comes from per-row and per-column
 // tables) plus 96 bytes per 4x4 cell and coarser: about 20 bytes per texel in all.
