@@ -553,6 +553,8 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
   std::vector<float> cosBound(static_cast<size_t>(s));
   for (int i = 1; i <= s; ++i) cosBound[size_t(i - 1)] = float(std::cos(i * 0.5 * kPi / s));
   const float phiScale = float(s / (2.0 * kPi));
+  // Pieces are binned whole by their direction, so none may be wider than an altitude bin.
+  const float binExtent = float(0.5 * kPi / s);
   std::atomic<size_t> done{0};
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
@@ -580,7 +582,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
             cell[1] += value.y;
             cell[2] += value.z;
           },
-          kLeafLevel);
+          kLeafLevel, binExtent);
     }
     if (k == 1 && params_.brdf == "lambert") {
       for (int c = 0; c < 3; ++c)

@@ -21,7 +21,7 @@ namespace compose::lighting {
 
 class LightingCache {
  public:
-  static constexpr int kProjectionVersion = 2;
+  static constexpr int kProjectionVersion = 3;
 
   explicit LightingCache(std::filesystem::path folder) : folder_(std::move(folder)) {}
 

@@ -17,7 +17,7 @@
 //
 // Small maps: the clipped linear model is second order in the size of the piece it is applied
 // to, so it is only ever applied to pieces at most kMaxPieceExtent across (the texels of a
-// 1024-wide map). A larger texel cut by the horizon is split into exact lat-long sub-rectangles
+// 256-wide map). A larger texel cut by the horizon is split into exact lat-long sub-rectangles
 // (same radiance, exact vector moments) until its pieces are that small, and a coarse cell is
 // only taken as a uniform patch (leafLevel) when it is at most kMaxPatchExtent across. The
 // white furnace then holds within 2e-6 at every map size from 2x1 up.
@@ -28,6 +28,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -61,13 +62,17 @@ class RadianceCells {
   // Calls visit(direction, value) for pieces of the hemisphere above n whose values sum to E(n):
   // whole cells (direction: their power-weighted centroid) and texels along the horizon
   // (direction: their centre). `value` is the cosine-weighted integral over the piece (RGB).
+  // `maxExtent` (radians) opens cells and splits texels wider than that even where the horizon
+  // does not cut them, so that a caller who bins the pieces by direction (the local Chebyshev
+  // grid) never puts one wide piece into one bin.
   template <class Visit>
-  void forEachAbove(const glm::vec3& n, Visit&& visit, int leafLevel = 0) const {
+  void forEachAbove(const glm::vec3& n, Visit&& visit, int leafLevel = 0,
+                    float maxExtent = std::numeric_limits<float>::infinity()) const {
     const int top = int(levels_.size()) - 1;
     const Level& level = levels_[size_t(top)];
-    const int leafFactor = 1 << std::clamp(leafLevel, 0, 20);
+    const Walk walk{1 << std::clamp(leafLevel, 0, 20), maxExtent};
     for (int cy = 0; cy < level.height; ++cy) {
-      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit, leafFactor);
+      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit, walk);
     }
   }
 
@@ -95,20 +100,28 @@ class RadianceCells {
     std::vector<Cell> cells;
   };
 
+  // How far a walk refines: cells of at most leafFactor texels per side may be taken as uniform
+  // patches on the horizon; pieces wider than maxExtent are always refined.
+  struct Walk {
+    int leafFactor;
+    float maxExtent;
+  };
+
   template <class Visit>
   void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit,
-                 int leafFactor) const {
+                 const Walk& walk) const {
     const Level& L = levels_[size_t(level)];
     const Cell& cell = L.cells[size_t(cy) * size_t(L.width) + size_t(cx)];
     const float d = glm::dot(n, cell.axis);
-    if (d >= cell.sinRadius) {
+    const float extent = 2.0f * std::max(cell.halfExtent.x, cell.halfExtent.y);
+    if (d >= cell.sinRadius && extent <= walk.maxExtent) {
       visit(cell.centroid, glm::vec3(glm::dot(n, cell.moment[0]), glm::dot(n, cell.moment[1]),
                                      glm::dot(n, cell.moment[2])));
       return;
     }
     if (d <= -cell.sinRadius) return;
-    if (L.factor <= leafFactor &&
-        2.0f * std::max(cell.halfExtent.x, cell.halfExtent.y) <= float(kMaxPatchExtent)) {
+    if (d < cell.sinRadius && L.factor <= walk.leafFactor && extent <= float(kMaxPatchExtent) &&
+        extent <= walk.maxExtent) {
       // The cell as one uniform patch: the linear model of n·ω across it, clipped.
       const glm::vec3& a = cell.axis;
       const float h = std::sqrt(a.x * a.x + a.z * a.z);
@@ -125,29 +138,30 @@ class RadianceCells {
       const int x0 = cx * L.factor, y0 = cy * L.factor;
       const int x1 = std::min(x0 + L.factor, width_), y1 = std::min(y0 + L.factor, height_);
       for (int y = y0; y < y1; ++y)
-        for (int x = x0; x < x1; ++x) visitTexel(x, y, n, visit);
+        for (int x = x0; x < x1; ++x) visitTexel(x, y, n, visit, walk);
       return;
     }
     const Level& child = levels_[size_t(level - 1)];
     const int x1 = std::min(2 * cx + 2, child.width), y1 = std::min(2 * cy + 2, child.height);
     for (int y = 2 * cy; y < y1; ++y)
-      for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit, leafFactor);
+      for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit, walk);
   }
 
   template <class Visit>
-  void visitTexel(int x, int y, const glm::vec3& n, Visit& visit) const {
+  void visitTexel(int x, int y, const glm::vec3& n, Visit& visit, const Walk& walk) const {
     const Row& row = rows_[size_t(y)];
     const Column& col = columns_[size_t(x)];
     const float* L = radiance_.data() + 3 * (size_t(y) * size_t(width_) + size_t(x));
     const glm::vec3 radiance(L[0], L[1], L[2]);
-    if (largeTexels_) {
+    if (largeTexels_ || 2.0f * std::max(row.halfHeight, row.halfWidth) > walk.maxExtent) {
       // Texels larger than a clipped-model piece: exact sub-rectangles (see the header comment).
       constexpr double kPi = std::numbers::pi;
       const double top = kPi * (0.5 - double(y) / height_);
       const double bottom = kPi * (0.5 - double(y + 1) / height_);
       const double left = kPi * (1.0 - 2.0 * (x + 1) / width_);
       const double right = kPi * (1.0 - 2.0 * x / width_);
-      visitPiece(bottom, top, left, right, glm::dvec3(radiance), glm::dvec3(n), visit);
+      visitPiece(bottom, top, left, right, glm::dvec3(radiance), glm::dvec3(n), visit,
+                 std::min(double(walk.maxExtent), 1e3));
       return;
     }
     const glm::vec3 w(col.sinLon * row.cosLat, row.sinLat, col.cosLon * row.cosLat);
@@ -170,7 +184,7 @@ class RadianceCells {
   // kMaxPieceExtent across, else split.
   template <class Visit>
   void visitPiece(double lat0, double lat1, double lon0, double lon1, const glm::dvec3& radiance,
-                  const glm::dvec3& n, Visit& visit) const {
+                  const glm::dvec3& n, Visit& visit, double maxExtent) const {
     const double latMid = 0.5 * (lat0 + lat1), lonMid = 0.5 * (lon0 + lon1);
     const glm::dvec3 centre(std::sin(lonMid) * std::cos(latMid), std::sin(latMid),
                             std::cos(lonMid) * std::cos(latMid));
@@ -186,13 +200,15 @@ class RadianceCells {
         (lon1 - lon0) * 0.5 * (std::sin(lat1) * std::sin(lat1) - std::sin(lat0) * std::sin(lat0)),
         (std::sin(lon1) - std::sin(lon0)) * c2);
     constexpr double kHalfPi = 0.5 * std::numbers::pi;
-    if (radius < kHalfPi && d >= std::sin(radius)) {
+    const double height = lat1 - lat0, width = (lon1 - lon0) * maxCos;
+    const bool small = height <= maxExtent && width <= maxExtent;
+    if (radius < kHalfPi && d >= std::sin(radius) && small) {
       visit(glm::vec3(centre), glm::vec3(radiance * glm::dot(n, moment)));
       return;
     }
     if (radius < kHalfPi && d <= -std::sin(radius)) return;
-    const double height = lat1 - lat0, width = (lon1 - lon0) * maxCos;
-    if (height <= kMaxPieceExtent && width <= kMaxPieceExtent) {
+    const double limit = std::min(maxExtent, kMaxPieceExtent);
+    if (height <= limit && width <= limit) {
       const double omega = (lon1 - lon0) * (std::sin(lat1) - std::sin(lat0));
       const glm::dvec3 north(-std::sin(lonMid) * std::sin(latMid), std::cos(latMid),
                              -std::cos(lonMid) * std::sin(latMid));
@@ -203,12 +219,15 @@ class RadianceCells {
       visit(glm::vec3(centre), glm::vec3(radiance * (omega * clippedMean(mean, alpha, beta))));
       return;
     }
-    const bool splitLat = height > kMaxPieceExtent, splitLon = width > kMaxPieceExtent;
+    // Split what is too wide for the clipped model (on the horizon) or for the caller's bins.
+    const bool above = radius < kHalfPi && d >= std::sin(radius);
+    const double target = above ? maxExtent : limit;
+    const bool splitLat = height > target, splitLon = width > target;
     const double lat[3] = {lat0, splitLat ? latMid : lat1, lat1};
     const double lon[3] = {lon0, splitLon ? lonMid : lon1, lon1};
     for (int i = 0; i < (splitLat ? 2 : 1); ++i)
       for (int j = 0; j < (splitLon ? 2 : 1); ++j)
-        visitPiece(lat[i], lat[i + 1], lon[j], lon[j + 1], radiance, n, visit);
+        visitPiece(lat[i], lat[i + 1], lon[j], lon[j + 1], radiance, n, visit, maxExtent);
   }
 
   // Per row: the centre latitude's sine and cosine, half extents in radians of arc, the solid

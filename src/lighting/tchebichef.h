@@ -67,8 +67,8 @@ class TchebichefBasis {
   std::vector<float> matrixF_;
 };
 
-// The textbook three-term recurrence in n (Mukundan 2004, docs/design.md §4), evaluated entirely in T
-// (double or float). Kept for comparison and benchmarks only: it is numerically unstable at high
+// The textbook three-term recurrence in n (Mukundan 2004, docs/design.md §4), evaluated entirely in
+// T (double or float). Kept for comparison and benchmarks only: it is numerically unstable at high
 // order. Returns K×N row-major. Throws std::invalid_argument on the same conditions as
 // TchebichefBasis.
 template <class T>
