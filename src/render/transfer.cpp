@@ -89,24 +89,42 @@ bool VertexTransfer::importState(const TransferParams& p, size_t vertices,
   return true;
 }
 
-SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction) {
+SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budget) {
   COMPOSE_CHECK(maxEdgeFraction > 0.0f);
   SurfacePoints out;
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   out.size = std::max({extent.x, extent.y, extent.z});
-  const float maxEdge = maxEdgeFraction * out.size;
+  // Longest edge per triangle, then the finest spacing whose points fit the budget.
+  const size_t triangles = mesh.triangleCount();
+  std::vector<float> longestEdge(triangles);
+  for (size_t t = 0; t < triangles; ++t) {
+    const uint32_t* v = &mesh.indices[3 * t];
+    const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+    longestEdge[t] =
+        std::max({glm::length(p[1] - p[0]), glm::length(p[2] - p[1]), glm::length(p[0] - p[2])});
+  }
+  auto levelFor = [](float longest, float edge) {
+    return std::clamp(int(std::ceil(longest / edge)), 1, 32);
+  };
+  float maxEdge = maxEdgeFraction * out.size;
+  for (int attempt = 0; attempt < 64; ++attempt) {
+    size_t count = mesh.positions.size();
+    for (float e : longestEdge) {
+      const size_t L = size_t(levelFor(e, maxEdge));
+      if (L > 1) count += (L + 1) * (L + 2) / 2 - 3;
+    }
+    if (count <= std::max(budget, mesh.positions.size())) break;
+    maxEdge *= 1.25f;
+  }
   out.positions = mesh.positions;
   out.normals.resize(mesh.normals.size());
   for (size_t i = 0; i < mesh.normals.size(); ++i) out.normals[i] = glm::normalize(mesh.normals[i]);
-  const size_t triangles = mesh.triangleCount();
   out.first.assign(triangles, 0);
   out.level.assign(triangles, 1);
   for (size_t t = 0; t < triangles; ++t) {
     const uint32_t* v = &mesh.indices[3 * t];
     const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
-    const float longest = std::max({glm::length(p[1] - p[0]), glm::length(p[2] - p[1]),
-                                    glm::length(p[0] - p[2])});
-    const int L = std::clamp(int(std::ceil(longest / maxEdge)), 1, 32);
+    const int L = levelFor(longestEdge[t], maxEdge);
     out.level[t] = uint8_t(L);
     if (L == 1) continue;
     out.first[t] = uint32_t(out.positions.size());
@@ -118,7 +136,8 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction) {
         out.positions.push_back(b0 * p[0] + b1 * p[1] + b2 * p[2]);
         const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
         const float len = glm::length(nn);
-        out.normals.push_back(len > 1e-12f ? nn / len : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
+        out.normals.push_back(len > 1e-12f ? nn / len
+                                           : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
       }
     }
   }
@@ -189,7 +208,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   for (int i = 0; i <= s; ++i) cosBound[size_t(i)] = std::cos(i * 0.5 * kPi / s);
   for (int i = 0; i < s; ++i) {
     const double a = cosBound[size_t(i)], b = cosBound[size_t(i) + 1];
-    omega[size_t(i)] = 2.0 * kPi / s * (a - b);  // the cell's solid angle
+    omega[size_t(i)] = 2.0 * kPi / s * (a - b);     // the cell's solid angle
     cosine[size_t(i)] = kPi / s * (a * a - b * b);  // ∫_cell cos θ dω
   }
   std::atomic<size_t> done{0};

@@ -70,12 +70,14 @@ struct TransferParams {
 // The points where the visibility is sampled: first the mesh's vertices (same indices), then for
 // each triangle whose longest edge is longer than `maxEdge` a grid of `level` segments per edge
 // (level = ceil(longest edge / maxEdge), at most 32), its corners being the triangle's vertices.
-// Normals are the interpolated vertex normals, normalised.
+// maxEdge is `maxEdgeFraction` of the object's size, widened as needed to keep the number of
+// points within `budget` (a finely tessellated mesh keeps its vertices only). Normals are the
+// interpolated vertex normals, normalised.
 struct SurfacePoints {
   std::vector<glm::vec3> positions, normals;  // object space
-  std::vector<uint32_t> first;  // per triangle: index of its first own grid point
-  std::vector<uint8_t> level;   // per triangle: segments per edge (1: the corners only)
-  float size = 0.0f;            // the object's size: its bounding box's largest extent
+  std::vector<uint32_t> first;                // per triangle: index of its first own grid point
+  std::vector<uint8_t> level;  // per triangle: segments per edge (1: the corners only)
+  float size = 0.0f;           // the object's size: its bounding box's largest extent
 
   size_t count() const { return positions.size(); }
   // The three points whose values, with these weights, interpolate at Embree's barycentrics
@@ -84,8 +86,8 @@ struct SurfacePoints {
               float weights[3]) const;
 };
 
-// `maxEdge` as a fraction of the object's size (default: 1/48).
-SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 48.0f);
+SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 96.0f,
+                            size_t budget = 80000);
 
 // Per-point transfer of a mesh, in the mesh's own (object) coordinates.
 struct VertexTransfer {

@@ -20,9 +20,11 @@
 // vertex) into DIR (default out/bench), and prints the tables.
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <numbers>
@@ -69,7 +71,7 @@ struct Pixel {
 
 struct Row {
   std::string mesh, env, method;
-  int order = 0;        // k, SH bands, or MC samples
+  int order = 0;  // k, SH bands, or MC samples
   bool sources = false;
   double floatsPerVertex = 0;
   double lightingFloats = 0;
@@ -108,7 +110,7 @@ int main(int argc, char** argv) {
   int pixels = 1200;
   std::string onlyMesh;
   int boundary = 2;
-  float pointFraction = 1.0f / 48.0f;
+  float pointFraction = 1.0f / 96.0f;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--out" && i + 1 < argc) {
@@ -125,8 +127,7 @@ int main(int argc, char** argv) {
     } else if (a == "--points" && i + 1 < argc) {
       pointFraction = float(std::atof(argv[++i]));
     } else {
-      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--pixels N] [--mesh FILE]\n",
-                   argv[0]);
+      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--pixels N] [--mesh FILE]\n", argv[0]);
       return 2;
     }
   }
@@ -246,8 +247,8 @@ int main(int argc, char** argv) {
       std::snprintf(line, sizeof line,
                     "%s / %s: %zu pixels; reference %d samples in %.1f s, two seeds agree to "
                     "%.1f dB; unshadowed cheb-local vs exact unshadowed %.1f dB (image space)",
-                    meshName, envName, px.size(), kReferenceSamples, referenceS,
-                    converged.snrDb, lightingOnly.snrDb);
+                    meshName, envName, px.size(), kReferenceSamples, referenceS, converged.snrDb,
+                    lightingOnly.snrDb);
       notes.push_back(line);
       std::printf("%s\n", line);
 
@@ -261,11 +262,11 @@ int main(int argc, char** argv) {
       };
       auto add = [&](const std::string& method, int order, bool sources, double floatsPerVertex,
                      double lightingFloats, double precomputeS, double shadeS, Measure m) {
-        rows.push_back({meshName, envName, method, order, sources, floatsPerVertex,
-                        lightingFloats, precomputeS, shadeS, m.snrDb, m.relError});
-        std::printf("  %-8s %-10s order %5d %s  %7.1f floats/vertex  %6.1f dB  %6.2f %%\n",
-                    envName, method.c_str(), order, sources ? "+sources" : "        ",
-                    floatsPerVertex, m.snrDb, 100.0 * m.relError);
+        rows.push_back({meshName, envName, method, order, sources, floatsPerVertex, lightingFloats,
+                        precomputeS, shadeS, m.snrDb, m.relError});
+        std::printf("  %-8s %-10s order %5d %s  %7.1f floats/vertex  %6.1f dB  %6.2f %%\n", envName,
+                    method.c_str(), order, sources ? "+sources" : "        ", floatsPerVertex,
+                    m.snrDb, 100.0 * m.relError);
       };
       add("none", 0, false, 0, double(unshadowedLighting->floatsStored()), 0, 0, measure(plain));
 
@@ -281,8 +282,8 @@ int main(int argc, char** argv) {
           in.sourceVisibility = &seen;
         }
         auto run = [&](const std::string& method, int order,
-                       std::unique_ptr<lighting::DiffuseLighting> lighting,
-                       render::ShadowMethod m, double floatsPerVertex) {
+                       std::unique_ptr<lighting::DiffuseLighting> lighting, render::ShadowMethod m,
+                       double floatsPerVertex) {
           const auto p0 = Clock::now();
           lighting->project(shadowEnv);
           const double projectS = seconds(p0);
@@ -291,6 +292,26 @@ int main(int argc, char** argv) {
           const auto s0 = Clock::now();
           const render::VertexIrradiance vi = render::shadeVertices(points, envFromObject, in);
           const render::RenderOutput out = renderWith(*unshadowedLighting, &vi);
+          if (std::getenv("COMPOSE_BENCH_WORST") && method == "cheb" && order == 16 &&
+              withSources) {
+            std::vector<std::pair<double, size_t>> err;
+            for (size_t i = 0; i < px.size(); ++i) {
+              const float* b = out.beauty.at(px[i].x, px[i].y);
+              const glm::dvec3 g(b[0], b[1], b[2]);
+              err.push_back({glm::length(g - ref[i]), i});
+            }
+            std::sort(err.rbegin(), err.rend());
+            for (int q = 0; q < 8; ++q) {
+              const size_t i = err[size_t(q)].second;
+              const float* b = out.beauty.at(px[i].x, px[i].y);
+              const float* un = plain.beauty.at(px[i].x, px[i].y);
+              std::printf(
+                  "    worst %d: pixel (%d, %d) ref %.4f got %.4f unshadowed %.4f n (%.2f %.2f "
+                  "%.2f)\n",
+                  q, px[i].x + plain.x0, px[i].y + plain.y0, ref[i].y, double(b[1]), double(un[1]),
+                  double(px[i].n.x), double(px[i].n.y), double(px[i].n.z));
+            }
+          }
           add(method, order, withSources, floatsPerVertex + (withSources ? 1.0 : 0.0),
               double(lighting->floatsStored()), projectS, seconds(s0), measure(out));
         };
@@ -318,8 +339,7 @@ int main(int argc, char** argv) {
         const auto m0 = Clock::now();
         for (size_t i = 0; i < px.size(); ++i) {
           const glm::vec3 nw = glm::normalize(px[i].n);
-          const glm::vec3 pObj =
-              glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
+          const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
           const glm::vec3 origin = pObj + 1e-4f * size * glm::normalize(objectFromEnv * nw);
           const lighting::MonteCarloLighting::VisibilityFn visible = [&](const glm::vec3& d) {
             return !scene.occluded(origin, objectFromEnv * d, 1e-5f * size);
@@ -354,18 +374,19 @@ int main(int argc, char** argv) {
   for (const std::string& n : notes) md << "- " << n << "\n";
   md << "\n";
   for (const char* meshName : meshes) {
-    md << "## " << meshName << "\n\n| method | floats/vertex | courtyard | forest | interior | "
-                                 "sunset |\n|---|---|---|---|---|---|\n";
+    md << "## " << meshName
+       << "\n\n| method | floats/vertex | courtyard | forest | interior | "
+          "sunset |\n|---|---|---|---|---|---|\n";
     std::map<std::string, std::map<std::string, const Row*>> table;
     std::vector<std::string> order;
     for (const Row& r : rows) {
       if (r.mesh != meshName) continue;
-      std::string label = r.method == "none"  ? "no shadows"
-                          : r.method == "ao"  ? "AO x irradiance"
-                          : r.method == "mc"  ? "MC " + std::to_string(r.order) + " samples/pixel"
-                          : r.method == "sh"  ? "SH " + std::to_string(lighting::shCount(r.order)) +
-                                                   " coefficients"
-                                              : "Chebyshev k=" + std::to_string(r.order);
+      std::string label = r.method == "none" ? "no shadows"
+                          : r.method == "ao" ? "AO x irradiance"
+                          : r.method == "mc" ? "MC " + std::to_string(r.order) + " samples/pixel"
+                          : r.method == "sh"
+                              ? "SH " + std::to_string(lighting::shCount(r.order)) + " coefficients"
+                              : "Chebyshev k=" + std::to_string(r.order);
       if (r.sources) label += " + 64 sources";
       if (!table.count(label)) order.push_back(label);
       table[label][r.env] = &r;
@@ -376,10 +397,9 @@ int main(int argc, char** argv) {
       for (const char* env : envs) {
         const auto it = table[label].find(env);
         md << " | "
-           << (it == table[label].end()
-                   ? std::string("–")
-                   : fmt("%.1f", it->second->snrDb) + " (" +
-                         fmt("%.2f", 100.0 * it->second->relError) + " %)");
+           << (it == table[label].end() ? std::string("–")
+                                        : fmt("%.1f", it->second->snrDb) + " (" +
+                                              fmt("%.2f", 100.0 * it->second->relError) + " %)");
       }
       md << " |\n";
     }

@@ -241,6 +241,7 @@ TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
   m.indices = {0, 1, 2, 1, 3, 2};
   // Edges up to 1.41 with a largest extent of 1: 1/4 gives 6 segments per edge.
   const SurfacePoints pts = surfacePoints(m, 0.25f);
+  EXPECT_EQ(surfacePoints(m, 0.25f, 20).level[0], 3) << "spacing widened to fit 20 points";
   EXPECT_EQ(pts.level[0], 6);
   EXPECT_EQ(pts.count(), 4u + 2u * (7u * 8u / 2u - 3u));
   // Interpolating any linear function of position sampled at the points returns its value at
