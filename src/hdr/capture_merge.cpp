@@ -97,6 +97,16 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     for (size_t s = 0; s < view.shots.size(); ++s) {
       const ingest::Shot& shot = view.shots[s];
       COMPOSE_CHECK(shot.exposure.has_value());
+      const Image& img = photos[v][s].image;
+      const Image& ref = photos[v][0].image;
+      if (img.width != ref.width || img.height != ref.height) {
+        throw Error(kStage,
+                    "photos of a bracket must have the same size: this one is " +
+                        std::to_string(img.width) + "x" + std::to_string(img.height) + ", " +
+                        view.shots[0].file.filename().string() + " is " +
+                        std::to_string(ref.width) + "x" + std::to_string(ref.height),
+                    shot.file);
+      }
       if (isEightBit(shot.info) != bool(eightBit[v])) {
         throw Error(kStage,
                     "a bracket mixes 8-bit and deeper photos (this one is " + shot.info.sampleType +

@@ -198,6 +198,14 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
   COMPOSE_CHECK(first.images.size() == first.exposures.size());
   const size_t n = first.images.size();
   if (n < 2) throw Error(kStage, "recovering a response needs at least two exposures");
+  for (const BracketCodes& b : brackets) {
+    COMPOSE_CHECK(b.images.size() == b.exposures.size() && !b.images.empty());
+    for (const Image* img : b.images) {
+      if (img->width != b.images[0]->width || img->height != b.images[0]->height)
+        throw Error(kStage, "photos of a bracket must have the same size");
+      if (img->channels < 3) throw Error(kStage, "recovering a response needs RGB photos");
+    }
+  }
 
   // Brackets with the same exposure sequence (within 1 %) are stacked vertically, so that one
   // calibration sees every view.
