@@ -111,6 +111,10 @@ Image render(const lighting::Environment& env, const calib::Lens& lens,
   const int s = p.supersample;
   const double cr = std::cos(roll), sr = std::sin(roll);
   const glm::dvec3 gain = p.calibration * p.whiteBalance;
+  // A fisheye's image circle: rays up to half the field of view from the axis.
+  const double circle = lens.projection == calib::Projection::Equidistant
+                             ? std::cos(0.5 * p.fovDegrees * kPi / 180.0)
+                             : -2.0;
   parallelFor(0, lens.height, [&](int64_t yy) {
     const int y = int(yy);
     for (int x = 0; x < lens.width; ++x) {
@@ -123,7 +127,7 @@ Image render(const lighting::Environment& env, const calib::Lens& lens,
           const double qx = cr * px + sr * py + lens.cx;
           const double qy = -sr * px + cr * py + lens.cy;
           glm::dvec3 dir;
-          if (!lens.direction(qx, qy, dir)) continue;
+          if (!lens.direction(qx, qy, dir) || -dir.z < circle) continue;
           sum += glm::dvec3(env.lookup(glm::vec3(worldFromCamera * dir)));
         }
       }

@@ -7,8 +7,9 @@
 //     ray; the environment's radiance L is looked up (bilinear) along it. Each pixel averages
 //     S × S rays on a regular sub-pixel grid (anti-aliasing: the sensor integrates light), and
 //     the image is blurred by a Gaussian of σ = blurPixels (lens, anti-aliasing filter and
-//     demosaicing together; real cameras do not resolve single pixels). A fisheye pixel outside
-//     the image circle sees nothing (0).
+//     demosaicing together; real cameras do not resolve single pixels). A fisheye's image circle
+//     holds the rays up to half the field of view from the axis (the field of view is measured
+//     across the width); pixels outside it see nothing (0).
 //  2. Exposure. Sensor signal s = K · wb_c · L_c · e, with e = t · ISO / N² the relative exposure
 //     (t seconds, N the f-number), K the calibration constant (`calibration`) and wb the
 //     white-balance gains. s = 1 is the clipping level.

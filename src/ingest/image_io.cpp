@@ -134,10 +134,9 @@ void fillCaptureInfo(const OIIO::ImageSpec& spec, CaptureInfo& info) {
   }
 }
 
+// The reader's own error messages (not OpenImageIO's global ones, which may be stale).
 std::string readerError(OIIO::ImageInput& input) {
-  std::string why = input.geterror();
-  if (why.empty()) why = OIIO::geterror();
-  return why;
+  return input.geterror();
 }
 
 }  // namespace
