@@ -219,7 +219,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                      view.name.c_str(), view.files.size(), stops.c_str(),
                      static_cast<long long>(view.stats.saturated + view.stats.dark));
       }
-      std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV's merge)\n",
+      std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n",
                    result.seconds, result.openCvSeconds);
     }
     printNotes(globals, result.notes);

@@ -123,6 +123,17 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     }
   }
 
+  // 8-bit codes of the 8-bit views, made once for recovery and merging.
+  std::vector<std::vector<Codes8>> codes(capture.views.size());
+  for (size_t v = 0; v < capture.views.size(); ++v) {
+    if (!eightBit[v]) continue;
+    for (const auto& photo : photos[v]) {
+      if (photo.image.channels < 3)
+        throw Error(kStage, "merging needs RGB photos", capture.views[v].shots.front().file);
+      codes[v].push_back(toCodes8(photo.image));
+    }
+  }
+
   // One response curve for every 8-bit view.
   std::string linearSpace;
   const bool anyEightBit = !firstEightBitSpace.empty();
@@ -139,7 +150,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         if (!eightBit[v] || photos[v].size() < 2) continue;
         BracketCodes b;
         for (size_t s = 0; s < photos[v].size(); ++s) {
-          b.images.push_back(&photos[v][s].image);
+          b.images.push_back(&codes[v][s]);
           b.exposures.push_back(*capture.views[v].shots[s].exposure);
         }
         brackets.push_back(std::move(b));
@@ -150,7 +161,12 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                     "photos; give a response file (--response FILE) or --response colorspace",
                     capture.views.front().shots.front().file);
       }
-      result.response = recoverResponse(brackets, options.recovery, progress);
+      const auto recoveryStart = std::chrono::steady_clock::now();
+      double calibrationSeconds = 0.0;
+      result.response = recoverResponse(brackets, options.recovery, progress, &calibrationSeconds);
+      result.openCvSeconds += calibrationSeconds;
+      result.recoverySeconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - recoveryStart).count();
       result.response.make = capture.cameraMake;
       result.response.model = capture.cameraModel;
       result.responseRecovered = true;
@@ -222,6 +238,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     }
     for (size_t s = 0; s < photos[v].size(); ++s) {
       input.images.push_back(input.eightBit ? &photos[v][s].image : &converted[s]);
+      if (input.eightBit) input.codes.push_back(&codes[v][s]);
       input.exposures.push_back(*view.shots[s].exposure);
       input.names.push_back(view.shots[s].file.string());
       out.exposures.push_back(*view.shots[s].exposure);

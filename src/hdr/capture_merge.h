@@ -60,7 +60,9 @@ struct CaptureMergeResult {
   std::filesystem::path responseCacheFile;  // where a recovered curve belongs (empty: nowhere)
   std::string linearisation;                // one sentence: how photos became linear
   std::vector<std::string> notes;
-  double seconds = 0.0, openCvSeconds = 0.0;
+  double seconds = 0.0;          // wall-clock time of mergeCapture
+  double openCvSeconds = 0.0;    // of which inside OpenCV (response recovery and merging)
+  double recoverySeconds = 0.0;  // response recovery alone (0 when a stored curve was used)
 };
 
 // `photos[v][s]` is the decoded image of capture.views[v].shots[s] (ingest::readImage), with

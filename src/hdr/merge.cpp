@@ -49,6 +49,7 @@ std::string percent(int64_t count, size_t total) {
 // codes, clipping and linear light.
 struct ShotView {
   const Image* image = nullptr;
+  const Codes8* codes = nullptr;
   int dx = 0, dy = 0;
   double exposure = 1.0;
   // Value of channel c at output pixel (x, y); false if the shifted shot does not cover it.
@@ -57,6 +58,9 @@ struct ShotView {
     return sx >= 0 && sy >= 0 && sx < image->width && sy < image->height;
   }
   const float* at(int x, int y) const { return image->at(x - dx, y - dy); }
+  const uint8_t* codeAt(int x, int y) const {
+    return codes->rgb.data() + (size_t(y - dy) * size_t(codes->width) + size_t(x - dx)) * 3;
+  }
 };
 
 }  // namespace
@@ -117,31 +121,35 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   // thresholds mean roughly the same thing.
   const int hiCode = int(std::ceil(params.clipHigh * 255.0 - 1e-9));
   const int loCode = int(std::floor(params.clipLow * 255.0 + 1e-9));
-  auto codeOf = [&](float v) -> int {
-    const float e = input.eightBit ? v : encodeGamma(v);
-    return int(std::clamp(e * 255.0f + 0.5f, 0.0f, 255.0f));
-  };
 
-  // 8-bit codes for OpenCV (merging, and alignment of any input).
-  std::vector<cv::Mat> codes;
-  const bool useOpenCvMerge = input.eightBit && !params.deghost && n > 1;
-  if (useOpenCvMerge || (params.align && n > 1)) {
-    codes.resize(n);
+  // 8-bit codes of every shot: OpenCV's input, and what the per-pixel pass classifies.
+  std::vector<Codes8> ownCodes;
+  std::vector<const Codes8*> codePtr = input.codes;
+  if (codePtr.empty()) {
+    ownCodes.reserve(n);
     for (size_t i = 0; i < n; ++i) {
-      codes[i].create(height, width, CV_8UC3);
       if (input.eightBit) {
-        toCodes8(*input.images[i], codes[i]);
+        ownCodes.push_back(toCodes8(*input.images[i]));
       } else {
-        Image encoded(width, height, 3);
         const Image& img = *input.images[i];
-        for (size_t p = 0; p < img.pixelCount(); ++p)
-          for (int c = 0; c < 3; ++c)
-            encoded.pixels[p * 3 + size_t(c)] =
-                encodeGamma(img.pixels[p * size_t(img.channels) + size_t(c)]);
-        toCodes8(encoded, codes[i]);
+        Image encoded(width, height, 3);
+        parallelFor(
+            0, height,
+            [&](int64_t y) {
+              for (int x = 0; x < width; ++x)
+                for (int c = 0; c < 3; ++c)
+                  encoded.at(x, int(y))[c] = encodeGamma(img.at(x, int(y))[c]);
+            },
+            16);
+        ownCodes.push_back(toCodes8(encoded));
       }
     }
+    for (const Codes8& c : ownCodes) codePtr.push_back(&c);
   }
+  COMPOSE_CHECK(codePtr.size() == n);
+  const bool useOpenCvMerge = input.eightBit && !params.deghost && n > 1;
+  std::vector<cv::Mat> codes(n);  // for OpenCV: views of the codes, or shifted copies
+  for (size_t i = 0; i < n; ++i) codes[i] = wrap(*codePtr[i]);
 
   // 1. Alignment against the middle exposure.
   if (params.align && n > 1) {
@@ -174,7 +182,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
 
   std::vector<ShotView> shots(n);
   for (size_t i = 0; i < n; ++i)
-    shots[i] = {input.images[i], result.shifts[i][0], result.shifts[i][1], input.exposures[i]};
+    shots[i] = {input.images[i], codePtr[i], result.shifts[i][0], result.shifts[i][1],
+                input.exposures[i]};
 
   // 2. OpenCV's merge of 8-bit brackets.
   cv::Mat merged;
@@ -198,16 +207,54 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   out = Image(width, height, 4, {"R", "G", "B", "clipped"});
   const ResponseCurve* curve = input.response;
   const size_t pivot = n / 2;
+  std::vector<float> logExposure(n);
+  for (size_t i = 0; i < n; ++i) logExposure[i] = float(std::log(input.exposures[i]));
   std::vector<int64_t> saturatedRows(size_t(height), 0), darkRows(size_t(height), 0),
       ghostRows(size_t(height), 0);
-  auto linearOf = [&](const float* v, int c) -> float {
-    return input.eightBit ? curve->inverse[size_t(c)][size_t(codeOf(v[c]))] : std::max(v[c], 0.0f);
+  // Linear value of channel c of shot i at a pixel: through the curve for 8-bit codes.
+  auto linearOf = [&](const ShotView& shot, int x, int y, int c) -> float {
+    return input.eightBit ? curve->inverse[size_t(c)][shot.codeAt(x, y)[c]]
+                          : std::max(shot.at(x, y)[c], 0.0f);
   };
+  // log(inverse / exposure) for the log-domain averages, looked up rather than computed.
+  std::vector<float> logInverse;
+  if (input.eightBit) {
+    logInverse.resize(3 * kCodes);
+    for (int c = 0; c < 3; ++c)
+      for (int z = 0; z < kCodes; ++z)
+        logInverse[size_t(c * kCodes + z)] = std::log(curve->inverse[size_t(c)][size_t(z)]);
+  }
+  bool unshifted = true;
+  for (const auto& s : result.shifts) unshifted = unshifted && s[0] == 0 && s[1] == 0;
   parallelFor(0, height, [&](int64_t yy) {
     const int y = int(yy);
     std::vector<float> weight(n), value(n * 3);
     std::vector<char> over(n), dark(n), covered(n);
+    std::vector<const uint8_t*> rowCodes(n);
+    for (size_t i = 0; i < n; ++i)
+      rowCodes[i] = codePtr[i]->rgb.data() + size_t(y) * size_t(width) * 3;
+    const float* mergedRow = useOpenCvMerge ? merged.ptr<float>(y) : nullptr;
     for (int x = 0; x < width; ++x) {
+      if (useOpenCvMerge && unshifted) {
+        // The common case first, cheaply: OpenCV's value stands unless some shot is clipped
+        // everywhere, or has a code of 0 or 255.
+        bool everyOver = true, everyDark = true, hard = false;
+        for (size_t i = 0; i < n; ++i) {
+          const uint8_t* z = rowCodes[i] + 3 * x;
+          const int hi = std::max({z[0], z[1], z[2]}), lo = std::min({z[0], z[1], z[2]});
+          everyOver = everyOver && hi >= hiCode;
+          everyDark = everyDark && hi <= loCode;
+          hard = hard || lo == 0 || hi == kCodes - 1;
+        }
+        if (!everyOver && !everyDark && !hard) {
+          float* o = out.at(x, y);
+          o[0] = mergedRow[3 * x];
+          o[1] = mergedRow[3 * x + 1];
+          o[2] = mergedRow[3 * x + 2];
+          o[3] = 0.0f;
+          continue;
+        }
+      }
       bool allOver = true, allDark = true, anyUncovered = false, anyHardClip = false;
       for (size_t i = 0; i < n; ++i) {
         covered[i] = shots[i].covers(x, y);
@@ -216,13 +263,10 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           over[i] = dark[i] = 0;
           continue;
         }
-        const float* v = shots[i].at(x, y);
-        int maxCode = 0;
-        for (int c = 0; c < 3; ++c) {
-          const int code = codeOf(v[c]);
-          maxCode = std::max(maxCode, code);
-          anyHardClip = anyHardClip || code == 0 || code == kCodes - 1;
-        }
+        const uint8_t* z = shots[i].codeAt(x, y);
+        const int maxCode = std::max({z[0], z[1], z[2]});
+        const int minCode = std::min({z[0], z[1], z[2]});
+        anyHardClip = anyHardClip || minCode == 0 || maxCode == kCodes - 1;
         over[i] = maxCode >= hiCode;
         dark[i] = maxCode <= loCode;
         allOver = allOver && over[i];
@@ -240,8 +284,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           for (pick = n - 1; !covered[pick]; --pick) {
           }
         }
-        const float* v = shots[pick].at(x, y);
-        for (int c = 0; c < 3; ++c) o[c] = float(linearOf(v, c) / shots[pick].exposure);
+        for (int c = 0; c < 3; ++c)
+          o[c] = float(linearOf(shots[pick], x, y, c) / shots[pick].exposure);
         o[3] = 1.0f;
         (allOver ? saturatedRows : darkRows)[size_t(y)]++;
         continue;
@@ -257,19 +301,16 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         // (a bound, not a measurement) pull the average: redo such pixels, and borders a shift
         // left uncovered, with the same log-domain average without them, per channel.
         for (int c = 0; c < 3; ++c) {
-          double sum = 0.0, total = 0.0;
+          float sum = 0.0f, total = 0.0f;
           for (size_t i = 0; i < n; ++i) {
             if (!covered[i]) continue;
-            const float* v = shots[i].at(x, y);
-            const int code = codeOf(v[c]);
-            if (code == 0 || code == kCodes - 1) continue;
-            float w = 0.0f;
-            for (int k = 0; k < 3; ++k) w += triangle(codeOf(v[k]));
-            w /= 3.0f;
-            sum += w * std::log(double(linearOf(v, c)) / shots[i].exposure);
+            const uint8_t* z = shots[i].codeAt(x, y);
+            if (z[c] == 0 || z[c] == kCodes - 1) continue;
+            const float w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
+            sum += w * (logInverse[size_t(c * kCodes + z[c])] - logExposure[i]);
             total += w;
           }
-          if (total > 0.0) o[c] = float(std::exp(sum / total));
+          if (total > 0.0f) o[c] = std::exp(sum / total);
         }
         continue;
       }
@@ -280,8 +321,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         const float* v = shots[i].at(x, y);
         float w = 0.0f;
         if (input.eightBit) {
-          for (int c = 0; c < 3; ++c) w += triangle(codeOf(v[c]));
-          w /= 3.0f;
+          const uint8_t* z = shots[i].codeAt(x, y);
+          w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
           if (params.deghost && over[i]) w = 0.0f;
         } else {
           float peak = 0.0f;
@@ -291,7 +332,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         }
         weight[i] = w;
         for (int c = 0; c < 3; ++c)
-          value[i * 3 + size_t(c)] = float(linearOf(v, c) / shots[i].exposure);
+          value[i * 3 + size_t(c)] = float(linearOf(shots[i], x, y, c) / shots[i].exposure);
       }
       if (params.deghost) {
         // Reference: the middle shot, or the covered shot with weight nearest to it.

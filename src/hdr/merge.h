@@ -64,6 +64,9 @@ struct MergeInput {
   //    full scale is 1.0.
   bool eightBit = true;
   const ResponseCurve* response = nullptr;
+  // Optional: the images' 8-bit codes (toCodes8), when the caller has them already (8-bit input
+  // only); otherwise they are made here.
+  std::vector<const Codes8*> codes;
 };
 
 struct MergeResult {

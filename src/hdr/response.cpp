@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/output_files.h"
+#include "core/parallel.h"
 #include "hdr/opencv_util.h"
 
 namespace compose::hdr {
@@ -138,6 +139,29 @@ std::vector<Sample> selectSamples(const std::vector<std::vector<cv::Mat>>& views
 
 }  // namespace
 
+Codes8 toCodes8(const Image& image) {
+  COMPOSE_CHECK(image.channels >= 3);
+  Codes8 out;
+  out.width = image.width;
+  out.height = image.height;
+  out.rgb.resize(image.pixelCount() * 3);
+  const int ch = image.channels;
+  parallelFor(
+      0, image.height,
+      [&](int64_t y) {
+        const float* src = image.row(int(y)).data();
+        uint8_t* dst = out.rgb.data() + size_t(y) * size_t(image.width) * 3;
+        for (int x = 0; x < image.width; ++x) {
+          for (int c = 0; c < 3; ++c) {
+            const float v = src[size_t(x) * size_t(ch) + size_t(c)] * 255.0f + 0.5f;
+            dst[3 * x + c] = uint8_t(v <= 0.0f ? 0.0f : (v >= 255.0f ? 255.0f : v));
+          }
+        }
+      },
+      16);
+  return out;
+}
+
 const char* methodName(RecoveryMethod method) {
   return method == RecoveryMethod::Debevec ? "debevec" : "robertson";
 }
@@ -191,7 +215,8 @@ void RecoveryParams::validate() const {
 }
 
 ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
-                              const RecoveryParams& params, const Progress& progress) {
+                              const RecoveryParams& params, const Progress& progress,
+                              double* openCvSeconds) {
   params.validate();
   COMPOSE_CHECK(!brackets.empty());
   const BracketCodes& first = brackets.front();
@@ -200,10 +225,9 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
   if (n < 2) throw Error(kStage, "recovering a response needs at least two exposures");
   for (const BracketCodes& b : brackets) {
     COMPOSE_CHECK(b.images.size() == b.exposures.size() && !b.images.empty());
-    for (const Image* img : b.images) {
+    for (const Codes8* img : b.images) {
       if (img->width != b.images[0]->width || img->height != b.images[0]->height)
         throw Error(kStage, "photos of a bracket must have the same size");
-      if (img->channels < 3) throw Error(kStage, "recovering a response needs RGB photos");
     }
   }
 
@@ -223,6 +247,7 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
   for (size_t i = 0; i < n; ++i) times.at<float>(int(i)) = float(first.exposures[i]);
 
   cv::Mat response;
+  OpenCvClock opencv;
   if (params.method == RecoveryMethod::Debevec) {
     // The chosen samples go to OpenCV as a mosaic of k x k blocks, one block per sample, and
     // OpenCV's grid of `samples` points is made to land on one point in every block: with a
@@ -232,11 +257,7 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     std::vector<std::vector<cv::Mat>> views;
     for (const BracketCodes* b : used) {
       views.emplace_back();
-      for (size_t i = 0; i < n; ++i) {
-        const Image& img = *b->images[i];
-        views.back().emplace_back(img.height, img.width, CV_8UC3);
-        toCodes8(img, views.back().back());
-      }
+      for (size_t i = 0; i < n; ++i) views.back().push_back(wrap(*b->images[i]));
     }
     const std::vector<Sample> samples = selectSamples(views, params.samples);
     views.clear();
@@ -255,7 +276,7 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     }
     const int gridPoints = k * k + k / 2 + 1;
     auto calibrate = cv::createCalibrateDebevec(gridPoints, float(params.lambda), false);
-    calibrate->process(mosaic, response, times);
+    opencv([&] { calibrate->process(mosaic, response, times); });
   } else {
     // Robertson uses every pixel of the views, stacked vertically; large captures are
     // subsampled (nearest, so codes stay codes).
@@ -267,8 +288,8 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
       stacks[i].create(rows, cols, CV_8UC3);
       int y = 0;
       for (const BracketCodes* b : used) {
-        const Image& img = *b->images[i];
-        toCodes8(img, stacks[i].rowRange(y, y + img.height));
+        const Codes8& img = *b->images[i];
+        wrap(img).copyTo(stacks[i].rowRange(y, y + img.height));
         y += img.height;
       }
     }
@@ -281,9 +302,10 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
       }
     }
     auto calibrate = cv::createCalibrateRobertson(params.maxIterations, float(params.threshold));
-    calibrate->process(stacks, response, times);
+    opencv([&] { calibrate->process(stacks, response, times); });
   }
   report(progress, "response", 1.0);
+  if (openCvSeconds) *openCvSeconds = opencv.seconds;
 
   ResponseCurve curve;
   for (int c = 0; c < 3; ++c) {

@@ -24,6 +24,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -73,10 +74,18 @@ struct RecoveryParams {
   void validate() const;    // compose::Error (stage "merge")
 };
 
-// 8-bit images of one bracket for recovery: RGB codes as floats code/255 (ingest::readImage of a
-// JPEG), all of one size, with their relative exposures.
+// 8-bit RGB codes of an image, interleaved, row-major: what an 8-bit file holds.
+struct Codes8 {
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgb;
+};
+// The codes of an image read from an 8-bit file (values code / 255, RGB or more channels: the
+// first three are taken). Multi-threaded.
+Codes8 toCodes8(const Image& encoded);
+
+// The 8-bit codes of one bracket for recovery, all of one size, with their relative exposures.
 struct BracketCodes {
-  std::vector<const Image*> images;
+  std::vector<const Codes8*> images;
   std::vector<double> exposures;
 };
 
@@ -91,8 +100,10 @@ struct BracketCodes {
 // Patch selection (see response.cpp) keeps that ripple near 1 % RMS on the virtual camera's
 // photos; the ends of the range (codes below 10, above 240), which few patches reach, can be off
 // by more. Merged radiance is much less sensitive: those codes carry little weight.
+// `openCvSeconds`, when given, receives the time spent inside OpenCV's calibration.
 ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
-                              const RecoveryParams& params, const Progress& progress = {});
+                              const RecoveryParams& params, const Progress& progress = {},
+                              double* openCvSeconds = nullptr);
 
 ResponseCurve readResponse(const std::filesystem::path& file);
 void writeResponse(const std::filesystem::path& file, const ResponseCurve& curve);
