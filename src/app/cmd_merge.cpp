@@ -191,7 +191,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       ingest::WriteOptions w;
       w.depth = ingest::WriteOptions::Depth::Float;
       w.attributes = exrAttributes(result, view, capture);
-      ingest::writeImage(outputs.add(dst), view.radiance, w);
+      w.chromaticities = colors.chromaticities(view.radiance.colorSpace);
+      ingest::writeImage(outputs, dst, view.radiance, w);
       written.push_back(dst);
     }
     if (result.responseRecovered && !result.responseCacheFile.empty()) {

@@ -451,7 +451,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
       if (p.writeJpeg) {
         const fs::path dst = absolute / (s.stem + ".jpg");
         w.depth = ingest::WriteOptions::Depth::UInt8;
-        ingest::writeImage(outputs.add(dst), s.codes, w);
+        ingest::writeImage(outputs, dst, s.codes, w);
         files.photos.push_back(dst);
         jv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.jpegSpace});
         js["file"] = dst.filename().string();
@@ -461,7 +461,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
         w.depth = ingest::WriteOptions::Depth::UInt16;
         Image linear = s.linear16;
         linear.colorSpace = options.linearSpace;
-        ingest::writeImage(outputs.add(dst), linear, w);
+        ingest::writeImage(outputs, dst, linear, w);
         files.photos.push_back(dst);
         tv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.linearSpace});
         js["tiff"] = dst.filename().string();
@@ -484,7 +484,8 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
       w.depth = ingest::WriteOptions::Depth::Float;
       Image truth = v.truth;
       truth.colorSpace = options.linearSpace;
-      ingest::writeImage(outputs.add(dst), truth, w);
+      w.chromaticities = options.linearChromaticities;
+      ingest::writeImage(outputs, dst, truth, w);
       files.truthImages.push_back(dst);
       tvj["radiance"] = dst.filename().string();
     }

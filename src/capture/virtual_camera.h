@@ -46,6 +46,7 @@
 // (calib/lens.h), `truth.json` and the true response as a response file (hdr/response.h).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -164,6 +165,9 @@ struct WriteCaptureOptions {
   // Colour-space names written into the descriptions, as the colour config in use spells them.
   std::string jpegSpace = "sRGB";
   std::string linearSpace = "lin_rec709";
+  // Written into the truth EXRs' header (Rec.709 primaries, D65).
+  std::optional<std::array<double, 8>> linearChromaticities =
+      std::array<double, 8>{0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290};
 };
 
 // Writes everything into `folder` (created if needed); all files appear together or none do.

@@ -32,6 +32,12 @@ std::string linearSpaceFor(const color::ColorConfig& colors, const std::string& 
     if (why) *why = "as given";
     return colors.resolve(override, "the camera's linear colour space");
   }
+  // By its primaries, when the config can tell (it has an interchange role), else by name.
+  if (const std::string byPrimaries = colors.spaceWithChromaticities(color::kRec709Chromaticities);
+      !byPrimaries.empty()) {
+    if (why) *why = "linear with the primaries of " + encodedSpace;
+    return byPrimaries;
+  }
   for (const char* name : {"lin_rec709", "Linear Rec.709 (sRGB)", "Linear Rec.709", "Linear",
                            "linear", "Utility - Linear - sRGB", "lin_srgb"}) {
     if (colors.has(name)) {

@@ -9,12 +9,21 @@
 // on part-way (a truncated JPEG) is an error, not a picture with a grey bottom.
 //
 // writeImage() never leaves a half-written file at the destination: it writes a temporary file in
-// the same folder and renames it into place only when the write has succeeded.
+// the same folder and renames it into place only when the write has succeeded. Several outputs
+// that belong together are written into one OutputFiles set (core/output_files.h) and appear
+// together on commit().
+//
+// OpenEXR files say what their numbers are: the chromaticities of their RGB space (the standard
+// `chromaticities` attribute, read back by readImage) and the colour-space name
+// (`colorSpace`, a string attribute). Half-float output is checked against half's range: an
+// image with a value beyond ±65504 is written as 32-bit float instead of turning into Inf, and
+// the write reports it.
 //
 // Errors (missing file, undecodable data, unwritable folder) throw compose::Error with stage
 // "ingest" (or "output" for writes) and the file name.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -22,6 +31,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "core/output_files.h"
 
 namespace compose::ingest {
 
@@ -47,7 +57,9 @@ struct CaptureInfo {
   std::optional<double> captureSeconds;
   int orientation = 1;  // EXIF orientation of the file (already applied)
   std::string cameraMake, cameraModel;
-  std::string fileColorSpace;         // colour space the file or its reader declares
+  std::string fileColorSpace;  // colour space the file or its reader declares
+  // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
+  std::optional<std::array<double, 8>> chromaticities;
   std::string format;                 // reader name, e.g. "jpeg", "openexr"
   std::string sampleType;             // pixel type as stored: "uint8", "uint16", "half", "float"...
   int bitsPerSample = 0;              // 8, 16, 32...
@@ -99,7 +111,14 @@ struct WriteOptions {
   } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
   int jpegQuality = 95;
   int alphaChannel = -1;  // index of the alpha channel, or -1
+  // OpenEXR only: chromaticities of the RGB channels (red, green, blue, white xy).
+  std::optional<std::array<double, 8>> chromaticities;
   std::vector<ImageAttribute> attributes;
+};
+
+struct WriteReport {
+  bool promotedToFloat = false;  // half was asked for, a value did not fit, float was written
+  float largestMagnitude = 0.0f;
 };
 
 // The EXIF attributes of `info` (exposure, focal lengths, focal-plane resolution, camera, time),
@@ -107,7 +126,14 @@ struct WriteOptions {
 std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info);
 
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
-void writeImage(const std::filesystem::path& path, const Image& image,
-                const WriteOptions& options = {});
+WriteReport writeImage(const std::filesystem::path& path, const Image& image,
+                       const WriteOptions& options = {});
+// Writes `image` as one of a set of outputs: into a temporary of `outputs`; it appears at `path`
+// when the caller commits the set.
+WriteReport writeImage(OutputFiles& outputs, const std::filesystem::path& path, const Image& image,
+                       const WriteOptions& options = {});
+
+// The largest value half float represents.
+inline constexpr float kHalfMax = 65504.0f;
 
 }  // namespace compose::ingest

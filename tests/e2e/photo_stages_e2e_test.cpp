@@ -63,157 +63,161 @@ std::vector<std::string> filesIn(const fs::path& dir) {
         << "stderr: " << (run).err << "\nexpected to contain: " << (needle); \
   } while (0)
 
+// ctest runs every test in a process of its own: the capture is made by the tests that need it.
 class PhotoStages : public ::testing::Test {
  protected:
   // A small capture: two views, three exposures 2 EV apart.
-  static void SetUpTestSuite() {
-    dir_ = new TempDir();
+  void makeCapture() {
     const CommandRun r = compose(
         "capture-sim --env " + q(pipeline::samplesDirectory() / "interior.exr") + " --out " +
-            q(*dir_ / "shots") + " --size 160x120 --views 2 --brackets 3 --seed 4",
-        *dir_);
+            q(dir_ / "shots") + " --size 160x120 --views 2 --brackets 3 --seed 4",
+        dir_);
     ASSERT_EQ(r.status, 0) << r.err;
   }
-  static void TearDownTestSuite() {
-    delete dir_;
-    dir_ = nullptr;
-  }
-  static fs::path shot(const std::string& name) { return *dir_ / "shots" / name; }
-  static TempDir* dir_;
+  fs::path shot(const std::string& name) const { return dir_ / "shots" / name; }
+  TempDir dir_;
 };
-TempDir* PhotoStages::dir_ = nullptr;
 
-TEST_F(PhotoStages, IngestPrintsTheExifAndTheGrouping) {
-  TempDir dir;
-  const CommandRun r =
-      compose("ingest --json " + q(dir / "grouped.json") + " " + q(*dir_ / "shots"), dir);
-  ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_NE(r.out.find("2 views"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("f/"), std::string::npos);
-  EXPECT_NE(r.out.find("compose virtual camera"), std::string::npos);
-  EXPECT_TRUE(fs::exists(dir / "grouped.json"));
-  // The grouping written is a capture description merge can take.
-  const CommandRun m =
-      compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
-  EXPECT_EQ(m.status, 0) << m.err;
-  EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"view1.exr", "view2.exr"}));
-}
-
-TEST_F(PhotoStages, MergeRecoversTheResponseOnceAndReusesIt) {
-  TempDir dir;
-  const CommandRun first =
-      compose("merge --capture " + q(shot("capture.json")) + " --out " + q(dir / "merged"), dir);
-  ASSERT_EQ(first.status, 0) << first.err;
-  EXPECT_EQ(filesIn(dir / "merged"), (std::vector<std::string>{"yaw000.exr", "yaw180.exr"}));
-  EXPECT_NE(first.err.find("linearised by the camera response recovered"), std::string::npos)
-      << first.err;
-  EXPECT_TRUE(fs::exists(dir / "responses" / "compose_virtual_camera.json"));
-  const auto exr = ingest::readImage(dir / "merged" / "yaw000.exr");
-  EXPECT_EQ(exr.image.channels, 4);
-  EXPECT_EQ(exr.image.channelNames[3], "clipped");
-  EXPECT_EQ(exr.info.sampleType, "float");
-
-  const CommandRun again =
-      compose("merge --out " + q(dir / "one.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
-                  q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg")),
-              dir);
-  ASSERT_EQ(again.status, 0) << again.err;
-  EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
-  EXPECT_TRUE(fs::exists(dir / "one.exr"));
-}
-
-TEST_F(PhotoStages, BracketsOfDifferentSizesAreRefused) {
-  TempDir dir;
-  // The middle exposure, resized, with its EXIF.
-  auto mid = ingest::readImage(shot("yaw000_2.jpg"));
-  Image half(80, 60, 3);
-  for (int y = 0; y < 60; ++y)
-    for (int x = 0; x < 80; ++x)
-      for (int c = 0; c < 3; ++c) half.at(x, y)[c] = mid.image.at(2 * x, 2 * y)[c];
-  ingest::WriteOptions w;
-  w.attributes = ingest::exifAttributes(mid.info);
-  ingest::writeImage(dir / "small.jpg", half, w);
-  const CommandRun r =
-      compose("merge --out " + q(dir / "out" / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
-                  q(dir / "small.jpg") + " " + q(shot("yaw000_3.jpg")),
-              dir);
-  EXPECT_FAILS_WITH(r, 1, "must have the same size");
-  EXPECT_NE(r.err.find("small.jpg"), std::string::npos) << r.err;
-  EXPECT_TRUE(filesIn(dir / "out").empty());
-}
-
-TEST_F(PhotoStages, AllEqualExposuresAreRefused) {
-  TempDir dir;
-  const CommandRun r = compose("merge --exposures 1,1,1 --out " + q(dir / "hdr.exr") + " " +
-                                   q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) + " " +
-                                   q(shot("yaw000_3.jpg")),
-                               dir);
-  EXPECT_FAILS_WITH(r, 1, "ingest: the exposures of view 'hdr' are all equal");
-  EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
-}
-
-TEST_F(PhotoStages, NoExifAndNoExposureListIsRefused) {
-  TempDir dir;
-  for (const char* name : {"yaw000_1.jpg", "yaw000_2.jpg"}) {
-    const auto img = ingest::readImage(shot(name));
-    ingest::writeImage(dir / (std::string("bare_") + name), img.image);  // no EXIF
+TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
+  makeCapture();
+  // ingest prints the EXIF and the grouping, and writes it for merge.
+  {
+    TempDir dir;
+    const CommandRun r =
+        compose("ingest --json " + q(dir / "grouped.json") + " " + q(dir_ / "shots"), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("2 views"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("f/"), std::string::npos);
+    EXPECT_NE(r.out.find("compose virtual camera"), std::string::npos);
+    EXPECT_TRUE(fs::exists(dir / "grouped.json"));
+    // The grouping written is a capture description merge can take.
+    const CommandRun m =
+        compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
+    EXPECT_EQ(m.status, 0) << m.err;
+    EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"view1.exr", "view2.exr"}));
   }
-  const CommandRun r =
-      compose("merge --out " + q(dir / "hdr.exr") + " " + q(dir / "bare_yaw000_1.jpg") + " " +
-                  q(dir / "bare_yaw000_2.jpg"),
-              dir);
-  EXPECT_FAILS_WITH(r, 1, "no exposure time in EXIF and no exposure given");
-  EXPECT_NE(r.err.find("bare_yaw000_1.jpg"), std::string::npos);
-  EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
-  // With a list it merges.
-  const CommandRun ok =
-      compose("merge --exposures 0.25,1 --response colorspace --out " + q(dir / "hdr.exr") + " " +
-                  q(dir / "bare_yaw000_1.jpg") + " " + q(dir / "bare_yaw000_2.jpg"),
-              dir);
-  EXPECT_EQ(ok.status, 0) << ok.err;
-  EXPECT_NE(ok.err.find("not by a camera response"), std::string::npos) << ok.err;
+  // merge recovers the response once and reuses it.
+  {
+    TempDir dir;
+    const CommandRun first =
+        compose("merge --capture " + q(shot("capture.json")) + " --out " + q(dir / "merged"), dir);
+    ASSERT_EQ(first.status, 0) << first.err;
+    EXPECT_EQ(filesIn(dir / "merged"), (std::vector<std::string>{"yaw000.exr", "yaw180.exr"}));
+    EXPECT_NE(first.err.find("linearised by the camera response recovered"), std::string::npos)
+        << first.err;
+    EXPECT_TRUE(fs::exists(dir / "responses" / "compose_virtual_camera.json"));
+    const auto exr = ingest::readImage(dir / "merged" / "yaw000.exr");
+    EXPECT_EQ(exr.image.channels, 4);
+    EXPECT_EQ(exr.image.channelNames[3], "clipped");
+    EXPECT_EQ(exr.info.sampleType, "float");
+
+    const CommandRun again =
+        compose("merge --out " + q(dir / "one.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    ASSERT_EQ(again.status, 0) << again.err;
+    EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
+    EXPECT_TRUE(fs::exists(dir / "one.exr"));
+  }
 }
 
-TEST_F(PhotoStages, TruncatedJpegIsRefused) {
-  TempDir dir;
-  const std::string bytes = slurp(shot("yaw000_2.jpg"));
-  compose::testing::writeText(dir / "cut.jpg", bytes.substr(0, bytes.size() * 2 / 3));
-  const CommandRun r = compose("merge --out " + q(dir / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) +
-                                   " " + q(dir / "cut.jpg") + " " + q(shot("yaw000_3.jpg")),
-                               dir);
-  EXPECT_FAILS_WITH(r, 1, "merge: truncated file");
-  EXPECT_NE(r.err.find("cut.jpg"), std::string::npos);
-  EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
+  makeCapture();
+  // Brackets of different sizes.
+  {
+    TempDir dir;
+    // The middle exposure, resized, with its EXIF.
+    auto mid = ingest::readImage(shot("yaw000_2.jpg"));
+    Image half(80, 60, 3);
+    for (int y = 0; y < 60; ++y)
+      for (int x = 0; x < 80; ++x)
+        for (int c = 0; c < 3; ++c) half.at(x, y)[c] = mid.image.at(2 * x, 2 * y)[c];
+    ingest::WriteOptions w;
+    w.attributes = ingest::exifAttributes(mid.info);
+    ingest::writeImage(dir / "small.jpg", half, w);
+    const CommandRun r =
+        compose("merge --out " + q(dir / "out" / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(dir / "small.jpg") + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "must have the same size");
+    EXPECT_NE(r.err.find("small.jpg"), std::string::npos) << r.err;
+    EXPECT_TRUE(filesIn(dir / "out").empty());
+  }
+  // A bracket whose exposures are all equal.
+  {
+    TempDir dir;
+    const CommandRun r = compose("merge --exposures 1,1,1 --out " + q(dir / "hdr.exr") + " " +
+                                     q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) + " " +
+                                     q(shot("yaw000_3.jpg")),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 1, "ingest: the exposures of view 'hdr' are all equal");
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // No EXIF and no exposure list.
+  {
+    TempDir dir;
+    for (const char* name : {"yaw000_1.jpg", "yaw000_2.jpg"}) {
+      const auto img = ingest::readImage(shot(name));
+      ingest::writeImage(dir / (std::string("bare_") + name), img.image);  // no EXIF
+    }
+    const CommandRun r =
+        compose("merge --out " + q(dir / "hdr.exr") + " " + q(dir / "bare_yaw000_1.jpg") + " " +
+                    q(dir / "bare_yaw000_2.jpg"),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "no exposure time in EXIF and no exposure given");
+    EXPECT_NE(r.err.find("bare_yaw000_1.jpg"), std::string::npos);
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+    // With a list it merges.
+    const CommandRun ok =
+        compose("merge --exposures 0.25,1 --response colorspace --out " + q(dir / "hdr.exr") + " " +
+                    q(dir / "bare_yaw000_1.jpg") + " " + q(dir / "bare_yaw000_2.jpg"),
+                dir);
+    EXPECT_EQ(ok.status, 0) << ok.err;
+    EXPECT_NE(ok.err.find("not by a camera response"), std::string::npos) << ok.err;
+  }
+  // A truncated JPEG.
+  {
+    TempDir dir;
+    const std::string bytes = slurp(shot("yaw000_2.jpg"));
+    compose::testing::writeText(dir / "cut.jpg", bytes.substr(0, bytes.size() * 2 / 3));
+    const CommandRun r =
+        compose("merge --out " + q(dir / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(dir / "cut.jpg") + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "merge: truncated file");
+    EXPECT_NE(r.err.find("cut.jpg"), std::string::npos);
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // An unknown colour space, refused before anything is read.
+  {
+    TempDir dir;
+    const CommandRun r = compose("merge --input-space no-such-space --out " + q(dir / "hdr.exr") +
+                                     " " + q(dir / "missing.jpg"),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 2, "no-such-space");
+    EXPECT_EQ(r.err.find("missing.jpg"), std::string::npos) << "nothing read yet: " << r.err;
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // A chessboard size that matches no photo.
+  {
+    TempDir dir;
+    const auto boards = pipeline::samplesDirectory() / "chessboard";
+    const CommandRun r = compose("calib lens --board 8x5 --out " + q(dir / "camera.json") + " " +
+                                     q(boards / "left01.jpg") + " " + q(boards / "left02.jpg") +
+                                     " " + q(boards / "left03.jpg"),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 1, "calib: no 8x5 chessboard");
+    EXPECT_FALSE(fs::exists(dir / "camera.json"));
+    // The right size calibrates and writes the lens file.
+    const CommandRun ok =
+        compose("calib lens --board 9x6 --out " + q(dir / "camera.json") + " " + q(boards), dir);
+    EXPECT_EQ(ok.status, 0) << ok.err;
+    EXPECT_TRUE(fs::exists(dir / "camera.json"));
+    EXPECT_NE(ok.err.find("RMS reprojection"), std::string::npos);
+  }
 }
 
-TEST_F(PhotoStages, UnknownColourSpaceIsRefusedBeforeAnythingIsRead) {
-  TempDir dir;
-  const CommandRun r = compose("merge --input-space no-such-space --out " + q(dir / "hdr.exr") +
-                                   " " + q(dir / "missing.jpg"),
-                               dir);
-  EXPECT_FAILS_WITH(r, 2, "no-such-space");
-  EXPECT_EQ(r.err.find("missing.jpg"), std::string::npos) << "nothing read yet: " << r.err;
-  EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
-}
-
-TEST_F(PhotoStages, ChessboardSizeMatchingNoPhotoIsRefused) {
-  TempDir dir;
-  const auto boards = pipeline::samplesDirectory() / "chessboard";
-  const CommandRun r = compose("calib lens --board 8x5 --out " + q(dir / "camera.json") + " " +
-                                   q(boards / "left01.jpg") + " " + q(boards / "left02.jpg") + " " +
-                                   q(boards / "left03.jpg"),
-                               dir);
-  EXPECT_FAILS_WITH(r, 1, "calib: no 8x5 chessboard");
-  EXPECT_FALSE(fs::exists(dir / "camera.json"));
-  // The right size calibrates and writes the lens file.
-  const CommandRun ok =
-      compose("calib lens --board 9x6 --out " + q(dir / "camera.json") + " " + q(boards), dir);
-  EXPECT_EQ(ok.status, 0) << ok.err;
-  EXPECT_TRUE(fs::exists(dir / "camera.json"));
-  EXPECT_NE(ok.err.find("RMS reprojection"), std::string::npos);
-}
-
-TEST_F(PhotoStages, BadCommandLinesExitTwo) {
+TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   TempDir dir;
   EXPECT_FAILS_WITH(compose("merge " + q(shot("yaw000_1.jpg")), dir), 2, "--out is required");
   EXPECT_FAILS_WITH(
