@@ -174,7 +174,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     for (const auto& v : capture.views) {
       photos.emplace_back();
       for (const auto& s : v.shots) {
-        photos.back().push_back(ingest::readImage(s.file, "merge"));
+        photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
         printer("read", double(++done) / double(total));
       }
     }
@@ -220,8 +220,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                      view.name.c_str(), view.files.size(), stops.c_str(),
                      static_cast<long long>(view.stats.saturated + view.stats.dark));
       }
-      std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n",
-                   result.seconds, result.openCvSeconds);
+      std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n", result.seconds,
+                   result.openCvSeconds);
     }
     printNotes(globals, result.notes);
     for (const auto& f : written) std::printf("%s\n", f.string().c_str());

@@ -133,10 +133,26 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
   std::vector<std::vector<Codes8>> codes(capture.views.size());
   for (size_t v = 0; v < capture.views.size(); ++v) {
     if (!eightBit[v]) continue;
-    for (const auto& photo : photos[v]) {
-      if (photo.image.channels < 3)
-        throw Error(kStage, "merging needs RGB photos", capture.views[v].shots.front().file);
-      codes[v].push_back(toCodes8(photo.image));
+    for (size_t s = 0; s < photos[v].size(); ++s) {
+      const ingest::LoadedImage& photo = photos[v][s];
+      const int ch = photo.image.channels;
+      if (ch < 3) throw Error(kStage, "merging needs RGB photos", capture.views[v].shots[s].file);
+      if (photo.codes.empty()) {
+        codes[v].push_back(toCodes8(photo.image));
+        continue;
+      }
+      // Read as codes already: borrowed as they are, or without the extra channels (RGBA).
+      Codes8 c;
+      c.width = photo.image.width;
+      c.height = photo.image.height;
+      if (ch == 3) {
+        c.external = photo.codes.data();
+      } else {
+        c.rgb.resize(size_t(c.width) * size_t(c.height) * 3);
+        for (size_t i = 0; i < size_t(c.width) * size_t(c.height); ++i)
+          for (size_t k = 0; k < 3; ++k) c.rgb[i * 3 + k] = photo.codes[i * size_t(ch) + k];
+      }
+      codes[v].push_back(std::move(c));
     }
   }
 
@@ -235,6 +251,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     if (!input.eightBit) {
       converted.reserve(photos[v].size());
       for (size_t s = 0; s < photos[v].size(); ++s) {
+        COMPOSE_CHECK(photos[v][s].hasPixels());
         Image img = photos[v][s].image;
         if (img.channels < 3) throw Error(kStage, "merging needs RGB photos", view.shots[s].file);
         img.colorSpace = spaces[v][s];

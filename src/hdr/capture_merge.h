@@ -65,8 +65,9 @@ struct CaptureMergeResult {
   double recoverySeconds = 0.0;  // response recovery alone (0 when a stored curve was used)
 };
 
-// `photos[v][s]` is the decoded image of capture.views[v].shots[s] (ingest::readImage), with
-// every shot's exposure resolved (ingest::resolveExposures).
+// `photos[v][s]` is the decoded image of capture.views[v].shots[s] (ingest::readImage; 8-bit
+// photos preferably read as codes, ReadOptions::codesForEightBit), with every shot's exposure
+// resolved (ingest::resolveExposures).
 CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                                 const std::vector<std::vector<ingest::LoadedImage>>& photos,
                                 const CaptureMergeOptions& options,

@@ -59,7 +59,7 @@ struct ShotView {
   }
   const float* at(int x, int y) const { return image->at(x - dx, y - dy); }
   const uint8_t* codeAt(int x, int y) const {
-    return codes->rgb.data() + (size_t(y - dy) * size_t(codes->width) + size_t(x - dx)) * 3;
+    return codes->data() + (size_t(y - dy) * size_t(codes->width) + size_t(x - dx)) * 3;
   }
 };
 
@@ -128,6 +128,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   if (codePtr.empty()) {
     ownCodes.reserve(n);
     for (size_t i = 0; i < n; ++i) {
+      COMPOSE_CHECK(!input.images[i]->pixels.empty());
       if (input.eightBit) {
         ownCodes.push_back(toCodes8(*input.images[i]));
       } else {
@@ -231,8 +232,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     std::vector<float> weight(n), value(n * 3);
     std::vector<char> over(n), dark(n), covered(n);
     std::vector<const uint8_t*> rowCodes(n);
-    for (size_t i = 0; i < n; ++i)
-      rowCodes[i] = codePtr[i]->rgb.data() + size_t(y) * size_t(width) * 3;
+    for (size_t i = 0; i < n; ++i) rowCodes[i] = codePtr[i]->data() + size_t(y) * size_t(width) * 3;
     const float* mergedRow = useOpenCvMerge ? merged.ptr<float>(y) : nullptr;
     for (int x = 0; x < width; ++x) {
       if (useOpenCvMerge && unshifted) {

@@ -15,7 +15,7 @@ namespace compose::hdr {
 
 // A matrix over the codes, without copying (OpenCV only reads it).
 inline cv::Mat wrap(const Codes8& codes) {
-  return cv::Mat(codes.height, codes.width, CV_8UC3, const_cast<uint8_t*>(codes.rgb.data()));
+  return cv::Mat(codes.height, codes.width, CV_8UC3, const_cast<uint8_t*>(codes.data()));
 }
 
 // Accumulates wall-clock time spent in the calls it wraps.

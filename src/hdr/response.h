@@ -74,10 +74,14 @@ struct RecoveryParams {
   void validate() const;    // compose::Error (stage "merge")
 };
 
-// 8-bit RGB codes of an image, interleaved, row-major: what an 8-bit file holds.
+// 8-bit RGB codes of an image, interleaved, row-major: what an 8-bit file holds. The codes are
+// owned (`rgb`) or borrowed (`external`, e.g. ingest::LoadedImage::codes, which must outlive
+// this).
 struct Codes8 {
   int width = 0, height = 0;
   std::vector<uint8_t> rgb;
+  const uint8_t* external = nullptr;
+  const uint8_t* data() const { return external ? external : rgb.data(); }
 };
 // The codes of an image read from an 8-bit file (values code / 255, RGB or more channels: the
 // first three are taken). Multi-threaded.

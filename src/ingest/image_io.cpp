@@ -202,7 +202,45 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   return info;
 }
 
-LoadedImage readImage(const fs::path& path, const std::string& stage) {
+namespace {
+
+// Decodes every pixel of `input` as `type` into `pixels`, orientation applied; returns the upright
+// spec. Decoded with ImageInput rather than ImageBuf: the JPEG reader reports a truncated file
+// only as an error message after a "successful" read, which ImageBuf drops.
+template <class T>
+OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int orientation,
+                       OIIO::TypeDesc type, std::vector<T>& pixels, const fs::path& path,
+                       const std::string& stage) {
+  pixels.resize(size_t(spec.width) * size_t(spec.height) * size_t(spec.nchannels));
+  const bool ok = input.read_image(0, 0, 0, spec.nchannels, type, pixels.data());
+  const std::string why = readerError(input);
+  input.close();
+  if (!ok)
+    throw Error(stage, "cannot decode image: " + (why.empty() ? "unknown reason" : why), path);
+  if (!why.empty()) {
+    const bool truncated = why.find("Premature end") != std::string::npos;
+    throw Error(stage, std::string(truncated ? "truncated file: " : "corrupt image data: ") + why,
+                path);
+  }
+  if (orientation == 1) return spec;
+  OIIO::ImageSpec stored = spec;  // keeps the Orientation attribute for reorient()
+  stored.set_format(type);
+  OIIO::ImageBuf buffer(stored, pixels.data());
+  OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(buffer);
+  if (upright.has_error())
+    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+  const OIIO::ImageSpec& s = upright.spec();
+  std::vector<T> turned(pixels.size());
+  OIIO::ROI roi(s.x, s.x + s.width, s.y, s.y + s.height, 0, 1, 0, s.nchannels);
+  if (!upright.get_pixels(roi, type, turned.data()))
+    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+  pixels = std::move(turned);
+  return s;
+}
+
+}  // namespace
+
+LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
   if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
@@ -222,39 +260,17 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
   }
   fillCaptureInfo(spec, info);
 
-  // Decoded with ImageInput rather than ImageBuf: the JPEG reader reports a truncated file only
-  // as an error message after a "successful" read, which ImageBuf drops.
-  OIIO::ImageSpec floatSpec = spec;  // keeps the Orientation attribute for reorient()
-  floatSpec.set_format(OIIO::TypeDesc::FLOAT);
-  std::vector<float> pixels(size_t(spec.width) * size_t(spec.height) * size_t(spec.nchannels));
-  const bool ok = input->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, pixels.data());
-  const std::string why = readerError(*input);
-  input->close();
-  if (!ok)
-    throw Error(stage, "cannot decode image: " + (why.empty() ? "unknown reason" : why), path);
-  if (!why.empty()) {
-    const bool truncated = why.find("Premature end") != std::string::npos;
-    throw Error(stage, std::string(truncated ? "truncated file: " : "corrupt image data: ") + why,
-                path);
-  }
-
   Image& img = out.image;
-  if (info.orientation != 1) {
-    OIIO::ImageBuf stored(floatSpec, pixels.data());
-    OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(stored);
-    if (upright.has_error())
-      throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
-    const OIIO::ImageSpec& s = upright.spec();
-    img = Image(s.width, s.height, s.nchannels);
-    OIIO::ROI roi(s.x, s.x + s.width, s.y, s.y + s.height, 0, 1, 0, s.nchannels);
-    if (!upright.get_pixels(roi, OIIO::TypeDesc::FLOAT, img.pixels.data()))
-      throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+  OIIO::ImageSpec upright;
+  if (options.codesForEightBit && spec.format == OIIO::TypeDesc::UINT8) {
+    upright = decode(*input, spec, info.orientation, OIIO::TypeDesc::UINT8, out.codes, path, stage);
   } else {
-    img.width = spec.width;
-    img.height = spec.height;
-    img.channels = spec.nchannels;
-    img.pixels = std::move(pixels);
+    upright =
+        decode(*input, spec, info.orientation, OIIO::TypeDesc::FLOAT, img.pixels, path, stage);
   }
+  img.width = upright.width;
+  img.height = upright.height;
+  img.channels = upright.nchannels;
   for (int c = 0; c < spec.nchannels; ++c) img.channelNames.push_back(spec.channel_name(c));
   img.colorSpace = info.fileColorSpace;
   return out;

@@ -24,6 +24,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -88,10 +89,22 @@ bool looksLikeImageFile(const std::filesystem::path& path);
 struct LoadedImage {
   Image image;  // float, channels as stored (1-4 or more), orientation applied
   CaptureInfo info;
+  // With ReadOptions::codesForEightBit and an 8-bit file: the stored codes, interleaved, channels
+  // as stored, orientation applied; `image` then has its size, channels, names and colour space
+  // but no pixels.
+  std::vector<uint8_t> codes;
+  bool hasPixels() const { return !image.pixels.empty(); }
+};
+
+struct ReadOptions {
+  // An 8-bit file is returned as its codes (LoadedImage::codes) instead of floats: a quarter of
+  // the memory, and no conversion for stages that work on codes (exposure merging).
+  bool codesForEightBit = false;
 };
 
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.
-LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest");
+LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
+                      const ReadOptions& options = {});
 
 // A metadata attribute written into the file header: standard names ("ExposureTime", "FNumber",
 // "Exif:PhotographicSensitivity", "Make", ...) land in the EXIF block of JPEG and TIFF files;

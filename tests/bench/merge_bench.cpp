@@ -45,7 +45,10 @@ int mergeOnly(const fs::path& dir, bool align) {
   ingest::Capture capture = ingest::readCaptureDescription(dir / "capture.json");
   ingest::resolveExposures(capture);
   std::vector<std::vector<ingest::LoadedImage>> photos(1);
-  for (const auto& s : capture.views[0].shots) photos[0].push_back(ingest::readImage(s.file));
+  ingest::ReadOptions read;
+  read.codesForEightBit = true;  // as compose merge reads them
+  for (const auto& s : capture.views[0].shots)
+    photos[0].push_back(ingest::readImage(s.file, "merge", read));
   const double decode = since(t0);
 
   const color::ColorConfig colors = color::ColorConfig::builtin();
