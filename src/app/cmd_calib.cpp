@@ -31,7 +31,7 @@ struct CalibOptions {
 
 Runner setupCalib(CLI::App& command, const Globals& globals) {
   auto o = std::make_shared<CalibOptions>();
-  command.description(
+  command.footer(
       "Camera calibration from chessboard photos (OpenCV).\n\nExamples:\n"
       "  compose calib lens --board 9x6 --out camera.json board/*.jpg\n"
       "  compose calib pose --board 9x6 --square 0.025 --lens camera.json --out pose.json "

@@ -27,7 +27,7 @@ struct SimOptions {
 Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
   auto o = std::make_shared<SimOptions>();
   capture::VirtualCameraParams& params = o->params;
-  command.description(
+  command.footer(
       "Take bracketed photos of an HDR environment with a virtual camera: a lens, a response "
       "curve, white balance, sensor noise (fixed seed), 8-bit quantisation and JPEG, EXIF written "
       "as a camera would. Writes the photos, capture.json (for compose merge --capture), "

@@ -40,7 +40,7 @@ std::string number(const std::optional<double>& v, const char* format) {
 
 Runner setupIngest(CLI::App& command, const Globals& globals) {
   auto o = std::make_shared<IngestOptions>();
-  command.description(
+  command.footer(
       "Read the EXIF of photos (exposure time, f-number, ISO, focal lengths, focal-plane "
       "resolution, camera, capture time), print it, and group the photos into views and "
       "brackets.\n\nExample:\n  compose ingest ~/photos/hdr-session/\n  compose ingest "

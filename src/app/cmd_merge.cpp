@@ -48,7 +48,7 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
 
 Runner setupMerge(CLI::App& command, const Globals& globals) {
   auto o = std::make_shared<MergeOptions>();
-  command.description(
+  command.footer(
       "Merge a bracket of exposures (8-bit JPEGs, 16-bit TIFFs, ...) into scene-linear radiance "
       "in the working colour space, written as float OpenEXR with a 'clipped' mask channel.\n"
       "The camera's response is recovered with OpenCV and kept per camera (Make/Model) in "

@@ -113,8 +113,8 @@ Image render(const lighting::Environment& env, const calib::Lens& lens,
   const glm::dvec3 gain = p.calibration * p.whiteBalance;
   // A fisheye's image circle: rays up to half the field of view from the axis.
   const double circle = lens.projection == calib::Projection::Equidistant
-                             ? std::cos(0.5 * p.fovDegrees * kPi / 180.0)
-                             : -2.0;
+                            ? std::cos(0.5 * p.fovDegrees * kPi / 180.0)
+                            : -2.0;
   parallelFor(0, lens.height, [&](int64_t yy) {
     const int y = int(yy);
     for (int x = 0; x < lens.width; ++x) {

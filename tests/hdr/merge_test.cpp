@@ -31,8 +31,8 @@ struct SyntheticBracket {
   Image radiance;
 };
 
-SyntheticBracket syntheticBracket(int w, int h, std::vector<double> exposures,
-                                  double stops = 12.0, double lowest = -8.0) {
+SyntheticBracket syntheticBracket(int w, int h, std::vector<double> exposures, double stops = 12.0,
+                                  double lowest = -8.0) {
   SyntheticBracket b;
   b.exposures = exposures;
   b.radiance = Image(w, h, 3);
@@ -199,7 +199,8 @@ TEST(Response, ColorSpaceCurveIsTheSrgbDecoding) {
   const auto colors = color::ColorConfig::builtin();
   const ResponseCurve c = curveFromColorSpace(colors, "sRGB", "lin_rec709");
   const ResponseCurve s = ResponseCurve::srgb();
-  for (int z = 1; z < kCodes; ++z) EXPECT_NEAR(c.inverse[0][z], s.inverse[0][z], 1e-5f * float(1 + z));
+  for (int z = 1; z < kCodes; ++z)
+    EXPECT_NEAR(c.inverse[0][z], s.inverse[0][z], 1e-5f * float(1 + z));
   std::string why;
   EXPECT_EQ(linearSpaceFor(colors, "sRGB - Texture", "", &why), "Linear Rec.709 (sRGB)");
   COMPOSE_EXPECT_ERROR(linearSpaceFor(colors, "sRGB", "no such space"), "no such space");
