@@ -1,5 +1,4 @@
-// OpenCV views of our data, and a clock for the time spent inside OpenCV. Private to the
-// photo-stage libraries (src/hdr, calib).
+// OpenCV views of our data, and a clock for the time spent inside OpenCV. Private to src/hdr.
 #pragma once
 
 #include <chrono>
