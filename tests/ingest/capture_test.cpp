@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 
+#include <OpenImageIO/imageio.h>
 #include <glm/mat3x3.hpp>
 
 #include "ingest/image_io.h"
@@ -237,6 +238,41 @@ TEST(ImageIoTruncation, TruncatedJpegIsAnErrorNotAGreyPicture) {
   }
   COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "truncated file");
   COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "cut.jpg)");
+}
+
+}  // namespace
+}  // namespace compose::ingest
+
+namespace compose::ingest {
+namespace {
+
+TEST(ImageIoCodes, EightBitFilesCanBeReadAsCodesWithOrientationApplied) {
+  compose::testing::TempDir dir;
+  // A 4x2 8-bit image whose top-left pixel is code 200, stored with Orientation 6: upright it is
+  // 2x4 with that pixel at the top right (as ImageIo.AppliesExifOrientation checks for floats).
+  const auto path = dir / "rotated.tif";
+  {
+    std::vector<uint8_t> px(4 * 2 * 3, 10);
+    px[0] = 200;
+    auto out = OIIO::ImageOutput::create(path.string());
+    OIIO::ImageSpec spec(4, 2, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("Orientation", 6);
+    ASSERT_TRUE(out->open(path.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+  }
+  ReadOptions codes;
+  codes.codesForEightBit = true;
+  const LoadedImage img = readImage(path, "ingest", codes);
+  EXPECT_FALSE(img.hasPixels());
+  ASSERT_EQ(img.image.width, 2);
+  ASSERT_EQ(img.image.height, 4);
+  ASSERT_EQ(img.codes.size(), 2u * 4u * 3u);
+  EXPECT_EQ(img.codes[(0 * 2 + 1) * 3], 200);  // row 0, column 1
+  EXPECT_EQ(img.codes[0], 10);
+  // Deeper files are still read as floats.
+  writeImage(dir / "deep.exr", Image(4, 2, 3));
+  EXPECT_TRUE(readImage(dir / "deep.exr", "ingest", codes).hasPixels());
 }
 
 }  // namespace
