@@ -133,13 +133,9 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
       // A pinhole from the 35 mm equivalent focal length, as the plate camera uses.
       calib::CameraOptions camera;
       if (o->focal35 != 0.0) camera.focal35mm = o->focal35;
-      const calib::PinholeCamera pin =
+      const calib::PlateCamera pin =
           calib::plateCamera(plate.image.width, plate.image.height, plate.info, camera);
-      lensModel.width = plate.image.width;
-      lensModel.height = plate.image.height;
-      lensModel.fx = lensModel.fy = pin.focalPx;
-      lensModel.cx = 0.5 * plate.image.width;
-      lensModel.cy = 0.5 * plate.image.height;
+      lensModel = pin.lens;
       lensModel.source = pin.focalSource;
       notes.push_back("no lens file: an ideal pinhole with the focal length from " +
                       pin.focalSource + " (" + std::to_string(int(std::lround(pin.focal35mm))) +
