@@ -8,6 +8,7 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
+#include "calib/lens_json.h"
 #include "core/error.h"
 #include "core/output_files.h"
 
@@ -160,17 +161,7 @@ void Lens::validate(const fs::path& file) const {
     if (!std::isfinite(d)) fail("distortion coefficients must be finite");
 }
 
-Lens readLens(const fs::path& file) {
-  std::error_code ec;
-  if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
-  std::ifstream in(file);
-  if (!in) throw Error("calib", "cannot open the lens file", file);
-  nlohmann::json j;
-  try {
-    in >> j;
-  } catch (const nlohmann::json::exception& e) {
-    throw Error("calib", std::string("not a valid JSON lens file: ") + e.what(), file);
-  }
+Lens lensFromJson(const nlohmann::json& j, const fs::path& file) {
   if (!j.is_object()) throw Error("calib", "lens file must hold a JSON object", file);
   auto number = [&](const char* key) -> double {
     if (!j.contains(key) || !j[key].is_number())
@@ -209,8 +200,7 @@ Lens readLens(const fs::path& file) {
   return lens;
 }
 
-void writeLens(const fs::path& file, const Lens& lens) {
-  lens.validate(file);
+nlohmann::ordered_json lensToJson(const Lens& lens) {
   nlohmann::ordered_json j;
   j["model"] = lens.projection == Projection::Rectilinear ? "rectilinear" : "equidistant";
   j["width"] = lens.width;
@@ -223,7 +213,31 @@ void writeLens(const fs::path& file, const Lens& lens) {
   j["rms"] = lens.rms;
   j["convention"] =
       "pixels as OpenCV: (0, 0) is the centre of the top-left pixel; camera looks along -Z, +Y up";
-  writeTextFile(file, j.dump(2) + "\n", "calib");
+  return j;
+}
+
+Lens readLens(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
+  std::ifstream in(file);
+  if (!in) throw Error("calib", "cannot open the lens file", file);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error("calib", std::string("not a valid JSON lens file: ") + e.what(), file);
+  }
+  return lensFromJson(j, file);
+}
+
+std::string lensText(const Lens& lens) {
+  lens.validate();
+  return lensToJson(lens).dump(2) + "\n";
+}
+
+void writeLens(const fs::path& file, const Lens& lens) {
+  lens.validate(file);
+  writeTextFile(file, lensToJson(lens).dump(2) + "\n", "calib");
 }
 
 }  // namespace compose::calib

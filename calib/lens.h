@@ -69,5 +69,7 @@ struct Lens {
 Lens readLens(const std::filesystem::path& file);
 // Written atomically (temporary file + rename).
 void writeLens(const std::filesystem::path& file, const Lens& lens);
+// The JSON text writeLens() writes (for writers that commit several files together).
+std::string lensText(const Lens& lens);
 
 }  // namespace compose::calib

@@ -82,7 +82,8 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
       cam.focalSource = "--focal35";
     } else if (exif.focalLength35mm) {
       cam.focal35mm = *exif.focalLength35mm;
-      cam.focalSource = "EXIF FocalLengthIn35mmFilm";
+      cam.focalSource =
+          exif.focal35mmSource.empty() ? "EXIF FocalLengthIn35mmFilm" : exif.focal35mmSource;
     } else {
       cam.focal35mm = kDefaultFocal35mm;
       cam.focalSource = "default (no 35 mm equivalent focal length in EXIF)";

@@ -22,7 +22,13 @@ void ProgressPrinter::operator()(std::string_view stage, double fraction) {
 }
 
 const std::vector<Command>& commands() {
-  static const std::vector<Command> list = {};
+  static const std::vector<Command> list = {
+      {"ingest", "Read photos' EXIF and group them into views and brackets", setupIngest},
+      {"merge", "Merge bracketed exposures into scene-linear HDR (OpenEXR)", setupMerge},
+      {"capture-sim", "Virtual camera: bracketed photos of an HDR environment, with ground truth",
+       setupCaptureSim},
+      {"calib", "Lens calibration and plate pose from chessboard photos", setupCalib},
+  };
   return list;
 }
 
@@ -58,6 +64,23 @@ double parseNumber(const std::string& text, const std::string& option) {
   } catch (const std::exception&) {
     throw UsageError(option + " expects a number, got '" + text + "'");
   }
+}
+
+std::vector<double> parseList(const std::string& text, const std::string& option) {
+  std::vector<double> out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t end = text.find(',', start);
+    if (end == std::string::npos) end = text.size();
+    out.push_back(parseNumber(text.substr(start, end - start), option));
+    start = end + 1;
+  }
+  return out;
+}
+
+void printNotes(const Globals& globals, const std::vector<std::string>& notes) {
+  if (globals.quiet) return;
+  for (const auto& note : notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
 }
 
 std::string join(const std::vector<std::string>& items, const std::string& separator) {

@@ -12,6 +12,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
+#include "core/error.h"
 #include "core/progress.h"
 
 namespace compose::app {
@@ -55,6 +56,12 @@ const std::vector<Command>& commands();
 // The one-shot `compose --plate ... --object ...`: its options live on the top-level app.
 Runner setupCompose(CLI::App& app, const Globals& globals);
 
+// The photo-stage commands (cmd_ingest.cpp, cmd_merge.cpp, cmd_capture_sim.cpp, cmd_calib.cpp).
+Runner setupIngest(CLI::App& command, const Globals& globals);
+Runner setupMerge(CLI::App& command, const Globals& globals);
+Runner setupCaptureSim(CLI::App& command, const Globals& globals);
+Runner setupCalib(CLI::App& command, const Globals& globals);
+
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);
 // "V" or "R,G,B" → three numbers; throws UsageError naming `option`.
@@ -62,5 +69,23 @@ glm::vec3 parseColour(const std::string& text, const std::string& option);
 // A number, or throws UsageError naming `option`.
 double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
+// "a,b,c" → numbers; throws UsageError naming `option`.
+std::vector<double> parseList(const std::string& text, const std::string& option);
+
+// Runs `check` (a parameter validation that throws compose::Error) and reports a failure as a
+// bad command line (UsageError, exit 2), so that bad values are refused before any file is read.
+template <class Check>
+void asUsage(Check&& check) {
+  try {
+    check();
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    throw UsageError(e.what());
+  }
+}
+
+// Prints a library's notes on stderr ("compose: note: ..."), unless quiet.
+void printNotes(const Globals& globals, const std::vector<std::string>& notes);
 
 }  // namespace compose::app

@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <limits>
 #include <system_error>
 
 #include <OpenImageIO/imagebuf.h>
@@ -24,7 +26,7 @@ std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* na
   const OIIO::ParamValue* p = spec.find_attribute(name);
   if (!p) return std::nullopt;
   double v = double(spec.get_float_attribute(name, -1.0f));
-  if (!(v > 0.0)) return std::nullopt;
+  if (!(v > 0.0) || !std::isfinite(v)) return std::nullopt;
   return v;
 }
 
@@ -35,44 +37,75 @@ std::string lowerExtension(const fs::path& path) {
   return ext;
 }
 
-}  // namespace
+std::string trimmed(std::string s) {
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  size_t i = 0;
+  while (i < s.size() && s[i] == ' ') ++i;
+  return s.substr(i);
+}
 
-LoadedImage readImage(const fs::path& path, const std::string& stage) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
-  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+// Days from 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil).
+int64_t daysFromCivil(int64_t y, int64_t m, int64_t d) {
+  y -= m <= 2;
+  const int64_t era = (y >= 0 ? y : y - 399) / 400;
+  const int64_t yoe = y - era * 400;
+  const int64_t doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const int64_t doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+  return era * 146097 + doe - 719468;
+}
 
-  auto input = OIIO::ImageInput::open(path.string());
-  if (!input) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "unknown reason";
-    throw Error(stage, "cannot read image: " + why, path);
+// "YYYY:MM:DD HH:MM:SS" (EXIF) → seconds; empty if malformed or blank.
+std::optional<double> exifSeconds(const std::string& text, const std::string& subsec) {
+  int y = 0, mo = 0, d = 0, h = 0, mi = 0, sec = 0;
+  if (std::sscanf(text.c_str(), "%d:%d:%d %d:%d:%d", &y, &mo, &d, &h, &mi, &sec) != 6)
+    return std::nullopt;
+  if (y < 1800 || mo < 1 || mo > 12 || d < 1 || d > 31 || h < 0 || h > 23 || mi < 0 || mi > 59 ||
+      sec < 0 || sec > 60)
+    return std::nullopt;
+  double t = double(daysFromCivil(y, mo, d)) * 86400.0 + h * 3600.0 + mi * 60.0 + sec;
+  // SubSecTimeOriginal holds the digits of a decimal fraction ("25" = 0.25 s).
+  std::string digits;
+  for (char c : subsec) {
+    if (c < '0' || c > '9') break;
+    digits.push_back(c);
   }
-  const OIIO::ImageSpec fileSpec = input->spec();
-  LoadedImage out;
-  CaptureInfo& info = out.info;
-  info.format = input->format_name();
-  input->close();
+  if (!digits.empty()) t += std::stod("0." + digits);
+  return t;
+}
 
-  OIIO::ImageBuf buf(path.string());
-  if (!buf.read(0, 0, /*force=*/true, OIIO::TypeDesc::FLOAT) || buf.has_error()) {
-    throw Error(stage, "cannot decode image: " + buf.geterror(), path);
+double unitMillimetres(int unit) {
+  switch (unit) {
+    case 2:
+      return 25.4;
+    case 3:
+      return 10.0;
+    case 4:
+      return 1.0;
+    case 5:
+      return 0.001;
+    default:
+      return 0.0;
   }
-  const OIIO::ImageSpec& spec = buf.spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
-    throw Error(stage, "image has no pixels", path);
-  }
+}
+
+// Fills everything but the pixels from a file's header.
+void fillCaptureInfo(const OIIO::ImageSpec& spec, CaptureInfo& info) {
   info.fileWidth = spec.width;
   info.fileHeight = spec.height;
+  info.channels = spec.nchannels;
+  info.sampleType = spec.format.c_str();
+  info.bitsPerSample = spec.get_int_attribute("oiio:BitsPerSample", int(spec.format.size()) * 8);
   info.orientation = spec.get_int_attribute("Orientation", 1);
   info.exposureTime = floatAttribute(spec, "ExposureTime");
   info.fNumber = floatAttribute(spec, "FNumber");
   info.iso = floatAttribute(spec, "Exif:PhotographicSensitivity");
   if (!info.iso) info.iso = floatAttribute(spec, "Exif:ISOSpeedRatings");
   info.focalLengthMm = floatAttribute(spec, "Exif:FocalLength");
-  info.focalLength35mm = floatAttribute(spec, "Exif:FocalLengthIn35mmFilm");
-  info.cameraMake = spec.get_string_attribute("Make");
-  info.cameraModel = spec.get_string_attribute("Model");
+  info.focalPlaneXResolution = floatAttribute(spec, "Exif:FocalPlaneXResolution");
+  info.focalPlaneYResolution = floatAttribute(spec, "Exif:FocalPlaneYResolution");
+  info.focalPlaneResolutionUnit = spec.get_int_attribute("Exif:FocalPlaneResolutionUnit", 2);
+  info.cameraMake = trimmed(spec.get_string_attribute("Make"));
+  info.cameraModel = trimmed(spec.get_string_attribute("Model"));
   info.fileColorSpace = spec.get_string_attribute("oiio:ColorSpace");
   if (const std::string named = spec.get_string_attribute("colorSpace"); !named.empty())
     info.fileColorSpace = named;
@@ -87,25 +120,185 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
     }
     if (finite) info.chromaticities = xy;
   }
-  (void)fileSpec;
+  info.dateTimeOriginal = trimmed(spec.get_string_attribute("Exif:DateTimeOriginal"));
+  if (info.dateTimeOriginal.empty())
+    info.dateTimeOriginal = trimmed(spec.get_string_attribute("DateTime"));
+  info.captureSeconds =
+      exifSeconds(info.dateTimeOriginal, spec.get_string_attribute("Exif:SubsecTimeOriginal"));
 
-  if (info.orientation != 1) {
-    OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(buf);
-    if (upright.has_error())
-      throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
-    buf = std::move(upright);
+  info.focalLength35mm = floatAttribute(spec, "Exif:FocalLengthIn35mmFilm");
+  if (info.focalLength35mm) {
+    info.focal35mmSource = "EXIF FocalLengthIn35mmFilm";
+  } else if (info.focalLengthMm && info.focalPlaneXResolution && info.focalPlaneYResolution &&
+             unitMillimetres(info.focalPlaneResolutionUnit) > 0.0) {
+    // Sensor size = image size / (pixels per unit); the 35 mm equivalent scales the focal length
+    // by the ratio of diagonals (43.27 mm for the 36 x 24 mm frame).
+    const double unit = unitMillimetres(info.focalPlaneResolutionUnit);
+    const double w = spec.width / *info.focalPlaneXResolution * unit;
+    const double h = spec.height / *info.focalPlaneYResolution * unit;
+    const double diagonal = std::sqrt(w * w + h * h);
+    if (diagonal > 0.5 && diagonal < 500.0) {
+      info.focalLength35mm = *info.focalLengthMm * 43.266615305567875 / diagonal;
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "derived from FocalLength %.3g mm and the focal-plane resolution (sensor "
+                    "%.1f x %.1f mm)",
+                    *info.focalLengthMm, w, h);
+      info.focal35mmSource = text;
+    }
   }
+}
 
-  const OIIO::ImageSpec& s = buf.spec();
-  Image& img = out.image;
-  img = Image(s.width, s.height, s.nchannels);
-  for (int c = 0; c < s.nchannels; ++c) img.channelNames.push_back(s.channel_name(c));
-  img.colorSpace = info.fileColorSpace;
+// The reader's own error messages (not OpenImageIO's global ones, which may be stale).
+std::string readerError(OIIO::ImageInput& input) {
+  return input.geterror();
+}
+
+}  // namespace
+
+std::optional<double> CaptureInfo::relativeExposure() const {
+  if (!exposureTime) return std::nullopt;
+  const double n = fNumber.value_or(1.0);
+  return *exposureTime * iso.value_or(100.0) / (n * n);
+}
+
+std::string CaptureInfo::exposureAssumptions() const {
+  std::string s;
+  if (!iso) s += "ISO 100 (no ISO in EXIF)";
+  if (!fNumber) s += std::string(s.empty() ? "" : ", ") + "f/1 (no FNumber in EXIF)";
+  return s;
+}
+
+std::string CaptureInfo::camera() const {
+  return trimmed(trimmed(cameraMake) + " " + trimmed(cameraModel));
+}
+
+bool looksLikeImageFile(const fs::path& path) {
+  static const char* const kExtensions[] = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".exr",
+                                            ".hdr", ".dng",  ".cr2", ".cr3", ".nef",  ".arw",
+                                            ".orf", ".rw2",  ".raf", ".pef", ".srw",  ".heic"};
+  const std::string ext = lowerExtension(path);
+  for (const char* e : kExtensions)
+    if (ext == e) return true;
+  return false;
+}
+
+CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
+  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+  auto input = OIIO::ImageInput::open(path.string());
+  if (!input) {
+    std::string why = OIIO::geterror();
+    if (why.empty()) why = "unknown reason";
+    throw Error(stage, "cannot read image: " + why, path);
+  }
+  CaptureInfo info;
+  info.format = input->format_name();
+  const OIIO::ImageSpec& spec = input->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw Error(stage, "image has no pixels", path);
+  fillCaptureInfo(spec, info);
+  return info;
+}
+
+namespace {
+
+// Decodes every pixel of `input` as `type` into `pixels`, orientation applied; returns the upright
+// spec. Decoded with ImageInput rather than ImageBuf: the JPEG reader reports a truncated file
+// only as an error message after a "successful" read, which ImageBuf drops.
+template <class T>
+OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int orientation,
+                       OIIO::TypeDesc type, std::vector<T>& pixels, const fs::path& path,
+                       const std::string& stage) {
+  pixels.resize(size_t(spec.width) * size_t(spec.height) * size_t(spec.nchannels));
+  const bool ok = input.read_image(0, 0, 0, spec.nchannels, type, pixels.data());
+  const std::string why = readerError(input);
+  input.close();
+  if (!ok)
+    throw Error(stage, "cannot decode image: " + (why.empty() ? "unknown reason" : why), path);
+  if (!why.empty()) {
+    const bool truncated = why.find("Premature end") != std::string::npos;
+    throw Error(stage, std::string(truncated ? "truncated file: " : "corrupt image data: ") + why,
+                path);
+  }
+  if (orientation == 1) return spec;
+  OIIO::ImageSpec stored = spec;  // keeps the Orientation attribute for reorient()
+  stored.set_format(type);
+  OIIO::ImageBuf buffer(stored, pixels.data());
+  OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(buffer);
+  if (upright.has_error())
+    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+  const OIIO::ImageSpec& s = upright.spec();
+  std::vector<T> turned(pixels.size());
   OIIO::ROI roi(s.x, s.x + s.width, s.y, s.y + s.height, 0, 1, 0, s.nchannels);
-  if (!buf.get_pixels(roi, OIIO::TypeDesc::FLOAT, img.pixels.data())) {
-    throw Error(stage, "cannot decode image: " + buf.geterror(), path);
+  if (!upright.get_pixels(roi, type, turned.data()))
+    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
+  pixels = std::move(turned);
+  return s;
+}
+
+}  // namespace
+
+LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
+  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+
+  auto input = OIIO::ImageInput::open(path.string());
+  if (!input) {
+    std::string why = OIIO::geterror();
+    if (why.empty()) why = "unknown reason";
+    throw Error(stage, "cannot read image: " + why, path);
   }
+  LoadedImage out;
+  CaptureInfo& info = out.info;
+  info.format = input->format_name();
+  const OIIO::ImageSpec spec = input->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+    throw Error(stage, "image has no pixels", path);
+  }
+  fillCaptureInfo(spec, info);
+
+  Image& img = out.image;
+  OIIO::ImageSpec upright;
+  if (options.codesForEightBit && spec.format == OIIO::TypeDesc::UINT8) {
+    upright = decode(*input, spec, info.orientation, OIIO::TypeDesc::UINT8, out.codes, path, stage);
+  } else {
+    upright =
+        decode(*input, spec, info.orientation, OIIO::TypeDesc::FLOAT, img.pixels, path, stage);
+  }
+  img.width = upright.width;
+  img.height = upright.height;
+  img.channels = upright.nchannels;
+  for (int c = 0; c < spec.nchannels; ++c) img.channelNames.push_back(spec.channel_name(c));
+  img.colorSpace = info.fileColorSpace;
   return out;
+}
+
+std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
+  std::vector<ImageAttribute> a;
+  if (info.exposureTime) a.push_back({"ExposureTime", *info.exposureTime});
+  if (info.fNumber) a.push_back({"FNumber", *info.fNumber});
+  if (info.iso) a.push_back({"Exif:PhotographicSensitivity", int(std::lround(*info.iso))});
+  if (info.focalLengthMm) a.push_back({"Exif:FocalLength", *info.focalLengthMm});
+  a.push_back({"Exif:FocalLengthIn35mmFilm",
+               info.focalLength35mm ? int(std::lround(*info.focalLength35mm)) : 0});
+  if (info.focalPlaneXResolution && info.focalPlaneYResolution) {
+    a.push_back({"Exif:FocalPlaneXResolution", *info.focalPlaneXResolution});
+    a.push_back({"Exif:FocalPlaneYResolution", *info.focalPlaneYResolution});
+    a.push_back({"Exif:FocalPlaneResolutionUnit", info.focalPlaneResolutionUnit});
+  }
+  if (!info.cameraMake.empty()) a.push_back({"Make", info.cameraMake});
+  if (!info.cameraModel.empty()) a.push_back({"Model", info.cameraModel});
+  if (!info.dateTimeOriginal.empty()) {
+    // "YYYY:MM:DD HH:MM:SS[.fraction]": the fraction goes to SubSecTimeOriginal.
+    const std::string& t = info.dateTimeOriginal;
+    const size_t dot = t.find('.');
+    a.push_back({"Exif:DateTimeOriginal", t.substr(0, dot)});
+    if (dot != std::string::npos) a.push_back({"Exif:SubsecTimeOriginal", t.substr(dot + 1)});
+  }
+  return a;
 }
 
 namespace {
@@ -120,6 +313,9 @@ OIIO::TypeDesc pixelFormat(const Image& image, const WriteOptions& options, bool
       break;
     case WriteOptions::Depth::UInt8:
       format = OIIO::TypeDesc::UINT8;
+      break;
+    case WriteOptions::Depth::UInt16:
+      format = OIIO::TypeDesc::UINT16;
       break;
     case WriteOptions::Depth::Half:
       format = OIIO::TypeDesc::HALF;
@@ -171,6 +367,9 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
     case WriteOptions::Depth::UInt8:
       format = OIIO::TypeDesc::UINT8;
       break;
+    case WriteOptions::Depth::UInt16:
+      format = OIIO::TypeDesc::UINT16;
+      break;
     case WriteOptions::Depth::Half:
       format = OIIO::TypeDesc::HALF;
       break;
@@ -197,8 +396,25 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
   spec.attribute("Software", "compose");
   if (isExr) describeExr(spec, image, options);
-  if (ext == ".jpg" || ext == ".jpeg") {
+  const bool isJpeg = ext == ".jpg" || ext == ".jpeg";
+  if (isJpeg) {
     spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
+  }
+  for (const ImageAttribute& a : options.attributes) {
+    if (const int* i = std::get_if<int>(&a.value)) {
+      spec.attribute(a.name, *i);
+    } else if (const double* d = std::get_if<double>(&a.value)) {
+      float f = float(*d);
+      // OpenImageIO 2.4's JPEG EXIF writer turns exact binary fractions (1/4, 1/64 s) into an
+      // infinite rational; one step up in float avoids that and reads back as the same value.
+      if (isJpeg) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+      spec.attribute(a.name, f);
+    } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
+      spec.attribute(a.name, *t);
+    } else {
+      const auto& v = std::get<std::vector<float>>(a.value);
+      spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, int(v.size())), v.data());
+    }
   }
   auto fail = [&](const std::string& what) {
     std::string why = output->geterror();

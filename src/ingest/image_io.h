@@ -4,7 +4,9 @@
 // the plugin is present) to float, applies the EXIF orientation so that pixel (0, 0) is the top
 // left of the picture as a person sees it, and returns the capture metadata that later stages need
 // (exposure for merging, focal length for the camera). Values are returned as stored: an 8-bit
-// sRGB JPEG comes back as encoded values in [0, 1], tagged with the colour space the file declares.
+// sRGB JPEG comes back as encoded values in [0, 1] (code / 255 exactly), a 16-bit TIFF as
+// code / 65535, tagged with the colour space the file declares. A file the decoder had to give up
+// on part-way (a truncated JPEG) is an error, not a picture with a grey bottom.
 //
 // writeImage() never leaves a half-written file at the destination: it writes a temporary file in
 // the same folder and renames it into place only when the write has succeeded. Several outputs
@@ -22,10 +24,12 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "core/image.h"
@@ -33,34 +37,89 @@
 
 namespace compose::ingest {
 
-// Capture metadata from EXIF (and the file header). Absent fields are empty.
+// Capture metadata from EXIF (and the file header). Absent fields are empty; EXIF values of 0
+// (which many cameras write for "unknown") count as absent.
 struct CaptureInfo {
-  std::optional<double> exposureTime;  // seconds
-  std::optional<double> fNumber;
-  std::optional<double> iso;
-  std::optional<double> focalLengthMm;    // true focal length
-  std::optional<double> focalLength35mm;  // 35 mm equivalent focal length
-  int orientation = 1;                    // EXIF orientation of the file (already applied)
+  std::optional<double> exposureTime;   // seconds (EXIF ExposureTime)
+  std::optional<double> fNumber;        // EXIF FNumber
+  std::optional<double> iso;            // EXIF PhotographicSensitivity (ISOSpeedRatings)
+  std::optional<double> focalLengthMm;  // true focal length (EXIF FocalLength)
+  // 35 mm equivalent focal length: EXIF FocalLengthIn35mmFilm, or derived from FocalLength and the
+  // focal-plane resolution tags when that is 0 or missing (see focal35mmSource).
+  std::optional<double> focalLength35mm;
+  std::string focal35mmSource;  // where focalLength35mm came from; empty when it is unknown
+  // EXIF FocalPlaneX/YResolution: sensor pixels per unit of FocalPlaneResolutionUnit (2 inch,
+  // 3 centimetre; 4 millimetre and 5 micrometre are non-standard but written by some cameras).
+  std::optional<double> focalPlaneXResolution, focalPlaneYResolution;
+  int focalPlaneResolutionUnit = 0;
+  // EXIF DateTimeOriginal ("YYYY:MM:DD HH:MM:SS") and SubSecTimeOriginal, as text and as seconds
+  // on a monotonic scale (days since 2000-01-01 times 86400 plus the time of day); the seconds are
+  // only for ordering shots and measuring the gaps between them.
+  std::string dateTimeOriginal;
+  std::optional<double> captureSeconds;
+  int orientation = 1;  // EXIF orientation of the file (already applied)
   std::string cameraMake, cameraModel;
   std::string fileColorSpace;  // colour space the file or its reader declares
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
   std::optional<std::array<double, 8>> chromaticities;
   std::string format;                 // reader name, e.g. "jpeg", "openexr"
+  std::string sampleType;             // pixel type as stored: "uint8", "uint16", "half", "float"...
+  int bitsPerSample = 0;              // 8, 16, 32...
   int fileWidth = 0, fileHeight = 0;  // as stored, before orientation
+  int channels = 0;                   // as stored
+
+  // Relative exposure t · ISO / N² (time in seconds, N the f-number): proportional to the light
+  // a pixel collects from a given radiance. Empty without an exposure time; a missing ISO counts
+  // as 100 and a missing f-number as 1 (see exposureAssumptions()), which is harmless when all
+  // shots of a bracket miss the same field.
+  std::optional<double> relativeExposure() const;
+  // What relativeExposure() had to assume ("ISO 100 (no ISO in EXIF)"), empty if nothing.
+  std::string exposureAssumptions() const;
+  // "Make Model" trimmed, or empty when neither is known.
+  std::string camera() const;
 };
+
+// Reads only the header of an image file (no pixels are decoded): size, pixel type, colour space
+// and EXIF. Fast enough to scan a folder of photos. Errors as readImage().
+CaptureInfo readCaptureInfo(const std::filesystem::path& path, const std::string& stage = "ingest");
+
+// Whether `path` has the extension of an image format readImage() is meant for (JPEG, PNG, TIFF,
+// OpenEXR, Radiance HDR, and camera raw formats), for scanning folders.
+bool looksLikeImageFile(const std::filesystem::path& path);
 
 struct LoadedImage {
   Image image;  // float, channels as stored (1-4 or more), orientation applied
   CaptureInfo info;
+  // With ReadOptions::codesForEightBit and an 8-bit file: the stored codes, interleaved, channels
+  // as stored, orientation applied; `image` then has its size, channels, names and colour space
+  // but no pixels.
+  std::vector<uint8_t> codes;
+  bool hasPixels() const { return !image.pixels.empty(); }
+};
+
+struct ReadOptions {
+  // An 8-bit file is returned as its codes (LoadedImage::codes) instead of floats: a quarter of
+  // the memory, and no conversion for stages that work on codes (exposure merging).
+  bool codesForEightBit = false;
 };
 
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.
-LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest");
+LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
+                      const ReadOptions& options = {});
+
+// A metadata attribute written into the file header: standard names ("ExposureTime", "FNumber",
+// "Exif:PhotographicSensitivity", "Make", ...) land in the EXIF block of JPEG and TIFF files;
+// any other name is kept as a custom attribute where the format allows it (OpenEXR).
+struct ImageAttribute {
+  std::string name;
+  std::variant<int, double, std::string, std::vector<float>> value;
+};
 
 struct WriteOptions {
   enum class Depth {
     Auto,
     UInt8,
+    UInt16,
     Half,
     Float
   } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
@@ -68,12 +127,17 @@ struct WriteOptions {
   int alphaChannel = -1;  // index of the alpha channel, or -1
   // OpenEXR only: chromaticities of the RGB channels (red, green, blue, white xy).
   std::optional<std::array<double, 8>> chromaticities;
+  std::vector<ImageAttribute> attributes;
 };
 
 struct WriteReport {
   bool promotedToFloat = false;  // half was asked for, a value did not fit, float was written
   float largestMagnitude = 0.0f;
 };
+
+// The EXIF attributes of `info` (exposure, focal lengths, focal-plane resolution, camera, time),
+// for WriteOptions::attributes, so that readImage() reads them back.
+std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info);
 
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
 WriteReport writeImage(const std::filesystem::path& path, const Image& image,

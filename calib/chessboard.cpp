@@ -1,0 +1,373 @@
+#include "calib/chessboard.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "calib/lens_json.h"
+#include "core/error.h"
+#include "core/output_files.h"
+
+namespace compose::calib {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kStage = "calib";
+
+// 8-bit grey of an image as read (values in [0, 1]; linear HDR input is clipped).
+cv::Mat grey8(const Image& image) {
+  cv::Mat out(image.height, image.width, CV_8UC1);
+  const int ch = image.channels;
+  for (int y = 0; y < image.height; ++y) {
+    const float* src = image.row(y).data();
+    uchar* dst = out.ptr<uchar>(y);
+    for (int x = 0; x < image.width; ++x) {
+      const float* p = src + size_t(x) * size_t(ch);
+      const float v = ch >= 3 ? 0.299f * p[0] + 0.587f * p[1] + 0.114f * p[2] : p[0];
+      dst[x] = cv::saturate_cast<uchar>(v * 255.0f + 0.5f);
+    }
+  }
+  return out;
+}
+
+std::vector<cv::Point3f> boardPoints(const Board& board) {
+  std::vector<cv::Point3f> pts;
+  for (int r = 0; r < board.rows; ++r)
+    for (int c = 0; c < board.columns; ++c)
+      pts.emplace_back(float(c * board.square), float(r * board.square), 0.0f);
+  return pts;
+}
+
+// Corners in OpenCV's pixel convention (centres on integers), refined; empty if not found.
+std::vector<cv::Point2f> findCorners(const cv::Mat& grey, const Board& board) {
+  std::vector<cv::Point2f> corners;
+  const cv::Size size(board.columns, board.rows);
+  const int flags =
+      cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
+  if (!cv::findChessboardCorners(grey, size, corners, flags)) return {};
+  // The refinement window grows with the image, as squares do (11 x 11 half-size at VGA).
+  const int half =
+      std::clamp(int(std::lround(11.0 * std::max(grey.cols, grey.rows) / 640.0)), 5, 31);
+  cv::cornerSubPix(grey, corners, cv::Size(half, half), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 0.001));
+  return corners;
+}
+
+std::string fixed(double v, int digits) {
+  char text[48];
+  std::snprintf(text, sizeof text, "%.*f", digits, v);
+  return text;
+}
+
+nlohmann::ordered_json rows4(const glm::dmat4& m) {
+  nlohmann::ordered_json j = nlohmann::ordered_json::array();
+  for (int r = 0; r < 4; ++r) j.push_back({m[0][r], m[1][r], m[2][r], m[3][r]});
+  return j;
+}
+
+}  // namespace
+
+Board Board::parse(const std::string& text) {
+  Board b;
+  char x = 0;
+  int c = 0, r = 0;
+  char extra = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d%c", &c, &x, &r, &extra) != 3 || (x != 'x' && x != 'X'))
+    throw Error(kStage,
+                "a board is given as COLUMNSxROWS of inner corners, e.g. 9x6; got '" + text + "'");
+  b.columns = c;
+  b.rows = r;
+  b.validate();
+  return b;
+}
+
+std::string Board::name() const {
+  return std::to_string(columns) + "x" + std::to_string(rows);
+}
+
+void Board::validate() const {
+  if (columns < 2 || rows < 2 || columns > 100 || rows > 100)
+    throw Error(kStage, "a chessboard needs 2 to 100 inner corners each way, got " + name());
+  if (!(square > 0.0) || !std::isfinite(square))
+    throw Error(kStage, "the chessboard's square size must be positive");
+}
+
+void CalibrationParams::validate() const {
+  if (minPhotos < 1) throw Error(kStage, "at least one photo is needed");
+}
+
+LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const Board& board,
+                              const CalibrationParams& params, const Progress& progress) {
+  board.validate();
+  params.validate();
+  if (photos.empty()) throw Error(kStage, "no photos to calibrate from");
+  const Image& first = *photos.front().image;
+  for (const CalibrationPhoto& p : photos) {
+    if (p.image->width != first.width || p.image->height != first.height) {
+      throw Error(kStage,
+                  "calibration photos must all have the same size: this one is " +
+                      std::to_string(p.image->width) + "x" + std::to_string(p.image->height) +
+                      ", " + photos.front().file.filename().string() + " is " +
+                      std::to_string(first.width) + "x" + std::to_string(first.height),
+                  p.file);
+    }
+  }
+  LensCalibration out;
+  std::vector<std::vector<cv::Point2f>> imagePoints;
+  for (size_t i = 0; i < photos.size(); ++i) {
+    report(progress, "calib", double(i) / double(photos.size() + 1));
+    auto corners = findCorners(grey8(*photos[i].image), board);
+    if (corners.empty()) {
+      out.rejected.push_back(photos[i].file);
+    } else {
+      out.used.push_back(photos[i].file);
+      imagePoints.push_back(std::move(corners));
+    }
+  }
+  if (int(out.used.size()) < params.minPhotos) {
+    std::string names;
+    for (const auto& f : out.rejected) names += (names.empty() ? "" : ", ") + f.filename().string();
+    const std::string what =
+        out.used.empty()
+            ? "no " + board.name() +
+                  " chessboard (inner corners, columns x rows) found in any of the " +
+                  std::to_string(photos.size()) + " photos (" + names +
+                  "); check --board: count the inner corners"
+            : "a " + board.name() + " chessboard was found in only " +
+                  std::to_string(out.used.size()) + " of " + std::to_string(photos.size()) +
+                  " photos; at least " + std::to_string(params.minPhotos) +
+                  " are needed (not found in: " + names + ")";
+    throw Error(kStage, what, photos.front().file);
+  }
+  const std::vector<std::vector<cv::Point3f>> objectPoints(imagePoints.size(), boardPoints(board));
+  const cv::Size size(first.width, first.height);
+  cv::Mat K, dist;
+  std::vector<cv::Mat> rvecs, tvecs;
+  double rms = 0.0;
+  Lens& lens = out.lens;
+  lens.width = first.width;
+  lens.height = first.height;
+  lens.projection = params.model;
+  try {
+    if (params.model == Projection::Rectilinear) {
+      rms = cv::calibrateCamera(objectPoints, imagePoints, size, K, dist, rvecs, tvecs);
+    } else {
+      std::vector<std::vector<cv::Point3d>> obj;
+      std::vector<std::vector<cv::Point2d>> img;
+      for (size_t i = 0; i < imagePoints.size(); ++i) {
+        obj.emplace_back(objectPoints[i].begin(), objectPoints[i].end());
+        img.emplace_back(imagePoints[i].begin(), imagePoints[i].end());
+      }
+      rms = cv::fisheye::calibrate(
+          obj, img, size, K, dist, rvecs, tvecs,
+          cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW);
+    }
+  } catch (const cv::Exception& e) {
+    throw Error(kStage, std::string("calibration failed: ") + e.err, photos.front().file);
+  }
+  K.convertTo(K, CV_64F);
+  dist.convertTo(dist, CV_64F);
+  lens.fx = K.at<double>(0, 0);
+  lens.fy = K.at<double>(1, 1);
+  lens.cx = K.at<double>(0, 2) + 0.5;  // OpenCV → continuous pixel coordinates
+  lens.cy = K.at<double>(1, 2) + 0.5;
+  for (int i = 0; i < int(dist.total()); ++i) lens.distortion.push_back(dist.at<double>(i));
+  lens.rms = rms;
+  lens.source = "chessboard calibration (" + std::to_string(out.used.size()) + " photos)";
+  lens.validate();
+
+  // Per-photo reprojection error, to point at a bad photo.
+  for (size_t i = 0; i < imagePoints.size(); ++i) {
+    std::vector<cv::Point2f> projected;
+    if (params.model == Projection::Rectilinear) {
+      cv::projectPoints(objectPoints[i], rvecs[i], tvecs[i], K, dist, projected);
+    } else {
+      cv::fisheye::projectPoints(objectPoints[i], projected, rvecs[i], tvecs[i], K, dist);
+    }
+    double sum = 0.0;
+    for (size_t k = 0; k < projected.size(); ++k) {
+      const cv::Point2f d = projected[k] - imagePoints[i][k];
+      sum += double(d.x) * d.x + double(d.y) * d.y;
+    }
+    out.photoRms.push_back(std::sqrt(sum / double(projected.size())));
+  }
+  if (!out.rejected.empty()) {
+    std::string names;
+    for (const auto& f : out.rejected) names += (names.empty() ? "" : ", ") + f.filename().string();
+    out.notes.push_back("no " + board.name() + " chessboard found in " +
+                        std::to_string(out.rejected.size()) + " photo(s), left out: " + names);
+  }
+  report(progress, "calib", 1.0);
+  return out;
+}
+
+PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens& lensIn,
+                            const Board& board) {
+  board.validate();
+  PlatePose pose;
+  pose.board = board;
+  pose.image = file;
+  pose.width = plate.width;
+  pose.height = plate.height;
+  Lens lens = lensIn;
+  if (lens.width != plate.width || lens.height != plate.height) {
+    const double a = double(lens.width) / lens.height, b = double(plate.width) / plate.height;
+    if (std::abs(a / b - 1.0) > 0.002) {
+      throw Error(kStage,
+                  "the lens was calibrated for " + std::to_string(lens.width) + "x" +
+                      std::to_string(lens.height) + " images, the plate is " +
+                      std::to_string(plate.width) + "x" + std::to_string(plate.height) +
+                      " (another aspect ratio: a crop, which the calibration cannot follow)",
+                  file);
+    }
+    lens = lens.resized(plate.width, plate.height);
+    pose.notes.push_back("the lens (" + std::to_string(lensIn.width) + "x" +
+                         std::to_string(lensIn.height) + ") was scaled to the plate's size");
+  }
+  pose.lens = lens;
+  const auto corners = findCorners(grey8(plate), board);
+  if (corners.empty()) {
+    throw Error(kStage,
+                "no " + board.name() +
+                    " chessboard (inner corners, columns x rows) found in the plate; check --board",
+                file);
+  }
+  // Undistort through the project's lens model: normalised OpenCV camera coordinates (x right,
+  // y down, z forward) of every corner; then a distortion-free PnP with K = identity.
+  std::vector<cv::Point2d> normalised;
+  for (const cv::Point2f& c : corners) {
+    glm::dvec3 d;
+    if (!lens.direction(c.x + 0.5, c.y + 0.5, d) || !(d.z < 0.0))
+      throw Error(kStage, "a chessboard corner lies outside what the lens model can invert", file);
+    normalised.emplace_back(d.x / -d.z, -d.y / -d.z);
+  }
+  const auto objectF = boardPoints(board);
+  std::vector<cv::Point3d> object(objectF.begin(), objectF.end());
+  cv::Mat rvec, tvec;
+  const cv::Mat K = cv::Mat::eye(3, 3, CV_64F);
+  if (!cv::solvePnP(object, normalised, K, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE) ||
+      !cv::solvePnP(object, normalised, K, cv::noArray(), rvec, tvec, true,
+                    cv::SOLVEPNP_ITERATIVE)) {
+    throw Error(kStage, "cannot solve for the camera's pose from the chessboard", file);
+  }
+  cv::Mat Rm;
+  cv::Rodrigues(rvec, Rm);
+  // X_cv = R X_board + t.
+  glm::dmat3 R;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) R[c][r] = Rm.at<double>(r, c);
+  const glm::dvec3 t(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+  const glm::dmat3 boardFromCv = glm::transpose(R);
+  const glm::dvec3 cameraInBoard = -(boardFromCv * t);
+  // World axes in board coordinates: X along the columns, Y the normal towards the camera.
+  const glm::dvec3 xAxis(1.0, 0.0, 0.0);
+  const glm::dvec3 yAxis = cameraInBoard.z >= 0.0 ? glm::dvec3(0, 0, 1) : glm::dvec3(0, 0, -1);
+  const glm::dvec3 zAxis = glm::cross(xAxis, yAxis);
+  const glm::dvec3 origin(0.5 * (board.columns - 1) * board.square,
+                          0.5 * (board.rows - 1) * board.square, 0.0);
+  // worldFromBoard: rows are the world axes.
+  const glm::dmat3 worldFromBoard = glm::transpose(glm::dmat3(xAxis, yAxis, zAxis));
+  const glm::dmat3 cvFromCamera(glm::dvec3(1, 0, 0), glm::dvec3(0, -1, 0), glm::dvec3(0, 0, -1));
+  const glm::dmat3 rotation = worldFromBoard * boardFromCv * cvFromCamera;
+  const glm::dvec3 position = worldFromBoard * (cameraInBoard - origin);
+  pose.worldFromCamera = glm::dmat4(rotation);
+  pose.worldFromCamera[3] = glm::dvec4(position, 1.0);
+
+  // Reprojection error through the lens model, pixels.
+  const glm::dmat4 cameraFromWorld = glm::inverse(pose.worldFromCamera);
+  double sum = 0.0;
+  for (size_t i = 0; i < corners.size(); ++i) {
+    const glm::dvec3 pb(object[i].x, object[i].y, object[i].z);
+    const glm::dvec3 pw = worldFromBoard * (pb - origin);
+    const glm::dvec3 pc = glm::dvec3(cameraFromWorld * glm::dvec4(pw, 1.0));
+    glm::dvec2 px;
+    if (!lens.project(pc, px))
+      throw Error(kStage, "the board's pose puts it behind the camera", file);
+    const double dx = px.x - (corners[i].x + 0.5), dy = px.y - (corners[i].y + 0.5);
+    sum += dx * dx + dy * dy;
+  }
+  pose.rms = std::sqrt(sum / double(corners.size()));
+  if (pose.rms > 2.0) {
+    pose.notes.push_back("the board's corners reproject with " + fixed(pose.rms, 2) +
+                         " px RMS: the lens calibration may not fit this photo");
+  }
+  return pose;
+}
+
+std::string poseText(const PlatePose& pose) {
+  pose.board.validate();
+  nlohmann::ordered_json j;
+  j["format"] = "compose-pose";
+  j["version"] = 1;
+  j["image"] = pose.image.filename().string();
+  j["width"] = pose.width;
+  j["height"] = pose.height;
+  j["board"] = {
+      {"columns", pose.board.columns}, {"rows", pose.board.rows}, {"square", pose.board.square}};
+  j["worldFromCamera"] = rows4(pose.worldFromCamera);
+  const glm::dvec3 p = pose.cameraPosition();
+  j["cameraPosition"] = {p.x, p.y, p.z};
+  j["rms"] = pose.rms;
+  j["frame"] =
+      "world: origin at the centre of the board's inner corners, the board in the plane y = 0, "
+      "+Y out of the board towards the camera, +X along the board's columns; camera: +X right, "
+      "+Y up, looking along -Z; lengths in the unit of 'square'";
+  j["lens"] = lensToJson(pose.lens);
+  return j.dump(2) + "\n";
+}
+
+void writePose(const fs::path& file, const PlatePose& pose) {
+  writeTextFile(file, poseText(pose), kStage);
+}
+
+PlatePose readPose(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error(kStage, "pose file not found", file);
+  std::ifstream in(file);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(kStage, std::string("not a valid JSON pose file: ") + e.what(), file);
+  }
+  auto fail = [&](const std::string& what) { throw Error(kStage, what, file); };
+  if (!j.is_object() || j.value("format", std::string()) != "compose-pose")
+    fail("not a pose file (\"format\" must be \"compose-pose\")");
+  if (j.value("version", 0) != 1) fail("unsupported pose file version (this compose reads 1)");
+  PlatePose pose;
+  pose.image = j.value("image", std::string());
+  pose.width = j.value("width", 0);
+  pose.height = j.value("height", 0);
+  if (!j.contains("board") || !j["board"].is_object()) fail("a pose file needs \"board\"");
+  pose.board.columns = j["board"].value("columns", 0);
+  pose.board.rows = j["board"].value("rows", 0);
+  pose.board.square = j["board"].value("square", 0.0);
+  pose.board.validate();
+  const auto& m = j.value("worldFromCamera", nlohmann::json());
+  bool ok = m.is_array() && m.size() == 4;
+  for (int r = 0; ok && r < 4; ++r) {
+    ok = m[r].is_array() && m[r].size() == 4;
+    for (int c = 0; ok && c < 4; ++c) {
+      ok = m[r][c].is_number();
+      if (ok) pose.worldFromCamera[c][r] = m[r][c].get<double>();
+    }
+  }
+  if (!ok) fail("\"worldFromCamera\" must be 4 rows of 4 numbers");
+  const glm::dmat3 rot(pose.worldFromCamera);
+  if (std::abs(glm::determinant(rot) - 1.0) > 1e-3)
+    fail("\"worldFromCamera\" is not a rigid motion");
+  if (!j.contains("lens")) fail("a pose file needs \"lens\"");
+  pose.lens = lensFromJson(j["lens"], file);
+  pose.rms = j.value("rms", 0.0);
+  return pose;
+}
+
+}  // namespace compose::calib

@@ -1,0 +1,163 @@
+// compose capture-sim: the virtual camera. Bracketed photos of an HDR environment through a
+// documented camera model, with the ground truth written next to them.
+#include <cmath>
+#include <cstdio>
+
+#include "app/cli.h"
+#include "capture/virtual_camera.h"
+#include "color/color.h"
+#include "hdr/capture_merge.h"
+#include "ingest/image_io.h"
+#include "lighting/environment.h"
+
+namespace compose::app {
+
+namespace {
+
+struct SimOptions {
+  capture::VirtualCameraParams params;
+  std::filesystem::path env, out;
+  std::string size = "1024x768", lens = "rectilinear", curve = "filmic", whiteBalance, envSpace;
+  std::string exposure;
+  bool noNoise = false, noJpeg = false, omit35 = false, truthImages = false;
+};
+
+}  // namespace
+
+Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
+  auto o = std::make_shared<SimOptions>();
+  capture::VirtualCameraParams& params = o->params;
+  command.footer(
+      "Take bracketed photos of an HDR environment with a virtual camera: a lens, a response "
+      "curve, white balance, sensor noise (fixed seed), 8-bit quantisation and JPEG, EXIF written "
+      "as a camera would. Writes the photos, capture.json (for compose merge --capture), "
+      "camera.json (the lens), truth.json and response_truth.json (the ground truth).\n\n"
+      "Example:\n  compose capture-sim --env forest.exr --out shots/ --views 6 --brackets 3 "
+      "--ev-step 2\n  compose merge --capture shots/capture.json --out merged/");
+  command.add_option("--env", o->env, "HDR environment, lat-long (equirectangular)")->required();
+  command.add_option("--out", o->out, "Output folder")->required();
+  command.add_option("--fov", params.fovDegrees, "Horizontal field of view, degrees")
+      ->capture_default_str();
+  command
+      .add_option("--views", params.views,
+                  "6: the cube directions px nx py ny pz nz; otherwise a ring around the "
+                  "horizon")
+      ->capture_default_str();
+  command.add_option("--brackets", params.brackets, "Exposures per view")->capture_default_str();
+  command.add_option("--ev-step", params.evStep, "Stops between exposures")->capture_default_str();
+  command.add_option("--seed", params.seed, "Seed of everything random (noise, shake, jitter)")
+      ->capture_default_str();
+  command.add_option("--size", o->size, "Image size WxH")->capture_default_str();
+  command.add_option("--lens", o->lens, "rectilinear or fisheye (equidistant)")
+      ->capture_default_str();
+  command.add_option("--exposure", o->exposure,
+                     "Middle exposure time, seconds [default: automatic, whole stops]");
+  command.add_option("--f-number", params.fNumber, "Aperture")->capture_default_str();
+  command.add_option("--iso", params.iso, "ISO")->capture_default_str();
+  command
+      .add_option("--response", o->curve,
+                  "Response curve: filmic[:C] (sRGB of a soft shoulder C), srgb, gamma[:G]")
+      ->capture_default_str();
+  command.add_option("--white-balance", o->whiteBalance, "White-balance gains R,G,B [1,1,1]");
+  command.add_flag("--no-noise", o->noNoise, "No sensor noise");
+  command.add_option("--full-well", params.fullWellElectrons, "Electrons at clipping, ISO 100")
+      ->capture_default_str();
+  command.add_option("--read-noise", params.readNoiseElectrons, "Read noise, electrons")
+      ->capture_default_str();
+  command.add_option("--supersample", params.supersample, "S x S rays per pixel (anti-aliasing)")
+      ->capture_default_str();
+  command.add_option("--blur", params.blurPixels, "Optics: Gaussian point-spread sigma, pixels")
+      ->capture_default_str();
+  command.add_option("--jpeg-quality", params.jpegQuality, "JPEG quality")->capture_default_str();
+  command.add_flag("--tiff", params.writeTiff16,
+                   "Also write 16-bit linear TIFFs (capture-tiff.json)");
+  command.add_flag("--no-jpeg", o->noJpeg, "Write no JPEGs (with --tiff)");
+  command
+      .add_option("--shake", params.shakePixels, "Hand-held shift per shot, up to this many pixels")
+      ->capture_default_str();
+  command.add_option("--roll", params.shakeRollDegrees, "Hand-held roll per shot, up to degrees")
+      ->capture_default_str();
+  command
+      .add_option("--jitter", params.orientationJitterDegrees,
+                  "Views off their nominal direction by up to degrees per axis")
+      ->capture_default_str();
+  command.add_flag("--omit-35mm", o->omit35,
+                   "Write FocalLengthIn35mmFilm = 0, as many phones do (the focal-plane "
+                   "resolution is still written)");
+  command.add_option("--make", params.make, "EXIF Make")->capture_default_str();
+  command.add_option("--model", params.model, "EXIF Model")->capture_default_str();
+  command.add_flag("--truth-images", o->truthImages,
+                   "Also write <view>_truth.exr, the radiance each view saw");
+  command.add_option("--env-space", o->envSpace,
+                     "Colour space of the environment [default: from the file]");
+
+  return [o, &globals]() -> int {
+    capture::VirtualCameraParams& p = o->params;
+    int w = 0, h = 0;
+    char x = 0, extra = 0;
+    if (std::sscanf(o->size.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || x != 'x')
+      throw UsageError("--size expects WxH, got '" + o->size + "'");
+    p.width = w;
+    p.height = h;
+    if (o->lens == "rectilinear") {
+      p.projection = calib::Projection::Rectilinear;
+    } else if (o->lens == "fisheye" || o->lens == "equidistant") {
+      p.projection = calib::Projection::Equidistant;
+    } else {
+      throw UsageError("--lens must be rectilinear or fisheye, got '" + o->lens + "'");
+    }
+    if (!o->exposure.empty()) p.exposureTime = parseNumber(o->exposure, "--exposure");
+    asUsage([&] { p.curve = capture::CameraCurve::parse(o->curve); });
+    if (!o->whiteBalance.empty())
+      p.whiteBalance = glm::dvec3(parseColour(o->whiteBalance, "--white-balance"));
+    p.noise = !o->noNoise;
+    p.writeJpeg = !o->noJpeg;
+    p.write35mm = !o->omit35;
+    asUsage([&] { p.validate(); });
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    std::string envSpace;
+    asUsage([&] {
+      if (!o->envSpace.empty()) envSpace = colors.resolve(o->envSpace, "--env-space");
+    });
+    // The camera's RGB is linear Rec.709 (what its sRGB JPEGs decode to).
+    std::string why;
+    const std::string cameraSpace = hdr::linearSpaceFor(colors, "sRGB", "", &why);
+
+    ingest::LoadedImage env = ingest::readImage(o->env, "capture-sim");
+    env.image.colorSpace =
+        envSpace.empty() ? colors.inputSpaceFor(o->env, env.info.fileColorSpace) : envSpace;
+    colors.convert(env.image, cameraSpace);
+    lighting::SanitizeReport sanitize;
+    const lighting::Environment environment =
+        lighting::Environment::fromLatLong(env.image, o->env, &sanitize);
+
+    ProgressPrinter printer(globals);
+    capture::SimulatedCapture sim = capture::simulateCapture(environment, p, printer.callback());
+    sim.environmentName = o->env.string();
+    capture::WriteCaptureOptions write;
+    write.truthImages = o->truthImages;
+    write.linearSpace = cameraSpace;
+    write.jpegSpace = colors.has("sRGB") ? "sRGB" : colors.inputSpaceFor("x.jpg", "");
+    const capture::CaptureFiles files =
+        capture::writeCapture(o->out, sim, write, printer.callback());
+
+    if (!globals.quiet) {
+      std::fprintf(stderr,
+                   "compose: %zu views x %d exposures, %dx%d, %s lens %.0f degrees (f = %.1f px); "
+                   "middle exposure %g s at f/%g ISO %g, %g EV apart\n",
+                   sim.views.size(), p.brackets, p.width, p.height,
+                   p.projection == calib::Projection::Rectilinear ? "rectilinear" : "fisheye",
+                   p.fovDegrees, sim.lens.fx, sim.middleExposureTime, p.fNumber, p.iso, p.evStep);
+      std::fprintf(stderr, "compose: response %s; noise %s; seed %llu\n",
+                   p.curve.describe().c_str(), p.noise ? "on" : "off",
+                   static_cast<unsigned long long>(p.seed));
+      if (sanitize.negativeTexels > 0)
+        std::fprintf(stderr, "compose: note: %lld negative texels of the environment set to 0\n",
+                     static_cast<long long>(sanitize.negativeTexels));
+    }
+    std::printf("%s\n", files.description.string().c_str());
+    return 0;
+  };
+}
+
+}  // namespace compose::app

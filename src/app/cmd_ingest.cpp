@@ -1,0 +1,169 @@
+// compose ingest: what the photos say about themselves (EXIF) and how they group into views and
+// brackets. Reads headers only.
+#include <cmath>
+#include <cstdio>
+
+#include "app/cli.h"
+#include "ingest/capture.h"
+
+namespace compose::app {
+
+namespace {
+
+struct IngestOptions {
+  std::vector<std::filesystem::path> paths;
+  std::filesystem::path capture, json;
+  std::string group = "auto", pattern, exposures;
+  double maxGap = 3.0;
+  int brackets = 0;
+};
+
+std::string exposureTime(const std::optional<double>& t) {
+  if (!t) return "-";
+  char text[32];
+  if (*t < 0.5) {
+    std::snprintf(text, sizeof text, "1/%g s", std::round(1.0 / *t * 10.0) / 10.0);
+  } else {
+    std::snprintf(text, sizeof text, "%g s", *t);
+  }
+  return text;
+}
+
+std::string number(const std::optional<double>& v, const char* format) {
+  if (!v) return "-";
+  char text[32];
+  std::snprintf(text, sizeof text, format, *v);
+  return text;
+}
+
+}  // namespace
+
+Runner setupIngest(CLI::App& command, const Globals& globals) {
+  auto o = std::make_shared<IngestOptions>();
+  command.footer(
+      "Read the EXIF of photos (exposure time, f-number, ISO, focal lengths, focal-plane "
+      "resolution, camera, capture time), print it, and group the photos into views and "
+      "brackets.\n\nExample:\n  compose ingest ~/photos/hdr-session/\n  compose ingest "
+      "--pattern '{view}_*.jpg' --json capture.json shots/");
+  command.add_option("paths", o->paths, "Photos and folders of photos");
+  command
+      .add_option("--group", o->group,
+                  "Grouping: exif (capture times and exposure sequences), pattern (needs "
+                  "--pattern), json (needs --capture), or auto")
+      ->capture_default_str();
+  command.add_option("--pattern", o->pattern,
+                     "File-name pattern with a {view} placeholder, e.g. '{view}_{bracket}.jpg'");
+  command.add_option("--capture", o->capture, "Read this JSON capture description instead");
+  command
+      .add_option("--max-gap", o->maxGap,
+                  "EXIF grouping: a pause longer than this (seconds) "
+                  "starts a new view")
+      ->capture_default_str();
+  command.add_option("--brackets", o->brackets, "EXIF grouping: photos per view, when known");
+  command.add_option("--exposures", o->exposures,
+                     "Relative exposures t1,t2,... overriding EXIF (one view only)");
+  command.add_option("--json", o->json, "Write the grouping as a JSON capture description");
+
+  return [o, &globals]() -> int {
+    // Everything the command line alone can refute, before a file is read.
+    std::string group = o->group;
+    if (group == "auto")
+      group = !o->capture.empty() ? "json" : (!o->pattern.empty() ? "pattern" : "exif");
+    if (group != "exif" && group != "pattern" && group != "json")
+      throw UsageError("--group must be exif, pattern, json or auto, got '" + o->group + "'");
+    if (group == "json" && o->capture.empty()) throw UsageError("--group json needs --capture");
+    if (group == "pattern" && o->pattern.empty())
+      throw UsageError("--group pattern needs --pattern");
+    if (group == "json" && !o->paths.empty())
+      throw UsageError("give either --capture or photos, not both");
+    if (group != "json" && o->paths.empty()) throw UsageError("no photos given");
+    ingest::ExifGrouping exif;
+    exif.maxGapSeconds = o->maxGap;
+    exif.bracketSize = o->brackets;
+    asUsage([&] { exif.validate(); });
+    std::vector<double> exposures;
+    if (!o->exposures.empty()) exposures = parseList(o->exposures, "--exposures");
+    for (double e : exposures)
+      if (!(e > 0.0) || !std::isfinite(e)) throw UsageError("--exposures must be positive numbers");
+
+    ingest::Capture capture;
+    if (group == "json") {
+      capture = ingest::readCaptureDescription(o->capture);
+    } else {
+      auto shots = ingest::scanShots(o->paths);
+      capture = group == "pattern" ? ingest::groupByPattern(std::move(shots), o->pattern)
+                                   : ingest::groupByExif(std::move(shots), exif);
+    }
+    if (!exposures.empty()) {
+      if (capture.views.size() != 1) {
+        throw UsageError("--exposures applies to one view, but the photos form " +
+                         std::to_string(capture.views.size()) + " views");
+      }
+      ingest::setExposures(capture.views[0], exposures, "--exposures");
+    }
+
+    // The table: one line per photo, as found.
+    std::vector<std::string> notes;
+    std::printf("%-24s %-11s %-6s %-10s %-5s %-6s %-9s %-7s %-7s %-22s %s\n", "photo", "size",
+                "type", "exposure", "f/", "ISO", "rel. EV", "focal", "35mm", "camera", "taken");
+    for (const auto& view : capture.views) {
+      for (const auto& s : view.shots) {
+        const auto& i = s.info;
+        const auto rel = s.exposure ? s.exposure : i.relativeExposure();
+        std::string f35 = number(i.focalLength35mm, "%.0f mm");
+        if (i.focalLength35mm && i.focal35mmSource.rfind("derived", 0) == 0) f35 += "*";
+        std::printf("%-24s %-11s %-6s %-10s %-5s %-6s %-9s %-7s %-7s %-22s %s\n",
+                    s.file.filename().string().c_str(),
+                    (std::to_string(i.fileWidth) + "x" + std::to_string(i.fileHeight)).c_str(),
+                    i.sampleType.c_str(), exposureTime(i.exposureTime).c_str(),
+                    number(i.fNumber, "%.1f").c_str(), number(i.iso, "%.0f").c_str(),
+                    rel ? number(std::log2(*rel), "%+.2f").c_str() : "-",
+                    number(i.focalLengthMm, "%.1f mm").c_str(), f35.c_str(),
+                    i.camera().empty() ? "-" : i.camera().c_str(),
+                    i.dateTimeOriginal.empty() ? "-" : i.dateTimeOriginal.c_str());
+        if (!i.focalLength35mm) {
+          notes.push_back(s.file.filename().string() +
+                          ": no 35 mm equivalent focal length (FocalLengthIn35mmFilm is 0 or "
+                          "missing and no focal-plane resolution): the plate camera assumes 50 mm "
+                          "unless --focal35 is given");
+        } else if (i.focal35mmSource.rfind("derived", 0) == 0) {
+          notes.push_back(s.file.filename().string() + ": 35 mm equivalent " + i.focal35mmSource +
+                          " (marked *)");
+        }
+        if (!s.exposure && i.exposureTime && !i.exposureAssumptions().empty())
+          notes.push_back(s.file.filename().string() + ": exposure assumes " +
+                          i.exposureAssumptions());
+        if (!rel)
+          notes.push_back(s.file.filename().string() +
+                          ": no exposure time in EXIF; merging needs --exposures");
+      }
+    }
+    std::printf("\ngrouped by %s: %zu view%s\n", capture.method.c_str(), capture.views.size(),
+                capture.views.size() == 1 ? "" : "s");
+    for (auto& v : capture.views)
+      for (auto& s : v.shots)
+        if (!s.exposure && s.info.relativeExposure()) {
+          s.exposure = s.info.relativeExposure();
+          s.exposureSource = "EXIF";
+        }
+    for (const auto& line : ingest::describeCapture(capture)) std::printf("  %s\n", line.c_str());
+    size_t size0 = capture.views.front().shots.size();
+    for (const auto& v : capture.views)
+      if (v.shots.size() != size0)
+        notes.push_back(
+            "views have different numbers of photos: check the grouping (--max-gap, "
+            "--brackets, --pattern)");
+    // Duplicate notes (one per photo) are common; print each once.
+    std::vector<std::string> unique;
+    for (const auto& n : notes)
+      if (std::find(unique.begin(), unique.end(), n) == unique.end()) unique.push_back(n);
+    printNotes(globals, unique);
+    if (!o->json.empty()) {
+      ingest::writeCaptureDescription(o->json, capture);
+      std::printf("%s\n", o->json.string().c_str());
+    }
+    return 0;
+  };
+}
+
+}  // namespace compose::app

@@ -1,0 +1,232 @@
+// compose merge: bracketed exposures → scene-linear OpenEXR. One bracket from the command line,
+// or every view of a capture description.
+#include <cmath>
+#include <cstdio>
+
+#include "app/cli.h"
+#include "color/color.h"
+#include "core/output_files.h"
+#include "hdr/capture_merge.h"
+#include "ingest/capture.h"
+#include "ingest/image_io.h"
+
+namespace compose::app {
+
+namespace {
+
+struct MergeOptions {
+  std::vector<std::filesystem::path> images;
+  std::filesystem::path out, capture, responseDir;
+  std::string exposures, response = "auto", recovery = "debevec", method = "debevec";
+  std::string inputSpace, linearSpace;
+  bool align = false, deghost = false;
+  hdr::CaptureMergeOptions merge;
+};
+
+std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult& result,
+                                                  const hdr::MergedView& view,
+                                                  const ingest::Capture& capture) {
+  std::vector<ingest::ImageAttribute> a;
+  std::vector<float> exposures(view.exposures.begin(), view.exposures.end());
+  std::string files;
+  for (const auto& f : view.files) files += (files.empty() ? "" : ";") + f.filename().string();
+  a.push_back({"compose:relativeExposures", exposures});
+  a.push_back({"compose:sourceFiles", files});
+  a.push_back({"compose:radianceUnit",
+               std::string("linear value / (t * ISO / N^2), the linear value in the unit of the "
+                           "response curve (1 = code 128 for a recovered curve)")});
+  a.push_back({"compose:linearisation", result.linearisation});
+  if (!result.response.empty())
+    a.push_back({"compose:response", result.response.method + ": " + result.response.source});
+  a.push_back({"compose:clippedPixels", int(view.stats.saturated + view.stats.dark)});
+  if (!capture.cameraMake.empty()) a.push_back({"Make", capture.cameraMake});
+  if (!capture.cameraModel.empty()) a.push_back({"Model", capture.cameraModel});
+  return a;
+}
+
+}  // namespace
+
+Runner setupMerge(CLI::App& command, const Globals& globals) {
+  auto o = std::make_shared<MergeOptions>();
+  command.footer(
+      "Merge a bracket of exposures (8-bit JPEGs, 16-bit TIFFs, ...) into scene-linear radiance "
+      "in the working colour space, written as float OpenEXR with a 'clipped' mask channel.\n"
+      "The camera's response is recovered with OpenCV and kept per camera (Make/Model) in "
+      "$COMPOSE_RESPONSE_DIR, else ~/.cache/compose/responses; later merges reuse it.\n\n"
+      "Examples:\n  compose merge --out hdr.exr IMG_0101.jpg IMG_0102.jpg IMG_0103.jpg\n"
+      "  compose merge --out hdr.exr --exposures 0.25,1,4 --align a.jpg b.jpg c.jpg\n"
+      "  compose merge --capture capture.json --out merged/     # every view, one exposure scale");
+  command.add_option("images", o->images, "The photos of one bracket, in any order");
+  command
+      .add_option("--out", o->out,
+                  "Output EXR (one bracket) or folder (with --capture: <folder>/<view>.exr)")
+      ->required();
+  command.add_option("--capture", o->capture,
+                     "JSON capture description (compose ingest --json, compose capture-sim)");
+  command.add_option("--exposures", o->exposures,
+                     "Relative exposures t1,t2,... in the order of the images (overrides EXIF; "
+                     "exposure times in seconds at a fixed aperture and ISO will do)");
+  command.add_flag("--align", o->align, "Align hand-held shots (OpenCV AlignMTB, translation)");
+  command.add_option("--max-shift", o->merge.merge.maxShift, "Alignment search range, pixels")
+      ->capture_default_str();
+  command.add_flag("--deghost", o->deghost,
+                   "Leave out, per pixel, shots that disagree with the reference (moving things)");
+  command
+      .add_option("--ghost-stops", o->merge.merge.ghostStops, "Ghost suppression threshold, stops")
+      ->capture_default_str();
+  command
+      .add_option("--response", o->response,
+                  "auto (the camera's stored curve, else recover), recover, colorspace (decode "
+                  "by the files' colour space), or a response file")
+      ->capture_default_str();
+  command.add_option("--recovery", o->recovery, "Response recovery: debevec or robertson")
+      ->capture_default_str();
+  command.add_option("--samples", o->merge.recovery.samples, "Debevec: patches sampled")
+      ->capture_default_str();
+  command.add_option("--lambda", o->merge.recovery.lambda, "Debevec: smoothness")
+      ->capture_default_str();
+  command.add_option("--merge-method", o->method, "8-bit merge: debevec or robertson (OpenCV)")
+      ->capture_default_str();
+  command.add_option("--response-dir", o->responseDir,
+                     "Folder of per-camera response curves [default: $COMPOSE_RESPONSE_DIR, "
+                     "else ~/.cache/compose/responses]");
+  command.add_option("--input-space", o->inputSpace,
+                     "Colour space of the photos [default: declared by the files]");
+  command.add_option("--linear-space", o->linearSpace,
+                     "The camera's linear RGB for 8-bit photos [default: linear Rec.709]");
+
+  return [o, &globals]() -> int {
+    hdr::CaptureMergeOptions& m = o->merge;
+    // The command line first: nothing is read until it is known to be sound.
+    if (o->capture.empty() && o->images.empty())
+      throw UsageError("give the photos of a bracket, or --capture FILE");
+    if (!o->capture.empty() && !o->images.empty())
+      throw UsageError("give either --capture or photos, not both");
+    std::vector<double> exposures;
+    if (!o->exposures.empty()) {
+      if (!o->capture.empty()) throw UsageError("--exposures applies to photos given directly");
+      exposures = parseList(o->exposures, "--exposures");
+      for (double e : exposures)
+        if (!(e > 0.0) || !std::isfinite(e))
+          throw UsageError("--exposures must be positive numbers");
+      if (exposures.size() != o->images.size()) {
+        throw UsageError("--exposures has " + std::to_string(exposures.size()) + " values for " +
+                         std::to_string(o->images.size()) + " photos");
+      }
+    }
+    if (o->response == "auto") {
+      m.response = hdr::ResponseMode::Auto;
+    } else if (o->response == "recover") {
+      m.response = hdr::ResponseMode::Recover;
+    } else if (o->response == "colorspace" || o->response == "srgb") {
+      m.response = hdr::ResponseMode::ColorSpace;
+    } else {
+      m.response = hdr::ResponseMode::File;
+      m.responseFile = o->response;
+    }
+    if (o->recovery == "debevec") {
+      m.recovery.method = hdr::RecoveryMethod::Debevec;
+    } else if (o->recovery == "robertson") {
+      m.recovery.method = hdr::RecoveryMethod::Robertson;
+    } else {
+      throw UsageError("--recovery must be debevec or robertson, got '" + o->recovery + "'");
+    }
+    if (o->method == "debevec") {
+      m.merge.method = hdr::MergeMethod::Debevec;
+    } else if (o->method == "robertson") {
+      m.merge.method = hdr::MergeMethod::Robertson;
+    } else {
+      throw UsageError("--merge-method must be debevec or robertson, got '" + o->method + "'");
+    }
+    m.merge.align = o->align;
+    m.merge.deghost = o->deghost;
+    if (!o->responseDir.empty()) m.responseFolder = o->responseDir;
+    asUsage([&] { m.validate(); });
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    // Colour-space names are checked against the config before any photo is read.
+    asUsage([&] {
+      if (!o->inputSpace.empty()) m.inputSpace = colors.resolve(o->inputSpace, "--input-space");
+      if (!o->linearSpace.empty()) m.linearSpace = colors.resolve(o->linearSpace, "--linear-space");
+    });
+    if (o->capture.empty() && o->out.extension() != ".exr")
+      throw UsageError("--out must name an .exr file (or a folder, with --capture)");
+
+    // Group, resolve exposures, read.
+    ingest::Capture capture;
+    if (!o->capture.empty()) {
+      capture = ingest::readCaptureDescription(o->capture);
+    } else {
+      capture.views.push_back(ingest::View{o->out.stem().string(), {}, {}});
+      for (const auto& s : ingest::scanShots(o->images, "merge"))
+        capture.views[0].shots.push_back(s);
+      if (capture.views[0].shots.size() != o->images.size() && !exposures.empty())
+        throw UsageError("--exposures needs one value per photo; folders were given");
+      if (!exposures.empty()) ingest::setExposures(capture.views[0], exposures, "--exposures");
+      capture.method = "the photos given";
+      capture.cameraMake = capture.views[0].shots[0].info.cameraMake;
+      capture.cameraModel = capture.views[0].shots[0].info.cameraModel;
+    }
+    ingest::resolveExposures(capture);
+    ProgressPrinter printer(globals);
+    std::vector<std::vector<ingest::LoadedImage>> photos;
+    size_t total = 0, done = 0;
+    for (const auto& v : capture.views) total += v.shots.size();
+    for (const auto& v : capture.views) {
+      photos.emplace_back();
+      for (const auto& s : v.shots) {
+        photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
+        printer("read", double(++done) / double(total));
+      }
+    }
+
+    const hdr::CaptureMergeResult result =
+        hdr::mergeCapture(capture, photos, m, colors, printer.callback());
+    photos.clear();
+
+    // Write every output together: the EXRs and, when recovered here, the camera's response.
+    OutputFiles outputs("merge");
+    std::vector<std::filesystem::path> written;
+    for (const auto& view : result.views) {
+      const std::filesystem::path dst = o->capture.empty() ? o->out : o->out / (view.name + ".exr");
+      ingest::WriteOptions w;
+      w.depth = ingest::WriteOptions::Depth::Float;
+      w.attributes = exrAttributes(result, view, capture);
+      w.chromaticities = colors.chromaticities(view.radiance.colorSpace);
+      ingest::writeImage(outputs, dst, view.radiance, w);
+      written.push_back(dst);
+    }
+    if (result.responseRecovered && !result.responseCacheFile.empty()) {
+      writeTextFile(outputs.add(result.responseCacheFile), hdr::responseText(result.response),
+                    "merge");
+    }
+    outputs.commit();
+
+    if (!globals.quiet) {
+      if (!result.linearisation.empty())
+        std::fprintf(stderr, "compose: %s\n", result.linearisation.c_str());
+      if (result.responseRecovered && !result.responseCacheFile.empty())
+        std::fprintf(stderr, "compose: response saved to %s (reused by later merges with %s %s)\n",
+                     result.responseCacheFile.string().c_str(), capture.cameraMake.c_str(),
+                     capture.cameraModel.c_str());
+      for (const auto& view : result.views) {
+        std::string stops;
+        for (double e : view.exposures) {
+          char text[24];
+          std::snprintf(text, sizeof text, "%s%+.1f", stops.empty() ? "" : " ",
+                        std::log2(e / view.exposures.front()));
+          stops += text;
+        }
+        std::fprintf(stderr, "compose: %-8s %zu photos (EV %s), %lld clipped pixels\n",
+                     view.name.c_str(), view.files.size(), stops.c_str(),
+                     static_cast<long long>(view.stats.saturated + view.stats.dark));
+      }
+      std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n", result.seconds,
+                   result.openCvSeconds);
+    }
+    printNotes(globals, result.notes);
+    for (const auto& f : written) std::printf("%s\n", f.string().c_str());
+    return 0;
+  };
+}
+
+}  // namespace compose::app

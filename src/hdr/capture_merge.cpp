@@ -1,0 +1,287 @@
+#include "hdr/capture_merge.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace compose::hdr {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kStage = "merge";
+
+bool isEightBit(const ingest::CaptureInfo& info) {
+  return info.sampleType == "uint8";
+}
+
+}  // namespace
+
+void CaptureMergeOptions::validate() const {
+  if (response == ResponseMode::File && responseFile.empty())
+    throw Error(kStage, "a response file must be named");
+  recovery.validate();
+  merge.validate();
+}
+
+std::string linearSpaceFor(const color::ColorConfig& colors, const std::string& encodedSpace,
+                           const std::string& override, std::string* why) {
+  if (!override.empty()) {
+    if (why) *why = "as given";
+    return colors.resolve(override, "the camera's linear colour space");
+  }
+  // By its primaries, when the config can tell (it has an interchange role), else by name.
+  if (const std::string byPrimaries = colors.spaceWithChromaticities(color::kRec709Chromaticities);
+      !byPrimaries.empty()) {
+    if (why) *why = "linear with the primaries of " + encodedSpace;
+    return byPrimaries;
+  }
+  for (const char* name : {"lin_rec709", "Linear Rec.709 (sRGB)", "Linear Rec.709", "Linear",
+                           "linear", "Utility - Linear - sRGB", "lin_srgb"}) {
+    if (colors.has(name)) {
+      if (why) *why = "linear with the primaries of " + encodedSpace;
+      return colors.resolve(name, "a linear colour space");
+    }
+  }
+  if (why) *why = "the config's reference space (it has no linear Rec.709 under a usual name)";
+  return colors.resolve("reference", "the reference role");
+}
+
+ResponseCurve curveFromColorSpace(const color::ColorConfig& colors, const std::string& encodedSpace,
+                                  const std::string& linearSpace) {
+  Image ramp(kCodes, 1, 3);
+  for (int z = 0; z < kCodes; ++z)
+    for (int c = 0; c < 3; ++c) ramp.pixels[size_t(z) * 3 + size_t(c)] = float(z) / 255.0f;
+  ramp.colorSpace = encodedSpace;
+  colors.convert(ramp, linearSpace);
+  ResponseCurve curve;
+  for (int c = 0; c < 3; ++c) {
+    auto& ch = curve.inverse[size_t(c)];
+    ch.resize(kCodes);
+    for (int z = 0; z < kCodes; ++z) ch[size_t(z)] = ramp.pixels[size_t(z) * 3 + size_t(c)];
+    // Code 0 decodes to 0 (or below): it still means "some light below code 1".
+    for (int z = 1; z < kCodes; ++z) {
+      if (!(ch[size_t(z)] > ch[size_t(z) - 1]))
+        throw Error("color", "the colour space " + encodedSpace +
+                                 " does not decode 8-bit codes "
+                                 "to increasing linear values; pass --response or --input-space");
+    }
+    if (!(ch[1] > 0.0f))
+      throw Error("color", "the colour space " + encodedSpace +
+                               " decodes code 1 to a non-positive value; pass --input-space");
+    ch[0] = 0.5f * ch[1];
+  }
+  curve.method = "colorspace";
+  curve.source = "the decoding curve of " + encodedSpace + " (OpenColorIO)";
+  curve.validate();
+  return curve;
+}
+
+CaptureMergeResult mergeCapture(const ingest::Capture& capture,
+                                const std::vector<std::vector<ingest::LoadedImage>>& photos,
+                                const CaptureMergeOptions& options,
+                                const color::ColorConfig& colors, const Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  COMPOSE_CHECK(photos.size() == capture.views.size());
+  CaptureMergeResult result;
+  const std::string working = colors.workingSpace();
+  const std::string overrideSpace = options.inputSpace.empty()
+                                        ? std::string()
+                                        : colors.resolve(options.inputSpace, "--input-space");
+
+  // Colour space of every shot, and which views are 8-bit.
+  std::vector<std::vector<std::string>> spaces(capture.views.size());
+  std::vector<char> eightBit(capture.views.size(), 0);
+  std::string firstEightBitSpace;
+  for (size_t v = 0; v < capture.views.size(); ++v) {
+    const ingest::View& view = capture.views[v];
+    COMPOSE_CHECK(photos[v].size() == view.shots.size());
+    eightBit[v] = isEightBit(view.shots.front().info);
+    for (size_t s = 0; s < view.shots.size(); ++s) {
+      const ingest::Shot& shot = view.shots[s];
+      COMPOSE_CHECK(shot.exposure.has_value());
+      const Image& img = photos[v][s].image;
+      const Image& ref = photos[v][0].image;
+      if (img.width != ref.width || img.height != ref.height) {
+        throw Error(kStage,
+                    "photos of a bracket must have the same size: this one is " +
+                        std::to_string(img.width) + "x" + std::to_string(img.height) + ", " +
+                        view.shots[0].file.filename().string() + " is " +
+                        std::to_string(ref.width) + "x" + std::to_string(ref.height),
+                    shot.file);
+      }
+      if (isEightBit(shot.info) != bool(eightBit[v])) {
+        throw Error(kStage,
+                    "a bracket mixes 8-bit and deeper photos (this one is " + shot.info.sampleType +
+                        ", " + view.shots.front().file.filename().string() + " is " +
+                        view.shots.front().info.sampleType + ")",
+                    shot.file);
+      }
+      std::string space = overrideSpace;
+      if (space.empty() && !shot.colorSpace.empty())
+        space = colors.resolve(shot.colorSpace, "the colour space of " + shot.file.string());
+      if (space.empty()) space = colors.inputSpaceFor(shot.file, shot.info.fileColorSpace);
+      spaces[v].push_back(space);
+      if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;
+    }
+  }
+
+  // 8-bit codes of the 8-bit views, made once for recovery and merging.
+  std::vector<std::vector<Codes8>> codes(capture.views.size());
+  for (size_t v = 0; v < capture.views.size(); ++v) {
+    if (!eightBit[v]) continue;
+    for (size_t s = 0; s < photos[v].size(); ++s) {
+      const ingest::LoadedImage& photo = photos[v][s];
+      const int ch = photo.image.channels;
+      if (ch < 3) throw Error(kStage, "merging needs RGB photos", capture.views[v].shots[s].file);
+      if (photo.codes.empty()) {
+        codes[v].push_back(toCodes8(photo.image));
+        continue;
+      }
+      // Read as codes already: borrowed as they are, or without the extra channels (RGBA).
+      Codes8 c;
+      c.width = photo.image.width;
+      c.height = photo.image.height;
+      if (ch == 3) {
+        c.external = photo.codes.data();
+      } else {
+        c.rgb.resize(size_t(c.width) * size_t(c.height) * 3);
+        for (size_t i = 0; i < size_t(c.width) * size_t(c.height); ++i)
+          for (size_t k = 0; k < 3; ++k) c.rgb[i * 3 + k] = photo.codes[i * size_t(ch) + k];
+      }
+      codes[v].push_back(std::move(c));
+    }
+  }
+
+  // One response curve for every 8-bit view.
+  std::string linearSpace;
+  const bool anyEightBit = !firstEightBitSpace.empty();
+  if (anyEightBit) {
+    std::string why;
+    linearSpace = linearSpaceFor(colors, firstEightBitSpace, options.linearSpace, &why);
+    ingest::CaptureInfo cameraInfo;
+    cameraInfo.cameraMake = capture.cameraMake;
+    cameraInfo.cameraModel = capture.cameraModel;
+    const std::string camera = cameraInfo.camera();
+    auto recover = [&] {
+      std::vector<BracketCodes> brackets;
+      for (size_t v = 0; v < capture.views.size(); ++v) {
+        if (!eightBit[v] || photos[v].size() < 2) continue;
+        BracketCodes b;
+        for (size_t s = 0; s < photos[v].size(); ++s) {
+          b.images.push_back(&codes[v][s]);
+          b.exposures.push_back(*capture.views[v].shots[s].exposure);
+        }
+        brackets.push_back(std::move(b));
+      }
+      if (brackets.empty()) {
+        throw Error(kStage,
+                    "recovering the camera's response needs a bracket of at least two 8-bit "
+                    "photos; give a response file (--response FILE) or --response colorspace",
+                    capture.views.front().shots.front().file);
+      }
+      const auto recoveryStart = std::chrono::steady_clock::now();
+      double calibrationSeconds = 0.0;
+      result.response = recoverResponse(brackets, options.recovery, progress, &calibrationSeconds);
+      result.openCvSeconds += calibrationSeconds;
+      result.recoverySeconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - recoveryStart).count();
+      result.response.make = capture.cameraMake;
+      result.response.model = capture.cameraModel;
+      result.responseRecovered = true;
+      result.responseCacheFile =
+          responseFileFor(options.responseFolder, capture.cameraMake, capture.cameraModel);
+      if (result.responseCacheFile.empty()) {
+        result.notes.push_back(
+            "the photos name no camera (EXIF Make/Model): the recovered response is used for "
+            "this merge only");
+      }
+    };
+    switch (options.response) {
+      case ResponseMode::File:
+        result.response = readResponse(options.responseFile);
+        result.linearisation =
+            "8-bit photos linearised by the response curve in " + options.responseFile.string();
+        break;
+      case ResponseMode::ColorSpace:
+        result.response = curveFromColorSpace(colors, firstEightBitSpace, linearSpace);
+        result.linearisation = "8-bit photos linearised by the colour space they declare (" +
+                               firstEightBitSpace + "), not by a camera response";
+        break;
+      case ResponseMode::Recover:
+        recover();
+        result.linearisation =
+            "8-bit photos linearised by the camera response " + result.response.source;
+        break;
+      case ResponseMode::Auto: {
+        const fs::path cached =
+            responseFileFor(options.responseFolder, capture.cameraMake, capture.cameraModel);
+        std::error_code ec;
+        if (!cached.empty() && fs::exists(cached, ec)) {
+          result.response = readResponse(cached);
+          result.linearisation =
+              "8-bit photos linearised by the stored response of " + camera + " (" +
+              cached.string() +
+              (result.response.created.empty() ? "" : ", recovered " + result.response.created) +
+              "); recovery skipped (--response recover to redo it)";
+        } else {
+          recover();
+          result.linearisation = "8-bit photos linearised by the camera response " +
+                                 result.response.source + (camera.empty() ? "" : " for " + camera);
+        }
+        break;
+      }
+    }
+    result.linearisation += "; camera RGB taken as " + linearSpace + " (" + why + ")";
+  }
+
+  // Merge view by view.
+  const size_t views = capture.views.size();
+  for (size_t v = 0; v < views; ++v) {
+    const ingest::View& view = capture.views[v];
+    MergedView out;
+    out.name = view.name;
+    MergeInput input;
+    input.eightBit = eightBit[v];
+    input.response = input.eightBit ? &result.response : nullptr;
+    std::vector<Image> converted;
+    if (!input.eightBit) {
+      converted.reserve(photos[v].size());
+      for (size_t s = 0; s < photos[v].size(); ++s) {
+        COMPOSE_CHECK(photos[v][s].hasPixels());
+        Image img = photos[v][s].image;
+        if (img.channels < 3) throw Error(kStage, "merging needs RGB photos", view.shots[s].file);
+        img.colorSpace = spaces[v][s];
+        colors.convert(img, working);
+        converted.push_back(std::move(img));
+      }
+    }
+    for (size_t s = 0; s < photos[v].size(); ++s) {
+      input.images.push_back(input.eightBit ? &photos[v][s].image : &converted[s]);
+      if (input.eightBit) input.codes.push_back(&codes[v][s]);
+      input.exposures.push_back(*view.shots[s].exposure);
+      input.names.push_back(view.shots[s].file.string());
+      out.exposures.push_back(*view.shots[s].exposure);
+      out.files.push_back(view.shots[s].file);
+    }
+    const Progress viewProgress = [&](std::string_view stage, double f) {
+      report(progress, stage, (double(v) + f) / double(views));
+    };
+    out.stats = mergeBracket(input, options.merge, progress ? viewProgress : Progress{});
+    out.radiance = std::move(out.stats.radiance);
+    out.stats.radiance = Image();
+    out.radiance.colorSpace = input.eightBit ? linearSpace : working;
+    colors.convert(out.radiance, working);
+    result.openCvSeconds += out.stats.openCvSeconds;
+    for (const std::string& note : out.stats.notes)
+      result.notes.push_back(views > 1 ? view.name + ": " + note : note);
+    result.views.push_back(std::move(out));
+  }
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace compose::hdr

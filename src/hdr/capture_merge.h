@@ -1,0 +1,88 @@
+// Merging a whole capture: every view's bracket → radiance in the working colour space, with one
+// response curve and therefore one exposure scale for all views (so that the faces of a cube
+// map agree).
+//
+// Linearisation (issue: colour for the photo stages), decided once per capture and reported in
+// the notes:
+//  * 8-bit photos (JPEG, 8-bit PNG/TIFF) go through a response curve:
+//      - ResponseMode::Auto: the camera's curve from the per-camera folder (hdr/response.h) when
+//        there is one, else recovered from the photos with OpenCV (and returned for saving);
+//      - Recover: always recovered; File: read from a response file;
+//      - ColorSpace: no camera curve, the codes are decoded by the colour space the files declare
+//        (an sRGB JPEG by the sRGB curve), through OpenColorIO.
+//    The curve's linear values are the camera's linear RGB, taken to be the linear space with
+//    the primaries of the declared encoding (for sRGB files: linear Rec.709; see
+//    linearSpaceFor()), then converted to the working space.
+//  * Deeper photos (16-bit, half, float) are converted from their colour space to the working
+//    space by OpenColorIO and merged by our own weighted average.
+//
+// Errors: compose::Error (stage "merge", or "color" for colour-space names) naming the file.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "color/color.h"
+#include "core/progress.h"
+#include "hdr/merge.h"
+#include "hdr/response.h"
+#include "ingest/capture.h"
+#include "ingest/image_io.h"
+
+namespace compose::hdr {
+
+enum class ResponseMode { Auto, Recover, File, ColorSpace };
+
+struct CaptureMergeOptions {
+  ResponseMode response = ResponseMode::Auto;
+  std::filesystem::path responseFile;                          // ResponseMode::File
+  std::filesystem::path responseFolder = responseDirectory();  // per-camera curves (Auto)
+  RecoveryParams recovery;
+  MergeParams merge;
+  std::string inputSpace;   // colour space of the photos; empty: from the files / description
+  std::string linearSpace;  // the camera's linear RGB for 8-bit photos; empty: linearSpaceFor()
+  void validate() const;    // compose::Error (stage "merge")
+};
+
+struct MergedView {
+  std::string name;
+  Image radiance;     // R, G, B in the working space, and "clipped"
+  MergeResult stats;  // counts, shifts, notes (stats.radiance is empty)
+  std::vector<double> exposures;
+  std::vector<std::filesystem::path> files;
+};
+
+struct CaptureMergeResult {
+  std::vector<MergedView> views;
+  ResponseCurve response;                   // the curve used for 8-bit photos (empty if none)
+  bool responseRecovered = false;           // recovered in this run
+  std::filesystem::path responseCacheFile;  // where a recovered curve belongs (empty: nowhere)
+  std::string linearisation;                // one sentence: how photos became linear
+  std::vector<std::string> notes;
+  double seconds = 0.0;          // wall-clock time of mergeCapture
+  double openCvSeconds = 0.0;    // of which inside OpenCV (response recovery and merging)
+  double recoverySeconds = 0.0;  // response recovery alone (0 when a stored curve was used)
+};
+
+// `photos[v][s]` is the decoded image of capture.views[v].shots[s] (ingest::readImage; 8-bit
+// photos preferably read as codes, ReadOptions::codesForEightBit), with every shot's exposure
+// resolved (ingest::resolveExposures).
+CaptureMergeResult mergeCapture(const ingest::Capture& capture,
+                                const std::vector<std::vector<ingest::LoadedImage>>& photos,
+                                const CaptureMergeOptions& options,
+                                const color::ColorConfig& colors, const Progress& progress = {});
+
+// The linear colour space that has the primaries of `encodedSpace` (an sRGB-encoded JPEG's
+// linear RGB is linear Rec.709): `override` if given, else the first of the usual names for
+// linear Rec.709 the config knows ("lin_rec709", "Linear Rec.709 (sRGB)", "Linear", ...), else
+// the config's reference role. `why` receives a short explanation.
+std::string linearSpaceFor(const color::ColorConfig& colors, const std::string& encodedSpace,
+                           const std::string& override, std::string* why = nullptr);
+
+// A 256-entry curve that decodes 8-bit codes of `encodedSpace` to `linearSpace` through
+// OpenColorIO (the ResponseMode::ColorSpace curve); the three channels are decoded as greys.
+ResponseCurve curveFromColorSpace(const color::ColorConfig& colors, const std::string& encodedSpace,
+                                  const std::string& linearSpace);
+
+}  // namespace compose::hdr

@@ -1,0 +1,413 @@
+#include "hdr/merge.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <opencv2/imgproc.hpp>
+#include <opencv2/photo.hpp>
+
+#include "core/error.h"
+#include "core/parallel.h"
+#include "hdr/opencv_util.h"
+
+namespace compose::hdr {
+
+namespace {
+
+constexpr const char* kStage = "merge";
+
+// OpenCV's triangle weights (photo/src/hdr_common.cpp): w(z) = z + 1 below 128, 256 - z above.
+inline float triangle(int z) {
+  return z < kCodes / 2 ? float(z + 1) : float(kCodes - z);
+}
+
+// The hat used for linear input: 1 up to 90 % of full scale, falling to 0 at 98 %.
+inline float linearHat(float v) {
+  return std::clamp((0.98f - v) / 0.08f, 0.0f, 1.0f);
+}
+
+float encodeGamma(float v) {
+  return v <= 0.0f ? 0.0f : std::pow(v, 1.0f / 2.2f);
+}
+
+cv::Mat responseMat(const ResponseCurve& curve) {
+  cv::Mat m(kCodes, 1, CV_32FC3);
+  for (int z = 0; z < kCodes; ++z)
+    for (int c = 0; c < 3; ++c) m.at<cv::Vec3f>(z)[c] = curve.inverse[size_t(c)][size_t(z)];
+  return m;
+}
+
+std::string percent(int64_t count, size_t total) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g %%", 100.0 * double(count) / double(total));
+  return text;
+}
+
+// One shot as the per-pixel passes see it: its values through a shift (x, y) and how they map to
+// codes, clipping and linear light.
+struct ShotView {
+  const Image* image = nullptr;
+  const Codes8* codes = nullptr;
+  int dx = 0, dy = 0;
+  double exposure = 1.0;
+  // Value of channel c at output pixel (x, y); false if the shifted shot does not cover it.
+  bool covers(int x, int y) const {
+    const int sx = x - dx, sy = y - dy;
+    return sx >= 0 && sy >= 0 && sx < image->width && sy < image->height;
+  }
+  const float* at(int x, int y) const { return image->at(x - dx, y - dy); }
+  const uint8_t* codeAt(int x, int y) const {
+    return codes->data() + (size_t(y - dy) * size_t(codes->width) + size_t(x - dx)) * 3;
+  }
+};
+
+}  // namespace
+
+const char* mergeMethodName(MergeMethod method) {
+  return method == MergeMethod::Debevec ? "debevec" : "robertson";
+}
+
+void MergeParams::validate() const {
+  if (maxShift < 1 || maxShift > 1024)
+    throw Error(kStage, "the alignment range must be between 1 and 1024 pixels");
+  if (!(ghostStops > 0.0) || !std::isfinite(ghostStops))
+    throw Error(kStage, "the ghost threshold must be a positive number of stops");
+  if (!(clipLow >= 0.0 && clipLow < clipHigh && clipHigh <= 1.0))
+    throw Error(kStage, "clipping thresholds must satisfy 0 <= low < high <= 1");
+}
+
+MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
+                         const Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  params.validate();
+  const size_t n = input.images.size();
+  COMPOSE_CHECK(n > 0 && input.exposures.size() == n);
+  COMPOSE_CHECK(!input.eightBit || input.response != nullptr);
+  auto name = [&](size_t i) {
+    return i < input.names.size() ? input.names[i] : "photo " + std::to_string(i + 1);
+  };
+  const Image& first = *input.images[0];
+  const int width = first.width, height = first.height;
+  for (size_t i = 0; i < n; ++i) {
+    const Image& img = *input.images[i];
+    if (img.channels < 3)
+      throw Error(
+          kStage,
+          "merging needs RGB photos; this one has " + std::to_string(img.channels) + " channel(s)",
+          name(i));
+    if (img.width != width || img.height != height) {
+      throw Error(kStage,
+                  "photos of a bracket must have the same size: this one is " +
+                      std::to_string(img.width) + "x" + std::to_string(img.height) + ", " +
+                      name(0) + " is " + std::to_string(width) + "x" + std::to_string(height),
+                  name(i));
+    }
+    if (!(input.exposures[i] > 0.0) || !std::isfinite(input.exposures[i]))
+      throw Error(kStage, "exposure must be a positive number", name(i));
+    if (i > 0 && !(input.exposures[i] >= input.exposures[i - 1]))
+      throw Error(kStage, "exposures must be given in increasing order", name(i));
+  }
+  if (n > 1 && std::log2(input.exposures.back() / input.exposures.front()) < 1.0 / 6.0)
+    throw Error(kStage, "the exposures of the bracket are all equal: nothing to merge", name(0));
+
+  MergeResult result;
+  result.shifts.assign(n, {0, 0});
+  OpenCvClock opencv;
+  report(progress, kStage, 0.0);
+
+  // Thresholds as 8-bit codes; linear input is compared after a 2.2 gamma, so that the same
+  // thresholds mean roughly the same thing.
+  const int hiCode = int(std::ceil(params.clipHigh * 255.0 - 1e-9));
+  const int loCode = int(std::floor(params.clipLow * 255.0 + 1e-9));
+
+  // 8-bit codes of every shot: OpenCV's input, and what the per-pixel pass classifies.
+  std::vector<Codes8> ownCodes;
+  std::vector<const Codes8*> codePtr = input.codes;
+  if (codePtr.empty()) {
+    ownCodes.reserve(n);
+    for (size_t i = 0; i < n; ++i) {
+      COMPOSE_CHECK(!input.images[i]->pixels.empty());
+      if (input.eightBit) {
+        ownCodes.push_back(toCodes8(*input.images[i]));
+      } else {
+        const Image& img = *input.images[i];
+        Image encoded(width, height, 3);
+        parallelFor(
+            0, height,
+            [&](int64_t y) {
+              for (int x = 0; x < width; ++x)
+                for (int c = 0; c < 3; ++c)
+                  encoded.at(x, int(y))[c] = encodeGamma(img.at(x, int(y))[c]);
+            },
+            16);
+        ownCodes.push_back(toCodes8(encoded));
+      }
+    }
+    for (const Codes8& c : ownCodes) codePtr.push_back(&c);
+  }
+  COMPOSE_CHECK(codePtr.size() == n);
+  const bool useOpenCvMerge = input.eightBit && !params.deghost && n > 1;
+  std::vector<cv::Mat> codes(n);  // for OpenCV: views of the codes, or shifted copies
+  for (size_t i = 0; i < n; ++i) codes[i] = wrap(*codePtr[i]);
+
+  // 1. Alignment against the middle exposure.
+  if (params.align && n > 1) {
+    int bits = 1;
+    while ((1 << bits) - 1 < params.maxShift) ++bits;
+    const size_t pivot = n / 2;
+    std::vector<cv::Mat> gray(n);
+    opencv([&] {
+      for (size_t i = 0; i < n; ++i) cv::cvtColor(codes[i], gray[i], cv::COLOR_RGB2GRAY);
+      auto mtb = cv::createAlignMTB(bits, 4, true);
+      for (size_t i = 0; i < n; ++i) {
+        if (i == pivot) continue;
+        const cv::Point s = mtb->calculateShift(gray[pivot], gray[i]);
+        result.shifts[i] = {s.x, s.y};
+        if (useOpenCvMerge && (s.x != 0 || s.y != 0)) {
+          cv::Mat shifted;
+          mtb->shiftMat(codes[i], shifted, s);
+          codes[i] = shifted;
+        }
+      }
+    });
+    std::string list;
+    for (size_t i = 0; i < n; ++i) {
+      list += (list.empty() ? "" : ", ") + name(i) + " (" + std::to_string(result.shifts[i][0]) +
+              ", " + std::to_string(result.shifts[i][1]) + ")";
+    }
+    result.notes.push_back("aligned to " + name(n / 2) + " (AlignMTB), shifts in pixels: " + list);
+  }
+  report(progress, kStage, 0.2);
+
+  std::vector<ShotView> shots(n);
+  for (size_t i = 0; i < n; ++i)
+    shots[i] = {input.images[i], codePtr[i], result.shifts[i][0], result.shifts[i][1],
+                input.exposures[i]};
+
+  // 2. OpenCV's merge of 8-bit brackets.
+  cv::Mat merged;
+  if (useOpenCvMerge) {
+    cv::Mat times(int(n), 1, CV_32F);
+    for (size_t i = 0; i < n; ++i) times.at<float>(int(i)) = float(input.exposures[i]);
+    const cv::Mat response = responseMat(*input.response);
+    opencv([&] {
+      if (params.method == MergeMethod::Debevec) {
+        cv::createMergeDebevec()->process(codes, merged, times, response);
+      } else {
+        cv::createMergeRobertson()->process(codes, merged, times, response);
+      }
+    });
+    codes.clear();
+  }
+  report(progress, kStage, 0.7);
+
+  // 3. Per-pixel pass: clipping, uncovered borders, and (own path) the weighted merge.
+  Image& out = result.radiance;
+  out = Image(width, height, 4, {"R", "G", "B", "clipped"});
+  const ResponseCurve* curve = input.response;
+  const size_t pivot = n / 2;
+  std::vector<float> logExposure(n);
+  for (size_t i = 0; i < n; ++i) logExposure[i] = float(std::log(input.exposures[i]));
+  std::vector<int64_t> saturatedRows(size_t(height), 0), darkRows(size_t(height), 0),
+      ghostRows(size_t(height), 0);
+  // Linear value of channel c of shot i at a pixel: through the curve for 8-bit codes.
+  auto linearOf = [&](const ShotView& shot, int x, int y, int c) -> float {
+    return input.eightBit ? curve->inverse[size_t(c)][shot.codeAt(x, y)[c]]
+                          : std::max(shot.at(x, y)[c], 0.0f);
+  };
+  // log(inverse / exposure) for the log-domain averages, looked up rather than computed.
+  std::vector<float> logInverse;
+  if (input.eightBit) {
+    logInverse.resize(3 * kCodes);
+    for (int c = 0; c < 3; ++c)
+      for (int z = 0; z < kCodes; ++z)
+        logInverse[size_t(c * kCodes + z)] = std::log(curve->inverse[size_t(c)][size_t(z)]);
+  }
+  bool unshifted = true;
+  for (const auto& s : result.shifts) unshifted = unshifted && s[0] == 0 && s[1] == 0;
+  parallelFor(0, height, [&](int64_t yy) {
+    const int y = int(yy);
+    std::vector<float> weight(n), value(n * 3);
+    std::vector<char> over(n), dark(n), covered(n);
+    std::vector<const uint8_t*> rowCodes(n);
+    for (size_t i = 0; i < n; ++i) rowCodes[i] = codePtr[i]->data() + size_t(y) * size_t(width) * 3;
+    const float* mergedRow = useOpenCvMerge ? merged.ptr<float>(y) : nullptr;
+    for (int x = 0; x < width; ++x) {
+      if (useOpenCvMerge && unshifted) {
+        // The common case first, cheaply: OpenCV's value stands unless some shot is clipped
+        // everywhere, or has a code of 0 or 255.
+        bool everyOver = true, everyDark = true, hard = false;
+        for (size_t i = 0; i < n; ++i) {
+          const uint8_t* z = rowCodes[i] + 3 * x;
+          const int hi = std::max({z[0], z[1], z[2]}), lo = std::min({z[0], z[1], z[2]});
+          everyOver = everyOver && hi >= hiCode;
+          everyDark = everyDark && hi <= loCode;
+          hard = hard || lo == 0 || hi == kCodes - 1;
+        }
+        if (!everyOver && !everyDark && !hard) {
+          float* o = out.at(x, y);
+          o[0] = mergedRow[3 * x];
+          o[1] = mergedRow[3 * x + 1];
+          o[2] = mergedRow[3 * x + 2];
+          o[3] = 0.0f;
+          continue;
+        }
+      }
+      bool allOver = true, allDark = true, anyUncovered = false, anyHardClip = false;
+      for (size_t i = 0; i < n; ++i) {
+        covered[i] = shots[i].covers(x, y);
+        if (!covered[i]) {
+          anyUncovered = true;
+          over[i] = dark[i] = 0;
+          continue;
+        }
+        const uint8_t* z = shots[i].codeAt(x, y);
+        const int maxCode = std::max({z[0], z[1], z[2]});
+        const int minCode = std::min({z[0], z[1], z[2]});
+        anyHardClip = anyHardClip || minCode == 0 || maxCode == kCodes - 1;
+        over[i] = maxCode >= hiCode;
+        dark[i] = maxCode <= loCode;
+        allOver = allOver && over[i];
+        allDark = allDark && dark[i];
+      }
+      float* o = out.at(x, y);
+      if (allOver || allDark) {
+        // Nothing trustworthy: the shortest (over-exposed) or longest (under-exposed) covering
+        // shot gives a bound.
+        size_t pick = 0;
+        if (allOver) {
+          for (pick = 0; !covered[pick]; ++pick) {
+          }
+        } else {
+          for (pick = n - 1; !covered[pick]; --pick) {
+          }
+        }
+        for (int c = 0; c < 3; ++c)
+          o[c] = float(linearOf(shots[pick], x, y, c) / shots[pick].exposure);
+        o[3] = 1.0f;
+        (allOver ? saturatedRows : darkRows)[size_t(y)]++;
+        continue;
+      }
+      o[3] = 0.0f;
+      if (useOpenCvMerge) {
+        const cv::Vec3f m = merged.at<cv::Vec3f>(y, x);
+        o[0] = m[0];
+        o[1] = m[1];
+        o[2] = m[2];
+        if (!anyUncovered && !anyHardClip) continue;
+        // MergeDebevec gives codes 0 and 255 a small but non-zero weight, and their log values
+        // (a bound, not a measurement) pull the average: redo such pixels, and borders a shift
+        // left uncovered, with the same log-domain average without them, per channel.
+        for (int c = 0; c < 3; ++c) {
+          float sum = 0.0f, total = 0.0f;
+          for (size_t i = 0; i < n; ++i) {
+            if (!covered[i]) continue;
+            const uint8_t* z = shots[i].codeAt(x, y);
+            if (z[c] == 0 || z[c] == kCodes - 1) continue;
+            const float w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
+            sum += w * (logInverse[size_t(c * kCodes + z[c])] - logExposure[i]);
+            total += w;
+          }
+          if (total > 0.0f) o[c] = std::exp(sum / total);
+        }
+        continue;
+      }
+      // Own weighted merge (deeper input, ghost suppression, or borders a shift left uncovered).
+      for (size_t i = 0; i < n; ++i) {
+        weight[i] = 0.0f;
+        if (!covered[i]) continue;
+        const float* v = shots[i].at(x, y);
+        float w = 0.0f;
+        if (input.eightBit) {
+          const uint8_t* z = shots[i].codeAt(x, y);
+          w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
+          if (params.deghost && over[i]) w = 0.0f;
+        } else {
+          float peak = 0.0f;
+          for (int c = 0; c < 3; ++c) peak = std::max(peak, v[c]);
+          w = float(shots[i].exposure) * linearHat(peak);
+          if (dark[i]) w *= 1e-3f;  // keep a trace so that a pixel dark everywhere gets a value
+        }
+        weight[i] = w;
+        for (int c = 0; c < 3; ++c)
+          value[i * 3 + size_t(c)] = float(linearOf(shots[i], x, y, c) / shots[i].exposure);
+      }
+      if (params.deghost) {
+        // Reference: the middle shot, or the covered shot with weight nearest to it.
+        size_t ref = n;
+        for (size_t d = 0; d < n && ref == n; ++d) {
+          if (pivot + d < n && weight[pivot + d] > 0.0f)
+            ref = pivot + d;
+          else if (d <= pivot && weight[pivot - d] > 0.0f)
+            ref = pivot - d;
+        }
+        if (ref < n) {
+          const float refLum =
+              std::max(1e-20f, value[ref * 3] + value[ref * 3 + 1] + value[ref * 3 + 2]);
+          bool dropped = false;
+          for (size_t i = 0; i < n; ++i) {
+            if (i == ref || weight[i] <= 0.0f) continue;
+            const float lum = std::max(1e-20f, value[i * 3] + value[i * 3 + 1] + value[i * 3 + 2]);
+            if (std::abs(std::log2(lum / refLum)) > params.ghostStops) {
+              weight[i] = 0.0f;
+              dropped = true;
+            }
+          }
+          if (dropped) ghostRows[size_t(y)]++;
+        }
+      }
+      double sum[3] = {0, 0, 0}, total = 0.0;
+      if (input.eightBit && !params.deghost) {
+        // Borders of an aligned OpenCV merge: the same log-domain average as MergeDebevec.
+        for (size_t i = 0; i < n; ++i) {
+          if (weight[i] <= 0.0f) continue;
+          for (int c = 0; c < 3; ++c)
+            sum[c] += weight[i] * std::log(std::max(value[i * 3 + size_t(c)], 1e-30f));
+          total += weight[i];
+        }
+        for (int c = 0; c < 3; ++c) o[c] = total > 0.0 ? float(std::exp(sum[c] / total)) : 0.0f;
+      } else {
+        for (size_t i = 0; i < n; ++i) {
+          if (weight[i] <= 0.0f) continue;
+          for (int c = 0; c < 3; ++c) sum[c] += weight[i] * value[i * 3 + size_t(c)];
+          total += weight[i];
+        }
+        for (int c = 0; c < 3; ++c) o[c] = total > 0.0 ? float(sum[c] / total) : 0.0f;
+      }
+    }
+  });
+  for (int y = 0; y < height; ++y) {
+    result.saturated += saturatedRows[size_t(y)];
+    result.dark += darkRows[size_t(y)];
+    result.ghosted += ghostRows[size_t(y)];
+  }
+
+  const size_t total = out.pixelCount();
+  if (n == 1) {
+    result.notes.push_back("only one photo (" + name(0) +
+                           "): no merge, its values are linearised and divided by its exposure");
+  }
+  if (result.saturated > 0) {
+    result.notes.push_back(std::to_string(result.saturated) + " pixels (" +
+                           percent(result.saturated, total) +
+                           ") are over-exposed in every photo: their radiance is a lower bound "
+                           "(channel 'clipped' = 1); add a shorter exposure to recover them");
+  }
+  if (result.dark > 0) {
+    result.notes.push_back(std::to_string(result.dark) + " pixels (" + percent(result.dark, total) +
+                           ") are black in every photo: their radiance is an upper bound "
+                           "(channel 'clipped' = 1)");
+  }
+  if (params.deghost) {
+    result.notes.push_back("ghost suppression left shots out at " + std::to_string(result.ghosted) +
+                           " pixels (" + percent(result.ghosted, total) + ")");
+  }
+  report(progress, kStage, 1.0);
+  result.openCvSeconds = opencv.seconds;
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace compose::hdr

@@ -1,0 +1,435 @@
+#include "hdr/response.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <ctime>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/photo.hpp>
+
+#include "core/error.h"
+#include "core/output_files.h"
+#include "core/parallel.h"
+#include "hdr/opencv_util.h"
+
+namespace compose::hdr {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kStage = "merge";
+
+std::string utcNow() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+double srgbDecode(double v) {
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
+
+// Makes a recovered curve usable: positive and non-decreasing, working outwards from the middle
+// (the ends rest on few samples and may wiggle).
+void makeMonotone(std::vector<float>& curve) {
+  for (float& v : curve)
+    if (!std::isfinite(v) || v < 0.0f) v = 0.0f;
+  const int mid = kCodes / 2;
+  for (int z = mid + 1; z < kCodes; ++z) curve[z] = std::max(curve[z], curve[z - 1]);
+  for (int z = mid - 1; z >= 0; --z) curve[z] = std::min(curve[z], curve[z + 1]);
+  // Codes below any observed value can come out as 0 (Robertson): keep them positive and ordered.
+  float floor = 0.0f;
+  for (int z = 0; z < kCodes; ++z)
+    if (curve[z] > 0.0f) {
+      floor = curve[z];
+      break;
+    }
+  if (floor <= 0.0f) return;
+  for (int z = 0; z < kCodes && curve[z] <= 0.0f; ++z) curve[z] = floor * 0.5f;
+  // An exact repeat of the value below is still non-decreasing; nothing more to do.
+}
+
+struct Sample {
+  float score = 0.0f;            // roughness: summed 3x3 standard deviation over shots and channels
+  std::vector<int> bins;         // per shot and channel: the band of the code
+  std::vector<cv::Vec3b> codes;  // per shot, the rounded 3x3 mean
+};
+
+// Debevec & Malik (1997) recommend sample pixels from smooth regions, spread over the range of
+// values. This picks up to `count` 5 x 5 patches on a grid over every view, scores them by how
+// much the codes vary inside (noise, JPEG artefacts, edges: all bad for a least-squares fit),
+// and takes the smoothest per band of code, for every shot and channel in turn, so that every
+// part of every channel's curve is constrained, the ends included. A patch's codes are its
+// rounded 5 x 5 means (a fifth of the noise). Patches with a clipped code (0 or >= 254) anywhere in
+// any shot are left out: a clipped code only says "at least" (or "at most"), which the
+// least-squares model cannot express, and it biases the patch's mean.
+std::vector<Sample> selectSamples(const std::vector<std::vector<cv::Mat>>& views, int count) {
+  constexpr int kBins = 32;
+  constexpr int kRadius = 2;
+  constexpr float kArea = float((2 * kRadius + 1) * (2 * kRadius + 1));
+  std::vector<Sample> candidates;
+  size_t pixels = 0;
+  for (const auto& v : views) pixels += v[0].total();
+  const int stride = std::max(3, int(std::sqrt(double(pixels) / (40.0 * count))));
+  for (const auto& shots : views) {
+    const size_t n = shots.size();
+    const cv::Mat& mid = shots[n / 2];
+    for (int y = kRadius; y + kRadius < mid.rows; y += stride) {
+      for (int x = kRadius; x + kRadius < mid.cols; x += stride) {
+        Sample s;
+        s.codes.resize(n);
+        bool clipped = false;
+        for (size_t i = 0; i < n; ++i) {
+          for (int c = 0; c < 3; ++c) {
+            float sum = 0.0f, sum2 = 0.0f;
+            for (int dy = -kRadius; dy <= kRadius; ++dy) {
+              const uchar* row = shots[i].ptr<uchar>(y + dy);
+              for (int dx = -kRadius; dx <= kRadius; ++dx) {
+                const uchar code = row[3 * (x + dx) + c];
+                const float v = code;
+                sum += v;
+                sum2 += v * v;
+                clipped = clipped || code == 0 || code >= 254;
+              }
+            }
+            const float mean = sum / kArea;
+            s.score += std::sqrt(std::max(0.0f, sum2 / kArea - mean * mean));
+            s.codes[i][c] = cv::saturate_cast<uchar>(mean);
+          }
+        }
+        if (clipped) continue;
+        for (size_t i = 0; i < n; ++i)
+          for (int c = 0; c < 3; ++c) s.bins.push_back(s.codes[i][c] * kBins / kCodes);
+        candidates.push_back(std::move(s));
+      }
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Sample& a, const Sample& b) { return a.score < b.score; });
+  // Round-robin over the bands of each channel, smoothest first, until `count` are taken.
+  const size_t keys = candidates.empty() ? 0 : candidates.front().bins.size();
+  std::vector<std::vector<size_t>> bins(keys * kBins);
+  for (size_t i = 0; i < candidates.size(); ++i)
+    for (size_t k = 0; k < keys; ++k) bins[k * kBins + size_t(candidates[i].bins[k])].push_back(i);
+  std::vector<size_t> next(bins.size(), 0);
+  std::vector<char> taken(candidates.size(), 0);
+  std::vector<Sample> out;
+  bool any = true;
+  while (int(out.size()) < count && any) {
+    any = false;
+    for (size_t b = 0; b < bins.size() && int(out.size()) < count; ++b) {
+      while (next[b] < bins[b].size() && taken[bins[b][next[b]]]) ++next[b];
+      if (next[b] == bins[b].size()) continue;
+      const size_t pick = bins[b][next[b]++];
+      taken[pick] = 1;
+      out.push_back(candidates[pick]);
+      any = true;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+Codes8 toCodes8(const Image& image) {
+  COMPOSE_CHECK(image.channels >= 3);
+  Codes8 out;
+  out.width = image.width;
+  out.height = image.height;
+  out.rgb.resize(image.pixelCount() * 3);
+  const int ch = image.channels;
+  parallelFor(
+      0, image.height,
+      [&](int64_t y) {
+        const float* src = image.row(int(y)).data();
+        uint8_t* dst = out.rgb.data() + size_t(y) * size_t(image.width) * 3;
+        for (int x = 0; x < image.width; ++x) {
+          for (int c = 0; c < 3; ++c) {
+            const float v = src[size_t(x) * size_t(ch) + size_t(c)] * 255.0f + 0.5f;
+            dst[3 * x + c] = uint8_t(v <= 0.0f ? 0.0f : (v >= 255.0f ? 255.0f : v));
+          }
+        }
+      },
+      16);
+  return out;
+}
+
+const char* methodName(RecoveryMethod method) {
+  return method == RecoveryMethod::Debevec ? "debevec" : "robertson";
+}
+
+float ResponseCurve::linear(int channel, float code) const {
+  const auto& c = inverse[size_t(channel)];
+  const float z = std::clamp(code, 0.0f, float(kCodes - 1));
+  const int z0 = std::min(int(z), kCodes - 2);
+  const float f = z - float(z0);
+  return c[size_t(z0)] * (1.0f - f) + c[size_t(z0) + 1] * f;
+}
+
+void ResponseCurve::validate(const fs::path& file) const {
+  for (int c = 0; c < 3; ++c) {
+    const auto& v = inverse[size_t(c)];
+    if (v.size() != size_t(kCodes))
+      throw Error(kStage, "a response curve needs 256 values per channel", file);
+    for (int z = 0; z < kCodes; ++z) {
+      if (!std::isfinite(v[size_t(z)]) || !(v[size_t(z)] > 0.0f))
+        throw Error(kStage,
+                    "response curve value at code " + std::to_string(z) + " is not positive", file);
+      if (z > 0 && v[size_t(z)] < v[size_t(z) - 1])
+        throw Error(kStage,
+                    "response curve decreases at code " + std::to_string(z) +
+                        " (a camera's response never does)",
+                    file);
+    }
+  }
+}
+
+ResponseCurve ResponseCurve::srgb() {
+  ResponseCurve r;
+  for (auto& ch : r.inverse) {
+    ch.resize(kCodes);
+    for (int z = 0; z < kCodes; ++z) ch[size_t(z)] = float(srgbDecode(z / 255.0));
+    ch[0] = ch[1] * 0.5f;  // code 0 still means "some light below code 1"
+  }
+  r.method = "srgb";
+  r.source = "the sRGB decoding curve (IEC 61966-2-1)";
+  return r;
+}
+
+void RecoveryParams::validate() const {
+  if (samples < 10 || samples > 100000)
+    throw Error(kStage, "response samples must be between 10 and 100000");
+  if (!(lambda > 0.0) || !std::isfinite(lambda))
+    throw Error(kStage, "the response smoothness must be a positive number");
+  if (maxIterations < 1) throw Error(kStage, "Robertson iterations must be at least 1");
+  if (!(threshold > 0.0)) throw Error(kStage, "Robertson threshold must be positive");
+  if (maxPixels < 1024) throw Error(kStage, "Robertson needs at least 1024 pixels");
+}
+
+ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
+                              const RecoveryParams& params, const Progress& progress,
+                              double* openCvSeconds) {
+  params.validate();
+  COMPOSE_CHECK(!brackets.empty());
+  const BracketCodes& first = brackets.front();
+  COMPOSE_CHECK(first.images.size() == first.exposures.size());
+  const size_t n = first.images.size();
+  if (n < 2) throw Error(kStage, "recovering a response needs at least two exposures");
+  for (const BracketCodes& b : brackets) {
+    COMPOSE_CHECK(b.images.size() == b.exposures.size() && !b.images.empty());
+    for (const Codes8* img : b.images) {
+      if (img->width != b.images[0]->width || img->height != b.images[0]->height)
+        throw Error(kStage, "photos of a bracket must have the same size");
+    }
+  }
+
+  // Brackets with the same exposure sequence (within 1 %) are stacked vertically, so that one
+  // calibration sees every view.
+  std::vector<const BracketCodes*> used;
+  for (const BracketCodes& b : brackets) {
+    if (b.exposures.size() != n) continue;
+    bool same = true;
+    for (size_t i = 0; i < n && same; ++i)
+      same = std::abs(b.exposures[i] / first.exposures[i] - 1.0) < 0.01 &&
+             b.images[i]->width == first.images[0]->width;
+    if (same) used.push_back(&b);
+  }
+  report(progress, "response", 0.0);
+  cv::Mat times(int(n), 1, CV_32F);
+  for (size_t i = 0; i < n; ++i) times.at<float>(int(i)) = float(first.exposures[i]);
+
+  cv::Mat response;
+  OpenCvClock opencv;
+  if (params.method == RecoveryMethod::Debevec) {
+    // The chosen samples go to OpenCV as a mosaic of k x k blocks, one block per sample, and
+    // OpenCV's grid of `samples` points is made to land on one point in every block: with a
+    // mosaic of width kB and height kB + B/2 (blocks shifted down by B/2), k² + k/2 + 1 grid
+    // points give exactly k columns and k rows with a step of B, whether OpenCV starts its rows
+    // at step/2 or at step (both occur across 4.x releases).
+    std::vector<std::vector<cv::Mat>> views;
+    for (const BracketCodes* b : used) {
+      views.emplace_back();
+      for (size_t i = 0; i < n; ++i) views.back().push_back(wrap(*b->images[i]));
+    }
+    const std::vector<Sample> samples = selectSamples(views, params.samples);
+    views.clear();
+    const int k = std::max(4, int(std::floor(std::sqrt(double(samples.size())))));
+    constexpr int B = 4;
+    std::vector<cv::Mat> mosaic(n);
+    for (size_t i = 0; i < n; ++i) {
+      mosaic[i] = cv::Mat(k * B + B / 2, k * B, CV_8UC3);
+      for (int row = 0; row < mosaic[i].rows; ++row) {
+        const int by = std::clamp((row - B / 2) / B, 0, k - 1);
+        for (int col = 0; col < mosaic[i].cols; ++col) {
+          const size_t index = size_t(by * k + col / B) % samples.size();
+          mosaic[i].at<cv::Vec3b>(row, col) = samples[index].codes[i];
+        }
+      }
+    }
+    const int gridPoints = k * k + k / 2 + 1;
+    auto calibrate = cv::createCalibrateDebevec(gridPoints, float(params.lambda), false);
+    opencv([&] { calibrate->process(mosaic, response, times); });
+  } else {
+    // Robertson uses every pixel of the views, stacked vertically; large captures are
+    // subsampled (nearest, so codes stay codes).
+    int rows = 0;
+    for (const BracketCodes* b : used) rows += b->images[0]->height;
+    const int cols = first.images[0]->width;
+    std::vector<cv::Mat> stacks(n);
+    for (size_t i = 0; i < n; ++i) {
+      stacks[i].create(rows, cols, CV_8UC3);
+      int y = 0;
+      for (const BracketCodes* b : used) {
+        const Codes8& img = *b->images[i];
+        wrap(img).copyTo(stacks[i].rowRange(y, y + img.height));
+        y += img.height;
+      }
+    }
+    const double scale = std::min(1.0, std::sqrt(double(params.maxPixels) / (double(rows) * cols)));
+    if (scale < 1.0) {
+      for (cv::Mat& s : stacks) {
+        cv::Mat small;
+        cv::resize(s, small, cv::Size(), scale, scale, cv::INTER_NEAREST);
+        s = small;
+      }
+    }
+    auto calibrate = cv::createCalibrateRobertson(params.maxIterations, float(params.threshold));
+    opencv([&] { calibrate->process(stacks, response, times); });
+  }
+  report(progress, "response", 1.0);
+  if (openCvSeconds) *openCvSeconds = opencv.seconds;
+
+  ResponseCurve curve;
+  for (int c = 0; c < 3; ++c) {
+    auto& ch = curve.inverse[size_t(c)];
+    ch.resize(kCodes);
+    for (int z = 0; z < kCodes; ++z) ch[size_t(z)] = response.at<cv::Vec3f>(z)[c];
+    makeMonotone(ch);
+    const float mid = ch[kCodes / 2];
+    if (!(mid > 0.0f) || !std::isfinite(mid))
+      throw Error(kStage, "the response recovery failed (no usable pixels at mid-grey)");
+    for (float& v : ch) v /= mid;
+  }
+  curve.method = methodName(params.method);
+  curve.created = utcNow();
+  size_t photos = 0;
+  for (const BracketCodes* b : used) photos += b->images.size();
+  curve.source = "recovered (" + std::string(curve.method) + ") from " + std::to_string(photos) +
+                 " photos in " + std::to_string(used.size()) +
+                 (used.size() == 1 ? " view" : " views");
+  curve.validate();
+  return curve;
+}
+
+std::string responseText(const ResponseCurve& curve) {
+  curve.validate();
+  nlohmann::ordered_json j;
+  j["format"] = "compose-response";
+  j["version"] = 1;
+  j["camera"] = {{"make", curve.make}, {"model", curve.model}};
+  j["method"] = curve.method;
+  j["created"] = curve.created;
+  j["source"] = curve.source;
+  j["channels"] = {"R", "G", "B"};
+  j["meaning"] =
+      "inverse[c][z]: linear exposure giving 8-bit code z in channel c; radiance = inverse / "
+      "(t * ISO / N^2)";
+  j["inverse"] = {curve.inverse[0], curve.inverse[1], curve.inverse[2]};
+  return j.dump(1) + "\n";
+}
+
+void writeResponse(const fs::path& file, const ResponseCurve& curve) {
+  writeTextFile(file, responseText(curve), kStage);
+}
+
+ResponseCurve readResponse(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error(kStage, "response file not found", file);
+  std::ifstream in(file);
+  if (!in) throw Error(kStage, "cannot open the response file", file);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(kStage, std::string("not a valid JSON response file: ") + e.what(), file);
+  }
+  if (!j.is_object() || j.value("format", std::string()) != "compose-response")
+    throw Error(kStage, "not a response file (\"format\" must be \"compose-response\")", file);
+  if (j.value("version", 0) != 1)
+    throw Error(kStage, "unsupported response file version (this compose reads version 1)", file);
+  ResponseCurve curve;
+  if (j.contains("camera") && j["camera"].is_object()) {
+    curve.make = j["camera"].value("make", std::string());
+    curve.model = j["camera"].value("model", std::string());
+  }
+  curve.method = j.value("method", std::string("unknown"));
+  curve.created = j.value("created", std::string());
+  curve.source = "file " + file.string();
+  if (!j.contains("inverse") || !j["inverse"].is_array() || j["inverse"].size() != 3)
+    throw Error(kStage, "a response file needs \"inverse\": three arrays of 256 numbers", file);
+  for (int c = 0; c < 3; ++c) {
+    const auto& a = j["inverse"][size_t(c)];
+    if (!a.is_array() || a.size() != size_t(kCodes))
+      throw Error(kStage, "a response file needs \"inverse\": three arrays of 256 numbers", file);
+    for (const auto& v : a) {
+      if (!v.is_number()) throw Error(kStage, "response values must be numbers", file);
+      curve.inverse[size_t(c)].push_back(v.get<float>());
+    }
+  }
+  curve.validate(file);
+  return curve;
+}
+
+fs::path responseDirectory() {
+  if (const char* dir = std::getenv("COMPOSE_RESPONSE_DIR"); dir && *dir) return dir;
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg)
+    return fs::path(xdg) / "compose" / "responses";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return fs::path(home) / ".cache" / "compose" / "responses";
+  return fs::path(".cache") / "compose" / "responses";
+}
+
+fs::path responseFileFor(const fs::path& folder, const std::string& make,
+                         const std::string& model) {
+  if (make.empty() && model.empty()) return {};
+  std::string name;
+  for (char c : make + "_" + model) {
+    const unsigned char u = static_cast<unsigned char>(c);
+    if (std::isalnum(u) || c == '-' || c == '.') {
+      name.push_back(char(std::tolower(u)));
+    } else if (name.empty() || name.back() != '_') {
+      name.push_back('_');
+    }
+  }
+  while (!name.empty() && name.back() == '_') name.pop_back();
+  while (!name.empty() && (name.front() == '_' || name.front() == '.')) name.erase(name.begin());
+  if (name.empty()) name = "camera";
+  return folder / (name + ".json");
+}
+
+Image linearize(const Image& encoded, const ResponseCurve& curve) {
+  COMPOSE_CHECK(encoded.channels >= 3);
+  Image out = encoded;
+  const size_t count = encoded.pixelCount();
+  const int ch = encoded.channels;
+  for (size_t i = 0; i < count; ++i) {
+    float* p = out.pixels.data() + i * size_t(ch);
+    for (int c = 0; c < 3; ++c) {
+      const float code = std::clamp(p[c], 0.0f, 1.0f) * 255.0f;
+      const float rounded = std::nearbyint(code);
+      p[c] = std::abs(code - rounded) < 1e-3f ? curve.inverse[size_t(c)][size_t(rounded)]
+                                              : curve.linear(c, code);
+    }
+  }
+  return out;
+}
+
+}  // namespace compose::hdr

@@ -1,0 +1,129 @@
+// Camera response curves: how a camera's 8-bit codes relate to the light its sensor collected.
+//
+// A ResponseCurve stores the *inverse* response per channel, as OpenCV's CalibrateDebevec and
+// CalibrateRobertson return it: for every 8-bit code z (0..255) the linear exposure X(z) that
+// produces it, up to one unknown scale per curve. Radiance then follows as X(z) / e, with e the
+// relative exposure t · ISO / N² of the shot (ingest::CaptureInfo::relativeExposure).
+//
+// Scale convention: a recovered curve is normalised so that every channel's value at code 128 is
+// 1, as OpenCV does. A camera's JPEGs are white-balanced, so the same code in each channel means
+// the same light; the merged radiance's unit is then "the light that gives code 128 at relative
+// exposure 1". A curve from another source (the virtual camera's ground truth, the sRGB curve)
+// keeps its own scale.
+//
+// Per-camera files: recovered curves are kept in a folder, one JSON file per camera (Make and
+// Model from EXIF), so that a later merge with the same camera skips the recovery:
+// responseDirectory() is $COMPOSE_RESPONSE_DIR, else $XDG_CACHE_HOME/compose/responses, else
+// ~/.cache/compose/responses. File format (version 1):
+//
+//   {"format": "compose-response", "version": 1, "camera": {"make": ..., "model": ...},
+//    "method": "debevec", "created": "2024-06-01T12:00:00Z", "source": "...",
+//    "channels": ["R", "G", "B"], "inverse": [[256 numbers], [256 numbers], [256 numbers]]}
+//
+// Errors: bad files throw compose::Error (stage "merge") naming the file and what is wrong.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "core/progress.h"
+
+namespace compose::hdr {
+
+inline constexpr int kCodes = 256;
+
+struct ResponseCurve {
+  // inverse[c][z]: linear exposure producing code z in channel c (R, G, B). Strictly increasing
+  // in z and positive for a usable curve.
+  std::array<std::vector<float>, 3> inverse;
+  std::string method;  // "debevec", "robertson", "srgb", "linear", "ground truth", ...
+  std::string make, model;
+  std::string created;  // ISO 8601 UTC time of recovery, empty if unknown
+  std::string source;   // where it came from, for messages ("recovered from 18 photos", a file)
+
+  bool empty() const { return inverse[0].empty(); }
+  // Linear value of a continuous code in [0, 255] (linear interpolation between codes), for
+  // encoded inputs deeper than 8 bits.
+  float linear(int channel, float code) const;
+  // Throws compose::Error (stage "merge", naming `file`) unless every channel has 256 finite,
+  // positive values that never decrease.
+  void validate(const std::filesystem::path& file = {}) const;
+
+  // The IEC 61966-2-1 sRGB decoding curve (what a JPEG declares when nothing better is known).
+  static ResponseCurve srgb();
+};
+
+enum class RecoveryMethod { Debevec, Robertson };
+const char* methodName(RecoveryMethod method);
+
+struct RecoveryParams {
+  RecoveryMethod method = RecoveryMethod::Debevec;
+  // Debevec: how many 5 x 5 patches (smooth, unclipped, spread over every shot's range of codes)
+  // are handed to OpenCV, and the smoothness weight. OpenCV solves a dense least-squares system
+  // with samples × shots rows by SVD, so the cost grows quickly with `samples`.
+  int samples = 150;
+  double lambda = 20.0;
+  int maxIterations = 30;   // Robertson
+  double threshold = 0.01;  // Robertson: convergence threshold
+  int maxPixels = 1 << 20;  // Robertson: views are subsampled (nearest) to about this many pixels
+  void validate() const;    // compose::Error (stage "merge")
+};
+
+// 8-bit RGB codes of an image, interleaved, row-major: what an 8-bit file holds. The codes are
+// owned (`rgb`) or borrowed (`external`, e.g. ingest::LoadedImage::codes, which must outlive
+// this).
+struct Codes8 {
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgb;
+  const uint8_t* external = nullptr;
+  const uint8_t* data() const { return external ? external : rgb.data(); }
+};
+// The codes of an image read from an 8-bit file (values code / 255, RGB or more channels: the
+// first three are taken). Multi-threaded.
+Codes8 toCodes8(const Image& encoded);
+
+// The 8-bit codes of one bracket for recovery, all of one size, with their relative exposures.
+struct BracketCodes {
+  std::vector<const Codes8*> images;
+  std::vector<double> exposures;
+};
+
+// Recovers the response with OpenCV from one or more brackets that share the same exposure
+// sequence (views of one capture: every view contributes samples). Brackets whose exposures
+// differ from the first one's are left out. Needs at least two exposures. The result is made
+// non-decreasing and normalised as described above.
+//
+// Accuracy, and its limit: with exposures a fixed ratio apart (2 EV brackets), the data only
+// fix the curve up to a ripple that repeats with that ratio (any such ripple is absorbed by the
+// unknown radiances); Debevec's smoothness term chooses among them, and noise excites it.
+// Patch selection (see response.cpp) keeps that ripple near 1 % RMS on the virtual camera's
+// photos; the ends of the range (codes below 10, above 240), which few patches reach, can be off
+// by more. Merged radiance is much less sensitive: those codes carry little weight.
+// `openCvSeconds`, when given, receives the time spent inside OpenCV's calibration.
+ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
+                              const RecoveryParams& params, const Progress& progress = {},
+                              double* openCvSeconds = nullptr);
+
+ResponseCurve readResponse(const std::filesystem::path& file);
+void writeResponse(const std::filesystem::path& file, const ResponseCurve& curve);
+// The JSON text writeResponse() writes (for OutputFiles users).
+std::string responseText(const ResponseCurve& curve);
+
+// The folder of per-camera response files (see above).
+std::filesystem::path responseDirectory();
+// The file for a camera in `folder`: "<make>_<model>.json", lower case, anything but letters,
+// digits, '-' and '.' replaced by '_'. Empty when the camera has neither make nor model.
+std::filesystem::path responseFileFor(const std::filesystem::path& folder, const std::string& make,
+                                      const std::string& model);
+
+// Linearises an 8-bit-coded RGB(A) image (codes as floats code/255; other channels are copied)
+// through the curve: out = inverse[c][code]. Codes are rounded to the nearest integer; deeper
+// inputs use ResponseCurve::linear on the continuous code.
+Image linearize(const Image& encoded, const ResponseCurve& curve);
+
+}  // namespace compose::hdr

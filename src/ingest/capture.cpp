@@ -1,0 +1,435 @@
+#include "ingest/capture.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <regex>
+
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/output_files.h"
+
+namespace compose::ingest {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kStage = "ingest";
+
+// Natural order: "img2" before "img10".
+bool naturalLess(const std::string& a, const std::string& b) {
+  size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (std::isdigit(static_cast<unsigned char>(a[i])) &&
+        std::isdigit(static_cast<unsigned char>(b[j]))) {
+      size_t ie = i, je = j;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      const std::string na = a.substr(i, ie - i), nb = b.substr(j, je - j);
+      const std::string ta = na.substr(std::min(na.find_first_not_of('0'), na.size()));
+      const std::string tb = nb.substr(std::min(nb.find_first_not_of('0'), nb.size()));
+      if (ta.size() != tb.size()) return ta.size() < tb.size();
+      if (ta != tb) return ta < tb;
+      i = ie;
+      j = je;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+bool shotNameLess(const Shot& a, const Shot& b) {
+  return naturalLess(a.file.filename().string(), b.file.filename().string());
+}
+
+std::string stops(double exposure, double reference) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%+.1f EV", std::log2(exposure / reference));
+  return text;
+}
+
+void fillCamera(Capture& capture) {
+  for (const View& v : capture.views) {
+    for (const Shot& s : v.shots) {
+      if (capture.cameraMake.empty() && capture.cameraModel.empty()) {
+        capture.cameraMake = s.info.cameraMake;
+        capture.cameraModel = s.info.cameraModel;
+      }
+    }
+  }
+}
+
+std::string relativeTo(const fs::path& file, const fs::path& folder) {
+  std::error_code ec;
+  const fs::path absFile = fs::absolute(file, ec);
+  const fs::path absFolder = fs::absolute(folder.empty() ? fs::path(".") : folder, ec);
+  const fs::path rel = absFile.lexically_normal().lexically_relative(absFolder.lexically_normal());
+  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
+  return absFile.lexically_normal().generic_string();
+}
+
+}  // namespace
+
+std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::string& stage) {
+  std::vector<Shot> shots;
+  for (const fs::path& p : paths) {
+    std::error_code ec;
+    if (fs::is_directory(p, ec)) {
+      std::vector<Shot> inFolder;
+      for (const auto& entry : fs::directory_iterator(p, ec)) {
+        if (!entry.is_regular_file(ec) || !looksLikeImageFile(entry.path())) continue;
+        inFolder.push_back(Shot{entry.path(), {}, {}, {}, {}});
+      }
+      if (ec) throw Error(stage, "cannot list the folder: " + ec.message(), p);
+      if (inFolder.empty()) throw Error(stage, "no image files in the folder", p);
+      std::sort(inFolder.begin(), inFolder.end(), shotNameLess);
+      for (Shot& s : inFolder) shots.push_back(std::move(s));
+    } else {
+      shots.push_back(Shot{p, {}, {}, {}, {}});
+    }
+  }
+  if (shots.empty()) throw Error(stage, "no photos given");
+  for (Shot& s : shots) s.info = readCaptureInfo(s.file, stage);
+  return shots;
+}
+
+void ExifGrouping::validate() const {
+  if (!(maxGapSeconds > 0.0) || !std::isfinite(maxGapSeconds))
+    throw Error(kStage, "the time gap between views must be a positive number of seconds");
+  if (bracketSize < 0) throw Error(kStage, "the bracket size must be positive");
+  if (!(sameExposureStops > 0.0 && sameExposureStops < 1.0))
+    throw Error(kStage, "the same-exposure tolerance must be between 0 and 1 stop");
+}
+
+Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options) {
+  options.validate();
+  Capture capture;
+  const bool timed = std::all_of(shots.begin(), shots.end(),
+                                 [](const Shot& s) { return s.info.captureSeconds.has_value(); });
+  if (timed) {
+    std::stable_sort(shots.begin(), shots.end(), [](const Shot& a, const Shot& b) {
+      if (*a.info.captureSeconds != *b.info.captureSeconds)
+        return *a.info.captureSeconds < *b.info.captureSeconds;
+      return shotNameLess(a, b);
+    });
+    capture.method = "EXIF capture times (a new view after a pause of more than " +
+                     std::to_string(int(std::lround(options.maxGapSeconds))) +
+                     " s) and exposure sequences";
+  } else {
+    capture.method = "file names and exposure sequences (not every photo has an EXIF capture time)";
+  }
+  View* current = nullptr;
+  double previousTime = 0.0;
+  for (Shot& s : shots) {
+    bool startNew = current == nullptr;
+    if (!startNew && timed && *s.info.captureSeconds - previousTime > options.maxGapSeconds)
+      startNew = true;
+    if (!startNew && options.bracketSize > 0 && int(current->shots.size()) >= options.bracketSize)
+      startNew = true;
+    const auto e = s.info.relativeExposure();
+    if (!startNew && e) {
+      for (const Shot& o : current->shots) {
+        const auto oe = o.info.relativeExposure();
+        if (oe && std::abs(std::log2(*e / *oe)) < options.sameExposureStops) startNew = true;
+      }
+    }
+    if (startNew) {
+      capture.views.push_back(View{});
+      current = &capture.views.back();
+    }
+    if (timed) previousTime = *s.info.captureSeconds;
+    current->shots.push_back(std::move(s));
+  }
+  const int digits = capture.views.size() >= 10 ? 2 : 1;
+  for (size_t i = 0; i < capture.views.size(); ++i) {
+    char name[40];
+    std::snprintf(name, sizeof name, "view%0*zu", digits, i + 1);
+    capture.views[i].name = name;
+  }
+  fillCamera(capture);
+  return capture;
+}
+
+Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
+  if (pattern.find("{view}") == std::string::npos)
+    throw Error(kStage, "the file-name pattern '" + pattern + "' has no {view} placeholder");
+  std::string re;
+  for (size_t i = 0; i < pattern.size();) {
+    if (pattern.compare(i, 6, "{view}") == 0) {
+      re += "(.+?)";
+      i += 6;
+    } else if (pattern.compare(i, 9, "{bracket}") == 0) {
+      re += ".+?";
+      i += 9;
+    } else if (pattern[i] == '*') {
+      re += ".*?";
+      ++i;
+    } else if (pattern[i] == '?') {
+      re += ".";
+      ++i;
+    } else {
+      const char c = pattern[i++];
+      if (std::string("\\^$.|+()[]{}").find(c) != std::string::npos) re += '\\';
+      re += c;
+    }
+  }
+  std::regex matcher;
+  try {
+    matcher = std::regex(re);
+  } catch (const std::regex_error&) {
+    throw Error(kStage, "cannot use the file-name pattern '" + pattern + "'");
+  }
+  std::stable_sort(shots.begin(), shots.end(), shotNameLess);
+  Capture capture;
+  capture.method = "file-name pattern " + pattern;
+  std::map<std::string, size_t> index;
+  for (Shot& s : shots) {
+    std::smatch m;
+    const std::string name = s.file.filename().string();
+    if (!std::regex_match(name, m, matcher))
+      throw Error(kStage, "file name does not match the pattern '" + pattern + "'", s.file);
+    const std::string key = m[1].str();
+    auto it = index.find(key);
+    if (it == index.end()) {
+      it = index.emplace(key, capture.views.size()).first;
+      capture.views.push_back(View{key, {}, {}});
+    }
+    capture.views[it->second].shots.push_back(std::move(s));
+  }
+  fillCamera(capture);
+  return capture;
+}
+
+Capture readCaptureDescription(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error(kStage, "capture description not found", file);
+  std::ifstream in(file);
+  if (!in) throw Error(kStage, "cannot open the capture description", file);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(kStage, std::string("not a valid JSON capture description: ") + e.what(), file);
+  }
+  auto fail = [&](const std::string& what) -> void { throw Error(kStage, what, file); };
+  if (!j.is_object()) fail("a capture description must hold a JSON object");
+  if (j.value("format", std::string()) != "compose-capture")
+    fail("not a capture description (\"format\" must be \"compose-capture\")");
+  if (j.value("version", 0) != 1)
+    fail("unsupported capture description version (this compose reads version 1)");
+  if (!j.contains("views") || !j["views"].is_array() || j["views"].empty())
+    fail("a capture description needs a non-empty \"views\" array");
+  const fs::path folder = file.parent_path();
+  auto resolvePath = [&](const std::string& p) {
+    return fs::path(p).is_absolute() ? fs::path(p) : folder / p;
+  };
+
+  Capture capture;
+  capture.method = "capture description " + file.string();
+  if (j.contains("camera")) {
+    if (!j["camera"].is_object()) fail("\"camera\" must be an object");
+    capture.cameraMake = j["camera"].value("make", std::string());
+    capture.cameraModel = j["camera"].value("model", std::string());
+  }
+  if (j.contains("lens")) {
+    if (!j["lens"].is_string()) fail("\"lens\" must name a lens file");
+    capture.lensFile = resolvePath(j["lens"].get<std::string>());
+  }
+  if (j.contains("groundTruth")) {
+    if (!j["groundTruth"].is_string()) fail("\"groundTruth\" must name a file");
+    capture.groundTruth = resolvePath(j["groundTruth"].get<std::string>());
+  }
+  auto positive = [&](const nlohmann::json& o, const char* key,
+                      const std::string& where) -> std::optional<double> {
+    if (!o.contains(key)) return std::nullopt;
+    if (!o[key].is_number() || !(o[key].get<double>() > 0.0) ||
+        !std::isfinite(o[key].get<double>()))
+      fail(where + ": \"" + key + "\" must be a positive number");
+    return o[key].get<double>();
+  };
+  std::map<std::string, int> names;
+  for (const auto& jv : j["views"]) {
+    const std::string where = "view " + std::to_string(capture.views.size() + 1);
+    if (!jv.is_object()) fail(where + " must be an object");
+    View v;
+    v.name = jv.value("name", "view" + std::to_string(capture.views.size() + 1));
+    if (v.name.empty() || v.name.find_first_of("/\\") != std::string::npos)
+      fail(where + ": a view name must be a non-empty plain name");
+    if (names[v.name]++) fail("two views are named '" + v.name + "'");
+    if (jv.contains("worldFromCamera")) {
+      const auto& m = jv["worldFromCamera"];
+      bool ok = m.is_array() && m.size() == 3;
+      glm::dmat3 r(1.0);
+      for (int row = 0; ok && row < 3; ++row) {
+        ok = m[row].is_array() && m[row].size() == 3;
+        for (int col = 0; ok && col < 3; ++col) {
+          ok = m[row][col].is_number();
+          if (ok) r[col][row] = m[row][col].get<double>();
+        }
+      }
+      if (!ok) fail("view '" + v.name + "': \"worldFromCamera\" must be 3 rows of 3 numbers");
+      // A rotation: orthonormal with determinant +1 (to a tolerance for hand-written files).
+      const glm::dmat3 should = glm::transpose(r) * r;
+      double err = std::abs(glm::determinant(r) - 1.0);
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) err = std::max(err, std::abs(should[a][b] - (a == b)));
+      if (err > 1e-3) fail("view '" + v.name + "': \"worldFromCamera\" is not a rotation");
+      v.worldFromCamera = r;
+    }
+    const std::string viewSpace = jv.value("colorSpace", std::string());
+    if (!jv.contains("exposures") || !jv["exposures"].is_array() || jv["exposures"].empty())
+      fail("view '" + v.name + "' needs a non-empty \"exposures\" array");
+    for (const auto& je : jv["exposures"]) {
+      if (!je.is_object() || !je.contains("file") || !je["file"].is_string())
+        fail("view '" + v.name + "': every exposure needs a \"file\"");
+      Shot s;
+      s.file = resolvePath(je["file"].get<std::string>());
+      s.colorSpace = je.value("colorSpace", viewSpace);
+      s.info = readCaptureInfo(s.file);
+      const std::string at = "view '" + v.name + "', " + s.file.filename().string();
+      const auto rel = positive(je, "exposure", at);
+      const auto t = positive(je, "exposureTime", at);
+      const auto n = positive(je, "fNumber", at);
+      const auto iso = positive(je, "iso", at);
+      if (rel) {
+        s.exposure = rel;
+        s.exposureSource = "capture description";
+      } else if (t) {
+        // Fields given here override EXIF; missing ones come from EXIF.
+        CaptureInfo merged = s.info;
+        merged.exposureTime = t;
+        if (n) merged.fNumber = n;
+        if (iso) merged.iso = iso;
+        s.exposure = merged.relativeExposure();
+        s.exposureSource = "capture description";
+      }
+      v.shots.push_back(std::move(s));
+    }
+    capture.views.push_back(std::move(v));
+  }
+  fillCamera(capture);
+  return capture;
+}
+
+std::string captureDescriptionText(const fs::path& file, const Capture& capture) {
+  const fs::path folder = file.parent_path();
+  nlohmann::ordered_json j;
+  j["format"] = "compose-capture";
+  j["version"] = 1;
+  if (!capture.cameraMake.empty() || !capture.cameraModel.empty())
+    j["camera"] = {{"make", capture.cameraMake}, {"model", capture.cameraModel}};
+  if (!capture.lensFile.empty()) j["lens"] = relativeTo(capture.lensFile, folder);
+  if (!capture.groundTruth.empty()) j["groundTruth"] = relativeTo(capture.groundTruth, folder);
+  nlohmann::ordered_json views = nlohmann::ordered_json::array();
+  for (const View& v : capture.views) {
+    nlohmann::ordered_json jv;
+    jv["name"] = v.name;
+    if (v.worldFromCamera) {
+      const glm::dmat3& r = *v.worldFromCamera;
+      jv["worldFromCamera"] = {
+          {r[0][0], r[1][0], r[2][0]}, {r[0][1], r[1][1], r[2][1]}, {r[0][2], r[1][2], r[2][2]}};
+    }
+    nlohmann::ordered_json exposures = nlohmann::ordered_json::array();
+    for (const Shot& s : v.shots) {
+      nlohmann::ordered_json je;
+      je["file"] = relativeTo(s.file, folder);
+      if (s.exposure) {
+        if (s.exposureSource == "EXIF" && s.info.exposureTime) {
+          je["exposureTime"] = *s.info.exposureTime;
+          if (s.info.fNumber) je["fNumber"] = *s.info.fNumber;
+          if (s.info.iso) je["iso"] = *s.info.iso;
+        } else {
+          je["exposure"] = *s.exposure;
+        }
+      }
+      if (!s.colorSpace.empty()) je["colorSpace"] = s.colorSpace;
+      exposures.push_back(je);
+    }
+    jv["exposures"] = exposures;
+    views.push_back(jv);
+  }
+  j["views"] = views;
+  return j.dump(2) + "\n";
+}
+
+void writeCaptureDescription(const fs::path& file, const Capture& capture) {
+  writeTextFile(file, captureDescriptionText(file, capture), kStage);
+}
+
+void setExposures(View& view, const std::vector<double>& exposures, const std::string& source) {
+  if (exposures.size() != view.shots.size()) {
+    throw Error(kStage, std::to_string(exposures.size()) + " exposures given for " +
+                            std::to_string(view.shots.size()) + " photos");
+  }
+  for (size_t i = 0; i < exposures.size(); ++i) {
+    if (!(exposures[i] > 0.0) || !std::isfinite(exposures[i]))
+      throw Error(kStage, "exposures must be positive numbers");
+    view.shots[i].exposure = exposures[i];
+    view.shots[i].exposureSource = source;
+  }
+}
+
+void resolveExposures(Capture& capture) {
+  for (View& v : capture.views) {
+    for (Shot& s : v.shots) {
+      if (s.exposure) continue;
+      s.exposure = s.info.relativeExposure();
+      if (!s.exposure) {
+        throw Error(kStage,
+                    "no exposure time in EXIF and no exposure given (pass --exposures t1,t2,... "
+                    "in the order of the photos, or a capture description)",
+                    s.file);
+      }
+      s.exposureSource = "EXIF";
+    }
+    std::stable_sort(v.shots.begin(), v.shots.end(),
+                     [](const Shot& a, const Shot& b) { return *a.exposure < *b.exposure; });
+    if (v.shots.size() > 1) {
+      const double lo = *v.shots.front().exposure, hi = *v.shots.back().exposure;
+      if (std::log2(hi / lo) < 1.0 / 6.0) {
+        std::string files;
+        for (const Shot& s : v.shots)
+          files += (files.empty() ? "" : ", ") + s.file.filename().string();
+        throw Error(kStage,
+                    "the exposures of view '" + v.name + "' are all equal (" + files +
+                        "): a bracket needs different exposures to merge",
+                    v.shots.front().file);
+      }
+    }
+  }
+}
+
+std::vector<std::string> describeCapture(const Capture& capture) {
+  std::vector<std::string> lines;
+  for (const View& v : capture.views) {
+    std::string line = v.name + ": " + std::to_string(v.shots.size()) +
+                       (v.shots.size() == 1 ? " photo" : " photos");
+    double reference = 0.0;
+    for (const Shot& s : v.shots)
+      if (s.exposure && reference == 0.0) reference = *s.exposure;
+    if (reference > 0.0 && v.shots.size() > 1) {
+      double lo = reference, hi = reference;
+      for (const Shot& s : v.shots)
+        if (s.exposure) lo = std::min(lo, *s.exposure), hi = std::max(hi, *s.exposure);
+      char span[48];
+      std::snprintf(span, sizeof span, ", %.1f EV range", std::log2(hi / lo));
+      line += span;
+    }
+    line += ":";
+    for (const Shot& s : v.shots) {
+      line += " " + s.file.filename().string();
+      if (s.exposure && reference > 0.0) line += " (" + stops(*s.exposure, reference) + ")";
+    }
+    lines.push_back(line);
+  }
+  return lines;
+}
+
+}  // namespace compose::ingest

@@ -1,0 +1,113 @@
+// Captures: photos grouped into views (directions the camera looked in) and, per view, a bracket
+// of exposures. This is what the merge stage takes and what the stitch stage needs to know about
+// each view.
+//
+// Three ways to get one:
+//  * groupByExif(): shots ordered by EXIF DateTimeOriginal (else by file name) are cut into views
+//    where the time gap to the previous shot exceeds a limit, or where the exposure sequence
+//    starts again (an exposure already present in the current view), or where a view is full
+//    (when the bracket size is known).
+//  * groupByPattern(): a file-name pattern with a {view} placeholder; files whose {view} part is
+//    the same form one view.
+//  * readCaptureDescription(): an explicit JSON capture description (written by `compose ingest
+//    --json`, `compose capture-sim`, or by hand). Format, version 1 (paths relative to the file):
+//
+//      {
+//        "format": "compose-capture", "version": 1,
+//        "camera": {"make": "Canon", "model": "EOS 5D"},        // optional
+//        "lens": "camera.json",                                 // optional lens file
+//        (calib/lens.h) "groundTruth": "truth.json",                           // optional, virtual
+//        camera only "views": [
+//          {"name": "nz",
+//           "worldFromCamera": [[1,0,0],[0,1,0],[0,0,1]],       // optional rotation, rows
+//           "colorSpace": "sRGB",                               // optional, for every exposure
+//           "exposures": [
+//             {"file": "nz_1.jpg", "exposureTime": 0.008, "fNumber": 8, "iso": 100},
+//             {"file": "nz_2.jpg", "exposure": 0.5}             // or a relative exposure
+//           ]}]
+//      }
+//
+//    Exposure fields are optional: a shot without them takes its exposure from EXIF. The camera
+//    frame is the project's (+X right, +Y up, looking along -Z); worldFromCamera is the rotation
+//    the photographer intended (nominal, to be refined by stitching).
+//
+// resolveExposures() sorts the shots of each view by increasing exposure. Exposures are *relative*:
+// t · ISO / N² (CaptureInfo::relativeExposure), or the values given in the description or on the
+// command line. Errors throw compose::Error (stage "ingest") naming the file.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <glm/mat3x3.hpp>
+
+#include "ingest/image_io.h"
+
+namespace compose::ingest {
+
+struct Shot {
+  std::filesystem::path file;
+  CaptureInfo info;                // from the file's header (readCaptureInfo)
+  std::optional<double> exposure;  // relative exposure used for merging; empty = unknown
+  std::string exposureSource;      // "EXIF", "capture description", "--exposures", ...
+  std::string colorSpace;          // colour space declared by a capture description, else empty
+};
+
+struct View {
+  std::string name;
+  std::vector<Shot> shots;  // the bracket, by increasing exposure
+  std::optional<glm::dmat3> worldFromCamera;
+};
+
+struct Capture {
+  std::vector<View> views;
+  std::string cameraMake, cameraModel;
+  std::filesystem::path lensFile;     // empty if none
+  std::filesystem::path groundTruth;  // empty if none
+  std::string method;                 // how it was grouped, for messages
+};
+
+// Shots from files and folders (folders: every image file inside, not recursive, by name). Reads
+// headers only. Throws if a file cannot be read or nothing is found.
+std::vector<Shot> scanShots(const std::vector<std::filesystem::path>& paths,
+                            const std::string& stage = "ingest");
+
+struct ExifGrouping {
+  double maxGapSeconds = 3.0;  // a longer pause between shots starts a new view
+  int bracketSize = 0;         // > 0: a view holds exactly this many shots
+  // Two exposures within this ratio (in stops) count as the same exposure.
+  double sameExposureStops = 1.0 / 6.0;
+  void validate() const;  // compose::Error (stage "ingest")
+};
+
+Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options);
+
+// `pattern` is matched against the whole file name: {view} matches the view's key (at least one
+// character), {bracket} and * any text, ? one character; everything else literally. Files that
+// do not match are an error naming the first of them.
+Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern);
+
+// Reads a JSON capture description and the headers of the files it names.
+Capture readCaptureDescription(const std::filesystem::path& file);
+// Writes one (atomically); file paths are written relative to the description's folder when they
+// lie below it.
+void writeCaptureDescription(const std::filesystem::path& file, const Capture& capture);
+// The text writeCaptureDescription() would write (for OutputFiles users).
+std::string captureDescriptionText(const std::filesystem::path& file, const Capture& capture);
+
+// Sets every shot's exposure from EXIF where it has none, checks the result and sorts each view
+// by increasing exposure: every shot needs an exposure (error naming the first file without one,
+// suggesting --exposures), and a view of more than one shot needs at least two different
+// exposures (error naming the view's files).
+void resolveExposures(Capture& capture);
+
+// Overrides the exposures of a single view from a list (e.g. --exposures): the list must have
+// one value per shot, in the order the shots were given.
+void setExposures(View& view, const std::vector<double>& exposures, const std::string& source);
+
+// A human-readable summary: one line per view with its shots and exposures in stops.
+std::vector<std::string> describeCapture(const Capture& capture);
+
+}  // namespace compose::ingest

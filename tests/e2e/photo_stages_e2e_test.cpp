@@ -1,0 +1,235 @@
+// End-to-end through the compose executable: the virtual camera's photos are ingested and merged
+// as a user would, and every bad input the issue lists gives a named error, a non-zero exit
+// status and no output.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "ingest/image_io.h"
+#include "pipeline/compose_job.h"
+#include "test_util.h"
+
+namespace compose {
+namespace {
+
+namespace fs = std::filesystem;
+using compose::testing::TempDir;
+
+struct CommandRun {
+  int status = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string q(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
+
+// Runs compose with its response store in `dir` (never the user's).
+CommandRun compose(const std::string& args, const TempDir& dir) {
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string cmd = "COMPOSE_RESPONSE_DIR=" + q(dir / "responses") + " " +
+                          q(COMPOSE_EXECUTABLE) + " " + args + " >" + q(out) + " 2>" + q(err) +
+                          " </dev/null";
+  const int raw = std::system(cmd.c_str());
+  CommandRun r;
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+// Only the files a test put there: no output and no temporary left behind.
+std::vector<std::string> filesIn(const fs::path& dir) {
+  std::vector<std::string> names;
+  if (!fs::exists(dir)) return names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+#define EXPECT_FAILS_WITH(run, code, needle)                                 \
+  do {                                                                       \
+    EXPECT_EQ((run).status, code) << (run).err;                              \
+    EXPECT_NE((run).err.find(needle), std::string::npos)                     \
+        << "stderr: " << (run).err << "\nexpected to contain: " << (needle); \
+  } while (0)
+
+// ctest runs every test in a process of its own: the capture is made by the tests that need it.
+class PhotoStages : public ::testing::Test {
+ protected:
+  // A small capture: two views, three exposures 2 EV apart.
+  void makeCapture() {
+    const CommandRun r = compose(
+        "capture-sim --env " + q(pipeline::samplesDirectory() / "interior.exr") + " --out " +
+            q(dir_ / "shots") + " --size 160x120 --views 2 --brackets 3 --seed 4",
+        dir_);
+    ASSERT_EQ(r.status, 0) << r.err;
+  }
+  fs::path shot(const std::string& name) const { return dir_ / "shots" / name; }
+  TempDir dir_;
+};
+
+TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
+  makeCapture();
+  // ingest prints the EXIF and the grouping, and writes it for merge.
+  {
+    TempDir dir;
+    const CommandRun r =
+        compose("ingest --json " + q(dir / "grouped.json") + " " + q(dir_ / "shots"), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("2 views"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("f/"), std::string::npos);
+    EXPECT_NE(r.out.find("compose virtual camera"), std::string::npos);
+    EXPECT_TRUE(fs::exists(dir / "grouped.json"));
+    // The grouping written is a capture description merge can take.
+    const CommandRun m =
+        compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
+    EXPECT_EQ(m.status, 0) << m.err;
+    EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"view1.exr", "view2.exr"}));
+  }
+  // merge recovers the response once and reuses it.
+  {
+    TempDir dir;
+    const CommandRun first =
+        compose("merge --capture " + q(shot("capture.json")) + " --out " + q(dir / "merged"), dir);
+    ASSERT_EQ(first.status, 0) << first.err;
+    EXPECT_EQ(filesIn(dir / "merged"), (std::vector<std::string>{"yaw000.exr", "yaw180.exr"}));
+    EXPECT_NE(first.err.find("linearised by the camera response recovered"), std::string::npos)
+        << first.err;
+    EXPECT_TRUE(fs::exists(dir / "responses" / "compose_virtual_camera.json"));
+    const auto exr = ingest::readImage(dir / "merged" / "yaw000.exr");
+    EXPECT_EQ(exr.image.channels, 4);
+    EXPECT_EQ(exr.image.channelNames[3], "clipped");
+    EXPECT_EQ(exr.info.sampleType, "float");
+
+    const CommandRun again =
+        compose("merge --out " + q(dir / "one.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    ASSERT_EQ(again.status, 0) << again.err;
+    EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
+    EXPECT_TRUE(fs::exists(dir / "one.exr"));
+  }
+}
+
+TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
+  makeCapture();
+  // Brackets of different sizes.
+  {
+    TempDir dir;
+    // The middle exposure, resized, with its EXIF.
+    auto mid = ingest::readImage(shot("yaw000_2.jpg"));
+    Image half(80, 60, 3);
+    for (int y = 0; y < 60; ++y)
+      for (int x = 0; x < 80; ++x)
+        for (int c = 0; c < 3; ++c) half.at(x, y)[c] = mid.image.at(2 * x, 2 * y)[c];
+    ingest::WriteOptions w;
+    w.attributes = ingest::exifAttributes(mid.info);
+    ingest::writeImage(dir / "small.jpg", half, w);
+    const CommandRun r =
+        compose("merge --out " + q(dir / "out" / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(dir / "small.jpg") + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "must have the same size");
+    EXPECT_NE(r.err.find("small.jpg"), std::string::npos) << r.err;
+    EXPECT_TRUE(filesIn(dir / "out").empty());
+  }
+  // A bracket whose exposures are all equal.
+  {
+    TempDir dir;
+    const CommandRun r = compose("merge --exposures 1,1,1 --out " + q(dir / "hdr.exr") + " " +
+                                     q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) + " " +
+                                     q(shot("yaw000_3.jpg")),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 1, "ingest: the exposures of view 'hdr' are all equal");
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // No EXIF and no exposure list.
+  {
+    TempDir dir;
+    for (const char* name : {"yaw000_1.jpg", "yaw000_2.jpg"}) {
+      const auto img = ingest::readImage(shot(name));
+      ingest::writeImage(dir / (std::string("bare_") + name), img.image);  // no EXIF
+    }
+    const CommandRun r =
+        compose("merge --out " + q(dir / "hdr.exr") + " " + q(dir / "bare_yaw000_1.jpg") + " " +
+                    q(dir / "bare_yaw000_2.jpg"),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "no exposure time in EXIF and no exposure given");
+    EXPECT_NE(r.err.find("bare_yaw000_1.jpg"), std::string::npos);
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+    // With a list it merges.
+    const CommandRun ok =
+        compose("merge --exposures 0.25,1 --response colorspace --out " + q(dir / "hdr.exr") + " " +
+                    q(dir / "bare_yaw000_1.jpg") + " " + q(dir / "bare_yaw000_2.jpg"),
+                dir);
+    EXPECT_EQ(ok.status, 0) << ok.err;
+    EXPECT_NE(ok.err.find("not by a camera response"), std::string::npos) << ok.err;
+  }
+  // A truncated JPEG.
+  {
+    TempDir dir;
+    const std::string bytes = slurp(shot("yaw000_2.jpg"));
+    compose::testing::writeText(dir / "cut.jpg", bytes.substr(0, bytes.size() * 2 / 3));
+    const CommandRun r =
+        compose("merge --out " + q(dir / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(dir / "cut.jpg") + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "merge: truncated file");
+    EXPECT_NE(r.err.find("cut.jpg"), std::string::npos);
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // An unknown colour space, refused before anything is read.
+  {
+    TempDir dir;
+    const CommandRun r = compose("merge --input-space no-such-space --out " + q(dir / "hdr.exr") +
+                                     " " + q(dir / "missing.jpg"),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 2, "no-such-space");
+    EXPECT_EQ(r.err.find("missing.jpg"), std::string::npos) << "nothing read yet: " << r.err;
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // A chessboard size that matches no photo.
+  {
+    TempDir dir;
+    const auto boards = pipeline::samplesDirectory() / "chessboard";
+    const CommandRun r = compose("calib lens --board 8x5 --out " + q(dir / "camera.json") + " " +
+                                     q(boards / "left01.jpg") + " " + q(boards / "left02.jpg") +
+                                     " " + q(boards / "left03.jpg"),
+                                 dir);
+    EXPECT_FAILS_WITH(r, 1, "calib: no 8x5 chessboard");
+    EXPECT_FALSE(fs::exists(dir / "camera.json"));
+    // The right size calibrates and writes the lens file.
+    const CommandRun ok =
+        compose("calib lens --board 9x6 --out " + q(dir / "camera.json") + " " + q(boards), dir);
+    EXPECT_EQ(ok.status, 0) << ok.err;
+    EXPECT_TRUE(fs::exists(dir / "camera.json"));
+    EXPECT_NE(ok.err.find("RMS reprojection"), std::string::npos);
+  }
+}
+
+TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
+  TempDir dir;
+  EXPECT_FAILS_WITH(compose("merge " + q(shot("yaw000_1.jpg")), dir), 2, "--out is required");
+  EXPECT_FAILS_WITH(
+      compose("merge --exposures 1,2 --out " + q(dir / "h.exr") + " " + q(shot("yaw000_1.jpg")),
+              dir),
+      2, "--exposures has 2 values for 1 photos");
+  EXPECT_FAILS_WITH(compose("merge --exposures 1,x --out h.exr a.jpg b.jpg", dir), 2,
+                    "--exposures expects a number");
+  EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --brackets 0", dir), 2, "brackets");
+  EXPECT_FAILS_WITH(compose("calib lens --board 9by6 --out c.json a.jpg", dir), 2, "9by6");
+  EXPECT_FAILS_WITH(compose("ingest --max-gap -1 a.jpg", dir), 2, "time gap");
+}
+
+}  // namespace
+}  // namespace compose

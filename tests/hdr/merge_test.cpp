@@ -1,0 +1,297 @@
+// Exposure merging: analytic brackets of known radiance, clipping, bad brackets, response files
+// and the per-camera store, alignment of hand-held shots, ghost suppression, 16-bit input.
+#include "hdr/merge.h"
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include "capture_fixture.h"
+#include "hdr/capture_merge.h"
+#include "hdr/response.h"
+
+namespace compose::hdr {
+namespace {
+
+using compose::testing::captureOnDisk;
+using compose::testing::loadSampleEnvironment;
+using compose::testing::smallCaptureParams;
+using compose::testing::TempDir;
+
+double srgbEncode(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
+}
+
+// A bracket of 8-bit sRGB-coded images of a radiance ramp (no noise, no JPEG): pixel x of row y
+// has radiance L = 2^(stops x / W + lowest) · (1, 0.8, 0.6) · (1 + y / H).
+struct SyntheticBracket {
+  std::vector<Image> images;
+  std::vector<double> exposures;
+  Image radiance;
+};
+
+SyntheticBracket syntheticBracket(int w, int h, std::vector<double> exposures, double stops = 12.0,
+                                  double lowest = -8.0) {
+  SyntheticBracket b;
+  b.exposures = exposures;
+  b.radiance = Image(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double l = std::exp2(stops * x / w + lowest) * (1.0 + double(y) / h);
+      float* p = b.radiance.at(x, y);
+      p[0] = float(l);
+      p[1] = float(0.8 * l);
+      p[2] = float(0.6 * l);
+    }
+  for (double e : exposures) {
+    Image img(w, h, 3);
+    for (size_t i = 0; i < img.pixels.size(); ++i)
+      img.pixels[i] = float(std::round(255.0 * srgbEncode(b.radiance.pixels[i] * e)) / 255.0);
+    b.images.push_back(std::move(img));
+  }
+  return b;
+}
+
+MergeInput inputOf(const SyntheticBracket& b, const ResponseCurve* curve) {
+  MergeInput in;
+  for (const Image& img : b.images) in.images.push_back(&img);
+  in.exposures = b.exposures;
+  in.response = curve;
+  return in;
+}
+
+TEST(Merge, SyntheticBracketMergesBackToItsRadiance) {
+  // With the exact (sRGB) curve and no noise, the only error is 8-bit quantisation: at least
+  // one shot sees every unclipped pixel at code >= 30, where half a step is under 2 % in
+  // linear light; the median is far below.
+  constexpr double kQuantisation = 0.02;
+  const SyntheticBracket b = syntheticBracket(256, 16, {0.25, 1.0, 4.0});
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  for (MergeMethod method : {MergeMethod::Debevec, MergeMethod::Robertson}) {
+    MergeParams params;
+    params.method = method;
+    const MergeResult r = mergeBracket(inputOf(b, &srgb), params);
+    ASSERT_EQ(r.radiance.channels, 4);
+    EXPECT_EQ(r.radiance.channelNames[3], "clipped");
+    std::vector<double> errors;
+    for (size_t i = 0; i < r.radiance.pixelCount(); ++i) {
+      const float* m = r.radiance.pixels.data() + i * 4;
+      const float* t = b.radiance.pixels.data() + i * 3;
+      if (m[3] > 0.0f) continue;
+      for (int c = 0; c < 3; ++c) errors.push_back(std::abs(m[c] / t[c] - 1.0));
+    }
+    std::sort(errors.begin(), errors.end());
+    EXPECT_LT(errors[errors.size() / 2], kQuantisation / 4) << mergeMethodName(method);
+    EXPECT_LT(errors[errors.size() * 95 / 100], kQuantisation) << mergeMethodName(method);
+    EXPECT_GT(r.openCvSeconds, 0.0);
+  }
+}
+
+TEST(Merge, PixelsClippedInEveryShotAreFlaggedCountedAndBounded) {
+  // From 2^-12 (black in the longest shot) to 2^4 (white in the shortest).
+  const SyntheticBracket b = syntheticBracket(256, 4, {0.25, 1.0, 4.0}, 16.0, -12.0);
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  const MergeResult r = mergeBracket(inputOf(b, &srgb), {});
+  // Over-exposed in every shot: some channel at code >= 250 in the shortest; black in every
+  // shot: every channel at code <= 4 in the longest. Both can be counted exactly.
+  int64_t over = 0, dark = 0;
+  for (size_t i = 0; i < b.radiance.pixelCount(); ++i) {
+    const float* t = b.radiance.pixels.data() + i * 3;
+    const float* m = r.radiance.pixels.data() + i * 4;
+    int code = 0;
+    for (int c = 0; c < 3; ++c)
+      code = std::max(code, int(std::round(255.0 * srgbEncode(t[c] * 0.25))));
+    int longCode = 0;
+    for (int c = 0; c < 3; ++c)
+      longCode = std::max(longCode, int(std::round(255.0 * srgbEncode(t[c] * 4.0))));
+    if (code >= 250) {
+      ++over;
+      EXPECT_EQ(m[3], 1.0f);
+      // The shortest shot's value: a lower bound where the code is 255 (up to half a code
+      // step, 1 % up there), else close.
+      if (code == 255) {
+        EXPECT_LE(m[0], t[0] * 1.01f) << "a lower bound";
+      } else {
+        EXPECT_NEAR(m[0] / t[0], 1.0, 0.01);
+      }
+    } else if (longCode <= 4) {
+      ++dark;
+      EXPECT_EQ(m[3], 1.0f);
+    } else {
+      EXPECT_EQ(m[3], 0.0f);
+    }
+  }
+  EXPECT_GT(over, 0);
+  EXPECT_GT(dark, 0);
+  EXPECT_EQ(r.saturated, over);
+  EXPECT_EQ(r.dark, dark);
+  bool noted = false;
+  for (const auto& n : r.notes) noted = noted || n.find("over-exposed in every photo") != n.npos;
+  EXPECT_TRUE(noted);
+}
+
+TEST(Merge, BadBracketsAreNamedErrors) {
+  const SyntheticBracket b = syntheticBracket(64, 8, {0.25, 1.0, 4.0});
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  MergeInput in = inputOf(b, &srgb);
+  in.names = {"a.jpg", "b.jpg", "c.jpg"};
+  const Image small(32, 8, 3);
+  in.images[2] = &small;
+  COMPOSE_EXPECT_ERROR(mergeBracket(in, {}), "must have the same size");
+  COMPOSE_EXPECT_ERROR(mergeBracket(in, {}), "(c.jpg)");
+  in = inputOf(b, &srgb);
+  in.exposures = {1.0, 1.0, 1.0};
+  COMPOSE_EXPECT_ERROR(mergeBracket(in, {}), "all equal");
+  MergeParams bad;
+  bad.clipLow = 0.9;
+  bad.clipHigh = 0.5;
+  COMPOSE_EXPECT_ERROR(mergeBracket(inputOf(b, &srgb), bad), "clipping thresholds");
+}
+
+TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
+  TempDir dir;
+  ResponseCurve c = ResponseCurve::srgb();
+  c.make = "Acme";
+  c.model = "X 1";
+  writeResponse(dir / "r.json", c);
+  const ResponseCurve back = readResponse(dir / "r.json");
+  EXPECT_EQ(back.inverse[1], c.inverse[1]);
+  EXPECT_EQ(back.model, "X 1");
+  EXPECT_EQ(responseFileFor(dir.path(), "Acme Corp.", "X/1 (mk II)").filename(),
+            "acme_corp._x_1_mk_ii.json");
+  EXPECT_TRUE(responseFileFor(dir.path(), "", "").empty());
+  c.inverse[0][200] = c.inverse[0][199] * 0.5f;
+  COMPOSE_EXPECT_ERROR(writeResponse(dir / "bad.json", c), "decreases at code 200");
+  compose::testing::writeText(dir / "bad.json", R"({"format": "compose-response", "version": 1,
+      "inverse": [[1, 2], [1, 2], [1, 2]]})");
+  COMPOSE_EXPECT_ERROR(readResponse(dir / "bad.json"), "three arrays of 256 numbers");
+}
+
+TEST(Response, RecoveredOnceThenReusedFromThePerCameraStore) {
+  TempDir dir;
+  auto params = smallCaptureParams(3);
+  params.width = 192;
+  params.height = 144;
+  params.views = 2;
+  const auto env = loadSampleEnvironment("interior");
+  auto on = captureOnDisk(env, params, dir / "capture");
+  const auto colors = color::ColorConfig::builtin();
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  const CaptureMergeResult first = mergeCapture(on.capture, on.photos, options, colors);
+  EXPECT_TRUE(first.responseRecovered);
+  ASSERT_FALSE(first.responseCacheFile.empty());
+  EXPECT_EQ(first.responseCacheFile.parent_path(), dir / "responses");
+  writeResponse(first.responseCacheFile, first.response);
+  const CaptureMergeResult second = mergeCapture(on.capture, on.photos, options, colors);
+  EXPECT_FALSE(second.responseRecovered);
+  EXPECT_NE(second.linearisation.find("recovery skipped"), std::string::npos)
+      << second.linearisation;
+  EXPECT_EQ(second.views[0].radiance.pixels, first.views[0].radiance.pixels);
+  // Linearising by the colour space instead says so.
+  options.response = ResponseMode::ColorSpace;
+  const CaptureMergeResult third = mergeCapture(on.capture, on.photos, options, colors);
+  EXPECT_NE(third.linearisation.find("not by a camera response"), std::string::npos);
+}
+
+TEST(Response, ColorSpaceCurveIsTheSrgbDecoding) {
+  const auto colors = color::ColorConfig::builtin();
+  const ResponseCurve c = curveFromColorSpace(colors, "sRGB", "lin_rec709");
+  const ResponseCurve s = ResponseCurve::srgb();
+  for (int z = 1; z < kCodes; ++z)
+    EXPECT_NEAR(c.inverse[0][z], s.inverse[0][z], 1e-5f * float(1 + z));
+  std::string why;
+  EXPECT_EQ(linearSpaceFor(colors, "sRGB - Texture", "", &why), "Linear Rec.709 (sRGB)");
+  COMPOSE_EXPECT_ERROR(linearSpaceFor(colors, "sRGB", "no such space"), "no such space");
+}
+
+TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {
+  // Linear 16-bit data, no JPEG: only noise and quantisation remain.
+  constexpr double kMedianError = 0.01;
+  TempDir dir;
+  auto params = smallCaptureParams(3);
+  params.width = 192;
+  params.height = 144;
+  params.views = 2;
+  params.writeJpeg = false;
+  params.writeTiff16 = true;
+  const auto env = loadSampleEnvironment("sunset");
+  auto on = captureOnDisk(env, params, dir / "capture");
+  EXPECT_EQ(on.photos[0][0].info.sampleType, "uint16");
+  const auto colors = color::ColorConfig::builtin();
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  const CaptureMergeResult merged = mergeCapture(on.capture, on.photos, options, colors);
+  EXPECT_TRUE(merged.response.empty()) << "no response for linear data";
+  EXPECT_EQ(merged.openCvSeconds, 0.0);
+  std::vector<double> errors;
+  for (size_t v = 0; v < merged.views.size(); ++v) {
+    Image truth = on.simulated.views[v].truth;
+    truth.colorSpace = "lin_rec709";
+    colors.convert(truth, colors.workingSpace());
+    const Image& m = merged.views[v].radiance;
+    for (size_t i = 0; i < m.pixelCount(); ++i) {
+      const float* a = m.pixels.data() + i * 4;
+      const float* t = truth.pixels.data() + i * 3;
+      if (a[3] > 0.0f) continue;
+      double d = 0.0, r = 0.0;
+      for (int c = 0; c < 3; ++c) d += std::abs(a[c] - t[c]), r += std::abs(t[c]);
+      if (r > 0.0) errors.push_back(d / r);
+    }
+  }
+  std::sort(errors.begin(), errors.end());
+  // The linear data needs no scale: radiance = s / e = K · L with K = 1.
+  EXPECT_LT(errors[errors.size() / 2], kMedianError);
+}
+
+TEST(Merge, HandHeldShiftsUpToTwentyPixelsAreAlignedWithinOnePixel) {
+  constexpr double kAlignment = 1.0;  // pixels, the issue's bound
+  TempDir dir;
+  auto params = smallCaptureParams(3, 11);
+  params.views = 2;
+  params.shakePixels = 20.0;
+  const auto env = loadSampleEnvironment("courtyard");
+  auto on = captureOnDisk(env, params, dir / "capture");
+  const auto colors = color::ColorConfig::builtin();
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  options.merge.align = true;
+  const CaptureMergeResult merged = mergeCapture(on.capture, on.photos, options, colors);
+  double worst = 0.0, largest = 0.0;
+  for (size_t v = 0; v < merged.views.size(); ++v) {
+    const auto& shots = on.simulated.views[v].shots;
+    const glm::dvec2 pivot = shots[1].shift;
+    for (size_t i = 0; i < shots.size(); ++i) {
+      const glm::dvec2 want = pivot - shots[i].shift;  // the shift that undoes the shake
+      const auto got = merged.views[v].stats.shifts[i];
+      worst = std::max({worst, std::abs(got[0] - want.x), std::abs(got[1] - want.y)});
+      largest = std::max({largest, std::abs(want.x), std::abs(want.y)});
+    }
+  }
+  std::printf("[ figures ] alignment: largest shake %.1f px, worst error %.2f px\n", largest,
+              worst);
+  EXPECT_GT(largest, 10.0) << "the test needs real shake";
+  EXPECT_LE(worst, kAlignment);
+}
+
+TEST(Merge, GhostSuppressionKeepsTheReferenceShotWhereSomethingMoved) {
+  // A dark square present only in the longest shot (someone walked through): with ghost
+  // suppression the merged pixels there follow the other shots.
+  SyntheticBracket b = syntheticBracket(128, 32, {0.25, 1.0, 4.0});
+  for (int y = 8; y < 24; ++y)
+    for (int x = 40; x < 60; ++x)
+      for (int c = 0; c < 3; ++c) b.images[2].at(x, y)[c] = 0.1f;
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  MergeParams plain, deghost;
+  deghost.deghost = true;
+  const MergeResult with = mergeBracket(inputOf(b, &srgb), deghost);
+  const MergeResult without = mergeBracket(inputOf(b, &srgb), plain);
+  const float* t = b.radiance.at(50, 16);
+  EXPECT_NEAR(with.radiance.at(50, 16)[1] / t[1], 1.0, 0.03);
+  EXPECT_GT(std::abs(without.radiance.at(50, 16)[1] / t[1] - 1.0), 0.2);
+  EXPECT_GE(with.ghosted, 16 * 20);
+}
+
+}  // namespace
+}  // namespace compose::hdr

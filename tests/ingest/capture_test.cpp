@@ -1,0 +1,279 @@
+// EXIF capture information, grouping photos into views, capture descriptions.
+#include "ingest/capture.h"
+
+#include <cmath>
+#include <fstream>
+
+#include <OpenImageIO/imageio.h>
+#include <glm/mat3x3.hpp>
+
+#include "ingest/image_io.h"
+#include "test_util.h"
+
+namespace compose::ingest {
+namespace {
+
+using compose::testing::TempDir;
+
+// EXIF rationals written by OpenImageIO carry six decimals: relative tolerance for exposures.
+constexpr double kExifRational = 1e-4;
+
+Image grey(int w, int h, float v = 0.5f) {
+  Image img(w, h, 3, {"R", "G", "B"});
+  std::fill(img.pixels.begin(), img.pixels.end(), v);
+  return img;
+}
+
+CaptureInfo cameraShot(double t, const std::string& when) {
+  CaptureInfo i;
+  i.exposureTime = t;
+  i.fNumber = 5.6;
+  i.iso = 200;
+  i.focalLengthMm = 4.2;
+  i.cameraMake = "Acme";
+  i.cameraModel = "Phone 3";
+  i.dateTimeOriginal = when;
+  return i;
+}
+
+void writeShot(const std::filesystem::path& file, const CaptureInfo& info, int w = 32, int h = 24) {
+  WriteOptions o;
+  o.attributes = exifAttributes(info);
+  writeImage(file, grey(w, h), o);
+}
+
+TEST(CaptureInfo, ExifWrittenByUsIsReadBack) {
+  TempDir dir;
+  CaptureInfo in = cameraShot(1.0 / 64.0, "2024:05:01 12:00:03.25");
+  in.focalLength35mm = 26.0;
+  writeShot(dir / "a.jpg", in);
+  const CaptureInfo out = readCaptureInfo(dir / "a.jpg");
+  ASSERT_TRUE(out.exposureTime && out.fNumber && out.iso && out.focalLengthMm);
+  EXPECT_NEAR(*out.exposureTime, 1.0 / 64.0, kExifRational / 64.0);  // a binary fraction
+  EXPECT_NEAR(*out.fNumber, 5.6, 1e-5);
+  EXPECT_EQ(*out.iso, 200.0);
+  EXPECT_NEAR(*out.focalLengthMm, 4.2, 1e-5);
+  ASSERT_TRUE(out.focalLength35mm);
+  EXPECT_EQ(*out.focalLength35mm, 26.0);
+  EXPECT_EQ(out.focal35mmSource, "EXIF FocalLengthIn35mmFilm");
+  EXPECT_EQ(out.camera(), "Acme Phone 3");
+  EXPECT_EQ(out.sampleType, "uint8");
+  EXPECT_EQ(out.dateTimeOriginal, "2024:05:01 12:00:03");
+  ASSERT_TRUE(out.captureSeconds);
+  // Relative exposure t · ISO / N².
+  EXPECT_NEAR(*out.relativeExposure(), (1.0 / 64.0) * 200.0 / (5.6 * 5.6), 1e-4);
+  EXPECT_TRUE(out.exposureAssumptions().empty());
+
+  // The sub-second part orders shots taken within one second.
+  CaptureInfo later = in;
+  later.dateTimeOriginal = "2024:05:01 12:00:03.75";
+  writeShot(dir / "b.jpg", later);
+  EXPECT_NEAR(*readCaptureInfo(dir / "b.jpg").captureSeconds - *out.captureSeconds, 0.5, 1e-6);
+}
+
+TEST(CaptureInfo, ThirtyFiveMillimetreEquivalentFromTheFocalPlaneResolution) {
+  TempDir dir;
+  // A phone: FocalLengthIn35mmFilm = 0, a 4.2 mm lens on a 6.4 x 4.8 mm sensor written as
+  // 4000 x 3000 pixels, i.e. 625 pixels per mm = 6250 per cm (unit 3).
+  CaptureInfo in = cameraShot(0.01, "2024:05:01 12:00:00");
+  in.focalPlaneXResolution = 6250.0;
+  in.focalPlaneYResolution = 6250.0;
+  in.focalPlaneResolutionUnit = 3;
+  writeShot(dir / "phone.jpg", in, 4000, 3000);
+  const CaptureInfo out = readCaptureInfo(dir / "phone.jpg");
+  ASSERT_TRUE(out.focalLength35mm);
+  // 4.2 mm · 43.27 / 8.0 mm (the diagonal of 6.4 x 4.8).
+  EXPECT_NEAR(*out.focalLength35mm, 4.2 * 43.266615305567875 / 8.0, 1e-3);
+  EXPECT_NE(out.focal35mmSource.find("derived"), std::string::npos);
+
+  // Without the resolution tags nothing can be derived: the field stays empty.
+  writeShot(dir / "bare.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
+  EXPECT_FALSE(readCaptureInfo(dir / "bare.jpg").focalLength35mm);
+}
+
+TEST(CaptureInfo, MissingFieldsAreAssumedAndSaid) {
+  TempDir dir;
+  CaptureInfo in;
+  in.exposureTime = 0.5;
+  writeShot(dir / "a.png", in);  // PNG keeps no EXIF: nothing comes back
+  EXPECT_FALSE(readCaptureInfo(dir / "a.png").relativeExposure());
+  CaptureInfo partial;
+  partial.exposureTime = 0.5;
+  EXPECT_NEAR(*partial.relativeExposure(), 0.5 * 100.0, 1e-12);
+  EXPECT_NE(partial.exposureAssumptions().find("ISO 100"), std::string::npos);
+}
+
+TEST(Capture, NoExposureAnywhereNamesTheFile) {
+  TempDir dir;
+  writeImage(dir / "a.jpg", grey(8, 8));
+  writeImage(dir / "b.jpg", grey(8, 8));
+  Capture c;
+  c.views.push_back(View{"v", {}, {}});
+  for (const auto& s : scanShots({dir / "a.jpg", dir / "b.jpg"})) c.views[0].shots.push_back(s);
+  COMPOSE_EXPECT_ERROR(resolveExposures(c), "no exposure time in EXIF and no exposure given");
+  COMPOSE_EXPECT_ERROR(resolveExposures(c), "a.jpg)");
+  // With a list, it works, and the shots are sorted by exposure.
+  setExposures(c.views[0], {4.0, 1.0}, "--exposures");
+  resolveExposures(c);
+  EXPECT_EQ(c.views[0].shots[0].file.filename(), "b.jpg");
+  EXPECT_EQ(*c.views[0].shots[1].exposure, 4.0);
+  COMPOSE_EXPECT_ERROR(setExposures(c.views[0], {1.0}, "--exposures"), "1 exposures given for 2");
+}
+
+TEST(Capture, AllEqualExposuresAreRefused) {
+  TempDir dir;
+  writeShot(dir / "a.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
+  writeShot(dir / "b.jpg", cameraShot(0.01, "2024:05:01 12:00:01"));
+  Capture c;
+  c.views.push_back(View{"front", scanShots({dir.path()}), {}});
+  COMPOSE_EXPECT_ERROR(resolveExposures(c), "exposures of view 'front' are all equal");
+}
+
+TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
+  TempDir dir;
+  // Two views of an auto-bracketed sequence in the camera's order 0, -2, +2 EV; the second view
+  // 20 s later. A third view follows without a pause: only the exposure sequence restarting
+  // shows it.
+  const double t[3] = {1.0 / 60, 1.0 / 240, 1.0 / 15};
+  const char* times[9] = {"12:00:00", "12:00:01", "12:00:01", "12:00:21", "12:00:21",
+                          "12:00:22", "12:00:22", "12:00:23", "12:00:23"};
+  for (int i = 0; i < 9; ++i) {
+    char name[16];
+    std::snprintf(name, sizeof name, "IMG_%04d.jpg", 100 + i);
+    writeShot(dir / name, cameraShot(t[i % 3], std::string("2024:05:01 ") + times[i]));
+  }
+  Capture c = groupByExif(scanShots({dir.path()}), {});
+  ASSERT_EQ(c.views.size(), 3u);
+  for (const View& v : c.views) EXPECT_EQ(v.shots.size(), 3u);
+  EXPECT_EQ(c.views[1].shots[0].file.filename(), "IMG_0103.jpg");
+  EXPECT_EQ(c.cameraModel, "Phone 3");
+  resolveExposures(c);
+  // Sorted darkest first.
+  EXPECT_NEAR(*c.views[0].shots[0].info.exposureTime, 1.0 / 240, 1e-5);
+  const auto lines = describeCapture(c);
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_NE(lines[0].find("4.0 EV range"), std::string::npos) << lines[0];
+
+  // A known bracket size cuts views as well (here with the pauses ignored).
+  ExifGrouping g;
+  g.bracketSize = 3;
+  g.maxGapSeconds = 1000.0;
+  EXPECT_EQ(groupByExif(scanShots({dir.path()}), g).views.size(), 3u);
+}
+
+TEST(Capture, GroupsByFileNamePattern) {
+  TempDir dir;
+  for (const char* v : {"front", "left", "up"})
+    for (int b = 1; b <= 3; ++b)
+      writeImage(dir / (std::string(v) + "_" + std::to_string(b) + ".jpg"), grey(8, 8));
+  const Capture c = groupByPattern(scanShots({dir.path()}), "{view}_{bracket}.jpg");
+  ASSERT_EQ(c.views.size(), 3u);
+  EXPECT_EQ(c.views[0].name, "front");
+  EXPECT_EQ(c.views[2].name, "up");
+  EXPECT_EQ(c.views[1].shots.size(), 3u);
+  COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "{view}.png"), "does not match");
+  COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "*.jpg"), "no {view}");
+}
+
+TEST(Capture, DescriptionRoundTripKeepsViewsExposuresAndOrientation) {
+  TempDir dir;
+  writeImage(dir / "a.jpg", grey(8, 8));
+  writeImage(dir / "b.jpg", grey(8, 8));
+  Capture c;
+  c.cameraMake = "Acme";
+  c.cameraModel = "X";
+  View v{"up", scanShots({dir / "a.jpg", dir / "b.jpg"}), {}};
+  // Looking up, image top towards +Z.
+  v.worldFromCamera = glm::dmat3(glm::dvec3(1, 0, 0), glm::dvec3(0, 0, 1), glm::dvec3(0, -1, 0));
+  setExposures(v, {0.25, 1.0}, "test");
+  c.views.push_back(v);
+  writeCaptureDescription(dir / "capture.json", c);
+  const Capture back = readCaptureDescription(dir / "capture.json");
+  ASSERT_EQ(back.views.size(), 1u);
+  EXPECT_EQ(back.views[0].name, "up");
+  EXPECT_EQ(back.cameraMake, "Acme");
+  ASSERT_TRUE(back.views[0].worldFromCamera);
+  EXPECT_EQ((*back.views[0].worldFromCamera)[1][2], 1.0);
+  EXPECT_EQ(*back.views[0].shots[1].exposure, 1.0);
+  EXPECT_EQ(back.views[0].shots[0].file, dir / "a.jpg");
+}
+
+TEST(Capture, BadDescriptionsAreNamedErrors) {
+  TempDir dir;
+  writeImage(dir / "a.jpg", grey(8, 8));
+  auto expect = [&](const std::string& text, const std::string& needle) {
+    compose::testing::writeText(dir / "c.json", text);
+    COMPOSE_EXPECT_ERROR(readCaptureDescription(dir / "c.json"), needle);
+  };
+  expect("{", "not a valid JSON capture description");
+  expect(R"({"format": "other", "version": 1})", "not a capture description");
+  expect(R"({"format": "compose-capture", "version": 1, "views": []})", "non-empty \"views\"");
+  expect(R"({"format": "compose-capture", "version": 1, "views": [{"name": "v",
+           "exposures": [{"file": "missing.jpg"}]}]})",
+         "file not found");
+  expect(R"({"format": "compose-capture", "version": 1, "views": [{"name": "v",
+           "worldFromCamera": [[2,0,0],[0,1,0],[0,0,1]], "exposures": [{"file": "a.jpg"}]}]})",
+         "not a rotation");
+  expect(R"({"format": "compose-capture", "version": 1, "views": [{"name": "v",
+           "exposures": [{"file": "a.jpg", "exposureTime": -1}]}]})",
+         "must be a positive number");
+  expect(R"({"format": "compose-capture", "version": 1, "views": [
+           {"name": "v", "exposures": [{"file": "a.jpg"}]},
+           {"name": "v", "exposures": [{"file": "a.jpg"}]}]})",
+         "two views are named 'v'");
+}
+
+TEST(ImageIoTruncation, TruncatedJpegIsAnErrorNotAGreyPicture) {
+  TempDir dir;
+  Image img(256, 256, 3);
+  for (size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = float((i * 37) % 251) / 250.0f;
+  writeImage(dir / "full.jpg", img);
+  std::ifstream in(dir / "full.jpg", std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  compose::testing::writeText(dir / "cut.jpg", bytes.substr(0, bytes.size() / 2));
+  try {
+    readImage(dir / "full.jpg");
+  } catch (const Error& e) {
+    ADD_FAILURE() << e.describe();
+  }
+  COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "truncated file");
+  COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "cut.jpg)");
+}
+
+}  // namespace
+}  // namespace compose::ingest
+
+namespace compose::ingest {
+namespace {
+
+TEST(ImageIoCodes, EightBitFilesCanBeReadAsCodesWithOrientationApplied) {
+  compose::testing::TempDir dir;
+  // A 4x2 8-bit image whose top-left pixel is code 200, stored with Orientation 6: upright it is
+  // 2x4 with that pixel at the top right (as ImageIo.AppliesExifOrientation checks for floats).
+  const auto path = dir / "rotated.tif";
+  {
+    std::vector<uint8_t> px(4 * 2 * 3, 10);
+    px[0] = 200;
+    auto out = OIIO::ImageOutput::create(path.string());
+    OIIO::ImageSpec spec(4, 2, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("Orientation", 6);
+    ASSERT_TRUE(out->open(path.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+  }
+  ReadOptions codes;
+  codes.codesForEightBit = true;
+  const LoadedImage img = readImage(path, "ingest", codes);
+  EXPECT_FALSE(img.hasPixels());
+  ASSERT_EQ(img.image.width, 2);
+  ASSERT_EQ(img.image.height, 4);
+  ASSERT_EQ(img.codes.size(), 2u * 4u * 3u);
+  EXPECT_EQ(img.codes[(0 * 2 + 1) * 3], 200);  // row 0, column 1
+  EXPECT_EQ(img.codes[0], 10);
+  // Deeper files are still read as floats.
+  writeImage(dir / "deep.exr", Image(4, 2, 3));
+  EXPECT_TRUE(readImage(dir / "deep.exr", "ingest", codes).hasPixels());
+}
+
+}  // namespace
+}  // namespace compose::ingest
