@@ -1,0 +1,252 @@
+#include "lighting/sphere_resample.h"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include <OpenEXR/ImfEnvmap.h>
+#include <glm/geometric.hpp>
+
+#include "ingest/image_io.h"
+#include "lighting/environment.h"
+#include "lighting/environment_util.h"
+#include "pipeline/compose_job.h"
+#include "test_util.h"
+
+namespace compose::lighting {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+TEST(CubeGeometry, FaceFramesAgreeWithOpenExr) {
+  // OpenEXR maps a face's "position in face" to the stacked image with pixelPosition; with its own
+  // pixel-centre convention (first and last centres on the edges), image coordinates (a, b) sit at
+  // pixel ((a + 1) / 2 (N - 1), (b + 1) / 2 (N - 1)) inside the face's band.
+  const int n = 64;
+  const IMATH_NAMESPACE::Box2i window(IMATH_NAMESPACE::V2i(0, 0),
+                                      IMATH_NAMESPACE::V2i(n - 1, 6 * n - 1));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> uni(-0.999, 0.999);
+  for (int face = 0; face < kCubeFaces; ++face) {
+    for (int i = 0; i < 200; ++i) {
+      const double a = uni(rng), b = uni(rng);
+      const glm::dvec3 d = faceImageDirection(face, a, b);
+      Imf::CubeMapFace f;
+      IMATH_NAMESPACE::V2f pif;
+      Imf::CubeMap::faceAndPixelPosition(IMATH_NAMESPACE::V3f(float(d.x), float(d.y), float(d.z)),
+                                         window, f, pif);
+      ASSERT_EQ(int(f), face);
+      const IMATH_NAMESPACE::V2f pos = Imf::CubeMap::pixelPosition(f, window, pif);
+      // float arithmetic inside OpenEXR: a few 1e-5 of a pixel.
+      constexpr double kFloatPixels = 1e-3;
+      EXPECT_NEAR(pos.x, (a + 1.0) * 0.5 * (n - 1), kFloatPixels);
+      EXPECT_NEAR(double(pos.y) - face * n, (b + 1.0) * 0.5 * (n - 1), kFloatPixels);
+      int g = -1;
+      double a2 = 0, b2 = 0;
+      faceImageCoordinates(d, g, a2, b2);
+      EXPECT_EQ(g, face);
+      EXPECT_NEAR(a2, a, 1e-14);
+      EXPECT_NEAR(b2, b, 1e-14);
+    }
+  }
+}
+
+TEST(CubeGeometry, FacesAreRightHandedViewsFromInside) {
+  for (int face = 0; face < kCubeFaces; ++face) {
+    const FaceFrame& f = faceFrame(face);
+    const glm::dvec3 up = -f.down;
+    EXPECT_EQ(glm::cross(f.right, up), -f.forward) << faceName(face);
+  }
+  // The photographer's convention: up view's image top points to +Z, down view's to -Z.
+  EXPECT_EQ(-faceFrame(2).down, glm::dvec3(0, 0, 1));
+  EXPECT_EQ(-faceFrame(3).down, glm::dvec3(0, 0, -1));
+}
+
+TEST(CubeGeometry, TexelSolidAnglesSumToFourPi) {
+  for (int n : {1, 2, 3, 7, 64}) {
+    double total = 0.0;
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) total += 6.0 * faceTexelSolidAngle(n, x, y);
+    EXPECT_NEAR(total, 4.0 * kPi, 1e-12) << n;
+  }
+}
+
+// Every overlap sums to the texel's and to the cell's exact solid angle, for even sizes (a cube
+// corner of four texels at each pole), odd sizes (a pole inside a texel), tiny and uneven ratios.
+TEST(CubeLatLongOverlaps, SumToTexelAndCellSolidAngles) {
+  struct Case {
+    int cube, width;
+  };
+  for (const Case c : {Case{1, 2}, Case{1, 16}, Case{2, 8}, Case{3, 8}, Case{5, 64}, Case{16, 16},
+                       Case{16, 64}, Case{17, 64}, Case{32, 30}, Case{8, 200}}) {
+    const CubeLatLongOverlaps overlaps(c.cube, c.width);
+    const int h = c.width / 2;
+    const Environment probe = Environment::constant(glm::vec3(0.0f), c.width);
+    std::vector<double> cellSum(size_t(c.width) * size_t(h), 0.0);
+    std::vector<CellOverlap> out;
+    double worstTexel = 0.0, mostNegative = 0.0;
+    for (int face = 0; face < kCubeFaces; ++face) {
+      for (int y = 0; y < c.cube; ++y) {
+        for (int x = 0; x < c.cube; ++x) {
+          overlaps.texel(face, x, y, out);
+          double sum = 0.0;
+          for (const CellOverlap& o : out) {
+            sum += o.solidAngle;
+            mostNegative = std::min(mostNegative, o.solidAngle);
+            cellSum[size_t(o.y) * size_t(c.width) + size_t(o.x)] += o.solidAngle;
+          }
+          const double expected = faceTexelSolidAngle(c.cube, x, y);
+          worstTexel = std::max(worstTexel, std::abs(sum - expected) / expected);
+        }
+      }
+    }
+    double worstCell = 0.0;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < c.width; ++x) {
+        const double expected = probe.rowSolidAngle(y);
+        worstCell = std::max(
+            worstCell,
+            std::abs(cellSum[size_t(y) * size_t(c.width) + size_t(x)] - expected) / expected);
+      }
+    }
+    // Closed-form integrals in double: only rounding remains.
+    constexpr double kRounding = 1e-9;
+    EXPECT_LT(worstTexel, kRounding) << "cube " << c.cube << " lat-long " << c.width;
+    EXPECT_LT(worstCell, kRounding) << "cube " << c.cube << " lat-long " << c.width;
+    EXPECT_GT(mostNegative, -1e-15) << "cube " << c.cube << " lat-long " << c.width;
+  }
+}
+
+// Independent check of where the solid angle goes: each texel of a 3³ cube cut into 400 x 400
+// sub-rectangles with exact solid angles, each assigned to the cell holding its centre.
+TEST(CubeLatLongOverlaps, MatchBruteForceSubdivision) {
+  const int n = 3, width = 12, sub = 400;
+  const CubeLatLongOverlaps overlaps(n, width);
+  std::vector<CellOverlap> out;
+  double worst = 0.0;
+  for (int face = 0; face < kCubeFaces; ++face) {
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) {
+        overlaps.texel(face, x, y, out);
+        std::vector<double> brute(size_t(width) * size_t(width / 2), 0.0);
+        const double a0 = -1.0 + 2.0 * x / n, b0 = -1.0 + 2.0 * y / n, h = 2.0 / n / sub;
+        for (int j = 0; j < sub; ++j) {
+          for (int i = 0; i < sub; ++i) {
+            const double a = a0 + (i + 0.5) * h, b = b0 + (j + 0.5) * h;
+            const glm::dvec3 d = glm::normalize(faceImageDirection(face, a, b));
+            const double lon = std::atan2(d.x, d.z), lat = std::asin(d.y);
+            const int cx = std::clamp(int((1.0 - lon / kPi) * 0.5 * width), 0, width - 1);
+            const int cy = std::clamp(int((0.5 - lat / kPi) * (width / 2)), 0, width / 2 - 1);
+            brute[size_t(cy) * size_t(width) + size_t(cx)] +=
+                cubeSolidAngle(a - 0.5 * h, b - 0.5 * h, a + 0.5 * h, b + 0.5 * h);
+          }
+        }
+        for (const CellOverlap& o : out)
+          brute[size_t(o.y) * size_t(width) + size_t(o.x)] -= o.solidAngle;
+        const double omega = faceTexelSolidAngle(n, x, y);
+        for (double r : brute) worst = std::max(worst, std::abs(r) / omega);
+      }
+    }
+  }
+  // Sub-rectangles straddling a cell edge go wholly to one side: about (edge length / sub) of the
+  // texel, 1/400 per edge crossing; allow a few crossings.
+  constexpr double kSubdivision = 1e-2;
+  EXPECT_LT(worst, kSubdivision);
+  EXPECT_GT(worst, 0.0);  // the subdivision is not exact: the comparison is not vacuous
+}
+
+std::filesystem::path sample(const std::string& name) {
+  return pipeline::samplesDirectory() / (name + ".exr");
+}
+
+Environment loadSample(const std::string& name) {
+  const auto path = sample(name);
+  if (!std::filesystem::exists(path)) return {};
+  return Environment::fromLatLong(ingest::readImage(path).image, path);
+}
+
+double relative(const glm::dvec3& a, const glm::dvec3& b) {
+  double worst = 0.0;
+  for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(a[c] - b[c]) / std::abs(b[c]));
+  return worst;
+}
+
+// The issue's energy check: ∫ L dω agrees between layouts within 1e-4 (relative, per channel).
+// The conversions are exact up to rounding, so the measured agreement is far tighter.
+TEST(SphereResample, PreservesEnergyOnTheSampleHdris) {
+  for (const char* name : {"courtyard", "forest", "interior", "sunset"}) {
+    const Environment env = loadSample(name);
+    if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+    const glm::dvec3 reference = integral(env);
+    for (int size : {256, 97}) {
+      const CubeMap cube = cubeFromLatLong(env, size);
+      const double cubeError = relative(cube.integral(), reference);
+      const Environment back = latLongFromCube(cube, env.width());
+      const double backError = relative(integral(back), reference);
+      constexpr double kIssueEnergy = 1e-4;
+      EXPECT_LT(cubeError, kIssueEnergy) << name << " cube " << size;
+      EXPECT_LT(backError, kIssueEnergy) << name << " back from cube " << size;
+      std::printf("%-10s cube %3d: energy %.2e (cube) %.2e (back to lat-long)\n", name, size,
+                  cubeError, backError);
+    }
+  }
+}
+
+// Box-filters a lat-long map onto a grid `factor` times coarser (exact: cells nest).
+Environment coarser(const Environment& env, int factor) {
+  const int w = env.width() / factor, h = env.height() / factor;
+  Image img(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      glm::dvec3 sum(0.0);
+      double area = 0.0;
+      for (int j = 0; j < factor; ++j)
+        for (int i = 0; i < factor; ++i) {
+          const double o = env.rowSolidAngle(y * factor + j);
+          sum += o * glm::dvec3(env.radiance(x * factor + i, y * factor + j));
+          area += o;
+        }
+      const glm::dvec3 m = sum / area;
+      img.at(x, y)[0] = float(m.x), img.at(x, y)[1] = float(m.y), img.at(x, y)[2] = float(m.z);
+    }
+  return Environment::fromLatLong(img);
+}
+
+double meanRelative(const Environment& ref, const Environment& x) {
+  double sum = 0.0;
+  for (int y = 0; y < ref.height(); ++y)
+    for (int i = 0; i < ref.width(); ++i) {
+      const glm::vec3 a = ref.radiance(i, y), b = x.radiance(i, y);
+      const double r = a.x + a.y + a.z;
+      const double d = std::abs(a.x - b.x) + std::abs(a.y - b.y) + std::abs(a.z - b.z);
+      sum += r > 0 ? d / r : (d > 0 ? 1.0 : 0.0);
+    }
+  return sum / (double(ref.width()) * ref.height());
+}
+
+TEST(SphereResample, RoundTripExperiment) {
+  for (const char* name : {"courtyard", "forest", "interior", "sunset"}) {
+    const Environment env = loadSample(name);
+    if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+    const Environment back = latLongFromCube(cubeFromLatLong(env, env.width() / 4), env.width());
+    for (int f : {1, 2, 4, 8})
+      std::printf("%-10s scale %d: mean rel %.4f\n", name, f,
+                  meanRelative(coarser(env, f), coarser(back, f)));
+  }
+  for (const char* name : {"forest", "sunset"}) {
+    const Environment env = loadSample(name);
+    const Environment ex = Environment::fromLatLong(
+        ingest::readImage(std::string("/tmp/envt/") + name + "_back.exr").image);
+    for (int f : {1, 2, 4, 8})
+      std::printf("exrenvmap %-10s scale %d: mean rel %.4f\n", name, f,
+                  meanRelative(coarser(env, f), coarser(ex, f)));
+  }
+  const Environment smooth = testing::analyticEnvironment(1024, [](const glm::vec3& d) {
+    return glm::vec3(1.0f + 0.5f * d.y, 2.0f + std::sin(3.0f * d.x), 1.5f + d.z * d.x);
+  });
+  const Environment back = latLongFromCube(cubeFromLatLong(smooth, 256), 1024);
+  std::printf("smooth: mean rel %.5f\n", meanRelative(smooth, back));
+}
+
+}  // namespace
+}  // namespace compose::lighting
