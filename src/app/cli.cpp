@@ -22,7 +22,9 @@ void ProgressPrinter::operator()(std::string_view stage, double fraction) {
 }
 
 const std::vector<Command>& commands() {
-  static const std::vector<Command> list = {};
+  static const std::vector<Command> list = {
+      {"convert", "Convert environment maps between layouts; unwrap mirror balls", setupConvert},
+  };
   return list;
 }
 

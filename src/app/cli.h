@@ -55,6 +55,9 @@ const std::vector<Command>& commands();
 // The one-shot `compose --plate ... --object ...`: its options live on the top-level app.
 Runner setupCompose(CLI::App& app, const Globals& globals);
 
+// Stage commands (cmd_<name>.cpp).
+Runner setupConvert(CLI::App& command, const Globals& globals);
+
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);
 // "V" or "R,G,B" → three numbers; throws UsageError naming `option`.

@@ -11,73 +11,25 @@
 
 namespace compose::lighting {
 
-namespace {
-
-// Texel range [first, last] of an n-texel face row overlapping [lo, hi] (face coordinates).
-void texelRange(int n, double lo, double hi, int& first, int& last) {
-  first = std::clamp(int(std::floor((lo + 1.0) * 0.5 * n)), 0, n - 1);
-  last = std::clamp(int(std::ceil((hi + 1.0) * 0.5 * n)) - 1, 0, n - 1);
-}
-
-}  // namespace
-
 FilteredCube::FilteredCube(const CubeMap& cube) {
   COMPOSE_CHECK(!cube.empty());
-  Level base;
-  base.size = cube.size();
-  base.stride = base.size + 2;
-  base.texels.assign(size_t(kCubeFaces) * size_t(base.stride) * size_t(base.stride) * 3, 0.0f);
-  for (int f = 0; f < kCubeFaces; ++f) {
-    for (int y = 0; y < base.size; ++y) {
-      std::copy_n(cube.texel(f, 0, y), size_t(base.size) * 3,
-                  base.texels.begin() + ptrdiff_t(base.offset(f, 0, y)));
-    }
-  }
-  fillBorders(base);
-  levels_.push_back(std::move(base));
-
-  while (levels_.back().size > 1) {
-    const Level& child = levels_.back();
-    const int n = child.size, m = (n + 1) / 2;
-    Level parent;
-    parent.size = m;
-    parent.stride = m + 2;
-    parent.texels.assign(size_t(kCubeFaces) * size_t(parent.stride) * size_t(parent.stride) * 3,
-                         0.0f);
-    parallelFor(0, int64_t(kCubeFaces) * m, [&](int64_t task) {
-      const int f = int(task / m), py = int(task % m);
-      const double b0 = -1.0 + 2.0 * py / m, b1 = -1.0 + 2.0 * (py + 1) / m;
-      int y0, y1;
-      texelRange(n, b0, b1, y0, y1);
-      for (int px = 0; px < m; ++px) {
-        const double a0 = -1.0 + 2.0 * px / m, a1 = -1.0 + 2.0 * (px + 1) / m;
-        int x0, x1;
-        texelRange(n, a0, a1, x0, x1);
-        glm::dvec3 sum(0.0);
-        double area = 0.0;
-        for (int y = y0; y <= y1; ++y) {
-          const double cb0 = std::max(b0, -1.0 + 2.0 * y / n),
-                       cb1 = std::min(b1, -1.0 + 2.0 * (y + 1) / n);
-          if (!(cb1 > cb0)) continue;
-          for (int x = x0; x <= x1; ++x) {
-            const double ca0 = std::max(a0, -1.0 + 2.0 * x / n),
-                         ca1 = std::min(a1, -1.0 + 2.0 * (x + 1) / n);
-            if (!(ca1 > ca0)) continue;
-            const double omega = cubeSolidAngle(ca0, cb0, ca1, cb1);
-            const float* t = child.texels.data() + child.offset(f, x, y);
-            sum += omega * glm::dvec3(t[0], t[1], t[2]);
-            area += omega;
-          }
-        }
-        const glm::dvec3 mean = sum / area;
-        float* out = parent.texels.data() + parent.offset(f, px, py);
-        out[0] = float(mean.x);
-        out[1] = float(mean.y);
-        out[2] = float(mean.z);
+  CubeMap current = cube;
+  for (;;) {
+    Level level;
+    level.size = current.size();
+    level.stride = level.size + 2;
+    level.texels.assign(size_t(kCubeFaces) * size_t(level.stride) * size_t(level.stride) * 3, 0.0f);
+    for (int f = 0; f < kCubeFaces; ++f) {
+      for (int y = 0; y < level.size; ++y) {
+        std::copy_n(current.texel(f, 0, y), size_t(level.size) * 3,
+                    level.texels.begin() + ptrdiff_t(level.offset(f, 0, y)));
       }
-    });
-    fillBorders(parent);
-    levels_.push_back(std::move(parent));
+    }
+    fillBorders(level);
+    levels_.push_back(std::move(level));
+    if (current.size() == 1) break;
+    // Exact solid-angle-weighted means, with partial overlaps when the size is odd.
+    current = resizeCube(current, (current.size() + 1) / 2);
   }
 }
 

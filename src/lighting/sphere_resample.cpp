@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <mutex>
 #include <numbers>
 
 #include <tbb/combinable.h>
@@ -201,26 +200,6 @@ class TexelIntegrator {
   double first_ = 0.0, current_ = 0.0;
 };
 
-// Reports progress from parallel loops without concurrent calls (core/progress.h's contract).
-class SharedProgress {
- public:
-  SharedProgress(const Progress& progress, std::string_view stage, int64_t total)
-      : progress_(progress), stage_(stage), total_(total) {}
-  void step() {
-    const int64_t d = ++done_;
-    if (!progress_ || (d % 64 != 0 && d != total_)) return;
-    std::unique_lock lock(mutex_, std::try_to_lock);
-    if (lock.owns_lock()) progress_(stage_, double(d) / double(total_));
-  }
-
- private:
-  const Progress& progress_;
-  std::string_view stage_;
-  int64_t total_;
-  std::atomic<int64_t> done_{0};
-  std::mutex mutex_;
-};
-
 }  // namespace
 
 CubeLatLongOverlaps::CubeLatLongOverlaps(int cubeSize, int latLongWidth)
@@ -302,7 +281,7 @@ CubeMap cubeFromLatLong(const Environment& env, int size, const Progress& progre
   const CubeLatLongOverlaps overlaps(size, env.width());
   CubeMap cube(size);
   cube.colorSpace = env.colorSpace();
-  SharedProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
+  ParallelProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
   parallelFor(0, int64_t(kCubeFaces) * size, [&](int64_t task) {
     const int face = int(task / size), y = int(task % size);
     std::vector<CellOverlap> cells;
@@ -336,7 +315,7 @@ Environment latLongFromCube(const CubeMap& cube, int width, const Progress& prog
   const size_t cells = size_t(width) * size_t(height);
   tbb::combinable<std::vector<double>> partial(
       [cells] { return std::vector<double>(cells * 4, 0.0); });
-  SharedProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
+  ParallelProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
   parallelFor(0, int64_t(kCubeFaces) * size, [&](int64_t task) {
     const int face = int(task / size), y = int(task % size);
     std::vector<double>& acc = partial.local();
@@ -366,6 +345,115 @@ Environment latLongFromCube(const CubeMap& cube, int width, const Progress& prog
       img.pixels[3 * i + size_t(c)] = area > 0.0 ? float(sum[4 * i + size_t(c)] / area) : 0.0f;
   }
   report(progress, "resample", 1.0);
+  return Environment::fromLatLong(img);
+}
+
+namespace {
+
+// Texel range [first, last] of an n-texel face row overlapping [lo, hi] (face coordinates).
+void texelRange(int n, double lo, double hi, int& first, int& last) {
+  first = std::clamp(int(std::floor((lo + 1.0) * 0.5 * n)), 0, n - 1);
+  last = std::clamp(int(std::ceil((hi + 1.0) * 0.5 * n)) - 1, 0, n - 1);
+}
+
+}  // namespace
+
+CubeMap resizeCube(const CubeMap& cube, int size) {
+  COMPOSE_CHECK(!cube.empty() && size >= 1);
+  const int n = cube.size(), m = size;
+  CubeMap out(m);
+  out.colorSpace = cube.colorSpace;
+  parallelFor(0, int64_t(kCubeFaces) * m, [&](int64_t task) {
+    const int f = int(task / m), py = int(task % m);
+    const double b0 = -1.0 + 2.0 * py / m, b1 = -1.0 + 2.0 * (py + 1) / m;
+    int y0, y1;
+    texelRange(n, b0, b1, y0, y1);
+    for (int px = 0; px < m; ++px) {
+      const double a0 = -1.0 + 2.0 * px / m, a1 = -1.0 + 2.0 * (px + 1) / m;
+      int x0, x1;
+      texelRange(n, a0, a1, x0, x1);
+      glm::dvec3 sum(0.0);
+      double area = 0.0;
+      for (int y = y0; y <= y1; ++y) {
+        const double cb0 = std::max(b0, -1.0 + 2.0 * y / n),
+                     cb1 = std::min(b1, -1.0 + 2.0 * (y + 1) / n);
+        if (!(cb1 > cb0)) continue;
+        for (int x = x0; x <= x1; ++x) {
+          const double ca0 = std::max(a0, -1.0 + 2.0 * x / n),
+                       ca1 = std::min(a1, -1.0 + 2.0 * (x + 1) / n);
+          if (!(ca1 > ca0)) continue;
+          const double omega = cubeSolidAngle(ca0, cb0, ca1, cb1);
+          sum += omega * glm::dvec3(cube.radiance(f, x, y));
+          area += omega;
+        }
+      }
+      const glm::dvec3 mean = sum / area;
+      float* t = out.texel(f, px, py);
+      t[0] = float(mean.x);
+      t[1] = float(mean.y);
+      t[2] = float(mean.z);
+    }
+  });
+  return out;
+}
+
+Environment resizeLatLong(const Environment& env, int width) {
+  COMPOSE_CHECK(width >= 2 && width % 2 == 0);
+  const int w0 = env.width(), h0 = env.height(), w1 = width, h1 = width / 2;
+  // Cells are rectangles in (longitude, sin latitude), where solid angle is plain area: the
+  // overlap weights separate into a longitude part and a sin-latitude part.
+  // Edges increase with the cell index: longitude fraction for columns, -sin(latitude) for rows.
+  auto edges = [](int n, bool latitude) {
+    std::vector<double> e(size_t(n) + 1);
+    for (int i = 0; i <= n; ++i)
+      e[size_t(i)] = latitude ? -std::sin(kPi * (0.5 - double(i) / n)) : double(i) / n;
+    e[0] = latitude ? -1.0 : 0.0;
+    e[size_t(n)] = 1.0;
+    return e;
+  };
+  // weights[j] lists (source index, overlap) for destination cell j; edges increase with index.
+  auto overlaps = [](const std::vector<double>& src, const std::vector<double>& dst) {
+    std::vector<std::vector<std::pair<int, double>>> out(dst.size() - 1);
+    size_t i = 0;
+    for (size_t j = 0; j + 1 < dst.size(); ++j) {
+      while (i + 1 < src.size() && src[i + 1] <= dst[j]) ++i;
+      for (size_t k = i; k + 1 < src.size() && src[k] < dst[j + 1]; ++k) {
+        const double o = std::min(src[k + 1], dst[j + 1]) - std::max(src[k], dst[j]);
+        if (o > 0.0) out[j].push_back({int(k), o});
+      }
+    }
+    return out;
+  };
+  const auto cols = overlaps(edges(w0, false), edges(w1, false));
+  const auto rows = overlaps(edges(h0, true), edges(h1, true));
+  // Longitude first (per source row), then latitude.
+  std::vector<double> tmp(size_t(h0) * size_t(w1) * 3, 0.0);
+  parallelFor(0, h0, [&](int64_t y) {
+    for (int x = 0; x < w1; ++x) {
+      double total = 0.0;
+      double* dst = tmp.data() + (size_t(y) * size_t(w1) + size_t(x)) * 3;
+      for (const auto& [k, o] : cols[size_t(x)]) {
+        const glm::vec3 L = env.radiance(k, int(y));
+        dst[0] += o * L.x, dst[1] += o * L.y, dst[2] += o * L.z;
+        total += o;
+      }
+      for (int c = 0; c < 3; ++c) dst[c] /= total;
+    }
+  });
+  Image img(w1, h1, 3, {"R", "G", "B"});
+  img.colorSpace = env.colorSpace();
+  parallelFor(0, h1, [&](int64_t yy) {
+    const int y = int(yy);
+    for (int x = 0; x < w1; ++x) {
+      double acc[3] = {0, 0, 0}, total = 0.0;
+      for (const auto& [k, o] : rows[size_t(y)]) {
+        const double* src = tmp.data() + (size_t(k) * size_t(w1) + size_t(x)) * 3;
+        for (int c = 0; c < 3; ++c) acc[c] += o * src[c];
+        total += o;
+      }
+      for (int c = 0; c < 3; ++c) img.at(x, y)[c] = float(acc[c] / total);
+    }
+  });
   return Environment::fromLatLong(img);
 }
 

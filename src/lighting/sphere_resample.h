@@ -61,4 +61,12 @@ CubeMap cubeFromLatLong(const Environment& environment, int size, const Progress
 // solid-angle-weighted mean of the texels it overlaps.
 Environment latLongFromCube(const CubeMap& cube, int width, const Progress& progress = {});
 
+// The cube map at another face size: each texel the solid-angle-weighted mean of the source texels
+// it overlaps (face rectangles; exact solid angles by the corner formula).
+CubeMap resizeCube(const CubeMap& cube, int size);
+
+// The lat-long map at another width (even): each cell the solid-angle-weighted mean of the cells
+// it overlaps (cells are rectangles in longitude and sin(latitude), so the weights are exact).
+Environment resizeLatLong(const Environment& environment, int width);
+
 }  // namespace compose::lighting
