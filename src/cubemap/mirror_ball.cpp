@@ -62,7 +62,12 @@ MirrorBallResult unwrapMirrorBall(const Image& ball, const MirrorBallOptions& op
   out.cube = lighting::CubeMap(n);
   out.cube.colorSpace = ball.colorSpace;
   std::vector<float> weight(size_t(kCubeFaces) * size_t(n) * size_t(n), 0.0f);
-  const double blind = options.blindSpotDegrees * kPi / 180.0;
+  // Pixels within 1.5 pixels of the ball's outline mix the ball with what is around it: directions
+  // that map there (the ring at disc radius r, r = sin(θ/2) for θ the angle from the camera) are
+  // treated like the blind spot.
+  const double rimRadius = std::max(0.0, 1.0 - 1.5 / (0.5 * s));
+  const double rimBlind = kPi - 2.0 * std::asin(rimRadius);
+  const double blind = std::max(options.blindSpotDegrees * kPi / 180.0, rimBlind);
   // Angle from straight behind the ball (-Z) below which nothing is read, and up to which the
   // weight ramps (smoothstep) to 1.
   const double cosBlind = std::cos(blind), cosFull = std::cos(std::min(2.0 * blind, kPi));
@@ -81,7 +86,7 @@ MirrorBallResult unwrapMirrorBall(const Image& ball, const MirrorBallOptions& op
           // How far from straight behind the ball: -d.z is the cosine of that angle.
           const double behind = -d.z;
           double w = 1.0;
-          if (blind > 0.0) {
+          if (blind > 0.0) {  // at least the rim's width
             if (behind >= cosBlind) {
               w = 0.0;
             } else if (behind > cosFull) {

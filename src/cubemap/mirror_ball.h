@@ -14,8 +14,9 @@
 // squeezed into a thin ring, and a small error in the crop moves it far. So the rim is weighted
 // down: the weight falls smoothly from 1 to 0 as the reflected direction comes within
 // 2 x blindSpotDegrees of straight behind the ball, and directions within blindSpotDegrees are not
-// read at all; both are filled from their surroundings (coverage.h). Each texel averages 3 x 3
-// bilinear samples of the photo over its footprint.
+// read at all; both are filled from their surroundings (coverage.h). The blind spot is never
+// narrower than the directions that land within 1.5 pixels of the ball's outline, where pixels mix
+// the ball with its background. Each texel averages 3 x 3 bilinear samples of the photo.
 #pragma once
 
 #include <filesystem>
