@@ -41,18 +41,21 @@ Image renderView(const lighting::FilteredCube& env, const calib::Lens& lens,
     const int y = int(yy);
     for (int x = 0; x < lens.width; ++x) {
       // Footprint of one sub-pixel: the solid angle spanned by the pixel's edges, divided up.
-      glm::dvec3 c, r, d;
+      glm::dvec3 c, r, down;
       float footprint = 0.0f;
       if (lens.direction(x + 0.5, y + 0.5, c) && lens.direction(x + 1.5, y + 0.5, r) &&
-          lens.direction(x + 0.5, y + 1.5, d)) {
-        footprint = float(glm::length(glm::cross(r - c, d - c)) / (s * s));
+          lens.direction(x + 0.5, y + 1.5, down)) {
+        footprint = float(glm::length(glm::cross(r - c, down - c)) / (s * s));
       }
       glm::vec3 sum(0.0f);
       for (int j = 0; j < s; ++j) {
         for (int i = 0; i < s; ++i) {
           glm::dvec3 ray;
           if (!lens.direction(x + (i + 0.5) / s, y + (j + 0.5) / s, ray)) continue;
-          sum += env.lookup(glm::vec3(worldFromCamera * ray), footprint);
+          const glm::vec3 d(worldFromCamera * ray);
+          // Sub-pixels smaller than a texel take the texel they hit (the map is piecewise
+          // constant); larger ones a prefiltered average over their footprint.
+          sum += env.levelFor(d, footprint) > 0.0f ? env.lookup(d, footprint) : env.nearest(d);
         }
       }
       float* p = out.at(x, y);

@@ -2,12 +2,12 @@
 // one of the project's lenses (calib/lens.h). Used to make stitching inputs with a known ground
 // truth, and available to any stage that needs a virtual photo of an environment.
 //
-// Each pixel is the mean radiance over s x s sub-pixel rays (stratified, at sub-pixel centres),
-// each ray a prefiltered lookup of the environment (lighting/filtered_cube.h) with a footprint of
-// the sub-pixel's solid angle, so a wide-angle view of a high-resolution map does not alias and a
-// telephoto view of a coarse one is interpolated. Rays the lens cannot form (beyond a fisheye's
-// 180°) and sub-pixels outside the lens model's valid range give 0. Values are radiance, linear,
-// in the environment's colour space; the image is RGB float.
+// Each pixel is the mean radiance over s x s sub-pixel rays (stratified, at sub-pixel centres), as
+// a sensor integrates the scene over its pixels. The environment is read as what it is, constant
+// over each texel: a sub-pixel smaller than a texel takes the texel its ray hits, a larger one the
+// prefiltered mean over its footprint (lighting/filtered_cube.h), so a wide-angle view of a
+// high-resolution map does not alias. Rays the lens cannot form (beyond a fisheye's 180°) give 0.
+// Values are radiance, linear, in the environment's colour space; the image is RGB float.
 #pragma once
 
 #include <glm/mat3x3.hpp>

@@ -125,6 +125,18 @@ glm::vec3 FilteredCube::lookupLevel(const glm::vec3& d, float level) const {
   return sample(face, a, b, level);
 }
 
+glm::vec3 FilteredCube::nearest(const glm::vec3& d) const {
+  COMPOSE_CHECK(!levels_.empty());
+  int face = 0;
+  double a = 0, b = 0;
+  faceImageCoordinates(glm::dvec3(d), face, a, b);
+  const Level& L = levels_[0];
+  const int x = std::clamp(int(std::floor((a + 1.0) * 0.5 * L.size)), 0, L.size - 1);
+  const int y = std::clamp(int(std::floor((b + 1.0) * 0.5 * L.size)), 0, L.size - 1);
+  const float* p = L.texels.data() + L.offset(face, x, y);
+  return {p[0], p[1], p[2]};
+}
+
 glm::vec3 FilteredCube::lookup(const glm::vec3& d, float solidAngle) const {
   COMPOSE_CHECK(!levels_.empty());
   int face = 0;

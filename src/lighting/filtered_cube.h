@@ -45,6 +45,8 @@ class FilteredCube {
 
   // Mean radiance over a footprint of `solidAngle` steradians around unit direction d.
   glm::vec3 lookup(const glm::vec3& d, float solidAngle) const;
+  // The texel of level 0 that d falls in (the map read as piecewise constant, no filtering).
+  glm::vec3 nearest(const glm::vec3& d) const;
   // Trilinear lookup at a fractional level (clamped to [0, levels() - 1]).
   glm::vec3 lookupLevel(const glm::vec3& d, float level) const;
   // The fractional level whose texels around d have solid angle `solidAngle`.
