@@ -24,6 +24,7 @@ void ProgressPrinter::operator()(std::string_view stage, double fraction) {
 const std::vector<Command>& commands() {
   static const std::vector<Command> list = {
       {"convert", "Convert environment maps between layouts; unwrap mirror balls", setupConvert},
+      {"stitch", "Stitch photos from one point into a cube-map environment", setupStitch},
   };
   return list;
 }

@@ -57,6 +57,7 @@ Runner setupCompose(CLI::App& app, const Globals& globals);
 
 // Stage commands (cmd_<name>.cpp).
 Runner setupConvert(CLI::App& command, const Globals& globals);
+Runner setupStitch(CLI::App& command, const Globals& globals);
 
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);
