@@ -25,24 +25,40 @@ bool PinholeCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
   return true;
 }
 
+void CameraOptions::validate() const {
+  if (!(height > 0.0 && height <= 1e4)) {
+    throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
+                     std::to_string(height));
+  }
+  if (!(std::abs(pitchDegrees) < 89.0)) {
+    throw UsageError("--pitch must be within ±89 degrees, got " + std::to_string(pitchDegrees));
+  }
+  if (focal35mm && !(*focal35mm > 0.0 && *focal35mm <= 1e4)) {
+    throw UsageError("--focal35 must be a positive focal length in mm, got " +
+                     std::to_string(*focal35mm));
+  }
+}
+
+void Placement::validate() const {
+  const glm::dvec2 p = imagePoint;
+  if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
+    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " +
+                     std::to_string(p.x) + "," + std::to_string(p.y));
+  }
+  if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
+    throw UsageError("--scale must be in (0, 10], got " + std::to_string(heightFraction));
+  }
+  if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
+}
+
 PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
                           const CameraOptions& options) {
   if (width <= 0 || height <= 0) throw Error("camera", "plate has no pixels");
-  if (!(options.height > 0.0) || !std::isfinite(options.height)) {
-    throw Error("camera", "camera height must be positive, got " + std::to_string(options.height));
-  }
-  if (!(std::abs(options.pitchDegrees) < 89.0)) {
-    throw Error("camera", "camera pitch must be within ±89 degrees, got " +
-                              std::to_string(options.pitchDegrees));
-  }
+  options.validate();
   PinholeCamera cam;
   cam.width = width;
   cam.height = height;
   if (options.focal35mm) {
-    if (!(*options.focal35mm > 0.0) || !std::isfinite(*options.focal35mm)) {
-      throw Error("camera",
-                  "focal length must be positive, got " + std::to_string(*options.focal35mm));
-    }
     cam.focal35mm = *options.focal35mm;
     cam.focalSource = "--focal35";
   } else if (exif.focalLength35mm) {
@@ -62,17 +78,8 @@ PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif
 
 glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement,
                          const glm::dvec3& lo, const glm::dvec3& hi) {
+  placement.validate();
   const glm::dvec2 p = placement.imagePoint;
-  if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
-    throw Error("camera", "--place must be within [0,1] x [0,1] of the plate, got " +
-                              std::to_string(p.x) + "," + std::to_string(p.y));
-  }
-  if (!(placement.heightFraction > 0.0 && placement.heightFraction <= 10.0)) {
-    throw Error("camera",
-                "--scale must be in (0, 10], got " + std::to_string(placement.heightFraction));
-  }
-  if (!std::isfinite(placement.yawDegrees))
-    throw Error("camera", "--yaw must be a finite number of degrees");
   glm::dvec3 origin, dir;
   camera.ray(p.x * camera.width, p.y * camera.height, origin, dir);
   if (!(dir.y < -1e-6)) {

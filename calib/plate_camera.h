@@ -1,7 +1,7 @@
 // The plate camera: a pinhole model of the camera that took the background photograph, and where
 // a synthetic object stands in front of it.
 //
-// Frames (see DESIGN.md §3): world is right-handed, +Y up, the ground plane is y = 0. The camera
+// Frames (see docs/design.md §2): world is right-handed, +Y up, the ground plane is y = 0. The camera
 // sits at (0, height, 0) and looks along -Z, tilted down by `pitch`. Image pixel (px, py) has its
 // origin at the top-left corner of the picture, +y down; the principal point is the image centre.
 //
@@ -42,6 +42,9 @@ struct CameraOptions {
   std::optional<double> focal35mm;  // overrides EXIF
   double height = 1.6;              // metres above the ground
   double pitchDegrees = 0.0;        // positive tilts the camera down
+
+  // Throws compose::UsageError naming the option when a value is out of range.
+  void validate() const;
 };
 
 // Validates options (throws compose::Error, stage "camera") and builds the plate camera.
@@ -56,6 +59,9 @@ struct Placement {
   glm::dvec2 imagePoint{0.5, 0.72};
   double heightFraction = 0.3;
   double yawDegrees = 0.0;
+
+  // Throws compose::UsageError naming the option when a value is out of range.
+  void validate() const;
 };
 
 // worldFromObject for a mesh with the given object-space bounds. Throws compose::Error (stage

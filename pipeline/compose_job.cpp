@@ -10,6 +10,7 @@
 
 #include "composite/composite.h"
 #include "core/error.h"
+#include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 #include "lighting/lighting.h"
@@ -53,6 +54,10 @@ namespace {
 
 fs::path outputBase(const ComposeJob& job) {
   fs::path base = job.output;
+  std::error_code ec;
+  if (!base.empty() && (!base.has_filename() || fs::is_directory(base, ec))) {
+    return base / "compose";
+  }
   std::string ext = base.extension().string();
   for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".exr" || ext == ".jpg" || ext == ".jpeg" || ext == ".png") base.replace_extension();
@@ -86,27 +91,82 @@ bool isHdrFormat(const std::string& format) {
   return format == "openexr" || format == "hdr" || format == "tiff" || format == "raw";
 }
 
-// Auto exposure: the plate and the environment look at the same kind of place, so the
-// environment's radiance in the directions the camera sees should match the plate's linear
-// values. Returns plate mean / environment mean over the camera's field of view (means of RGB).
-double autoExposure(const Image& plateLinear, const lighting::Environment& env,
-                    const calib::PinholeCamera& camera, const glm::mat3& envFromWorld) {
-  constexpr int kGrid = 64;
-  double plateSum = 0.0, envSum = 0.0;
-  for (int j = 0; j < kGrid; ++j) {
-    for (int i = 0; i < kGrid; ++i) {
-      const double px = (i + 0.5) / kGrid * camera.width, py = (j + 0.5) / kGrid * camera.height;
-      glm::dvec3 origin, dir;
-      camera.ray(px, py, origin, dir);
-      const glm::vec3 L = env.lookup(envFromWorld * glm::vec3(dir));
-      envSum += double(L.x + L.y + L.z);
-      const float* p = plateLinear.at(std::min(int(px), plateLinear.width - 1),
-                                      std::min(int(py), plateLinear.height - 1));
-      plateSum += double(p[0] + p[1] + p[2]);
+// Automatic exposure: a mid-grey ball standing where the object stands, lit by the environment,
+// should look as bright in the composite as middle grey looks in the plate. The plate's middle
+// grey is its log-average (the key that a camera's reflected-light meter exposes for); the ball's
+// brightness is the mean radiance of its visible half, each normal weighted by its projected
+// area towards the camera. Unlike matching what the environment shows in the camera's field of
+// view, this follows the light that falls on the object, wherever it comes from (a softbox behind
+// the camera, a dark backdrop in view).
+struct ExposureMatch {
+  double scale = 1.0;         // plate units per environment unit
+  double plateKey = 0.0;      // log-average of the plate's RGB mean
+  double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
+};
+
+ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLighting& lighting,
+                           const glm::dvec3& towardCamera, const glm::mat3& envFromWorld) {
+  ExposureMatch m;
+  // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level.
+  constexpr double kFloor = 1e-4;
+  double logSum = 0.0;
+  int64_t count = 0;
+  const int step = std::max(1, int(std::sqrt(double(plateLinear.pixelCount()) / 65536.0)));
+  for (int y = step / 2; y < plateLinear.height; y += step) {
+    for (int x = step / 2; x < plateLinear.width; x += step) {
+      const float* p = plateLinear.at(x, y);
+      logSum += std::log(std::max(kFloor, (double(p[0]) + p[1] + p[2]) / 3.0));
+      ++count;
     }
   }
-  if (!(envSum > 0.0) || !(plateSum > 0.0)) return 1.0;
-  return plateSum / envSum;
+  m.plateKey = std::exp(logSum / double(std::max<int64_t>(count, 1)));
+  // Ball: normals on the hemisphere facing the camera (a Fibonacci spiral, evenly spread).
+  const glm::dvec3 c = glm::normalize(towardCamera);
+  const glm::dvec3 helper = std::abs(c.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
+  const glm::dvec3 u = glm::normalize(glm::cross(helper, c)), v = glm::cross(c, u);
+  constexpr int kNormals = 256;
+  double weighted = 0.0, weights = 0.0;
+  for (int i = 0; i < kNormals; ++i) {
+    const double z = 1.0 - (i + 0.5) / kNormals;  // cos of the angle to the camera, (0, 1]
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const double phi = double(i) * 2.399963229728653;  // golden angle
+    const glm::dvec3 n = z * c + r * std::cos(phi) * u + r * std::sin(phi) * v;
+    const glm::vec3 e = glm::max(lighting.irradiance(envFromWorld * glm::vec3(n)), glm::vec3(0.0f));
+    weighted += z * (double(e.x) + e.y + e.z) / 3.0;
+    weights += z;
+  }
+  m.ballRadiance = 0.18 * weighted / weights / std::numbers::pi;
+  if (m.ballRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.ballRadiance;
+  return m;
+}
+
+// Brings an input image to the working space and says how it was read. An explicit colour space
+// (--plate-space, --env-space) wins; an OpenEXR file that carries chromaticities is taken by
+// them (as the colour space of the config with those primaries, or converted by matrix);
+// otherwise the space the file declares, else the config's file rules.
+std::string toWorkingSpace(Image& image, const fs::path& file, const ingest::CaptureInfo& info,
+                           const std::string& explicitSpace, const std::string& option,
+                           const color::ColorConfig& colors) {
+  const std::string working = colors.workingSpace();
+  if (!explicitSpace.empty()) {
+    image.colorSpace = colors.resolve(explicitSpace, option);
+    colors.convert(image, working);
+    return "'" + image.colorSpace + "' (" + option + ")";
+  }
+  if (info.chromaticities) {
+    const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
+    if (!named.empty()) {
+      image.colorSpace = named;
+      colors.convert(image, working);
+      return "'" + named + "' (by the chromaticities in its header)";
+    }
+    colors.convertFromChromaticities(image, *info.chromaticities, working);
+    return "the RGB space of the chromaticities in its header (converted by matrix)";
+  }
+  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
+  const std::string read = image.colorSpace;
+  colors.convert(image, working);
+  return "'" + read + "'";
 }
 
 class StageTimer {
@@ -147,6 +207,42 @@ fs::path displayPathFor(const ComposeJob& job) {
   return p;
 }
 
+void validate(const ComposeJob& job) {
+  if (job.plate.empty()) throw UsageError("--plate is required");
+  if (job.object.empty()) throw UsageError("--object is required");
+  if (job.output.empty()) throw UsageError("--out must not be empty");
+  if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
+    throw UsageError("--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
+  }
+  if (!std::isfinite(job.environmentYawDegrees))
+    throw UsageError("--env-yaw must be a finite number of degrees");
+  for (int c = 0; c < 3; ++c) {
+    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
+      throw UsageError("--albedo must be within [0, 1]");
+  }
+  if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
+    throw UsageError("--exposure must be a number of stops within ±64");
+  }
+  job.camera.validate();
+  job.placement.validate();
+  // The lighting basis and its parameters: a misspelt name fails before any pixel is read.
+  try {
+    ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
+    if (params.has("order") && params.getString("order", "") == "auto") {
+      params.getDouble("target", 45.0, "lighting");
+      params.erase("order");
+      params.erase("target");
+    } else if (params.has("target")) {
+      throw Error("lighting", "target=... needs order=auto");
+    }
+    lighting::createLighting(job.lighting, params);
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    throw UsageError(e.what(), e.stage());
+  }
+}
+
 std::vector<StageRecord> plan(const ComposeJob& job) {
   const fs::path env = environmentPath(job);
   std::vector<StageRecord> s;
@@ -180,18 +276,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   result.exrPath = exrPathFor(job);
   result.displayPath = displayPathFor(job);
   const fs::path envPath = environmentPath(job);
-  if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
-    throw Error("render", "--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
-  }
-  if (!std::isfinite(job.environmentYawDegrees))
-    throw Error("render", "--env-yaw must be a finite number of degrees");
-  for (int c = 0; c < 3; ++c) {
-    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
-      throw Error("render", "--albedo must be within [0, 1]");
-  }
-  if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
-    throw Error("render", "--exposure must be a number of stops within ±64");
-  }
+  validate(job);
 
   // Lighting basis first: a misspelt name should fail before any pixel is read. order=auto (with
   // an optional target=dB, default 45) defers the order to the environment's own tail energy.
@@ -227,6 +312,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   result.height = plate.image.height;
   if (!mesh.normalsFromFile)
     result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
+  for (const std::string& w : mesh.warnings) result.notes.push_back("object: " + w);
   if (!isHdrFormat(env.info.format)) {
     result.notes.push_back(
         "the environment is a " + env.info.format +
@@ -239,17 +325,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   const std::string working = colors.workingSpace();
   {
     StageTimer t(stage(result.stages, "color"));
-    plateLinear.colorSpace = job.plateSpace.empty()
-                                 ? colors.inputSpaceFor(job.plate, plate.info.fileColorSpace)
-                                 : colors.resolve(job.plateSpace, "--plate-space");
-    envLinear.colorSpace = job.environmentSpace.empty()
-                               ? colors.inputSpaceFor(envPath, env.info.fileColorSpace)
-                               : colors.resolve(job.environmentSpace, "--env-space");
-    result.notes.push_back("plate read as '" + plateLinear.colorSpace + "', environment as '" +
-                           envLinear.colorSpace + "', working space '" + working +
-                           "' (config: " + colors.source() + ")");
-    colors.convert(plateLinear, working);
-    colors.convert(envLinear, working);
+    const std::string plateRead =
+        toWorkingSpace(plateLinear, job.plate, plate.info, job.plateSpace, "--plate-space", colors);
+    const std::string envRead =
+        toWorkingSpace(envLinear, envPath, env.info, job.environmentSpace, "--env-space", colors);
+    result.notes.push_back("plate read as " + plateRead + ", environment as " + envRead +
+                           ", working space '" + working + "' (config: " + colors.source() + ")");
   }
 
   // precompute
@@ -315,17 +396,34 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     if (job.exposureStops) {
       settings.exposure = float(std::exp2(*job.exposureStops));
     } else {
-      const double scale = autoExposure(plateLinear, environment, camera, settings.envFromWorld);
-      settings.exposure = float(scale);
-      char line[160];
+      const glm::dvec3 objectBase(worldFromObject[3]);
+      const ExposureMatch match = autoExposure(
+          plateLinear, *lighting, camera.position() - objectBase, settings.envFromWorld);
+      settings.exposure = float(match.scale);
+      char line[300];
       std::snprintf(line, sizeof line,
-                    "auto exposure: %+.2f stops (environment matched to the plate's mean)",
-                    std::log2(scale));
+                    "auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
+                    "environment's units) matched to the plate's log-average (%.4g); override with "
+                    "--exposure",
+                    std::log2(match.scale), match.ballRadiance, match.plateKey);
       result.notes.push_back(line);
     }
     result.exposure = settings.exposure;
     rendered = render::renderDiffuse(mesh, worldFromObject, camera, *lighting, settings, progress);
     rendered.beauty.colorSpace = working;
+    double coverage = 0.0;
+    for (size_t i = 3; i < rendered.beauty.pixels.size(); i += 4)
+      coverage += rendered.beauty.pixels[i];
+    if (!(coverage > 0.0)) {
+      throw Error("render",
+                  "the object covers no pixel of the plate (--scale " +
+                      std::to_string(job.placement.heightFraction) +
+                      " of the plate height at --place " +
+                      std::to_string(job.placement.imagePoint.x) + "," +
+                      std::to_string(job.placement.imagePoint.y) +
+                      "): make it larger or place it inside the frame",
+                  job.object);
+    }
   }
 
   // composite
@@ -355,11 +453,49 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     ingest::WriteOptions exrOptions;
     exrOptions.depth = ingest::WriteOptions::Depth::Half;
     exrOptions.alphaChannel = 3;
+    exrOptions.chromaticities = colors.chromaticities(working);
+    if (!exrOptions.chromaticities) {
+      result.notes.push_back("the config (" + colors.source() +
+                             ") does not say what the primaries of the working space '" + working +
+                             "' are: the EXR carries its name but no chromaticities");
+    }
     const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
     const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
     Image shown = colors.toDisplay(composite, display, view);
-    ingest::writeImage(result.exrPath, exr, exrOptions);
-    ingest::writeImage(result.displayPath, shown, {});
+    {
+      // Object pixels that the display image shows as clipped white: their shading is lost.
+      int64_t covered = 0, clipped = 0;
+      for (size_t i = 0; i < shown.pixelCount(); ++i) {
+        if (rendered.beauty.pixels[4 * i + 3] < 0.5f) continue;
+        ++covered;
+        const float* d = shown.pixels.data() + 3 * i;
+        if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped;
+      }
+      constexpr double kClippedShare = 0.02;
+      if (covered > 0 && double(clipped) > kClippedShare * double(covered)) {
+        char line[240];
+        std::snprintf(line, sizeof line,
+                      "warning: %.1f%% of the object's pixels are clipped to white in %s "
+                      "(view %s): lower --exposure to keep their shading",
+                      100.0 * double(clipped) / double(covered),
+                      result.displayPath.filename().string().c_str(), view.c_str());
+        result.notes.push_back(line);
+      }
+    }
+    // Both files appear together or not at all: a failure keeps every previous output.
+    OutputFiles outputs("output");
+    const ingest::WriteReport written =
+        ingest::writeImage(outputs, result.exrPath, exr, exrOptions);
+    ingest::writeImage(outputs, result.displayPath, shown, {});
+    outputs.commit();
+    if (written.promotedToFloat) {
+      char line[200];
+      std::snprintf(line, sizeof line,
+                    "values up to %g exceed half float's range (65504): the EXR is written as "
+                    "32-bit float",
+                    double(written.largestMagnitude));
+      result.notes.push_back(line);
+    }
     report(progress, "output", 1.0);
   }
   return result;

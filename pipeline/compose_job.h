@@ -46,6 +46,7 @@ struct ComposeJob {
   std::filesystem::path environment;  // empty: defaultEnvironment()
   // Output base path: writes <base>.exr (linear) and <base>.jpg (display). An extension of .exr,
   // .jpg/.jpeg or .png on `output` is taken off first; .png selects PNG for the display image.
+  // A path ending in '/' (or an existing folder) writes <folder>/compose.exr and .jpg.
   std::filesystem::path output = "out/compose";
 
   std::string plateSpace;        // empty: from the file (see ColorConfig::inputSpaceFor)
@@ -88,6 +89,10 @@ struct ComposeResult {
 // Output paths for a job.
 std::filesystem::path exrPathFor(const ComposeJob& job);
 std::filesystem::path displayPathFor(const ComposeJob& job);
+
+// Checks every option of the job without reading any file; throws compose::UsageError (exit
+// status 2) naming the option. runCompose() calls it first.
+void validate(const ComposeJob& job);
 
 // What would run, and why, without reading any pixels.
 std::vector<StageRecord> plan(const ComposeJob& job);

@@ -1,9 +1,12 @@
 #include "color/color.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <sstream>
 
 #include <OpenColorIO/OpenColorIO.h>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
 
 #include "color/builtin_config.h"
 #include "core/error.h"
@@ -58,6 +61,56 @@ void applyRgb(const OCIO::ConstProcessorRcPtr& processor, Image& image) {
     cpu->apply(desc);
   });
 }
+
+// --- linear RGB spaces from chromaticities ------------------------------------------------------
+
+glm::dvec3 xyzOfChromaticity(double x, double y) {
+  return {x / y, 1.0, (1.0 - x - y) / y};
+}
+
+// RGB → XYZ of a linear RGB space (the normalised primary matrix, SMPTE RP 177).
+glm::dmat3 xyzFromRgb(const Chromaticities& c) {
+  const glm::dmat3 primaries(xyzOfChromaticity(c[0], c[1]), xyzOfChromaticity(c[2], c[3]),
+                             xyzOfChromaticity(c[4], c[5]));  // columns
+  const glm::dvec3 scale = glm::inverse(primaries) * xyzOfChromaticity(c[6], c[7]);
+  return glm::dmat3(primaries[0] * scale[0], primaries[1] * scale[1], primaries[2] * scale[2]);
+}
+
+// Bradford chromatic adaptation of XYZ from white `from` to white `to` (xy).
+glm::dmat3 bradford(double fromX, double fromY, double toX, double toY) {
+  // glm is column-major: these are the rows of the Bradford cone matrix, transposed.
+  const glm::dmat3 cone = glm::transpose(
+      glm::dmat3(0.8951, 0.2664, -0.1614, -0.7502, 1.7135, 0.0367, 0.0389, -0.0685, 1.0296));
+  const glm::dvec3 s = cone * xyzOfChromaticity(fromX, fromY);
+  const glm::dvec3 d = cone * xyzOfChromaticity(toX, toY);
+  glm::dmat3 gain(1.0);
+  for (int i = 0; i < 3; ++i) gain[i][i] = d[i] / s[i];
+  return glm::inverse(cone) * gain * cone;
+}
+
+// XYZ → xy chromaticities of the columns and of the white (sum of columns) of an RGB → XYZ
+// matrix.
+Chromaticities chromaticitiesOf(const glm::dmat3& m) {
+  Chromaticities c{};
+  auto xy = [](const glm::dvec3& v, double* out) {
+    const double sum = v.x + v.y + v.z;
+    out[0] = v.x / sum;
+    out[1] = v.y / sum;
+  };
+  for (int i = 0; i < 3; ++i) xy(m[i], &c[size_t(2 * i)]);
+  xy(m[0] + m[1] + m[2], &c[6]);
+  return c;
+}
+
+double maxDifference(const glm::dmat3& a, const glm::dmat3& b) {
+  double d = 0.0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) d = std::max(d, std::abs(a[i][j] - b[i][j]));
+  return d;
+}
+
+constexpr Chromaticities kP3D65 = {0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290};
+constexpr Chromaticities kRec2020 = {0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290};
 
 }  // namespace
 
@@ -128,6 +181,96 @@ void ColorConfig::convert(Image& image, const std::string& to) const {
       throw Error("color", "cannot convert " + src + " to " + dst + ": " + e.what());
     }
   }
+  image.colorSpace = dst;
+}
+
+std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& space) const {
+  const OCIO::ConstConfigRcPtr& config = impl_->config;
+  OCIO::ConstColorSpaceRcPtr cs = space.empty() ? nullptr : config->getColorSpace(space.c_str());
+  if (!cs || cs->isData()) return std::nullopt;
+  // The interchange space and the white its conversions adapt to.
+  std::string interchange;
+  glm::dmat3 xyzFromInterchange(1.0);
+  double whiteX = 0.0, whiteY = 0.0;
+  if (config->hasRole(OCIO::ROLE_INTERCHANGE_SCENE)) {
+    interchange = OCIO::ROLE_INTERCHANGE_SCENE;
+    xyzFromInterchange = xyzFromRgb(kAcesAp0Chromaticities);
+    whiteX = kAcesAp0Chromaticities[6];
+    whiteY = kAcesAp0Chromaticities[7];
+  } else if (config->hasRole(OCIO::ROLE_INTERCHANGE_DISPLAY)) {
+    interchange = OCIO::ROLE_INTERCHANGE_DISPLAY;
+    whiteX = 0.3127;
+    whiteY = 0.3290;
+  } else {
+    return std::nullopt;
+  }
+  glm::dmat3 toInterchange(1.0);
+  try {
+    OCIO::ConstCPUProcessorRcPtr cpu =
+        config->getProcessor(cs->getName(), interchange.c_str())->getDefaultCPUProcessor();
+    for (int i = 0; i < 3; ++i) {
+      float rgb[3] = {0.0f, 0.0f, 0.0f};
+      rgb[i] = 1.0f;
+      cpu->applyRGB(rgb);
+      toInterchange[i] = glm::dvec3(rgb[0], rgb[1], rgb[2]);
+    }
+    // Linear spaces only: the conversion must scale and add like a matrix.
+    float probe[3] = {0.25f, 2.0f, 0.5f};
+    cpu->applyRGB(probe);
+    const glm::dvec3 expected = toInterchange * glm::dvec3(0.25, 2.0, 0.5);
+    for (int i = 0; i < 3; ++i) {
+      if (!(std::abs(probe[i] - expected[i]) <= 1e-4 * (1.0 + std::abs(expected[i]))))
+        return std::nullopt;
+    }
+  } catch (const OCIO::Exception&) {
+    return std::nullopt;
+  }
+  const glm::dmat3 xyz = xyzFromInterchange * toInterchange;
+  // A well-known set, adapted the way the config adapts (Bradford to the interchange white).
+  // Configs publish these matrices to 4-7 digits and differ in how they derive the ACES white
+  // (up to 2e-4 here); a different set of primaries differs by more than 1e-2.
+  for (const Chromaticities& known :
+       {kRec709Chromaticities, kAcesAp1Chromaticities, kAcesAp0Chromaticities, kP3D65, kRec2020}) {
+    const glm::dmat3 adapted = bradford(known[6], known[7], whiteX, whiteY) * xyzFromRgb(known);
+    if (maxDifference(adapted, xyz) < 1e-3) return known;
+  }
+  return chromaticitiesOf(xyz);
+}
+
+std::string ColorConfig::spaceWithChromaticities(const Chromaticities& c) const {
+  const OCIO::ConstConfigRcPtr& config = impl_->config;
+  for (int i = 0; i < config->getNumColorSpaces(); ++i) {
+    const std::string name = config->getColorSpaceNameByIndex(i);
+    const std::optional<Chromaticities> own = chromaticities(name);
+    if (!own) continue;
+    double d = 0.0;
+    for (size_t k = 0; k < c.size(); ++k) d = std::max(d, std::abs(c[k] - (*own)[k]));
+    if (d < 1e-3) return name;
+  }
+  return {};
+}
+
+void ColorConfig::convertFromChromaticities(Image& image, const Chromaticities& from,
+                                            const std::string& to) const {
+  COMPOSE_CHECK(image.channels >= 3);
+  const std::string dst = resolve(to, "a conversion target");
+  const std::optional<Chromaticities> target = chromaticities(dst);
+  if (!target) {
+    throw Error("color", "cannot convert by chromaticities: the config (" + impl_->source +
+                             ") does not say what the primaries of '" + dst + "' are");
+  }
+  const glm::dmat3 m = glm::inverse(xyzFromRgb(*target)) *
+                       bradford(from[6], from[7], (*target)[6], (*target)[7]) * xyzFromRgb(from);
+  const glm::mat3 mf(m);
+  parallelFor(0, image.height, [&](int64_t y) {
+    for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * image.channels;
+         p != end; p += image.channels) {
+      const glm::vec3 v = mf * glm::vec3(p[0], p[1], p[2]);
+      p[0] = v.x;
+      p[1] = v.y;
+      p[2] = v.z;
+    }
+  });
   image.colorSpace = dst;
 }
 

@@ -8,14 +8,28 @@
 // work, and an unknown name is an error that lists the valid ones.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/image.h"
 
 namespace compose::color {
+
+// CIE 1931 xy chromaticities of a linear RGB space, in OpenEXR's order: red x, y, green x, y,
+// blue x, y, white x, y.
+using Chromaticities = std::array<double, 8>;
+
+// Well-known primaries, for matching and for tests.
+inline constexpr Chromaticities kRec709Chromaticities = {0.64, 0.33, 0.30,   0.60,
+                                                         0.15, 0.06, 0.3127, 0.3290};
+inline constexpr Chromaticities kAcesAp1Chromaticities = {0.713, 0.293, 0.165,   0.830,
+                                                          0.128, 0.044, 0.32168, 0.33767};
+inline constexpr Chromaticities kAcesAp0Chromaticities = {0.7347, 0.2653,  0.0,     1.0,
+                                                          0.0001, -0.0770, 0.32168, 0.33767};
 
 class ColorConfig {
  public:
@@ -42,6 +56,22 @@ class ColorConfig {
   // Converts the first three channels of `image` from image.colorSpace to `to` in place and sets
   // image.colorSpace. Other channels (alpha, AOVs) are left alone. The image needs >= 3 channels.
   void convert(Image& image, const std::string& to) const;
+
+  // Chromaticities of a linear colour space of the config, found through the config's
+  // interchange role (aces_interchange or cie_xyz_d65_interchange): the space's unit primaries
+  // are converted there and read off. A space whose conversion matches a well-known set of
+  // primaries (Rec.709, P3-D65, Rec.2020, ACES AP0, AP1) up to the config's white-point adaptation
+  // reports that set. Empty when the config has no interchange role, or the space is not linear
+  // RGB (an encoded or data space).
+  std::optional<Chromaticities> chromaticities(const std::string& space) const;
+  // A linear colour space of the config with these chromaticities (within 1e-3), or empty.
+  std::string spaceWithChromaticities(const Chromaticities& c) const;
+  // Converts the first three channels of `image` from the linear RGB space with chromaticities
+  // `from` to the config space `to` (whose chromaticities must be known), with Bradford
+  // adaptation between the white points; tags the image `to`. Throws compose::Error (stage
+  // "color") when `to` has no known chromaticities.
+  void convertFromChromaticities(Image& image, const Chromaticities& from,
+                                 const std::string& to) const;
 
   std::string defaultDisplay() const;
   std::string defaultView(const std::string& display) const;

@@ -37,11 +37,13 @@ class Error : public std::runtime_error {
   std::filesystem::path file_;
 };
 
-// Bad command-line usage (an option out of range, a malformed value): exit status 2, reported
-// before any file is read. Its stage is "cli".
+// Bad command-line usage (an option out of range, a malformed value, an unknown name): exit
+// status 2, reported before any file is read. Its stage is "cli" unless a library stage that
+// validates its own parameters (e.g. "lighting") says otherwise.
 class UsageError : public Error {
  public:
-  explicit UsageError(const std::string& what) : Error("cli", what) {}
+  explicit UsageError(const std::string& what, std::string stage = "cli")
+      : Error(std::move(stage), what) {}
 };
 
 namespace detail {

@@ -53,7 +53,7 @@ fs::path OutputFiles::add(const fs::path& destination) {
     if (ec) throw Error(stage_, "cannot create the output folder: " + ec.message(), dir);
   }
   if (!dir.empty() && !fs::is_directory(dir, ec))
-    throw Error(stage_, "the output folder is not a folder", dir);
+    throw Error(stage_, "cannot write into the output folder: it is a file, not a folder", dir);
   Entry e{temporaryNear(destination, "partial"), destination};
   entries_.push_back(e);
   return e.temporary;

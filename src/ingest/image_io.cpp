@@ -3,6 +3,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
 #include <system_error>
 
 #include <OpenImageIO/imagebuf.h>
@@ -71,6 +74,19 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
   info.cameraMake = spec.get_string_attribute("Make");
   info.cameraModel = spec.get_string_attribute("Model");
   info.fileColorSpace = spec.get_string_attribute("oiio:ColorSpace");
+  if (const std::string named = spec.get_string_attribute("colorSpace"); !named.empty())
+    info.fileColorSpace = named;
+  if (const OIIO::ParamValue* c = spec.find_attribute("chromaticities");
+      c && c->type() == OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8)) {
+    std::array<double, 8> xy;
+    const float* v = static_cast<const float*>(c->data());
+    bool finite = true;
+    for (size_t i = 0; i < 8; ++i) {
+      xy[i] = v[i];
+      finite = finite && std::isfinite(v[i]);
+    }
+    if (finite) info.chromaticities = xy;
+  }
   (void)fileSpec;
 
   if (info.orientation != 1) {
@@ -92,22 +108,20 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
   return out;
 }
 
-void writeImage(const fs::path& path, const Image& image, const WriteOptions& options) {
+namespace {
+
+// Writes into `file` (a temporary); errors name `shown`, the destination the user asked for.
+WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& image,
+                      const WriteOptions& options) {
   COMPOSE_CHECK(image.width > 0 && image.height > 0 && image.channels > 0);
   COMPOSE_CHECK(image.pixels.size() == image.pixelCount() * size_t(image.channels));
 
-  std::error_code ec;
-  fs::path dir = path.parent_path();
-  if (!dir.empty() && !fs::exists(dir, ec)) {
-    fs::create_directories(dir, ec);
-    if (ec) throw Error("output", "cannot create folder: " + ec.message(), dir);
-  }
+  auto output = OIIO::ImageOutput::create(shown.string());
+  if (!output) throw Error("output", "no image writer for this file extension", shown);
 
-  auto output = OIIO::ImageOutput::create(path.string());
-  if (!output) throw Error("output", "no image writer for this file extension", path);
-
-  const std::string ext = lowerExtension(path);
+  const std::string ext = lowerExtension(shown);
   const bool isExr = ext == ".exr";
+  WriteReport report;
   OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
   switch (options.depth) {
     case WriteOptions::Depth::Auto:
@@ -123,6 +137,16 @@ void writeImage(const fs::path& path, const Image& image, const WriteOptions& op
       format = OIIO::TypeDesc::FLOAT;
       break;
   }
+  if (format == OIIO::TypeDesc::HALF) {
+    for (float v : image.pixels) {
+      if (std::isfinite(v))
+        report.largestMagnitude = std::max(report.largestMagnitude, std::abs(v));
+    }
+    if (report.largestMagnitude > kHalfMax) {
+      format = OIIO::TypeDesc::FLOAT;
+      report.promotedToFloat = true;
+    }
+  }
   OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
   if (!image.channelNames.empty()) {
     COMPOSE_CHECK(int(image.channelNames.size()) == image.channels);
@@ -131,32 +155,45 @@ void writeImage(const fs::path& path, const Image& image, const WriteOptions& op
   spec.alpha_channel = options.alphaChannel;
   if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
   spec.attribute("Software", "compose");
-  if (isExr) spec.attribute("compression", "zip");
+  if (isExr) {
+    spec.attribute("compression", "zip");
+    if (!image.colorSpace.empty()) spec.attribute("colorSpace", image.colorSpace);
+    if (options.chromaticities) {
+      float c[8];
+      for (int i = 0; i < 8; ++i) c[i] = float((*options.chromaticities)[size_t(i)]);
+      spec.attribute("chromaticities", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8), c);
+    }
+  }
   if (ext == ".jpg" || ext == ".jpeg") {
     spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
   }
-
-  // Same folder, so that the final rename cannot cross file systems.
-  fs::path temp = path;
-  std::string tempName = path.filename().string();
-  tempName.insert(tempName.begin(), '.');
-  tempName.append(".partial-").append(std::to_string(::getpid()));
-  temp.replace_filename(tempName);
   auto fail = [&](const std::string& what) {
     std::string why = output->geterror();
+    if (why.empty() && errno != 0) why = std::strerror(errno);
     output.reset();
-    fs::remove(temp, ec);
-    throw Error("output", what + (why.empty() ? "" : ": " + why), path);
+    throw Error("output", what + (why.empty() ? "" : ": " + why), shown);
   };
-  if (!output->open(temp.string(), spec)) fail("cannot open for writing");
+  errno = 0;
+  if (!output->open(file.string(), spec)) fail("cannot open for writing");
   if (!output->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data())) fail("cannot write image");
   if (!output->close()) fail("cannot finish writing");
-  output.reset();
-  fs::rename(temp, path, ec);
-  if (ec) {
-    fs::remove(temp, ec);
-    throw Error("output", "cannot move the finished file into place", path);
-  }
+  return report;
+}
+
+}  // namespace
+
+WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& image,
+                       const WriteOptions& options) {
+  if (!OIIO::ImageOutput::create(path.string()))
+    throw Error("output", "no image writer for this file extension", path);
+  return writeInto(outputs.add(path), path, image, options);
+}
+
+WriteReport writeImage(const fs::path& path, const Image& image, const WriteOptions& options) {
+  OutputFiles outputs("output");
+  const WriteReport report = writeImage(outputs, path, image, options);
+  outputs.commit();
+  return report;
 }
 
 }  // namespace compose::ingest

@@ -7,17 +7,27 @@
 // sRGB JPEG comes back as encoded values in [0, 1], tagged with the colour space the file declares.
 //
 // writeImage() never leaves a half-written file at the destination: it writes a temporary file in
-// the same folder and renames it into place only when the write has succeeded.
+// the same folder and renames it into place only when the write has succeeded. Several outputs
+// that belong together are written into one OutputFiles set (core/output_files.h) and appear
+// together on commit().
+//
+// OpenEXR files say what their numbers are: the chromaticities of their RGB space (the standard
+// `chromaticities` attribute, read back by readImage) and the colour-space name
+// (`colorSpace`, a string attribute). Half-float output is checked against half's range: an
+// image with a value beyond ±65504 is written as 32-bit float instead of turning into Inf, and
+// the write reports it.
 //
 // Errors (missing file, undecodable data, unwritable folder) throw compose::Error with stage
 // "ingest" (or "output" for writes) and the file name.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
 
 #include "core/image.h"
+#include "core/output_files.h"
 
 namespace compose::ingest {
 
@@ -30,7 +40,9 @@ struct CaptureInfo {
   std::optional<double> focalLength35mm;  // 35 mm equivalent focal length
   int orientation = 1;                    // EXIF orientation of the file (already applied)
   std::string cameraMake, cameraModel;
-  std::string fileColorSpace;         // colour space the file or its reader declares
+  std::string fileColorSpace;  // colour space the file or its reader declares
+  // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
+  std::optional<std::array<double, 8>> chromaticities;
   std::string format;                 // reader name, e.g. "jpeg", "openexr"
   int fileWidth = 0, fileHeight = 0;  // as stored, before orientation
 };
@@ -52,10 +64,24 @@ struct WriteOptions {
   } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
   int jpegQuality = 95;
   int alphaChannel = -1;  // index of the alpha channel, or -1
+  // OpenEXR only: chromaticities of the RGB channels (red, green, blue, white xy).
+  std::optional<std::array<double, 8>> chromaticities;
+};
+
+struct WriteReport {
+  bool promotedToFloat = false;  // half was asked for, a value did not fit, float was written
+  float largestMagnitude = 0.0f;
 };
 
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
-void writeImage(const std::filesystem::path& path, const Image& image,
-                const WriteOptions& options = {});
+WriteReport writeImage(const std::filesystem::path& path, const Image& image,
+                       const WriteOptions& options = {});
+// Writes `image` as one of a set of outputs: into a temporary of `outputs`; it appears at `path`
+// when the caller commits the set.
+WriteReport writeImage(OutputFiles& outputs, const std::filesystem::path& path, const Image& image,
+                       const WriteOptions& options = {});
+
+// The largest value half float represents.
+inline constexpr float kHalfMax = 65504.0f;
 
 }  // namespace compose::ingest

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 
@@ -178,11 +179,19 @@ size_t ChebBase::floatsStored() const {
 }
 
 std::string ChebBase::parameterKey() const {
+  // Every parameter, and the internal constants of the integrators, that changes the numbers.
+  char constants[160];
+  std::snprintf(constants, sizeof constants,
+                " leaf=%d piece=%.17g patch=%.17g cell-factor=%d view-table=%dx%d", kLeafLevel,
+                RadianceCells::kMaxPieceExtent, RadianceCells::kMaxPatchExtent,
+                RadianceCells::kFinestFactor, ChebLocalLighting::kViewThetas,
+                ChebLocalLighting::kViewPhis);
   return name_ + " order=" + std::to_string(params_.order) +
          " samples=" + std::to_string(params_.samples) +
          " rows=" + std::to_string(params_.normalRows) +
          " cols=" + std::to_string(params_.normalCols) +
-         " subsamples=" + std::to_string(params_.subsamples) + " version=1";
+         " subsamples=" + std::to_string(params_.subsamples) + " brdf=" + params_.brdf +
+         " sigma=" + std::to_string(params_.sigma) + constants;
 }
 
 bool ChebBase::exportState(std::vector<float>& out) const {
@@ -544,6 +553,8 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
   std::vector<float> cosBound(static_cast<size_t>(s));
   for (int i = 1; i <= s; ++i) cosBound[size_t(i - 1)] = float(std::cos(i * 0.5 * kPi / s));
   const float phiScale = float(s / (2.0 * kPi));
+  // Pieces are binned whole by their direction, so none may be wider than an altitude bin.
+  const float binExtent = float(0.5 * kPi / s);
   std::atomic<size_t> done{0};
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
@@ -571,7 +582,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
             cell[1] += value.y;
             cell[2] += value.z;
           },
-          kLeafLevel);
+          kLeafLevel, binExtent);
     }
     if (k == 1 && params_.brdf == "lambert") {
       for (int c = 0; c < 3; ++c)
@@ -603,11 +614,6 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
     e += w[q] * dot;
   }
   return e;
-}
-
-std::string ChebLocalLighting::parameterKey() const {
-  return ChebBase::parameterKey() + " brdf=" + params_.brdf +
-         " sigma=" + std::to_string(params_.sigma);
 }
 
 size_t ChebLocalLighting::floatsStored() const {

@@ -1,5 +1,5 @@
 // Lighting by 2D discrete Chebyshev (Tchebichef) moments, after Alnasser & Foroosh, "Image-Based
-// Rendering of Synthetic Diffuse Objects in Natural Scenes" (ICPR 2006), DESIGN.md §4.2.
+// Rendering of Synthetic Diffuse Objects in Natural Scenes" (ICPR 2006), docs/design.md §5.
 //
 // On an s x s grid of directions (i = altitude index, j = azimuth index) the outgoing radiance is
 //   L_o = Σ_i Σ_j L_in(i, j) f_c(i, j) = Σ_{m<s} Σ_{n<s} T^L_mn T^f_mn       (paper eq. 7)
@@ -128,7 +128,6 @@ class ChebLocalLighting final : public ChebBase {
   void project(const Environment& environment, const Progress& progress = {}) override;
   glm::vec3 irradiance(const glm::vec3& n) const override;
   glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& view) const override;
-  std::string parameterKey() const override;
   size_t floatsStored() const override;
 
   // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.

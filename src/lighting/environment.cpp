@@ -47,10 +47,11 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
                 "environment needs RGB channels, the image has " + std::to_string(image.channels),
                 file);
   }
-  if (image.height < 2 || image.width != 2 * image.height) {
+  if (image.height < 1 || image.width != 2 * image.height) {
     throw Error("lighting",
-                "not a lat-long (equirectangular) map: " + std::to_string(image.width) + "x" +
-                    std::to_string(image.height) + ", expected width = 2 x height",
+                "not a lat-long (equirectangular) map: it is " + std::to_string(image.width) + "x" +
+                    std::to_string(image.height) +
+                    ", and a lat-long map is twice as wide as it is high",
                 file);
   }
   Environment env;
@@ -88,7 +89,7 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
 }
 
 Environment Environment::constant(glm::vec3 value, int width) {
-  COMPOSE_CHECK(width >= 2 && width % 2 == 0);
+  COMPOSE_CHECK(width >= 2 && width % 2 == 0);  // 2x1 is the smallest lat-long map
   Environment env;
   env.width_ = width;
   env.height_ = width / 2;

@@ -12,7 +12,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'L', 'I', 'T', '1'};
+constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'L', 'I', 'T', '2'};
 
 // Two independent 64-bit hashes (FNV-1a and a multiply-xorshift mix) over 32-bit words.
 struct Hash128 {
@@ -45,6 +45,7 @@ std::string LightingCache::key(const Environment& env, const DiffuseLighting& ba
     h.word(w);
   }
   h.bytes(basis.parameterKey());
+  h.word(uint32_t(kProjectionVersion));
   return h.hex();
 }
 

@@ -2,9 +2,14 @@
 // and the same basis parameters loads it instead of projecting again.
 //
 // The key is a 128-bit hash of the environment's radiance (every texel, bit for bit), its size,
-// and the basis' parameterKey(). Entries are single files named by the key, written atomically
-// (temporary file + rename); a file that is unreadable, truncated or does not match is ignored and
+// the basis' parameterKey() (every parameter and internal constant that changes the numbers), and
+// kProjectionVersion. Entries are single files named by the key, written atomically (temporary
+// file + rename); a file that is unreadable, truncated or does not match is ignored and
 // rewritten. Only bases whose exportState() returns true are cached.
+//
+// kProjectionVersion names the numbers a projection produces. Any change to how a cacheable basis
+// projects must bump it: tests/lighting/cache_version_test.cpp holds a fingerprint of a golden
+// projection for the current version and fails when the numbers move without a new version.
 #pragma once
 
 #include <filesystem>
@@ -16,6 +21,8 @@ namespace compose::lighting {
 
 class LightingCache {
  public:
+  static constexpr int kProjectionVersion = 3;
+
   explicit LightingCache(std::filesystem::path folder) : folder_(std::move(folder)) {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);

@@ -17,128 +17,164 @@ constexpr double kPi = std::numbers::pi;
 
 RadianceCells::RadianceCells(const Environment& env, int topFactor)
     : width_(env.width()), height_(env.height()) {
-  COMPOSE_CHECK(topFactor >= 2 && (topFactor & (topFactor - 1)) == 0);
+  COMPOSE_CHECK(topFactor >= kFinestFactor && (topFactor & (topFactor - 1)) == 0);
   const int w = width_, h = height_;
-  const size_t texels = size_t(w) * size_t(h);
-  texels_.resize(texels);
-  rows_.resize(size_t(h));
-  rowMoment_.resize(size_t(h));
-  rowOmega_.resize(size_t(h));
-  sinLon_.resize(size_t(w));
-  cosLon_.resize(size_t(w));
-  for (int x = 0; x < w; ++x) {
-    const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / w);
-    sinLon_[size_t(x)] = float(std::sin(lon));
-    cosLon_[size_t(x)] = float(std::cos(lon));
-  }
-  // Per texel, the exact vector moment m_t = ∫_texel ω dω of its lat-long cell, in closed form:
+  dLon_ = float(2.0 * kPi / w);
+  largeTexels_ =
+      kPi / h > kMaxPieceExtent * (1.0 + 1e-9) || 2.0 * kPi / w > kMaxPieceExtent * (1.0 + 1e-9);
+  radiance_ = env.texels();
+
+  // Per column and per row, the closed forms of the texel's vector moment m_t = ∫_texel ω dω:
   // with dω = cos λ dλ dφ, m = (∫sin φ dφ ∫cos²λ dλ, ∫dφ ∫sin λ cos λ dλ, ∫cos φ dφ ∫cos²λ dλ).
-  parallelFor(0, h, [&](int64_t yy) {
-    const int y = int(yy);
+  columns_.resize(size_t(w));
+  for (int x = 0; x < w; ++x) {
+    const double left = kPi * (1.0 - 2.0 * x / w), right = kPi * (1.0 - 2.0 * (x + 1) / w);
+    const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / w);
+    columns_[size_t(x)] =
+        Column{float(std::sin(lon)), float(std::cos(lon)), float(std::cos(right) - std::cos(left)),
+               float(std::sin(left) - std::sin(right))};
+  }
+  // Every point of a texel of row y lies within rowBound[y] of its centre (along the meridian,
+  // then along the parallel).
+  std::vector<double> rowBound(static_cast<size_t>(h));
+  rows_.resize(size_t(h));
+  for (int y = 0; y < h; ++y) {
     const double top = kPi * (0.5 - double(y) / h), bottom = kPi * (0.5 - double(y + 1) / h);
-    const double centreLat = kPi * (0.5 - (y + 0.5) / h);
-    rows_[size_t(y)] = Row{float(std::sin(centreLat)), float(std::cos(centreLat)),
-                           float(0.5 * kPi / h), float(kPi / w * std::cos(centreLat))};
+    const double lat = kPi * (0.5 - (y + 0.5) / h);
     const double cos2 =
         0.5 * (top - bottom) + 0.25 * (std::sin(2.0 * top) - std::sin(2.0 * bottom));
-    const double sincos =
+    const double sinCos =
         0.5 * (std::sin(top) * std::sin(top) - std::sin(bottom) * std::sin(bottom));
-    const double omega = env.rowSolidAngle(y);
-    rowOmega_[size_t(y)] = omega;
-    for (int x = 0; x < w; ++x) {
-      const double left = kPi * (1.0 - 2.0 * x / w), right = kPi * (1.0 - 2.0 * (x + 1) / w);
-      const glm::dvec3 m((std::cos(right) - std::cos(left)) * cos2, (left - right) * sincos,
-                         (std::sin(left) - std::sin(right)) * cos2);
-      const double len = glm::length(m);
-      const size_t t = size_t(y) * size_t(w) + size_t(x);
-      const glm::dvec3 L(env.radiance(x, y));
-      if (x == 0) rowMoment_[size_t(y)] = len;
-      texels_[t] =
-          Texel{env.direction(x, y), glm::vec3(m / len), glm::vec3(L * len), glm::vec3(L * omega)};
-    }
-  });
-  // Every point of a texel lies within half its angular diagonal of its centre.
-  const double halfDiagonal = 0.5 * std::hypot(kPi / h, 2.0 * kPi / w);
+    rows_[size_t(y)] = Row{float(std::sin(lat)),
+                           float(std::cos(lat)),
+                           float(0.5 * kPi / h),
+                           float(kPi / w * std::cos(lat)),
+                           float(env.rowSolidAngle(y)),
+                           float(cos2),
+                           float(sinCos)};
+    const double maxCos =
+        (top >= 0.0 && bottom <= 0.0) ? 1.0 : std::max(std::cos(top), std::cos(bottom));
+    rowBound[size_t(y)] = 0.5 * kPi / h + kPi / w * maxCos;
+  }
 
-  levels_.resize(1);
-  levels_[0].width = w;  // level 0 is the texels themselves (their data lives below)
-  levels_[0].height = h;
-  for (int size = 2; size <= topFactor; size *= 2) {
+  // Construction-time extras per cell of the level below: solid angle, ∫ω dω, cone half-angle.
+  std::vector<double> omega, childOmega;
+  std::vector<glm::dvec3> geometric, childGeometric;
+  std::vector<double> radius, childRadius;
+  auto finish = [&](Cell& cell, const glm::dvec3& geo, double om, double rad, int x0, int y0,
+                    int x1, int y1) {
+    cell.sinRadius = rad >= 0.5 * kPi ? 2.0f : float(std::sin(rad));
+    const glm::dvec3 total = glm::dvec3(cell.moment[0] + cell.moment[1] + cell.moment[2]);
+    const double totalLen = glm::length(total);
+    cell.centroid = totalLen > 0.0 ? glm::vec3(total / totalLen) : cell.axis;
+    cell.meanDirection = glm::vec3(geo / om);
+    const double midLat = kPi * (0.5 - 0.5 * (y0 + y1) / double(h));
+    cell.halfExtent =
+        glm::vec2(float(0.5 * kPi * (y1 - y0) / h), float(kPi * (x1 - x0) / w * std::cos(midLat)));
+  };
+  auto axisOf = [](const glm::dvec3& geo) {
+    const double len = glm::length(geo);
+    return len > 1e-12 ? geo / len : glm::dvec3(0.0, 1.0, 0.0);
+  };
+
+  for (int factor = kFinestFactor; factor <= topFactor; factor *= 2) {
     Level level;
-    level.width = (w + size - 1) / size;
-    level.height = (h + size - 1) / size;
-    const size_t cells = size_t(level.width) * size_t(level.height);
-    level.axisX.resize(cells);
-    level.axisY.resize(cells);
-    level.axisZ.resize(cells);
-    level.sinRadius.resize(cells);
-    for (auto& m : level.moment) m.resize(cells);
-    level.centroid.resize(cells);
-    level.power.resize(cells);
-    level.halfExtent.resize(cells);
-    level.meanDirection.resize(cells);
-    parallelFor(0, int64_t(cells), [&](int64_t ii) {
+    level.factor = factor;
+    level.width = (w + factor - 1) / factor;
+    level.height = (h + factor - 1) / factor;
+    const size_t count = size_t(level.width) * size_t(level.height);
+    level.cells.resize(count);
+    omega.assign(count, 0.0);
+    geometric.assign(count, glm::dvec3(0.0));
+    radius.assign(count, 0.0);
+    const bool fromTexels = factor == kFinestFactor;
+    const Level* finer = fromTexels ? nullptr : &levels_.back();
+    parallelFor(0, int64_t(count), [&](int64_t ii) {
       const size_t i = size_t(ii);
-      const int x0 = int(i % size_t(level.width)) * size, y0 = int(i / size_t(level.width)) * size;
-      const int x1 = std::min(x0 + size, w), y1 = std::min(y0 + size, h);
-      glm::dvec3 geometric(0.0);
-      double omega = 0.0;
-      glm::dvec3 axis(0.0), centroid(0.0), power(0.0),
-          moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
-      for (int y = y0; y < y1; ++y) {
-        for (int x = x0; x < x1; ++x) {
-          const size_t t = size_t(y) * size_t(w) + size_t(x);
-          const glm::dvec3 m = glm::dvec3(texels_[t].moment);
-          const glm::dvec3 lw(texels_[t].weighted);
-          power += glm::dvec3(texels_[t].power);
-          geometric += m * rowMoment_[size_t(y)];
-          omega += rowOmega_[size_t(y)];
-          axis += glm::dvec3(texels_[t].centre);
-          centroid += m * (lw.x + lw.y + lw.z);
-          for (int k = 0; k < 3; ++k) moment[k] += m * lw[k];
+      const int cx = int(i % size_t(level.width)), cy = int(i / size_t(level.width));
+      const int x0 = cx * factor, y0 = cy * factor;
+      const int x1 = std::min(x0 + factor, w), y1 = std::min(y0 + factor, h);
+      Cell& cell = level.cells[i];
+      glm::dvec3 power(0.0), moment[3] = {glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};
+      glm::dvec3 geo(0.0);
+      double om = 0.0, rad = 0.0;
+      if (fromTexels) {
+        for (int y = y0; y < y1; ++y) {
+          const Row& row = rows_[size_t(y)];
+          for (int x = x0; x < x1; ++x) {
+            const Column& col = columns_[size_t(x)];
+            const glm::dvec3 m(double(col.dCos) * row.cos2, double(dLon_) * row.sinCos,
+                               double(col.dSin) * row.cos2);
+            const float* L = radiance_.data() + 3 * (size_t(y) * size_t(w) + size_t(x));
+            for (int k = 0; k < 3; ++k) {
+              moment[k] += m * double(L[k]);
+              power[k] += double(L[k]) * row.omega;
+            }
+            geo += m;
+            om += row.omega;
+          }
         }
-      }
-      const double axisLen = glm::length(axis);
-      const glm::dvec3 a = axisLen > 0.0 ? axis / axisLen : glm::dvec3(0, 1, 0);
-      double minCos = 1.0;
-      for (int y = y0; y < y1; ++y) {
-        for (int x = x0; x < x1; ++x) {
-          minCos = std::min(
-              minCos, glm::dot(glm::dvec3(texels_[size_t(y) * size_t(w) + size_t(x)].centre), a));
+        const glm::dvec3 a = axisOf(geo);
+        for (int y = y0; y < y1; ++y) {
+          const Row& row = rows_[size_t(y)];
+          for (int x = x0; x < x1; ++x) {
+            const Column& col = columns_[size_t(x)];
+            const glm::dvec3 c(col.sinLon * row.cosLat, row.sinLat, col.cosLon * row.cosLat);
+            const double angle = std::acos(std::clamp(glm::dot(glm::normalize(c), a), -1.0, 1.0));
+            rad = std::max(rad, angle + rowBound[size_t(y)]);
+          }
         }
+        cell.axis = glm::vec3(a);
+      } else {
+        const int c1x = std::min(2 * cx + 2, finer->width),
+                  c1y = std::min(2 * cy + 2, finer->height);
+        for (int y = 2 * cy; y < c1y; ++y) {
+          for (int x = 2 * cx; x < c1x; ++x) {
+            const size_t c = size_t(y) * size_t(finer->width) + size_t(x);
+            const Cell& child = finer->cells[c];
+            for (int k = 0; k < 3; ++k) moment[k] += glm::dvec3(child.moment[k]);
+            power += glm::dvec3(child.power);
+            geo += childGeometric[c];
+            om += childOmega[c];
+          }
+        }
+        const glm::dvec3 a = axisOf(geo);
+        for (int y = 2 * cy; y < c1y; ++y) {
+          for (int x = 2 * cx; x < c1x; ++x) {
+            const size_t c = size_t(y) * size_t(finer->width) + size_t(x);
+            const double angle =
+                std::acos(std::clamp(glm::dot(glm::dvec3(finer->cells[c].axis), a), -1.0, 1.0));
+            rad = std::max(rad, angle + childRadius[c]);
+          }
+        }
+        cell.axis = glm::vec3(a);
       }
-      // Pad by 1e-5 rad so that float rounding in the horizon test cannot misclassify a texel; a
-      // cone wider than a hemisphere is always split.
-      const double radius = std::acos(std::clamp(minCos, -1.0, 1.0)) + halfDiagonal + 1e-5;
-      level.axisX[i] = float(a.x);
-      level.axisY[i] = float(a.y);
-      level.axisZ[i] = float(a.z);
-      level.sinRadius[i] = radius >= 0.5 * kPi ? 2.0f : float(std::sin(radius));
-      const double centroidLen = glm::length(centroid);
-      level.centroid[i] = glm::vec3(centroidLen > 0.0 ? centroid / centroidLen : a);
-      level.power[i] = glm::vec3(power);
-      level.meanDirection[i] = glm::vec3(geometric / omega);
-      const double midLat = kPi * (0.5 - 0.5 * (y0 + y1) / double(h));
-      level.halfExtent[i] = glm::vec2(float(0.5 * kPi * (y1 - y0) / h),
-                                      float(kPi * (x1 - x0) / w * std::cos(midLat)));
-      for (int k = 0; k < 3; ++k) {
-        level.moment[3 * k][i] = float(moment[k].x);
-        level.moment[3 * k + 1][i] = float(moment[k].y);
-        level.moment[3 * k + 2][i] = float(moment[k].z);
-      }
+      for (int k = 0; k < 3; ++k) cell.moment[k] = glm::vec3(moment[k]);
+      cell.power = glm::vec3(power);
+      // Pad by 1e-5 rad so that float rounding in the horizon test cannot misclassify a texel.
+      rad += 1e-5;
+      omega[i] = om;
+      geometric[i] = geo;
+      radius[i] = rad;
+      finish(cell, geo, om, rad, x0, y0, x1, y1);
     });
     levels_.push_back(std::move(level));
+    std::swap(omega, childOmega);
+    std::swap(geometric, childGeometric);
+    std::swap(radius, childRadius);
   }
 }
 
 size_t RadianceCells::cellCount() const {
   size_t n = 0;
-  for (const auto& l : levels_) n += l.axisX.size();
+  for (const auto& l : levels_) n += l.cells.size();
   return n;
 }
 
 size_t RadianceCells::floatsStored() const {
-  return cellCount() * 24 + texels_.size() * 12;
+  return cellCount() * (sizeof(Cell) / sizeof(float)) + radiance_.size() +
+         rows_.size() * (sizeof(Row) / sizeof(float)) +
+         columns_.size() * (sizeof(Column) / sizeof(float));
 }
 
 float RadianceCells::clippedMean(float c, float a, float b) {

@@ -1,27 +1,39 @@
 // RadianceCells: a multi-level view of an Environment for exact, fast cosine-weighted integrals.
 //
-// Each texel t is treated as what it is, the mean radiance L_t over its lat-long cell, and carries
-// the cell's exact vector moment m_t = ∫_cell ω dω. A texel wholly above the horizon of n adds
+// Each texel t is treated as what it is, the mean radiance L_t over its lat-long cell, with the
+// cell's exact vector moment m_t = ∫_cell ω dω. A texel wholly above the horizon of n adds
 // exactly ∫_cell L_t max(0, n·ω) dω = L_t (n·m_t). A texel that the horizon cuts adds the exact
 // integral of the cosine's linear model across the texel, clipped at the horizon (clippedMean):
 // the only approximation, second order, confined to a band of texels where the cosine is ~0.
 //
-// Texels are grouped into a pyramid of cells (2x2, 4x4, ... texels). Each cell keeps its vector
+// Texels are grouped into a pyramid of cells (4x4, 8x8, ... texels). Each cell keeps its vector
 // moment V = Σ L_t m_t (per channel) and a cone (axis, half-angle) containing every point of every
 // member texel. For a normal n, starting from the coarsest cells:
 //  * a cell whose cone lies entirely above n's horizon contributes n·V, with no further work;
 //  * a cell entirely below contributes nothing;
-//  * a cell the horizon cuts is split into its four children, down to single texels.
+//  * a cell the horizon cuts is split into its children, down to single texels.
 // The result equals the texel-by-texel sum up to rounding, at a small fraction of its cost (the
 // work follows the horizon's great circle). The exact reference and the local bases use it.
+//
+// Small maps: the clipped linear model is second order in the size of the piece it is applied
+// to, so it is only ever applied to pieces at most kMaxPieceExtent across (the texels of a
+// 256-wide map). A larger texel cut by the horizon is split into exact lat-long sub-rectangles
+// (same radiance, exact vector moments) until its pieces are that small, and a coarse cell is
+// only taken as a uniform patch (leafLevel) when it is at most kMaxPatchExtent across. The
+// white furnace then holds within 2e-6 at every map size from 2x1 up.
+//
+// Memory: 12 bytes per texel (its radiance; the geometry comes from per-row and per-column
+// tables) plus 96 bytes per 4x4 cell and coarser: about 20 bytes per texel in all.
 #pragma once
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <numbers>
 #include <vector>
 
+#include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
-
 #include <glm/vec3.hpp>
 
 #include "lighting/environment.h"
@@ -30,8 +42,15 @@ namespace compose::lighting {
 
 class RadianceCells {
  public:
+  // Largest angular extent (radians, along either axis) of a piece integrated with the clipped
+  // linear model, and of a coarse cell taken as a uniform patch.
+  static constexpr double kMaxPieceExtent = std::numbers::pi / 128.0;
+  static constexpr double kMaxPatchExtent = std::numbers::pi / 64.0;
+  // Texels per side of the finest cells.
+  static constexpr int kFinestFactor = 4;
+
   RadianceCells() = default;
-  // `topFactor`: texels per side of the top-level cells (a power of two).
+  // `topFactor`: texels per side of the top-level cells (a power of two, at least 4).
   explicit RadianceCells(const Environment& env, int topFactor = 32);
 
   // E(n) = Σ_t ∫_t L_t max(0, n·ω) dω, accumulated in double. `leafLevel` > 0 stops refining at
@@ -43,13 +62,17 @@ class RadianceCells {
   // Calls visit(direction, value) for pieces of the hemisphere above n whose values sum to E(n):
   // whole cells (direction: their power-weighted centroid) and texels along the horizon
   // (direction: their centre). `value` is the cosine-weighted integral over the piece (RGB).
+  // `maxExtent` (radians) opens cells and splits texels wider than that even where the horizon
+  // does not cut them, so that a caller who bins the pieces by direction (the local Chebyshev
+  // grid) never puts one wide piece into one bin.
   template <class Visit>
-  void forEachAbove(const glm::vec3& n, Visit&& visit, int leafLevel = 0) const {
+  void forEachAbove(const glm::vec3& n, Visit&& visit, int leafLevel = 0,
+                    float maxExtent = std::numeric_limits<float>::infinity()) const {
     const int top = int(levels_.size()) - 1;
     const Level& level = levels_[size_t(top)];
-    leafLevel = std::clamp(leafLevel, 0, top);
+    const Walk walk{1 << std::clamp(leafLevel, 0, 20), maxExtent};
     for (int cy = 0; cy < level.height; ++cy) {
-      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit, leafLevel);
+      for (int cx = 0; cx < level.width; ++cx) visitCell(top, cx, cy, n, visit, walk);
     }
   }
 
@@ -62,94 +85,169 @@ class RadianceCells {
   static float clippedMean(float c, float a, float b);
 
  private:
-  // One level of the pyramid: cells of 2^level x 2^level texels (clipped at the map's edges).
+  // One level of the pyramid: cells of factor x factor texels (clipped at the map's edges).
+  struct Cell {
+    glm::vec3 axis;
+    float sinRadius;          // sin of the cone's half-angle; 2 for a cone wider than a hemisphere
+    glm::vec3 moment[3];      // V per channel
+    glm::vec3 centroid;       // unit direction of Σ_channels V
+    glm::vec3 power;          // Σ L_t Ω_t
+    glm::vec3 meanDirection;  // ∫_cell ω dω / Ω_cell (not unit length)
+    glm::vec2 halfExtent;     // half height and half width of the cell, radians of arc
+  };
   struct Level {
-    int width = 0, height = 0;
-    std::vector<float> axisX, axisY, axisZ, sinRadius;
-    std::vector<float> moment[9];  // V: [3 * channel + axis][cell]
-    std::vector<glm::vec3> centroid;
-    std::vector<glm::vec3> power;          // Σ L_t Ω_t
-    std::vector<glm::vec2> halfExtent;     // half height and half width of the cell, radians of arc
-    std::vector<glm::vec3> meanDirection;  // ∫_cell ω dω / Ω_cell (not unit length)
+    int factor = 0, width = 0, height = 0;
+    std::vector<Cell> cells;
+  };
+
+  // How far a walk refines: cells of at most leafFactor texels per side may be taken as uniform
+  // patches on the horizon; pieces wider than maxExtent are always refined.
+  struct Walk {
+    int leafFactor;
+    float maxExtent;
   };
 
   template <class Visit>
-  void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit, int leafLevel) const {
-    if (level == 0) {
-      visitTexel(cx, cy, n, visit);
+  void visitCell(int level, int cx, int cy, const glm::vec3& n, Visit& visit,
+                 const Walk& walk) const {
+    const Level& L = levels_[size_t(level)];
+    const Cell& cell = L.cells[size_t(cy) * size_t(L.width) + size_t(cx)];
+    const float d = glm::dot(n, cell.axis);
+    const float extent = 2.0f * std::max(cell.halfExtent.x, cell.halfExtent.y);
+    if (d >= cell.sinRadius && extent <= walk.maxExtent) {
+      visit(cell.centroid, glm::vec3(glm::dot(n, cell.moment[0]), glm::dot(n, cell.moment[1]),
+                                     glm::dot(n, cell.moment[2])));
       return;
     }
-    const Level& L = levels_[size_t(level)];
-    const size_t i = size_t(cy) * size_t(L.width) + size_t(cx);
-    const float d = n.x * L.axisX[i] + n.y * L.axisY[i] + n.z * L.axisZ[i];
-    if (d >= L.sinRadius[i]) {
-      visit(L.centroid[i],
-            glm::vec3(n.x * L.moment[0][i] + n.y * L.moment[1][i] + n.z * L.moment[2][i],
-                      n.x * L.moment[3][i] + n.y * L.moment[4][i] + n.z * L.moment[5][i],
-                      n.x * L.moment[6][i] + n.y * L.moment[7][i] + n.z * L.moment[8][i]));
-    } else if (d > -L.sinRadius[i]) {
-      if (level == leafLevel) {
-        // The cell as one uniform patch: the linear model of n·ω across it, clipped.
-        const glm::vec3 a(L.axisX[i], L.axisY[i], L.axisZ[i]);
-        const float h = std::sqrt(a.x * a.x + a.z * a.z);
-        const glm::vec3 east = h > 1e-6f ? glm::vec3(a.z / h, 0.0f, -a.x / h) : glm::vec3(1, 0, 0);
-        // north = axis x east
-        const glm::vec3 nn(a.y * east.z - a.z * east.y, a.z * east.x - a.x * east.z,
-                           a.x * east.y - a.y * east.x);
-        const float alpha = L.halfExtent[i].x * (n.x * nn.x + n.y * nn.y + n.z * nn.z);
-        const float beta = L.halfExtent[i].y * (n.x * east.x + n.y * east.y + n.z * east.z);
-        // The model's centre value is the mean of n·ω over the cell under its true solid-angle
-        // density (n·∫ω dω / Ω), which removes the first-order error of the cos λ density.
-        const glm::vec3& md = L.meanDirection[i];
-        visit(a, L.power[i] * clippedMean(n.x * md.x + n.y * md.y + n.z * md.z, alpha, beta));
-        return;
-      }
-      const Level& child = levels_[size_t(level - 1)];
-      const int x1 = std::min(2 * cx + 2, child.width), y1 = std::min(2 * cy + 2, child.height);
-      for (int y = 2 * cy; y < y1; ++y) {
-        for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit, leafLevel);
-      }
+    if (d <= -cell.sinRadius) return;
+    if (d < cell.sinRadius && L.factor <= walk.leafFactor && extent <= float(kMaxPatchExtent) &&
+        extent <= walk.maxExtent) {
+      // The cell as one uniform patch: the linear model of n·ω across it, clipped.
+      const glm::vec3& a = cell.axis;
+      const float h = std::sqrt(a.x * a.x + a.z * a.z);
+      const glm::vec3 east = h > 1e-6f ? glm::vec3(a.z / h, 0.0f, -a.x / h) : glm::vec3(1, 0, 0);
+      const glm::vec3 north = glm::cross(a, east);
+      const float alpha = cell.halfExtent.x * glm::dot(n, north);
+      const float beta = cell.halfExtent.y * glm::dot(n, east);
+      // The model's centre value is the mean of n·ω over the cell under its true solid-angle
+      // density (n·∫ω dω / Ω), which removes the first-order error of the cos λ density.
+      visit(a, cell.power * clippedMean(glm::dot(n, cell.meanDirection), alpha, beta));
+      return;
     }
+    if (level == 0) {
+      const int x0 = cx * L.factor, y0 = cy * L.factor;
+      const int x1 = std::min(x0 + L.factor, width_), y1 = std::min(y0 + L.factor, height_);
+      for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) visitTexel(x, y, n, visit, walk);
+      return;
+    }
+    const Level& child = levels_[size_t(level - 1)];
+    const int x1 = std::min(2 * cx + 2, child.width), y1 = std::min(2 * cy + 2, child.height);
+    for (int y = 2 * cy; y < y1; ++y)
+      for (int x = 2 * cx; x < x1; ++x) visitCell(level - 1, x, y, n, visit, walk);
   }
 
   template <class Visit>
-  void visitTexel(int x, int y, const glm::vec3& n, Visit& visit) const {
+  void visitTexel(int x, int y, const glm::vec3& n, Visit& visit, const Walk& walk) const {
     const Row& row = rows_[size_t(y)];
-    const Texel& tx = texels_[size_t(y) * size_t(width_) + size_t(x)];
-    const glm::vec3& w = tx.centre;
-    const float centre = n.x * w.x + n.y * w.y + n.z * w.z;
-    const float sinLon = sinLon_[size_t(x)], cosLon = cosLon_[size_t(x)];
+    const Column& col = columns_[size_t(x)];
+    const float* L = radiance_.data() + 3 * (size_t(y) * size_t(width_) + size_t(x));
+    const glm::vec3 radiance(L[0], L[1], L[2]);
+    if (largeTexels_ || 2.0f * std::max(row.halfHeight, row.halfWidth) > walk.maxExtent) {
+      // Texels larger than a clipped-model piece: exact sub-rectangles (see the header comment).
+      constexpr double kPi = std::numbers::pi;
+      const double top = kPi * (0.5 - double(y) / height_);
+      const double bottom = kPi * (0.5 - double(y + 1) / height_);
+      const double left = kPi * (1.0 - 2.0 * (x + 1) / width_);
+      const double right = kPi * (1.0 - 2.0 * x / width_);
+      visitPiece(bottom, top, left, right, glm::dvec3(radiance), glm::dvec3(n), visit,
+                 std::min(double(walk.maxExtent), 1e3));
+      return;
+    }
+    const glm::vec3 w(col.sinLon * row.cosLat, row.sinLat, col.cosLon * row.cosLat);
+    const float centre = glm::dot(n, w);
     // Half-ranges of n·ω across the texel along its north and east extents.
     const float alpha =
-        row.halfHeight * (n.y * row.cosLat - (n.x * sinLon + n.z * cosLon) * row.sinLat);
-    const float beta = row.halfWidth * (n.x * cosLon - n.z * sinLon);
+        row.halfHeight * (n.y * row.cosLat - (n.x * col.sinLon + n.z * col.cosLon) * row.sinLat);
+    const float beta = row.halfWidth * (n.x * col.cosLon - n.z * col.sinLon);
     const float spread = std::abs(alpha) + std::abs(beta);
     if (centre >= spread) {
-      const glm::vec3& m = tx.moment;
-      visit(w, tx.weighted * (n.x * m.x + n.y * m.y + n.z * m.z));
+      const glm::vec3 m(col.dCos * row.cos2, dLon_ * row.sinCos, col.dSin * row.cos2);
+      visit(w, radiance * glm::dot(n, m));
     } else if (centre > -spread) {
-      visit(w, tx.power * clippedMean(centre, alpha, beta));
+      visit(w, radiance * (row.omega * clippedMean(centre, alpha, beta)));
     }
   }
 
+  // The lat-long rectangle [lat0, lat1] x [lon0, lon1] of uniform `radiance`: whole above or
+  // below n's horizon by its enclosing cone, by the clipped linear model once it is at most
+  // kMaxPieceExtent across, else split.
+  template <class Visit>
+  void visitPiece(double lat0, double lat1, double lon0, double lon1, const glm::dvec3& radiance,
+                  const glm::dvec3& n, Visit& visit, double maxExtent) const {
+    const double latMid = 0.5 * (lat0 + lat1), lonMid = 0.5 * (lon0 + lon1);
+    const glm::dvec3 centre(std::sin(lonMid) * std::cos(latMid), std::sin(latMid),
+                            std::cos(lonMid) * std::cos(latMid));
+    // Every point is within (half the latitude extent) + (half the longitude extent times the
+    // largest cos latitude) of the centre: along the meridian, then along the parallel.
+    const double maxCos =
+        (lat0 <= 0.0 && lat1 >= 0.0) ? 1.0 : std::max(std::cos(lat0), std::cos(lat1));
+    const double radius = 0.5 * (lat1 - lat0) + 0.5 * (lon1 - lon0) * maxCos + 1e-9;
+    const double d = glm::dot(n, centre);
+    const double c2 = 0.5 * (lat1 - lat0) + 0.25 * (std::sin(2.0 * lat1) - std::sin(2.0 * lat0));
+    const glm::dvec3 moment(
+        (std::cos(lon0) - std::cos(lon1)) * c2,
+        (lon1 - lon0) * 0.5 * (std::sin(lat1) * std::sin(lat1) - std::sin(lat0) * std::sin(lat0)),
+        (std::sin(lon1) - std::sin(lon0)) * c2);
+    constexpr double kHalfPi = 0.5 * std::numbers::pi;
+    const double height = lat1 - lat0, width = (lon1 - lon0) * maxCos;
+    const bool small = height <= maxExtent && width <= maxExtent;
+    if (radius < kHalfPi && d >= std::sin(radius) && small) {
+      visit(glm::vec3(centre), glm::vec3(radiance * glm::dot(n, moment)));
+      return;
+    }
+    if (radius < kHalfPi && d <= -std::sin(radius)) return;
+    const double limit = std::min(maxExtent, kMaxPieceExtent);
+    if (height <= limit && width <= limit) {
+      const double omega = (lon1 - lon0) * (std::sin(lat1) - std::sin(lat0));
+      const glm::dvec3 north(-std::sin(lonMid) * std::sin(latMid), std::cos(latMid),
+                             -std::cos(lonMid) * std::sin(latMid));
+      const glm::dvec3 east(std::cos(lonMid), 0.0, -std::sin(lonMid));
+      const float alpha = float(0.5 * height * glm::dot(n, north));
+      const float beta = float(0.5 * (lon1 - lon0) * std::cos(latMid) * glm::dot(n, east));
+      const float mean = float(glm::dot(n, moment) / omega);
+      visit(glm::vec3(centre), glm::vec3(radiance * (omega * clippedMean(mean, alpha, beta))));
+      return;
+    }
+    // Split what is too wide for the clipped model (on the horizon) or for the caller's bins.
+    const bool above = radius < kHalfPi && d >= std::sin(radius);
+    const double target = above ? maxExtent : limit;
+    const bool splitLat = height > target, splitLon = width > target;
+    const double lat[3] = {lat0, splitLat ? latMid : lat1, lat1};
+    const double lon[3] = {lon0, splitLon ? lonMid : lon1, lon1};
+    for (int i = 0; i < (splitLat ? 2 : 1); ++i)
+      for (int j = 0; j < (splitLon ? 2 : 1); ++j)
+        visitPiece(lat[i], lat[i + 1], lon[j], lon[j + 1], radiance, n, visit, maxExtent);
+  }
+
+  // Per row: the centre latitude's sine and cosine, half extents in radians of arc, the solid
+  // angle of its texels, and the latitude integrals of the vector moment (∫cos²λ dλ and
+  // ∫sin λ cos λ dλ over the row).
   struct Row {
-    float sinLat, cosLat, halfHeight,
-        halfWidth;  // at the texel centre; half extents in radians of arc
+    float sinLat, cosLat, halfHeight, halfWidth, omega, cos2, sinCos;
+  };
+  // Per column: the centre longitude's sine and cosine, and the longitude integrals of the
+  // vector moment (∫sin φ dφ = dCos, ∫cos φ dφ = dSin over the column).
+  struct Column {
+    float sinLon, cosLon, dCos, dSin;
   };
   int width_ = 0, height_ = 0;
-  std::vector<Level> levels_;  // [0] is unused (texels are below), [1..] coarser and coarser
-  // Texels, one record each so that a texel along the horizon costs one cache line.
-  struct Texel {
-    glm::vec3 centre;    // centre direction
-    glm::vec3 moment;    // unit direction of the vector moment m_t
-    glm::vec3 weighted;  // L_t |m_t|
-    glm::vec3 power;     // L_t Ω_t
-  };
-  std::vector<Texel> texels_;
+  float dLon_ = 0.0f;
+  bool largeTexels_ = false;     // texels larger than kMaxPieceExtent: cut ones are split
+  std::vector<Level> levels_;    // finest (kFinestFactor) first
+  std::vector<float> radiance_;  // RGB per texel, row-major
   std::vector<Row> rows_;
-  std::vector<double> rowMoment_,
-      rowOmega_;  // per row: |m_t| and Ω_t (the same for every texel of a row)
-  std::vector<float> sinLon_, cosLon_;
+  std::vector<Column> columns_;
 };
 
 }  // namespace compose::lighting

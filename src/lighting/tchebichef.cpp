@@ -30,7 +30,7 @@ void validateSizeOrder(int size, int order) {
   }
 }
 
-// Derivation of the stable evaluation (DESIGN.md §4.1).
+// Derivation of the stable evaluation (docs/design.md §4).
 //
 // The textbook recurrence in n (tchebichefNaive) amplifies rounding error geometrically once n is
 // large, so each row is computed by the recurrence in x of Mukundan ("Some computational aspects

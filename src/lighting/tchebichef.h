@@ -1,5 +1,5 @@
 // Orthonormal discrete Tchebichef (Chebyshev) polynomials and the separable 2D moment transforms
-// built on them (DESIGN.md §4.1, §4.2).
+// built on them (docs/design.md §4, §5).
 //
 // For a size N ≥ 1, the polynomials t_0 .. t_{N-1} are defined on the integer grid x = 0 .. N-1 and
 // are orthonormal there:
@@ -13,7 +13,7 @@
 //     order; measured 6e-14 at N = 2048, 1.6e-13 at 4096, 3.5e-13 at 8192 (full checks) and
 //     3e-13 on a sample of row pairs at 16384 (tests/bench/tchebichef_bench.cpp). It does NOT use
 //     the textbook recurrence in n, which loses orthonormality from order ≈ 55 at N = 64
-//     (DESIGN.md §4.1); tchebichefNaive() keeps that recurrence only for comparison.
+//     (docs/design.md §4); tchebichefNaive() keeps that recurrence only for comparison.
 //   * Values too small for double (at the edges of very high orders at large N: t_{N−1}(0) is
 //     about 2^−N) come out as subnormals or 0.
 //   * Cost: O(N·K) time, K·N doubles plus K·N floats of memory. A full-order N = 16384 basis is
@@ -67,8 +67,8 @@ class TchebichefBasis {
   std::vector<float> matrixF_;
 };
 
-// The textbook three-term recurrence in n (Mukundan 2004, DESIGN.md §4.1), evaluated entirely in T
-// (double or float). Kept for comparison and benchmarks only: it is numerically unstable at high
+// The textbook three-term recurrence in n (Mukundan 2004, docs/design.md §4), evaluated entirely in
+// T (double or float). Kept for comparison and benchmarks only: it is numerically unstable at high
 // order. Returns K×N row-major. Throws std::invalid_argument on the same conditions as
 // TchebichefBasis.
 template <class T>
@@ -84,7 +84,7 @@ double orthonormalityError(std::span<const double> m, int order, int size);
 double orthonormalityError(std::span<const float> m, int order, int size);
 
 // ---------------------------------------------------------------------------------------------
-// Separable 2D moments (DESIGN.md §4.2, paper eq. 3)
+// Separable 2D moments (docs/design.md §5, paper eq. 3)
 //
 // An image f has rows×cols samples, row-major, with rows = rowBasis.size() and
 // cols = colBasis.size(). Its order-K moments are the K×K matrix (row-major)

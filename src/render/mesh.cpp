@@ -1,14 +1,22 @@
 #include "render/mesh.h"
 
 #include <algorithm>
+#include <array>
+#include <cerrno>
+#include <charconv>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <limits>
+#include <string_view>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <tiny_obj_loader.h>
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/output_files.h"
 
 namespace compose::render {
 
@@ -53,7 +61,74 @@ void computeVertexNormals(Mesh& mesh) {
 
 namespace {
 
+// tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so. This pass
+// over the text finds them first and names the line: every field of v, vn and vt must be a
+// finite number, and every corner of f an integer reference.
+void checkObjNumbers(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  std::string line;
+  size_t lineNo = 0;
+  auto fail = [&](const std::string& what) {
+    throw Error("mesh", "line " + std::to_string(lineNo) + ": " + what, path);
+  };
+  std::vector<std::string_view> fields;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    fields.clear();
+    for (size_t i = 0; i < line.size();) {
+      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      size_t j = i;
+      while (j < line.size() && !std::isspace(static_cast<unsigned char>(line[j]))) ++j;
+      if (j > i) fields.emplace_back(line.data() + i, j - i);
+      i = j;
+    }
+    if (fields.empty() || fields[0].front() == '#') continue;
+    const std::string_view key = fields[0];
+    if (key == "v" || key == "vn" || key == "vt") {
+      const size_t needed = key == "vt" ? 1 : 3;
+      if (fields.size() < needed + 1) {
+        fail("'" + std::string(key) + "' needs " + std::to_string(needed) + " numbers, has " +
+             std::to_string(fields.size() - 1));
+      }
+      for (size_t f = 1; f < fields.size(); ++f) {
+        const std::string text(fields[f]);
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end != text.c_str() + text.size() || !std::isfinite(v)) {
+          fail(std::string(key == "v"    ? "vertex coordinate"
+                           : key == "vn" ? "normal component"
+                                         : "texture coordinate") +
+               " '" + text + "' is not a finite number");
+        }
+      }
+    } else if (key == "f") {
+      if (fields.size() < 4) fail("a face needs at least 3 corners");
+      for (size_t f = 1; f < fields.size(); ++f) {
+        // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
+        const std::string_view corner = fields[f];
+        size_t start = 0;
+        for (int part = 0; part < 3 && start <= corner.size(); ++part) {
+          const size_t slash = std::min(corner.find('/', start), corner.size());
+          const std::string_view number = corner.substr(start, slash - start);
+          if (!(number.empty() && part > 0)) {
+            long value = 0;
+            const auto [ptr, ec] =
+                std::from_chars(number.data(), number.data() + number.size(), value);
+            if (ec != std::errc() || ptr != number.data() + number.size() || value == 0) {
+              fail("face corner '" + std::string(corner) + "' is not a valid vertex reference");
+            }
+          }
+          if (slash == corner.size()) break;
+          start = slash + 1;
+        }
+      }
+    }
+  }
+}
+
 Mesh loadObj(const fs::path& path) {
+  checkObjNumbers(path);
   tinyobj::ObjReaderConfig config;
   config.triangulate = true;
   config.vertex_color = false;
@@ -116,6 +191,71 @@ Mesh loadObj(const fs::path& path) {
   return mesh;
 }
 
+// Drops triangles that cannot render: degenerate ones (zero area, or a repeated corner) and
+// duplicates (the same three positions as an earlier triangle, in any order or winding), with a
+// warning that counts them. Unused vertices are left in place (they cost nothing to render).
+void dropUnrenderableTriangles(Mesh& mesh, const fs::path& path) {
+  const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
+  const float size = std::max({extent.x, extent.y, extent.z});
+  // Area below (1e-7 of the object's size)² is rounding noise in float coordinates.
+  const float minDoubleArea = 1e-14f * size * size;
+  // Positions by value, so that vertices split by normals still count as one position.
+  std::unordered_map<uint64_t, uint32_t> positionIds;
+  std::vector<uint32_t> positionId(mesh.positions.size());
+  for (size_t i = 0; i < mesh.positions.size(); ++i) {
+    const glm::vec3& p = mesh.positions[i];
+    uint32_t bits[3];
+    std::memcpy(bits, &p, sizeof bits);
+    const uint64_t key = (uint64_t(bits[0]) * 0x9E3779B97F4A7C15ull) ^
+                         (uint64_t(bits[1]) * 0xC2B2AE3D27D4EB4Full) ^ uint64_t(bits[2]);
+    // Hash collisions only merge keys; equality is checked below through the ids' positions.
+    auto [it, inserted] = positionIds.try_emplace(key, uint32_t(i));
+    positionId[i] = (inserted || mesh.positions[it->second] == p) ? it->second : uint32_t(i);
+  }
+  struct TripleHash {
+    size_t operator()(const std::array<uint32_t, 3>& t) const {
+      return (size_t(t[0]) * 73856093u) ^ (size_t(t[1]) * 19349663u) ^ (size_t(t[2]) * 83492791u);
+    }
+  };
+  std::unordered_set<std::array<uint32_t, 3>, TripleHash> seen;
+  std::vector<uint32_t> kept;
+  kept.reserve(mesh.indices.size());
+  size_t degenerate = 0, duplicate = 0;
+  for (size_t t = 0; t < mesh.indices.size(); t += 3) {
+    const uint32_t* v = &mesh.indices[t];
+    std::array<uint32_t, 3> ids = {positionId[v[0]], positionId[v[1]], positionId[v[2]]};
+    const glm::vec3 n = glm::cross(mesh.positions[v[1]] - mesh.positions[v[0]],
+                                   mesh.positions[v[2]] - mesh.positions[v[0]]);
+    if (ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] ||
+        !(glm::length(n) > minDoubleArea)) {
+      ++degenerate;
+      continue;
+    }
+    std::sort(ids.begin(), ids.end());
+    if (!seen.insert(ids).second) {
+      ++duplicate;
+      continue;
+    }
+    kept.insert(kept.end(), v, v + 3);
+  }
+  const size_t total = mesh.indices.size() / 3;
+  if (kept.empty()) {
+    throw Error("mesh",
+                "nothing renderable: all " + std::to_string(total) + " triangles are degenerate" +
+                    (duplicate ? " or duplicates" : ""),
+                path);
+  }
+  if (degenerate) {
+    mesh.warnings.push_back("dropped " + std::to_string(degenerate) + " of " +
+                            std::to_string(total) + " triangles with no area");
+  }
+  if (duplicate) {
+    mesh.warnings.push_back("dropped " + std::to_string(duplicate) + " of " +
+                            std::to_string(total) + " triangles that repeat another one");
+  }
+  mesh.indices = std::move(kept);
+}
+
 void validate(Mesh& mesh, const fs::path& path) {
   if (mesh.indices.empty()) throw Error("mesh", "mesh has no triangles", path);
   for (size_t i = 0; i < mesh.positions.size(); ++i) {
@@ -128,6 +268,7 @@ void validate(Mesh& mesh, const fs::path& path) {
   if (!(std::max({extent.x, extent.y, extent.z}) > 0.0f)) {
     throw Error("mesh", "mesh has zero size (all vertices coincide)", path);
   }
+  dropUnrenderableTriangles(mesh, path);
   if (mesh.normalsFromFile) {
     for (size_t i = 0; i < mesh.normals.size(); ++i) {
       glm::vec3& n = mesh.normals[i];

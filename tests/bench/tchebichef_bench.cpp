@@ -35,7 +35,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// A basis "has broken down" once a Gram entry is off by more than this (DESIGN.md §4.1).
+// A basis "has broken down" once a Gram entry is off by more than this (docs/design.md §4).
 constexpr double kBrokenTol = 1e-6;
 // Largest N whose full K×K Gram matrix is checked.
 constexpr int kFullCheckMaxSize = 2048;

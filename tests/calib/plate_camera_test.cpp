@@ -79,7 +79,8 @@ TEST(PlateCamera, RejectsImpossiblePlacements) {
                        "--place must be within [0,1]");
   CameraOptions bad;
   bad.height = -1.0;
-  COMPOSE_EXPECT_ERROR(plateCamera(10, 10, {}, bad), "camera height must be positive");
+  COMPOSE_EXPECT_ERROR(plateCamera(10, 10, {}, bad), "--camera-height must be a positive");
+  EXPECT_THROW(bad.validate(), UsageError) << "an option out of range is a usage error (exit 2)";
 }
 
 }  // namespace

@@ -24,7 +24,7 @@ TEST(ColorConfig, BuiltinWorkingSpaceIsAcescg) {
   EXPECT_EQ(c.resolve("srgb_tx", "test"), "sRGB - Texture");
   EXPECT_EQ(c.resolve("lin_rec709", "test"), "Linear Rec.709 (sRGB)");
   EXPECT_EQ(c.defaultDisplay(), "sRGB");
-  EXPECT_EQ(c.defaultView("sRGB"), "Standard");
+  EXPECT_EQ(c.defaultView("sRGB"), "Soft Clip") << "the default view rolls highlights off";
 }
 
 TEST(ColorConfig, DecodesSrgbAndConvertsToAcescg) {
@@ -72,6 +72,37 @@ TEST(ColorConfig, DisplayTransformEncodesSrgbAndClips) {
                        "unknown view 'Filmic' for display 'sRGB'");
 }
 
+// Soft Clip: the same as Standard up to linear 0.8 (a plate decoded from sRGB keeps its look), a
+// shoulder above it (y = t + (1-t) u/(1+u), u = (x-t)/(1-t), t = 0.8) where Standard clips.
+TEST(ColorConfig, SoftClipViewRollsHighlightsOffAndKeepsTheRest) {
+  const ColorConfig c = ColorConfig::builtin();
+  const float in[] = {0.0f, 0.05f, 0.18f, 0.5f, 0.79f, 1.0f, 2.0f, 10.0f, 1000.0f};
+  Image img(9, 1, 3);
+  for (int i = 0; i < 9; ++i) img.at(i, 0)[0] = img.at(i, 0)[1] = img.at(i, 0)[2] = in[i];
+  img.colorSpace = "lin_rec709";
+  const Image soft = c.toDisplay(img, "sRGB", "Soft Clip");
+  const Image hard = c.toDisplay(img, "sRGB", "Standard");
+  auto encode = [](double v) {
+    return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+  };
+  auto shoulder = [](double x) {
+    const double t = 0.8, u = (x - t) / (1 - t);
+    return x <= t ? x : t + (1 - t) * u / (1 + u);
+  };
+  for (int i = 0; i < 9; ++i) {
+    const double got = soft.at(i, 0)[0];
+    if (in[i] <= 0.8f) {
+      // Identical to Standard below the knee: within float and 1e-5 log-offset rounding.
+      EXPECT_NEAR(got, hard.at(i, 0)[0], 2e-5) << "input " << in[i];
+    } else {
+      // The spline follows the shoulder within 0.001 in linear light.
+      EXPECT_NEAR(got, encode(shoulder(in[i])), 2e-3) << "input " << in[i];
+      EXPECT_LT(got, 1.0f) << "input " << in[i] << " must not clip";
+    }
+  }
+  EXPECT_LT(soft.at(6, 0)[0], soft.at(7, 0)[0]) << "monotonic: 2 shows darker than 10";
+}
+
 TEST(ColorConfig, UnknownSpaceListsTheValidOnes) {
   const ColorConfig c = ColorConfig::builtin();
   COMPOSE_EXPECT_ERROR(
@@ -106,6 +137,53 @@ TEST(ColorConfig, HonoursOcioEnvironmentVariable) {
   img.colorSpace = "sRGB";
   c.convert(img, c.workingSpace());
   EXPECT_NEAR(img.pixels[0], srgbToLinear(0.5), 1e-3);  // Blender's sRGB may be a LUT: 1e-3
+}
+
+}  // namespace
+}  // namespace compose::color
+
+namespace compose::color {
+namespace {
+
+void expectChromaticities(const std::optional<Chromaticities>& got, const Chromaticities& want) {
+  ASSERT_TRUE(got.has_value());
+  for (size_t i = 0; i < want.size(); ++i) EXPECT_NEAR((*got)[i], want[i], 1e-6) << "entry " << i;
+}
+
+TEST(Chromaticities, OfTheBuiltinSpacesThroughTheInterchangeRole) {
+  const ColorConfig c = ColorConfig::builtin();
+  expectChromaticities(c.chromaticities("ACEScg"), kAcesAp1Chromaticities);
+  expectChromaticities(c.chromaticities("lin_rec709"), kRec709Chromaticities);
+  expectChromaticities(c.chromaticities("ACES2065-1"), kAcesAp0Chromaticities);
+  EXPECT_FALSE(c.chromaticities("sRGB - Texture").has_value()) << "an encoded space is not linear";
+  EXPECT_FALSE(c.chromaticities("Raw").has_value());
+  EXPECT_EQ(c.spaceWithChromaticities(kAcesAp1Chromaticities), "ACEScg");
+  EXPECT_EQ(c.spaceWithChromaticities(kRec709Chromaticities), "Linear Rec.709 (sRGB)");
+  Chromaticities odd = kRec709Chromaticities;
+  odd[0] = 0.66;
+  EXPECT_EQ(c.spaceWithChromaticities(odd), "");
+}
+
+TEST(Chromaticities, OfAThirdPartyConfig) {
+  const auto file = pipeline::samplesDirectory() / "ocio" / "blender" / "config.ocio";
+  if (!std::filesystem::exists(file)) GTEST_FAIL() << "sample data missing: " << file;
+  const ColorConfig c = ColorConfig::fromFile(file);
+  expectChromaticities(c.chromaticities("Linear"), kRec709Chromaticities);
+  expectChromaticities(c.chromaticities("Linear ACEScg"), kAcesAp1Chromaticities);
+}
+
+TEST(Chromaticities, ConversionAgreesWithTheConfigsOwn) {
+  const ColorConfig c = ColorConfig::builtin();
+  Image a(2, 1, 3, {"R", "G", "B"});
+  const float px[6] = {0.2f, 0.5f, 0.9f, 3.0f, 0.01f, 0.4f};
+  std::copy(px, px + 6, a.pixels.begin());
+  a.colorSpace = "lin_rec709";
+  Image b = a;
+  c.convert(a, "ACEScg");
+  c.convertFromChromaticities(b, kRec709Chromaticities, "ACEScg");
+  EXPECT_EQ(b.colorSpace, "ACEScg");
+  // The config's matrix is printed to 7 digits: agreement to ~1e-6 relative.
+  for (size_t i = 0; i < 6; ++i) EXPECT_NEAR(a.pixels[i], b.pixels[i], 2e-6 * (1 + a.pixels[i]));
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <numbers>
 #include <sstream>
 
@@ -337,7 +338,7 @@ TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
                      " --lighting wavelets",
                  dir_.path());
-  EXPECT_EQ(r.status, 1);
+  EXPECT_EQ(r.status, 2) << "a misspelt command-line value is a usage error";
   EXPECT_NE(r.err.find("unknown lighting basis 'wavelets'; valid: cheb-local, cheb-latlong, "
                        "cheb-face, sh, mc, exact"),
             std::string::npos)
@@ -365,6 +366,183 @@ TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
       << r.err;
   EXPECT_EQ(slurp(dir_ / "x.exr"), "previous result");
   EXPECT_FALSE(fs::exists(dir_ / "x.jpg"));
+}
+
+}  // namespace
+}  // namespace compose
+
+// --- outputs that say what they are, appear together, and never hold Inf ---
+
+namespace compose {
+namespace {
+
+void writeExr(const fs::path& path, int w, int h, const std::function<void(float*, int, int)>& f) {
+  std::vector<float> px(size_t(w) * size_t(h) * 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) f(&px[(size_t(y) * size_t(w) + size_t(x)) * 3], x, y);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out->open(path.string(), OIIO::ImageSpec(w, h, 3, OIIO::TypeDesc::FLOAT)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+  out->close();
+}
+
+void writeGreyPlate(const fs::path& path, int w, int h, float encoded) {
+  std::vector<float> px(size_t(w) * size_t(h) * 3, encoded);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out->open(path.string(), OIIO::ImageSpec(w, h, 3, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+  out->close();
+}
+
+class ComposeOutputs : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    samples_ = pipeline::samplesDirectory();
+    if (!fs::exists(samples_ / "bunny.obj") || !fs::exists(samples_ / "forest.exr"))
+      GTEST_FAIL() << "sample data missing in " << samples_ << ": run samples/fetch.sh";
+    writeGreyPlate(dir_ / "input-plate.png", 320, 240, 0.5f);
+  }
+  std::string args(const std::string& out) const {
+    return "--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
+           quote((samples_ / "bunny.obj").string()) + " --samples 1 --no-cache --out " + quote(out);
+  }
+  fs::path samples_;
+  TempDir dir_;
+};
+
+TEST_F(ComposeOutputs, AFailedDisplayWriteKeepsThePreviousExr) {
+  compose::testing::writeText(dir_ / "x.exr", "previous result");
+  fs::create_directory(dir_ / "x.jpg");  // the JPEG cannot be written: a folder has its name
+  const auto r = runCompose(args((dir_ / "x").string()), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("x.jpg"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("is an existing folder"), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(dir_ / "x.exr"), "previous result") << "the old EXR must survive";
+  for (const auto& e : fs::directory_iterator(dir_.path()))
+    EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos)
+        << "temporary left behind: " << e.path();
+}
+
+TEST_F(ComposeOutputs, ExrSaysWhatColourSpaceItIsIn) {
+  const auto r = runCompose(args((dir_ / "c").string()), dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  auto in = OIIO::ImageInput::open((dir_ / "c.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec& spec = in->spec();
+  const OIIO::ParamValue* c = spec.find_attribute("chromaticities");
+  ASSERT_NE(c, nullptr) << "no chromaticities: every tool would read the EXR as Rec.709";
+  const float* xy = static_cast<const float*>(c->data());
+  // ACES AP1 (ACEScg), the built-in working space, and the ACES white.
+  const float ap1[8] = {0.713f, 0.293f, 0.165f, 0.830f, 0.128f, 0.044f, 0.32168f, 0.33767f};
+  for (int i = 0; i < 8; ++i) EXPECT_NEAR(xy[i], ap1[i], 1e-6) << "entry " << i;
+  EXPECT_EQ(spec.get_string_attribute("colorSpace"), "ACEScg");
+}
+
+TEST_F(ComposeOutputs, OutEndingInASlashWritesIntoThatFolder) {
+  const auto r = runCompose(args((dir_ / "results").string() + "/"), dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir_ / "results" / "compose.exr"));
+  EXPECT_TRUE(fs::exists(dir_ / "results" / "compose.jpg"));
+}
+
+TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
+  writeExr(dir_ / "input-bright.exr", 32, 16,
+           [](float* p, int, int) { p[0] = p[1] = p[2] = 1e30f; });
+  const auto r = runCompose(args((dir_ / "b").string()) + " --exposure 0 --env " +
+                                quote((dir_ / "input-bright.exr").string()),
+                            dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("exceed half float's range (65504): the EXR is written as 32-bit float"),
+            std::string::npos)
+      << r.err;
+  const Raster e = readRaster(dir_ / "b.exr");
+  const int objectR = e.channel("object.R");
+  double largest = 0.0;
+  for (int y = 0; y < e.height; ++y) {
+    for (int x = 0; x < e.width; ++x) {
+      for (int c = 0; c < e.channels; ++c) ASSERT_TRUE(std::isfinite(e.at(x, y, c)));
+      largest = std::max(largest, double(e.at(x, y, objectR)));
+    }
+  }
+  EXPECT_GT(largest, 1e28) << "the object's radiance is kept, not clamped";
+}
+
+TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
+  const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("render: the object covers no pixel of the plate"), std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "n.exr"));
+}
+
+// A studio: a dark backdrop fills the camera's view (-Z), a bright softbox hangs behind the
+// camera (+Z) and lights the object's front. Matching what lies in view would push the exposure
+// up by many stops and burn the object to a white silhouette; the grey-ball match must not.
+TEST_F(ComposeOutputs, AutoExposureFollowsTheLightOnTheObject) {
+  const int w = 256, h = 128;
+  writeExr(dir_ / "input-studio.exr", w, h, [&](float* p, int x, int y) {
+    const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / w), lat = kPi * (0.5 - (y + 0.5) / h);
+    const double dz = std::cos(lon) * std::cos(lat), dy = std::sin(lat);
+    // OpenEXR axes: the centre column looks along +Z, behind the camera.
+    const bool softbox = dz > 0.85 && dy > 0.1;
+    p[0] = p[1] = p[2] = softbox ? 40.0f : 0.01f;
+  });
+  const auto r = runCompose(
+      args((dir_ / "s").string()) + " --env " + quote((dir_ / "input-studio.exr").string()),
+      dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("clipped to white"), std::string::npos) << r.err;
+  const Raster e = readRaster(dir_ / "s.exr"), j = readRaster(dir_ / "s.jpg");
+  const int a = e.channel("object.A");
+  int64_t covered = 0, white = 0;
+  double sum = 0.0;
+  for (int y = 0; y < e.height; ++y) {
+    for (int x = 0; x < e.width; ++x) {
+      if (e.at(x, y, a) < 1.0f) continue;
+      ++covered;
+      const double v = (j.at(x, y, 0) + j.at(x, y, 1) + j.at(x, y, 2)) / 3.0;
+      sum += v;
+      if (v >= 254.5 / 255.0) ++white;
+    }
+  }
+  ASSERT_GT(covered, 500);
+  // The plate is mid-grey (sRGB 0.5): the clay object (albedo 0.5) sits near it, neither a white
+  // silhouette nor black.
+  EXPECT_LT(double(white) / double(covered), 0.02);
+  EXPECT_GT(sum / double(covered), 0.25);
+  EXPECT_LT(sum / double(covered), 0.95);
+}
+
+// Every out-of-range command-line value is a usage error (exit 2), reported before any file is
+// read: the plate named here does not exist, and the error is about the option, not the file.
+TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
+  TempDir dir;
+  const std::string base = "--plate /no/such/plate.jpg --object /no/such/mesh.obj --out " +
+                           quote((dir.path() / "x").string());
+  const std::pair<const char*, const char*> cases[] = {
+      {"--samples 0", "--samples must be in 1..64"},
+      {"--samples 65", "--samples must be in 1..64"},
+      {"--scale 0", "--scale must be in (0, 10]"},
+      {"--place 0.5,1.5", "--place must be within [0,1]"},
+      {"--place 0.5", "--place expects two numbers"},
+      {"--albedo 1.5", "--albedo must be within [0, 1]"},
+      {"--albedo 0.1,0.2", "--albedo expects one value or R,G,B"},
+      {"--exposure 100", "--exposure must be a number of stops within"},
+      {"--exposure bright", "--exposure expects a number"},
+      {"--pitch 95", "--pitch must be within"},
+      {"--camera-height -1", "--camera-height must be a positive"},
+      {"--focal35 0", "--focal35 must be a positive"},
+      {"--env-yaw inf", "--env-yaw must be a finite"},
+      {"--lighting wavelets", "unknown lighting basis 'wavelets'"},
+      {"--lighting-params order=99", "order k must be in"},
+      {"--lighting-params frobnicate=1", "does not take parameter(s): frobnicate"},
+  };
+  for (const auto& [option, message] : cases) {
+    const auto r = runCompose(base + " " + option, dir.path());
+    EXPECT_EQ(r.status, 2) << option << "\n" << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << option << "\n" << r.err;
+    EXPECT_EQ(r.err.find("file not found"), std::string::npos) << option << "\n" << r.err;
+  }
 }
 
 }  // namespace

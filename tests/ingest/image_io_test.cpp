@@ -99,3 +99,49 @@ TEST(ImageIo, FailedWriteLeavesNothingBehindAndKeepsTheOldFile) {
 
 }  // namespace
 }  // namespace compose::ingest
+
+namespace compose::ingest {
+namespace {
+
+TEST(ImageIo, ExrCarriesChromaticitiesAndTheColourSpaceName) {
+  TempDir dir;
+  Image img = gradient(4, 3, 3);
+  img.channelNames = {"R", "G", "B"};
+  img.colorSpace = "ACEScg";
+  WriteOptions opt;
+  opt.chromaticities =
+      std::array<double, 8>{0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767};
+  writeImage(dir / "a.exr", img, opt);
+  // Read by OpenImageIO directly: the standard attribute, as other tools see it.
+  auto in = OIIO::ImageInput::open((dir / "a.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ParamValue* c = in->spec().find_attribute("chromaticities");
+  ASSERT_NE(c, nullptr) << "no chromaticities attribute in the header";
+  EXPECT_EQ(c->type(), OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8));
+  in->close();
+  const LoadedImage back = readImage(dir / "a.exr");
+  ASSERT_TRUE(back.info.chromaticities.has_value());
+  for (size_t i = 0; i < 8; ++i)
+    EXPECT_NEAR((*back.info.chromaticities)[i], (*opt.chromaticities)[i], 1e-7);
+  EXPECT_EQ(back.info.fileColorSpace, "ACEScg");
+}
+
+TEST(ImageIo, ValuesBeyondHalfRangeAreWrittenAsFloatNotInf) {
+  TempDir dir;
+  Image img = gradient(4, 4, 3);
+  img.pixels[5] = 1e30f;
+  WriteOptions opt;
+  opt.depth = WriteOptions::Depth::Half;
+  const WriteReport report = writeImage(dir / "big.exr", img, opt);
+  EXPECT_TRUE(report.promotedToFloat);
+  EXPECT_EQ(report.largestMagnitude, 1e30f);
+  const LoadedImage back = readImage(dir / "big.exr");
+  EXPECT_EQ(back.image.pixels[5], 1e30f);
+  for (float v : back.image.pixels) EXPECT_TRUE(std::isfinite(v));
+  // Within range: half as asked.
+  img.pixels[5] = 60000.0f;
+  EXPECT_FALSE(writeImage(dir / "ok.exr", img, opt).promotedToFloat);
+}
+
+}  // namespace
+}  // namespace compose::ingest

@@ -1,5 +1,5 @@
 // Cross-check of the SH irradiance (lighting/sh.h) against Filament's `cmgen` (Debian package
-// libfilament-tools, 1.9.25+dfsg2 in bookworm) on the four sample HDRIs, as DESIGN.md §4.3 asks:
+// libfilament-tools, 1.9.25+dfsg2 in bookworm) on the four sample HDRIs, as docs/design.md §7 asks:
 // `cmgen --sh=3 --sh-window=no -i` must agree with ShLighting(2) within 1e-3 relative.
 //
 // cmgen's conventions, found by experiment (cones of radiance in known directions, an index map

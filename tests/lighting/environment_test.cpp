@@ -88,9 +88,20 @@ TEST(Environment, ClampsAndCountsNegativeRadiance) {
 TEST(Environment, RejectsMapsThatAreNotLatLong) {
   Image img(30, 20, 3);
   COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "cross.exr"),
-                       "not a lat-long (equirectangular) map: 30x20");
+                       "not a lat-long (equirectangular) map: it is 30x20, and a lat-long map is "
+                       "twice as wide as it is high");
   Image grey(32, 16, 1);
   COMPOSE_EXPECT_ERROR(Environment::fromLatLong(grey, "grey.exr"), "needs RGB channels");
+}
+
+TEST(Environment, TheSmallestLatLongMapIsTwoByOne) {
+  // Two texels, the western and the eastern half of the sphere: a valid map.
+  Image img(2, 1, 3);
+  img.at(0, 0)[0] = 1.0f;  // the left texel is the +X half (longitude 0..π)
+  const Environment env = Environment::fromLatLong(img);
+  EXPECT_EQ(env.width(), 2);
+  EXPECT_NEAR(env.rowSolidAngle(0), 2.0 * std::numbers::pi, 1e-12);
+  EXPECT_GT(env.direction(0, 0).x, 0.99f);
 }
 
 }  // namespace

@@ -27,7 +27,7 @@ constexpr double kReferenceRelTol = 1e-12;
 // The float copy is the double basis rounded to float: each value moves by ≤ 2^-24 relatively, so
 // by Cauchy–Schwarz each entry of T·Tᵀ moves by ≤ 2·2^-24 ≈ 1.2e-7. Twice that bound.
 constexpr double kFloatCopyOrthonormalTol = 0x1p-22;
-// "Has lost orthonormality": the threshold DESIGN.md §4.1 uses for the naive recurrence.
+// "Has lost orthonormality": the threshold docs/design.md §4 uses for the naive recurrence.
 constexpr double kBrokenTol = 1e-6;
 
 // Runs `f` and returns the message of the std::invalid_argument it throws ("" if none).
@@ -268,7 +268,7 @@ TEST(TchebichefBasis, LowerOrderIsPrefixOfFullOrder) {
   }
 }
 
-// DESIGN.md §4.1: the recurrence in n loses orthonormality near order 55 at N = 64.
+// docs/design.md §4: the recurrence in n loses orthonormality near order 55 at N = 64.
 TEST(TchebichefNaive, BreaksDownWhereStableBasisHolds) {
   constexpr int kN = 64;
   const std::vector<double> naive = tchebichefNaive<double>(kN, kN);

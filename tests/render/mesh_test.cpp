@@ -53,13 +53,53 @@ TEST(Mesh, ErrorsNameTheFileAndTheProblem) {
   writeText(dir / "empty.obj", "# nothing\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "empty.obj"), "mesh has no triangles (");
   writeText(dir / "nan.obj", "v 0 0 0\nv 1e999 0 0\nv 0 1 0\nf 1 2 3\n");  // overflows to inf
-  COMPOSE_EXPECT_ERROR(loadMesh(dir / "nan.obj"), "vertex 2 has a non-finite coordinate");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "nan.obj"),
+                       "line 2: vertex coordinate '1e999' is not a finite");
   writeText(dir / "point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "point.obj"), "zero size");
   writeText(dir / "zeron.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nf 1//1 2//1 3//1\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "zeron.obj"), "normal of vertex 1 is zero");
   writeText(dir / "model.stl", "solid x\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "model.stl"), "unsupported mesh format '.stl'");
+}
+
+TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
+  TempDir dir;
+  // tinyobjloader alone reads each of these as 0 and renders wrong geometry.
+  const std::pair<const char*, const char*> cases[] = {
+      {"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2: vertex coordinate 'nan'"},
+      {"v 0 0 0\nv 1 0 0\n\nv 0 inf 0\nf 1 2 3\n", "line 4: vertex coordinate 'inf'"},
+      {"v 0 0 0\nv 1 0 abc\nv 0 1 0\nf 1 2 3\n", "line 2: vertex coordinate 'abc'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1x\nf 1//1 2//1 3//1\n", "line 4: normal component '1x'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1\nf 1 2 3\n", "line 3: 'v' needs 3 numbers, has 2"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 two 3\n", "line 4: face corner 'two'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "line 4: face corner '0'"},
+  };
+  for (const auto& [text, message] : cases) {
+    writeText(dir / "bad.obj", text);
+    COMPOSE_EXPECT_ERROR(loadMesh(dir / "bad.obj"), message);
+  }
+  // Valid forms still load: exponents, signs, relative indices, v/vt/vn corners.
+  writeText(dir / "ok.obj",
+            "v 0 0 0\nv 1e0 -0 +0\nv 0 1.0E+0 0\nvt 0 0\nvn 0 0 1\nf -3/1/1 -2/1/1 -1/1/1\n");
+  EXPECT_EQ(loadMesh(dir / "ok.obj").triangleCount(), 1u);
+}
+
+TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
+  TempDir dir;
+  // One good triangle, one with a repeated corner, one with three collinear corners, one
+  // repeating the first in another winding.
+  writeText(dir / "m.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\n"
+            "f 1 2 3\nf 1 1 2\nf 1 2 4\nf 3 2 1\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  EXPECT_EQ(m.triangleCount(), 1u);
+  ASSERT_EQ(m.warnings.size(), 2u);
+  EXPECT_EQ(m.warnings[0], "dropped 2 of 4 triangles with no area");
+  EXPECT_EQ(m.warnings[1], "dropped 1 of 4 triangles that repeat another one");
+  writeText(dir / "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "flat.obj"),
+                       "nothing renderable: all 2 triangles are degenerate");
 }
 
 }  // namespace
