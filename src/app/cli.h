@@ -63,6 +63,8 @@ Runner setupStitch(CLI::App& command, const Globals& globals);
 glm::dvec2 parsePair(const std::string& text, const std::string& option);
 // "V" or "R,G,B" → three numbers; throws UsageError naming `option`.
 glm::vec3 parseColour(const std::string& text, const std::string& option);
+// "X,Y,Z" → three finite numbers; throws UsageError naming `option`.
+glm::dvec3 parseTriple(const std::string& text, const std::string& option);
 // A number, or throws UsageError naming `option`.
 double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");

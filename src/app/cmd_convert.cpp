@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "app/cli.h"
+#include "color/color.h"
 #include "core/error.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
@@ -16,7 +17,7 @@ namespace {
 
 struct ConvertOptions {
   std::vector<std::string> inputs;
-  std::string to, from, out, depth = "float", faceNames = "pxnx";
+  std::string to, from, out, depth = "float", faceNames = "pxnx", photoSpace, outSpace;
   int size = 0, width = 0;
   double blindSpot = 10.0;
 };
@@ -73,6 +74,12 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--face-names", o->faceNames,
                  "Names of face files: pxnx, posneg, exr (+X ...), words")
       ->capture_default_str();
+  cmd.add_option("--photo-space", o->photoSpace,
+                 "Mirror ball: colour space of the photo [default: from the file]; it is "
+                 "linearised before unwrapping");
+  cmd.add_option("--out-space", o->outSpace,
+                 "Mirror ball: colour space of the result [default: what the config's file rules "
+                 "say for --out]");
   cmd.add_option("--blind-spot", o->blindSpot,
                  "Mirror ball: degrees around the direction behind the ball that are filled from "
                  "their surroundings instead of read")
@@ -126,10 +133,27 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     glm::dvec3 energyIn(0.0);
     lighting::SanitizeReport sanitized;
     if (from == Layout::MirrorBall) {
-      const ingest::LoadedImage photo = ingest::readImage(inputs.front(), "ingest");
+      ingest::LoadedImage photo = ingest::readImage(inputs.front(), "ingest");
+      // Unwrapping averages pixels: it happens on linear radiance.
+      const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+      const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
+                                                     : colors.resolve(o->outSpace, "--out-space");
+      Image rgb(photo.image.width, photo.image.height, 3, {"R", "G", "B"});
+      for (size_t k = 0; k < rgb.pixelCount(); ++k) {
+        const float* s = photo.image.pixels.data() + k * size_t(photo.image.channels);
+        for (int c = 0; c < 3; ++c)
+          rgb.pixels[3 * k + size_t(c)] = s[photo.image.channels >= 3 ? c : 0];
+      }
+      rgb.colorSpace = !o->photoSpace.empty()
+                           ? colors.resolve(o->photoSpace, "--photo-space")
+                           : colors.inputSpaceFor(inputs.front(), photo.info.fileColorSpace);
+      notes.push_back("mirror ball read as '" + rgb.colorSpace + "', unwrapped in '" + target +
+                      "'");
+      colors.convert(rgb, target);
+      write.chromaticities = colors.chromaticities(target);
       ball.faceSize = o->size > 0 && *to != Layout::LatLong ? o->size : 0;
       cubemap::MirrorBallResult unwrapped =
-          cubemap::unwrapMirrorBall(photo.image, ball, inputs.front(), printer.callback());
+          cubemap::unwrapMirrorBall(rgb, ball, inputs.front(), printer.callback());
       cube = std::move(unwrapped.cube);
       energyIn = cube.integral();
       notes.push_back("mirror ball " + std::to_string(photo.image.width) + "x" +
@@ -142,6 +166,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       read.layout = from;
       const cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
       notes.push_back("read " + file.describe() + " (" + file.how + ")");
+      // Values are resampled as stored; the colour metadata goes along.
+      write.chromaticities = file.info.chromaticities;
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
       }

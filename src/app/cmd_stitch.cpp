@@ -272,6 +272,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       photos[i].saturation = 0.98f * std::min({white.pixels[0], white.pixels[1], white.pixels[2]});
     }
 
+    write.chromaticities = colors.chromaticities(target);
     ProgressPrinter printer(globals);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, printer.callback());
 

@@ -7,6 +7,7 @@
 
 #include <Imath/half.h>
 #include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfChromaticitiesAttribute.h>
 #include <OpenEXR/ImfEnvmapAttribute.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
@@ -222,9 +223,9 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
 }
 
 void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
-              bool useHalf, std::optional<Layout> envmap) {
+              bool useHalf, std::optional<Layout> envmap, const WriteOptions& options) {
   if (lowerExtension(destination) == ".exr") {
-    writeExr(temporary, rgb, useHalf, envmap);
+    writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);
   } else {
     ingest::writeImage(temporary, rgb, {});
   }
@@ -390,7 +391,8 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
   return out;
 }
 
-void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optional<Layout> envmap) {
+void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optional<Layout> envmap,
+              const std::optional<std::array<double, 8>>& chromaticities) {
   COMPOSE_CHECK(rgb.channels == 3 && rgb.width > 0 && rgb.height > 0);
   try {
     Imf::Header header(rgb.width, rgb.height);
@@ -402,6 +404,14 @@ void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optiona
       Imf::addEnvmap(header, *envmap == Layout::Cube ? Imf::ENVMAP_CUBE : Imf::ENVMAP_LATLONG);
     }
     header.insert("software", Imf::StringAttribute("compose"));
+    if (!rgb.colorSpace.empty()) header.insert("colorSpace", Imf::StringAttribute(rgb.colorSpace));
+    if (chromaticities) {
+      const auto& c = *chromaticities;
+      auto xy = [&](int i) {
+        return IMATH_NAMESPACE::V2f(float(c[size_t(2 * i)]), float(c[size_t(2 * i + 1)]));
+      };
+      Imf::addChromaticities(header, Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3)));
+    }
     Imf::OutputFile out(path.c_str(), header);
     Imf::FrameBuffer frame;
     std::vector<Imath::half> halves;
@@ -441,7 +451,7 @@ std::vector<std::string> writeLatLong(OutputFiles& outputs, const fs::path& path
   img.colorSpace = env.colorSpace();
   img.pixels = env.texels();
   const bool half = chooseHalf(options.depth, maxValue(img.pixels), path, notes);
-  writeAny(outputs.add(path), path, img, half, Layout::LatLong);
+  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options);
   return notes;
 }
 
@@ -473,7 +483,7 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path
     const bool half = chooseHalf(options.depth, maximum, paths[0], notes);
     for (int f = 0; f < kCubeFaces; ++f) {
       writeAny(outputs.add(paths[size_t(f)]), paths[size_t(f)], cube.faceImage(f), half,
-               std::nullopt);
+               std::nullopt, options);
     }
     return notes;
   }
@@ -482,7 +492,7 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path
   const bool half = chooseHalf(options.depth, maximum, path, notes);
   const Image packed = packFaces(cube, layout);
   writeAny(outputs.add(path), path, packed, half,
-           layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt);
+           layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt, options);
   return notes;
 }
 

@@ -82,6 +82,10 @@ struct WriteOptions {
   } depth = Depth::Auto;  // Auto: half unless a value
                           // exceeds half's range (65504)
   int faceNaming = 0;     // layouts.h parseFaceNaming; for Layout::Faces
+  // OpenEXR only: the chromaticities of the RGB channels (red, green, blue, white xy), written
+  // with the colour-space name (the image's, as the string attribute `colorSpace`), as
+  // ingest::writeImage does.
+  std::optional<std::array<double, 8>> chromaticities;
 };
 
 // Writes a lat-long environment to `path` (EXR gets envmap=latlong). Returns a note when the depth
@@ -100,8 +104,10 @@ std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::fil
                                                                   int faceNaming);
 
 // Writes RGB float data as an EXR through OpenEXR (ZIP, scanlines), with an optional envmap
-// attribute. Used by the writers above; exposed for tests and other stages.
+// attribute, the image's colour-space name and optional chromaticities. Used by the writers above;
+// exposed for tests and other stages.
 void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
-              std::optional<Layout> envmap);
+              std::optional<Layout> envmap,
+              const std::optional<std::array<double, 8>>& chromaticities = std::nullopt);
 
 }  // namespace compose::cubemap

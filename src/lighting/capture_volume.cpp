@@ -34,11 +34,14 @@ void CaptureProxy::validate() const {
           !(boxMax.z > boxMin.z)) {
         throw Error("lighting", "the room must have a positive width, height and depth");
       }
-      for (int a = 0; a < 3; ++a) {
-        if (!(capturePoint[a] > boxMin[a] && capturePoint[a] < boxMax[a])) {
-          throw Error("lighting", "the capture point " + describe() +
-                                      " is not inside the room: parallax needs the camera inside");
-        }
+      if (!contains(capturePoint)) {
+        char s[300];
+        std::snprintf(s, sizeof s,
+                      "the capture point (%g, %g, %g) is not inside the room (x %g..%g, y %g..%g, "
+                      "z %g..%g m): parallax needs the camera inside",
+                      capturePoint.x, capturePoint.y, capturePoint.z, boxMin.x, boxMax.x, boxMin.y,
+                      boxMax.y, boxMin.z, boxMax.z);
+        throw Error("lighting", s);
       }
       return;
     case Shape::Sphere:
@@ -46,6 +49,19 @@ void CaptureProxy::validate() const {
         throw Error("lighting", "the environment's radius must be a positive number of metres");
       return;
   }
+}
+
+bool CaptureProxy::contains(const glm::dvec3& p) const {
+  switch (shape) {
+    case Shape::Distant:
+      return true;
+    case Shape::Box:
+      return p.x > boxMin.x && p.x < boxMax.x && p.y > boxMin.y && p.y < boxMax.y &&
+             p.z > boxMin.z && p.z < boxMax.z;
+    case Shape::Sphere:
+      return glm::length(p - capturePoint) < radius;
+  }
+  return false;
 }
 
 std::string CaptureProxy::describe() const {

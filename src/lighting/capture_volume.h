@@ -35,8 +35,11 @@ struct CaptureProxy {
   // compose::Error (stage "lighting") on an empty box, a capture point outside it, a radius <= 0
   // or non-finite numbers.
   void validate() const;
-  // Where the ray from `position` (inside the proxy) along unit `direction` leaves it, and the
-  // proxy's outward unit normal there. Box or Sphere only.
+  // True if p is strictly inside the proxy (always, for the distant one).
+  bool contains(const glm::dvec3& p) const;
+  // Where the ray from `position` along unit `direction` leaves the proxy, and the proxy's
+  // outward unit normal there. Box or Sphere only. A position outside is first moved to the
+  // nearest point just inside.
   glm::dvec3 exit(const glm::dvec3& position, const glm::dvec3& direction,
                   glm::dvec3* normal = nullptr) const;
   // A human-readable summary: "room 6 x 3 x 8 m, captured at (0, 1.6, 0)".

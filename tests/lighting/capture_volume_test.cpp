@@ -134,7 +134,7 @@ TEST(CaptureVolume, ConstantSurroundingsStayConstantEverywhere) {
 TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   CaptureProxy p = room();
   p.capturePoint = {3.0, 1.0, 0.0};
-  COMPOSE_EXPECT_ERROR(p.validate(), "is not inside the room");
+  COMPOSE_EXPECT_ERROR(p.validate(), "the capture point (3, 1, 0) is not inside the room");
   p = room();
   p.boxMax.y = 0.0;
   COMPOSE_EXPECT_ERROR(p.validate(), "positive width, height and depth");
