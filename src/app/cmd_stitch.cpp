@@ -26,7 +26,8 @@ struct StitchCommandOptions {
   std::string out, calib, to = "cube", photoSpace, outSpace, depth = "float", faceNames = "pxnx";
   double fov = 0.0, maxCorrection = 10.0;
   int size = 0, width = 0, featureSize = 1000;
-  bool fisheye = false, noRefine = false, noGains = false, lowMemory = false;
+  std::string gains = "auto";
+  bool fisheye = false, noRefine = false, lowMemory = false;
 };
 
 // "file@yaw,pitch[,roll]" → file and the angles; no '@' → file only.
@@ -103,7 +104,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
                  "How far the rough orientations may be off, degrees")
       ->capture_default_str();
   cmd.add_flag("--no-refine", o->noRefine, "Use the rough orientations as they are");
-  cmd.add_flag("--no-gains", o->noGains, "No exposure compensation between photos");
+  cmd.add_option("--gains", o->gains,
+                 "Exposure compensation between photos: on, off, or auto (on when a photo is not "
+                 "HDR: merged HDR photos have known exposures)")
+      ->capture_default_str();
   cmd.add_option("--feature-size", o->featureSize,
                  "Long side of the images features are found on, pixels")
       ->capture_default_str();
@@ -149,7 +153,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     cubemap::StitchOptions options;
     options.faceSize = o->size > 0 ? o->size : 1024;
     options.refine = !o->noRefine;
-    options.gains = !o->noGains;
+    if (o->gains != "auto" && o->gains != "on" && o->gains != "off")
+      throw UsageError("--gains must be on, off or auto; got '" + o->gains + "'");
     options.maxCorrectionDegrees = o->maxCorrection;
     options.featureSize = o->featureSize;
     options.keepPhotos = !o->lowMemory;
@@ -215,6 +220,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         p.lens = calib::Lens::fromFieldOfView(
             h.width, h.height, o->fov,
             o->fisheye ? calib::Projection::Equidistant : calib::Projection::Rectilinear);
+        p.lens.source = "--fov";
       } else if (h.focalLength35mm) {
         // A 35 mm-equivalent focal length refers to the 36 x 24 mm frame's diagonal.
         constexpr double kDiagonalMm = 43.266615305567875;
@@ -233,6 +239,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       }
       photos.push_back(p);
     }
+    options.gains = o->gains == "on" ||
+                    (o->gains == "auto" &&
+                     std::any_of(headers.begin(), headers.end(),
+                                 [](const cubemap::PhotoHeader& h) { return !h.floatingPoint; }));
     if (o->size == 0) {
       // Texels as fine as the photos' pixels at their centres: a face of 2 fx texels, at most 2048.
       double fx = 1e9;

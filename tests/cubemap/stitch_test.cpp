@@ -202,5 +202,70 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
 INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchSample,
                          ::testing::Values("courtyard", "forest", "interior", "sunset"));
 
+// One photo taken a stop and a half brighter: its gain brings it back.
+TEST(Stitch, GainsRecoverAnExposureDifference) {
+  const Environment env = loadSample("forest");
+  if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+  const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
+  Capture capture = sixViews(scene, 384, 100.0, 1.0, 3);
+  const float brighter = 2.8f;
+  for (float& v : capture.images[4].pixels) v *= brighter;
+  StitchOptions options;
+  options.faceSize = 64;
+  const StitchResult r = stitch(
+      capture.photos, [&](int i) { return capture.images[size_t(i)]; }, options);
+  double others = 0.0;
+  for (int i = 0; i < kCubeFaces; ++i)
+    if (i != 4) others += std::log(double(r.gains[size_t(i)])) / 5.0;
+  const double relative = std::exp(std::log(double(r.gains[4])) - others);
+  // Medians of log ratios at a few hundred matched keypoints: about 1 %.
+  EXPECT_NEAR(relative * brighter, 1.0, 0.03) << "gain of the brighter photo " << relative;
+}
+
+// More photos with a narrower lens: a ring of six 75° views and straight up and down. The bands
+// between the ring and the poles are seen by no photo: filled, and reported.
+TEST(Stitch, NarrowLensRingWithHolesFilledAndReported) {
+  const Environment env = loadSample("courtyard");
+  if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+  const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
+  const calib::Lens lens = calib::Lens::fromFieldOfView(320, 320, 75.0);
+  std::vector<StitchPhoto> photos;
+  std::vector<Image> images;
+  std::vector<glm::dmat3> truth;
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> off(-2.0, 2.0);
+  auto shoot = [&](double yaw, double pitch) {
+    const glm::dmat3 nominal = cameraRotation(yaw, pitch, 0.0);
+    const glm::dmat3 real = nominal * cameraRotation(off(rng), off(rng), off(rng));
+    truth.push_back(real);
+    images.push_back(renderView(scene, lens, real, 2));
+    photos.push_back({"yaw " + std::to_string(int(yaw)) + " pitch " + std::to_string(int(pitch)),
+                      lens, nominal, 0.0f});
+  };
+  for (int k = 0; k < 6; ++k) shoot(60.0 * k, 0.0);
+  shoot(0.0, 90.0);
+  shoot(0.0, -90.0);
+  StitchOptions options;
+  options.faceSize = 64;
+  const StitchResult r = stitch(
+      photos, [&](int i) { return images[size_t(i)]; }, options);
+  // Bands between 37.5° and 52.5° of elevation (0.18 of the sphere), less what the frames'
+  // corners reach: measured 0.16.
+  EXPECT_GT(r.coverage.uncovered, 0.05);
+  EXPECT_LT(r.coverage.uncovered, 0.19);
+  for (int f = 0; f < kCubeFaces; ++f)
+    for (float v : r.cube.face(f)) ASSERT_TRUE(std::isfinite(v) && v >= 0.0f);
+  // The ring overlaps by 15°: those orientations are found (up to the unobservable common part,
+  // well under the 2° the photos were off).
+  int refined = 0;
+  for (int k = 0; k < 6; ++k) {
+    if (r.correctionDegrees[size_t(k)] == 0.0) continue;
+    ++refined;
+    EXPECT_LT(rotationDegrees(r.worldFromCamera[size_t(k)], truth[size_t(k)]), 1.0) << k;
+  }
+  EXPECT_GE(refined, 5);
+  std::printf("ring of 6 + 2 at 75 degrees: %.3f of the sphere filled\n", r.coverage.uncovered);
+}
+
 }  // namespace
 }  // namespace compose::cubemap
