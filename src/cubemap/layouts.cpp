@@ -4,6 +4,7 @@
 #include <cctype>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 namespace compose::cubemap {
 
@@ -121,15 +122,17 @@ CrossCell crossCell(Layout layout, int face) {
   return (layout == Layout::HorizontalCross ? kHorizontal : kVertical)[face];
 }
 
+// Both directions build their outputs row by row with insert(), so every output float is written
+// once (no zero-filling first): layout conversions are memory copies, and cost about as much.
+
 std::array<Image, kCubeFaces> unpackFaces(const Image& image, Layout layout) {
   COMPOSE_CHECK(layout == Layout::Cube || layout == Layout::HorizontalCross ||
                 layout == Layout::VerticalCross);
   const int n = checkShape(layout, image.width, image.height, {});
+  const size_t c = size_t(image.channels), rowFloats = size_t(n) * c;
   std::array<Image, kCubeFaces> faces;
-  for (int f = 0; f < kCubeFaces; ++f) {
-    Image& face = faces[size_t(f)];
-    face = Image(n, n, image.channels, image.channelNames);
-    face.colorSpace = image.colorSpace;
+  parallelFor(0, kCubeFaces, [&](int64_t ff) {
+    const int f = int(ff);
     int x0 = 0, y0 = f * n;
     bool rotated = false;
     if (layout != Layout::Cube) {
@@ -138,17 +141,25 @@ std::array<Image, kCubeFaces> unpackFaces(const Image& image, Layout layout) {
       y0 = cell.row * n;
       rotated = cell.rotated180;
     }
-    const size_t rowFloats = size_t(n) * size_t(image.channels);
+    Image& face = faces[size_t(f)];
+    face.width = face.height = n;
+    face.channels = image.channels;
+    face.channelNames = image.channelNames;
+    face.colorSpace = image.colorSpace;
+    face.pixels.reserve(rowFloats * size_t(n));
+    std::vector<float> reversed(rotated ? rowFloats : 0);
     for (int y = 0; y < n; ++y) {
       if (!rotated) {
-        std::copy_n(image.at(x0, y0 + y), rowFloats, face.at(0, y));
+        const float* src = image.at(x0, y0 + y);
+        face.pixels.insert(face.pixels.end(), src, src + rowFloats);
       } else {
+        const float* src = image.at(x0, y0 + n - 1 - y);
         for (int x = 0; x < n; ++x)
-          std::copy_n(image.at(x0 + n - 1 - x, y0 + n - 1 - y), size_t(image.channels),
-                      face.at(x, y));
+          std::copy_n(src + size_t(n - 1 - x) * c, c, reversed.data() + size_t(x) * c);
+        face.pixels.insert(face.pixels.end(), reversed.begin(), reversed.end());
       }
     }
-  }
+  });
   return faces;
 }
 
@@ -156,25 +167,44 @@ Image packFaces(const lighting::CubeMap& cube, Layout layout) {
   COMPOSE_CHECK(layout == Layout::Cube || layout == Layout::HorizontalCross ||
                 layout == Layout::VerticalCross);
   const int n = cube.size();
-  const int w = layout == Layout::Cube ? n : layout == Layout::HorizontalCross ? 4 * n : 3 * n;
-  const int h = layout == Layout::Cube ? 6 * n : layout == Layout::HorizontalCross ? 3 * n : 4 * n;
-  Image out(w, h, 3, {"R", "G", "B"});
+  const int cols = layout == Layout::Cube ? 1 : layout == Layout::HorizontalCross ? 4 : 3;
+  const int rows = layout == Layout::Cube ? 6 : layout == Layout::HorizontalCross ? 3 : 4;
+  Image out;
+  out.width = cols * n;
+  out.height = rows * n;
+  out.channels = 3;
+  out.channelNames = {"R", "G", "B"};
   out.colorSpace = cube.colorSpace;
+  const size_t faceRow = size_t(n) * 3;
+  // Which face sits in each cell of the layout's grid (-1: black).
+  std::vector<int> cell(size_t(cols) * size_t(rows), -1);
+  std::vector<bool> turned(kCubeFaces, false);
   for (int f = 0; f < kCubeFaces; ++f) {
-    int x0 = 0, y0 = f * n;
-    bool rotated = false;
-    if (layout != Layout::Cube) {
-      const CrossCell cell = crossCell(layout, f);
-      x0 = cell.column * n;
-      y0 = cell.row * n;
-      rotated = cell.rotated180;
+    if (layout == Layout::Cube) {
+      cell[size_t(f)] = f;
+    } else {
+      const CrossCell c = crossCell(layout, f);
+      cell[size_t(c.row) * size_t(cols) + size_t(c.column)] = f;
+      turned[size_t(f)] = c.rotated180;
     }
+  }
+  out.pixels.reserve(size_t(out.width) * size_t(out.height) * 3);
+  std::vector<float> reversed(faceRow);
+  for (int r = 0; r < rows; ++r) {
     for (int y = 0; y < n; ++y) {
-      if (!rotated) {
-        std::copy_n(cube.texel(f, 0, y), size_t(n) * 3, out.at(x0, y0 + y));
-      } else {
-        for (int x = 0; x < n; ++x)
-          std::copy_n(cube.texel(f, x, y), 3, out.at(x0 + n - 1 - x, y0 + n - 1 - y));
+      for (int k = 0; k < cols; ++k) {
+        const int f = cell[size_t(r) * size_t(cols) + size_t(k)];
+        if (f < 0) {
+          out.pixels.insert(out.pixels.end(), faceRow, 0.0f);
+        } else if (!turned[size_t(f)]) {
+          const float* src = cube.texel(f, 0, y);
+          out.pixels.insert(out.pixels.end(), src, src + faceRow);
+        } else {
+          const float* src = cube.texel(f, 0, n - 1 - y);
+          for (int x = 0; x < n; ++x)
+            std::copy_n(src + size_t(n - 1 - x) * 3, 3, reversed.data() + size_t(x) * 3);
+          out.pixels.insert(out.pixels.end(), reversed.begin(), reversed.end());
+        }
       }
     }
   }

@@ -135,8 +135,8 @@ class TexelIntegrator {
       return -sgn * rho * sinPsi / std::sqrt(ny * ny + rho * rho * sinPsi * sinPsi);
     };
     const double lo = std::min(from, to), hi = std::max(from, to);
-    std::vector<double> bp;
-    bp.reserve(16);
+    thread_local std::vector<double> bp;
+    bp.clear();
     bp.push_back(lo);
     bp.push_back(hi);
     // Column boundaries.
@@ -276,32 +276,84 @@ void CubeLatLongOverlaps::texel(int face, int x, int y, std::vector<CellOverlap>
   }
 }
 
+void CubeLatLongOverlaps::forEachTexel(
+    const std::function<void(int, int, int, const std::vector<CellOverlap>&)>& visit,
+    const Progress& progress) const {
+  const int n = cubeSize_;
+  // Faces +X -X +Y -Y +Z -Z. -Z (5) stands for the side faces, +Y (2) for -Y; without the
+  // quarter-turn symmetry every side face is computed.
+  const bool quarterTurns = width_ % 4 == 0;
+  const std::vector<int> references =
+      quarterTurns ? std::vector<int>{5, 2} : std::vector<int>{0, 1, 4, 5, 2};
+  const int half = (n + 1) / 2;  // columns computed per row; the others are their mirrors
+  const int64_t tasks = int64_t(references.size()) * n;
+  ParallelProgress shared(progress, "resample", tasks);
+  parallelFor(0, tasks, [&](int64_t task) {
+    const int ref = references[size_t(task / n)], y = int(task % n);
+    std::vector<CellOverlap> cells, mirrored, moved;
+    for (int x = 0; x < half; ++x) {
+      texel(ref, x, y, cells);
+      // Texel column N-1-x is the mirror image across the plane of the face's right axis: for a
+      // right axis along x, φ -> -φ (cell column c -> W-1-c); along z, φ -> π - φ
+      // (c -> W/2-1-c).
+      mirrored = cells;
+      const bool alongX = faceFrame(ref).right.x != 0.0;
+      for (CellOverlap& c : mirrored)
+        c.x = alongX ? width_ - 1 - c.x : ((width_ / 2 - 1 - c.x) % width_ + width_) % width_;
+      const int mx = n - 1 - x;
+      for (int side = 0; side < (mx == x ? 1 : 2); ++side) {
+        const std::vector<CellOverlap>& base = side == 0 ? cells : mirrored;
+        const int bx = side == 0 ? x : mx;
+        visit(ref, bx, y, base);
+        if (!quarterTurns) {
+          if (ref == 2) {  // -Y: the mirror y -> -y, rows mirrored, texel row N-1-y
+            moved = base;
+            for (CellOverlap& c : moved) c.y = height_ - 1 - c.y;
+            visit(3, bx, n - 1 - y, moved);
+          }
+          continue;
+        }
+        if (ref == 5) {
+          // Turning -Z about +Y by -90°, 180°, +90° gives +X, +Z, -X with the same texel
+          // coordinates; longitude turns with it, φ -> φ + θ, columns shift by -θ W / (2π).
+          const int shifts[3][2] = {{0, 1}, {4, 2}, {1, 3}};  // (face, quarter widths)
+          for (const auto& [face, quarters] : shifts) {
+            moved = base;
+            for (CellOverlap& c : moved) c.x = (c.x + quarters * (width_ / 4)) % width_;
+            visit(face, bx, y, moved);
+          }
+        } else {
+          moved = base;
+          for (CellOverlap& c : moved) c.y = height_ - 1 - c.y;
+          visit(3, bx, n - 1 - y, moved);
+        }
+      }
+    }
+    shared.step();
+  });
+  report(progress, "resample", 1.0);
+}
+
 CubeMap cubeFromLatLong(const Environment& env, int size, const Progress& progress) {
   COMPOSE_CHECK(size >= 1);
   const CubeLatLongOverlaps overlaps(size, env.width());
   CubeMap cube(size);
   cube.colorSpace = env.colorSpace();
-  ParallelProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
-  parallelFor(0, int64_t(kCubeFaces) * size, [&](int64_t task) {
-    const int face = int(task / size), y = int(task % size);
-    std::vector<CellOverlap> cells;
-    for (int x = 0; x < size; ++x) {
-      overlaps.texel(face, x, y, cells);
-      glm::dvec3 sum(0.0);
-      double area = 0.0;
-      for (const CellOverlap& c : cells) {
-        sum += c.solidAngle * glm::dvec3(env.radiance(c.x, c.y));
-        area += c.solidAngle;
-      }
-      const glm::dvec3 mean = area > 0.0 ? sum / area : glm::dvec3(0.0);
-      float* t = cube.texel(face, x, y);
-      t[0] = float(mean.x);
-      t[1] = float(mean.y);
-      t[2] = float(mean.z);
-    }
-    shared.step();
-  });
-  report(progress, "resample", 1.0);
+  overlaps.forEachTexel(
+      [&](int face, int x, int y, const std::vector<CellOverlap>& cells) {
+        glm::dvec3 sum(0.0);
+        double area = 0.0;
+        for (const CellOverlap& c : cells) {
+          sum += c.solidAngle * glm::dvec3(env.radiance(c.x, c.y));
+          area += c.solidAngle;
+        }
+        const glm::dvec3 mean = area > 0.0 ? sum / area : glm::dvec3(0.0);
+        float* t = cube.texel(face, x, y);
+        t[0] = float(mean.x);
+        t[1] = float(mean.y);
+        t[2] = float(mean.z);
+      },
+      progress);
   return cube;
 }
 
@@ -309,30 +361,24 @@ Environment latLongFromCube(const CubeMap& cube, int width, const Progress& prog
   COMPOSE_CHECK(!cube.empty() && width >= 2 && width % 2 == 0);
   const int size = cube.size(), height = width / 2;
   const CubeLatLongOverlaps overlaps(size, width);
-  // Each texel scatters into the cells it overlaps: one accumulator per thread, summed at the end
-  // (in a fixed order, so the result does not depend on the thread count beyond float rounding of
-  // per-cell sums, which are in double).
+  // Each texel scatters into the cells it overlaps: one accumulator per thread (double), summed
+  // at the end.
   const size_t cells = size_t(width) * size_t(height);
   tbb::combinable<std::vector<double>> partial(
       [cells] { return std::vector<double>(cells * 4, 0.0); });
-  ParallelProgress shared(progress, "resample", int64_t(kCubeFaces) * size);
-  parallelFor(0, int64_t(kCubeFaces) * size, [&](int64_t task) {
-    const int face = int(task / size), y = int(task % size);
-    std::vector<double>& acc = partial.local();
-    std::vector<CellOverlap> hits;
-    for (int x = 0; x < size; ++x) {
-      overlaps.texel(face, x, y, hits);
-      const glm::dvec3 L(cube.radiance(face, x, y));
-      for (const CellOverlap& c : hits) {
-        double* a = acc.data() + (size_t(c.y) * size_t(width) + size_t(c.x)) * 4;
-        a[0] += c.solidAngle * L.x;
-        a[1] += c.solidAngle * L.y;
-        a[2] += c.solidAngle * L.z;
-        a[3] += c.solidAngle;
-      }
-    }
-    shared.step();
-  });
+  overlaps.forEachTexel(
+      [&](int face, int x, int y, const std::vector<CellOverlap>& hits) {
+        std::vector<double>& acc = partial.local();
+        const glm::dvec3 L(cube.radiance(face, x, y));
+        for (const CellOverlap& c : hits) {
+          double* a = acc.data() + (size_t(c.y) * size_t(width) + size_t(c.x)) * 4;
+          a[0] += c.solidAngle * L.x;
+          a[1] += c.solidAngle * L.y;
+          a[2] += c.solidAngle * L.z;
+          a[3] += c.solidAngle;
+        }
+      },
+      progress);
   std::vector<double> sum(cells * 4, 0.0);
   partial.combine_each([&](const std::vector<double>& p) {
     for (size_t i = 0; i < sum.size(); ++i) sum[i] += p[i];
@@ -344,7 +390,6 @@ Environment latLongFromCube(const CubeMap& cube, int width, const Progress& prog
     for (int c = 0; c < 3; ++c)
       img.pixels[3 * i + size_t(c)] = area > 0.0 ? float(sum[4 * i + size_t(c)] / area) : 0.0f;
   }
-  report(progress, "resample", 1.0);
   return Environment::fromLatLong(img);
 }
 

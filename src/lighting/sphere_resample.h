@@ -17,6 +17,7 @@
 // of threads. Progress goes to stage "resample".
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "core/progress.h"
@@ -41,6 +42,16 @@ class CubeLatLongOverlaps {
   // solid angle. The solid angles sum to the texel's own (faceTexelSolidAngle) and, over all
   // texels, to each cell's. Const and thread-safe.
   void texel(int face, int x, int y, std::vector<CellOverlap>& out) const;
+
+  // Calls visit(face, x, y, overlaps) once for every texel of the cube, in parallel (visit must
+  // be safe to call concurrently for different texels). Only a sixth of the texels is computed:
+  // the rest follow by the symmetries that map the lat-long grid onto itself: the mirror
+  // x -> -x (columns mirrored), quarter turns about +Y (the side faces; columns shift by a quarter
+  // of the width, when the width is a multiple of 4), and the mirror y -> -y (+Y onto -Y; rows
+  // mirrored). `progress` gets stage "resample".
+  void forEachTexel(
+      const std::function<void(int face, int x, int y, const std::vector<CellOverlap>&)>& visit,
+      const Progress& progress = {}) const;
 
   int cubeSize() const { return cubeSize_; }
   int latLongWidth() const { return width_; }
