@@ -1,5 +1,6 @@
 // compose stitch: photos from one point in roughly known directions to a cube-map environment.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -23,9 +24,9 @@ namespace fs = std::filesystem;
 
 struct StitchCommandOptions {
   std::vector<std::string> photos;
-  std::string out, calib, to = "cube", photoSpace, outSpace, depth = "float", faceNames = "pxnx";
+  std::string out, calib, to = "cube", photoSpace, outSpace, depth = "auto", faceNames = "pxnx";
   double fov = 0.0, maxCorrection = 10.0;
-  int size = 0, width = 0, featureSize = 1000;
+  int size = 0, width = 0, featureSize = 800;
   std::string gains = "auto";
   bool fisheye = false, noRefine = false, lowMemory = false;
 };
@@ -117,7 +118,9 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--out-space", o->outSpace,
                  "Colour space of the result [default: what the config's file rules say for "
                  "--out, so that compose --env reads it back correctly]");
-  cmd.add_option("--depth", o->depth, "EXR sample type: float, half, auto")->capture_default_str();
+  cmd.add_option("--depth", o->depth,
+                 "EXR sample type: auto (half float unless a value exceeds its range), half, float")
+      ->capture_default_str();
   cmd.add_option("--face-names", o->faceNames, "For --to faces: pxnx, posneg, exr, words")
       ->capture_default_str();
 
@@ -259,11 +262,16 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     std::vector<std::string> spaces(photos.size());
     auto load = [&](int i) {
       ingest::LoadedImage img = ingest::readImage(args[size_t(i)].file, "ingest");
-      Image rgb(img.image.width, img.image.height, 3, {"R", "G", "B"});
-      for (size_t k = 0; k < rgb.pixelCount(); ++k) {
-        const float* s = img.image.pixels.data() + k * size_t(img.image.channels);
-        for (int c = 0; c < 3; ++c)
-          rgb.pixels[3 * k + size_t(c)] = s[img.image.channels >= 3 ? c : 0];
+      Image rgb;
+      if (img.image.channels == 3) {
+        rgb = std::move(img.image);
+      } else {
+        rgb = Image(img.image.width, img.image.height, 3, {"R", "G", "B"});
+        for (size_t k = 0; k < rgb.pixelCount(); ++k) {
+          const float* s = img.image.pixels.data() + k * size_t(img.image.channels);
+          for (int c = 0; c < 3; ++c)
+            rgb.pixels[3 * k + size_t(c)] = s[img.image.channels >= 3 ? c : 0];
+        }
       }
       rgb.colorSpace = forced.empty()
                            ? colors.inputSpaceFor(args[size_t(i)].file, img.info.fileColorSpace)
@@ -286,6 +294,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     ProgressPrinter printer(globals);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, printer.callback());
 
+    const auto writeStart = std::chrono::steady_clock::now();
     OutputFiles outputs("output");
     std::vector<std::string> written;
     lighting::CubeMap cube = result.cube;
@@ -304,6 +313,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       }
     }
     outputs.commit();
+    const double writeSeconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - writeStart).count();
 
     if (!globals.quiet) {
       for (size_t i = 0; i < photos.size(); ++i) {
@@ -331,7 +342,9 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         std::snprintf(t, sizeof t, "%s%s %.2f s", timing.empty() ? "" : ", ", step.c_str(), s);
         timing += t;
       }
-      notes.push_back("time: " + timing);
+      char w[64];
+      std::snprintf(w, sizeof w, ", write %.2f s", writeSeconds);
+      notes.push_back("time: " + timing + w);
       for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
     }
     for (const auto& w : written) std::printf("%s\n", w.c_str());

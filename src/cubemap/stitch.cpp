@@ -71,17 +71,24 @@ glm::dmat3 kabsch(const std::vector<glm::dvec3>& a, const std::vector<glm::dvec3
 // Area-averaged mip pyramid of a photo (RGB float), for prefiltered lookups.
 class PhotoPyramid {
  public:
-  explicit PhotoPyramid(const Image& photo) {
-    Level base{photo.width, photo.height, std::vector<float>(photo.pixelCount() * 3)};
-    for (size_t i = 0; i < photo.pixelCount(); ++i) {
-      const float* s = photo.pixels.data() + i * size_t(photo.channels);
-      float* d = base.rgb.data() + i * 3;
-      if (photo.channels >= 3) {
-        d[0] = s[0], d[1] = s[1], d[2] = s[2];
-      } else {
-        d[0] = d[1] = d[2] = s[0];
+  // Takes the photo's pixels (RGB: without a copy).
+  explicit PhotoPyramid(Image&& photo) {
+    Level base{photo.width, photo.height, {}};
+    if (photo.channels == 3) {
+      base.rgb = std::move(photo.pixels);
+    } else {
+      base.rgb.resize(photo.pixelCount() * 3);
+      for (size_t i = 0; i < photo.pixelCount(); ++i) {
+        const float* s = photo.pixels.data() + i * size_t(photo.channels);
+        float* d = base.rgb.data() + i * 3;
+        if (photo.channels >= 3) {
+          d[0] = s[0], d[1] = s[1], d[2] = s[2];
+        } else {
+          d[0] = d[1] = d[2] = s[0];
+        }
       }
     }
+    photo = Image();
     levels_.push_back(std::move(base));
     while (levels_.back().width > 1 || levels_.back().height > 1) {
       const Level& c = levels_.back();
@@ -562,35 +569,46 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
   // 1. Features (and, if kept, the photos themselves).
   std::vector<Features> features(static_cast<size_t>(count));
   const bool refine = options.refine && count > 1;
-  if (refine || options.keepPhotos) {
-    for (int i = 0; i < count; ++i) {
-      auto t0 = Clock::now();
-      Image img = loadChecked(i);
-      timer.add("load", t0);
-      t0 = Clock::now();
-      if (refine) {
-        Features& f = features[size_t(i)];
-        const int longSide = std::max(img.width, img.height);
-        f.scale = std::max(1.0, double(longSide) / options.featureSize);
-        cv::Mat lum(img.height, img.width, CV_32F);
-        parallelFor(0, img.height, [&](int64_t y) {
-          float* row = lum.ptr<float>(int(y));
-          for (int x = 0; x < img.width; ++x) row[x] = luminance(img.at(x, int(y)), img.channels);
-        });
-        if (f.scale > 1.0) {
-          cv::resize(lum, f.luminance,
-                     cv::Size(std::max(1, int(std::lround(img.width / f.scale))),
-                              std::max(1, int(std::lround(img.height / f.scale)))),
-                     0, 0, cv::INTER_AREA);
-          f.scale = double(img.width) / f.luminance.cols;
-        } else {
-          f.luminance = lum;
-        }
+  // Loading and the feature images, photo by photo: in parallel when the photos are kept anyway,
+  // one at a time otherwise.
+  auto prepare = [&](int i) {
+    Image img = loadChecked(i);
+    if (refine) {
+      Features& f = features[size_t(i)];
+      const int longSide = std::max(img.width, img.height);
+      f.scale = std::max(1.0, double(longSide) / options.featureSize);
+      cv::Mat lum(img.height, img.width, CV_32F);
+      for (int y = 0; y < img.height; ++y) {
+        float* row = lum.ptr<float>(y);
+        for (int x = 0; x < img.width; ++x) row[x] = luminance(img.at(x, y), img.channels);
       }
-      if (options.keepPhotos) kept[size_t(i)] = std::move(img);
-      timer.add("features", t0);
-      report(progress, "features", 0.5 * (i + 1) / count);
+      if (f.scale > 1.0) {
+        cv::resize(lum, f.luminance,
+                   cv::Size(std::max(1, int(std::lround(img.width / f.scale))),
+                            std::max(1, int(std::lround(img.height / f.scale)))),
+                   0, 0, cv::INTER_AREA);
+        f.scale = double(img.width) / f.luminance.cols;
+      } else {
+        f.luminance = lum;
+      }
     }
+    if (options.keepPhotos) kept[size_t(i)] = std::move(img);
+  };
+  if (refine || options.keepPhotos) {
+    const auto t0 = Clock::now();
+    ParallelProgress loaded(progress, "load", count, 1);
+    if (options.keepPhotos) {
+      parallelFor(0, count, [&](int64_t i) {
+        prepare(int(i));
+        loaded.step();
+      });
+    } else {
+      for (int i = 0; i < count; ++i) {
+        prepare(i);
+        loaded.step();
+      }
+    }
+    timer.add("load", t0);
   }
 
   if (refine) {
@@ -821,9 +839,8 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     Image img = options.keepPhotos ? std::move(kept[size_t(i)]) : loadChecked(i);
     if (!options.keepPhotos) timer.add("load", t0);
     t0 = Clock::now();
-    const PhotoPyramid pyramid(img);
     const int w = img.width, h = img.height;
-    img = Image();
+    const PhotoPyramid pyramid(std::move(img));
     const glm::dmat3 cameraFromWorld = glm::transpose(result.worldFromCamera[size_t(i)]);
     const float gain = result.gains[size_t(i)];
     const double margin = std::max(2.0, 0.01 * std::min(w, h));  // coverage ramp at the frame
@@ -840,31 +857,28 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
       if (angleBetween(0.5 * (glm::normalize(rowStart) + glm::normalize(rowEnd)), axis) >
           half + rowHalf + step)
         return;
+      // The camera-frame steps of a quarter texel along the face's right and down axes.
+      const glm::dvec3 qa = cameraFromWorld * (0.25 * step * frame.right);
+      const glm::dvec3 qb = cameraFromWorld * (0.25 * step * frame.down);
       for (int x = 0; x < n; ++x) {
         const double a = -1.0 + (2.0 * x + 1.0) / n;
-        const glm::dvec3 d = frame.forward + a * frame.right + b * frame.down;
-        const glm::dvec3 c = cameraFromWorld * d;
-        glm::dvec2 px;
-        if (!p.lens.project(c, px)) continue;
+        const glm::dvec3 c = cameraFromWorld * (frame.forward + a * frame.right + b * frame.down);
+        if (p.lens.projection == calib::Projection::Rectilinear && !(c.z < 0.0)) continue;
+        // The texel as 2 x 2 sub-texel rays (a quarter texel off its centre each way): their mean
+        // prefiltered to their own footprint is close to the box average over the texel, which is
+        // what a cube texel holds.
+        glm::dvec2 ps[4];
+        bool seen = true;
+        for (int k = 0; k < 4 && seen; ++k)
+          seen = p.lens.project(c + ((k & 1) ? qa : -qa) + ((k & 2) ? qb : -qb), ps[k]);
+        if (!seen) continue;
+        const glm::dvec2 px = 0.25 * (ps[0] + ps[1] + ps[2] + ps[3]);
         if (!(px.x > 0.0 && px.x < w && px.y > 0.0 && px.y < h)) continue;
-        // The texel's footprint in photo pixels: its edges projected.
-        glm::dvec2 pa, pb;
-        double footprint = 1.0;
-        if (p.lens.project(c + cameraFromWorld * (step * frame.right), pa) &&
-            p.lens.project(c + cameraFromWorld * (step * frame.down), pb)) {
-          footprint = std::max(glm::length(pa - px), glm::length(pb - px));
-        }
-        // The texel's mean over 2 x 2 sub-texel rays, each prefiltered to its own footprint: close
-        // to the box average over the texel, as the ground truth of a cube texel is defined.
-        const float level = float(std::log2(std::max(1.0, 0.5 * footprint)));
+        // Sub-texels are half a texel apart: each covers about that many photo pixels.
+        const double footprint = std::max(glm::length(ps[1] - ps[0]), glm::length(ps[2] - ps[0]));
+        const float level = float(std::log2(std::max(1.0, footprint)));
         glm::vec3 L(0.0f);
-        for (int k = 0; k < 4; ++k) {
-          const double sa = (k & 1) ? 0.25 : -0.25, sb = (k & 2) ? 0.25 : -0.25;
-          const glm::dvec3 cs = c + cameraFromWorld * (step * (sa * frame.right + sb * frame.down));
-          glm::dvec2 ps;
-          if (!p.lens.project(cs, ps)) ps = px;
-          L += pyramid.sample(ps.x, ps.y, level);
-        }
+        for (int k = 0; k < 4; ++k) L += pyramid.sample(ps[k].x, ps[k].y, level);
         L *= 0.25f * gain;
         // Feathering: 1 in the middle of the frame, 0 at its edges.
         const double fx = std::min(px.x, w - px.x) / (0.5 * w);

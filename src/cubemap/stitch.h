@@ -63,7 +63,7 @@ struct StitchOptions {
   int faceSize = 1024;                 // cube face size of the result
   bool refine = true;                  // refine orientations by feature matching
   double maxCorrectionDegrees = 10.0;  // how far the rough orientations may be off
-  int featureSize = 1000;              // long side of the images features are found on
+  int featureSize = 800;               // long side of the images features are found on
   bool gains = true;                   // exposure compensation between photos
   bool keepPhotos = true;              // load each photo once and hold it (faster, more memory)
   void validate() const;               // compose::UsageError on values out of range
