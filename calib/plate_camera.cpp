@@ -11,18 +11,22 @@
 
 namespace compose::calib {
 
-void PinholeCamera::ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const {
-  const glm::dvec3 camDir(px - 0.5 * width, -(py - 0.5 * height), -focalPx);
+bool PlateCamera::ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const {
+  glm::dvec3 camDir;
+  if (!lens.direction(px, py, camDir)) return false;
   origin = position();
   direction = glm::normalize(glm::dvec3(worldFromCamera * glm::dvec4(camDir, 0.0)));
+  return true;
 }
 
-bool PinholeCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
-  const glm::dvec3 c = glm::dvec3(glm::inverse(worldFromCamera) * glm::dvec4(world, 1.0));
-  if (c.z >= -1e-9) return false;
-  pixel.x = 0.5 * width + focalPx * c.x / -c.z;
-  pixel.y = 0.5 * height - focalPx * c.y / -c.z;
-  return true;
+glm::dmat4 PlateCamera::cameraFromWorld() const {
+  return glm::inverse(worldFromCamera);
+}
+
+bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
+  const glm::dvec3 c = glm::dvec3(cameraFromWorld() * glm::dvec4(world, 1.0));
+  if (lens.projection == Projection::Rectilinear && c.z >= -1e-9) return false;
+  return lens.project(c, pixel);
 }
 
 void CameraOptions::validate() const {
@@ -51,37 +55,60 @@ void Placement::validate() const {
   if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
 }
 
-PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
-                          const CameraOptions& options) {
+PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
+                        const CameraOptions& options) {
   if (width <= 0 || height <= 0) throw Error("camera", "plate has no pixels");
   options.validate();
-  PinholeCamera cam;
+  PlateCamera cam;
   cam.width = width;
   cam.height = height;
-  if (options.focal35mm) {
-    cam.focal35mm = *options.focal35mm;
-    cam.focalSource = "--focal35";
-  } else if (exif.focalLength35mm) {
-    cam.focal35mm = *exif.focalLength35mm;
-    cam.focalSource = "EXIF FocalLengthIn35mmFilm";
-  } else {
-    cam.focal35mm = kDefaultFocal35mm;
-    cam.focalSource = "default (no 35 mm equivalent focal length in EXIF)";
-  }
   const double diagonalPx = std::hypot(double(width), double(height));
-  cam.focalPx = cam.focal35mm / kFullFrameDiagonalMm * diagonalPx;
+  if (options.lens) {
+    const Lens& l = *options.lens;
+    const double aspect = double(width) / height, lensAspect = double(l.width) / l.height;
+    if (std::abs(aspect / lensAspect - 1.0) > 0.01) {
+      throw Error("camera", "the calibration is for " + std::to_string(l.width) + "x" +
+                                std::to_string(l.height) + " images, the plate is " +
+                                std::to_string(width) + "x" + std::to_string(height) +
+                                " (another aspect ratio: cropped or rotated?)");
+    }
+    cam.lens = (l.width == width && l.height == height) ? l : l.resized(width, height);
+    cam.focal35mm = 0.5 * (cam.lens.fx + cam.lens.fy) / diagonalPx * kFullFrameDiagonalMm;
+    cam.focalSource = l.source.empty() ? std::string("calibration") : l.source;
+    if (l.width != width) cam.focalSource += " (scaled to the plate's size)";
+  } else {
+    if (options.focal35mm) {
+      cam.focal35mm = *options.focal35mm;
+      cam.focalSource = "--focal35";
+    } else if (exif.focalLength35mm) {
+      cam.focal35mm = *exif.focalLength35mm;
+      cam.focalSource = "EXIF FocalLengthIn35mmFilm";
+    } else {
+      cam.focal35mm = kDefaultFocal35mm;
+      cam.focalSource = "default (no 35 mm equivalent focal length in EXIF)";
+    }
+    const double focalPx = cam.focal35mm / kFullFrameDiagonalMm * diagonalPx;
+    cam.lens.width = width;
+    cam.lens.height = height;
+    cam.lens.fx = cam.lens.fy = focalPx;
+    cam.lens.cx = 0.5 * width;
+    cam.lens.cy = 0.5 * height;
+    cam.lens.source = cam.focalSource;
+  }
   const double pitch = options.pitchDegrees * std::numbers::pi / 180.0;
   cam.worldFromCamera = glm::translate(glm::dmat4(1.0), glm::dvec3(0.0, options.height, 0.0)) *
                         glm::rotate(glm::dmat4(1.0), -pitch, glm::dvec3(1.0, 0.0, 0.0));
   return cam;
 }
 
-glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement,
+glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
                          const glm::dvec3& lo, const glm::dvec3& hi) {
   placement.validate();
   const glm::dvec2 p = placement.imagePoint;
   glm::dvec3 origin, dir;
-  camera.ray(p.x * camera.width, p.y * camera.height, origin, dir);
+  if (!camera.ray(p.x * camera.width, p.y * camera.height, origin, dir)) {
+    throw Error("camera", "--place is outside what the calibrated lens can see");
+  }
   if (!(dir.y < -1e-6)) {
     throw Error(
         "camera",
@@ -93,7 +120,7 @@ glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement
   // Depth of the ground point along the optical axis sets the world size of one pixel there.
   const glm::dvec3 axis = glm::dvec3(camera.worldFromCamera * glm::dvec4(0, 0, -1, 0));
   const double depth = glm::dot(ground - origin, axis);
-  const double worldHeight = placement.heightFraction * camera.height * depth / camera.focalPx;
+  const double worldHeight = placement.heightFraction * camera.height * depth / camera.lens.fy;
   const double meshHeight = hi.y - lo.y;
   const double meshSize = std::max({hi.x - lo.x, meshHeight, hi.z - lo.z});
   COMPOSE_CHECK(meshSize > 0.0);

@@ -1,13 +1,15 @@
-// The plate camera: a pinhole model of the camera that took the background photograph, and where
-// a synthetic object stands in front of it.
+// The plate camera: the camera that took the background photograph (its lens and its pose), and
+// where a synthetic object stands in front of it.
 //
-// Frames (see docs/design.md §2): world is right-handed, +Y up, the ground plane is y = 0. The camera
-// sits at (0, height, 0) and looks along -Z, tilted down by `pitch`. Image pixel (px, py) has its
-// origin at the top-left corner of the picture, +y down; the principal point is the image centre.
+// Frames (see docs/design.md §2): world is right-handed, +Y up, the ground plane is y = 0. The
+// camera sits at (0, height, 0) and looks along -Z, tilted down by `pitch`. Image pixel (px, py)
+// has its origin at the top-left corner of the picture, +y down (calib/lens.h).
 //
-// Field of view: from EXIF FocalLengthIn35mmFilm when present, else an explicit override, else a
-// 50 mm full-frame equivalent. A 35 mm-equivalent focal length f maps to the image diagonal:
-// focal_px = f / 43.27 mm * diagonal_px (43.27 mm is the 36 x 24 mm frame's diagonal).
+// The lens, in order of preference: a calibration file (`compose calib lens`, calib::readLens;
+// its intrinsics and distortion, scaled to the plate's size when the plate was resized); else
+// --focal35; else EXIF FocalLengthIn35mmFilm; else a stated 50 mm default. A 35 mm-equivalent
+// focal length f maps to the image diagonal: focal_px = f / 43.27 mm * diagonal_px (43.27 mm is
+// the 36 x 24 mm frame's diagonal), with the principal point at the image centre.
 #pragma once
 
 #include <optional>
@@ -17,6 +19,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
+#include "calib/lens.h"
 #include "ingest/image_io.h"
 
 namespace compose::calib {
@@ -24,21 +27,25 @@ namespace compose::calib {
 inline constexpr double kFullFrameDiagonalMm = 43.266615305567875;  // sqrt(36² + 24²)
 inline constexpr double kDefaultFocal35mm = 50.0;
 
-struct PinholeCamera {
+struct PlateCamera {
   int width = 0, height = 0;
-  double focalPx = 0.0;     // focal length in pixels (square pixels)
-  double focal35mm = 0.0;   // the same as a 35 mm equivalent
-  std::string focalSource;  // where the focal length came from, for --explain
+  Lens lens;                // intrinsics and distortion, at the plate's size
+  double focal35mm = 0.0;   // the focal length as a 35 mm equivalent (across the diagonal)
+  std::string focalSource;  // where the focal length came from, for the notes
   glm::dmat4 worldFromCamera{1.0};
 
-  // World-space ray through continuous pixel position (px, py); direction is unit length.
-  void ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const;
-  // Projects a world point to continuous pixel coordinates; returns false if behind the camera.
+  // World-space ray through continuous pixel position (px, py); direction is unit length. Returns
+  // false where the lens has no ray (outside a distortion model's valid range).
+  bool ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const;
+  // Projects a world point to continuous pixel coordinates; returns false if the lens cannot see
+  // it (behind the camera).
   bool project(const glm::dvec3& world, glm::dvec2& pixel) const;
   glm::dvec3 position() const { return glm::dvec3(worldFromCamera[3]); }
+  glm::dmat4 cameraFromWorld() const;
 };
 
 struct CameraOptions {
+  std::optional<Lens> lens;         // from a calibration file; overrides everything else
   std::optional<double> focal35mm;  // overrides EXIF
   double height = 1.6;              // metres above the ground
   double pitchDegrees = 0.0;        // positive tilts the camera down
@@ -47,9 +54,10 @@ struct CameraOptions {
   void validate() const;
 };
 
-// Validates options (throws compose::Error, stage "camera") and builds the plate camera.
-PinholeCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
-                          const CameraOptions& options);
+// Validates options and builds the plate camera. Throws compose::Error (stage "camera") when a
+// calibration file does not fit the plate (another aspect ratio).
+PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
+                        const CameraOptions& options);
 
 // Where and how big the object stands. `imagePoint` is in [0, 1]² of the plate (0,0 top-left):
 // the object's base (centre of its bounding box's bottom face) stands on the ground point seen
@@ -66,7 +74,7 @@ struct Placement {
 
 // worldFromObject for a mesh with the given object-space bounds. Throws compose::Error (stage
 // "camera") if the point is above the horizon or the numbers are out of range.
-glm::dmat4 placeOnGround(const PinholeCamera& camera, const Placement& placement,
+glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
                          const glm::dvec3& boundsMin, const glm::dvec3& boundsMax);
 
 }  // namespace compose::calib

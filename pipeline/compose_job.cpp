@@ -8,6 +8,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "calib/lens.h"
 #include "composite/composite.h"
 #include "core/error.h"
 #include "core/output_files.h"
@@ -18,7 +19,11 @@
 #include "lighting/lighting.h"
 #include "lighting/lighting_cache.h"
 #include "lighting/order_selector.h"
+#include "pipeline/shadows.h"
+#include "render/embree_scene.h"
 #include "render/mesh.h"
+#include "render/renderer.h"
+#include "render/transfer.h"
 
 namespace compose::pipeline {
 
@@ -43,13 +48,13 @@ fs::path defaultEnvironment() {
   return samplesDirectory() / "forest.exr";
 }
 
-fs::path lightingCacheDirectory() {
+fs::path cacheDirectory() {
   if (const char* dir = std::getenv("COMPOSE_CACHE_DIR"); dir && *dir) return dir;
   if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg)
-    return fs::path(xdg) / "compose" / "lighting";
+    return fs::path(xdg) / "compose";
   if (const char* home = std::getenv("HOME"); home && *home)
-    return fs::path(home) / ".cache" / "compose" / "lighting";
-  return fs::path(".cache") / "compose" / "lighting";
+    return fs::path(home) / ".cache" / "compose";
+  return fs::path(".cache") / "compose";
 }
 
 namespace {
@@ -242,6 +247,7 @@ void validate(const ComposeJob& job) {
   }
   job.camera.validate();
   job.placement.validate();
+  ShadowPlan::parse(job.shadowParams);
   if (job.room && job.environmentRadius) throw UsageError("give either --room or --env-radius");
   if (job.captureAt && !job.room && !job.environmentRadius)
     throw UsageError(
@@ -291,16 +297,27 @@ std::vector<StageRecord> plan(const ComposeJob& job) {
                  "cube is resampled to lat-long on loading"});
   }
   s.push_back({"color", true, "plate and environment to the working space (role scene_linear)"});
-  s.push_back({"precompute", true,
-               "project the environment onto the '" + job.lighting + "' lighting basis" +
-                   (job.lightingCache.empty()
-                        ? std::string(" (cache off)")
-                        : ", or reuse the cached projection in " + job.lightingCache.string() +
-                              " if this environment and these parameters were seen before")});
+  s.push_back(
+      {"precompute", true,
+       "project the environment onto the '" + job.lighting + "' lighting basis" +
+           (job.cache.empty()
+                ? std::string(" (cache off)")
+                : ", or reuse the cached projection in " + lightingCacheFolder(job.cache).string() +
+                      " if this environment and these parameters were seen before")});
+  if (job.shadows) {
+    s.push_back({"shadows", true,
+                 "self-shadowing by " + ShadowPlan::parse(job.shadowParams).describe() +
+                     ", unless the object is convex; the visibility pass is reused from " +
+                     (job.cache.empty() ? std::string("nowhere (cache off)")
+                                        : visibilityCacheFolder(job.cache).string()) +
+                     " when this mesh was seen with these parameters"});
+  } else {
+    s.push_back({"shadows", false, "--shadows off"});
+  }
   s.push_back({"render", true,
                "ray-cast the object with " +
                    std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
-                   " samples per pixel; no self-shadowing or ground shadow yet"});
+                   " samples per pixel; no ground shadow yet"});
   s.push_back({"composite", true, "premultiplied over, in scene-linear light"});
   s.push_back({"output", true,
                "write " + exrPathFor(job).string() + " and " + displayPathFor(job).string()});
@@ -386,9 +403,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     }
     if (const lighting::CaptureProxy proxy = captureProxy(job);
         proxy.shape != lighting::CaptureProxy::Shape::Distant) {
-      // Parallax: the environment as seen from the object's centre.
-      const calib::PinholeCamera camera =
-          calib::plateCamera(plate.image.width, plate.image.height, plate.info, job.camera);
+      // Parallax: the environment as seen from the object's centre (camera and placement as the
+      // render stage will have them).
+      calib::CameraOptions cameraOptions = job.camera;
+      if (!job.lensFile.empty()) cameraOptions.lens = calib::readLens(job.lensFile);
+      const calib::PlateCamera camera =
+          calib::plateCamera(plate.image.width, plate.image.height, plate.info, cameraOptions);
       const glm::dmat4 worldFromObject = calib::placeOnGround(
           camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
       const glm::dvec3 centre(
@@ -424,8 +444,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       result.notes.push_back(line);
     }
     bool reused = false;
-    if (!job.lightingCache.empty()) {
-      const lighting::LightingCache cache(job.lightingCache);
+    if (!job.cache.empty()) {
+      const lighting::LightingCache cache(lightingCacheFolder(job.cache));
       const std::string key = lighting::LightingCache::key(environment, *lighting);
       reused = cache.load(key, *lighting);
       if (reused) {
@@ -444,21 +464,63 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     record.reason += ": " + lighting->describe();
   }
 
+  // The plate camera and where the object stands.
+  calib::CameraOptions cameraOptions = job.camera;
+  if (!job.lensFile.empty()) cameraOptions.lens = calib::readLens(job.lensFile);
+  const calib::PlateCamera camera =
+      calib::plateCamera(plateLinear.width, plateLinear.height, plate.info, cameraOptions);
+  result.notes.push_back("camera: " + std::to_string(int(std::lround(camera.focal35mm))) +
+                         " mm equivalent, " + camera.focalSource);
+  const glm::dmat4 worldFromObject = calib::placeOnGround(
+      camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+  const double envYaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
+  const glm::mat3 envFromWorld =
+      glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));
+  // The rotation part of the placement (a yaw and a uniform scale), normalised.
+  glm::mat3 worldFromObjectRotation = glm::mat3(worldFromObject);
+  for (int c = 0; c < 3; ++c)
+    worldFromObjectRotation[c] = glm::normalize(worldFromObjectRotation[c]);
+  const render::EmbreeScene objectScene(mesh.positions, mesh.indices);
+
+  // shadows
+  pipeline::ShadowResult shadows;
+  bool shadowed = false;
+  {
+    StageRecord& record = stage(result.stages, "shadows");
+    StageTimer t(record);
+    if (!job.shadows) {
+      record.runs = false;
+      record.reason = "--shadows off";
+    } else if (render::isConvex(mesh)) {
+      record.runs = false;
+      record.reason = "the object is closed and convex: it cannot shadow itself";
+    } else {
+      const ShadowPlan shadowPlan = ShadowPlan::parse(job.shadowParams);
+      shadows = computeSelfShadowing(mesh, objectScene, environment,
+                                     envFromWorld * worldFromObjectRotation, shadowPlan, job.cache,
+                                     progress);
+      record.reason = shadowPlan.describe() + ": " + shadows.reason;
+      if (shadows.irradiance.clamped > 0) {
+        result.notes.push_back(std::to_string(shadows.irradiance.clamped) +
+                               " vertices' shadowed irradiance rang outside [0, unshadowed] "
+                               "(truncation) and was clamped");
+      }
+      shadowed = true;
+    }
+  }
+
   // render
   render::RenderOutput rendered;
   {
     StageTimer t(stage(result.stages, "render"));
-    const calib::PinholeCamera camera =
-        calib::plateCamera(plateLinear.width, plateLinear.height, plate.info, job.camera);
-    result.notes.push_back("camera: " + std::to_string(int(std::lround(camera.focal35mm))) +
-                           " mm equivalent, " + camera.focalSource);
-    const glm::dmat4 worldFromObject = calib::placeOnGround(
-        camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
     render::RenderSettings settings;
     settings.samplesPerAxis = job.samplesPerAxis;
     settings.albedo = job.albedo;
-    const double yaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
-    settings.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)));
+    settings.envFromWorld = envFromWorld;
+    if (shadowed) {
+      settings.shadows = &shadows.irradiance;
+      settings.occlusion = &shadows.occlusion;
+    }
     if (job.exposureStops) {
       settings.exposure = float(std::exp2(*job.exposureStops));
     } else {
@@ -475,12 +537,10 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       result.notes.push_back(line);
     }
     result.exposure = settings.exposure;
-    rendered = render::renderDiffuse(mesh, worldFromObject, camera, *lighting, settings, progress);
+    rendered = render::renderDiffuse(mesh, objectScene, worldFromObject, camera, *lighting,
+                                     settings, progress);
     rendered.beauty.colorSpace = working;
-    double coverage = 0.0;
-    for (size_t i = 3; i < rendered.beauty.pixels.size(); i += 4)
-      coverage += rendered.beauty.pixels[i];
-    if (!(coverage > 0.0)) {
+    if (!(rendered.coverage > 0.0)) {
       throw Error("render",
                   "the object covers no pixel of the plate (--scale " +
                       std::to_string(job.placement.heightFraction) +
@@ -490,52 +550,92 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
                       "): make it larger or place it inside the frame",
                   job.object);
     }
+    result.objectPixels = rendered.coverage;
   }
 
   // composite
   Image composite;
   {
     StageTimer t(stage(result.stages, "composite"));
-    composite = composite::over(rendered.beauty, plateLinear);
+    composite = composite::over(rendered.beauty, rendered.x0, rendered.y0, plateLinear);
   }
 
-  // output: RGBA composite (opaque), the object layer, the normal AOV.
+  // output: the composite (one part, the full frame) and the object with its AOVs (a second part
+  // whose data window is the traced rectangle), and the display image.
   {
     StageTimer t(stage(result.stages, "output"));
-    Image exr(
-        composite.width, composite.height, 11,
-        {"R", "G", "B", "A", "object.R", "object.G", "object.B", "object.A", "N.X", "N.Y", "N.Z"});
-    exr.colorSpace = working;
+    Image compositeRgba(composite.width, composite.height, 4, {"R", "G", "B", "A"});
+    compositeRgba.colorSpace = working;
     for (size_t i = 0; i < composite.pixelCount(); ++i) {
-      float* d = exr.pixels.data() + i * 11;
-      const float* c = composite.pixels.data() + i * 3;
-      const float* b = rendered.beauty.pixels.data() + i * 4;
-      const float* n = rendered.normals.pixels.data() + i * 3;
-      d[0] = c[0], d[1] = c[1], d[2] = c[2], d[3] = 1.0f;
-      d[4] = b[0], d[5] = b[1], d[6] = b[2], d[7] = b[3];
-      d[8] = n[0], d[9] = n[1], d[10] = n[2];
-      result.objectPixels += b[3];
+      std::copy_n(composite.pixels.data() + 3 * i, 3, compositeRgba.pixels.data() + 4 * i);
+      compositeRgba.pixels[4 * i + 3] = 1.0f;
     }
-    ingest::WriteOptions exrOptions;
-    exrOptions.depth = ingest::WriteOptions::Depth::Half;
-    exrOptions.alphaChannel = 3;
-    exrOptions.chromaticities = colors.chromaticities(working);
-    if (!exrOptions.chromaticities) {
+    const std::vector<std::string>& aovNames = render::aovChannelNames();
+    const int objectChannels = 4 + int(aovNames.size());
+    std::vector<std::string> objectNames = {"object.R", "object.G", "object.B", "object.A"};
+    objectNames.insert(objectNames.end(), aovNames.begin(), aovNames.end());
+    Image object(rendered.beauty.width, rendered.beauty.height, objectChannels, objectNames);
+    object.colorSpace = working;
+    for (size_t i = 0; i < object.pixelCount(); ++i) {
+      float* d = object.pixels.data() + i * size_t(objectChannels);
+      std::copy_n(rendered.beauty.pixels.data() + 4 * i, 4, d);
+      std::copy_n(rendered.aovs.pixels.data() + i * aovNames.size(), aovNames.size(), d + 4);
+    }
+    ingest::ExrPart compositePart{"composite",     &compositeRgba,   0, 0,
+                                  composite.width, composite.height, {}};
+    compositePart.options.depth = ingest::WriteOptions::Depth::Half;
+    compositePart.options.alphaChannel = 3;
+    compositePart.options.chromaticities = colors.chromaticities(working);
+    ingest::ExrPart objectPart{"object",        &object,          rendered.x0,          rendered.y0,
+                               composite.width, composite.height, compositePart.options};
+    if (!compositePart.options.chromaticities) {
       result.notes.push_back("the config (" + colors.source() +
                              ") does not say what the primaries of the working space '" + working +
                              "' are: the EXR carries its name but no chromaticities");
     }
+    // The camera and the placement, so that another tool can rebuild the scene.
+    ingest::ExrHeader header;
+    auto asImath = [](const glm::dmat4& m) {
+      // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
+      // Imath's rows of the row-vector matrix (translation in the last row).
+      std::array<float, 16> out;
+      for (int c = 0; c < 4; ++c)
+        for (int r = 0; r < 4; ++r) out[size_t(4 * c + r)] = float(m[c][r]);
+      return out;
+    };
+    // OpenEXR's camera space looks along +Z (left-handed): flip our -Z.
+    const glm::dmat4 flipZ = glm::scale(glm::dmat4(1.0), glm::dvec3(1.0, 1.0, -1.0));
+    const glm::dmat4 cameraFromWorld = camera.cameraFromWorld();
+    glm::dmat4 ndcFromCamera(0.0);  // pinhole part of the lens (distortion is not a matrix)
+    const calib::Lens& lens = camera.lens;
+    ndcFromCamera[0][0] = lens.fx / camera.width;
+    ndcFromCamera[2][0] = -lens.cx / camera.width;
+    ndcFromCamera[1][1] = -lens.fy / camera.height;
+    ndcFromCamera[2][1] = -lens.cy / camera.height;
+    ndcFromCamera[2][2] = -1.0;
+    ndcFromCamera[2][3] = -1.0;
+    header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
+    header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
+    header.matrices.emplace_back("compose:worldFromObject", asImath(worldFromObject));
+    header.strings.emplace_back("compose:object", fs::absolute(job.object).string());
+    if (lens.hasDistortion()) {
+      header.strings.emplace_back("compose:lens",
+                                  "distorted lens: worldToNDC holds its pinhole part only");
+    }
+
     const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
     const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
     Image shown = colors.toDisplay(composite, display, view);
     {
       // Object pixels that the display image shows as clipped white: their shading is lost.
       int64_t covered = 0, clipped = 0;
-      for (size_t i = 0; i < shown.pixelCount(); ++i) {
-        if (rendered.beauty.pixels[4 * i + 3] < 0.5f) continue;
-        ++covered;
-        const float* d = shown.pixels.data() + 3 * i;
-        if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped;
+      for (int y = 0; y < rendered.beauty.height; ++y) {
+        for (int x = 0; x < rendered.beauty.width; ++x) {
+          if (rendered.beauty.at(x, y)[3] < 0.5f) continue;
+          ++covered;
+          const float* d = shown.at(x + rendered.x0, y + rendered.y0);
+          if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped;
+        }
       }
       constexpr double kClippedShare = 0.02;
       if (covered > 0 && double(clipped) > kClippedShare * double(covered)) {
@@ -550,16 +650,17 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     }
     // Both files appear together or not at all: a failure keeps every previous output.
     OutputFiles outputs("output");
-    const ingest::WriteReport written =
-        ingest::writeImage(outputs, result.exrPath, exr, exrOptions);
+    const std::vector<ingest::WriteReport> written =
+        ingest::writeExrParts(outputs, result.exrPath, {compositePart, objectPart}, header);
     ingest::writeImage(outputs, result.displayPath, shown, {});
     outputs.commit();
-    if (written.promotedToFloat) {
+    for (const ingest::WriteReport& w : written) {
+      if (!w.promotedToFloat) continue;
       char line[200];
       std::snprintf(line, sizeof line,
-                    "values up to %g exceed half float's range (65504): the EXR is written as "
-                    "32-bit float",
-                    double(written.largestMagnitude));
+                    "values up to %g exceed half float's range (65504): that part of the EXR is "
+                    "written as 32-bit float",
+                    double(w.largestMagnitude));
       result.notes.push_back(line);
     }
     report(progress, "output", 1.0);

@@ -36,9 +36,9 @@ const std::vector<std::string>& stageNames();
 std::filesystem::path samplesDirectory();
 // The environment used when none is given.
 std::filesystem::path defaultEnvironment();
-// Folder of the projected-lighting cache: $COMPOSE_CACHE_DIR, else
-// $XDG_CACHE_HOME/compose/lighting, else ~/.cache/compose/lighting.
-std::filesystem::path lightingCacheDirectory();
+// Root of the on-disk caches (projected lighting in lighting/, visibility passes in visibility/):
+// $COMPOSE_CACHE_DIR, else $XDG_CACHE_HOME/compose, else ~/.cache/compose.
+std::filesystem::path cacheDirectory();
 
 struct ComposeJob {
   std::filesystem::path plate;
@@ -55,10 +55,16 @@ struct ComposeJob {
 
   std::string lighting = "cheb-local";
   std::string lightingParams;  // "key=value,..." for the basis
-  // Projected lighting is cached here, keyed by the environment's pixels and the basis
-  // parameters; empty disables the cache.
-  std::filesystem::path lightingCache = lightingCacheDirectory();
+  // Self-shadowing of the object (skipped for a convex object) and its parameters
+  // (pipeline/shadows.h).
+  bool shadows = true;
+  std::string shadowParams;
+  // Root of the caches: projected lighting keyed by the environment's pixels and the basis
+  // parameters, visibility passes keyed by the mesh and theirs; empty disables both.
+  std::filesystem::path cache = cacheDirectory();
   double environmentYawDegrees = 0.0;
+  // A lens calibration (compose calib lens) for the plate; empty: EXIF or --focal35.
+  std::filesystem::path lensFile;
 
   calib::CameraOptions camera;
   calib::Placement placement;

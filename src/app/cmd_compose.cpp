@@ -13,7 +13,7 @@ namespace {
 
 struct ComposeOptions {
   pipeline::ComposeJob job;
-  std::string place, albedo, lightingParams, exposure = "auto", room, captureAt;
+  std::string place, albedo, lightingParams, exposure = "auto", shadows = "self", room, captureAt;
   double focal35 = 0.0, envRadius = 0.0;
   bool explain = false, noCache = false;
 };
@@ -76,9 +76,19 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   app.add_option("--display", job.display,
                  "OpenColorIO display for the JPEG/PNG [default: the config's]");
   app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
-  app.add_option("--cache", job.lightingCache, "Folder for cached lighting projections")
+  app.add_option("--cache", job.cache,
+                 "Folder of the caches (projected lighting, visibility passes)")
       ->capture_default_str();
-  app.add_flag("--no-cache", o->noCache, "Neither read nor write the lighting cache");
+  app.add_flag("--no-cache", o->noCache, "Neither read nor write the caches");
+  app.add_option("--shadows", o->shadows,
+                 "Self-shadowing of the object: self (by precomputed transfer; skipped for a "
+                 "convex object) or off")
+      ->capture_default_str();
+  app.add_option("--shadow-params", job.shadowParams,
+                 "Self-shadowing parameters as key=value,...: method=cheb|sh|ao, order, grid, "
+                 "boundary, sources");
+  app.add_option("--calib", job.lensFile,
+                 "Lens calibration of the plate's camera (JSON from compose calib lens)");
   app.add_flag("--explain", o->explain, "Say which stages run or are skipped and why, then exit");
 
   return [o, &app, &globals]() -> int {
@@ -95,7 +105,12 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     if (app.count("--env-radius")) j.environmentRadius = o->envRadius;
     if (!o->captureAt.empty()) j.captureAt = parseTriple(o->captureAt, "--capture-at");
     j.lightingParams = o->lightingParams;
-    if (o->noCache) j.lightingCache.clear();
+    if (o->noCache) j.cache.clear();
+    if (o->shadows == "off") {
+      j.shadows = false;
+    } else if (o->shadows != "self") {
+      throw UsageError("--shadows must be self or off, got '" + o->shadows + "'");
+    }
     if (o->exposure != "auto") j.exposureStops = parseNumber(o->exposure, "--exposure");
 
     if (o->explain) {

@@ -11,5 +11,8 @@ namespace compose::composite {
 // background's channel layout (its alpha, if any, becomes α_fg + α_bg (1 - α_fg)). Throws
 // compose::Error (stage "composite") on a size or colour-space mismatch.
 Image over(const Image& foreground, const Image& background);
+// The same with the foreground covering [x, x + width) x [y, y + height) of the background (it
+// must lie inside it); the rest of the background is copied unchanged.
+Image over(const Image& foreground, int x, int y, const Image& background);
 
 }  // namespace compose::composite

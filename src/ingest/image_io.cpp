@@ -110,6 +110,47 @@ LoadedImage readImage(const fs::path& path, const std::string& stage) {
 
 namespace {
 
+// The pixel format for `image` under `options`, and whether a half request became float.
+OIIO::TypeDesc pixelFormat(const Image& image, const WriteOptions& options, bool isExr,
+                           WriteReport& report) {
+  OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
+  switch (options.depth) {
+    case WriteOptions::Depth::Auto:
+      format = isExr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::UINT8;
+      break;
+    case WriteOptions::Depth::UInt8:
+      format = OIIO::TypeDesc::UINT8;
+      break;
+    case WriteOptions::Depth::Half:
+      format = OIIO::TypeDesc::HALF;
+      break;
+    case WriteOptions::Depth::Float:
+      format = OIIO::TypeDesc::FLOAT;
+      break;
+  }
+  if (format == OIIO::TypeDesc::HALF) {
+    for (float v : image.pixels) {
+      if (std::isfinite(v))
+        report.largestMagnitude = std::max(report.largestMagnitude, std::abs(v));
+    }
+    if (report.largestMagnitude > kHalfMax) {
+      format = OIIO::TypeDesc::FLOAT;
+      report.promotedToFloat = true;
+    }
+  }
+  return format;
+}
+
+void describeExr(OIIO::ImageSpec& spec, const Image& image, const WriteOptions& options) {
+  spec.attribute("compression", "zip");
+  if (!image.colorSpace.empty()) spec.attribute("colorSpace", image.colorSpace);
+  if (options.chromaticities) {
+    float c[8];
+    for (int i = 0; i < 8; ++i) c[i] = float((*options.chromaticities)[size_t(i)]);
+    spec.attribute("chromaticities", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8), c);
+  }
+}
+
 // Writes into `file` (a temporary); errors name `shown`, the destination the user asked for.
 WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& image,
                       const WriteOptions& options) {
@@ -155,15 +196,7 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   spec.alpha_channel = options.alphaChannel;
   if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
   spec.attribute("Software", "compose");
-  if (isExr) {
-    spec.attribute("compression", "zip");
-    if (!image.colorSpace.empty()) spec.attribute("colorSpace", image.colorSpace);
-    if (options.chromaticities) {
-      float c[8];
-      for (int i = 0; i < 8; ++i) c[i] = float((*options.chromaticities)[size_t(i)]);
-      spec.attribute("chromaticities", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8), c);
-    }
-  }
+  if (isExr) describeExr(spec, image, options);
   if (ext == ".jpg" || ext == ".jpeg") {
     spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
   }
@@ -187,6 +220,54 @@ WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& 
   if (!OIIO::ImageOutput::create(path.string()))
     throw Error("output", "no image writer for this file extension", path);
   return writeInto(outputs.add(path), path, image, options);
+}
+
+std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const fs::path& path,
+                                       const std::vector<ExrPart>& parts, const ExrHeader& header) {
+  COMPOSE_CHECK(!parts.empty());
+  std::vector<WriteReport> reports(parts.size());
+  std::vector<OIIO::ImageSpec> specs;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const ExrPart& part = parts[i];
+    const Image& image = *part.image;
+    COMPOSE_CHECK(image.width > 0 && image.height > 0 && image.channels > 0);
+    const OIIO::TypeDesc format = pixelFormat(image, part.options, true, reports[i]);
+    OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
+    spec.x = part.x;
+    spec.y = part.y;
+    spec.full_x = 0;
+    spec.full_y = 0;
+    spec.full_width = part.fullWidth > 0 ? part.fullWidth : image.width;
+    spec.full_height = part.fullHeight > 0 ? part.fullHeight : image.height;
+    if (!image.channelNames.empty()) spec.channelnames = image.channelNames;
+    spec.alpha_channel = part.options.alphaChannel;
+    spec.attribute("name", part.name);
+    spec.attribute("Software", "compose");
+    describeExr(spec, image, part.options);
+    for (const auto& [name, m] : header.matrices) spec.attribute(name, OIIO::TypeMatrix, m.data());
+    for (const auto& [name, value] : header.strings) spec.attribute(name, value);
+    specs.push_back(std::move(spec));
+  }
+  const fs::path file = outputs.add(path);
+  auto output = OIIO::ImageOutput::create(path.string());
+  if (!output) throw Error("output", "no image writer for this file extension", path);
+  auto fail = [&](const std::string& what) {
+    std::string why = output->geterror();
+    if (why.empty() && errno != 0) why = std::strerror(errno);
+    output.reset();
+    throw Error("output", what + (why.empty() ? "" : ": " + why), path);
+  };
+  errno = 0;
+  if (!output->open(file.string(), int(specs.size()), specs.data()))
+    fail("cannot open for writing");
+  for (size_t i = 0; i < parts.size(); ++i) {
+    if (i > 0 && !output->open(file.string(), specs[i], OIIO::ImageOutput::AppendSubimage))
+      fail("cannot start part '" + parts[i].name + "'");
+    if (!output->write_image(OIIO::TypeDesc::FLOAT, parts[i].image->pixels.data()))
+      fail("cannot write part '" + parts[i].name + "'");
+  }
+  if (!output->close()) fail("cannot finish writing");
+  return reports;
 }
 
 WriteReport writeImage(const fs::path& path, const Image& image, const WriteOptions& options) {

@@ -25,6 +25,8 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/image.h"
 #include "core/output_files.h"
@@ -80,6 +82,30 @@ WriteReport writeImage(const std::filesystem::path& path, const Image& image,
 // when the caller commits the set.
 WriteReport writeImage(OutputFiles& outputs, const std::filesystem::path& path, const Image& image,
                        const WriteOptions& options = {});
+
+// One part of a multi-part OpenEXR file (as Nuke reads them: each part a layer group with its own
+// data window). The image covers [x, x + width) x [y, y + height) of the full frame
+// fullWidth x fullHeight (the display window).
+struct ExrPart {
+  std::string name;
+  const Image* image = nullptr;
+  int x = 0, y = 0;
+  int fullWidth = 0, fullHeight = 0;
+  WriteOptions options;
+};
+
+// Attributes written on every part of an OpenEXR file: 4x4 matrices (OpenEXR's m44f, stored as
+// Imath reads them: row vectors, translation in the last row) and strings.
+struct ExrHeader {
+  std::vector<std::pair<std::string, std::array<float, 16>>> matrices;
+  std::vector<std::pair<std::string, std::string>> strings;
+};
+
+// Writes a multi-part OpenEXR into a temporary of `outputs` (it appears at `path` on commit).
+// Returns a report per part.
+std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const std::filesystem::path& path,
+                                       const std::vector<ExrPart>& parts,
+                                       const ExrHeader& header = {});
 
 // The largest value half float represents.
 inline constexpr float kHalfMax = 65504.0f;

@@ -140,8 +140,12 @@ void NormalGrid::frame(size_t node, glm::vec3& east, glm::vec3& north) const {
 }
 
 void NormalGrid::interpolation(const glm::vec3& n, size_t nodes[4], float weights[4]) const {
-  const double lat = fastAtan2(n.y, std::sqrt(n.x * n.x + n.z * n.z));
-  double lon = fastAtan2(n.x, n.z);
+  interpolationAt(fastAtan2(n.y, std::sqrt(n.x * n.x + n.z * n.z)), fastAtan2(n.x, n.z), nodes,
+                  weights);
+}
+
+void NormalGrid::interpolationAt(double lat, double lon, size_t nodes[4], float weights[4]) const {
+  lon = std::fmod(lon, 2.0 * kPi);
   if (lon < 0.0) lon += 2.0 * kPi;
   const double u = (0.5 - lat / kPi) * (rows_ - 1);
   const double v = lon / (2.0 * kPi) * cols_;
@@ -614,6 +618,18 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
     e += w[q] * dot;
   }
   return e;
+}
+
+void ChebLocalLighting::lightMoments(double latitude, double longitude, float* out) const {
+  COMPOSE_CHECK(!table_.empty());
+  size_t nodes[4];
+  float w[4];
+  grid_.interpolationAt(latitude, longitude, nodes, w);
+  std::fill(out, out + stride_, 0.0f);
+  for (int q = 0; q < 4; ++q) {
+    const float* node = table_.data() + nodes[q] * stride_;
+    for (size_t i = 0; i < stride_; ++i) out[i] += w[q] * node[i];
+  }
 }
 
 size_t ChebLocalLighting::floatsStored() const {

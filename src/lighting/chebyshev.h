@@ -65,6 +65,9 @@ class NormalGrid {
   void frame(size_t node, glm::vec3& east, glm::vec3& north) const;
   // The four nodes around unit direction n and their bilinear weights.
   void interpolation(const glm::vec3& n, size_t nodes[4], float weights[4]) const;
+  // The same for a direction given by latitude and longitude (radians; longitude as atan2(x, z),
+  // any value, wrapped).
+  void interpolationAt(double latitude, double longitude, size_t nodes[4], float weights[4]) const;
 
  private:
   int rows_ = 0, cols_ = 0;
@@ -129,6 +132,16 @@ class ChebLocalLighting final : public ChebBase {
   glm::vec3 irradiance(const glm::vec3& n) const override;
   glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& view) const override;
   size_t floatsStored() const override;
+
+  int order() const { return params_.order; }
+  int samples() const { return params_.samples; }
+  bool lambertian() const { return params_.brdf == "lambert"; }
+  // The lighting moments a_mn (k x k per channel, channel-major: out[c k² + m k + n]) at the
+  // normal with this latitude and longitude, in the tangent frame of that longitude
+  // (east = (cos φ, 0, -sin φ), north = n x east), interpolated between grid nodes. For a
+  // Lambertian surface E = Σ a_mn b_mn with b the moments of the BRDF side (1, or a visibility
+  // mask). Needs project().
+  void lightMoments(double latitude, double longitude, float* out) const;
 
   // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.
   static double orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut,

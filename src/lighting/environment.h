@@ -54,6 +54,13 @@ class Environment {
   }
   // The radiance, RGB interleaved, row-major (for hashing and copying).
   const std::vector<float>& texels() const { return texels_; }
+  // Changes one texel (non-negative, finite radiance).
+  void setRadiance(int x, int y, const glm::vec3& L) {
+    float* p = texels_.data() + (size_t(y) * size_t(width_) + size_t(x)) * 3;
+    p[0] = L.x;
+    p[1] = L.y;
+    p[2] = L.z;
+  }
 
   // Direction of the centre of texel (x, y).
   glm::vec3 direction(int x, int y) const;

@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <string>
 
+#include "core/float_cache.h"
 #include "lighting/lighting.h"
 
 namespace compose::lighting {
@@ -23,12 +24,11 @@ class LightingCache {
  public:
   static constexpr int kProjectionVersion = 3;
 
-  explicit LightingCache(std::filesystem::path folder) : folder_(std::move(folder)) {}
+  explicit LightingCache(std::filesystem::path folder)
+      : files_(std::move(folder), "COMPLIT3", ".lighting") {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);
-  std::filesystem::path pathFor(const std::string& key) const {
-    return folder_ / (key + ".lighting");
-  }
+  std::filesystem::path pathFor(const std::string& key) const { return files_.pathFor(key); }
 
   // Restores `basis` from the entry for `key`; false on a miss or an entry that does not fit.
   bool load(const std::string& key, DiffuseLighting& basis) const;
@@ -36,7 +36,7 @@ class LightingCache {
   bool store(const std::string& key, const DiffuseLighting& basis) const;
 
  private:
-  std::filesystem::path folder_;
+  FloatCache files_;
 };
 
 }  // namespace compose::lighting

@@ -5,9 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
-#include <string>
 
-#include <embree3/rtcore.h>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 
@@ -17,26 +15,6 @@
 namespace compose::render {
 
 namespace {
-
-void embreeError(void*, RTCError code, const char* message) {
-  // Reported through rtcGetDeviceError below; nothing to do here but keep Embree quiet.
-  (void)code;
-  (void)message;
-}
-
-// RAII holders for Embree handles.
-struct Device {
-  RTCDevice handle = rtcNewDevice(nullptr);
-  ~Device() {
-    if (handle) rtcReleaseDevice(handle);
-  }
-};
-struct Scene {
-  RTCScene handle = nullptr;
-  ~Scene() {
-    if (handle) rtcReleaseScene(handle);
-  }
-};
 
 // Deterministic per-sample jitter in [0, 1): a 32-bit integer hash (lowbias32).
 float hash01(uint32_t x) {
@@ -48,156 +26,199 @@ float hash01(uint32_t x) {
   return float(x >> 8) * (1.0f / 16777216.0f);
 }
 
+// Channel offsets in the AOV image.
+enum Aov { kN = 0, kP = 3, kDepth = 6, kAlbedo = 7, kIrradiance = 10, kShadowed = 13, kAo = 16 };
+constexpr int kAovChannels = 17;
+
+// The screen rectangle that can hold the object: the projection of points along the world
+// bounding box's edges (a distorted lens bends them), padded by two pixels; the whole frame when
+// some of the box is behind the camera. Coordinates are clamped before they become integers.
+void screenRectangle(const calib::PlateCamera& camera, const glm::dvec3& lo, const glm::dvec3& hi,
+                     int& x0, int& y0, int& x1, int& y1) {
+  x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
+  glm::dvec2 smin(std::numeric_limits<double>::max()), smax(-std::numeric_limits<double>::max());
+  constexpr int kSteps = 16;
+  for (int c = 0; c < 8; ++c) {
+    const glm::dvec3 a((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y, (c & 4) ? hi.z : lo.z);
+    for (int axis = 0; axis < 3; ++axis) {
+      if (c & (1 << axis)) continue;  // each edge once, from its low corner
+      glm::dvec3 b = a;
+      b[axis] = axis == 0 ? hi.x : axis == 1 ? hi.y : hi.z;
+      for (int s = 0; s <= kSteps; ++s) {
+        glm::dvec2 px;
+        if (!camera.project(a + (b - a) * (double(s) / kSteps), px)) return;  // behind: all
+        smin = glm::min(smin, px);
+        smax = glm::max(smax, px);
+      }
+    }
+  }
+  constexpr double kLimit = 1e7;  // far outside any image, well inside int
+  auto toInt = [&](double v) { return int(std::clamp(v, -kLimit, kLimit)); };
+  x0 = std::clamp(toInt(std::floor(smin.x)) - 2, 0, camera.width);
+  y0 = std::clamp(toInt(std::floor(smin.y)) - 2, 0, camera.height);
+  x1 = std::clamp(toInt(std::ceil(smax.x)) + 2, 0, camera.width);
+  y1 = std::clamp(toInt(std::ceil(smax.y)) + 2, 0, camera.height);
+  x1 = std::max(x0, x1);
+  y1 = std::max(y0, y1);
+}
+
 }  // namespace
 
-RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject,
-                           const calib::PinholeCamera& camera,
+const std::vector<std::string>& aovChannelNames() {
+  static const std::vector<std::string> names = {"N.X",
+                                                 "N.Y",
+                                                 "N.Z",
+                                                 "P.X",
+                                                 "P.Y",
+                                                 "P.Z",
+                                                 "depth.Z",
+                                                 "albedo.R",
+                                                 "albedo.G",
+                                                 "albedo.B",
+                                                 "irradiance.R",
+                                                 "irradiance.G",
+                                                 "irradiance.B",
+                                                 "irradianceShadowed.R",
+                                                 "irradianceShadowed.G",
+                                                 "irradianceShadowed.B",
+                                                 "AO.Y"};
+  return names;
+}
+
+RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
+                           const glm::dmat4& worldFromObject, const calib::PlateCamera& camera,
                            const lighting::DiffuseLighting& lighting,
                            const RenderSettings& settings, const Progress& progress) {
   COMPOSE_CHECK(settings.samplesPerAxis >= 1);
   COMPOSE_CHECK(!mesh.indices.empty() && mesh.normals.size() == mesh.positions.size());
+  if (settings.shadows) COMPOSE_CHECK(settings.shadows->shadowed.size() == mesh.positions.size());
+  if (settings.occlusion) COMPOSE_CHECK(settings.occlusion->size() == mesh.positions.size());
 
-  // Object → world once, in double, then float for Embree.
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
   const glm::dmat3 normalFromObject = glm::transpose(glm::inverse(glm::dmat3(worldFromObject)));
-  std::vector<glm::vec3> normals(mesh.normals.size());
-  for (size_t i = 0; i < normals.size(); ++i) {
-    normals[i] = glm::vec3(glm::normalize(normalFromObject * glm::dvec3(mesh.normals[i])));
-  }
+  const glm::dmat4 cameraFromWorld = camera.cameraFromWorld();
 
-  Device device;
-  if (!device.handle) throw Error("render", "cannot create the Embree device");
-  rtcSetDeviceErrorFunction(device.handle, embreeError, nullptr);
-  Scene scene;
-  scene.handle = rtcNewScene(device.handle);
-  rtcSetSceneBuildQuality(scene.handle, RTC_BUILD_QUALITY_HIGH);
-  RTCGeometry geom = rtcNewGeometry(device.handle, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                               RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                               mesh.positions.size()));
-  auto* triangles = static_cast<uint32_t*>(
-      rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                              3 * sizeof(uint32_t), mesh.triangleCount()));
-  if (!vertices || !triangles) {
-    rtcReleaseGeometry(geom);
-    throw Error("render", "Embree could not allocate the mesh buffers");
-  }
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-  for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    const glm::dvec3 p =
-        glm::dvec3(worldFromObject * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
-    lo = glm::min(lo, p);
-    hi = glm::max(hi, p);
-    vertices[3 * i] = float(p.x);
-    vertices[3 * i + 1] = float(p.y);
-    vertices[3 * i + 2] = float(p.z);
+  for (const glm::vec3& p : mesh.positions) {
+    const glm::dvec3 w = glm::dvec3(worldFromObject * glm::dvec4(glm::dvec3(p), 1.0));
+    lo = glm::min(lo, w);
+    hi = glm::max(hi, w);
   }
-  std::copy(mesh.indices.begin(), mesh.indices.end(), triangles);
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(scene.handle, geom);
-  rtcReleaseGeometry(geom);
-  rtcCommitScene(scene.handle);
-  if (rtcGetDeviceError(device.handle) != RTC_ERROR_NONE)
-    throw Error("render", "Embree failed to build the scene");
-
   RenderOutput out;
-  out.beauty = Image(camera.width, camera.height, 4, {"R", "G", "B", "A"});
-  out.normals = Image(camera.width, camera.height, 3, {"N.X", "N.Y", "N.Z"});
-  out.normals.colorSpace = "Raw";
-
-  // Screen rectangle of the world bounding box; the whole frame if any corner is behind the camera.
-  int x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
-  {
-    glm::dvec2 smin(std::numeric_limits<double>::max()), smax(-std::numeric_limits<double>::max());
-    bool allInFront = true;
-    for (int c = 0; c < 8; ++c) {
-      const glm::dvec3 corner((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y, (c & 4) ? hi.z : lo.z);
-      glm::dvec2 px;
-      if (!camera.project(corner, px)) {
-        allInFront = false;
-        break;
-      }
-      smin = glm::min(smin, px);
-      smax = glm::max(smax, px);
-    }
-    if (allInFront) {
-      x0 = std::clamp(int(std::floor(smin.x)) - 1, 0, camera.width);
-      y0 = std::clamp(int(std::floor(smin.y)) - 1, 0, camera.height);
-      x1 = std::clamp(int(std::ceil(smax.x)) + 1, 0, camera.width);
-      y1 = std::clamp(int(std::ceil(smax.y)) + 1, 0, camera.height);
-    }
-  }
-  out.x0 = x0;
-  out.y0 = y0;
-  out.x1 = std::max(x0, x1);
-  out.y1 = std::max(y0, y1);
+  screenRectangle(camera, lo, hi, out.x0, out.y0, out.x1, out.y1);
+  const int w = out.x1 - out.x0, h = out.y1 - out.y0;
+  out.beauty = Image(w, h, 4, {"R", "G", "B", "A"});
+  out.aovs = Image(w, h, kAovChannels, aovChannelNames());
+  out.aovs.colorSpace = "Raw";
+  if (w == 0 || h == 0) return out;
 
   const int n = settings.samplesPerAxis;
   const float invSamples = 1.0f / float(n * n);
   const float invPi = float(1.0 / std::numbers::pi);
   const glm::vec3 reflect = settings.albedo * settings.exposure * invPi;
   std::atomic<int> rowsDone{0};
-  const int rowCount = out.y1 - out.y0;
+  std::atomic<int64_t> hitsTotal{0};
 
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
-    RTCIntersectContext context;
+    int64_t rowHits = 0;
     for (int x = out.x0; x < out.x1; ++x) {
-      glm::vec3 colour(0.0f), normalSum(0.0f);
+      glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f);
+      glm::dvec3 positionSum(0.0);
+      double depthSum = 0.0;
+      float aoSum = 0.0f;
       int hits = 0;
       for (int s = 0; s < n * n; ++s) {
         const uint32_t seed =
             (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
-        const double px = x + (s % n + double(hash01(2 * seed))) / n;
-        const double py = y + (s / n + double(hash01(2 * seed + 1))) / n;
+        const double jx = settings.jitter ? double(hash01(2 * seed)) : 0.5;
+        const double jy = settings.jitter ? double(hash01(2 * seed + 1)) : 0.5;
         glm::dvec3 org, dir;
-        camera.ray(px, py, org, dir);
-        RTCRayHit rh{};
-        rh.ray.org_x = float(org.x);
-        rh.ray.org_y = float(org.y);
-        rh.ray.org_z = float(org.z);
-        rh.ray.dir_x = float(dir.x);
-        rh.ray.dir_y = float(dir.y);
-        rh.ray.dir_z = float(dir.z);
-        rh.ray.tnear = 0.0f;
-        rh.ray.tfar = std::numeric_limits<float>::infinity();
-        rh.ray.mask = 0xFFFFFFFFu;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rtcInitIntersectContext(&context);
-        rtcIntersect1(scene.handle, &context, &rh);
-        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-        const uint32_t* tri = &mesh.indices[3 * size_t(rh.hit.primID)];
-        const float u = rh.hit.u, v = rh.hit.v;
-        glm::vec3 nrm = glm::normalize((1.0f - u - v) * normals[tri[0]] + u * normals[tri[1]] +
-                                       v * normals[tri[2]]);
-        // Seen from behind (open meshes): shade the side the camera sees.
-        const glm::vec3 ng(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
-        if (glm::dot(ng, glm::vec3(dir)) > 0.0f) nrm = -nrm;
+        if (!camera.ray(x + (s % n + jx) / n, y + (s / n + jy) / n, org, dir)) continue;
+        // Into the object's coordinates: the same ray parameter t on both sides.
+        const glm::dvec3 oObj = glm::dvec3(objectFromWorld * glm::dvec4(org, 1.0));
+        const glm::dvec3 dObj = glm::dvec3(objectFromWorld * glm::dvec4(dir, 0.0));
+        const EmbreeScene::Hit hit = scene.intersect(glm::vec3(oObj), glm::vec3(dObj));
+        if (!hit.found) continue;
+        const uint32_t* tri = &mesh.indices[3 * size_t(hit.triangle)];
+        const float u = hit.u, v = hit.v, t = 1.0f - u - v;
+        const glm::vec3 interpolated =
+            t * mesh.normals[tri[0]] + u * mesh.normals[tri[1]] + v * mesh.normals[tri[2]];
+        glm::vec3 ng =
+            glm::vec3(glm::normalize(normalFromObject * glm::dvec3(hit.geometricNormal)));
+        glm::vec3 nrm = glm::dot(interpolated, interpolated) > 1e-12f
+                            ? glm::vec3(glm::normalize(normalFromObject * glm::dvec3(interpolated)))
+                            : ng;  // a zero interpolated normal: the face's own
         const glm::vec3 view = -glm::vec3(dir);
-        const glm::vec3 e =
+        // Shade the side the camera sees: a back face turns both normals round, and a shading
+        // normal that still points away from the viewer is bent back to the tangent plane.
+        if (glm::dot(ng, view) < 0.0f) {
+          ng = -ng;
+          nrm = -nrm;
+        }
+        const float away = glm::dot(nrm, view);
+        if (away < 0.0f) nrm = glm::normalize(nrm - (away - 1e-3f) * view);
+        glm::vec3 e =
             glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view),
                      glm::vec3(0.0f));
-        colour += reflect * e;
+        glm::vec3 shadowedE = e;
+        if (settings.shadows) {
+          const VertexIrradiance& vi = *settings.shadows;
+          const glm::vec3 sh =
+              t * vi.shadowed[tri[0]] + u * vi.shadowed[tri[1]] + v * vi.shadowed[tri[2]];
+          const glm::vec3 un =
+              t * vi.unshadowed[tri[0]] + u * vi.unshadowed[tri[1]] + v * vi.unshadowed[tri[2]];
+          for (int c = 0; c < 3; ++c) {
+            // Where the vertices get (almost) no light there is nothing to shadow.
+            const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
+            shadowedE[c] = e[c] * ratio;
+          }
+        }
+        colour += reflect * shadowedE;
+        irradianceSum += e;
+        shadowedSum += shadowedE;
+        if (settings.occlusion) {
+          const std::vector<float>& ao = *settings.occlusion;
+          aoSum += t * ao[tri[0]] + u * ao[tri[1]] + v * ao[tri[2]];
+        } else {
+          aoSum += 1.0f;
+        }
         normalSum += nrm;
+        const glm::dvec3 p = org + dir * double(hit.distance);
+        positionSum += p;
+        depthSum += -(cameraFromWorld * glm::dvec4(p, 1.0)).z;
         ++hits;
       }
       if (hits == 0) continue;
-      float* b = out.beauty.at(x, y);
+      rowHits += hits;
+      float* b = out.beauty.at(x - out.x0, y - out.y0);
       b[0] = colour.x * invSamples;
       b[1] = colour.y * invSamples;
       b[2] = colour.z * invSamples;
       b[3] = float(hits) * invSamples;
+      float* a = out.aovs.at(x - out.x0, y - out.y0);
+      const float inv = 1.0f / float(hits);
       const float len = glm::length(normalSum);
       if (len > 0.0f) {
-        float* nn = out.normals.at(x, y);
-        nn[0] = normalSum.x / len;
-        nn[1] = normalSum.y / len;
-        nn[2] = normalSum.z / len;
+        a[kN] = normalSum.x / len;
+        a[kN + 1] = normalSum.y / len;
+        a[kN + 2] = normalSum.z / len;
       }
+      for (int c = 0; c < 3; ++c) {
+        a[kP + c] = float(positionSum[c] / hits);
+        a[kAlbedo + c] = settings.albedo[c];
+        a[kIrradiance + c] = irradianceSum[c] * inv * settings.exposure;
+        a[kShadowed + c] = shadowedSum[c] * inv * settings.exposure;
+      }
+      a[kDepth] = float(depthSum / hits);
+      a[kAo] = aoSum * inv;
     }
+    hitsTotal += rowHits;
     const int done = ++rowsDone;
-    if (done % 16 == 0) report(progress, "render", double(done) / std::max(rowCount, 1));
+    if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
   });
-  out.rays = int64_t(rowCount) * (out.x1 - out.x0) * n * n;
+  out.rays = int64_t(w) * h * n * n;
+  out.coverage = double(hitsTotal) * double(invSamples);
   report(progress, "render", 1.0);
   return out;
 }

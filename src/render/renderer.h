@@ -1,18 +1,30 @@
-// The renderer: ray-casts a mesh with Embree from the plate camera and shades every hit with a
-// diffuse lighting representation.
+// The renderer: ray-casts a mesh with Embree from the plate camera and shades every hit as a
+// diffuse surface lit by the environment, optionally with self-shadowing (transfer.h).
 //
 // Output is scene-linear RGBA in the working space, PREMULTIPLIED by coverage (alpha = fraction
-// of the pixel's samples that hit the object), the size of the plate. Anti-aliasing: n x n
-// stratified, jittered samples per pixel, box filter. Only the screen rectangle the object's
-// bounding box projects to is traced; the rest is transparent black.
+// of the pixel's samples that hit the object), and arbitrary output variables (AOVs). Only the
+// screen rectangle the object can cover is traced and stored: every image of RenderOutput is the
+// size of that rectangle, whose top-left pixel on the plate is (x0, y0); everything outside it is
+// transparent black. Anti-aliasing: n x n stratified samples per pixel (jittered, or at the
+// strata's centres), box filter.
 //
-// Shading: a Lambertian surface of albedo ρ, outgoing radiance ρ E(n) / π with E the irradiance
-// from the lighting (lighting.h). Negative irradiance (SH ringing) is clamped to 0. The normal is
-// the interpolated vertex normal; `envFromWorld` rotates world normals into the environment's
-// frame (turning the environment about +Y).
+// Shading: a Lambertian surface of albedo ρ, outgoing radiance ρ E / π times the exposure, E the
+// irradiance of the lighting (lighting.h) at the interpolated vertex normal. With self-shadowing,
+// E is the unshadowed irradiance at the pixel's normal times the ratio of the shadowed to the
+// unshadowed irradiance interpolated from the vertices, so that the per-pixel normal keeps its
+// detail and the visibility comes from the transfer. Negative irradiance (SH ringing) is clamped
+// to 0. The shading normal faces the viewer: a back face is shaded from the side the camera sees,
+// and an interpolated normal that points away from the viewer is bent back to the tangent plane.
+// `envFromWorld` rotates world directions into the environment's frame.
 //
-// Threading: rows in parallel on oneTBB; the lighting is only read.
+// The mesh is traced in its own coordinates (one Embree scene serves the renderer and the
+// visibility precompute); camera rays are carried into it by the inverse of `worldFromObject`.
+//
+// Threading: rows in parallel on oneTBB; the lighting and the scene are only read.
 #pragma once
+
+#include <string>
+#include <vector>
 
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
@@ -22,27 +34,46 @@
 #include "core/image.h"
 #include "core/progress.h"
 #include "lighting/lighting.h"
+#include "render/embree_scene.h"
 #include "render/mesh.h"
+#include "render/transfer.h"
 
 namespace compose::render {
 
 struct RenderSettings {
   int samplesPerAxis = 4;  // n x n samples per pixel
-  glm::vec3 albedo{0.8f};  // in the working space
+  bool jitter = true;      // jittered within each stratum; false: the strata's centres
+  glm::vec3 albedo{0.5f};  // in the working space
   float exposure = 1.0f;   // linear multiplier on the object's radiance
   glm::mat3 envFromWorld{1.0f};
+  // Per-vertex irradiance with and without self-shadowing (transfer.h); null: no shadowing.
+  const VertexIrradiance* shadows = nullptr;
+  // Per-vertex ambient occlusion for the AO AOV; null: 1.
+  const std::vector<float>* occlusion = nullptr;
 };
+
+// The AOV channels, in order (Nuke's layer.channel names). All are the mean over the pixel's
+// samples that hit the object (not premultiplied), 0 where none did:
+//   N      world-space unit normal (+Y up)
+//   P      world-space position (metres)
+//   depth  distance in front of the camera along its axis (depth.Z, metres)
+//   albedo diffuse albedo
+//   irradiance        unshadowed irradiance E x exposure (so that the object layer is
+//                     albedo x shadowed / π)
+//   irradianceShadowed  the same with self-shadowing
+//   AO     ambient occlusion, (1/π) ∫ V cos θ dω (1 without the visibility pass)
+const std::vector<std::string>& aovChannelNames();
 
 struct RenderOutput {
-  Image beauty;   // RGBA, premultiplied, working space
-  Image normals;  // N.X N.Y N.Z: world-space unit normal (mean over the pixel's hits), 0 off the
-                  // object
-  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // traced rectangle [x0, x1) x [y0, y1)
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // the traced rectangle [x0, x1) x [y0, y1) on the plate
+  Image beauty;                        // RGBA, premultiplied, working space; (x1 - x0) x (y1 - y0)
+  Image aovs;                          // aovChannelNames(); (x1 - x0) x (y1 - y0)
   int64_t rays = 0;
+  double coverage = 0.0;  // sum of alpha
 };
 
-RenderOutput renderDiffuse(const Mesh& mesh, const glm::dmat4& worldFromObject,
-                           const calib::PinholeCamera& camera,
+RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& objectScene,
+                           const glm::dmat4& worldFromObject, const calib::PlateCamera& camera,
                            const lighting::DiffuseLighting& lighting,
                            const RenderSettings& settings, const Progress& progress = {});
 

@@ -36,3 +36,20 @@ TEST(Over, MismatchesAreErrors) {
 
 }  // namespace
 }  // namespace compose::composite
+
+namespace compose::composite {
+namespace {
+
+TEST(Over, AForegroundRectangleInsideTheBackground) {
+  Image fg(1, 1, 4), bg(3, 2, 3);
+  fg.pixels = {0.5f, 0.5f, 0.5f, 1.0f};
+  std::fill(bg.pixels.begin(), bg.pixels.end(), 0.25f);
+  const Image out = over(fg, 2, 1, bg);
+  EXPECT_EQ(out.at(2, 1)[0], 0.5f);
+  EXPECT_EQ(out.at(1, 1)[0], 0.25f) << "outside the rectangle the background is unchanged";
+  EXPECT_EQ(out.at(2, 0)[0], 0.25f);
+  COMPOSE_EXPECT_ERROR(over(fg, 3, 0, bg), "does not lie inside the background");
+}
+
+}  // namespace
+}  // namespace compose::composite

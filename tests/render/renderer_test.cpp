@@ -38,7 +38,8 @@ Mesh uvSphere(int rings, int segments) {
 
 struct Scene {
   Mesh sphere = uvSphere(64, 128);
-  calib::PinholeCamera camera = calib::plateCamera(200, 150, {}, {});
+  EmbreeScene bvh{sphere.positions, sphere.indices};
+  calib::PlateCamera camera = calib::plateCamera(200, 150, {}, {});
   glm::dmat4 worldFromObject{1.0};
   Scene() {
     calib::Placement place;
@@ -58,7 +59,7 @@ TEST(Renderer, WhiteFurnaceGivesTheAlbedo) {
   settings.albedo = glm::vec3(0.25f, 0.5f, 0.75f);
   settings.exposure = 2.0f;
   const RenderOutput out =
-      renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
+      renderDiffuse(scene.sphere, scene.bvh, scene.worldFromObject, scene.camera, sh, settings);
   int covered = 0;
   double alphaSum = 0.0;
   for (int y = 0; y < out.beauty.height; ++y) {
@@ -104,12 +105,12 @@ TEST(Renderer, ShadingFollowsTheNormalAov) {
   const float c = 0.0f, s = 1.0f;
   settings.envFromWorld = glm::mat3(glm::vec3(c, 0, -s), glm::vec3(0, 1, 0), glm::vec3(s, 0, c));
   const RenderOutput out =
-      renderDiffuse(scene.sphere, scene.worldFromObject, scene.camera, sh, settings);
+      renderDiffuse(scene.sphere, scene.bvh, scene.worldFromObject, scene.camera, sh, settings);
   int checked = 0;
   for (int y = 0; y < out.beauty.height; ++y) {
     for (int x = 0; x < out.beauty.width; ++x) {
       if (out.beauty.at(x, y)[3] < 1.0f) continue;
-      const float* n = out.normals.at(x, y);
+      const float* n = out.aovs.at(x, y);  // N.X N.Y N.Z come first
       const glm::vec3 nEnv = settings.envFromWorld * glm::vec3(n[0], n[1], n[2]);
       const float expected = 1.0f + 2.0f / 3.0f * glm::dot(b, nEnv);
       // 64x128 tessellation + 128x64 map quadrature: 2e-3.
@@ -119,7 +120,7 @@ TEST(Renderer, ShadingFollowsTheNormalAov) {
   }
   EXPECT_GT(checked, 3000);
   // The camera sees the sphere's front: normals of covered pixels point back toward +Z (camera).
-  const float* centre = out.normals.at(100, int(0.8 * 150 - 0.25 * 150));
+  const float* centre = out.aovs.at(100 - out.x0, int(0.8 * 150 - 0.25 * 150) - out.y0);
   EXPECT_GT(centre[2], 0.9f);
 }
 

@@ -1,0 +1,183 @@
+#include "pipeline/shadows.h"
+
+#include <chrono>
+#include <cstdio>
+
+#include "core/error.h"
+#include "core/float_cache.h"
+#include "core/hash.h"
+#include "core/params.h"
+#include "lighting/chebyshev.h"
+#include "lighting/lighting_cache.h"
+#include "lighting/sh.h"
+#include "lighting/sources.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+double seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// Projects `basis` onto `env`, through the lighting cache when there is one.
+bool projectCached(lighting::DiffuseLighting& basis, const lighting::Environment& env,
+                   const fs::path& cacheRoot, const Progress& progress) {
+  if (!cacheRoot.empty()) {
+    const lighting::LightingCache cache(lightingCacheFolder(cacheRoot));
+    const std::string key = lighting::LightingCache::key(env, basis);
+    if (cache.load(key, basis)) return true;
+    basis.project(env, progress);
+    cache.store(key, basis);
+    return false;
+  }
+  basis.project(env, progress);
+  return false;
+}
+
+}  // namespace
+
+fs::path lightingCacheFolder(const fs::path& root) {
+  return root / "lighting";
+}
+fs::path visibilityCacheFolder(const fs::path& root) {
+  return root / "visibility";
+}
+
+ShadowPlan ShadowPlan::parse(const std::string& text) {
+  ShadowPlan plan;
+  try {
+    ParamSet p = ParamSet::parse(text, "shadows");
+    const std::string method = p.getString("method", "cheb");
+    if (method == "cheb") {
+      plan.method = render::ShadowMethod::Chebyshev;
+    } else if (method == "sh") {
+      plan.method = render::ShadowMethod::Harmonics;
+    } else if (method == "ao") {
+      plan.method = render::ShadowMethod::AmbientOcclusion;
+    } else {
+      throw UsageError("method must be cheb, sh or ao, got '" + method + "'", "shadows");
+    }
+    const bool sh = plan.method == render::ShadowMethod::Harmonics;
+    plan.transfer.grid = p.getInt("grid", 16, "shadows");
+    plan.lightingOrder = p.getInt("order", sh ? 4 : 12, "shadows");
+    plan.transfer.boundaryRays = p.getInt("boundary", 2, "shadows");
+    plan.sources = p.getInt("sources", 64, "shadows");
+    p.requireAllUsed("shadows", "--shadow-params (method, order, grid, boundary, sources)");
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    throw UsageError(e.what(), "shadows");
+  }
+  if (plan.sources < 0 || plan.sources > 64)
+    throw UsageError("sources must be in 0..64, got " + std::to_string(plan.sources), "shadows");
+  if (plan.method == render::ShadowMethod::Harmonics) {
+    if (plan.lightingOrder < 0 || plan.lightingOrder > lighting::kMaxShOrder)
+      throw UsageError(
+          "order (SH bands) must be in 0..8, got " + std::to_string(plan.lightingOrder), "shadows");
+    plan.transfer.shBands = plan.lightingOrder;
+    plan.transfer.order = 1;
+  } else {
+    plan.transfer.shBands = 0;
+    plan.transfer.order = plan.method == render::ShadowMethod::Chebyshev ? plan.lightingOrder : 1;
+  }
+  if (plan.method == render::ShadowMethod::Chebyshev &&
+      (plan.lightingOrder < 1 || plan.lightingOrder > std::min(plan.transfer.grid, 32))) {
+    throw UsageError(
+        "order (k) must be in 1..min(grid, 32), got " + std::to_string(plan.lightingOrder),
+        "shadows");
+  }
+  plan.transfer.validate();
+  return plan;
+}
+
+std::string ShadowPlan::describe() const {
+  std::string s = render::shadowMethodName(method);
+  if (method == render::ShadowMethod::Chebyshev) {
+    s += " k=" + std::to_string(lightingOrder) + " on " + std::to_string(transfer.grid) + "x" +
+         std::to_string(transfer.grid) + " cells";
+  } else if (method == render::ShadowMethod::Harmonics) {
+    s += " up to band " + std::to_string(lightingOrder);
+  }
+  if (sources > 0 && method != render::ShadowMethod::AmbientOcclusion)
+    s += ", " + std::to_string(sources) + " bright sources by rays";
+  return s;
+}
+
+ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
+                                  const lighting::Environment& environment,
+                                  const glm::mat3& envFromObject, const ShadowPlan& plan,
+                                  const fs::path& cacheRoot, const Progress& progress) {
+  ShadowResult out;
+  // The visibility pass, cached by the mesh's content and the parameters.
+  render::VertexTransfer transfer;
+  const auto start = std::chrono::steady_clock::now();
+  bool reused = false;
+  Hash128 h;
+  h.bytes(render::meshHash(mesh));
+  h.bytes(plan.transfer.key());
+  const std::string key = h.hex();
+  const FloatCache cache(visibilityCacheFolder(cacheRoot), "COMPVIS1", ".visibility");
+  const std::string description =
+      "transfer " + plan.transfer.key() + " vertices " + std::to_string(mesh.positions.size());
+  if (!cacheRoot.empty()) {
+    if (auto state = cache.load(key, description)) {
+      reused = transfer.importState(plan.transfer, mesh.positions.size(), *state);
+    }
+  }
+  if (!reused) {
+    transfer = render::computeTransfer(mesh, plan.transfer, progress);
+    char line[200];
+    std::snprintf(line, sizeof line, "visibility pass: %lld rays (%.0f per vertex) in %.2f s",
+                  static_cast<long long>(transfer.rays),
+                  double(transfer.rays) / double(mesh.positions.size()), seconds(start));
+    out.reason = line;
+    if (!cacheRoot.empty() && cache.store(key, description, transfer.exportState()))
+      out.reason += ", cached in " + cache.pathFor(key).string();
+  } else {
+    out.reason =
+        "reused the visibility pass " + cache.pathFor(key).string() + " (same mesh and parameters)";
+  }
+
+  // The lighting the transfer applies to: the environment without its brightest sources.
+  const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
+  lighting::SourceSplit split = lighting::splitBrightSources(environment, sourceCount);
+  std::unique_ptr<lighting::DiffuseLighting> shadowLighting;
+  if (plan.method == render::ShadowMethod::Chebyshev) {
+    lighting::ChebParams cp;
+    cp.order = plan.lightingOrder;
+    cp.samples = plan.transfer.grid;
+    shadowLighting = std::make_unique<lighting::ChebLocalLighting>(cp);
+  } else if (plan.method == render::ShadowMethod::Harmonics) {
+    shadowLighting = std::make_unique<lighting::ShLighting>(plan.lightingOrder);
+  } else {
+    // Ambient occlusion scales the unshadowed irradiance of the default basis.
+    shadowLighting = lighting::createLighting("cheb-local");
+  }
+  const bool lightingReused = projectCached(*shadowLighting, split.residual, cacheRoot, progress);
+  out.reason += std::string("; ") + (lightingReused ? "reused" : "projected") + " its lighting (" +
+                shadowLighting->describe() + ")";
+
+  render::SourceVisibility seen;
+  if (!split.sources.empty()) {
+    seen = render::traceSources(mesh, scene, split.sources, envFromObject);
+    char line[200];
+    std::snprintf(line, sizeof line, "; %zu bright sources (%.1f%% of the light) by %lld rays",
+                  split.sources.size(), 100.0 * split.sourceShare,
+                  static_cast<long long>(seen.rays));
+    out.reason += line;
+  }
+  render::ShadowInputs inputs;
+  inputs.method = plan.method;
+  inputs.transfer = &transfer;
+  inputs.shadowLighting = shadowLighting.get();
+  inputs.sources = split.sources;
+  inputs.sourceVisibility = &seen;
+  out.irradiance = render::shadeVertices(mesh, envFromObject, inputs);
+  out.occlusion = std::move(transfer.ao);
+  return out;
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,56 @@
+// Self-shadowing for the compose pipeline: which method and parameters, the visibility pass
+// (cached on disk), the lighting it needs, and the per-vertex irradiance the renderer uses.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <glm/mat3x3.hpp>
+
+#include "core/progress.h"
+#include "lighting/environment.h"
+#include "render/embree_scene.h"
+#include "render/mesh.h"
+#include "render/transfer.h"
+
+namespace compose::pipeline {
+
+// --shadow-params: method=cheb|sh|ao (cheb), order (cheb: k, 12; sh: bands, 4), grid (s, 16),
+// boundary (r, 2: r x r rays on the cells along a shadow's edge), sources (64: bright sources
+// split off and shadowed by exact rays, 0..64).
+struct ShadowPlan {
+  render::ShadowMethod method = render::ShadowMethod::Chebyshev;
+  render::TransferParams transfer;
+  int lightingOrder = 12;  // cheb: k; sh: bands
+  int sources = 64;
+
+  // Throws compose::UsageError (stage "shadows") naming the bad parameter; unknown ones list the
+  // valid ones.
+  static ShadowPlan parse(const std::string& params);
+  std::string describe() const;
+};
+
+struct ShadowResult {
+  render::VertexIrradiance irradiance;
+  std::vector<float> occlusion;  // per-vertex ambient occlusion
+  std::string reason;            // what ran or was reused, for the stage report
+  std::vector<std::string> notes;
+};
+
+// The cache folders under a cache root.
+std::filesystem::path lightingCacheFolder(const std::filesystem::path& root);
+std::filesystem::path visibilityCacheFolder(const std::filesystem::path& root);
+
+// The visibility pass of `mesh` (object space, traced in `scene`), from the cache under
+// `cacheRoot` when it holds this mesh with these parameters (an empty root: no cache), then the
+// lighting of the environment for the method (bright sources split off, each shadowed by a ray
+// per vertex), then the per-vertex shadowed and unshadowed irradiance. `envFromObject` turns
+// the mesh into the environment's frame (a yaw).
+ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
+                                  const lighting::Environment& environment,
+                                  const glm::mat3& envFromObject, const ShadowPlan& plan,
+                                  const std::filesystem::path& cacheRoot,
+                                  const Progress& progress = {});
+
+}  // namespace compose::pipeline

@@ -1,0 +1,42 @@
+// A 128-bit content hash for cache keys: two independent 64-bit hashes (FNV-1a and a
+// multiply-xorshift mix) over 32-bit words. Not cryptographic; collisions between honest inputs
+// are vanishingly unlikely at 128 bits.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <span>
+#include <string>
+
+namespace compose {
+
+struct Hash128 {
+  uint64_t a = 1469598103934665603ull, b = 0x9E3779B97F4A7C15ull;
+
+  void word(uint32_t w) {
+    a = (a ^ w) * 1099511628211ull;
+    b = (b ^ (w + 0x632BE59BD9B4E019ull + (b << 6) + (b >> 2))) * 0xff51afd7ed558ccdull;
+  }
+  void bytes(const std::string& s) {
+    for (unsigned char c : s) word(c);
+    word(0xFFFFFFFFu);
+  }
+  // Floats bit for bit.
+  void floats(std::span<const float> values) {
+    for (float v : values) {
+      uint32_t w;
+      std::memcpy(&w, &v, sizeof w);
+      word(w);
+    }
+    word(0xFFFFFFFEu);
+  }
+  std::string hex() const {
+    char buf[33];
+    std::snprintf(buf, sizeof buf, "%016llx%016llx", static_cast<unsigned long long>(a),
+                  static_cast<unsigned long long>(b));
+    return buf;
+  }
+};
+
+}  // namespace compose

@@ -1,0 +1,64 @@
+#include "lighting/sources.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
+#include "core/error.h"
+
+namespace compose::lighting {
+
+SourceSplit splitBrightSources(const Environment& env, int count) {
+  COMPOSE_CHECK(count >= 0);
+  SourceSplit out;
+  out.residual = env;
+  if (count == 0) return out;
+  // Blocks of f x f texels, f a power of two, so that the reduced map is at most 1024 wide.
+  int f = 1;
+  while (env.width() / f > 1024 && f < env.height()) f *= 2;
+  const int bw = (env.width() + f - 1) / f, bh = (env.height() + f - 1) / f;
+  struct Block {
+    int bx, by;
+    double power;
+  };
+  std::vector<Block> blocks;
+  blocks.reserve(size_t(bw) * size_t(bh));
+  double total = 0.0;
+  for (int by = 0; by < bh; ++by) {
+    for (int bx = 0; bx < bw; ++bx) {
+      double p = 0.0;
+      for (int y = by * f; y < std::min((by + 1) * f, env.height()); ++y) {
+        for (int x = bx * f; x < std::min((bx + 1) * f, env.width()); ++x) {
+          const glm::vec3 L = env.radiance(x, y);
+          p += (double(L.x) + L.y + L.z) / 3.0 * env.rowSolidAngle(y);
+        }
+      }
+      blocks.push_back({bx, by, p});
+      total += p;
+    }
+  }
+  const size_t n = std::min(blocks.size(), size_t(count));
+  std::partial_sort(blocks.begin(), blocks.begin() + ptrdiff_t(n), blocks.end(),
+                    [](const Block& a, const Block& b) { return a.power > b.power; });
+  double taken = 0.0;
+  for (size_t i = 0; i < n; ++i) {
+    const Block& b = blocks[i];
+    if (!(b.power > 0.0)) break;
+    glm::dvec3 power(0.0), centre(0.0);
+    for (int y = b.by * f; y < std::min((b.by + 1) * f, env.height()); ++y) {
+      for (int x = b.bx * f; x < std::min((b.bx + 1) * f, env.width()); ++x) {
+        const glm::dvec3 p = glm::dvec3(env.radiance(x, y)) * env.rowSolidAngle(y);
+        power += p;
+        centre += glm::dvec3(env.direction(x, y)) * (p.x + p.y + p.z);
+        out.residual.setRadiance(x, y, glm::vec3(0.0f));
+      }
+    }
+    out.sources.push_back({glm::vec3(glm::normalize(centre)), glm::vec3(power)});
+    taken += b.power;
+  }
+  out.sourceShare = total > 0.0 ? taken / total : 0.0;
+  return out;
+}
+
+}  // namespace compose::lighting

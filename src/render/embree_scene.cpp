@@ -1,0 +1,124 @@
+#include "render/embree_scene.h"
+
+#include <embree3/rtcore.h>
+
+#include <algorithm>
+#include <limits>
+
+#include "core/error.h"
+
+namespace compose::render {
+
+struct EmbreeScene::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+};
+
+EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
+                         const std::vector<uint32_t>& indices)
+    : impl_(std::make_unique<Impl>()) {
+  COMPOSE_CHECK(!indices.empty() && indices.size() % 3 == 0);
+  impl_->device = rtcNewDevice(nullptr);
+  if (!impl_->device) throw Error("render", "cannot create the Embree device");
+  impl_->scene = rtcNewScene(impl_->device);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+  RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), positions.size()));
+  auto* triangles = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), indices.size() / 3));
+  if (!vertices || !triangles) {
+    rtcReleaseGeometry(geom);
+    throw Error("render", "Embree could not allocate the mesh buffers");
+  }
+  for (size_t i = 0; i < positions.size(); ++i) {
+    vertices[3 * i] = positions[i].x;
+    vertices[3 * i + 1] = positions[i].y;
+    vertices[3 * i + 2] = positions[i].z;
+  }
+  std::copy(indices.begin(), indices.end(), triangles);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(impl_->scene, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(impl_->scene);
+  if (rtcGetDeviceError(impl_->device) != RTC_ERROR_NONE)
+    throw Error("render", "Embree failed to build the scene");
+}
+
+EmbreeScene::~EmbreeScene() = default;
+
+EmbreeScene::Hit EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
+                                        float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh{};
+  rh.ray.org_x = o.x;
+  rh.ray.org_y = o.y;
+  rh.ray.org_z = o.z;
+  rh.ray.dir_x = d.x;
+  rh.ray.dir_y = d.y;
+  rh.ray.dir_z = d.z;
+  rh.ray.tnear = tnear;
+  rh.ray.tfar = tfar;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &context, &rh);
+  Hit hit;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
+  hit.found = true;
+  hit.triangle = rh.hit.primID;
+  hit.u = rh.hit.u;
+  hit.v = rh.hit.v;
+  hit.distance = rh.ray.tfar;
+  hit.geometricNormal = glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+  return hit;
+}
+
+bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay ray{};
+  ray.org_x = o.x;
+  ray.org_y = o.y;
+  ray.org_z = o.z;
+  ray.dir_x = d.x;
+  ray.dir_y = d.y;
+  ray.dir_z = d.z;
+  ray.tnear = tnear;
+  ray.tfar = tfar;
+  ray.mask = 0xFFFFFFFFu;
+  rtcOccluded1(impl_->scene, &context, &ray);
+  return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
+}
+
+uint32_t EmbreeScene::occluded8(const glm::vec3& o, const glm::vec3* d, uint32_t active,
+                                float tnear, float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  alignas(32) int valid[8];
+  alignas(32) RTCRay8 rays{};
+  for (int i = 0; i < 8; ++i) {
+    valid[i] = (active >> i) & 1u ? -1 : 0;
+    rays.org_x[i] = o.x;
+    rays.org_y[i] = o.y;
+    rays.org_z[i] = o.z;
+    rays.dir_x[i] = d[i].x;
+    rays.dir_y[i] = d[i].y;
+    rays.dir_z[i] = d[i].z;
+    rays.tnear[i] = tnear;
+    rays.tfar[i] = tfar;
+    rays.mask[i] = 0xFFFFFFFFu;
+    rays.time[i] = 0.0f;
+  }
+  rtcOccluded8(valid, impl_->scene, &context, &rays);
+  uint32_t hits = 0;
+  for (int i = 0; i < 8; ++i)
+    if (valid[i] && rays.tfar[i] < 0.0f) hits |= 1u << i;
+  return hits;
+}
+
+}  // namespace compose::render

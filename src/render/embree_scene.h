@@ -1,0 +1,46 @@
+// A triangle mesh in an Embree scene: the one place the renderer and the visibility precompute
+// talk to Embree. RAII over the device and the scene; queries are const and thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+namespace compose::render {
+
+class EmbreeScene {
+ public:
+  // Builds a scene of the triangles `indices` (three per triangle) over `positions`. Throws
+  // compose::Error (stage "render") if Embree cannot build it.
+  EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices);
+  ~EmbreeScene();
+  EmbreeScene(const EmbreeScene&) = delete;
+  EmbreeScene& operator=(const EmbreeScene&) = delete;
+
+  struct Hit {
+    bool found = false;
+    uint32_t triangle = 0;
+    float u = 0.0f, v = 0.0f;  // barycentrics of corners 1 and 2
+    float distance = 0.0f;
+    glm::vec3 geometricNormal{0.0f};  // unnormalised, (p1 - p0) x (p2 - p0)
+  };
+
+  // Closest hit along origin + t·direction, t in [tnear, tfar].
+  Hit intersect(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
+                float tfar = 1e30f) const;
+  // Whether anything lies along origin + t·direction, t in [tnear, tfar].
+  bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
+                float tfar = 1e30f) const;
+  // The same for 8 rays from one origin; `active` masks the rays to trace; returns a bit mask of
+  // the occluded ones.
+  uint32_t occluded8(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
+                     float tnear, float tfar = 1e30f) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace compose::render

@@ -1,0 +1,139 @@
+// Self-shadowing by precomputed transfer (docs/design.md §10).
+//
+// The irradiance at a surface point that its own object may shadow is
+//
+//     E = ∫ V(ω) L(ω) max(0, n·ω) dω,
+//
+// V the visibility (1 where the environment is seen, 0 where the object itself is in the way).
+// On the local altitude/azimuth grid of the cheb-local lighting basis (s x s cells around the
+// normal: altitude θ in s equal steps of π/2s from the normal, azimuth φ in s equal steps from
+// the tangent `east`), with ℓ_ij = ∫_cell L cos θ dω (what the lighting tabulates per normal) and
+// V_ij the visible fraction of the cell seen from the point (one ray per cell, then r x r on the
+// cells where the shadow's edge passes),
+//
+//     E ≈ Σ_ij V_ij ℓ_ij = Σ_mn a_mn b_mn,
+//
+// a and b the 2D Tchebichef moments of ℓ and V (exact at k = s by orthonormality; truncation to
+// k x k is the approximation). This file computes, per mesh vertex, b (k x k), and beside it the
+// spherical-harmonic transfer vector of Sloan, Kautz & Snyder 2002 (T_lm = ∫ V max(0, n·ω) Y_lm
+// dω, in the object's frame) and the ambient occlusion (1/π) ∫ V cos θ dω, all from the same
+// occlusion rays (Embree), uniform in solid angle within each cell.
+//
+// The tangent frame. Both sides must use one frame per normal: east = ∂n/∂φ normalised (the
+// direction of increasing longitude φ = atan2(n.x, n.z)), north = n x east, with φ := 0 where n
+// is within 1e-6 of ±Y (the frame field's unavoidable singular point). The frame turns with the
+// object about +Y, so the moments are unchanged by yaw: they are computed once in the object's
+// own coordinates, and shading looks the lighting up at the vertex's longitude plus the yaw
+// (which is also how a vertex exactly at the pole stays consistent). The SH transfer vector is
+// rotated by the yaw about the SH pole (+Y).
+//
+// Threading: computeTransfer() uses every core (vertices in parallel); the result is
+// deterministic (per-vertex jitter from a hash of the vertex index and the seed).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <glm/mat3x3.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/progress.h"
+#include "lighting/lighting.h"
+#include "lighting/sources.h"
+#include "render/mesh.h"
+
+namespace compose::render {
+
+struct TransferParams {
+  int grid = 16;  // s: s x s cells on the hemisphere around the normal
+  int order = 8;  // k: k x k Chebyshev moments kept per vertex (k <= s)
+  // One ray per cell first; then the cells on a shadow boundary (whose ray disagrees with a
+  // neighbour's) are sampled again with r x r stratified rays.
+  int boundaryRays = 3;
+  int shBands = 4;  // SH transfer up to band 4: 25 coefficients per vertex
+  uint32_t seed = 1;
+
+  // Throws compose::UsageError (stage "shadows") naming the parameter.
+  void validate() const;
+  // Everything that changes the numbers, for the cache key.
+  std::string key() const;
+  int firstPassRays() const { return grid * grid; }
+};
+
+// Per-vertex transfer of a mesh, in the mesh's own (object) coordinates.
+struct VertexTransfer {
+  TransferParams params;
+  size_t vertexCount = 0;
+  std::vector<float> cheb;  // k² per vertex: moments of V on the local grid
+  std::vector<float> sh;    // (shBands + 1)² per vertex: Sloan's transfer vector
+  std::vector<float> ao;    // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
+  int64_t rays = 0;
+
+  size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
+  // Plain floats for the on-disk cache, and back; false if `in` does not fit these parameters.
+  std::vector<float> exportState() const;
+  bool importState(const TransferParams& params, size_t vertexCount, const std::vector<float>& in);
+};
+
+// Visibility of every vertex of `mesh` against the mesh itself. Rays leave each vertex from a
+// point lifted by a small fraction of the mesh's size along the vertex normal.
+VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
+                               const Progress& progress = {});
+
+// True when the mesh is closed and convex: every edge joins exactly two triangles and no
+// triangle's far corner lies above its neighbour's plane. A convex solid cannot shadow itself,
+// so the visibility pass is skipped for it.
+bool isConvex(const Mesh& mesh);
+
+// A 128-bit hash of the mesh's positions, normals and triangles (for cache keys).
+std::string meshHash(const Mesh& mesh);
+
+// How the shadowed irradiance is computed.
+enum class ShadowMethod {
+  Chebyshev,         // Σ a_mn b_mn with the cheb-local lighting's moments (its order k)
+  Harmonics,         // Sloan's SH transfer with the sh lighting's radiance coefficients (its order)
+  AmbientOcclusion,  // AO x unshadowed irradiance
+};
+const char* shadowMethodName(ShadowMethod method);
+
+// Which bright sources (lighting/sources.h) each vertex sees: bit i of visible[v] for source i
+// (at most 64 sources). Rays go from the vertex, lifted as in computeTransfer, towards the
+// source's direction turned into the object's frame.
+struct SourceVisibility {
+  std::vector<uint64_t> visible;
+  int64_t rays = 0;
+};
+class EmbreeScene;
+SourceVisibility traceSources(const Mesh& mesh, const EmbreeScene& objectScene,
+                              const std::vector<lighting::LightSource>& sources,
+                              const glm::mat3& envFromObject);
+
+// What shading with self-shadowing needs besides the mesh.
+struct ShadowInputs {
+  ShadowMethod method = ShadowMethod::Chebyshev;
+  const VertexTransfer* transfer = nullptr;
+  // The lighting the transfer is applied to: of the residual when there are sources, else of the
+  // whole environment. Chebyshev needs cheb-local (Lambertian) on the transfer's grid with order
+  // <= the transfer's; Harmonics sh with order <= its SH bands; ambient occlusion any basis.
+  const lighting::DiffuseLighting* shadowLighting = nullptr;
+  // Bright sources split off (environment frame) and their per-vertex visibility; may be empty.
+  // The unshadowed irradiance is the lighting's plus every source's, the shadowed one the
+  // transfer's plus the sources each vertex sees; ambient occlusion scales the unshadowed one.
+  std::vector<lighting::LightSource> sources;
+  const SourceVisibility* sourceVisibility = nullptr;
+};
+
+// Per-vertex irradiance with and without self-shadowing, in the environment's frame and units.
+struct VertexIrradiance {
+  std::vector<glm::vec3> shadowed, unshadowed;
+  int clamped = 0;  // vertices whose shadowed irradiance left [0, unshadowed] by more than 0.1 %
+};
+
+// `envFromObject` is the rotation from the mesh's coordinates to the environment's; it must be a
+// turn about +Y (placement yaw and environment yaw), so that the transfer's frames apply. Throws
+// compose::Error (stage "shadows") when the inputs do not fit the method.
+VertexIrradiance shadeVertices(const Mesh& mesh, const glm::mat3& envFromObject,
+                               const ShadowInputs& inputs);
+
+}  // namespace compose::render
