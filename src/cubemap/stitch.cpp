@@ -30,6 +30,8 @@ constexpr double kDegrees = kPi / 180.0;
 // Verified matches a pair needs. The rotation model has two degrees of freedom per match and the
 // rough orientations already bound it, so a handful of agreeing matches is not chance.
 constexpr size_t kMinInliers = 8;
+// Photo pixels a sub-texel ray may span before the texel is cut into more rays.
+constexpr double kSubTexelPixels = 2.0;
 
 double angleBetween(const glm::dvec3& a, const glm::dvec3& b) {
   return std::atan2(glm::length(glm::cross(a, b)), glm::dot(a, b));
@@ -864,9 +866,10 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         const double a = -1.0 + (2.0 * x + 1.0) / n;
         const glm::dvec3 c = cameraFromWorld * (frame.forward + a * frame.right + b * frame.down);
         if (p.lens.projection == calib::Projection::Rectilinear && !(c.z < 0.0)) continue;
-        // The texel as 2 x 2 sub-texel rays (a quarter texel off its centre each way): their mean
-        // prefiltered to their own footprint is close to the box average over the texel, which is
-        // what a cube texel holds.
+        // The texel as 2 x 2 sub-texel rays (a quarter texel off its centre each way), and more
+        // (3 x 3, 4 x 4) when the texel spans many photo pixels: their mean, each prefiltered to
+        // its own footprint, is close to the box average over the texel, which is what a cube
+        // texel holds.
         glm::dvec2 ps[4];
         bool seen = true;
         for (int k = 0; k < 4 && seen; ++k)
@@ -874,12 +877,29 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         if (!seen) continue;
         const glm::dvec2 px = 0.25 * (ps[0] + ps[1] + ps[2] + ps[3]);
         if (!(px.x > 0.0 && px.x < w && px.y > 0.0 && px.y < h)) continue;
-        // Sub-texels are half a texel apart: each covers about that many photo pixels.
-        const double footprint = std::max(glm::length(ps[1] - ps[0]), glm::length(ps[2] - ps[0]));
-        const float level = float(std::log2(std::max(1.0, footprint)));
+        // Those rays are half a texel apart: the texel spans twice that many photo pixels.
+        const double texelPixels =
+            2.0 * std::max(glm::length(ps[1] - ps[0]), glm::length(ps[2] - ps[0]));
+        const int m = std::clamp(int(std::ceil(texelPixels / kSubTexelPixels)), 2, 4);
+        const float level = float(std::log2(std::max(1.0, texelPixels / m)));
         glm::vec3 L(0.0f);
-        for (int k = 0; k < 4; ++k) L += pyramid.sample(ps[k].x, ps[k].y, level);
-        L *= 0.25f * gain;
+        if (m == 2) {
+          for (int k = 0; k < 4; ++k) L += pyramid.sample(ps[k].x, ps[k].y, level);
+          L *= 0.25f;
+        } else {
+          int rays = 0;
+          for (int sj = 0; sj < m; ++sj) {
+            for (int si = 0; si < m; ++si) {
+              const double sa = 4.0 * ((si + 0.5) / m - 0.5), sb = 4.0 * ((sj + 0.5) / m - 0.5);
+              glm::dvec2 q;
+              if (!p.lens.project(c + sa * qa + sb * qb, q)) continue;
+              L += pyramid.sample(q.x, q.y, level);
+              ++rays;
+            }
+          }
+          L /= float(std::max(rays, 1));
+        }
+        L *= gain;
         // Feathering: 1 in the middle of the frame, 0 at its edges.
         const double fx = std::min(px.x, w - px.x) / (0.5 * w);
         const double fy = std::min(px.y, h - px.y) / (0.5 * h);
