@@ -235,7 +235,7 @@ TEST(Stitch, FisheyeViews) {
   if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   const CubeMap truth = lighting::cubeFromLatLong(env, 64);
   const lighting::FilteredCube scene(truth);
-  calib::Lens lens = calib::Lens::fromFieldOfView(600, 600, 140.0, calib::Projection::Equidistant);
+  calib::Lens lens = calib::Lens::fromFieldOfView(560, 560, 140.0, calib::Projection::Equidistant);
   lens.distortion = {-0.02, 0.003, 0.0, 0.0};
   std::vector<glm::dmat3> nominal;
   for (int f = 0; f < kCubeFaces; ++f) nominal.push_back(faceCameraRotation(f));
