@@ -32,7 +32,7 @@ group_of() {  # name -> group keyword
     ocio/*)       echo ocio ;;
     chessboard/*) echo chessboard ;;
     *.exr)        echo hdr ;;
-    *.obj)        echo models ;;
+    *.obj|*.bez)  echo models ;;
     *)            echo plates ;;
   esac
 }

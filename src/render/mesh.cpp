@@ -8,6 +8,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <string_view>
 #include <unordered_map>
 #include <unordered_set>
@@ -280,11 +281,169 @@ void validate(Mesh& mesh, const fs::path& path) {
       n /= len;
     }
   } else {
+    const int flipped = orientConsistently(mesh);
+    if (flipped > 0) {
+      mesh.warnings.push_back("turned " + std::to_string(flipped) +
+                              " triangles wound against their neighbours to face outwards");
+    }
     computeVertexNormals(mesh);
   }
 }
 
+// Geomview's bicubic Bézier patches ("BBP": 16 control points of 3 numbers per patch, rows of
+// four), such as the Newell teapot of its sample data. Each patch is tessellated into
+// kSteps x kSteps quads; vertices on shared patch edges coincide exactly (a Bézier patch's edge
+// depends on its edge control points only) and are welded. Geomview's models are Z-up: they are
+// turned to this project's Y-up frame, (x, y, z) → (x, z, -y). Normals are computed afterwards.
+Mesh loadBezierPatches(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  std::string header;
+  if (!(in >> header) || header != "BBP") {
+    throw Error(
+        "mesh",
+        "not a Geomview bicubic patch file: expected the keyword BBP, found '" + header + "'",
+        path);
+  }
+  std::vector<glm::dvec3> control;
+  std::string token;
+  std::vector<double> numbers;
+  while (in >> token) {
+    char* end = nullptr;
+    const double v = std::strtod(token.c_str(), &end);
+    if (end != token.c_str() + token.size() || !std::isfinite(v)) {
+      throw Error("mesh", "'" + token + "' is not a finite number", path);
+    }
+    numbers.push_back(v);
+  }
+  if (numbers.empty() || numbers.size() % 48 != 0) {
+    throw Error("mesh",
+                "a bicubic patch file holds 16 points of 3 numbers per patch; this one has " +
+                    std::to_string(numbers.size()) + " numbers",
+                path);
+  }
+  constexpr int kSteps = 16;
+  auto bernstein = [](double t, double b[4]) {
+    const double s = 1.0 - t;
+    b[0] = s * s * s;
+    b[1] = 3.0 * t * s * s;
+    b[2] = 3.0 * t * t * s;
+    b[3] = t * t * t;
+  };
+  Mesh mesh;
+  std::map<std::array<float, 3>, uint32_t> weld;
+  const size_t patches = numbers.size() / 48;
+  for (size_t patch = 0; patch < patches; ++patch) {
+    const double* c = numbers.data() + patch * 48;
+    std::vector<uint32_t> ids;
+    for (int i = 0; i <= kSteps; ++i) {
+      double bu[4];
+      bernstein(double(i) / kSteps, bu);
+      for (int j = 0; j <= kSteps; ++j) {
+        double bv[4];
+        bernstein(double(j) / kSteps, bv);
+        glm::dvec3 p(0.0);
+        for (int a = 0; a < 4; ++a)
+          for (int b = 0; b < 4; ++b) {
+            const double* q = c + 3 * (4 * a + b);
+            p += bu[a] * bv[b] * glm::dvec3(q[0], q[1], q[2]);
+          }
+        const std::array<float, 3> key = {float(p.x), float(p.z), float(-p.y)};
+        auto [it, inserted] = weld.try_emplace(key, uint32_t(mesh.positions.size()));
+        if (inserted) mesh.positions.emplace_back(key[0], key[1], key[2]);
+        ids.push_back(it->second);
+      }
+    }
+    for (int i = 0; i < kSteps; ++i) {
+      for (int j = 0; j < kSteps; ++j) {
+        const uint32_t a = ids[size_t(i * (kSteps + 1) + j)];
+        const uint32_t b = ids[size_t(i * (kSteps + 1) + j + 1)];
+        const uint32_t cc = ids[size_t((i + 1) * (kSteps + 1) + j)];
+        const uint32_t d = ids[size_t((i + 1) * (kSteps + 1) + j + 1)];
+        mesh.indices.insert(mesh.indices.end(), {a, cc, d, a, d, b});
+      }
+    }
+  }
+  mesh.normalsFromFile = false;
+  return mesh;
+}
+
 }  // namespace
+
+int orientConsistently(Mesh& mesh) {
+  const size_t triangles = mesh.triangleCount();
+  if (triangles == 0) return 0;
+  // Corners by position, so that vertices split by normals or texture seams count as one.
+  std::map<std::array<float, 3>, uint32_t> ids;
+  std::vector<uint32_t> id(mesh.positions.size());
+  for (size_t i = 0; i < mesh.positions.size(); ++i) {
+    const glm::vec3& p = mesh.positions[i];
+    id[i] = ids.try_emplace({p.x, p.y, p.z}, uint32_t(ids.size())).first->second;
+  }
+  auto corner = [&](size_t t, int k) { return id[mesh.indices[3 * t + size_t(k)]]; };
+  std::unordered_map<uint64_t, std::vector<uint32_t>> edges;  // undirected edge → triangles
+  auto edgeKey = [](uint32_t a, uint32_t b) {
+    return (uint64_t(std::min(a, b)) << 32) | std::max(a, b);
+  };
+  for (size_t t = 0; t < triangles; ++t)
+    for (int k = 0; k < 3; ++k)
+      edges[edgeKey(corner(t, k), corner(t, (k + 1) % 3))].push_back(uint32_t(t));
+  // Whether triangle t, as currently wound, runs from a to b.
+  auto runs = [&](size_t t, bool flip, uint32_t a, uint32_t b) {
+    for (int k = 0; k < 3; ++k) {
+      uint32_t u = corner(t, k), v = corner(t, (k + 1) % 3);
+      if (flip) std::swap(u, v);
+      if (u == a && v == b) return true;
+    }
+    return false;
+  };
+  std::vector<int8_t> state(triangles, -1);  // -1 unvisited, 0 keep, 1 flip
+  int flippedTotal = 0;
+  for (size_t seed = 0; seed < triangles; ++seed) {
+    if (state[seed] >= 0) continue;
+    // Walk the connected piece, winding each neighbour against the shared edge.
+    std::vector<uint32_t> piece = {uint32_t(seed)}, queue = {uint32_t(seed)};
+    state[seed] = 0;
+    while (!queue.empty()) {
+      const uint32_t t = queue.back();
+      queue.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = corner(t, k), b = corner(t, (k + 1) % 3);
+        if (state[t]) std::swap(a, b);  // t runs a → b
+        for (uint32_t n : edges[edgeKey(a, b)]) {
+          if (n == t || state[n] >= 0) continue;
+          // A consistent neighbour runs b → a.
+          state[n] = runs(n, false, a, b) ? 1 : 0;
+          piece.push_back(n);
+          queue.push_back(n);
+        }
+      }
+    }
+    // Outwards: the piece's signed volume about its own centre must be positive.
+    glm::dvec3 centre(0.0);
+    for (uint32_t t : piece)
+      for (int k = 0; k < 3; ++k)
+        centre += glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]);
+    centre /= double(3 * piece.size());
+    double volume = 0.0;
+    for (uint32_t t : piece) {
+      glm::dvec3 p[3];
+      for (int k = 0; k < 3; ++k)
+        p[k] = glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]) - centre;
+      if (state[t]) std::swap(p[1], p[2]);
+      volume += glm::dot(p[0], glm::cross(p[1], p[2]));
+    }
+    const bool invert = volume < 0.0;
+    for (uint32_t t : piece) {
+      const bool flip = (state[t] != 0) != invert;
+      if (flip) {
+        std::swap(mesh.indices[3 * size_t(t) + 1], mesh.indices[3 * size_t(t) + 2]);
+        ++flippedTotal;
+      }
+    }
+  }
+  return flippedTotal;
+}
 
 Mesh loadMesh(const fs::path& path) {
   std::error_code ec;
@@ -296,8 +455,10 @@ Mesh loadMesh(const fs::path& path) {
   Mesh mesh;
   if (ext == ".obj") {
     mesh = loadObj(path);
+  } else if (ext == ".bez") {
+    mesh = loadBezierPatches(path);
   } else {
-    throw Error("mesh", "unsupported mesh format '" + ext + "'; supported: .obj", path);
+    throw Error("mesh", "unsupported mesh format '" + ext + "'; supported: .obj, .bez", path);
   }
   validate(mesh, path);
   return mesh;

@@ -35,4 +35,10 @@ Mesh loadMesh(const std::filesystem::path& path);
 // Smooth vertex normals: the angle-weighted mean of the adjacent face normals.
 void computeVertexNormals(Mesh& mesh);
 
+// Winds every connected piece of the mesh one way (each triangle against its neighbours across
+// shared edges), then outwards (a positive signed volume about the piece's centre). Used for
+// meshes whose normals are computed, where a triangle wound the wrong way would turn its corner
+// normals inside out. Returns how many triangles were turned.
+int orientConsistently(Mesh& mesh);
+
 }  // namespace compose::render

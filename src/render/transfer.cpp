@@ -161,7 +161,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
               if (occluded) continue;
               visible[size_t(ray.cell)] += ray.weight;
               const double cosT = glm::dot(ray.d, n);
-              aoSum += cosT * ray.weight;
               if (nsh > 0) {
                 lighting::evalSh(params.shBands, ray.d, y.data());
                 for (int c = 0; c < nsh; ++c) shSum[size_t(c)] += y[size_t(c)] * cosT * ray.weight;
@@ -184,12 +183,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
         {
           // Trace without accumulating yet: cells on a shadow boundary are sampled again.
           std::vector<double> keepVisible = visible;
-          const double keepAo = aoSum;
           const std::vector<double> keepSh = shSum;
           trace(batch, &occluded);
           if (r > 1) {
             visible = keepVisible;
-            aoSum = keepAo;
             shSum = keepSh;
           }
         }
@@ -228,7 +225,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
             if (occluded[size_t(ray.cell)]) continue;
             visible[size_t(ray.cell)] += ray.weight;
             const double cosT = glm::dot(ray.d, n);
-            aoSum += cosT * ray.weight;
             if (nsh > 0) {
               lighting::evalSh(params.shBands, ray.d, y.data());
               for (int c = 0; c < nsh; ++c) shSum[size_t(c)] += y[size_t(c)] * cosT * ray.weight;
@@ -236,9 +232,17 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
           }
           trace(refine, nullptr);
         }
-        // Visible fraction per cell.
-        for (int i = 0; i < s; ++i)
-          for (int j = 0; j < s; ++j) visible[size_t(i * s + j)] /= cellOmega(i);
+        // Visible fraction per cell; AO from it and each cell's exact cosine integral
+        // ∫_cell cos θ dω = (π/s)(cos²θ_i - cos²θ_{i+1}), so that a fully visible point has AO 1.
+        for (int i = 0; i < s; ++i) {
+          const double cosine = kPi / s *
+                                (cosBound[size_t(i)] * cosBound[size_t(i)] -
+                                 cosBound[size_t(i) + 1] * cosBound[size_t(i) + 1]);
+          for (int j = 0; j < s; ++j) {
+            visible[size_t(i * s + j)] /= cellOmega(i);
+            aoSum += visible[size_t(i * s + j)] * cosine;
+          }
+        }
         const std::vector<double> m = lighting::moments2d(basis, basis, visible, k);
         std::transform(m.begin(), m.end(), out.cheb.begin() + ptrdiff_t(v * kk),
                        [](double x) { return float(x); });

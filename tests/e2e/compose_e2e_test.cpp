@@ -569,3 +569,83 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
 
 }  // namespace
 }  // namespace compose
+
+namespace compose {
+namespace {
+
+// The header carries the camera (worldToCamera, worldToNDC) and the placement
+// (compose:worldFromObject, mapping the mesh file's own coordinates to world space): rebuilt
+// from them and the OBJ alone, the scene projects onto the pixels the object covers.
+TEST_F(ComposeOutputs, TheHeaderRebuildsTheScene) {
+  const auto r = runCompose(args((dir_ / "h").string()) + " --place 0.4,0.8 --yaw 35", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  auto in = OIIO::ImageInput::open((dir_ / "h.exr").string());
+  ASSERT_TRUE(in);
+  auto matrix = [&](const char* name) {
+    std::array<double, 16> m{};
+    const OIIO::ParamValue* p = in->spec().find_attribute(name);
+    EXPECT_NE(p, nullptr) << name;
+    if (p) {
+      const float* f = static_cast<const float*>(p->data());
+      for (int i = 0; i < 16; ++i) m[size_t(i)] = f[i];
+    }
+    return m;
+  };
+  // Imath's convention: row vectors, p' = p M.
+  auto apply = [](const std::array<double, 16>& m, const double p[3], double out[4]) {
+    for (int c = 0; c < 4; ++c)
+      out[c] = p[0] * m[size_t(c)] + p[1] * m[size_t(4 + c)] + p[2] * m[size_t(8 + c)] +
+               m[size_t(12 + c)];
+  };
+  const auto worldFromObject = matrix("compose:worldFromObject");
+  const auto worldToNdc = matrix("worldToNDC");
+  const auto worldToCamera = matrix("worldToCamera");
+  const int width = in->spec().full_width, height = in->spec().full_height;
+  in->close();
+
+  // The mesh's vertices, read here from the OBJ text.
+  std::ifstream obj(samples_ / "bunny.obj");
+  std::string line;
+  double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
+  int vertices = 0;
+  while (std::getline(obj, line)) {
+    if (line.rfind("v ", 0) != 0) continue;
+    std::istringstream ls(line.substr(2));
+    double p[3], w[4], ndc[4];
+    ls >> p[0] >> p[1] >> p[2];
+    apply(worldFromObject, p, w);
+    apply(worldToNdc, w, ndc);
+    const double px = ndc[0] / ndc[3] * width, py = ndc[1] / ndc[3] * height;
+    lo[0] = std::min(lo[0], px), lo[1] = std::min(lo[1], py);
+    hi[0] = std::max(hi[0], px), hi[1] = std::max(hi[1], py);
+    ++vertices;
+  }
+  ASSERT_GT(vertices, 30000);
+  const Raster e = readRaster(dir_ / "h.exr");
+  const int a = e.channel("object.A"), P = e.channel("P.X"), depth = e.channel("depth.Z");
+  int covLo[2] = {e.width, e.height}, covHi[2] = {-1, -1};
+  double worstDepth = 0.0;
+  for (int y = 0; y < e.height; ++y) {
+    for (int x = 0; x < e.width; ++x) {
+      if (e.at(x, y, a) <= 0.0f) continue;
+      covLo[0] = std::min(covLo[0], x), covLo[1] = std::min(covLo[1], y);
+      covHi[0] = std::max(covHi[0], x + 1), covHi[1] = std::max(covHi[1], y + 1);
+      if (e.at(x, y, a) < 1.0f) continue;
+      const double p[3] = {e.at(x, y, P), e.at(x, y, P + 1), e.at(x, y, P + 2)};
+      double c[4];
+      apply(worldToCamera, p, c);
+      // OpenEXR's camera looks along +Z: its z is the depth.
+      worstDepth = std::max(worstDepth, std::abs(c[2] - e.at(x, y, depth)) / c[2]);
+    }
+  }
+  // The silhouette's box and the projected vertices' box agree to within a pixel (plus the
+  // half-float rounding of the matrices' effect is far below that).
+  EXPECT_NEAR(lo[0], covLo[0], 1.5);
+  EXPECT_NEAR(lo[1], covLo[1], 1.5);
+  EXPECT_NEAR(hi[0], covHi[0], 1.5);
+  EXPECT_NEAR(hi[1], covHi[1], 1.5);
+  EXPECT_LT(worstDepth, 2e-3) << "depth.Z against P through worldToCamera (half floats)";
+}
+
+}  // namespace
+}  // namespace compose

@@ -4,6 +4,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "pipeline/compose_job.h"
 #include "test_util.h"
 
 namespace compose::render {
@@ -100,6 +101,59 @@ TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
   writeText(dir / "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "flat.obj"),
                        "nothing renderable: all 2 triangles are degenerate");
+}
+
+TEST(Mesh, TrianglesWoundAgainstTheirNeighboursAreTurnedOutwards) {
+  TempDir dir;
+  // The cube with one face wound inwards (and no normals): the computed normals must still
+  // point out of every corner.
+  writeText(dir / "cube.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+            "f 1 4 3 2\nf 8 7 6 5\nf 1 2 6 5\nf 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n");
+  const Mesh m = loadMesh(dir / "cube.obj");
+  ASSERT_EQ(m.warnings.size(), 1u);
+  EXPECT_EQ(m.warnings[0], "turned 2 triangles wound against their neighbours to face outwards");
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const glm::vec3 out = glm::normalize(m.positions[i] - glm::vec3(0.5f));
+    EXPECT_GT(glm::dot(m.normals[i], out), 0.99f) << "vertex " << i;
+  }
+  // A cube wound entirely inside out is turned as a whole.
+  writeText(dir / "inside.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+            "f 2 3 4 1\nf 8 7 6 5\nf 5 6 2 1\nf 3 7 8 4\nf 4 8 5 1\nf 6 7 3 2\n");
+  const Mesh inside = loadMesh(dir / "inside.obj");
+  for (size_t i = 0; i < inside.positions.size(); ++i)
+    EXPECT_GT(glm::dot(inside.normals[i], glm::normalize(inside.positions[i] - glm::vec3(0.5f))),
+              0.99f);
+}
+
+TEST(Mesh, BicubicPatchesAreTessellatedWeldedAndTurnedUpright) {
+  TempDir dir;
+  // One flat patch in Geomview's Z-up frame: the unit square at z = 2, control points on a grid.
+  std::string text = "BBP\n";
+  for (int a = 0; a < 4; ++a)
+    for (int b = 0; b < 4; ++b)
+      text += std::to_string(a / 3.0) + " " + std::to_string(b / 3.0) + " 2\n";
+  writeText(dir / "patch.bez", text);
+  const Mesh m = loadMesh(dir / "patch.bez");
+  EXPECT_EQ(m.positions.size(), 17u * 17u);
+  EXPECT_EQ(m.triangleCount(), 2u * 16u * 16u);
+  // Z-up → Y-up: the patch lies at y = 2.
+  EXPECT_NEAR(m.boundsMin().y, 2.0f, 1e-6f);
+  EXPECT_NEAR(m.boundsMax().y, 2.0f, 1e-6f);
+  writeText(dir / "bad.bez", "BBP\n0 0 0\n1 1\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "bad.bez"), "16 points of 3 numbers per patch");
+  writeText(dir / "other.bez", "CBBP\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "other.bez"), "expected the keyword BBP");
+}
+
+TEST(Mesh, TheSampleTeapotIsOneSmoothSurface) {
+  const auto file = pipeline::samplesDirectory() / "teapot.bez";
+  if (!std::filesystem::exists(file)) GTEST_FAIL() << "sample data missing: " << file;
+  const Mesh m = loadMesh(file);
+  EXPECT_GT(m.triangleCount(), 14000u);
+  // Upright: taller than deep in y, and every normal of the top lid rim faces up.
+  EXPECT_GT(m.boundsMax().y - m.boundsMin().y, 0.5f);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <numbers>
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "lighting/exact.h"
 #include "lighting/sh.h"
@@ -122,6 +123,96 @@ TEST(Renderer, ShadingFollowsTheNormalAov) {
   // The camera sees the sphere's front: normals of covered pixels point back toward +Z (camera).
   const float* centre = out.aovs.at(100 - out.x0, int(0.8 * 150 - 0.25 * 150) - out.y0);
   EXPECT_GT(centre[2], 0.9f);
+}
+
+}  // namespace
+}  // namespace compose::render
+
+namespace compose::render {
+namespace {
+
+// One square facing the camera (wound counter-clockwise towards it) at `depth` in front of a
+// level camera at the origin, with the given vertex normals.
+Mesh facingSquare(const glm::vec3 normals[4]) {
+  Mesh m;
+  m.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+  m.normals.assign(normals, normals + 4);
+  m.indices = {0, 1, 2, 0, 2, 3};
+  m.normalsFromFile = true;
+  return m;
+}
+
+// Bright where the camera is (+Z), dark behind the square (-Z).
+lighting::Environment frontLit() {
+  Image img(64, 32, 3);
+  const auto probe = lighting::Environment::constant(glm::vec3(0.0f), 64);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 64; ++x) {
+      const float v = probe.direction(x, y).z > 0.0f ? 1.0f : 0.0f;
+      img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = v;
+    }
+  return lighting::Environment::fromLatLong(img);
+}
+
+RenderOutput renderSquare(const Mesh& m, const lighting::DiffuseLighting& lighting) {
+  const EmbreeScene bvh(m.positions, m.indices);
+  calib::CameraOptions level;
+  level.height = 1e-3;
+  const calib::PlateCamera camera = calib::plateCamera(64, 48, {}, level);
+  // The square 5 units in front of the camera.
+  const glm::dmat4 worldFromObject =
+      glm::translate(glm::dmat4(1.0), camera.position() + glm::dvec3(0, 0, -5));
+  RenderSettings settings;
+  settings.albedo = glm::vec3(1.0f);
+  settings.samplesPerAxis = 1;
+  return renderDiffuse(m, bvh, worldFromObject, camera, lighting, settings);
+}
+
+TEST(Renderer, AShadingNormalPointingAwayIsBentTowardsTheViewer) {
+  // The file's normals point away from the camera although the face looks at it.
+  const glm::vec3 away[4] = {{0, 0, -1}, {0, 0, -1}, {0, 0, -1}, {0, 0, -1}};
+  lighting::ExactLighting exact;
+  exact.project(frontLit());
+  const RenderOutput out = renderSquare(facingSquare(away), exact);
+  const float* centre = out.beauty.at(32 - out.x0, 24 - out.y0);
+  ASSERT_EQ(centre[3], 1.0f);
+  // Bent to the tangent plane, the normal sees half of the bright front: E = π/2... and
+  // anything but the dark back (0).
+  EXPECT_GT(centre[0], 0.2f) << "shaded from behind the face";
+  const float* n = out.aovs.at(32 - out.x0, 24 - out.y0);
+  EXPECT_GE(n[2], 0.0f) << "the normal AOV faces the viewer";
+}
+
+TEST(Renderer, AZeroInterpolatedNormalFallsBackToTheFace) {
+  // Vertex normals that cancel in the middle of the square.
+  const glm::vec3 cancelling[4] = {{1, 0, 0}, {0, 1, 0}, {-1, 0, 0}, {0, -1, 0}};
+  lighting::ExactLighting exact;
+  exact.project(frontLit());
+  const RenderOutput out = renderSquare(facingSquare(cancelling), exact);
+  for (float v : out.beauty.pixels) ASSERT_TRUE(std::isfinite(v));
+  for (float v : out.aovs.pixels) ASSERT_TRUE(std::isfinite(v));
+}
+
+TEST(Renderer, ABoundingBoxCornerJustInFrontOfTheCameraIsClamped) {
+  // A long wall whose near end ends a hair in front of the camera: its corners project to
+  // coordinates far beyond any int.
+  Mesh wall;
+  wall.positions = {{0.5f, -1, -1e-7f}, {0.5f, -1, -50}, {0.5f, 1, -50}, {0.5f, 1, -1e-7f}};
+  wall.normals.assign(4, glm::vec3(-1, 0, 0));
+  wall.indices = {0, 1, 2, 0, 2, 3};
+  const EmbreeScene bvh(wall.positions, wall.indices);
+  const calib::PlateCamera camera = calib::plateCamera(64, 48, {}, {});
+  lighting::ExactLighting exact;
+  exact.project(lighting::Environment::constant(glm::vec3(1.0f), 16));
+  RenderSettings settings;
+  settings.samplesPerAxis = 1;
+  const glm::dmat4 worldFromObject = glm::translate(glm::dmat4(1.0), camera.position());
+  const RenderOutput out = renderDiffuse(wall, bvh, worldFromObject, camera, exact, settings);
+  EXPECT_GE(out.x0, 0);
+  EXPECT_LE(out.x1, 64);
+  EXPECT_GE(out.y0, 0);
+  EXPECT_LE(out.y1, 48);
+  EXPECT_GT(out.coverage, 0.0) << "the wall is seen";
 }
 
 }  // namespace
