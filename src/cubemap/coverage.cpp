@@ -12,11 +12,11 @@ CoverageReport measureCoverage(const lighting::CubeMap& cube, const std::vector<
   const int n = cube.size();
   COMPOSE_CHECK(weight.size() == size_t(kCubeFaces) * size_t(n) * size_t(n));
   CoverageReport r;
-  for (int f = 0; f < kCubeFaces; ++f) {
-    for (int y = 0; y < n; ++y) {
-      for (int x = 0; x < n; ++x) {
+  for (int y = 0; y < n; ++y) {
+    for (int x = 0; x < n; ++x) {
+      const double omega = lighting::faceTexelSolidAngle(n, x, y);  // the same on every face
+      for (int f = 0; f < kCubeFaces; ++f) {
         const float w = weight[(size_t(f) * size_t(n) + size_t(y)) * size_t(n) + size_t(x)];
-        const double omega = lighting::faceTexelSolidAngle(n, x, y);
         if (w <= 0.0f)
           r.uncovered += omega;
         else if (w < 1.0f)

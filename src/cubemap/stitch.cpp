@@ -859,6 +859,9 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
       if (angleBetween(0.5 * (glm::normalize(rowStart) + glm::normalize(rowEnd)), axis) >
           half + rowHalf + step)
         return;
+      // Texels whose centre falls this far outside the frame cannot reach into it: a texel's
+      // half diagonal in photo pixels, bounded by the worst case of the lens at this face size.
+      const double cull = 2.0 * std::max(p.lens.fx, p.lens.fy) * step + 2.0;
       // The camera-frame steps of a quarter texel along the face's right and down axes.
       const glm::dvec3 qa = cameraFromWorld * (0.25 * step * frame.right);
       const glm::dvec3 qb = cameraFromWorld * (0.25 * step * frame.down);
@@ -866,6 +869,13 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         const double a = -1.0 + (2.0 * x + 1.0) / n;
         const glm::dvec3 c = cameraFromWorld * (frame.forward + a * frame.right + b * frame.down);
         if (p.lens.projection == calib::Projection::Rectilinear && !(c.z < 0.0)) continue;
+        // Most texels miss the frame: one projection tells, before the texel's own rays.
+        {
+          glm::dvec2 centre;
+          if (!p.lens.project(c, centre)) continue;
+          if (!(centre.x > -cull && centre.x < w + cull && centre.y > -cull && centre.y < h + cull))
+            continue;
+        }
         // The texel as 2 x 2 sub-texel rays (a quarter texel off its centre each way), and more
         // (3 x 3, 4 x 4) when the texel spans many photo pixels: their mean, each prefiltered to
         // its own footprint, is close to the box average over the texel, which is what a cube

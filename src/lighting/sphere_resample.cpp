@@ -408,17 +408,26 @@ CubeMap resizeCube(const CubeMap& cube, int size) {
   const int n = cube.size(), m = size;
   CubeMap out(m);
   out.colorSpace = cube.colorSpace;
-  parallelFor(0, int64_t(kCubeFaces) * m, [&](int64_t task) {
-    const int f = int(task / m), py = int(task % m);
+  // The overlap weights are the same on every face: computed once, per row of destination texels
+  // (child texel index, shared solid angle), then applied to the six faces.
+  struct Weight {
+    int child;
+    double omega;
+  };
+  std::vector<std::vector<Weight>> rows(static_cast<size_t>(m));
+  std::vector<std::vector<int>> starts(static_cast<size_t>(m));
+  parallelFor(0, m, [&](int64_t pyy) {
+    const int py = int(pyy);
+    std::vector<Weight>& w = rows[size_t(py)];
+    std::vector<int>& start = starts[size_t(py)];
     const double b0 = -1.0 + 2.0 * py / m, b1 = -1.0 + 2.0 * (py + 1) / m;
     int y0, y1;
     texelRange(n, b0, b1, y0, y1);
     for (int px = 0; px < m; ++px) {
+      start.push_back(int(w.size()));
       const double a0 = -1.0 + 2.0 * px / m, a1 = -1.0 + 2.0 * (px + 1) / m;
       int x0, x1;
       texelRange(n, a0, a1, x0, x1);
-      glm::dvec3 sum(0.0);
-      double area = 0.0;
       for (int y = y0; y <= y1; ++y) {
         const double cb0 = std::max(b0, -1.0 + 2.0 * y / n),
                      cb1 = std::min(b1, -1.0 + 2.0 * (y + 1) / n);
@@ -427,10 +436,24 @@ CubeMap resizeCube(const CubeMap& cube, int size) {
           const double ca0 = std::max(a0, -1.0 + 2.0 * x / n),
                        ca1 = std::min(a1, -1.0 + 2.0 * (x + 1) / n);
           if (!(ca1 > ca0)) continue;
-          const double omega = cubeSolidAngle(ca0, cb0, ca1, cb1);
-          sum += omega * glm::dvec3(cube.radiance(f, x, y));
-          area += omega;
+          w.push_back({y * n + x, cubeSolidAngle(ca0, cb0, ca1, cb1)});
         }
+      }
+    }
+    start.push_back(int(w.size()));
+  });
+  parallelFor(0, int64_t(kCubeFaces) * m, [&](int64_t task) {
+    const int f = int(task / m), py = int(task % m);
+    const std::vector<Weight>& w = rows[size_t(py)];
+    const std::vector<int>& start = starts[size_t(py)];
+    const float* src = cube.face(f).data();
+    for (int px = 0; px < m; ++px) {
+      glm::dvec3 sum(0.0);
+      double area = 0.0;
+      for (int k = start[size_t(px)]; k < start[size_t(px) + 1]; ++k) {
+        const float* t = src + size_t(w[size_t(k)].child) * 3;
+        sum += w[size_t(k)].omega * glm::dvec3(t[0], t[1], t[2]);
+        area += w[size_t(k)].omega;
       }
       const glm::dvec3 mean = sum / area;
       float* t = out.texel(f, px, py);
