@@ -8,9 +8,11 @@
 // lens work the same way.
 //
 // Steps.
-//  1. Features. SIFT keypoints on a log-luminance rendition of each photo, at most `featureSize`
-//     pixels on the long side (one tone mapping for all photos, so that features repeat). Each
-//     keypoint becomes a ray through the lens model (distortion included).
+//  1. Features. SIFT keypoints on an 8-bit log-luminance rendition of each photo, at most
+//     `featureSize` pixels on the long side (one tone mapping for all photos, so that features
+//     repeat, then local contrast equalisation, which brings out skies and shadows). Each keypoint
+//     becomes a ray through the lens model (distortion included). Everything else works on the
+//     float radiance.
 //  2. Matching. Only pairs whose rough frusta overlap are matched: descriptors with Lowe's ratio
 //     test, kept if the rough orientations put the two rays within the orientation tolerance, then
 //     verified by RANSAC on the pair's relative rotation (two rays fix a rotation).
@@ -19,23 +21,27 @@
 //     of each connected group of photos on the verified matches, on ideal pinhole coordinates of
 //     the rays. Its gauge (one global rotation) is then fixed by aligning the refined orientations
 //     to the rough ones as a whole, so the world stays level and facing where the photographer
-//     said. A photo that matched nothing keeps its rough orientation (and a note says so); a
-//     correction larger than `maxCorrectionDegrees` is refused.
+//     said. A correction larger than `maxCorrectionDegrees` is refused. A photo that shares no
+//     features with any other (a clear sky, a blank wall) is aligned directly instead: a pattern
+//     search over small rotations that makes the log luminance of its overlaps agree with its
+//     aligned neighbours' (up to an exposure offset); a photo with no aligned neighbour keeps its
+//     rough orientation. Notes say which photo got what.
 //  4. Exposure. Per-photo gains from the radiance at matched keypoints (median log ratio per pair,
 //     least squares over pairs, geometric mean 1), so that photos of unequal exposure blend;
 //     photos merged to HDR with known exposures get gains of ~1.
 //  5. Warping and blending, in the radiance domain. Every cube texel looks up every photo that
-//     sees it, prefiltered to the texel's footprint (a mip pyramid per photo, trilinear), and the
-//     photos are averaged with seam-aware weights: each photo's weight falls to 0 at its frame
-//     (feathering across the whole overlap, so that no seam remains where one photo ends), and
-//     clipped pixels of LDR photos are weighted down by 100.
+//     sees it as 2 x 2 to 4 x 4 sub-texel rays, each prefiltered to its footprint (a mip pyramid
+//     per photo, trilinear), which approximates the box average over the texel that a cube texel
+//     holds. The photos are averaged with seam-aware weights: each photo's weight falls to 0 at
+//     its frame (feathering across the whole overlap, so that no seam remains where one photo
+//     ends), and clipped pixels of LDR photos are weighted down by 100.
 //  6. Coverage. Directions no photo sees are filled from their surroundings (coverage.h), and the
 //     fraction of the sphere that needed it is reported.
 //
 // Memory: photos are loaded through a callback, once each if `keepPhotos` (all photos are then
 // held until warping), or twice (features, then warping) if not, holding one at a time.
-// Threading: every core; progress on stages "features", "match", "warp". Errors: compose::Error
-// (stage "stitch") naming the photo.
+// Threading: every core; progress on stages "load", "features", "match", "warp"; the time of each
+// step comes back in the result. Errors: compose::Error (stage "stitch") naming the photo.
 #pragma once
 
 #include <functional>
