@@ -193,6 +193,51 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
   EXPECT_LT(rel[rel.size() / 2], 0.10);
 }
 
+// JPEG photos, each exposed for itself as a camera in automatic mode would: the exposure gains
+// bring them to one scale, so the faces keep the brightness ratios of the scene.
+TEST(StitchCommand, AutoExposedJpegsAreBroughtToOneScale) {
+  if (!fs::exists(sample("sunset.exr"))) GTEST_SKIP() << "samples missing";
+  TempDir dir;
+  const Environment env = Environment::fromLatLong(ingest::readImage(sample("sunset.exr")).image);
+  const CubeMap truth = lighting::cubeFromLatLong(env, 32);
+  const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
+  const calib::Lens lens = calib::Lens::fromFieldOfView(384, 384, 100.0);
+  const char* names[kCubeFaces] = {"px", "nx", "py", "ny", "pz", "nz"};
+  std::string photos;
+  for (int f = 0; f < kCubeFaces; ++f) {
+    Image view = cubemap::renderView(scene, lens, cubemap::faceCameraRotation(f), 2);
+    std::vector<float> values(view.pixels.begin(), view.pixels.end());
+    std::nth_element(values.begin(), values.begin() + ptrdiff_t(values.size() / 2), values.end());
+    const float exposure = 0.18f / std::max(values[values.size() / 2], 1e-6f);
+    for (float& v : view.pixels) {
+      const float x = std::clamp(exposure * v, 0.0f, 1.0f);  // sRGB encoding, clipped at white
+      v = x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
+    }
+    const fs::path p = dir / (std::string("sky_") + names[f] + ".jpg");
+    ingest::writeImage(p, view);
+    photos += " " + q(p);
+  }
+  const RunResult r = run("stitch --fov 100 --size 32 --out " + q(dir / "env.exr") + photos, dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("clipping at white"), std::string::npos) << r.err;
+  const CubeMap stitched = cubemap::cubeMapOf(cubemap::readEnvironmentFile({dir / "env.exr"}));
+  auto faceMean = [](const CubeMap& c, int f) {
+    double sum = 0.0;
+    for (float v : c.face(f)) sum += v;
+    return sum;
+  };
+  // Brightness of each side face relative to the -Z face, stitched against the scene: the sky
+  // (+Y) is many times the ground (-Y) in the scene, and the photos were exposed to hide it.
+  for (int f : {0, 1, 2, 3, 4}) {
+    const double expected = faceMean(truth, f) / faceMean(truth, 5);
+    const double ours = faceMean(stitched, f) / faceMean(stitched, 5);
+    // Gains from feature radiance ratios, JPEG quantisation and clipped highlights: 15 %.
+    constexpr double kGains = 0.15;
+    EXPECT_NEAR(ours / expected, 1.0, kGains)
+        << lighting::faceName(f) << " scene ratio " << expected;
+  }
+}
+
 TEST(ComposeWithCubeEnvironments, CrossesAndFaceFoldersLightTheObject) {
   if (!fs::exists(sample("forest.exr")) || !fs::exists(sample("bunny.obj")))
     GTEST_SKIP() << "samples missing";
