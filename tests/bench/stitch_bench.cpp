@@ -112,22 +112,24 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < view.pixels.size(); i += 97) lum.push_back(view.pixels[i]);
     std::nth_element(lum.begin(), lum.begin() + ptrdiff_t(lum.size() / 2), lum.end());
     const float exposure = 0.18f / std::max(lum[lum.size() / 2], 1e-6f);
-    parallelFor(0, int64_t(view.pixels.size()), [&](int64_t i) {
-      view.pixels[size_t(i)] = srgbEncode(exposure * view.pixels[size_t(i)]);
-    }, 1 << 16);
+    parallelFor(
+        0, int64_t(view.pixels.size()),
+        [&](int64_t i) { view.pixels[size_t(i)] = srgbEncode(exposure * view.pixels[size_t(i)]); },
+        1 << 16);
     view.colorSpace = "sRGB";
     ingest::WriteOptions w;
     w.jpegQuality = 95;
     ingest::writeImage(p, view, w);
   }
 
-  std::printf("\nStitching into 1024^2 cube faces (compose stitch --fov 110 --size 1024), %ld "
-              "cores:\n\n",
-              sysconf(_SC_NPROCESSORS_ONLN));
+  std::printf(
+      "\nStitching into 1024^2 cube faces (compose stitch --fov 110 --size 1024), %ld "
+      "cores:\n\n",
+      sysconf(_SC_NPROCESSORS_ONLN));
   std::printf("| mode | wall time | peak memory | steps |\n|---|---|---|---|\n");
   for (const bool lowMemory : {false, true}) {
-    std::vector<std::string> args = {"stitch", "--fov", "110", "--size", "1024", "--out",
-                                     (dir / "forest_env.exr").string()};
+    std::vector<std::string> args = {
+        "stitch", "--fov", "110", "--size", "1024", "--out", (dir / "forest_env.exr").string()};
     if (lowMemory) args.push_back("--low-memory");
     for (const auto& p : photos) args.push_back(p);
     const Run r = runCompose(args, dir / "stderr.txt");
