@@ -518,6 +518,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     settings.albedo = job.albedo;
     settings.envFromWorld = envFromWorld;
     if (shadowed) {
+      settings.points = &shadows.points;
       settings.shadows = &shadows.irradiance;
       settings.occlusion = &shadows.occlusion;
     }

@@ -62,7 +62,7 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
     }
     const bool sh = plan.method == render::ShadowMethod::Harmonics;
     plan.transfer.grid = p.getInt("grid", 16, "shadows");
-    plan.lightingOrder = p.getInt("order", sh ? 4 : 12, "shadows");
+    plan.lightingOrder = p.getInt("order", sh ? 4 : 16, "shadows");
     plan.transfer.boundaryRays = p.getInt("boundary", 2, "shadows");
     plan.sources = p.getInt("sources", 64, "shadows");
     p.requireAllUsed("shadows", "--shadow-params (method, order, grid, boundary, sources)");
@@ -111,6 +111,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
                                   const glm::mat3& envFromObject, const ShadowPlan& plan,
                                   const fs::path& cacheRoot, const Progress& progress) {
   ShadowResult out;
+  out.points = render::surfacePoints(mesh);
   // The visibility pass, cached by the mesh's content and the parameters.
   render::VertexTransfer transfer;
   const auto start = std::chrono::steady_clock::now();
@@ -118,21 +119,24 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   Hash128 h;
   h.bytes(render::meshHash(mesh));
   h.bytes(plan.transfer.key());
+  h.word(uint32_t(out.points.count()));
   const std::string key = h.hex();
   const FloatCache cache(visibilityCacheFolder(cacheRoot), "COMPVIS1", ".visibility");
   const std::string description =
-      "transfer " + plan.transfer.key() + " vertices " + std::to_string(mesh.positions.size());
+      "transfer " + plan.transfer.key() + " points " + std::to_string(out.points.count());
   if (!cacheRoot.empty()) {
     if (auto state = cache.load(key, description)) {
-      reused = transfer.importState(plan.transfer, mesh.positions.size(), *state);
+      reused = transfer.importState(plan.transfer, out.points.count(), *state);
     }
   }
   if (!reused) {
-    transfer = render::computeTransfer(mesh, plan.transfer, progress);
+    transfer = render::computeTransfer(mesh, out.points, plan.transfer, progress);
     char line[200];
-    std::snprintf(line, sizeof line, "visibility pass: %lld rays (%.0f per vertex) in %.2f s",
-                  static_cast<long long>(transfer.rays),
-                  double(transfer.rays) / double(mesh.positions.size()), seconds(start));
+    std::snprintf(line, sizeof line,
+                  "visibility pass at %zu points (%zu vertices): %lld rays (%.0f per point) in "
+                  "%.2f s",
+                  out.points.count(), mesh.positions.size(), static_cast<long long>(transfer.rays),
+                  double(transfer.rays) / double(out.points.count()), seconds(start));
     out.reason = line;
     if (!cacheRoot.empty() && cache.store(key, description, transfer.exportState()))
       out.reason += ", cached in " + cache.pathFor(key).string();
@@ -162,7 +166,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
 
   render::SourceVisibility seen;
   if (!split.sources.empty()) {
-    seen = render::traceSources(mesh, scene, split.sources, envFromObject);
+    seen = render::traceSources(out.points, scene, split.sources, envFromObject);
     char line[200];
     std::snprintf(line, sizeof line, "; %zu bright sources (%.1f%% of the light) by %lld rays",
                   split.sources.size(), 100.0 * split.sourceShare,
@@ -175,7 +179,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   inputs.shadowLighting = shadowLighting.get();
   inputs.sources = split.sources;
   inputs.sourceVisibility = &seen;
-  out.irradiance = render::shadeVertices(mesh, envFromObject, inputs);
+  out.irradiance = render::shadeVertices(out.points, envFromObject, inputs);
   out.occlusion = std::move(transfer.ao);
   return out;
 }

@@ -16,13 +16,13 @@
 
 namespace compose::pipeline {
 
-// --shadow-params: method=cheb|sh|ao (cheb), order (cheb: k, 12; sh: bands, 4), grid (s, 16),
+// --shadow-params: method=cheb|sh|ao (cheb), order (cheb: k, 16; sh: bands, 4), grid (s, 16),
 // boundary (r, 2: r x r rays on the cells along a shadow's edge), sources (64: bright sources
 // split off and shadowed by exact rays, 0..64).
 struct ShadowPlan {
   render::ShadowMethod method = render::ShadowMethod::Chebyshev;
   render::TransferParams transfer;
-  int lightingOrder = 12;  // cheb: k; sh: bands
+  int lightingOrder = 16;  // cheb: k; sh: bands
   int sources = 64;
 
   // Throws compose::UsageError (stage "shadows") naming the bad parameter; unknown ones list the
@@ -32,8 +32,9 @@ struct ShadowPlan {
 };
 
 struct ShadowResult {
+  render::SurfacePoints points;
   render::VertexIrradiance irradiance;
-  std::vector<float> occlusion;  // per-vertex ambient occlusion
+  std::vector<float> occlusion;  // per-point ambient occlusion
   std::string reason;            // what ran or was reused, for the stage report
   std::vector<std::string> notes;
 };

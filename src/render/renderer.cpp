@@ -91,8 +91,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
                            const RenderSettings& settings, const Progress& progress) {
   COMPOSE_CHECK(settings.samplesPerAxis >= 1);
   COMPOSE_CHECK(!mesh.indices.empty() && mesh.normals.size() == mesh.positions.size());
-  if (settings.shadows) COMPOSE_CHECK(settings.shadows->shadowed.size() == mesh.positions.size());
-  if (settings.occlusion) COMPOSE_CHECK(settings.occlusion->size() == mesh.positions.size());
+  if (settings.shadows || settings.occlusion) COMPOSE_CHECK(settings.points != nullptr);
+  if (settings.shadows) COMPOSE_CHECK(settings.shadows->shadowed.size() == settings.points->count());
+  if (settings.occlusion) COMPOSE_CHECK(settings.occlusion->size() == settings.points->count());
 
   const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
   const glm::dmat3 normalFromObject = glm::transpose(glm::inverse(glm::dmat3(worldFromObject)));
@@ -162,12 +163,16 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view),
                      glm::vec3(0.0f));
         glm::vec3 shadowedE = e;
+        uint32_t near[3] = {0, 0, 0};
+        float weight[3] = {0.0f, 0.0f, 0.0f};
+        if (settings.points) settings.points->locate(mesh, hit.triangle, u, v, near, weight);
         if (settings.shadows) {
           const VertexIrradiance& vi = *settings.shadows;
-          const glm::vec3 sh =
-              t * vi.shadowed[tri[0]] + u * vi.shadowed[tri[1]] + v * vi.shadowed[tri[2]];
-          const glm::vec3 un =
-              t * vi.unshadowed[tri[0]] + u * vi.unshadowed[tri[1]] + v * vi.unshadowed[tri[2]];
+          const glm::vec3 sh = weight[0] * vi.shadowed[near[0]] + weight[1] * vi.shadowed[near[1]] +
+                               weight[2] * vi.shadowed[near[2]];
+          const glm::vec3 un = weight[0] * vi.unshadowed[near[0]] +
+                               weight[1] * vi.unshadowed[near[1]] +
+                               weight[2] * vi.unshadowed[near[2]];
           for (int c = 0; c < 3; ++c) {
             // Where the vertices get (almost) no light there is nothing to shadow.
             const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
@@ -179,7 +184,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         shadowedSum += shadowedE;
         if (settings.occlusion) {
           const std::vector<float>& ao = *settings.occlusion;
-          aoSum += t * ao[tri[0]] + u * ao[tri[1]] + v * ao[tri[2]];
+          aoSum += weight[0] * ao[near[0]] + weight[1] * ao[near[1]] + weight[2] * ao[near[2]];
         } else {
           aoSum += 1.0f;
         }

@@ -11,8 +11,8 @@
 // Shading: a Lambertian surface of albedo ρ, outgoing radiance ρ E / π times the exposure, E the
 // irradiance of the lighting (lighting.h) at the interpolated vertex normal. With self-shadowing,
 // E is the unshadowed irradiance at the pixel's normal times the ratio of the shadowed to the
-// unshadowed irradiance interpolated from the vertices, so that the per-pixel normal keeps its
-// detail and the visibility comes from the transfer. Negative irradiance (SH ringing) is clamped
+// unshadowed irradiance interpolated from the surface points around the hit, so that the
+// per-pixel normal keeps its detail and the visibility comes from the transfer. Negative irradiance (SH ringing) is clamped
 // to 0. The shading normal faces the viewer: a back face is shaded from the side the camera sees,
 // and an interpolated normal that points away from the viewer is bent back to the tangent plane.
 // `envFromWorld` rotates world directions into the environment's frame.
@@ -46,9 +46,10 @@ struct RenderSettings {
   glm::vec3 albedo{0.5f};  // in the working space
   float exposure = 1.0f;   // linear multiplier on the object's radiance
   glm::mat3 envFromWorld{1.0f};
-  // Per-vertex irradiance with and without self-shadowing (transfer.h); null: no shadowing.
+  // Self-shadowing (transfer.h): the surface points, their irradiance with and without it, and
+  // their ambient occlusion (for the AO AOV); null: no shadowing, AO 1.
+  const SurfacePoints* points = nullptr;
   const VertexIrradiance* shadows = nullptr;
-  // Per-vertex ambient occlusion for the AO AOV; null: 1.
   const std::vector<float>* occlusion = nullptr;
 };
 

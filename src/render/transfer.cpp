@@ -13,6 +13,8 @@
 #include "core/error.h"
 #include "core/hash.h"
 #include "core/parallel.h"
+
+#include <tbb/enumerable_thread_specific.h>
 #include "lighting/chebyshev.h"
 #include "lighting/sh.h"
 #include "lighting/tchebichef.h"
@@ -87,14 +89,86 @@ bool VertexTransfer::importState(const TransferParams& p, size_t vertices,
   return true;
 }
 
-VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
-                               const Progress& progress) {
+SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction) {
+  COMPOSE_CHECK(maxEdgeFraction > 0.0f);
+  SurfacePoints out;
+  const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
+  out.size = std::max({extent.x, extent.y, extent.z});
+  const float maxEdge = maxEdgeFraction * out.size;
+  out.positions = mesh.positions;
+  out.normals.resize(mesh.normals.size());
+  for (size_t i = 0; i < mesh.normals.size(); ++i) out.normals[i] = glm::normalize(mesh.normals[i]);
+  const size_t triangles = mesh.triangleCount();
+  out.first.assign(triangles, 0);
+  out.level.assign(triangles, 1);
+  for (size_t t = 0; t < triangles; ++t) {
+    const uint32_t* v = &mesh.indices[3 * t];
+    const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+    const float longest = std::max({glm::length(p[1] - p[0]), glm::length(p[2] - p[1]),
+                                    glm::length(p[0] - p[2])});
+    const int L = std::clamp(int(std::ceil(longest / maxEdge)), 1, 32);
+    out.level[t] = uint8_t(L);
+    if (L == 1) continue;
+    out.first[t] = uint32_t(out.positions.size());
+    const glm::vec3 n[3] = {out.normals[v[0]], out.normals[v[1]], out.normals[v[2]]};
+    for (int j = 0; j <= L; ++j) {
+      for (int i = 0; i <= L - j; ++i) {
+        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+        const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
+        out.positions.push_back(b0 * p[0] + b1 * p[1] + b2 * p[2]);
+        const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
+        const float len = glm::length(nn);
+        out.normals.push_back(len > 1e-12f ? nn / len : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
+      }
+    }
+  }
+  return out;
+}
+
+void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
+                           float w[3]) const {
+  const uint32_t* corner = &mesh.indices[3 * size_t(t)];
+  const int L = level[t];
+  if (L == 1) {
+    idx[0] = corner[0], idx[1] = corner[1], idx[2] = corner[2];
+    w[0] = 1.0f - u - v, w[1] = u, w[2] = v;
+    return;
+  }
+  // Grid point (i, j) at barycentrics (i/L, j/L) of corners 1 and 2.
+  auto point = [&](int i, int j) -> uint32_t {
+    if (i == 0 && j == 0) return corner[0];
+    if (i == L && j == 0) return corner[1];
+    if (i == 0 && j == L) return corner[2];
+    int rank = j * (L + 1) - j * (j - 1) / 2 + i;  // row j holds L - j + 1 points
+    rank -= 1;                                     // corner (0, 0) is not stored
+    if (j > 0) rank -= 1;                          // nor (L, 0), the last of row 0
+    return first[t] + uint32_t(rank);
+  };
+  const float fu = std::clamp(u, 0.0f, 1.0f) * float(L), fv = std::clamp(v, 0.0f, 1.0f) * float(L);
+  int i = std::min(int(fu), L - 1), j = std::min(int(fv), L - 1);
+  if (i + j > L - 1) {
+    // Rounding put the hit past the diagonal: onto the last cell of its row.
+    i = L - 1 - j;
+  }
+  const float a = fu - float(i), b = fv - float(j);
+  if (a + b <= 1.0f || i + j == L - 1) {
+    idx[0] = point(i, j), idx[1] = point(i + 1, j), idx[2] = point(i, j + 1);
+    w[0] = std::max(0.0f, 1.0f - a - b), w[1] = a, w[2] = b;
+  } else {
+    idx[0] = point(i + 1, j + 1), idx[1] = point(i, j + 1), idx[2] = point(i + 1, j);
+    w[0] = a + b - 1.0f, w[1] = 1.0f - a, w[2] = 1.0f - b;
+  }
+}
+
+VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
+                               const TransferParams& params, const Progress& progress) {
   params.validate();
   COMPOSE_CHECK(mesh.normals.size() == mesh.positions.size());
   const int s = params.grid, k = params.order, r = params.boundaryRays;
   const size_t kk = size_t(k) * size_t(k);
   const int nsh = lighting::shCount(params.shBands);
-  const size_t count = mesh.positions.size();
+  const size_t count = points.count();
+  const size_t cells = size_t(s) * size_t(s);
 
   VertexTransfer out;
   out.params = params;
@@ -104,34 +178,59 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
   out.ao.assign(count, 0.0f);
 
   const EmbreeScene scene(mesh.positions, mesh.indices);
-  const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
-  const float size = std::max({extent.x, extent.y, extent.z});
-  // Rays leave a point lifted off the surface by 1e-4 of the object's size, and ignore hits
+  // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
   // closer than that: enough for float positions, far below any feature that casts a shadow.
-  const float lift = 1e-4f * size, tnear = 1e-5f * size;
+  const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
 
   const lighting::TchebichefBasis basis(s, k);
   // Cell boundaries: altitude θ_i = iπ/(2s) (as the cheb-local grid), azimuth φ_j = 2πj/s.
-  std::vector<double> cosBound(size_t(s) + 1);
+  std::vector<double> cosBound(size_t(s) + 1), omega(static_cast<size_t>(s)),
+      cosine(static_cast<size_t>(s));
   for (int i = 0; i <= s; ++i) cosBound[size_t(i)] = std::cos(i * 0.5 * kPi / s);
+  for (int i = 0; i < s; ++i) {
+    const double a = cosBound[size_t(i)], b = cosBound[size_t(i) + 1];
+    omega[size_t(i)] = 2.0 * kPi / s * (a - b);  // the cell's solid angle
+    cosine[size_t(i)] = kPi / s * (a * a - b * b);  // ∫_cell cos θ dω
+  }
   std::atomic<size_t> done{0};
   std::atomic<int64_t> rays{0};
-  const size_t cells = size_t(s) * size_t(s);
+
+  // Per-thread scratch, so that no point allocates.
+  struct Scratch {
+    std::vector<double> visible, y, shSum;
+    std::vector<glm::vec3> dirs;   // the first pass' direction per cell
+    std::vector<char> occluded;    // the first pass' answer per cell
+    std::vector<glm::vec3> batch;  // rays of one trace call
+    std::vector<int> batchCell;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch([&] {
+    Scratch sc;
+    sc.visible.resize(cells);
+    sc.y.resize(size_t(nsh));
+    sc.shSum.resize(size_t(nsh));
+    sc.dirs.resize(cells);
+    sc.occluded.resize(cells);
+    return sc;
+  });
 
   parallelFor(
       0, int64_t(count),
       [&](int64_t vi) {
         const size_t v = size_t(vi);
-        const glm::dvec3 n = glm::normalize(glm::dvec3(mesh.normals[v]));
+        Scratch& sc = scratch.local();
+        const glm::dvec3 n = glm::normalize(glm::dvec3(points.normals[v]));
         glm::dvec3 east, north;
         tangentFrame(n, east, north);
-        const glm::vec3 origin = mesh.positions[v] + lift * glm::vec3(n);
-        std::vector<double> visible(cells, 0.0);
-        std::vector<double> y(static_cast<size_t>(nsh));
-        std::vector<double> shSum(static_cast<size_t>(nsh), 0.0);
-        double aoSum = 0.0;
+        const glm::vec3 origin = points.positions[v] + lift * glm::vec3(n);
+        std::fill(sc.visible.begin(), sc.visible.end(), 0.0);
+        std::fill(sc.shSum.begin(), sc.shSum.end(), 0.0);
         int64_t traced = 0;
-        uint32_t sample = (uint32_t(v) * 0x9E3779B1u) ^ (params.seed * 0x85EBCA77u);
+        // The jitter depends on where the point is, not on its index: a point shared by two
+        // triangles' grids gets the same answer on both.
+        uint32_t bits[3];
+        std::memcpy(bits, &points.positions[v], sizeof bits);
+        uint32_t sample = (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^
+                          (bits[2] * 0xC2B2AE3Du) ^ (params.seed * 0x27D4EB2Fu);
 
         // A direction in cell (i, j) at fractional position (u, w), uniform in solid angle.
         auto direction = [&](int i, int j, double u, double w) {
@@ -139,115 +238,83 @@ VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
               cosBound[size_t(i)] - u * (cosBound[size_t(i)] - cosBound[size_t(i) + 1]);
           const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
           const double phi = 2.0 * kPi * (j + w) / s;
-          return sinT * std::cos(phi) * east + sinT * std::sin(phi) * north + cosT * n;
+          return glm::vec3(sinT * std::cos(phi) * east + sinT * std::sin(phi) * north + cosT * n);
         };
-        // Traces `dirs` (grouped by 8) and adds each visible ray's share to the integrals.
-        struct Ray {
-          glm::dvec3 d;
-          int cell;
-          double weight;  // the solid angle it stands for
+        // A ray that reaches the environment: its share of the cell and of the SH integral.
+        auto seen = [&](int cell, const glm::vec3& d, double share) {
+          sc.visible[size_t(cell)] += share;
+          const glm::dvec3 dd(d);
+          lighting::evalSh(params.shBands, dd, sc.y.data());
+          const double weight = glm::dot(dd, n) * share * omega[size_t(cell / s)];
+          for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
         };
-        std::vector<Ray> batch;
-        auto trace = [&](std::vector<Ray>& list, std::vector<char>* hitOut) {
-          glm::vec3 dirs[8];
-          for (size_t first = 0; first < list.size(); first += 8) {
-            const int m = int(std::min<size_t>(8, list.size() - first));
-            for (int b = 0; b < m; ++b) dirs[b] = glm::vec3(list[first + size_t(b)].d);
-            const uint32_t hit = scene.occluded8(origin, dirs, (1u << m) - 1u, tnear);
-            for (int b = 0; b < m; ++b) {
-              const Ray& ray = list[first + size_t(b)];
-              const bool occluded = (hit >> b) & 1u;
-              if (hitOut) (*hitOut)[first + size_t(b)] = occluded ? 1 : 0;
-              if (occluded) continue;
-              visible[size_t(ray.cell)] += ray.weight;
-              const double cosT = glm::dot(ray.d, n);
-              if (nsh > 0) {
-                lighting::evalSh(params.shBands, ray.d, y.data());
-                for (int c = 0; c < nsh; ++c) shSum[size_t(c)] += y[size_t(c)] * cosT * ray.weight;
-              }
-            }
+        // Traces sc.batch (any length) in groups of 8; calls answer(index, occluded).
+        auto traceBatch = [&](auto&& answer) {
+          for (size_t first = 0; first < sc.batch.size(); first += 8) {
+            const int m = int(std::min<size_t>(8, sc.batch.size() - first));
+            const uint32_t hit =
+                scene.occluded8(origin, sc.batch.data() + first, (1u << m) - 1u, tnear);
+            for (int b = 0; b < m; ++b) answer(first + size_t(b), ((hit >> b) & 1u) != 0);
           }
-          traced += int64_t(list.size());
-        };
-        auto cellOmega = [&](int i) {
-          return 2.0 * kPi / s * (cosBound[size_t(i)] - cosBound[size_t(i) + 1]);
+          traced += int64_t(sc.batch.size());
         };
 
         // Pass 1: one jittered ray per cell.
-        batch.clear();
-        for (int i = 0; i < s; ++i)
-          for (int j = 0; j < s; ++j, ++sample)
-            batch.push_back({direction(i, j, hash01(2 * sample), hash01(2 * sample + 1)), i * s + j,
-                             cellOmega(i)});
-        std::vector<char> occluded(cells, 0);
-        {
-          // Trace without accumulating yet: cells on a shadow boundary are sampled again.
-          std::vector<double> keepVisible = visible;
-          const std::vector<double> keepSh = shSum;
-          trace(batch, &occluded);
-          if (r > 1) {
-            visible = keepVisible;
-            shSum = keepSh;
-          }
-        }
-        if (r > 1) {
-          // Cells whose ray disagrees with a neighbour's lie on a shadow boundary: they get r x r
-          // stratified rays; the others keep their one ray.
-          auto at = [&](int i, int j) { return occluded[size_t(i * s + ((j % s + s) % s))]; };
-          bool poleMixed = false;
-          for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
-          std::vector<Ray> settled, refine;
-          for (int i = 0; i < s; ++i) {
-            for (int j = 0; j < s; ++j) {
-              const char c = at(i, j);
-              bool boundary = i == 0 && poleMixed;
-              for (int di = -1; di <= 1 && !boundary; ++di) {
-                const int ii = i + di;
-                if (ii < 0 || ii >= s) continue;
-                for (int dj = -1; dj <= 1; ++dj) boundary = boundary || at(ii, j + dj) != c;
-              }
-              const Ray& first = batch[size_t(i * s + j)];
-              if (!boundary) {
-                settled.push_back(first);
-                continue;
-              }
-              for (int a = 0; a < r; ++a) {
-                for (int b = 0; b < r; ++b, ++sample) {
-                  refine.push_back({direction(i, j, (a + hash01(2 * sample)) / r,
-                                              (b + hash01(2 * sample + 1)) / r),
-                                    i * s + j, cellOmega(i) / (r * r)});
-                }
-              }
-            }
-          }
-          // The first pass' answers for settled cells count as they are (no second trace).
-          for (const Ray& ray : settled) {
-            if (occluded[size_t(ray.cell)]) continue;
-            visible[size_t(ray.cell)] += ray.weight;
-            const double cosT = glm::dot(ray.d, n);
-            if (nsh > 0) {
-              lighting::evalSh(params.shBands, ray.d, y.data());
-              for (int c = 0; c < nsh; ++c) shSum[size_t(c)] += y[size_t(c)] * cosT * ray.weight;
-            }
-          }
-          trace(refine, nullptr);
-        }
-        // Visible fraction per cell; AO from it and each cell's exact cosine integral
-        // ∫_cell cos θ dω = (π/s)(cos²θ_i - cos²θ_{i+1}), so that a fully visible point has AO 1.
+        sc.batch.clear();
         for (int i = 0; i < s; ++i) {
-          const double cosine = kPi / s *
-                                (cosBound[size_t(i)] * cosBound[size_t(i)] -
-                                 cosBound[size_t(i) + 1] * cosBound[size_t(i) + 1]);
-          for (int j = 0; j < s; ++j) {
-            visible[size_t(i * s + j)] /= cellOmega(i);
-            aoSum += visible[size_t(i * s + j)] * cosine;
+          for (int j = 0; j < s; ++j, ++sample) {
+            const glm::vec3 d = direction(i, j, hash01(2 * sample), hash01(2 * sample + 1));
+            sc.dirs[size_t(i * s + j)] = d;
+            sc.batch.push_back(d);
           }
         }
-        const std::vector<double> m = lighting::moments2d(basis, basis, visible, k);
+        traceBatch([&](size_t index, bool occluded) { sc.occluded[index] = occluded ? 1 : 0; });
+
+        // Cells whose ray disagrees with a neighbour's lie on a shadow's edge: they get r x r
+        // stratified rays; every other cell keeps its one ray.
+        auto at = [&](int i, int j) { return sc.occluded[size_t(i * s + ((j % s + s) % s))]; };
+        bool poleMixed = false;
+        for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
+        sc.batch.clear();
+        sc.batchCell.clear();
+        for (int i = 0; i < s; ++i) {
+          for (int j = 0; j < s; ++j) {
+            const char c = at(i, j);
+            bool boundary = r > 1 && i == 0 && poleMixed;
+            for (int di = -1; di <= 1 && r > 1 && !boundary; ++di) {
+              const int ii = i + di;
+              if (ii < 0 || ii >= s) continue;
+              for (int dj = -1; dj <= 1; ++dj) boundary = boundary || at(ii, j + dj) != c;
+            }
+            if (!boundary) {
+              if (!c) seen(i * s + j, sc.dirs[size_t(i * s + j)], 1.0);
+              continue;
+            }
+            for (int a = 0; a < r; ++a) {
+              for (int b = 0; b < r; ++b, ++sample) {
+                sc.batch.push_back(direction(i, j, (a + hash01(2 * sample)) / r,
+                                             (b + hash01(2 * sample + 1)) / r));
+                sc.batchCell.push_back(i * s + j);
+              }
+            }
+          }
+        }
+        const double share = 1.0 / double(r * r);
+        traceBatch([&](size_t index, bool occluded) {
+          if (!occluded) seen(sc.batchCell[index], sc.batch[index], share);
+        });
+
+        // AO from the visible fractions and each cell's exact cosine integral, so that a fully
+        // visible point has AO 1.
+        double ao = 0.0;
+        for (int i = 0; i < s; ++i)
+          for (int j = 0; j < s; ++j) ao += sc.visible[size_t(i * s + j)] * cosine[size_t(i)];
+        const std::vector<double> m = lighting::moments2d(basis, basis, sc.visible, k);
         std::transform(m.begin(), m.end(), out.cheb.begin() + ptrdiff_t(v * kk),
                        [](double x) { return float(x); });
-        for (int c = 0; c < nsh; ++c) out.sh[v * size_t(nsh) + size_t(c)] = float(shSum[size_t(c)]);
-        out.ao[v] = float(aoSum / kPi);
+        for (int c = 0; c < nsh; ++c)
+          out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
+        out.ao[v] = float(ao / kPi);
         rays += traced;
         const size_t d = ++done;
         if (d % 1024 == 0) report(progress, "shadows", double(d) / double(count));
@@ -333,27 +400,25 @@ const char* shadowMethodName(ShadowMethod method) {
   return "";
 }
 
-SourceVisibility traceSources(const Mesh& mesh, const EmbreeScene& scene,
+SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
                               const std::vector<lighting::LightSource>& sources,
                               const glm::mat3& envFromObject) {
   COMPOSE_CHECK(sources.size() <= 64);
   SourceVisibility out;
-  const size_t count = mesh.positions.size();
+  const size_t count = points.count();
   out.visible.assign(count, 0);
   if (sources.empty()) return out;
   const glm::mat3 objectFromEnv = glm::transpose(envFromObject);
   std::vector<glm::vec3> dirs(sources.size());
   for (size_t i = 0; i < sources.size(); ++i) dirs[i] = objectFromEnv * sources[i].direction;
-  const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
-  const float size = std::max({extent.x, extent.y, extent.z});
-  const float lift = 1e-4f * size, tnear = 1e-5f * size;
+  const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
   std::atomic<int64_t> rays{0};
   parallelFor(
       0, int64_t(count),
       [&](int64_t vi) {
         const size_t v = size_t(vi);
-        const glm::vec3 n = glm::normalize(mesh.normals[v]);
-        const glm::vec3 origin = mesh.positions[v] + lift * n;
+        const glm::vec3 n = points.normals[v];
+        const glm::vec3 origin = points.positions[v] + lift * n;
         glm::vec3 batch[8];
         int index[8];
         int m = 0;
@@ -381,11 +446,11 @@ SourceVisibility traceSources(const Mesh& mesh, const EmbreeScene& scene,
   return out;
 }
 
-VertexIrradiance shadeVertices(const Mesh& mesh, const glm::mat3& envFromObject,
+VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& envFromObject,
                                const ShadowInputs& in) {
   COMPOSE_CHECK(in.shadowLighting != nullptr);
   const ShadowMethod method = in.method;
-  const size_t count = mesh.positions.size();
+  const size_t count = points.count();
   // The rotation must be a turn about +Y: its angle is the longitude offset.
   const glm::vec3 x = envFromObject[0];
   COMPOSE_CHECK(std::abs(x.y) < 1e-4f && std::abs(envFromObject[1].y - 1.0f) < 1e-4f);
@@ -429,7 +494,7 @@ VertexIrradiance shadeVertices(const Mesh& mesh, const glm::mat3& envFromObject,
       0, int64_t(count),
       [&](int64_t vi) {
         const size_t v = size_t(vi);
-        const glm::dvec3 nObj = glm::normalize(glm::dvec3(mesh.normals[v]));
+        const glm::dvec3 nObj = glm::normalize(glm::dvec3(points.normals[v]));
         const glm::vec3 nEnv = glm::normalize(envFromObject * glm::vec3(nObj));
         glm::vec3 unshadowed = glm::max(in.shadowLighting->irradiance(nEnv), glm::vec3(0.0f));
         for (const lighting::LightSource& source : in.sources)

@@ -27,8 +27,14 @@
 // (which is also how a vertex exactly at the pole stays consistent). The SH transfer vector is
 // rotated by the yaw about the SH pole (+Y).
 //
-// Threading: computeTransfer() uses every core (vertices in parallel); the result is
-// deterministic (per-vertex jitter from a hash of the vertex index and the seed).
+// Where: at surface points (SurfacePoints): the mesh's vertices, and on triangles larger than a
+// set fraction of the object a barycentric grid of points, so that a shadow falling across a
+// large face is not smeared between its corners. The renderer interpolates linearly between the
+// three points around a hit.
+//
+// Threading: computeTransfer() uses every core (points in parallel); the result is
+// deterministic (per-point jitter from a hash of the point's position and the seed, so that the
+// same point on two triangles gets the same answer).
 #pragma once
 
 #include <cstdint>
@@ -61,7 +67,27 @@ struct TransferParams {
   int firstPassRays() const { return grid * grid; }
 };
 
-// Per-vertex transfer of a mesh, in the mesh's own (object) coordinates.
+// The points where the visibility is sampled: first the mesh's vertices (same indices), then for
+// each triangle whose longest edge is longer than `maxEdge` a grid of `level` segments per edge
+// (level = ceil(longest edge / maxEdge), at most 32), its corners being the triangle's vertices.
+// Normals are the interpolated vertex normals, normalised.
+struct SurfacePoints {
+  std::vector<glm::vec3> positions, normals;  // object space
+  std::vector<uint32_t> first;  // per triangle: index of its first own grid point
+  std::vector<uint8_t> level;   // per triangle: segments per edge (1: the corners only)
+  float size = 0.0f;            // the object's size: its bounding box's largest extent
+
+  size_t count() const { return positions.size(); }
+  // The three points whose values, with these weights, interpolate at Embree's barycentrics
+  // (u for corner 1, v for corner 2) of `triangle`.
+  void locate(const Mesh& mesh, uint32_t triangle, float u, float v, uint32_t points[3],
+              float weights[3]) const;
+};
+
+// `maxEdge` as a fraction of the object's size (default: 1/48).
+SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 48.0f);
+
+// Per-point transfer of a mesh, in the mesh's own (object) coordinates.
 struct VertexTransfer {
   TransferParams params;
   size_t vertexCount = 0;
@@ -76,10 +102,10 @@ struct VertexTransfer {
   bool importState(const TransferParams& params, size_t vertexCount, const std::vector<float>& in);
 };
 
-// Visibility of every vertex of `mesh` against the mesh itself. Rays leave each vertex from a
-// point lifted by a small fraction of the mesh's size along the vertex normal.
-VertexTransfer computeTransfer(const Mesh& mesh, const TransferParams& params,
-                               const Progress& progress = {});
+// Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
+// from a spot lifted by 1e-4 of the mesh's size along its normal.
+VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
+                               const TransferParams& params, const Progress& progress = {});
 
 // True when the mesh is closed and convex: every edge joins exactly two triangles and no
 // triangle's far corner lies above its neighbour's plane. A convex solid cannot shadow itself,
@@ -105,7 +131,7 @@ struct SourceVisibility {
   int64_t rays = 0;
 };
 class EmbreeScene;
-SourceVisibility traceSources(const Mesh& mesh, const EmbreeScene& objectScene,
+SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& objectScene,
                               const std::vector<lighting::LightSource>& sources,
                               const glm::mat3& envFromObject);
 
@@ -124,7 +150,7 @@ struct ShadowInputs {
   const SourceVisibility* sourceVisibility = nullptr;
 };
 
-// Per-vertex irradiance with and without self-shadowing, in the environment's frame and units.
+// Per-point irradiance with and without self-shadowing, in the environment's frame and units.
 struct VertexIrradiance {
   std::vector<glm::vec3> shadowed, unshadowed;
   int clamped = 0;  // vertices whose shadowed irradiance left [0, unshadowed] by more than 0.1 %
@@ -133,7 +159,7 @@ struct VertexIrradiance {
 // `envFromObject` is the rotation from the mesh's coordinates to the environment's; it must be a
 // turn about +Y (placement yaw and environment yaw), so that the transfer's frames apply. Throws
 // compose::Error (stage "shadows") when the inputs do not fit the method.
-VertexIrradiance shadeVertices(const Mesh& mesh, const glm::mat3& envFromObject,
+VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& envFromObject,
                                const ShadowInputs& inputs);
 
 }  // namespace compose::render

@@ -137,10 +137,12 @@ class FloorAndWall : public ::testing::Test {
     params_.grid = 16;
     params_.order = 12;
     params_.shBands = 4;
-    transfer_ = computeTransfer(mesh_, params_);
+    points_ = surfacePoints(mesh_, 10.0f);  // the vertices only: the floor is a fine grid
+    transfer_ = computeTransfer(mesh_, points_, params_);
     for (size_t v = 0; v < 81; v += 2) floor_.push_back(v);  // floor vertices, at the pole
   }
   Mesh mesh_;
+  SurfacePoints points_;
   TransferParams params_;
   VertexTransfer transfer_;
   std::vector<size_t> floor_;
@@ -165,17 +167,17 @@ TEST_F(FloorAndWall, ChebyshevTransferMatchesRayTracingAtThePole) {
     ShadowInputs in;
     in.transfer = &transfer_;
     in.shadowLighting = &cheb;
-    const VertexIrradiance plain = shadeVertices(mesh_, envFromObject, in);
+    const VertexIrradiance plain = shadeVertices(points_, envFromObject, in);
     // With the 16 brightest sources split off and shadowed by rays.
     const lighting::SourceSplit split = lighting::splitBrightSources(env, 16);
     lighting::ChebLocalLighting residual(cp);
     residual.project(split.residual);
     const EmbreeScene scene(mesh_.positions, mesh_.indices);
-    const SourceVisibility seen = traceSources(mesh_, scene, split.sources, envFromObject);
+    const SourceVisibility seen = traceSources(points_, scene, split.sources, envFromObject);
     in.shadowLighting = &residual;
     in.sources = split.sources;
     in.sourceVisibility = &seen;
-    const VertexIrradiance withSources = shadeVertices(mesh_, envFromObject, in);
+    const VertexIrradiance withSources = shadeVertices(points_, envFromObject, in);
     const double plainDb = snrDb(plain.shadowed, ref, floor_);
     const double sourcesDb = snrDb(withSources.shadowed, ref, floor_);
     // Measured (yaw 0, 30, -115): 26-28 dB with the moments alone (the sun is one texel in a
@@ -207,7 +209,7 @@ TEST_F(FloorAndWall, HarmonicTransferTurnsWithTheYaw) {
     in.method = ShadowMethod::Harmonics;
     in.transfer = &transfer_;
     in.shadowLighting = &sh;
-    db[i++] = snrDb(shadeVertices(mesh_, envFromObject, in).shadowed, ref, floor_);
+    db[i++] = snrDb(shadeVertices(points_, envFromObject, in).shadowed, ref, floor_);
   }
   // SH transfer up to band 4 is coarse here, but it must be as good turned as not: a missing
   // rotation of the transfer vector costs several dB.
@@ -222,7 +224,7 @@ TEST(Transfer, AConvexObjectSeesEverything) {
   TransferParams p;
   p.grid = 8;
   p.order = 8;
-  const VertexTransfer t = computeTransfer(box, p);
+  const VertexTransfer t = computeTransfer(box, surfacePoints(box, 10.0f), p);
   for (float ao : t.ao) EXPECT_NEAR(ao, 1.0f, 1e-6f);
   // V = 1 on every cell: its moments are those of a constant, only b_00 = s (= Σ t_0 t_0 s²).
   for (size_t v = 0; v < t.vertexCount; ++v) {
@@ -230,6 +232,39 @@ TEST(Transfer, AConvexObjectSeesEverything) {
     for (int i = 1; i < 64; ++i) EXPECT_NEAR(t.cheb[v * 64 + size_t(i)], 0.0f, 1e-5f);
   }
   EXPECT_EQ(t.rays, int64_t(box.positions.size()) * 64) << "no boundary cells: one ray each";
+}
+
+TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  m.normals.assign(4, glm::vec3(0, 0, 1));
+  m.indices = {0, 1, 2, 1, 3, 2};
+  // Edges up to 1.41 with a largest extent of 1: 1/4 gives 6 segments per edge.
+  const SurfacePoints pts = surfacePoints(m, 0.25f);
+  EXPECT_EQ(pts.level[0], 6);
+  EXPECT_EQ(pts.count(), 4u + 2u * (7u * 8u / 2u - 3u));
+  // Interpolating any linear function of position sampled at the points returns its value at
+  // the hit, and the points used are those of the hit's own cell.
+  auto f = [](const glm::vec3& p) { return 2.0f * p.x - 3.0f * p.y + 0.5f; };
+  for (uint32_t t = 0; t < 2; ++t) {
+    for (float u = 0.0f; u <= 1.0f; u += 0.07f) {
+      for (float v = 0.0f; u + v <= 1.0f; v += 0.05f) {
+        uint32_t idx[3];
+        float w[3];
+        pts.locate(m, t, u, v, idx, w);
+        const uint32_t* c = &m.indices[3 * t];
+        const glm::vec3 hit =
+            (1 - u - v) * m.positions[c[0]] + u * m.positions[c[1]] + v * m.positions[c[2]];
+        float value = 0.0f;
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LT(idx[k], pts.count());
+          EXPECT_LE(glm::length(pts.positions[idx[k]] - hit), 0.25f) << "a point of the cell";
+          value += w[k] * f(pts.positions[idx[k]]);
+        }
+        EXPECT_NEAR(value, f(hit), 1e-5f) << "t " << t << " u " << u << " v " << v;
+      }
+    }
+  }
 }
 
 TEST(Transfer, ParametersAreValidated) {

@@ -1,0 +1,425 @@
+// compose-bench-shadows: self-shadowing accuracy against a ray-traced reference, with its cost,
+// for every transfer method, on real meshes in the sample environments (docs/design.md §10).
+//
+//   compose-bench-shadows [--out DIR] [--quick] [--pixels N] [--mesh bunny.obj]
+//
+// For each mesh (the Stanford bunny, Suzanne, the Newell teapot) the object is rendered alone at
+// 480x360, one sample per pixel at the pixel's centre, so that every pixel is shaded at one point
+// whose position and normal the P and N AOVs give. The reference at a pixel is the exact
+// unshadowed irradiance at its normal minus a Monte Carlo estimate (environment and cosine
+// sampling, MIS) of the light the object blocks there, with 32768 samples; a second reference
+// with another seed says how converged it is. The object's pixels are compared with it: SNR and
+// relative error over an even spread of fully covered pixels.
+//
+// Methods: no shadows; ambient occlusion x irradiance; SH transfer (Sloan et al. 2002) with 9,
+// 16, 25 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both transfers with
+// and without the 64 brightest sources split off and shadowed by rays; and Monte Carlo with
+// visibility rays per pixel at several sample counts.
+//
+// Writes shadows.csv, shadows.md and one SVG plot per mesh (SNR against the floats stored per
+// vertex) into DIR (default out/bench), and prints the tables.
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "calib/plate_camera.h"
+#include "ingest/image_io.h"
+#include "lighting/chebyshev.h"
+#include "lighting/exact.h"
+#include "lighting/monte_carlo.h"
+#include "lighting/sh.h"
+#include "lighting/sources.h"
+#include "pipeline/compose_job.h"
+#include "render/embree_scene.h"
+#include "render/mesh.h"
+#include "render/renderer.h"
+#include "render/transfer.h"
+#include "svg_plot.h"
+
+namespace {
+
+using namespace compose;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double seconds(Clock::time_point a) {
+  return std::chrono::duration<double>(Clock::now() - a).count();
+}
+
+double peakRssMb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+struct Pixel {
+  int x, y;
+  glm::vec3 p, n;
+};
+
+struct Row {
+  std::string mesh, env, method;
+  int order = 0;        // k, SH bands, or MC samples
+  bool sources = false;
+  double floatsPerVertex = 0;
+  double lightingFloats = 0;
+  double precomputeS = 0;  // projection of the lighting (the visibility pass is per mesh)
+  double shadeS = 0;       // per-vertex shading + rendering the frame
+  double snrDb = 0, relError = 0;
+};
+
+struct Measure {
+  double snrDb, relError;
+};
+
+Measure compare(const std::vector<glm::dvec3>& got, const std::vector<glm::dvec3>& ref) {
+  double s = 0, e = 0, rel = 0;
+  for (size_t i = 0; i < ref.size(); ++i) {
+    s += glm::dot(ref[i], ref[i]);
+    const glm::dvec3 d = ref[i] - got[i];
+    e += glm::dot(d, d);
+    const double r1 = std::abs(ref[i].x) + std::abs(ref[i].y) + std::abs(ref[i].z);
+    rel += (std::abs(d.x) + std::abs(d.y) + std::abs(d.z)) / std::max(r1, 1e-12);
+  }
+  return {10.0 * std::log10(s / e), rel / double(ref.size())};
+}
+
+std::string fmt(const char* f, double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  fs::path outDir = "out/bench";
+  bool quick = false;
+  int pixels = 1200;
+  std::string onlyMesh;
+  int boundary = 2;
+  float pointFraction = 1.0f / 48.0f;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--out" && i + 1 < argc) {
+      outDir = argv[++i];
+    } else if (a == "--quick") {
+      quick = true;
+      pixels = 300;
+    } else if (a == "--pixels" && i + 1 < argc) {
+      pixels = std::atoi(argv[++i]);
+    } else if (a == "--mesh" && i + 1 < argc) {
+      onlyMesh = argv[++i];
+    } else if (a == "--boundary" && i + 1 < argc) {
+      boundary = std::atoi(argv[++i]);
+    } else if (a == "--points" && i + 1 < argc) {
+      pointFraction = float(std::atof(argv[++i]));
+    } else {
+      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--pixels N] [--mesh FILE]\n",
+                   argv[0]);
+      return 2;
+    }
+  }
+  fs::create_directories(outDir);
+  const fs::path samples = pipeline::samplesDirectory();
+  const int kReferenceSamples = quick ? 8192 : 32768;
+  std::vector<Row> rows;
+  std::vector<std::string> notes;
+
+  const char* meshes[] = {"bunny.obj", "monkey.obj", "teapot.bez"};
+  const char* envs[] = {"courtyard", "forest", "interior", "sunset"};
+  for (const char* meshName : meshes) {
+    if (!onlyMesh.empty() && onlyMesh != meshName) continue;
+    const render::Mesh mesh = render::loadMesh(samples / meshName);
+    const render::EmbreeScene scene(mesh.positions, mesh.indices);
+    const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
+    const float size = std::max({extent.x, extent.y, extent.z});
+    // The visibility pass once, at the largest order measured (lower orders are its top-left
+    // moments) and with SH up to band 4.
+    render::TransferParams tp;
+    tp.grid = 16;
+    tp.order = 16;
+    tp.shBands = 4;
+    tp.boundaryRays = boundary;
+    const auto t0 = Clock::now();
+    const render::SurfacePoints points = render::surfacePoints(mesh, pointFraction);
+    const render::VertexTransfer transfer = render::computeTransfer(mesh, points, tp);
+    const double transferS = seconds(t0);
+    notes.push_back(std::string(meshName) + ": " + std::to_string(mesh.positions.size()) +
+                    " vertices, " + std::to_string(mesh.triangleCount()) + " triangles, " +
+                    std::to_string(points.count()) + " surface points; visibility pass " +
+                    fmt("%.2f", transferS) + " s, " + std::to_string(transfer.rays) + " rays (" +
+                    fmt("%.0f", double(transfer.rays) / double(points.count())) +
+                    " per point, 2 cores)");
+    std::printf("%s\n", notes.back().c_str());
+
+    // The object alone, large in a 480x360 frame, turned 30 degrees.
+    const calib::PlateCamera camera = calib::plateCamera(480, 360, {}, {});
+    calib::Placement place;
+    place.imagePoint = {0.5, 0.85};
+    place.heightFraction = 0.7;
+    place.yawDegrees = 30.0;
+    const glm::dmat4 worldFromObject = calib::placeOnGround(
+        camera, place, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+    glm::mat3 envFromObject = glm::mat3(worldFromObject);
+    for (int c = 0; c < 3; ++c) envFromObject[c] = glm::normalize(envFromObject[c]);
+
+    for (const char* envName : envs) {
+      Image img = ingest::readImage(samples / (std::string(envName) + ".exr")).image;
+      const lighting::Environment env = lighting::Environment::fromLatLong(img);
+      lighting::ExactLighting exact;
+      exact.project(env);
+      auto unshadowedLighting = lighting::createLighting("cheb-local");
+      unshadowedLighting->project(env);
+      render::RenderSettings settings;
+      settings.samplesPerAxis = 1;
+      settings.jitter = false;
+      settings.albedo = glm::vec3(1.0f);
+      settings.exposure = float(std::numbers::pi);  // the object layer is then E itself
+      auto renderWith = [&](const lighting::DiffuseLighting& lighting,
+                            const render::VertexIrradiance* shadows) {
+        render::RenderSettings s = settings;
+        s.points = &points;
+        s.shadows = shadows;
+        return render::renderDiffuse(mesh, scene, worldFromObject, camera, lighting, s);
+      };
+      // The pixels: an even spread of fully covered ones, with their points and normals.
+      const render::RenderOutput plain = renderWith(*unshadowedLighting, nullptr);
+      std::vector<Pixel> all;
+      for (int y = 0; y < plain.beauty.height; ++y)
+        for (int x = 0; x < plain.beauty.width; ++x) {
+          if (plain.beauty.at(x, y)[3] < 1.0f) continue;
+          const float* a = plain.aovs.at(x, y);
+          all.push_back({x, y, glm::vec3(a[3], a[4], a[5]), glm::vec3(a[0], a[1], a[2])});
+        }
+      std::vector<Pixel> px;
+      const size_t step = std::max<size_t>(1, all.size() / size_t(pixels));
+      for (size_t i = 0; i < all.size(); i += step) px.push_back(all[i]);
+
+      // References: exact unshadowed minus the MC estimate of the blocked light, twice.
+      const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+      const glm::mat3 objectFromEnv = glm::transpose(envFromObject);
+      auto reference = [&](uint64_t seed, std::vector<glm::dvec3>& out,
+                           std::vector<glm::dvec3>* unshadowed) {
+        lighting::MonteCarloLighting mc(1, seed);
+        mc.project(env);
+        out.resize(px.size());
+        if (unshadowed) unshadowed->resize(px.size());
+        for (size_t i = 0; i < px.size(); ++i) {
+          const glm::vec3 n = glm::normalize(px[i].n);  // world = environment frame here
+          const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
+          const glm::vec3 nObj = glm::normalize(objectFromEnv * n);
+          const glm::vec3 origin = pObj + 1e-4f * size * nObj;
+          const lighting::MonteCarloLighting::VisibilityFn blocked = [&](const glm::vec3& d) {
+            return scene.occluded(origin, objectFromEnv * d, 1e-5f * size);
+          };
+          const glm::dvec3 e(exact.irradiance(n));
+          out[i] = e - glm::dvec3(mc.estimate(n, kReferenceSamples, &blocked));
+          if (unshadowed) (*unshadowed)[i] = e;
+        }
+      };
+      const auto r0 = Clock::now();
+      std::vector<glm::dvec3> ref, ref2, refUnshadowed;
+      reference(11, ref, &refUnshadowed);
+      const double referenceS = seconds(r0);
+      reference(12, ref2, nullptr);
+      const Measure converged = compare(ref2, ref);
+      const Measure lightingOnly = [&] {
+        std::vector<glm::dvec3> got;
+        for (const Pixel& p : px) {
+          const float* b = plain.beauty.at(p.x, p.y);
+          got.emplace_back(b[0], b[1], b[2]);
+        }
+        return compare(got, refUnshadowed);
+      }();
+      char line[400];
+      std::snprintf(line, sizeof line,
+                    "%s / %s: %zu pixels; reference %d samples in %.1f s, two seeds agree to "
+                    "%.1f dB; unshadowed cheb-local vs exact unshadowed %.1f dB (image space)",
+                    meshName, envName, px.size(), kReferenceSamples, referenceS,
+                    converged.snrDb, lightingOnly.snrDb);
+      notes.push_back(line);
+      std::printf("%s\n", line);
+
+      auto measure = [&](const render::RenderOutput& out) {
+        std::vector<glm::dvec3> got;
+        for (const Pixel& p : px) {
+          const float* b = out.beauty.at(p.x, p.y);
+          got.emplace_back(b[0], b[1], b[2]);
+        }
+        return compare(got, ref);
+      };
+      auto add = [&](const std::string& method, int order, bool sources, double floatsPerVertex,
+                     double lightingFloats, double precomputeS, double shadeS, Measure m) {
+        rows.push_back({meshName, envName, method, order, sources, floatsPerVertex,
+                        lightingFloats, precomputeS, shadeS, m.snrDb, m.relError});
+        std::printf("  %-8s %-10s order %5d %s  %7.1f floats/vertex  %6.1f dB  %6.2f %%\n",
+                    envName, method.c_str(), order, sources ? "+sources" : "        ",
+                    floatsPerVertex, m.snrDb, 100.0 * m.relError);
+      };
+      add("none", 0, false, 0, double(unshadowedLighting->floatsStored()), 0, 0, measure(plain));
+
+      const lighting::SourceSplit split = lighting::splitBrightSources(env, 64);
+      const render::SourceVisibility seen =
+          render::traceSources(points, scene, split.sources, envFromObject);
+      for (const bool withSources : {false, true}) {
+        const lighting::Environment& shadowEnv = withSources ? split.residual : env;
+        render::ShadowInputs in;
+        in.transfer = &transfer;
+        if (withSources) {
+          in.sources = split.sources;
+          in.sourceVisibility = &seen;
+        }
+        auto run = [&](const std::string& method, int order,
+                       std::unique_ptr<lighting::DiffuseLighting> lighting,
+                       render::ShadowMethod m, double floatsPerVertex) {
+          const auto p0 = Clock::now();
+          lighting->project(shadowEnv);
+          const double projectS = seconds(p0);
+          in.method = m;
+          in.shadowLighting = lighting.get();
+          const auto s0 = Clock::now();
+          const render::VertexIrradiance vi = render::shadeVertices(points, envFromObject, in);
+          const render::RenderOutput out = renderWith(*unshadowedLighting, &vi);
+          add(method, order, withSources, floatsPerVertex + (withSources ? 1.0 : 0.0),
+              double(lighting->floatsStored()), projectS, seconds(s0), measure(out));
+        };
+        if (!withSources) {
+          run("ao", 1, lighting::createLighting("cheb-local"),
+              render::ShadowMethod::AmbientOcclusion, 1);
+        }
+        for (int bands : {2, 3, 4})
+          run("sh", bands, std::make_unique<lighting::ShLighting>(bands),
+              render::ShadowMethod::Harmonics, lighting::shCount(bands));
+        for (int k : {1, 2, 3, 4, 5, 6, 8, 10, 12, 16}) {
+          if (quick && (k == 2 || k == 10)) continue;
+          lighting::ChebParams cp;
+          cp.order = k;
+          cp.samples = 16;
+          run("cheb", k, std::make_unique<lighting::ChebLocalLighting>(cp),
+              render::ShadowMethod::Chebyshev, k * k);
+        }
+      }
+      // Monte Carlo with visibility rays at each pixel (measured on the reference pixels).
+      for (int n : {16, 64, 256, 1024}) {
+        lighting::MonteCarloLighting mc(n, 99);
+        mc.project(env);
+        std::vector<glm::dvec3> got(px.size());
+        const auto m0 = Clock::now();
+        for (size_t i = 0; i < px.size(); ++i) {
+          const glm::vec3 nw = glm::normalize(px[i].n);
+          const glm::vec3 pObj =
+              glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
+          const glm::vec3 origin = pObj + 1e-4f * size * glm::normalize(objectFromEnv * nw);
+          const lighting::MonteCarloLighting::VisibilityFn visible = [&](const glm::vec3& d) {
+            return !scene.occluded(origin, objectFromEnv * d, 1e-5f * size);
+          };
+          got[i] = glm::dvec3(mc.irradiance(nw, visible));
+        }
+        // Time scaled to the whole frame's covered pixels.
+        const double frameS = seconds(m0) * double(all.size()) / double(px.size());
+        add("mc", n, false, 0, double(mc.floatsStored()), 0, frameS, compare(got, ref));
+      }
+    }
+  }
+
+  // --- outputs ---------------------------------------------------------------------------------
+  {
+    std::ofstream csv(outDir / "shadows.csv");
+    csv << "mesh,env,method,order,sources,floats_per_vertex,lighting_floats,projection_s,"
+           "shade_render_s,snr_db,rel_error\n";
+    for (const Row& r : rows) {
+      csv << r.mesh << ',' << r.env << ',' << r.method << ',' << r.order << ','
+          << (r.sources ? 64 : 0) << ',' << r.floatsPerVertex << ',' << r.lightingFloats << ','
+          << r.precomputeS << ',' << r.shadeS << ',' << r.snrDb << ',' << r.relError << '\n';
+    }
+  }
+  std::ofstream md(outDir / "shadows.md");
+  md << "# Self-shadowing: accuracy against a ray-traced reference\n\n"
+        "Produced by `compose-bench-shadows`"
+     << (quick ? " --quick" : "")
+     << ". Object pixels (480x360, one sample per pixel at its centre) against the exact "
+        "unshadowed irradiance minus a Monte Carlo estimate of the light the object blocks. "
+        "SNR in dB (relative error in %).\n\n";
+  for (const std::string& n : notes) md << "- " << n << "\n";
+  md << "\n";
+  for (const char* meshName : meshes) {
+    md << "## " << meshName << "\n\n| method | floats/vertex | courtyard | forest | interior | "
+                                 "sunset |\n|---|---|---|---|---|---|\n";
+    std::map<std::string, std::map<std::string, const Row*>> table;
+    std::vector<std::string> order;
+    for (const Row& r : rows) {
+      if (r.mesh != meshName) continue;
+      std::string label = r.method == "none"  ? "no shadows"
+                          : r.method == "ao"  ? "AO x irradiance"
+                          : r.method == "mc"  ? "MC " + std::to_string(r.order) + " samples/pixel"
+                          : r.method == "sh"  ? "SH " + std::to_string(lighting::shCount(r.order)) +
+                                                   " coefficients"
+                                              : "Chebyshev k=" + std::to_string(r.order);
+      if (r.sources) label += " + 64 sources";
+      if (!table.count(label)) order.push_back(label);
+      table[label][r.env] = &r;
+    }
+    for (const std::string& label : order) {
+      const Row* any = table[label].begin()->second;
+      md << "| " << label << " | " << fmt("%.0f", any->floatsPerVertex);
+      for (const char* env : envs) {
+        const auto it = table[label].find(env);
+        md << " | "
+           << (it == table[label].end()
+                   ? std::string("–")
+                   : fmt("%.1f", it->second->snrDb) + " (" +
+                         fmt("%.2f", 100.0 * it->second->relError) + " %)");
+      }
+      md << " |\n";
+    }
+    md << "\n";
+
+    bench::Chart chart;
+    chart.title = std::string("Self-shadowing on ") + meshName + " (mean over the four HDRIs)";
+    chart.xLabel = "floats stored per vertex";
+    chart.yLabel = "SNR against the ray-traced reference (dB)";
+    chart.logX = true;
+    for (const auto& [method, sources, label] :
+         std::vector<std::tuple<std::string, bool, std::string>>{
+             {"cheb", false, "Chebyshev transfer"},
+             {"cheb", true, "Chebyshev transfer + 64 sources"},
+             {"sh", false, "SH transfer"},
+             {"sh", true, "SH transfer + 64 sources"},
+             {"ao", false, "AO x irradiance"}}) {
+      bench::Series s;
+      s.label = label;
+      std::map<int, std::pair<double, int>> byOrder;
+      std::map<int, double> floats;
+      for (const Row& r : rows) {
+        if (r.mesh != meshName || r.method != method || r.sources != sources) continue;
+        byOrder[r.order].first += r.snrDb;
+        byOrder[r.order].second += 1;
+        floats[r.order] = r.floatsPerVertex;
+      }
+      for (const auto& [o, v] : byOrder) {
+        s.x.push_back(floats[o]);
+        s.y.push_back(v.first / v.second);
+      }
+      chart.series.push_back(s);
+    }
+    chart.hLines.push_back({40.0, "40 dB"});
+    std::string stem = meshName;
+    stem = stem.substr(0, stem.find('.'));
+    bench::writeSvg(chart, outDir / ("shadows_" + stem + ".svg"));
+  }
+  md << "Peak resident memory of the benchmark: " << fmt("%.0f", peakRssMb()) << " MB.\n";
+  std::printf("peak resident memory %.0f MB; wrote %s\n", peakRssMb(),
+              (outDir / "shadows.md").c_str());
+  return 0;
+}
