@@ -13,7 +13,7 @@ PACKAGES=(
   libopencv-dev libopencv-contrib-dev libopenimageio-dev openimageio-tools
   libopencolorio-dev opencolorio-tools libopenexr-dev libglm-dev libtinygltf-dev
   libtinyobjloader-dev libembree-dev libtbb-dev libcli11-dev nlohmann-json3-dev
-  libgtest-dev libbenchmark-dev libfilament-tools
+  libgtest-dev libbenchmark-dev libfilament-tools openexr
 )
 BUILD_DIR=${COMPOSE_BUILD_DIR:-build}
 

@@ -12,7 +12,9 @@
 #include "composite/composite.h"
 #include "core/error.h"
 #include "core/output_files.h"
+#include "cubemap/environment_io.h"
 #include "ingest/image_io.h"
+#include "lighting/capture_volume.h"
 #include "lighting/environment.h"
 #include "lighting/lighting.h"
 #include "lighting/lighting_cache.h"
@@ -174,6 +176,21 @@ std::string toWorkingSpace(Image& image, const fs::path& file, const ingest::Cap
   return "'" + read + "'";
 }
 
+// The proxy of the surroundings the job describes (distant when it describes none).
+lighting::CaptureProxy captureProxy(const ComposeJob& job) {
+  lighting::CaptureProxy proxy;
+  proxy.capturePoint = job.captureAt ? *job.captureAt : glm::dvec3(0.0, job.camera.height, 0.0);
+  if (job.room) {
+    proxy.shape = lighting::CaptureProxy::Shape::Box;
+    proxy.boxMin = glm::dvec3(-0.5 * job.room->x, 0.0, -0.5 * job.room->z);
+    proxy.boxMax = glm::dvec3(0.5 * job.room->x, job.room->y, 0.5 * job.room->z);
+  } else if (job.environmentRadius) {
+    proxy.shape = lighting::CaptureProxy::Shape::Sphere;
+    proxy.radius = *job.environmentRadius;
+  }
+  return proxy;
+}
+
 class StageTimer {
  public:
   explicit StageTimer(StageRecord& record)
@@ -231,6 +248,18 @@ void validate(const ComposeJob& job) {
   job.camera.validate();
   job.placement.validate();
   ShadowPlan::parse(job.shadowParams);
+  if (job.room && job.environmentRadius) throw UsageError("give either --room or --env-radius");
+  if (job.captureAt && !job.room && !job.environmentRadius)
+    throw UsageError(
+        "--capture-at needs --room or --env-radius (a distant environment has no "
+        "position)");
+  try {
+    captureProxy(job).validate();
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    throw UsageError(e.what(), e.stage());
+  }
   // The lighting basis and its parameters: a misspelt name fails before any pixel is read.
   try {
     ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
@@ -257,7 +286,16 @@ std::vector<StageRecord> plan(const ComposeJob& job) {
                    " and the environment " + env.string()});
   s.push_back(
       {"merge", false, "the environment is a single HDR image, no exposure bracket to merge"});
-  s.push_back({"stitch", false, "the environment is already a lat-long map, no faces to stitch"});
+  std::error_code ec;
+  if (fs::is_directory(env, ec) || env.string().find('%') != std::string::npos) {
+    s.push_back({"stitch", true,
+                 "assemble the six cube faces and resample them exactly to a lat-long map (photos "
+                 "are stitched with compose stitch)"});
+  } else {
+    s.push_back({"stitch", false,
+                 "one environment image (lat-long, OpenEXR cube or cross): nothing to stitch; a "
+                 "cube is resampled to lat-long on loading"});
+  }
   s.push_back({"color", true, "plate and environment to the working space (role scene_linear)"});
   s.push_back(
       {"precompute", true,
@@ -311,7 +349,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   auto lighting = lighting::createLighting(job.lighting, lightingParams);
 
   // ingest
-  ingest::LoadedImage plate, env;
+  ingest::LoadedImage plate;
+  cubemap::LoadedEnvironment env;
   render::Mesh mesh;
   {
     StageTimer t(stage(result.stages, "ingest"));
@@ -321,7 +360,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
                   envPath);
     }
     plate = ingest::readImage(job.plate, "ingest");
-    env = ingest::readImage(envPath, "ingest");
+    env = cubemap::loadEnvironment(envPath, {}, progress);  // any layout, as a lat-long map
+    for (const std::string& n : env.notes) result.notes.push_back(n);
     mesh = render::loadMesh(job.object);
     report(progress, "ingest", 1.0);
   }
@@ -345,7 +385,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     const std::string plateRead =
         toWorkingSpace(plateLinear, job.plate, plate.info, job.plateSpace, "--plate-space", colors);
     const std::string envRead =
-        toWorkingSpace(envLinear, envPath, env.info, job.environmentSpace, "--env-space", colors);
+        toWorkingSpace(envLinear, env.file, env.info, job.environmentSpace, "--env-space", colors);
     result.notes.push_back("plate read as " + plateRead + ", environment as " + envRead +
                            ", working space '" + working + "' (config: " + colors.source() + ")");
   }
@@ -360,6 +400,35 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       result.notes.push_back(std::to_string(sanitized.negativeTexels) +
                              " environment texels had negative values (as low as " +
                              std::to_string(sanitized.mostNegative) + "): clamped to 0");
+    }
+    if (const lighting::CaptureProxy proxy = captureProxy(job);
+        proxy.shape != lighting::CaptureProxy::Shape::Distant) {
+      // Parallax: the environment as seen from the object's centre (camera and placement as the
+      // render stage will have them).
+      calib::CameraOptions cameraOptions = job.camera;
+      if (!job.lensFile.empty()) cameraOptions.lens = calib::readLens(job.lensFile);
+      const calib::PlateCamera camera =
+          calib::plateCamera(plate.image.width, plate.image.height, plate.info, cameraOptions);
+      const glm::dmat4 worldFromObject = calib::placeOnGround(
+          camera, job.placement, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+      const glm::dvec3 centre(
+          worldFromObject * glm::dvec4(0.5 * glm::dvec3(mesh.boundsMin() + mesh.boundsMax()), 1.0));
+      lighting::CaptureProxy placed = proxy;
+      const double yaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
+      placed.environmentFromWorld =
+          glm::dmat3(glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)));
+      environment = lighting::CaptureVolumeSource(environment, placed).at(glm::vec3(centre));
+      char line[300];
+      std::snprintf(line, sizeof line,
+                    "parallax: the environment as seen from the object's centre "
+                    "(%.2f, %.2f, %.2f) m; surroundings: ",
+                    centre.x, centre.y, centre.z);
+      result.notes.push_back(line + proxy.describe());
+      if (!proxy.contains(centre)) {
+        result.notes.push_back(
+            "the object's centre is outside the surroundings given: it is lit as from the "
+            "nearest point inside them");
+      }
     }
     StageRecord& record = stage(result.stages, "precompute");
     if (autoOrder) {

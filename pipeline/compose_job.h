@@ -73,6 +73,16 @@ struct ComposeJob {
   // field of view is scaled to match the plate's mean linear value).
   std::optional<double> exposureStops;
   int samplesPerAxis = 4;
+
+  // Surroundings at a finite distance, for parallax (lighting/capture_volume.h): a room of
+  // W x H x D metres standing on the ground, centred below the plate camera (x in [-W/2, W/2],
+  // y in [0, H], z in [-D/2, D/2]), or a sphere of `environmentRadius` metres around the capture
+  // point. Neither: the environment is infinitely distant. The object is then lit by the
+  // environment as seen from its centre.
+  std::optional<glm::dvec3> room;
+  std::optional<double> environmentRadius;
+  // Where the environment was captured, world metres; default: the plate camera's position.
+  std::optional<glm::dvec3> captureAt;
 };
 
 struct StageRecord {

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -28,6 +29,8 @@ const std::vector<Command>& commands() {
       {"capture-sim", "Virtual camera: bracketed photos of an HDR environment, with ground truth",
        setupCaptureSim},
       {"calib", "Lens calibration and plate pose from chessboard photos", setupCalib},
+      {"convert", "Convert environment maps between layouts; unwrap mirror balls", setupConvert},
+      {"stitch", "Stitch photos from one point into a cube-map environment", setupStitch},
   };
   return list;
 }
@@ -53,6 +56,17 @@ glm::vec3 parseColour(const std::string& text, const std::string& option) {
     throw UsageError(option + " expects one value or R,G,B, got '" + text + "'");
   }
   return {r, g, b};
+}
+
+glm::dvec3 parseTriple(const std::string& text, const std::string& option) {
+  std::istringstream in(text);
+  double x = 0, y = 0, z = 0;
+  char c1 = 0, c2 = 0;
+  if (!(in >> x >> c1 >> y >> c2 >> z) || c1 != ',' || c2 != ',' || !in.eof() ||
+      !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+    throw UsageError(option + " expects three numbers as X,Y,Z, got '" + text + "'");
+  }
+  return {x, y, z};
 }
 
 double parseNumber(const std::string& text, const std::string& option) {

@@ -56,16 +56,20 @@ const std::vector<Command>& commands();
 // The one-shot `compose --plate ... --object ...`: its options live on the top-level app.
 Runner setupCompose(CLI::App& app, const Globals& globals);
 
-// The photo-stage commands (cmd_ingest.cpp, cmd_merge.cpp, cmd_capture_sim.cpp, cmd_calib.cpp).
+// The stage commands (cmd_<name>.cpp).
 Runner setupIngest(CLI::App& command, const Globals& globals);
 Runner setupMerge(CLI::App& command, const Globals& globals);
 Runner setupCaptureSim(CLI::App& command, const Globals& globals);
 Runner setupCalib(CLI::App& command, const Globals& globals);
+Runner setupConvert(CLI::App& command, const Globals& globals);
+Runner setupStitch(CLI::App& command, const Globals& globals);
 
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);
 // "V" or "R,G,B" → three numbers; throws UsageError naming `option`.
 glm::vec3 parseColour(const std::string& text, const std::string& option);
+// "X,Y,Z" → three finite numbers; throws UsageError naming `option`.
+glm::dvec3 parseTriple(const std::string& text, const std::string& option);
 // A number, or throws UsageError naming `option`.
 double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");

@@ -13,8 +13,8 @@ namespace {
 
 struct ComposeOptions {
   pipeline::ComposeJob job;
-  std::string place, albedo, lightingParams, exposure = "auto", shadows = "self";
-  double focal35 = 0.0;
+  std::string place, albedo, lightingParams, exposure = "auto", shadows = "self", room, captureAt;
+  double focal35 = 0.0, envRadius = 0.0;
   bool explain = false, noCache = false;
 };
 
@@ -27,7 +27,8 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   app.add_option("--object", job.object, "Mesh to insert (Wavefront OBJ)");
   app.add_option(
       "--env", job.environment,
-      "HDR environment, lat-long (equirectangular) map [default: the forest sample HDRI]");
+      "HDR environment: a lat-long map, an OpenEXR cube map, a cross, or six face files (a folder, "
+      "a name with % for the face, or one face file) [default: the forest sample HDRI]");
   app.add_option("--out", job.output, "Output base path; writes BASE.exr and BASE.jpg (or .png)")
       ->capture_default_str();
   app.add_option("--lighting", job.lighting, "Lighting basis: " + join(lighting::lightingNames()))
@@ -46,6 +47,15 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   app.add_option("--env-yaw", job.environmentYawDegrees,
                  "Turn the environment about the vertical axis, degrees")
       ->capture_default_str();
+  app.add_option(
+      "--room", o->room,
+      "Parallax: the environment is a room of W,H,D metres (floor on the ground, centred "
+      "below the plate camera) instead of infinitely distant");
+  app.add_option("--env-radius", o->envRadius,
+                 "Parallax: the environment is a sphere of this radius (metres) around the capture "
+                 "point");
+  app.add_option("--capture-at", o->captureAt,
+                 "Where the environment was captured, X,Y,Z metres [default: the plate camera]");
   app.add_option("--focal35", o->focal35,
                  "35 mm equivalent focal length of the plate [default: EXIF, else 50]");
   app.add_option("--camera-height", job.camera.height, "Camera height above the ground, metres")
@@ -91,6 +101,9 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     if (!o->place.empty()) j.placement.imagePoint = parsePair(o->place, "--place");
     if (!o->albedo.empty()) j.albedo = parseColour(o->albedo, "--albedo");
     if (app.count("--focal35")) j.camera.focal35mm = o->focal35;
+    if (!o->room.empty()) j.room = parseTriple(o->room, "--room");
+    if (app.count("--env-radius")) j.environmentRadius = o->envRadius;
+    if (!o->captureAt.empty()) j.captureAt = parseTriple(o->captureAt, "--capture-at");
     j.lightingParams = o->lightingParams;
     if (o->noCache) j.cache.clear();
     if (o->shadows == "off") {

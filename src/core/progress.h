@@ -2,7 +2,11 @@
 // the front end decides how to show it.
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <functional>
+#include <mutex>
+#include <string>
 #include <string_view>
 
 namespace compose {
@@ -14,5 +18,27 @@ using Progress = std::function<void(std::string_view stage, double fraction)>;
 inline void report(const Progress& progress, std::string_view stage, double fraction) {
   if (progress) progress(stage, fraction);
 }
+
+// Progress from inside a parallel loop of `total` steps: step() may be called from any thread;
+// the callback is called at most every `every` steps and never concurrently (a busy reporter is
+// skipped, not waited for).
+class ParallelProgress {
+ public:
+  ParallelProgress(const Progress& progress, std::string stage, int64_t total, int64_t every = 64)
+      : progress_(progress), stage_(std::move(stage)), total_(total), every_(every) {}
+  void step() {
+    const int64_t d = ++done_;
+    if (!progress_ || (d % every_ != 0 && d != total_)) return;
+    std::unique_lock lock(mutex_, std::try_to_lock);
+    if (lock.owns_lock()) progress_(stage_, double(d) / double(total_));
+  }
+
+ private:
+  const Progress& progress_;
+  std::string stage_;
+  int64_t total_, every_;
+  std::atomic<int64_t> done_{0};
+  std::mutex mutex_;
+};
 
 }  // namespace compose

@@ -5,9 +5,9 @@
 // Each grid point holds one projected DiffuseLighting, made from the radiance a RadianceSource
 // gives for that position. A distant source (the same environment everywhere: a single HDRI) is
 // projected once and shared by every point; position-dependent sources (parallax-corrected
-// cube maps, later) are projected per point. Irradiance is linear in the lighting coefficients,
-// so interpolating the eight neighbours' irradiance equals interpolating their coefficients.
-// Positions outside the volume are clamped to its boundary.
+// captures: capture_volume.h) are projected per point. Irradiance is linear in the lighting
+// coefficients, so interpolating the eight neighbours' irradiance equals interpolating their
+// coefficients. Positions outside the volume are clamped to its boundary.
 #pragma once
 
 #include <functional>

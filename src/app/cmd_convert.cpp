@@ -1,0 +1,235 @@
+// compose convert: environment maps between layouts (lat-long, OpenEXR cube, crosses, six faces)
+// and mirror-ball photos to environments.
+#include <cmath>
+#include <cstdio>
+
+#include "app/cli.h"
+#include "color/color.h"
+#include "core/error.h"
+#include "core/output_files.h"
+#include "cubemap/environment_io.h"
+#include "cubemap/mirror_ball.h"
+#include "lighting/sphere_resample.h"
+
+namespace compose::app {
+
+namespace {
+
+struct ConvertOptions {
+  std::vector<std::string> inputs;
+  std::string to, from, out, depth = "float", faceNames = "pxnx", photoSpace, outSpace;
+  int size = 0, width = 0;
+  double blindSpot = 10.0;
+};
+
+std::string fraction(double f) {
+  char s[32];
+  std::snprintf(s, sizeof s, "%.2f %%", 100.0 * f);
+  return s;
+}
+
+double energyDifference(const glm::dvec3& a, const glm::dvec3& b) {
+  double worst = 0.0;
+  for (int c = 0; c < 3; ++c) {
+    const double scale = std::max(std::abs(a[c]), std::abs(b[c]));
+    if (scale > 0.0) worst = std::max(worst, std::abs(a[c] - b[c]) / scale);
+  }
+  return worst;
+}
+
+}  // namespace
+
+Runner setupConvert(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ConvertOptions>();
+  cmd.description(
+      "Convert an environment map between layouts, or unwrap a mirror-ball photo.\n\n"
+      "Layouts: latlong (2:1), cube (OpenEXR's 1:6 strip, envmap=cube), hcross (4:3), vcross "
+      "(3:4), faces (six files), mirrorball (a square crop of a chrome ball; input only).\n"
+      "The input's layout is detected from an EXR's envmap attribute or the aspect ratio; square "
+      "images need --from. Resampling is area-exact: the integral of the radiance is kept.\n\n"
+      "Examples:\n"
+      "  compose convert forest.exr --to cube --out forest_cube.exr\n"
+      "  compose convert cross.hdr --to latlong --width 2048 --out env.exr\n"
+      "  compose convert env_%.exr --to vcross --out cross.exr       (% stands for px, nx, ...)\n"
+      "  compose convert ball.jpg --from mirrorball --to latlong --out env.exr");
+  cmd.add_option("inputs", o->inputs,
+                 "Environment: an image, a folder of six faces, a face-name pattern with %, or six "
+                 "face files")
+      ->required();
+  cmd.add_option("--to", o->to, "Output layout: latlong, cube, hcross, vcross, faces")->required();
+  cmd.add_option("--out", o->out,
+                 "Output file; for --to faces a name with % (replaced by the face names) or a "
+                 "base name that gets _px, _nx, ...")
+      ->required();
+  cmd.add_option("--from,--layout", o->from,
+                 "Input layout when it cannot be detected: latlong, cube, hcross, vcross, faces, "
+                 "mirrorball");
+  cmd.add_option("--size", o->size,
+                 "Cube face size in texels [default: lat-long width / 4, or as read]");
+  cmd.add_option("--width", o->width,
+                 "Lat-long width in texels, even [default: 4 x face size, or as read]");
+  cmd.add_option("--depth", o->depth,
+                 "EXR sample type: float, half, or auto (half unless values exceed its range)")
+      ->capture_default_str();
+  cmd.add_option("--face-names", o->faceNames,
+                 "Names of face files: pxnx, posneg, exr (+X ...), words")
+      ->capture_default_str();
+  cmd.add_option("--photo-space", o->photoSpace,
+                 "Mirror ball: colour space of the photo [default: from the file]; it is "
+                 "linearised before unwrapping");
+  cmd.add_option("--out-space", o->outSpace,
+                 "Mirror ball: colour space of the result [default: what the config's file rules "
+                 "say for --out]");
+  cmd.add_option("--blind-spot", o->blindSpot,
+                 "Mirror ball: degrees around the direction behind the ball that are filled from "
+                 "their surroundings instead of read")
+      ->capture_default_str();
+
+  return [o, &globals]() -> int {
+    using cubemap::Layout;
+    // Every value is checked before any file is read.
+    const auto to = cubemap::parseLayout(o->to);
+    if (!to || *to == Layout::MirrorBall) {
+      throw UsageError("--to must be one of latlong, cube, hcross, vcross, faces; got '" + o->to +
+                       "'");
+    }
+    std::optional<Layout> from;
+    if (!o->from.empty()) {
+      from = cubemap::parseLayout(o->from);
+      if (!from) {
+        throw UsageError("--from must be one of " + join(cubemap::layoutNames()) + "; got '" +
+                         o->from + "'");
+      }
+    }
+    if (o->size < 0 || o->size > 16384) throw UsageError("--size must be 1..16384 texels");
+    if (o->width < 0 || o->width > 65536 || o->width % 2 != 0)
+      throw UsageError("--width must be an even number of texels up to 65536");
+    cubemap::WriteOptions write;
+    if (o->depth == "auto")
+      write.depth = cubemap::WriteOptions::Depth::Auto;
+    else if (o->depth == "half")
+      write.depth = cubemap::WriteOptions::Depth::Half;
+    else if (o->depth == "float")
+      write.depth = cubemap::WriteOptions::Depth::Float;
+    else
+      throw UsageError("--depth must be auto, half or float; got '" + o->depth + "'");
+    const auto naming = cubemap::parseFaceNaming(o->faceNames);
+    if (!naming)
+      throw UsageError("--face-names must be one of " + join(cubemap::faceNamingNames()));
+    write.faceNaming = *naming;
+    cubemap::MirrorBallOptions ball;
+    ball.blindSpotDegrees = o->blindSpot;
+    ball.validate();
+    if (from == Layout::MirrorBall && o->inputs.size() != 1)
+      throw UsageError("--from mirrorball takes one photo");
+
+    ProgressPrinter printer(globals);
+    std::vector<std::string> notes;
+    std::vector<std::filesystem::path> inputs(o->inputs.begin(), o->inputs.end());
+
+    // Read into either a lat-long environment or a cube map.
+    lighting::Environment latLong;
+    lighting::CubeMap cube;
+    glm::dvec3 energyIn(0.0);
+    lighting::SanitizeReport sanitized;
+    if (from == Layout::MirrorBall) {
+      ingest::LoadedImage photo = ingest::readImage(inputs.front(), "ingest");
+      // Unwrapping averages pixels: it happens on linear radiance.
+      const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+      const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
+                                                     : colors.resolve(o->outSpace, "--out-space");
+      Image rgb(photo.image.width, photo.image.height, 3, {"R", "G", "B"});
+      for (size_t k = 0; k < rgb.pixelCount(); ++k) {
+        const float* s = photo.image.pixels.data() + k * size_t(photo.image.channels);
+        for (int c = 0; c < 3; ++c)
+          rgb.pixels[3 * k + size_t(c)] = s[photo.image.channels >= 3 ? c : 0];
+      }
+      rgb.colorSpace = !o->photoSpace.empty()
+                           ? colors.resolve(o->photoSpace, "--photo-space")
+                           : colors.inputSpaceFor(inputs.front(), photo.info.fileColorSpace);
+      notes.push_back("mirror ball read as '" + rgb.colorSpace + "', unwrapped in '" + target +
+                      "'");
+      colors.convert(rgb, target);
+      write.chromaticities = colors.chromaticities(target);
+      ball.faceSize = o->size > 0 && *to != Layout::LatLong ? o->size : 0;
+      cubemap::MirrorBallResult unwrapped =
+          cubemap::unwrapMirrorBall(rgb, ball, inputs.front(), printer.callback());
+      cube = std::move(unwrapped.cube);
+      energyIn = cube.integral();
+      notes.push_back("mirror ball " + std::to_string(photo.image.width) + "x" +
+                      std::to_string(photo.image.height) + " unwrapped; " +
+                      fraction(unwrapped.coverage.uncovered) +
+                      " of the sphere (behind the ball) filled from its surroundings, " +
+                      fraction(unwrapped.coverage.partial) + " blended towards the fill");
+    } else {
+      cubemap::ReadOptions read;
+      read.layout = from;
+      const cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
+      notes.push_back("read " + file.describe() + " (" + file.how + ")");
+      // Values are resampled as stored; the colour metadata goes along.
+      write.chromaticities = file.info.chromaticities;
+      if (file.layout == Layout::MirrorBall) {
+        throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
+      }
+      if (file.isCube()) {
+        cube = cubemap::cubeMapOf(file, &sanitized);
+        energyIn = cube.integral();
+      } else {
+        latLong = lighting::Environment::fromLatLong(file.image, file.files.front(), &sanitized);
+        energyIn = lighting::integral(latLong);
+      }
+    }
+    if (sanitized.negativeTexels > 0) {
+      notes.push_back(std::to_string(sanitized.negativeTexels) +
+                      " texels had negative values (as low as " +
+                      std::to_string(sanitized.mostNegative) + "): clamped to 0");
+    }
+
+    // Convert.
+    OutputFiles outputs("output");
+    std::vector<std::string> written;
+    glm::dvec3 energyOut(0.0);
+    if (*to == Layout::LatLong) {
+      lighting::Environment result;
+      if (!cube.empty()) {
+        const int width = o->width > 0 ? o->width : 4 * cube.size();
+        result = lighting::latLongFromCube(cube, width, printer.callback());
+      } else {
+        result = o->width > 0 && o->width != latLong.width()
+                     ? lighting::resizeLatLong(latLong, o->width)
+                     : latLong;
+      }
+      energyOut = lighting::integral(result);
+      for (auto& n : cubemap::writeLatLong(outputs, o->out, result, write)) notes.push_back(n);
+      written.push_back(o->out);
+    } else {
+      lighting::CubeMap result;
+      if (!cube.empty()) {
+        result = o->size > 0 && o->size != cube.size() ? lighting::resizeCube(cube, o->size) : cube;
+      } else {
+        const int size = o->size > 0 ? o->size : std::max(1, latLong.width() / 4);
+        result = lighting::cubeFromLatLong(latLong, size, printer.callback());
+      }
+      energyOut = result.integral();
+      for (auto& n : cubemap::writeCubeMap(outputs, o->out, result, *to, write)) notes.push_back(n);
+      if (*to == Layout::Faces) {
+        for (const auto& p : cubemap::facePaths(o->out, write.faceNaming)) written.push_back(p);
+      } else {
+        written.push_back(o->out);
+      }
+    }
+    outputs.commit();
+    char energy[160];
+    std::snprintf(energy, sizeof energy,
+                  "radiance integrated over the sphere agrees with the input to %.1e (relative)",
+                  energyDifference(energyIn, energyOut));
+    notes.push_back(energy);
+    if (!globals.quiet) {
+      for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
+    }
+    for (const auto& w : written) std::printf("%s\n", w.c_str());
+    return 0;
+  };
+}
+
+}  // namespace compose::app

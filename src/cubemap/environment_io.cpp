@@ -1,0 +1,499 @@
+#include "cubemap/environment_io.h"
+
+#include <algorithm>
+#include <cctype>
+#include <fstream>
+#include <map>
+
+#include <Imath/half.h>
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfChromaticitiesAttribute.h>
+#include <OpenEXR/ImfEnvmapAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStandardAttributes.h>
+#include <OpenEXR/ImfStringAttribute.h>
+
+#include "core/error.h"
+#include "lighting/sphere_resample.h"
+
+namespace compose::cubemap {
+
+namespace fs = std::filesystem;
+using lighting::kCubeFaces;
+
+namespace {
+
+std::string lowerExtension(const fs::path& p) {
+  std::string e = p.extension().string();
+  for (auto& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+bool isImageFile(const fs::path& p) {
+  static const char* kExtensions[] = {".exr",  ".hdr", ".tif", ".tiff", ".png", ".jpg",
+                                      ".jpeg", ".pfm", ".dng", ".cr2",  ".nef", ".arw"};
+  const std::string e = lowerExtension(p);
+  return std::any_of(std::begin(kExtensions), std::end(kExtensions),
+                     [&](const char* k) { return e == k; });
+}
+
+bool hasExrMagic(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  unsigned char magic[4] = {0, 0, 0, 0};
+  in.read(reinterpret_cast<char*>(magic), 4);
+  return in.gcount() == 4 && magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 &&
+         magic[3] == 0x01;
+}
+
+std::string faceList() {
+  std::string s;
+  for (int f = 0; f < kCubeFaces; ++f) s += std::string(f ? " " : "") + lighting::faceName(f);
+  return s;
+}
+
+// Six face files, recognised by name or taken in OpenEXR's order.
+EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how) {
+  std::array<std::optional<fs::path>, kCubeFaces> byFace;
+  int recognised = 0;
+  for (const fs::path& p : paths) {
+    const auto token = faceFromName(p.stem().string());
+    if (!token) continue;
+    ++recognised;
+    if (byFace[size_t(token->face)]) {
+      throw Error("ingest",
+                  std::string("two files for cube face ") + lighting::faceName(token->face) + ": " +
+                      byFace[size_t(token->face)]->filename().string() + " and " +
+                      p.filename().string(),
+                  p);
+    }
+    byFace[size_t(token->face)] = p;
+  }
+  EnvironmentFile out;
+  out.layout = Layout::Faces;
+  if (recognised == 0) {
+    for (int f = 0; f < kCubeFaces; ++f) byFace[size_t(f)] = paths[size_t(f)];
+    how += "; no face names recognised, taken in OpenEXR's order " + faceList();
+  } else if (recognised < kCubeFaces) {
+    for (int f = 0; f < kCubeFaces; ++f) {
+      if (!byFace[size_t(f)]) {
+        throw Error("ingest",
+                    std::string("missing cube face ") + lighting::faceName(f) +
+                        ": no file named for it (names such as *_px, *_posx, *+X, *_right; "
+                        "front is -Z, back is +Z)",
+                    paths.front().parent_path());
+      }
+    }
+  }
+  out.how = how;
+  std::array<fs::path, kCubeFaces> files;
+  for (int f = 0; f < kCubeFaces; ++f) files[size_t(f)] = *byFace[size_t(f)];
+  for (int f = 0; f < kCubeFaces; ++f) {
+    ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest");
+    if (f == 0) out.info = img.info;
+    checkShape(Layout::Faces, img.image.width, img.image.height, files[size_t(f)]);
+    if (f > 0 && img.image.width != out.faces[0].width) {
+      throw Error("ingest",
+                  std::string("cube faces differ in size: ") + lighting::faceName(f) + " is " +
+                      std::to_string(img.image.width) + "x" + std::to_string(img.image.height) +
+                      ", +X is " + std::to_string(out.faces[0].width) + "x" +
+                      std::to_string(out.faces[0].height),
+                  files[size_t(f)]);
+    }
+    out.faces[size_t(f)] = std::move(img.image);
+    out.files.push_back(files[size_t(f)]);
+  }
+  return out;
+}
+
+// The six siblings of a face set from a folder.
+std::vector<fs::path> facesInFolder(const fs::path& folder) {
+  std::vector<fs::path> candidates;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(folder, ec)) {
+    if (entry.is_regular_file() && isImageFile(entry.path()) &&
+        faceFromName(entry.path().stem().string()))
+      candidates.push_back(entry.path());
+  }
+  if (ec) throw Error("ingest", "cannot list the folder: " + ec.message(), folder);
+  std::sort(candidates.begin(), candidates.end());
+  if (candidates.empty()) {
+    throw Error("ingest",
+                "no cube face files in the folder (expected six images named like env_px.exr ... "
+                "env_nz.exr, posx/negx, +X/-X or right/left/top/bottom/back/front)",
+                folder);
+  }
+  return candidates;
+}
+
+// The six files of a '%' pattern, trying each naming family.
+std::vector<fs::path> facesOfPattern(const fs::path& pattern) {
+  const std::string text = pattern.string();
+  const size_t at = text.find('%');
+  std::string tried;
+  for (int family = 0; family < 6; ++family) {
+    for (const char* like : {"px", "PX"}) {
+      std::vector<fs::path> files;
+      for (int f = 0; f < kCubeFaces; ++f)
+        files.push_back(text.substr(0, at) + faceNameIn(family, f, like) + text.substr(at + 1));
+      std::error_code ec;
+      const bool all = std::all_of(files.begin(), files.end(),
+                                   [&](const fs::path& p) { return fs::is_regular_file(p, ec); });
+      if (all) return files;
+      tried += (tried.empty() ? "" : ", ") + files.front().filename().string();
+    }
+  }
+  throw Error("ingest", "no six face files match the pattern (tried " + tried + ", ...)", pattern);
+}
+
+// The six siblings of one face file.
+std::vector<fs::path> siblingsOf(const fs::path& face, const FaceToken& token) {
+  const std::string stem = face.stem().string();
+  const std::string prefix = stem.substr(0, stem.size() - token.token.size());
+  std::vector<fs::path> files;
+  for (int f = 0; f < kCubeFaces; ++f) {
+    fs::path p = face;
+    p.replace_filename(prefix + faceNameIn(token.family, f, token.token) +
+                       face.extension().string());
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec)) {
+      throw Error("ingest",
+                  std::string("missing cube face ") + lighting::faceName(f) + ": expected " +
+                      p.filename().string() + " beside " + face.filename().string(),
+                  p);
+    }
+    files.push_back(p);
+  }
+  return files;
+}
+
+std::string aspectText(Layout layout) {
+  switch (layout) {
+    case Layout::LatLong:
+      return "aspect 2:1";
+    case Layout::Cube:
+      return "aspect 1:6";
+    case Layout::HorizontalCross:
+      return "aspect 4:3";
+    case Layout::VerticalCross:
+      return "aspect 3:4";
+    default:
+      return "";
+  }
+}
+
+std::string layoutTitle(Layout layout) {
+  switch (layout) {
+    case Layout::LatLong:
+      return "lat-long map";
+    case Layout::Cube:
+      return "cube map in OpenEXR's layout";
+    case Layout::HorizontalCross:
+      return "horizontal cross";
+    case Layout::VerticalCross:
+      return "vertical cross";
+    case Layout::Faces:
+      return "six face files";
+    case Layout::MirrorBall:
+      return "mirror ball";
+  }
+  return "";
+}
+
+float maxValue(const std::vector<float>& v) {
+  float m = 0.0f;
+  for (float x : v) m = std::max(m, x);
+  return m;
+}
+
+bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
+                std::vector<std::string>& notes) {
+  if (lowerExtension(path) != ".exr") return false;
+  if (depth == WriteOptions::Depth::Half) return true;
+  if (depth == WriteOptions::Depth::Float) return false;
+  constexpr float kHalfMax = 65504.0f;
+  if (maximum > kHalfMax) {
+    notes.push_back("values up to " + std::to_string(maximum) + " exceed half float's range: " +
+                    path.filename().string() + " is written as 32-bit float");
+    return false;
+  }
+  return true;
+}
+
+void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
+              bool useHalf, std::optional<Layout> envmap, const WriteOptions& options) {
+  if (lowerExtension(destination) == ".exr") {
+    writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);
+  } else {
+    ingest::writeImage(temporary, rgb, {});
+  }
+}
+
+}  // namespace
+
+std::string EnvironmentFile::describe() const {
+  if (layout == Layout::LatLong || layout == Layout::MirrorBall)
+    return layoutTitle(layout) + " " + std::to_string(image.width) + "x" +
+           std::to_string(image.height);
+  return layoutTitle(layout) + ", faces " + std::to_string(faces[0].width) + "x" +
+         std::to_string(faces[0].height);
+}
+
+std::optional<Layout> exrEnvmapLayout(const fs::path& file) {
+  if (!hasExrMagic(file)) return std::nullopt;
+  try {
+    Imf::InputFile in(file.c_str());
+    if (!Imf::hasEnvmap(in.header())) return std::nullopt;
+    return Imf::envmap(in.header()) == Imf::ENVMAP_CUBE ? Layout::Cube : Layout::LatLong;
+  } catch (const std::exception&) {
+    return std::nullopt;  // unreadable: the image reader reports it properly
+  }
+}
+
+EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
+                                    const ReadOptions& options) {
+  if (inputs.size() == 6) {
+    if (options.layout && *options.layout != Layout::Faces) {
+      throw Error("ingest", std::string("six inputs are six cube faces, not a ") +
+                                layoutName(*options.layout) + " layout");
+    }
+    return readSixFaces(inputs, "six face files");
+  }
+  if (inputs.size() != 1) {
+    throw Error("ingest",
+                "expected one environment (an image, a folder of six faces or a name "
+                "pattern with %) or six face files, got " +
+                    std::to_string(inputs.size()) + " inputs");
+  }
+  const fs::path& path = inputs.front();
+  std::error_code ec;
+  if (path.string().find('%') != std::string::npos && !fs::exists(path, ec))
+    return readSixFaces(facesOfPattern(path), "six face files from the pattern");
+  if (fs::is_directory(path, ec)) {
+    const auto files = facesInFolder(path);
+    if (files.size() != 6) {
+      // Let readSixFaces name the duplicate; with fewer than six, name the missing face.
+      if (files.size() < 6) {
+        std::array<bool, kCubeFaces> seen{};
+        for (const auto& f : files) seen[size_t(faceFromName(f.stem().string())->face)] = true;
+        for (int f = 0; f < kCubeFaces; ++f) {
+          if (!seen[size_t(f)]) {
+            throw Error("ingest",
+                        std::string("missing cube face ") + lighting::faceName(f) +
+                            ": the folder has face files for only " + std::to_string(files.size()) +
+                            " faces",
+                        path);
+          }
+        }
+      }
+    }
+    return readSixFaces(files, "six face files in the folder");
+  }
+  if (!fs::exists(path, ec)) throw Error("ingest", "file not found", path);
+
+  const auto token = faceFromName(path.stem().string());
+  if (options.layout == Layout::Faces) {
+    if (!token) {
+      throw Error("ingest",
+                  "--layout faces needs six face files, a folder, a % pattern or a file named "
+                  "for its face (env_px.exr ...)",
+                  path);
+    }
+    return readSixFaces(siblingsOf(path, *token),
+                        "six face files beside " + path.filename().string());
+  }
+
+  EnvironmentFile out;
+  ingest::LoadedImage img = ingest::readImage(path, "ingest");
+  const int w = img.image.width, h = img.image.height;
+  const std::optional<Layout> declared = exrEnvmapLayout(path);
+  if (options.layout) {
+    out.layout = *options.layout;
+    out.how = std::string("--layout ") + layoutName(out.layout);
+    if (declared && *declared != out.layout)
+      out.how += std::string(" (the file's envmap attribute says ") + layoutName(*declared) + ")";
+  } else if (declared) {
+    out.layout = *declared;
+    out.how = std::string("OpenEXR envmap attribute: ") + layoutName(out.layout);
+  } else if (const auto byAspect = layoutFromAspect(w, h)) {
+    out.layout = *byAspect;
+    out.how = aspectText(out.layout);
+  } else if (w == h && token) {
+    return readSixFaces(siblingsOf(path, *token),
+                        "six face files beside " + path.filename().string());
+  } else if (w == h) {
+    throw Error("ingest",
+                "a square image could be a mirror ball or a single cube face: say which with "
+                "--layout (mirrorball, faces)",
+                path);
+  } else {
+    throw Error("ingest",
+                "cannot tell the environment's layout from a " + std::to_string(w) + "x" +
+                    std::to_string(h) +
+                    " image: expected 2:1 (lat-long), 1:6 (OpenEXR cube), 4:3 (horizontal "
+                    "cross) or 3:4 (vertical cross), or give --layout",
+                path);
+  }
+  checkShape(out.layout, w, h, path);
+  out.files.push_back(path);
+  out.info = img.info;
+  if (out.layout == Layout::LatLong || out.layout == Layout::MirrorBall) {
+    out.image = std::move(img.image);
+  } else {
+    out.faces = unpackFaces(img.image, out.layout);
+  }
+  return out;
+}
+
+lighting::CubeMap cubeMapOf(const EnvironmentFile& file, lighting::SanitizeReport* report) {
+  COMPOSE_CHECK(file.isCube());
+  std::array<const Image*, kCubeFaces> faces;
+  for (int f = 0; f < kCubeFaces; ++f) faces[size_t(f)] = &file.faces[size_t(f)];
+  std::array<fs::path, kCubeFaces> names;
+  for (int f = 0; f < kCubeFaces; ++f)
+    names[size_t(f)] = file.files.size() == 6 ? file.files[size_t(f)] : file.files.front();
+  return lighting::CubeMap::fromFaces(faces, file.files.front(), report, &names);
+}
+
+LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& options,
+                                  const Progress& progress) {
+  EnvironmentFile file = readEnvironmentFile({path}, options);
+  LoadedEnvironment out;
+  out.info = file.info;
+  out.file = file.files.front();
+  if (file.layout == Layout::MirrorBall) {
+    throw Error("ingest",
+                "a mirror ball needs unwrapping first: compose convert BALL --from mirrorball "
+                "--to latlong --out ENV.exr",
+                path);
+  }
+  if (file.layout == Layout::LatLong) {
+    out.image = std::move(file.image);
+    if (file.how != "aspect 2:1") out.notes.push_back("environment layout: " + file.how);
+    return out;
+  }
+  lighting::SanitizeReport sanitized;
+  lighting::CubeMap cube = cubeMapOf(file, &sanitized);
+  if (sanitized.negativeTexels > 0) {
+    out.notes.push_back(std::to_string(sanitized.negativeTexels) +
+                        " cube texels had negative values (as low as " +
+                        std::to_string(sanitized.mostNegative) + "): clamped to 0");
+  }
+  const lighting::Environment env = lighting::latLongFromCube(cube, 4 * cube.size(), progress);
+  out.image = Image(env.width(), env.height(), 3, {"R", "G", "B"});
+  out.image.colorSpace = file.info.fileColorSpace;
+  out.image.pixels = env.texels();
+  out.notes.push_back("environment: " + file.describe() + " (" + file.how +
+                      "), resampled exactly to a " + std::to_string(env.width()) + "x" +
+                      std::to_string(env.height()) + " lat-long map");
+  return out;
+}
+
+void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optional<Layout> envmap,
+              const std::optional<std::array<double, 8>>& chromaticities) {
+  COMPOSE_CHECK(rgb.channels == 3 && rgb.width > 0 && rgb.height > 0);
+  try {
+    Imf::Header header(rgb.width, rgb.height);
+    header.compression() = Imf::ZIP_COMPRESSION;
+    const Imf::PixelType type = useHalf ? Imf::HALF : Imf::FLOAT;
+    for (const char* name : {"R", "G", "B"}) header.channels().insert(name, Imf::Channel(type));
+    if (envmap) {
+      COMPOSE_CHECK(*envmap == Layout::LatLong || *envmap == Layout::Cube);
+      Imf::addEnvmap(header, *envmap == Layout::Cube ? Imf::ENVMAP_CUBE : Imf::ENVMAP_LATLONG);
+    }
+    header.insert("software", Imf::StringAttribute("compose"));
+    if (!rgb.colorSpace.empty()) header.insert("colorSpace", Imf::StringAttribute(rgb.colorSpace));
+    if (chromaticities) {
+      const auto& c = *chromaticities;
+      auto xy = [&](int i) {
+        return IMATH_NAMESPACE::V2f(float(c[size_t(2 * i)]), float(c[size_t(2 * i + 1)]));
+      };
+      Imf::addChromaticities(header, Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3)));
+    }
+    Imf::OutputFile out(path.c_str(), header);
+    Imf::FrameBuffer frame;
+    std::vector<Imath::half> halves;
+    const size_t w = size_t(rgb.width);
+    if (useHalf) {
+      halves.resize(rgb.pixels.size());
+      for (size_t i = 0; i < halves.size(); ++i) halves[i] = Imath::half(rgb.pixels[i]);
+      for (int c = 0; c < 3; ++c) {
+        frame.insert(c == 0   ? "R"
+                     : c == 1 ? "G"
+                              : "B",
+                     Imf::Slice(Imf::HALF, reinterpret_cast<char*>(halves.data() + c),
+                                3 * sizeof(Imath::half), 3 * sizeof(Imath::half) * w));
+      }
+    } else {
+      for (int c = 0; c < 3; ++c) {
+        frame.insert(c == 0   ? "R"
+                     : c == 1 ? "G"
+                              : "B",
+                     Imf::Slice(Imf::FLOAT,
+                                reinterpret_cast<char*>(const_cast<float*>(rgb.pixels.data() + c)),
+                                3 * sizeof(float), 3 * sizeof(float) * w));
+      }
+    }
+    out.setFrameBuffer(frame);
+    out.writePixels(rgb.height);
+  } catch (const std::exception& e) {
+    throw Error("output", std::string("cannot write the EXR: ") + e.what(), path);
+  }
+}
+
+std::vector<std::string> writeLatLong(OutputFiles& outputs, const fs::path& path,
+                                      const lighting::Environment& env,
+                                      const WriteOptions& options) {
+  std::vector<std::string> notes;
+  Image img(env.width(), env.height(), 3, {"R", "G", "B"});
+  img.colorSpace = env.colorSpace();
+  img.pixels = env.texels();
+  const bool half = chooseHalf(options.depth, maxValue(img.pixels), path, notes);
+  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options);
+  return notes;
+}
+
+std::array<fs::path, kCubeFaces> facePaths(const fs::path& path, int faceNaming) {
+  std::array<fs::path, kCubeFaces> out;
+  const std::string text = path.string();
+  const size_t at = text.find('%');
+  for (int f = 0; f < kCubeFaces; ++f) {
+    const std::string token = faceNameIn(faceNaming, f, "px");
+    if (at != std::string::npos) {
+      out[size_t(f)] = text.substr(0, at) + token + text.substr(at + 1);
+    } else {
+      fs::path p = path;
+      p.replace_filename(path.stem().string() + "_" + token + path.extension().string());
+      out[size_t(f)] = p;
+    }
+  }
+  return out;
+}
+
+std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path,
+                                      const lighting::CubeMap& cube, Layout layout,
+                                      const WriteOptions& options) {
+  std::vector<std::string> notes;
+  float maximum = 0.0f;
+  for (int f = 0; f < kCubeFaces; ++f) maximum = std::max(maximum, maxValue(cube.face(f)));
+  if (layout == Layout::Faces) {
+    const auto paths = facePaths(path, options.faceNaming);
+    const bool half = chooseHalf(options.depth, maximum, paths[0], notes);
+    for (int f = 0; f < kCubeFaces; ++f) {
+      writeAny(outputs.add(paths[size_t(f)]), paths[size_t(f)], cube.faceImage(f), half,
+               std::nullopt, options);
+    }
+    return notes;
+  }
+  COMPOSE_CHECK(layout == Layout::Cube || layout == Layout::HorizontalCross ||
+                layout == Layout::VerticalCross);
+  const bool half = chooseHalf(options.depth, maximum, path, notes);
+  const Image packed = packFaces(cube, layout);
+  writeAny(outputs.add(path), path, packed, half,
+           layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt, options);
+  return notes;
+}
+
+}  // namespace compose::cubemap

@@ -1,0 +1,113 @@
+// Reading and writing environment maps in every layout of layouts.h.
+//
+// Reading. One input names an image file, a folder holding six face files, one face file (its
+// five siblings are found by name: env_px.exr → env_nx.exr, ...), or a name pattern in which '%'
+// stands for the face (env_%.exr, or exrenvmap's env%.exr → env+X.exr ...). Six inputs are six
+// face files: recognised by name, or else taken in OpenEXR's order +X -X +Y -Y +Z -Z (and the
+// caller is told). A single image's layout comes from, in order: the caller's explicit layout;
+// the OpenEXR `envmap` header attribute (latlong or cube); the aspect ratio where it is
+// unambiguous (layouts.h). Every decision is reported in `EnvironmentFile::how`.
+//
+// Writing. Lat-long maps and OpenEXR cube strips go to EXR through OpenEXR itself, so that the
+// `envmap` attribute is set (latlong or cube) and other OpenEXR tools (exrenvmap, Nuke) recognise
+// them; crosses and face files go to any format OpenImageIO writes (EXR, HDR, TIFF, PNG...).
+// Outputs are registered with an OutputFiles, so a command's files appear together or not at all.
+//
+// Errors (missing or duplicate faces, faces of different sizes, non-square faces, a layout that
+// does not fit the image, an undecidable layout) throw compose::Error with stage "ingest" and the
+// file; write errors use stage "output".
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/output_files.h"
+#include "core/progress.h"
+#include "cubemap/layouts.h"
+#include "ingest/image_io.h"
+#include "lighting/cubemap.h"
+#include "lighting/environment.h"
+
+namespace compose::cubemap {
+
+struct ReadOptions {
+  std::optional<Layout> layout;  // forced layout (--layout); nullopt: detect
+};
+
+struct EnvironmentFile {
+  Layout layout = Layout::LatLong;
+  std::string how;  // how the layout was decided, for the user ("aspect 4:3", "envmap attribute")
+  std::vector<std::filesystem::path> files;  // as read; for six face files, in face order
+  Image image;  // LatLong and MirrorBall: the image as read (channels as stored)
+  std::array<Image, lighting::kCubeFaces> faces;  // cube layouts: the faces as read
+  ingest::CaptureInfo info;                       // of the first file
+
+  bool isCube() const { return layout != Layout::LatLong && layout != Layout::MirrorBall; }
+  // "vertical cross, faces 256²" / "lat-long 1024x512".
+  std::string describe() const;
+};
+
+EnvironmentFile readEnvironmentFile(const std::vector<std::filesystem::path>& inputs,
+                                    const ReadOptions& options = {});
+
+// The layout an EXR's `envmap` attribute declares; nullopt for other files or no attribute.
+std::optional<Layout> exrEnvmapLayout(const std::filesystem::path& file);
+
+// The file's cube map: faces validated and sanitised (lighting::CubeMap::fromFaces).
+lighting::CubeMap cubeMapOf(const EnvironmentFile& file,
+                            lighting::SanitizeReport* report = nullptr);
+
+// What the one-shot pipeline needs from --env: the environment as a lat-long RGB(A) image with
+// values as stored (colour conversion is the caller's), its capture metadata, the file whose name
+// the colour rules should look at, and notes for the user. Cube layouts are resampled exactly
+// (lighting/sphere_resample.h) to a lat-long map of width 4N; mirror balls are refused (convert
+// them first: compose convert --from mirrorball).
+struct LoadedEnvironment {
+  Image image;
+  ingest::CaptureInfo info;
+  std::filesystem::path file;
+  std::vector<std::string> notes;
+};
+LoadedEnvironment loadEnvironment(const std::filesystem::path& path,
+                                  const ReadOptions& options = {}, const Progress& progress = {});
+
+struct WriteOptions {
+  enum class Depth {
+    Auto,
+    Half,
+    Float
+  } depth = Depth::Auto;  // Auto: half unless a value
+                          // exceeds half's range (65504)
+  int faceNaming = 0;     // layouts.h parseFaceNaming; for Layout::Faces
+  // OpenEXR only: the chromaticities of the RGB channels (red, green, blue, white xy), written
+  // with the colour-space name (the image's, as the string attribute `colorSpace`), as
+  // ingest::writeImage does.
+  std::optional<std::array<double, 8>> chromaticities;
+};
+
+// Writes a lat-long environment to `path` (EXR gets envmap=latlong). Returns a note when the depth
+// was chosen for the user (Auto went to float).
+std::vector<std::string> writeLatLong(OutputFiles& outputs, const std::filesystem::path& path,
+                                      const lighting::Environment& environment,
+                                      const WriteOptions& options = {});
+// Writes a cube map in `layout` (Cube: one EXR, envmap=cube; crosses: one image; Faces: six files
+// named from `path`, whose '%' is replaced by the face names, or whose stem gets "_<face>").
+// Returns notes (depth decisions, the face files' names).
+std::vector<std::string> writeCubeMap(OutputFiles& outputs, const std::filesystem::path& path,
+                                      const lighting::CubeMap& cube, Layout layout,
+                                      const WriteOptions& options = {});
+// The six paths writeCubeMap(.., Layout::Faces) writes for `path`.
+std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::filesystem::path& path,
+                                                                  int faceNaming);
+
+// Writes RGB float data as an EXR through OpenEXR (ZIP, scanlines), with an optional envmap
+// attribute, the image's colour-space name and optional chromaticities. Used by the writers above;
+// exposed for tests and other stages.
+void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
+              std::optional<Layout> envmap,
+              const std::optional<std::array<double, 8>>& chromaticities = std::nullopt);
+
+}  // namespace compose::cubemap
