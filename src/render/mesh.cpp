@@ -35,6 +35,31 @@ glm::vec3 Mesh::boundsMax() const {
   return hi;
 }
 
+glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
+  const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
+  const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
+  if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
+  const uint32_t* c = &indices[3 * size_t(triangle)];
+  const glm::vec2 uv =
+      (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
+  const Image& img = textures[size_t(mat.texture)].image;
+  // Texel centres at (i + 0.5) / width; v = 0 is the bottom row (OBJ and glTF flip differently:
+  // loaders store v so that this holds).
+  const float x = uv.x * float(img.width) - 0.5f, y = (1.0f - uv.y) * float(img.height) - 0.5f;
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float ax = x - fx, ay = y - fy;
+  auto texel = [&](int ix, int iy) {
+    ix = ((ix % img.width) + img.width) % img.width;
+    iy = ((iy % img.height) + img.height) % img.height;
+    const float* p = img.at(ix, iy);
+    return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
+  };
+  const int x0 = int(fx), y0 = int(fy);
+  const glm::vec3 t = (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
+                      (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
+  return mat.baseColor * t;
+}
+
 void computeVertexNormals(Mesh& mesh) {
   // Angle-weighted face normals (Thürmer & Wüthrich 1998): unlike area weighting, the result does
   // not depend on how polygons were split into triangles.

@@ -116,7 +116,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   const int n = settings.samplesPerAxis;
   const float invSamples = 1.0f / float(n * n);
   const float invPi = float(1.0 / std::numbers::pi);
-  const glm::vec3 reflect = settings.albedo * settings.exposure * invPi;
+  const bool materials = mesh.hasMaterials() && !settings.overrideMaterials;
+  const float reflect = settings.exposure * invPi;
   std::atomic<int> rowsDone{0};
   std::atomic<int64_t> hitsTotal{0};
 
@@ -124,7 +125,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     const int y = int(yy);
     int64_t rowHits = 0;
     for (int x = out.x0; x < out.x1; ++x) {
-      glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f);
+      glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
+          albedoSum(0.0f);
       glm::dvec3 positionSum(0.0);
       double depthSum = 0.0;
       float aoSum = 0.0f;
@@ -179,7 +181,10 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             shadowedE[c] = e[c] * ratio;
           }
         }
-        colour += reflect * shadowedE;
+        const glm::vec3 albedo =
+            materials ? mesh.albedoAt(hit.triangle, u, v) : settings.albedo;
+        colour += reflect * albedo * shadowedE;
+        albedoSum += albedo;
         irradianceSum += e;
         shadowedSum += shadowedE;
         if (settings.occlusion) {
@@ -211,7 +216,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       }
       for (int c = 0; c < 3; ++c) {
         a[kP + c] = float(positionSum[c] / hits);
-        a[kAlbedo + c] = settings.albedo[c];
+        a[kAlbedo + c] = albedoSum[c] * inv;
         a[kIrradiance + c] = irradianceSum[c] * inv * settings.exposure;
         a[kShadowed + c] = shadowedSum[c] * inv * settings.exposure;
       }

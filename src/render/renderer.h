@@ -44,6 +44,8 @@ struct RenderSettings {
   int samplesPerAxis = 4;  // n x n samples per pixel
   bool jitter = true;      // jittered within each stratum; false: the strata's centres
   glm::vec3 albedo{0.5f};  // in the working space
+  // Use `albedo` even where the mesh has materials (the pipeline sets it for --albedo).
+  bool overrideMaterials = false;
   float exposure = 1.0f;   // linear multiplier on the object's radiance
   glm::mat3 envFromWorld{1.0f};
   // Self-shadowing (transfer.h): the surface points, their irradiance with and without it, and

@@ -12,7 +12,7 @@
 // relative error over an even spread of fully covered pixels.
 //
 // Methods: no shadows; ambient occlusion x irradiance; SH transfer (Sloan et al. 2002) with 9,
-// 16, 25 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both transfers with
+// 16, 25, 49 and 81 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both transfers with
 // and without the 64 brightest sources split off and shadowed by rays; and Monte Carlo with
 // visibility rays per pixel at several sample counts.
 //
@@ -146,11 +146,11 @@ int main(int argc, char** argv) {
     const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
     const float size = std::max({extent.x, extent.y, extent.z});
     // The visibility pass once, at the largest order measured (lower orders are its top-left
-    // moments) and with SH up to band 4.
+    // moments) and with SH up to band 8.
     render::TransferParams tp;
     tp.grid = 16;
     tp.order = 16;
-    tp.shBands = 4;
+    tp.shBands = 8;
     tp.boundaryRays = boundary;
     const auto t0 = Clock::now();
     const render::SurfacePoints points = render::surfacePoints(mesh, pointFraction);
@@ -319,7 +319,7 @@ int main(int argc, char** argv) {
           run("ao", 1, lighting::createLighting("cheb-local"),
               render::ShadowMethod::AmbientOcclusion, 1);
         }
-        for (int bands : {2, 3, 4})
+        for (int bands : {2, 3, 4, 6, 8})
           run("sh", bands, std::make_unique<lighting::ShLighting>(bands),
               render::ShadowMethod::Harmonics, lighting::shCount(bands));
         for (int k : {1, 2, 3, 4, 5, 6, 8, 10, 12, 16}) {
