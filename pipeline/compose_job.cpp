@@ -19,6 +19,7 @@
 #include "lighting/lighting.h"
 #include "lighting/lighting_cache.h"
 #include "lighting/order_selector.h"
+#include "pipeline/materials.h"
 #include "pipeline/shadows.h"
 #include "render/embree_scene.h"
 #include "render/mesh.h"
@@ -238,10 +239,12 @@ void validate(const ComposeJob& job) {
   }
   if (!std::isfinite(job.environmentYawDegrees))
     throw UsageError("--env-yaw must be a finite number of degrees");
-  for (int c = 0; c < 3; ++c) {
-    if (!(job.albedo[c] >= 0.0f && job.albedo[c] <= 1.0f))
+  for (int c = 0; job.albedo && c < 3; ++c) {
+    if (!((*job.albedo)[c] >= 0.0f && (*job.albedo)[c] <= 1.0f))
       throw UsageError("--albedo must be within [0, 1]");
   }
+  if (!(job.creaseDegrees >= 0.0 && job.creaseDegrees <= 180.0))
+    throw UsageError("--crease must be an angle within [0, 180] degrees");
   if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
     throw UsageError("--exposure must be a number of stops within ±64");
   }
@@ -362,13 +365,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     plate = ingest::readImage(job.plate, "ingest");
     env = cubemap::loadEnvironment(envPath, {}, progress);  // any layout, as a lat-long map
     for (const std::string& n : env.notes) result.notes.push_back(n);
-    mesh = render::loadMesh(job.object);
+    mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
     report(progress, "ingest", 1.0);
   }
   result.width = plate.image.width;
   result.height = plate.image.height;
-  if (!mesh.normalsFromFile)
-    result.notes.push_back("the object has no normals in its file: computed smooth vertex normals");
+  if (!mesh.normalsFromFile) result.notes.push_back("object normals: " + mesh.normalsSource);
   for (const std::string& w : mesh.warnings) result.notes.push_back("object: " + w);
   if (!isHdrFormat(env.info.format)) {
     result.notes.push_back(
@@ -388,6 +390,12 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
         toWorkingSpace(envLinear, env.file, env.info, job.environmentSpace, "--env-space", colors);
     result.notes.push_back("plate read as " + plateRead + ", environment as " + envRead +
                            ", working space '" + working + "' (config: " + colors.source() + ")");
+    if (job.albedo && mesh.hasMaterials()) {
+      result.notes.push_back("--albedo given: the object's " +
+                             std::to_string(mesh.materials.size()) + " materials are not used");
+    } else if (const std::string read = materialsToWorkingSpace(mesh, colors); !read.empty()) {
+      result.notes.push_back(read);
+    }
   }
 
   // precompute
@@ -515,7 +523,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     StageTimer t(stage(result.stages, "render"));
     render::RenderSettings settings;
     settings.samplesPerAxis = job.samplesPerAxis;
-    settings.albedo = job.albedo;
+    settings.albedo = job.albedo.value_or(glm::vec3(render::kDefaultAlbedo));
+    settings.overrideMaterials = job.albedo.has_value();
     settings.envFromWorld = envFromWorld;
     if (shadowed) {
       settings.points = &shadows.points;

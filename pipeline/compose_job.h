@@ -68,7 +68,11 @@ struct ComposeJob {
 
   calib::CameraOptions camera;
   calib::Placement placement;
-  glm::vec3 albedo{0.5f};  // in the working space (clay grey)
+  // Diffuse albedo in the working space for the whole object, overriding the mesh's materials;
+  // empty: the materials, and render::kDefaultAlbedo (clay grey) where the mesh has none.
+  std::optional<glm::vec3> albedo;
+  // Crease angle (degrees, 0..180) for the normals computed where the mesh file has none.
+  double creaseDegrees = 60.0;
   // Exposure of the object in stops; empty = auto (the environment's radiance in the camera's
   // field of view is scaled to match the plate's mean linear value).
   std::optional<double> exposureStops;

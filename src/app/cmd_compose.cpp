@@ -24,7 +24,13 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   auto o = std::make_shared<ComposeOptions>();
   pipeline::ComposeJob& job = o->job;
   app.add_option("--plate", job.plate, "Background photograph (JPEG, PNG, TIFF, EXR, ...)");
-  app.add_option("--object", job.object, "Mesh to insert (Wavefront OBJ)");
+  app.add_option("--object", job.object,
+                 "Mesh to insert: glTF 2.0 (.gltf, .glb), Wavefront OBJ (with its .mtl "
+                 "materials) or Geomview bicubic patches (.bez)");
+  app.add_option("--crease", job.creaseDegrees,
+                 "Crease angle in degrees for normals computed where the mesh has none: edges "
+                 "sharper than this stay sharp (0 flat, 180 fully smooth)")
+      ->capture_default_str();
   app.add_option(
       "--env", job.environment,
       "HDR environment: a lat-long map, an OpenEXR cube map, a cross, or six face files (a folder, "
@@ -63,7 +69,8 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   app.add_option("--pitch", job.camera.pitchDegrees, "Camera tilt down, degrees")
       ->capture_default_str();
   app.add_option("--albedo", o->albedo,
-                 "Object albedo, one value or R,G,B in the working space [default: 0.5]");
+                 "Object albedo, one value or R,G,B in the working space, instead of the "
+                 "mesh's materials [default: the materials, else 0.5]");
   app.add_option("--exposure", o->exposure,
                  "Exposure of the object in stops, or 'auto': match the environment to the plate")
       ->capture_default_str();

@@ -10,6 +10,7 @@
 #include <limits>
 #include <system_error>
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
@@ -240,6 +241,37 @@ OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int
 
 }  // namespace
 
+namespace {
+
+// Everything readImage() does once the file is open; `path` names the file in errors.
+LoadedImage readOpened(OIIO::ImageInput& input, const fs::path& path, const std::string& stage,
+                       const ReadOptions& options) {
+  LoadedImage out;
+  CaptureInfo& info = out.info;
+  info.format = input.format_name();
+  const OIIO::ImageSpec spec = input.spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+    throw Error(stage, "image has no pixels", path);
+  }
+  fillCaptureInfo(spec, info);
+
+  Image& img = out.image;
+  OIIO::ImageSpec upright;
+  if (options.codesForEightBit && spec.format == OIIO::TypeDesc::UINT8) {
+    upright = decode(input, spec, info.orientation, OIIO::TypeDesc::UINT8, out.codes, path, stage);
+  } else {
+    upright = decode(input, spec, info.orientation, OIIO::TypeDesc::FLOAT, img.pixels, path, stage);
+  }
+  img.width = upright.width;
+  img.height = upright.height;
+  img.channels = upright.nchannels;
+  for (int c = 0; c < spec.nchannels; ++c) img.channelNames.push_back(spec.channel_name(c));
+  img.colorSpace = info.fileColorSpace;
+  return out;
+}
+
+}  // namespace
+
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
@@ -251,29 +283,20 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
     if (why.empty()) why = "unknown reason";
     throw Error(stage, "cannot read image: " + why, path);
   }
-  LoadedImage out;
-  CaptureInfo& info = out.info;
-  info.format = input->format_name();
-  const OIIO::ImageSpec spec = input->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
-    throw Error(stage, "image has no pixels", path);
-  }
-  fillCaptureInfo(spec, info);
+  return readOpened(*input, path, stage, options);
+}
 
-  Image& img = out.image;
-  OIIO::ImageSpec upright;
-  if (options.codesForEightBit && spec.format == OIIO::TypeDesc::UINT8) {
-    upright = decode(*input, spec, info.orientation, OIIO::TypeDesc::UINT8, out.codes, path, stage);
-  } else {
-    upright =
-        decode(*input, spec, info.orientation, OIIO::TypeDesc::FLOAT, img.pixels, path, stage);
+LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::path& name,
+                                const std::string& stage, const ReadOptions& options) {
+  if (bytes.empty()) throw Error(stage, "image data is empty", name);
+  OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
+  auto input = OIIO::ImageInput::open(name.string(), nullptr, &proxy);
+  if (!input) {
+    std::string why = OIIO::geterror();
+    if (why.empty()) why = "unknown reason";
+    throw Error(stage, "cannot read image: " + why, name);
   }
-  img.width = upright.width;
-  img.height = upright.height;
-  img.channels = upright.nchannels;
-  for (int c = 0; c < spec.nchannels; ++c) img.channelNames.push_back(spec.channel_name(c));
-  img.colorSpace = info.fileColorSpace;
-  return out;
+  return readOpened(*input, name, stage, options);
 }
 
 std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {

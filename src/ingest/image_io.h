@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <variant>
@@ -106,6 +107,14 @@ struct ReadOptions {
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.
 LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
                       const ReadOptions& options = {});
+
+// Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
+// stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).
+// Otherwise as readImage(); `bytes` need only live for the call.
+LoadedImage readImageFromMemory(std::span<const unsigned char> bytes,
+                                const std::filesystem::path& name,
+                                const std::string& stage = "ingest",
+                                const ReadOptions& options = {});
 
 // A metadata attribute written into the file header: standard names ("ExposureTime", "FNumber",
 // "Exif:PhotographicSensitivity", "Make", ...) land in the EXIF block of JPEG and TIFF files;

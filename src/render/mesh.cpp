@@ -3,21 +3,20 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
-#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
-#include <string_view>
+#include <numbers>
 #include <unordered_map>
 #include <unordered_set>
 
-#include <tiny_obj_loader.h>
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
 #include "core/output_files.h"
+#include "render/mesh_formats.h"
 
 namespace compose::render {
 
@@ -35,23 +34,59 @@ glm::vec3 Mesh::boundsMax() const {
   return hi;
 }
 
+namespace {
+
+// A texture coordinate brought into one period of its wrap mode (so that texel indices stay
+// small), then a texel index wrapped into [0, n).
+float reduce(float t, Texture::Wrap wrap) {
+  switch (wrap) {
+    case Texture::Wrap::Repeat:
+      return t - std::floor(t);
+    case Texture::Wrap::Mirror:
+      return t - 2.0f * std::floor(0.5f * t);
+    case Texture::Wrap::Clamp:
+      break;
+  }
+  return std::clamp(t, -1.0f, 2.0f);
+}
+
+int wrapIndex(int i, int n, Texture::Wrap wrap) {
+  switch (wrap) {
+    case Texture::Wrap::Repeat:
+      return ((i % n) + n) % n;
+    case Texture::Wrap::Mirror: {
+      const int m = ((i % (2 * n)) + 2 * n) % (2 * n);
+      return m < n ? m : 2 * n - 1 - m;
+    }
+    case Texture::Wrap::Clamp:
+      break;
+  }
+  return std::clamp(i, 0, n - 1);
+}
+
+}  // namespace
+
 glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
   const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
   const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
   if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
+  const Texture& tex = textures[size_t(mat.texture)];
+  const Image& img = tex.image;
+  if (img.empty()) return mat.baseColor;
   const uint32_t* c = &indices[3 * size_t(triangle)];
-  const glm::vec2 uv =
+  const glm::vec2 interpolated =
       (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
-  const Image& img = textures[size_t(mat.texture)].image;
+  const glm::vec3 uv = mat.uvTransform * glm::vec3(interpolated, 1.0f);
+  if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) return mat.baseColor;
   // Texel centres at (i + 0.5) / width; v = 0 is the bottom row (OBJ and glTF flip differently:
   // loaders store v so that this holds).
-  const float x = uv.x * float(img.width) - 0.5f, y = (1.0f - uv.y) * float(img.height) - 0.5f;
+  const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
+  const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
   const float ax = x - fx, ay = y - fy;
   auto texel = [&](int ix, int iy) {
-    ix = ((ix % img.width) + img.width) % img.width;
-    iy = ((iy % img.height) + img.height) % img.height;
-    const float* p = img.at(ix, iy);
+    const float* p =
+        img.at(wrapIndex(ix, img.width, tex.wrapU), wrapIndex(iy, img.height, tex.wrapV));
     return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
   };
   const int x0 = int(fx), y0 = int(fy);
@@ -60,215 +95,306 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
   return mat.baseColor * t;
 }
 
-void computeVertexNormals(Mesh& mesh) {
-  // Angle-weighted face normals (Thürmer & Wüthrich 1998): unlike area weighting, the result does
-  // not depend on how polygons were split into triangles.
-  mesh.normals.assign(mesh.positions.size(), glm::vec3(0.0f));
-  for (size_t t = 0; t < mesh.indices.size(); t += 3) {
-    const uint32_t v[3] = {mesh.indices[t], mesh.indices[t + 1], mesh.indices[t + 2]};
-    const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
-    const glm::vec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
-    const float len = glm::length(n);
-    if (!(len > 0.0f)) continue;  // degenerate triangle
-    for (int k = 0; k < 3; ++k) {
-      const glm::vec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
-      const float la = glm::length(a), lb = glm::length(b);
-      if (!(la > 0.0f && lb > 0.0f)) continue;
-      const float angle = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0f, 1.0f));
-      mesh.normals[v[k]] += n * (angle / len);
+namespace detail {
+
+std::string count(size_t n, const std::string& singular, const std::string& plural) {
+  return std::to_string(n) + " " + (n == 1 ? singular : plural);
+}
+
+Image textureImage(Image decoded, const std::string& fallbackSpace) {
+  Image out(decoded.width, decoded.height, 3, {"R", "G", "B"});
+  out.colorSpace = decoded.colorSpace.empty() ? fallbackSpace : decoded.colorSpace;
+  const int channels = decoded.channels;
+  for (size_t i = 0; i < out.pixelCount(); ++i) {
+    const float* s = decoded.pixels.data() + i * size_t(channels);
+    float* d = out.pixels.data() + i * 3;
+    if (channels < 3) {
+      d[0] = d[1] = d[2] = s[0];  // grey, or grey and alpha
+    } else {
+      d[0] = s[0];
+      d[1] = s[1];
+      d[2] = s[2];
     }
   }
-  for (auto& n : mesh.normals) {
-    const float len = glm::length(n);
-    n = len > 0.0f ? n / len : glm::vec3(0.0f, 1.0f, 0.0f);
-  }
-  mesh.normalsFromFile = false;
+  return out;
 }
+
+}  // namespace detail
 
 namespace {
 
-// tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so. This pass
-// over the text finds them first and names the line: every field of v, vn and vt must be a
-// finite number, and every corner of f an integer reference.
-void checkObjNumbers(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
-  std::string line;
-  size_t lineNo = 0;
-  auto fail = [&](const std::string& what) {
-    throw Error("mesh", "line " + std::to_string(lineNo) + ": " + what, path);
+// Positions welded by value (-0 and +0 alike): an id per vertex, equal for equal positions.
+std::vector<uint32_t> weldPositions(const std::vector<glm::vec3>& positions) {
+  struct KeyHash {
+    size_t operator()(const std::array<uint32_t, 3>& k) const {
+      return (size_t(k[0]) * 0x9E3779B97F4A7C15ull) ^ (size_t(k[1]) * 0xC2B2AE3D27D4EB4Full) ^
+             size_t(k[2]);
+    }
   };
-  std::vector<std::string_view> fields;
-  while (std::getline(in, line)) {
-    ++lineNo;
-    fields.clear();
-    for (size_t i = 0; i < line.size();) {
-      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
-      size_t j = i;
-      while (j < line.size() && !std::isspace(static_cast<unsigned char>(line[j]))) ++j;
-      if (j > i) fields.emplace_back(line.data() + i, j - i);
-      i = j;
-    }
-    if (fields.empty() || fields[0].front() == '#') continue;
-    const std::string_view key = fields[0];
-    if (key == "v" || key == "vn" || key == "vt") {
-      const size_t needed = key == "vt" ? 1 : 3;
-      if (fields.size() < needed + 1) {
-        fail("'" + std::string(key) + "' needs " + std::to_string(needed) + " numbers, has " +
-             std::to_string(fields.size() - 1));
-      }
-      for (size_t f = 1; f < fields.size(); ++f) {
-        const std::string text(fields[f]);
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end != text.c_str() + text.size() || !std::isfinite(v)) {
-          fail(std::string(key == "v"    ? "vertex coordinate"
-                           : key == "vn" ? "normal component"
-                                         : "texture coordinate") +
-               " '" + text + "' is not a finite number");
-        }
-      }
-    } else if (key == "f") {
-      if (fields.size() < 4) fail("a face needs at least 3 corners");
-      for (size_t f = 1; f < fields.size(); ++f) {
-        // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
-        const std::string_view corner = fields[f];
-        size_t start = 0;
-        for (int part = 0; part < 3 && start <= corner.size(); ++part) {
-          const size_t slash = std::min(corner.find('/', start), corner.size());
-          const std::string_view number = corner.substr(start, slash - start);
-          if (!(number.empty() && part > 0)) {
-            long value = 0;
-            const auto [ptr, ec] =
-                std::from_chars(number.data(), number.data() + number.size(), value);
-            if (ec != std::errc() || ptr != number.data() + number.size() || value == 0) {
-              fail("face corner '" + std::string(corner) + "' is not a valid vertex reference");
-            }
-          }
-          if (slash == corner.size()) break;
-          start = slash + 1;
-        }
-      }
-    }
+  std::unordered_map<std::array<uint32_t, 3>, uint32_t, KeyHash> ids;
+  ids.reserve(positions.size());
+  std::vector<uint32_t> id(positions.size());
+  for (size_t i = 0; i < positions.size(); ++i) {
+    std::array<uint32_t, 3> key;
+    const glm::vec3 p = positions[i] + glm::vec3(0.0f);  // -0 becomes +0
+    std::memcpy(key.data(), &p, sizeof key);
+    id[i] = ids.try_emplace(key, uint32_t(ids.size())).first->second;
   }
+  return id;
 }
 
-Mesh loadObj(const fs::path& path) {
-  checkObjNumbers(path);
-  tinyobj::ObjReaderConfig config;
-  config.triangulate = true;
-  config.vertex_color = false;
-  config.mtl_search_path = path.parent_path().string();
-  tinyobj::ObjReader reader;
-  if (!reader.ParseFromFile(path.string(), config)) {
-    std::string why = reader.Error();
-    while (!why.empty() && (why.back() == '\n' || why.back() == '\r')) why.pop_back();
-    throw Error("mesh", "cannot parse OBJ: " + (why.empty() ? std::string("unknown reason") : why),
+// Union-find over triangle corners, with path halving.
+struct CornerSets {
+  std::vector<uint32_t> parent;
+  explicit CornerSets(size_t n) : parent(n) {
+    for (size_t i = 0; i < n; ++i) parent[i] = uint32_t(i);
+  }
+  uint32_t find(uint32_t c) {
+    while (parent[c] != c) c = parent[c] = parent[parent[c]];
+    return c;
+  }
+  void join(uint32_t a, uint32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+struct NormalStats {
+  size_t computed = 0;  // vertices whose normal was computed
+  size_t added = 0;     // vertices added by splitting at sharp edges
+};
+
+// Normals for every vertex with fromFile[v] == 0: the corners around a position are joined into
+// smooth fans across edges whose faces differ by at most `creaseDegrees` (and, with smoothing
+// groups, share a non-zero group); each fan gets the angle-weighted mean normal of its faces, and
+// a vertex whose corners fall into several fans is split, one copy per fan. Vertices with file
+// normals keep them. `fromFile` grows with the mesh.
+NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
+                           const std::vector<uint32_t>& groups, double creaseDegrees) {
+  NormalStats stats;
+  const size_t triangles = mesh.triangleCount();
+  const size_t corners = 3 * triangles;
+  mesh.normals.resize(mesh.positions.size(), glm::vec3(0.0f));
+  const std::vector<uint32_t> pid = weldPositions(mesh.positions);
+  // Unit face normals and the angle of each corner.
+  std::vector<glm::dvec3> faceNormal(triangles, glm::dvec3(0.0));
+  std::vector<double> angle(corners, 0.0);
+  for (size_t t = 0; t < triangles; ++t) {
+    glm::dvec3 p[3];
+    for (int k = 0; k < 3; ++k) p[k] = glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]);
+    const glm::dvec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
+    const double len = glm::length(n);
+    if (!(len > 0.0)) continue;
+    faceNormal[t] = n / len;
+    for (int k = 0; k < 3; ++k) {
+      const glm::dvec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
+      const double la = glm::length(a), lb = glm::length(b);
+      if (la > 0.0 && lb > 0.0)
+        angle[3 * t + size_t(k)] = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0, 1.0));
+    }
+  }
+  auto group = [&](size_t t) { return groups.empty() ? 1u : groups[t]; };
+  const bool fullySmooth = creaseDegrees >= 180.0;
+  const double cosCrease = std::cos(creaseDegrees * std::numbers::pi / 180.0);
+  // Flat faces (group 0) join only their coplanar neighbours in group 0 (the triangles of one
+  // polygon), so that a flat polygon keeps one vertex per corner.
+  auto smooth = [&](size_t a, size_t b) {
+    if (group(a) != group(b)) return false;
+    const double cosine = glm::dot(faceNormal[a], faceNormal[b]);
+    if (group(a) == 0) return cosine >= 1.0 - 1e-9;
+    return fullySmooth || cosine >= cosCrease - 1e-9;
+  };
+
+  CornerSets sets(corners);
+  auto cornerPid = [&](size_t c) { return pid[mesh.indices[c]]; };
+  auto next = [](size_t c) { return c - c % 3 + (c % 3 + 1) % 3; };
+  // Edges (by welded position) and the corners they start from, sorted so that the faces
+  // sharing an edge are adjacent.
+  std::vector<std::pair<uint64_t, uint32_t>> edges(corners);
+  for (size_t c = 0; c < corners; ++c) {
+    const uint32_t a = cornerPid(c), b = cornerPid(next(c));
+    edges[c] = {(uint64_t(std::min(a, b)) << 32) | std::max(a, b), uint32_t(c)};
+  }
+  std::sort(edges.begin(), edges.end());
+  // More faces than this on one edge: a pathological fin, left sharp rather than compared
+  // pairwise.
+  constexpr size_t kMaxFacesOnEdge = 8;
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    if (j - i >= 2 && j - i <= kMaxFacesOnEdge) {
+      for (size_t a = i; a < j; ++a) {
+        for (size_t b = a + 1; b < j; ++b) {
+          const size_t ca = edges[a].second, cb = edges[b].second;
+          if (ca / 3 == cb / 3 || !smooth(ca / 3, cb / 3)) continue;
+          // Join the corners that sit at the same end of the shared edge.
+          if (cornerPid(ca) == cornerPid(cb)) {
+            sets.join(uint32_t(ca), uint32_t(cb));
+            sets.join(uint32_t(next(ca)), uint32_t(next(cb)));
+          } else {
+            sets.join(uint32_t(ca), uint32_t(next(cb)));
+            sets.join(uint32_t(next(ca)), uint32_t(cb));
+          }
+        }
+      }
+    }
+    i = j;
+  }
+  if (fullySmooth) {
+    // One normal per position (and smoothing group), even where fans meet only at a vertex.
+    std::unordered_map<uint64_t, uint32_t> first;
+    for (size_t c = 0; c < corners; ++c) {
+      if (group(c / 3) == 0) continue;
+      const uint64_t key = (uint64_t(cornerPid(c)) << 32) | group(c / 3);
+      const auto [it, inserted] = first.try_emplace(key, uint32_t(c));
+      if (!inserted) sets.join(it->second, uint32_t(c));
+    }
+  }
+
+  std::vector<glm::dvec3> sum(corners, glm::dvec3(0.0));
+  for (size_t c = 0; c < corners; ++c) sum[sets.find(uint32_t(c))] += angle[c] * faceNormal[c / 3];
+  auto fanNormal = [&](uint32_t root, size_t c) {
+    const double len = glm::length(sum[root]);
+    if (len > 0.0) return glm::vec3(sum[root] / len);
+    const glm::dvec3& f = faceNormal[c / 3];
+    return glm::dot(f, f) > 0.0 ? glm::vec3(f) : glm::vec3(0.0f, 1.0f, 0.0f);
+  };
+  // The first fan met at a vertex keeps the vertex; every other fan gets a copy.
+  const size_t originalVertices = mesh.positions.size();
+  std::vector<uint32_t> fanOf(originalVertices, UINT32_MAX);
+  std::unordered_map<uint64_t, uint32_t> copies;
+  for (size_t c = 0; c < corners; ++c) {
+    const uint32_t v = mesh.indices[c];
+    if (fromFile[v]) continue;
+    const uint32_t root = sets.find(uint32_t(c));
+    if (fanOf[v] == UINT32_MAX) {
+      fanOf[v] = root;
+      mesh.normals[v] = fanNormal(root, c);
+      ++stats.computed;
+      continue;
+    }
+    if (fanOf[v] == root) continue;
+    const auto [it, inserted] =
+        copies.try_emplace((uint64_t(v) << 32) | root, uint32_t(mesh.positions.size()));
+    if (inserted) {
+      mesh.positions.push_back(mesh.positions[v]);
+      if (!mesh.texcoords.empty()) mesh.texcoords.push_back(mesh.texcoords[v]);
+      mesh.normals.push_back(fanNormal(root, c));
+      fromFile.push_back(0);
+      ++stats.added;
+    }
+    mesh.indices[c] = it->second;
+  }
+  return stats;
+}
+
+// Keeps the triangles with keep[t] != 0, with their materials and smoothing groups.
+void keepTriangles(detail::LoadedMesh& loaded, const std::vector<uint8_t>& keep) {
+  Mesh& mesh = loaded.mesh;
+  size_t out = 0;
+  for (size_t t = 0; t < keep.size(); ++t) {
+    if (!keep[t]) continue;
+    for (int k = 0; k < 3; ++k) mesh.indices[3 * out + size_t(k)] = mesh.indices[3 * t + size_t(k)];
+    if (!mesh.triangleMaterial.empty()) mesh.triangleMaterial[out] = mesh.triangleMaterial[t];
+    if (!loaded.smoothingGroup.empty()) loaded.smoothingGroup[out] = loaded.smoothingGroup[t];
+    ++out;
+  }
+  mesh.indices.resize(3 * out);
+  if (!mesh.triangleMaterial.empty()) mesh.triangleMaterial.resize(out);
+  if (!loaded.smoothingGroup.empty()) loaded.smoothingGroup.resize(out);
+}
+
+// Removes the vertices no triangle uses (so that bounds, placement and hashing see only what
+// renders), keeping the order of the rest.
+void dropUnusedVertices(detail::LoadedMesh& loaded) {
+  Mesh& mesh = loaded.mesh;
+  std::vector<uint32_t> remap(mesh.positions.size(), UINT32_MAX);
+  for (uint32_t i : mesh.indices) remap[i] = 0;
+  uint32_t next = 0;
+  for (size_t v = 0; v < remap.size(); ++v) {
+    if (remap[v] == UINT32_MAX) continue;
+    remap[v] = next;
+    mesh.positions[next] = mesh.positions[v];
+    if (v < mesh.normals.size()) mesh.normals[next] = mesh.normals[v];
+    if (!mesh.texcoords.empty()) mesh.texcoords[next] = mesh.texcoords[v];
+    if (!loaded.hasNormal.empty()) loaded.hasNormal[next] = loaded.hasNormal[v];
+    ++next;
+  }
+  mesh.positions.resize(next);
+  if (mesh.normals.size() > next) mesh.normals.resize(next);
+  if (!mesh.texcoords.empty()) mesh.texcoords.resize(next);
+  if (!loaded.hasNormal.empty()) loaded.hasNormal.resize(next);
+  for (uint32_t& i : mesh.indices) i = remap[i];
+}
+
+// Drops the triangles that cannot render, with a warning that counts each kind: a corner with a
+// non-finite coordinate, no area (zero area, or a repeated corner), or the same three positions
+// as an earlier triangle (in any order or winding). A mesh with nothing left is an error.
+void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path) {
+  Mesh& mesh = loaded.mesh;
+  const size_t total = mesh.triangleCount();
+  std::vector<uint8_t> keep(total, 1);
+  size_t nonFinite = 0;
+  for (size_t t = 0; t < total; ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const glm::vec3& p = mesh.positions[mesh.indices[3 * t + size_t(k)]];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) keep[t] = 0;
+    }
+    nonFinite += keep[t] ? 0 : 1;
+  }
+  if (nonFinite == total) {
+    throw Error("mesh",
+                "nothing renderable: all " +
+                    detail::count(total, "triangle has", "triangles have") +
+                    " a corner with a non-finite coordinate",
                 path);
   }
-  const tinyobj::attrib_t& attrib = reader.GetAttrib();
-  const size_t vertexCount = attrib.vertices.size() / 3;
-  const size_t normalCount = attrib.normals.size() / 3;
-
-  bool allNormals = normalCount > 0;
-  for (const auto& shape : reader.GetShapes()) {
-    for (const auto& idx : shape.mesh.indices) {
-      if (idx.normal_index < 0) allNormals = false;
-    }
+  if (nonFinite) {
+    keepTriangles(loaded, keep);
+    mesh.warnings.push_back("dropped " + std::to_string(nonFinite) + " of " +
+                            std::to_string(total) +
+                            " triangles with a corner whose coordinates are not finite numbers");
   }
-
-  Mesh mesh;
-  // (position, normal) pairs → output vertex.
-  std::unordered_map<uint64_t, uint32_t> remap;
-  for (const auto& shape : reader.GetShapes()) {
-    const auto& m = shape.mesh;
-    for (size_t f = 0; f < m.num_face_vertices.size(); ++f) {
-      if (m.num_face_vertices[f] != 3)
-        throw Error("mesh", "face is not a triangle after triangulation", path);
-    }
-    for (const auto& idx : m.indices) {
-      if (idx.vertex_index < 0 || size_t(idx.vertex_index) >= vertexCount) {
-        throw Error("mesh",
-                    "face refers to vertex " + std::to_string(idx.vertex_index + 1) +
-                        " but the file has " + std::to_string(vertexCount),
-                    path);
-      }
-      const int ni = allNormals ? idx.normal_index : -1;
-      if (allNormals && size_t(ni) >= normalCount) {
-        throw Error("mesh",
-                    "face refers to normal " + std::to_string(ni + 1) + " but the file has " +
-                        std::to_string(normalCount),
-                    path);
-      }
-      const uint64_t key = (uint64_t(uint32_t(idx.vertex_index)) << 32) | uint32_t(ni + 1);
-      auto [it, inserted] = remap.try_emplace(key, uint32_t(mesh.positions.size()));
-      if (inserted) {
-        const float* p = &attrib.vertices[3 * size_t(idx.vertex_index)];
-        mesh.positions.emplace_back(p[0], p[1], p[2]);
-        if (allNormals) {
-          const float* n = &attrib.normals[3 * size_t(ni)];
-          mesh.normals.emplace_back(n[0], n[1], n[2]);
-        }
-      }
-      mesh.indices.push_back(it->second);
-    }
-  }
-  mesh.normalsFromFile = allNormals;
-  return mesh;
-}
-
-// Drops triangles that cannot render: degenerate ones (zero area, or a repeated corner) and
-// duplicates (the same three positions as an earlier triangle, in any order or winding), with a
-// warning that counts them. Unused vertices are left in place (they cost nothing to render).
-void dropUnrenderableTriangles(Mesh& mesh, const fs::path& path) {
+  dropUnusedVertices(loaded);
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   const float size = std::max({extent.x, extent.y, extent.z});
+  if (!(size > 0.0f)) throw Error("mesh", "mesh has zero size (all vertices coincide)", path);
+
   // Area below (1e-7 of the object's size)² is rounding noise in float coordinates.
   const float minDoubleArea = 1e-14f * size * size;
   // Positions by value, so that vertices split by normals still count as one position.
-  std::unordered_map<uint64_t, uint32_t> positionIds;
-  std::vector<uint32_t> positionId(mesh.positions.size());
-  for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    const glm::vec3& p = mesh.positions[i];
-    uint32_t bits[3];
-    std::memcpy(bits, &p, sizeof bits);
-    const uint64_t key = (uint64_t(bits[0]) * 0x9E3779B97F4A7C15ull) ^
-                         (uint64_t(bits[1]) * 0xC2B2AE3D27D4EB4Full) ^ uint64_t(bits[2]);
-    // Hash collisions only merge keys; equality is checked below through the ids' positions.
-    auto [it, inserted] = positionIds.try_emplace(key, uint32_t(i));
-    positionId[i] = (inserted || mesh.positions[it->second] == p) ? it->second : uint32_t(i);
-  }
+  const std::vector<uint32_t> positionId = weldPositions(mesh.positions);
   struct TripleHash {
     size_t operator()(const std::array<uint32_t, 3>& t) const {
       return (size_t(t[0]) * 73856093u) ^ (size_t(t[1]) * 19349663u) ^ (size_t(t[2]) * 83492791u);
     }
   };
   std::unordered_set<std::array<uint32_t, 3>, TripleHash> seen;
-  std::vector<uint32_t> kept;
-  kept.reserve(mesh.indices.size());
+  const size_t remaining = mesh.triangleCount();
+  keep.assign(remaining, 1);
   size_t degenerate = 0, duplicate = 0;
-  for (size_t t = 0; t < mesh.indices.size(); t += 3) {
-    const uint32_t* v = &mesh.indices[t];
+  for (size_t t = 0; t < remaining; ++t) {
+    const uint32_t* v = &mesh.indices[3 * t];
     std::array<uint32_t, 3> ids = {positionId[v[0]], positionId[v[1]], positionId[v[2]]};
     const glm::vec3 n = glm::cross(mesh.positions[v[1]] - mesh.positions[v[0]],
                                    mesh.positions[v[2]] - mesh.positions[v[0]]);
     if (ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] ||
         !(glm::length(n) > minDoubleArea)) {
       ++degenerate;
+      keep[t] = 0;
       continue;
     }
     std::sort(ids.begin(), ids.end());
     if (!seen.insert(ids).second) {
       ++duplicate;
-      continue;
+      keep[t] = 0;
     }
-    kept.insert(kept.end(), v, v + 3);
   }
-  const size_t total = mesh.indices.size() / 3;
-  if (kept.empty()) {
+  if (degenerate + duplicate == remaining) {
     throw Error("mesh",
-                "nothing renderable: all " + std::to_string(total) + " triangles are degenerate" +
-                    (duplicate ? " or duplicates" : ""),
+                "nothing renderable: all " + std::to_string(remaining) +
+                    " triangles are degenerate" + (duplicate ? " or duplicates" : ""),
                 path);
   }
   if (degenerate) {
@@ -279,40 +405,81 @@ void dropUnrenderableTriangles(Mesh& mesh, const fs::path& path) {
     mesh.warnings.push_back("dropped " + std::to_string(duplicate) + " of " +
                             std::to_string(total) + " triangles that repeat another one");
   }
-  mesh.indices = std::move(kept);
+  if (degenerate + duplicate) {
+    keepTriangles(loaded, keep);
+    dropUnusedVertices(loaded);
+  }
 }
 
-void validate(Mesh& mesh, const fs::path& path) {
+// Validation and normals shared by every format (see the header comment).
+Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::path& path) {
+  Mesh& mesh = loaded.mesh;
   if (mesh.indices.empty()) throw Error("mesh", "mesh has no triangles", path);
+  COMPOSE_CHECK(mesh.indices.size() % 3 == 0);
+  for (uint32_t i : mesh.indices) COMPOSE_CHECK(i < mesh.positions.size());
+  COMPOSE_CHECK(mesh.triangleMaterial.empty() ||
+                mesh.triangleMaterial.size() == mesh.triangleCount());
+  COMPOSE_CHECK(mesh.texcoords.empty() || mesh.texcoords.size() == mesh.positions.size());
+  loaded.hasNormal.resize(mesh.positions.size(), 0);
+  mesh.normals.resize(mesh.positions.size(), glm::vec3(0.0f));
+
+  dropUnrenderableTriangles(loaded, path);
+
+  // Normals from the file: normalised; a zero or non-finite one is computed instead.
+  size_t badNormals = 0, fileNormals = 0;
   for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    const glm::vec3& p = mesh.positions[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-      throw Error("mesh", "vertex " + std::to_string(i + 1) + " has a non-finite coordinate", path);
+    if (!loaded.hasNormal[i]) continue;
+    glm::vec3& n = mesh.normals[i];
+    const float len = glm::length(n);
+    if (!std::isfinite(len) || !(len > 0.0f)) {
+      loaded.hasNormal[i] = 0;
+      ++badNormals;
+      continue;
     }
+    n /= len;
+    ++fileNormals;
   }
-  const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
-  if (!(std::max({extent.x, extent.y, extent.z}) > 0.0f)) {
-    throw Error("mesh", "mesh has zero size (all vertices coincide)", path);
+  if (badNormals) {
+    mesh.warnings.push_back(
+        detail::count(badNormals, "normal in the file was", "normals in the file were") +
+        " zero or not finite: computed instead");
   }
-  dropUnrenderableTriangles(mesh, path);
-  if (mesh.normalsFromFile) {
-    for (size_t i = 0; i < mesh.normals.size(); ++i) {
-      glm::vec3& n = mesh.normals[i];
-      const float len = glm::length(n);
-      if (!std::isfinite(len) || len == 0.0f) {
-        throw Error("mesh", "normal of vertex " + std::to_string(i + 1) + " is zero or not finite",
-                    path);
-      }
-      n /= len;
-    }
+  const size_t vertices = mesh.positions.size();
+  char crease[64];
+  std::snprintf(crease, sizeof crease, "%g°", options.creaseDegrees);
+  if (fileNormals == vertices) {
+    mesh.normalsFromFile = true;
+    mesh.normalsSource = "from the file";
   } else {
-    const int flipped = orientConsistently(mesh);
-    if (flipped > 0) {
-      mesh.warnings.push_back("turned " + std::to_string(flipped) +
-                              " triangles wound against their neighbours to face outwards");
+    if (fileNormals == 0) {
+      const int flipped = orientConsistently(mesh);
+      if (flipped > 0) {
+        mesh.warnings.push_back("turned " + std::to_string(flipped) +
+                                " triangles wound against their neighbours to face outwards");
+      }
     }
-    computeVertexNormals(mesh);
+    const NormalStats stats =
+        computeNormals(mesh, loaded.hasNormal, loaded.smoothingGroup, options.creaseDegrees);
+    mesh.normalsFromFile = false;
+    mesh.normalsSource =
+        std::string(fileNormals ? "from the file for " + std::to_string(fileNormals) + " of " +
+                                      std::to_string(vertices) + " vertices; the others "
+                                : "not in the file: ") +
+        "computed as smooth angle-weighted normals with a crease angle of " + crease;
+    if (stats.added > 0) {
+      mesh.normalsSource += " (" + detail::count(stats.added, "vertex", "vertices") +
+                            " added where sharper edges meet)";
+    }
+    if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
   }
+  if (mesh.materials.empty()) {
+    mesh.triangleMaterial.clear();
+    mesh.textures.clear();
+  }
+  bool textured = false;
+  for (const Material& m : mesh.materials) textured = textured || m.texture >= 0;
+  if (!textured) mesh.texcoords.clear();
+  return std::move(loaded.mesh);
 }
 
 // Geomview's bicubic Bézier patches ("BBP": 16 control points of 3 numbers per patch, rows of
@@ -320,7 +487,7 @@ void validate(Mesh& mesh, const fs::path& path) {
 // kSteps x kSteps quads; vertices on shared patch edges coincide exactly (a Bézier patch's edge
 // depends on its edge control points only) and are welded. Geomview's models are Z-up: they are
 // turned to this project's Y-up frame, (x, y, z) → (x, z, -y). Normals are computed afterwards.
-Mesh loadBezierPatches(const fs::path& path) {
+detail::LoadedMesh loadBezierPatches(const fs::path& path) {
   std::ifstream in(path);
   if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
   std::string header;
@@ -355,7 +522,8 @@ Mesh loadBezierPatches(const fs::path& path) {
     b[2] = 3.0 * t * t * s;
     b[3] = t * t * t;
   };
-  Mesh mesh;
+  detail::LoadedMesh loaded;
+  Mesh& mesh = loaded.mesh;
   std::map<std::array<float, 3>, uint32_t> weld;
   const size_t patches = numbers.size() / 48;
   for (size_t patch = 0; patch < patches; ++patch) {
@@ -389,11 +557,99 @@ Mesh loadBezierPatches(const fs::path& path) {
       }
     }
   }
-  mesh.normalsFromFile = false;
-  return mesh;
+  return loaded;
 }
 
 }  // namespace
+
+void computeVertexNormals(Mesh& mesh, double creaseDegrees) {
+  std::vector<uint8_t> fromFile(mesh.positions.size(), 0);
+  computeNormals(mesh, fromFile, {}, creaseDegrees);
+  mesh.normalsFromFile = false;
+}
+
+std::vector<uint32_t> triangulatePolygon(const std::vector<glm::vec3>& corners) {
+  const size_t n = corners.size();
+  std::vector<uint32_t> out;
+  if (n < 3) return out;
+  if (n == 3) return {0, 1, 2};
+  // Newell's normal: the polygon's area vector, robust for non-planar and concave polygons.
+  glm::dvec3 normal(0.0);
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3 a(corners[i]), b(corners[(i + 1) % n]);
+    normal +=
+        glm::dvec3((a.y - b.y) * (a.z + b.z), (a.z - b.z) * (a.x + b.x), (a.x - b.x) * (a.y + b.y));
+  }
+  const double area = glm::length(normal);
+  auto fan = [&] {
+    for (uint32_t i = 1; i + 1 < n; ++i) out.insert(out.end(), {0u, i, i + 1});
+    return out;
+  };
+  if (!(area > 0.0) || !std::isfinite(area)) return fan();
+  normal /= area;
+  // 2D coordinates in the polygon's plane, counter-clockwise about the normal.
+  const glm::dvec3 helper =
+      std::abs(normal.x) < 0.9 ? glm::dvec3(1.0, 0.0, 0.0) : glm::dvec3(0.0, 1.0, 0.0);
+  const glm::dvec3 ex = glm::normalize(glm::cross(helper, normal));
+  const glm::dvec3 ey = glm::cross(normal, ex);
+  std::vector<glm::dvec2> q(n);
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3 p(corners[i]);
+    q[i] = glm::dvec2(glm::dot(p, ex), glm::dot(p, ey));
+  }
+  auto cross2 = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& b) {
+    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+  };
+  // Tolerance for "on the left" in units of the polygon's area.
+  const double eps = 1e-12 * area;
+  if (n == 4) {
+    // A quad: the 0-2 diagonal (as most modelling tools split quads) unless it lies outside.
+    const bool valid02 = cross2(q[0], q[1], q[2]) > eps && cross2(q[0], q[2], q[3]) > eps;
+    if (valid02) return {0, 1, 2, 0, 2, 3};
+    const bool valid13 = cross2(q[1], q[2], q[3]) > eps && cross2(q[1], q[3], q[0]) > eps;
+    if (valid13) return {0, 1, 3, 1, 2, 3};
+    return {0, 1, 2, 0, 2, 3};
+  }
+  // Ear clipping: cut off a convex corner whose triangle holds no other corner, until three
+  // remain. O(n²) per ear at worst; polygons in mesh files are small.
+  std::vector<uint32_t> ring(n);
+  for (size_t i = 0; i < n; ++i) ring[i] = uint32_t(i);
+  auto inside = [&](const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b,
+                    const glm::dvec2& c) {
+    return cross2(a, b, p) >= -eps && cross2(b, c, p) >= -eps && cross2(c, a, p) >= -eps;
+  };
+  while (ring.size() > 3) {
+    const size_t m = ring.size();
+    size_t ear = m;
+    for (size_t i = 0; i < m && ear == m; ++i) {
+      const uint32_t a = ring[(i + m - 1) % m], b = ring[i], c = ring[(i + 1) % m];
+      if (!(cross2(q[a], q[b], q[c]) > eps)) continue;  // reflex or flat corner
+      bool empty = true;
+      for (size_t j = 0; j < m && empty; ++j) {
+        const uint32_t p = ring[j];
+        if (p == a || p == b || p == c) continue;
+        if (q[p] == q[a] || q[p] == q[b] || q[p] == q[c]) continue;  // a repeated corner
+        empty = !inside(q[p], q[a], q[b], q[c]);
+      }
+      if (empty) ear = i;
+    }
+    if (ear == m) {
+      // No ear (a self-intersecting or numerically flat outline): cut the most convex corner.
+      double best = -std::numeric_limits<double>::infinity();
+      for (size_t i = 0; i < m; ++i) {
+        const double turn = cross2(q[ring[(i + m - 1) % m]], q[ring[i]], q[ring[(i + 1) % m]]);
+        if (turn > best) {
+          best = turn;
+          ear = i;
+        }
+      }
+    }
+    out.insert(out.end(), {ring[(ear + m - 1) % m], ring[ear], ring[(ear + 1) % m]});
+    ring.erase(ring.begin() + std::ptrdiff_t(ear));
+  }
+  out.insert(out.end(), {ring[0], ring[1], ring[2]});
+  return out;
+}
 
 int orientConsistently(Mesh& mesh) {
   const size_t triangles = mesh.triangleCount();
@@ -470,23 +726,26 @@ int orientConsistently(Mesh& mesh) {
   return flippedTotal;
 }
 
-Mesh loadMesh(const fs::path& path) {
+Mesh loadMesh(const fs::path& path, const MeshOptions& options) {
+  COMPOSE_CHECK(options.creaseDegrees >= 0.0 && options.creaseDegrees <= 180.0);
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error("mesh", "file not found", path);
   if (fs::is_directory(path, ec)) throw Error("mesh", "is a folder, expected a mesh file", path);
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
-  Mesh mesh;
+  detail::LoadedMesh loaded;
   if (ext == ".obj") {
-    mesh = loadObj(path);
+    loaded = detail::loadObj(path);
+  } else if (ext == ".gltf" || ext == ".glb") {
+    loaded = detail::loadGltf(path);
   } else if (ext == ".bez") {
-    mesh = loadBezierPatches(path);
+    loaded = loadBezierPatches(path);
   } else {
-    throw Error("mesh", "unsupported mesh format '" + ext + "'; supported: .obj, .bez", path);
+    throw Error("mesh", "unsupported mesh format '" + ext + "'; supported: .obj, .gltf, .glb, .bez",
+                path);
   }
-  validate(mesh, path);
-  return mesh;
+  return finish(std::move(loaded), options, path);
 }
 
 }  // namespace compose::render

@@ -1,12 +1,44 @@
-// Triangle meshes for rendering: loading, validation, normals.
+// Triangle meshes for rendering: loading, validation, normals, materials.
 //
-// loadMesh() reads Wavefront OBJ (through tinyobjloader; polygons are triangulated). Vertices are
-// split where a position is used with different normals. A mesh without normals, or with
-// normals missing on some faces, gets smooth angle-weighted vertex normals; normals of zero length
-// or NaN in the file are an error. Every number in the file must be a finite number (a malformed
-// one is an error naming its line). Degenerate and duplicate triangles are dropped with a warning
-// (Mesh::warnings); a mesh with nothing renderable left is an error. Errors throw compose::Error
-// (stage "mesh") naming the file.
+// loadMesh() reads, by the file's extension:
+//  * Wavefront OBJ (.obj, through tinyobjloader): groups and objects are merged into one mesh;
+//    polygons of any size are triangulated (ear clipping in the polygon's own plane, so concave
+//    ones stay inside their outline); `mtllib`/`usemtl` materials give each face a base colour
+//    (`Kd`) and an albedo texture (`map_Kd`, with its `-s`, `-o` and `-clamp` options). `Kd` is
+//    taken as linear Rec.709, the way Blender writes and reads it; a `map_Kd` image is decoded as
+//    the colour space its file declares (sRGB for 8-bit images). `map_Kd` multiplies `Kd`, as the
+//    MTL format defines it. Smoothing groups (`s`) of a file without normals split the computed
+//    normals: faces in different groups meet at a sharp edge, and faces in no group (`s off`)
+//    are flat.
+//  * glTF 2.0 (.gltf with its buffers and images, or binary .glb, through tinygltf): the default
+//    scene (else the first; else every root node) with its node hierarchy flattened into object
+//    space (translation/rotation/scale or matrix, a node mirrored by a negative determinant keeps
+//    its triangles wound outwards); every mesh and primitive: triangles, strips and fans (points
+//    and lines are skipped with a warning), indexed (8-, 16- or 32-bit) or not, POSITION, NORMAL
+//    and the TEXCOORD set the base-colour texture uses, in any component type (normalised
+//    integers included, as KHR_mesh_quantization writes them) and with sparse accessors. The
+//    metallic-roughness material gives the base colour: `baseColorFactor` (linear Rec.709) times
+//    `baseColorTexture` (sRGB unless its image declares otherwise), with the texture's sampler
+//    wrap modes and KHR_texture_transform. A file that requires an extension compose cannot honour
+//    (Draco or meshopt compression, ...) is an error naming it. Vertex colours, skins and morph
+//    targets are ignored with a warning (skinned meshes render in their bind pose).
+//  * Geomview bicubic Bézier patches (.bez), tessellated (see mesh.cpp).
+//
+// Normals. Normals in the file are kept (normalised). Vertices without one get smooth normals:
+// the angle-weighted mean of the faces around the vertex that are joined to it by edges no
+// sharper than MeshOptions::creaseDegrees (the angle between the two faces' normals); a vertex
+// where sharper edges meet is split, one copy per smooth fan. 0° gives flat faces (what the glTF
+// specification asks for when a primitive has no normals), 180° one smooth normal per position.
+// Before normals are computed for a mesh that has none, every connected piece is wound one way
+// and outwards (orientConsistently()).
+//
+// Robustness. Real files are untrusted input. What can be dropped is dropped with a warning that
+// counts it (Mesh::warnings; loading never prints): faces that refer to vertices the file does not
+// have, triangles with a non-finite corner, degenerate and duplicate triangles, zero or
+// non-finite normals (recomputed), unreadable material libraries and textures (the material
+// renders with its base colour), primitives with broken accessors. A mesh with nothing renderable
+// left, a file that cannot be parsed, and (in OBJ) a malformed number are errors. Errors throw
+// compose::Error (stage "mesh") naming the file and what is wrong.
 #pragma once
 
 #include <cstdint>
@@ -14,6 +46,7 @@
 #include <string>
 #include <vector>
 
+#include <glm/mat3x3.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
@@ -21,12 +54,15 @@
 
 namespace compose::render {
 
-// An albedo texture: RGB (or RGBA, alpha unused) float in `image.colorSpace`, sampled bilinearly
-// with wrap-around at texture coordinates (u to the right, v up: v = 0 is the image's bottom row,
-// as in OBJ; a glTF loader flips its v into this convention).
+// An albedo texture: RGB float in `image.colorSpace` (the colour space its file declares, or
+// empty when the file declares none; the pipeline converts it to the working space before
+// rendering), sampled bilinearly at texture coordinates (u to the right, v up: v = 0 is the
+// image's bottom row, as in OBJ; the glTF loader stores 1 - v so that this holds).
 struct Texture {
-  std::filesystem::path file;
+  enum class Wrap { Repeat, Clamp, Mirror };
+  std::filesystem::path file;  // the image file, or a description of where an embedded one was
   Image image;
+  Wrap wrapU = Wrap::Repeat, wrapV = Wrap::Repeat;
 };
 
 // A diffuse material: the albedo is baseColor times the texture's colour (when there is one).
@@ -35,14 +71,22 @@ struct Material {
   std::string name;
   glm::vec3 baseColor{1.0f};
   int texture = -1;  // index into Mesh::textures, or -1
+  // Applied to (u, v, 1) before the texture is sampled (OBJ's -s/-o, glTF's
+  // KHR_texture_transform), in this file's convention (v up).
+  glm::mat3 uvTransform{1.0f};
 };
+
+// The albedo of faces that have no material in a mesh where others have one (and the default of
+// --albedo): a mid grey.
+inline constexpr float kDefaultAlbedo = 0.5f;
 
 struct Mesh {
   std::vector<glm::vec3> positions;   // object space
   std::vector<glm::vec3> normals;     // unit, one per position
   std::vector<uint32_t> indices;      // three per triangle, counter-clockwise seen from outside
-  bool normalsFromFile = false;       // false: computed by computeVertexNormals()
-  std::vector<std::string> warnings;  // what loading dropped or repaired, for the user
+  bool normalsFromFile = false;       // every normal came from the file
+  std::string normalsSource;          // how the normals were obtained, for the user
+  std::vector<std::string> warnings;  // what loading dropped, ignored or repaired, for the user
 
   // Materials: empty when the file has none (the renderer then uses --albedo everywhere).
   std::vector<glm::vec2> texcoords;        // one per position, or empty
@@ -63,15 +107,30 @@ struct Mesh {
   glm::vec3 albedoAt(uint32_t triangle, float u, float v) const;
 };
 
-Mesh loadMesh(const std::filesystem::path& path);
+struct MeshOptions {
+  // Vertices without a normal in the file get the mean normal of the faces around them that are
+  // joined by edges of at most this dihedral angle (degrees, 0..180).
+  double creaseDegrees = 60.0;
+};
 
-// Smooth vertex normals: the angle-weighted mean of the adjacent face normals.
-void computeVertexNormals(Mesh& mesh);
+Mesh loadMesh(const std::filesystem::path& path, const MeshOptions& options = {});
+
+// Smooth vertex normals for every vertex (see the header comment): the angle-weighted mean of the
+// adjacent face normals across edges of at most `creaseDegrees`, vertices split where sharper
+// edges meet. Positions are welded by value first, so that vertices split by texture seams are
+// smoothed as one.
+void computeVertexNormals(Mesh& mesh, double creaseDegrees = 180.0);
 
 // Winds every connected piece of the mesh one way (each triangle against its neighbours across
 // shared edges), then outwards (a positive signed volume about the piece's centre). Used for
 // meshes whose normals are computed, where a triangle wound the wrong way would turn its corner
 // normals inside out. Returns how many triangles were turned.
 int orientConsistently(Mesh& mesh);
+
+// Triangulates one polygon (corners in order, roughly planar, convex or not) by ear clipping in
+// the plane of its Newell normal; quads take the 0-2 diagonal unless that lies outside them.
+// Returns corner-index triples wound like the polygon. A polygon with no area is split as a fan
+// (its triangles are degenerate and dropped later).
+std::vector<uint32_t> triangulatePolygon(const std::vector<glm::vec3>& corners);
 
 }  // namespace compose::render

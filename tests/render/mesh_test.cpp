@@ -18,10 +18,14 @@ constexpr const char* kCube =
     "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
     "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n";
 
+// Fully smooth normals (crease 180°).
+const MeshOptions kSmooth{.creaseDegrees = 180.0};
+constexpr float kPi = 3.14159265f;
+
 TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {
   TempDir dir;
   writeText(dir / "cube.obj", kCube);
-  const Mesh m = loadMesh(dir / "cube.obj");
+  const Mesh m = loadMesh(dir / "cube.obj", kSmooth);
   EXPECT_FALSE(m.normalsFromFile);
   EXPECT_EQ(m.triangleCount(), 12u);
   EXPECT_EQ(m.positions.size(), 8u);
@@ -32,6 +36,74 @@ TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {
   }
   EXPECT_EQ(m.boundsMin(), glm::vec3(0.0f));
   EXPECT_EQ(m.boundsMax(), glm::vec3(1.0f));
+}
+
+// The face normal of triangle t.
+glm::vec3 faceNormal(const Mesh& m, size_t t) {
+  const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                  c = m.positions[m.indices[3 * t + 2]];
+  return glm::normalize(glm::cross(b - a, c - a));
+}
+
+TEST(Mesh, CreaseAngleSplitsVerticesWhereFacesMeetSharply) {
+  TempDir dir;
+  writeText(dir / "cube.obj", kCube);
+  // The cube's edges are 90°: below that every corner normal is its own face's normal (each of
+  // the 8 corners split into 3), above it they are smooth again.
+  for (const double crease : {0.0, 60.0, 89.0}) {
+    const Mesh m = loadMesh(dir / "cube.obj", {.creaseDegrees = crease});
+    EXPECT_EQ(m.positions.size(), 24u) << crease;
+    for (size_t t = 0; t < m.triangleCount(); ++t)
+      for (int k = 0; k < 3; ++k)
+        EXPECT_GT(glm::dot(m.normals[m.indices[3 * t + size_t(k)]], faceNormal(m, t)), 0.9999f);
+    EXPECT_NE(m.normalsSource.find("crease angle of " + std::to_string(int(crease)) + "°"),
+              std::string::npos)
+        << m.normalsSource;
+  }
+  EXPECT_EQ(loadMesh(dir / "cube.obj", {.creaseDegrees = 91.0}).positions.size(), 8u);
+
+  // A strip folded by 20° along its middle edge stays smooth at 60° (the shared vertices get the
+  // mean of both faces' normals) and splits at 10°.
+  const float s = std::sin(20.0f * kPi / 180.0f), c = std::cos(20.0f * kPi / 180.0f);
+  writeText(dir / "fold.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 " + std::to_string(1 + c) +
+                                  " " + std::to_string(s) + "\nv 1 " + std::to_string(1 + c) + " " +
+                                  std::to_string(s) + "\nf 1 2 4 3\nf 3 4 6 5\n");
+  const Mesh smooth = loadMesh(dir / "fold.obj");
+  EXPECT_EQ(smooth.positions.size(), 6u);
+  const Mesh sharp = loadMesh(dir / "fold.obj", {.creaseDegrees = 10.0});
+  EXPECT_EQ(sharp.positions.size(), 8u);
+  EXPECT_NE(sharp.normalsSource.find("2 vertices added"), std::string::npos) << sharp.normalsSource;
+}
+
+TEST(Mesh, SmoothingGroupsOfTheFileSplitComputedNormals) {
+  TempDir dir;
+  // The folded strip again, each face in its own smoothing group: sharp even at 180°. With
+  // "s off" the faces are flat; with one group they are smooth.
+  const std::string v = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 2 0.2\nv 1 2 0.2\n";
+  writeText(dir / "groups.obj", v + "s 1\nf 1 2 4 3\ns 2\nf 3 4 6 5\n");
+  EXPECT_EQ(loadMesh(dir / "groups.obj", kSmooth).positions.size(), 8u);
+  writeText(dir / "off.obj", v + "s off\nf 1 2 4 3\nf 3 4 6 5\n");
+  EXPECT_EQ(loadMesh(dir / "off.obj", kSmooth).positions.size(), 8u);
+  writeText(dir / "one.obj", v + "s 1\nf 1 2 4 3\nf 3 4 6 5\n");
+  EXPECT_EQ(loadMesh(dir / "one.obj", kSmooth).positions.size(), 6u);
+}
+
+TEST(Mesh, NormalsAreSmoothedAcrossTextureSeams) {
+  TempDir dir;
+  // Two faces meeting at a fold, their shared corners with different texture coordinates: the
+  // seam vertices are separate but get one normal.
+  writeText(dir / "seam.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 2 0.3\nv 1 2 0.3\n"
+            "vt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nvt 0 0.5\nvt 1 0.5\nvt 0 1\nvt 1 1\n"
+            "f 1/1 2/2 4/4 3/3\nf 3/5 4/6 6/8 5/7\n");
+  const Mesh m = loadMesh(dir / "seam.obj");
+  EXPECT_EQ(m.positions.size(), 8u);
+  std::vector<glm::vec3> atY1;
+  for (size_t i = 0; i < m.positions.size(); ++i)
+    if (m.positions[i].y == 1.0f) atY1.push_back(m.normals[i]);
+  ASSERT_EQ(atY1.size(), 4u);
+  for (const glm::vec3& n : atY1) EXPECT_GT(glm::dot(n, atY1[0]), 0.99999f);
+  EXPECT_LT(atY1[0].z, 0.999f) << "the seam normal leans between the two faces";
 }
 
 TEST(Mesh, KeepsFileNormalsAndSplitsVerticesPerNormal) {
@@ -58,10 +130,20 @@ TEST(Mesh, ErrorsNameTheFileAndTheProblem) {
                        "line 2: vertex coordinate '1e999' is not a finite");
   writeText(dir / "point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "point.obj"), "zero size");
-  writeText(dir / "zeron.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nf 1//1 2//1 3//1\n");
-  COMPOSE_EXPECT_ERROR(loadMesh(dir / "zeron.obj"), "normal of vertex 1 is zero");
   writeText(dir / "model.stl", "solid x\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "model.stl"), "unsupported mesh format '.stl'");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir.path()), "is a folder");
+}
+
+TEST(Mesh, ZeroNormalsInTheFileAreComputedWithAWarning) {
+  TempDir dir;
+  writeText(dir / "zeron.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nvn 0 0 1\nf 1//1 2//2 3//2\n");
+  const Mesh m = loadMesh(dir / "zeron.obj");
+  ASSERT_EQ(m.warnings.size(), 1u);
+  EXPECT_EQ(m.warnings[0], "1 normal in the file was zero or not finite: computed instead");
+  EXPECT_FALSE(m.normalsFromFile);
+  for (const glm::vec3& n : m.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
+  EXPECT_NE(m.normalsSource.find("from the file for 2 of 3 vertices"), std::string::npos);
 }
 
 TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
@@ -110,7 +192,7 @@ TEST(Mesh, TrianglesWoundAgainstTheirNeighboursAreTurnedOutwards) {
   writeText(dir / "cube.obj",
             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
             "f 1 4 3 2\nf 8 7 6 5\nf 1 2 6 5\nf 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n");
-  const Mesh m = loadMesh(dir / "cube.obj");
+  const Mesh m = loadMesh(dir / "cube.obj", kSmooth);
   ASSERT_EQ(m.warnings.size(), 1u);
   EXPECT_EQ(m.warnings[0], "turned 2 triangles wound against their neighbours to face outwards");
   for (size_t i = 0; i < m.positions.size(); ++i) {
@@ -121,7 +203,7 @@ TEST(Mesh, TrianglesWoundAgainstTheirNeighboursAreTurnedOutwards) {
   writeText(dir / "inside.obj",
             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
             "f 2 3 4 1\nf 8 7 6 5\nf 5 6 2 1\nf 3 7 8 4\nf 4 8 5 1\nf 6 7 3 2\n");
-  const Mesh inside = loadMesh(dir / "inside.obj");
+  const Mesh inside = loadMesh(dir / "inside.obj", kSmooth);
   for (size_t i = 0; i < inside.positions.size(); ++i)
     EXPECT_GT(glm::dot(inside.normals[i], glm::normalize(inside.positions[i] - glm::vec3(0.5f))),
               0.99f);

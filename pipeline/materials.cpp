@@ -1,0 +1,56 @@
+#include "pipeline/materials.h"
+
+#include <algorithm>
+#include <map>
+
+#include "core/error.h"
+
+namespace compose::pipeline {
+
+std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig& colors) {
+  if (!mesh.hasMaterials()) return {};
+  const std::string working = colors.workingSpace();
+
+  // Base colours, as a row of pixels.
+  Image base(int(mesh.materials.size()), 1, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < mesh.materials.size(); ++i) {
+    const glm::vec3& c = mesh.materials[i].baseColor;
+    std::copy_n(&c.x, 3, base.pixels.data() + 3 * i);
+  }
+  std::string baseRead;
+  if (colors.has(mesh.colorSpace)) {
+    base.colorSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
+    baseRead = "'" + base.colorSpace + "'";
+    colors.convert(base, working);
+  } else if (mesh.colorSpace == "lin_rec709" && colors.chromaticities(working)) {
+    colors.convertFromChromaticities(base, color::kRec709Chromaticities, working);
+    baseRead = "linear Rec.709 (by its primaries)";
+  } else {
+    baseRead = "the working space's own (the config knows neither '" + mesh.colorSpace +
+               "' nor the working space's primaries)";
+  }
+  for (size_t i = 0; i < mesh.materials.size(); ++i) {
+    const float* p = base.pixels.data() + 3 * i;
+    mesh.materials[i].baseColor = glm::vec3(p[0], p[1], p[2]);
+  }
+  mesh.colorSpace = working;
+
+  std::map<std::string, int> textureSpaces;
+  for (render::Texture& texture : mesh.textures) {
+    texture.image.colorSpace = colors.inputSpaceFor(texture.file, texture.image.colorSpace);
+    ++textureSpaces["'" + texture.image.colorSpace + "'"];
+    colors.convert(texture.image, working);
+  }
+  std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
+                     (mesh.materials.size() == 1 ? "" : "s") + ", base colours read as " + baseRead;
+  if (!textureSpaces.empty()) {
+    std::string read;
+    for (const auto& [space, n] : textureSpaces)
+      read += (read.empty() ? "" : ", ") + std::to_string(n) + " as " + space;
+    line += ", " + std::to_string(mesh.textures.size()) + " texture" +
+            (mesh.textures.size() == 1 ? "" : "s") + " (" + read + ")";
+  }
+  return line + ", converted to '" + working + "'";
+}
+
+}  // namespace compose::pipeline

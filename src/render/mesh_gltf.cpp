@@ -1,0 +1,724 @@
+// glTF 2.0, .gltf and .glb (see mesh.h for what is read and how), parsed by Debian's shared
+// tinygltf. Accessors are decoded here with every bound checked, since tinygltf leaves that to
+// its users; images are decoded by our ingest (OpenImageIO), not by tinygltf's stb_image.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <set>
+
+#include <tiny_gltf.h>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/mat4x4.hpp>
+
+#include "core/error.h"
+#include "ingest/image_io.h"
+#include "render/mesh_formats.h"
+
+namespace compose::render::detail {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// A problem with one primitive (a broken accessor, a missing attribute): it is skipped with a
+// warning that says why.
+struct PrimitiveError {
+  std::string what;
+};
+
+// Extensions a file may require that do not change what compose reads.
+const std::set<std::string>& supportedRequiredExtensions() {
+  static const std::set<std::string> names = {
+      "KHR_texture_transform", "KHR_mesh_quantization", "KHR_materials_emissive_strength",
+      "KHR_materials_unlit",   "KHR_materials_ior",     "KHR_materials_specular"};
+  return names;
+}
+
+// Keeps the encoded bytes of data-URI images for our own decoder. Images in buffer views are
+// decoded from the buffer after their bounds are checked, and images in files from the file, so
+// their bytes are not kept (nor read) here.
+bool keepEncodedImage(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                      const unsigned char* bytes, int size, void*) {
+  if (image->bufferView < 0 && image->uri.empty() && bytes && size > 0)
+    image->image.assign(bytes, bytes + size);
+  return true;
+}
+
+int componentSize(int componentType) {
+  switch (componentType) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+      return 2;
+    case TINYGLTF_COMPONENT_TYPE_INT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+      return 4;
+    default:
+      return 0;
+  }
+}
+
+int componentCount(int type) {
+  switch (type) {
+    case TINYGLTF_TYPE_SCALAR:
+      return 1;
+    case TINYGLTF_TYPE_VEC2:
+      return 2;
+    case TINYGLTF_TYPE_VEC3:
+      return 3;
+    case TINYGLTF_TYPE_VEC4:
+    case TINYGLTF_TYPE_MAT2:
+      return 4;
+    case TINYGLTF_TYPE_MAT3:
+      return 9;
+    case TINYGLTF_TYPE_MAT4:
+      return 16;
+    default:
+      return 0;
+  }
+}
+
+const char* typeName(int components) {
+  switch (components) {
+    case 1:
+      return "SCALAR";
+    case 2:
+      return "VEC2";
+    case 3:
+      return "VEC3";
+    default:
+      return "VEC4 or a matrix";
+  }
+}
+
+// One component, little-endian as glTF stores it; normalised integers map to [0, 1] or [-1, 1]
+// (glTF 2.0 §3.11).
+double component(const unsigned char* p, int componentType, bool normalized) {
+  switch (componentType) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+      int8_t v;
+      std::memcpy(&v, p, 1);
+      return normalized ? std::max(double(v) / 127.0, -1.0) : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      return normalized ? double(p[0]) / 255.0 : double(p[0]);
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? std::max(double(v) / 32767.0, -1.0) : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? double(v) / 65535.0 : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_INT: {
+      int32_t v;
+      std::memcpy(&v, p, 4);
+      return normalized ? std::max(double(v) / 2147483647.0, -1.0) : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return normalized ? double(v) / 4294967295.0 : double(v);
+    }
+    default: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return double(v);
+    }
+  }
+}
+
+class GltfReader {
+ public:
+  GltfReader(const tinygltf::Model& model, const fs::path& path, LoadedMesh& out)
+      : model_(model), path_(path), out_(out), mesh_(out.mesh) {}
+
+  void read();
+
+ private:
+  // The bytes of buffer view `view` from `offset`, holding `count` elements of `elementSize`
+  // bytes `stride` apart (0: tightly packed, or the view's own stride when `useViewStride`).
+  const unsigned char* viewBytes(int view, size_t offset, size_t count, size_t elementSize,
+                                 size_t& stride, bool useViewStride, const std::string& what) const;
+  // Accessor `index` as `components` doubles per element, sparse substitution applied.
+  std::vector<double> accessor(int index, int components, const std::string& what) const;
+  std::vector<uint32_t> indices(int index, const std::string& what) const;
+
+  glm::dmat4 localTransform(const tinygltf::Node& node, int index) const;
+  void addPrimitive(const tinygltf::Primitive& primitive, const glm::dmat4& objectFromNode);
+  uint32_t material(int gltfMaterial);
+  int texture(int gltfTexture, const std::string& materialName);
+  Image decodeImage(int imageIndex);
+
+  const tinygltf::Model& model_;
+  const fs::path& path_;
+  LoadedMesh& out_;
+  Mesh& mesh_;
+  std::map<int, uint32_t> materials_;  // glTF material (-1: none) → Mesh::materials
+  std::map<int, int> textures_;        // glTF texture → Mesh::textures (-1: unreadable)
+  std::vector<int> texCoordSet_;       // per Mesh material: the TEXCOORD set its texture uses
+  size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
+  size_t colours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0;
+  bool noMaterial_ = false, someMaterial_ = false;
+};
+
+const unsigned char* GltfReader::viewBytes(int view, size_t offset, size_t count,
+                                           size_t elementSize, size_t& stride, bool useViewStride,
+                                           const std::string& what) const {
+  if (view < 0 || size_t(view) >= model_.bufferViews.size()) {
+    throw PrimitiveError{what + " refers to buffer view " + std::to_string(view) +
+                         ", the file has " + std::to_string(model_.bufferViews.size())};
+  }
+  const tinygltf::BufferView& bv = model_.bufferViews[size_t(view)];
+  if (bv.buffer < 0 || size_t(bv.buffer) >= model_.buffers.size()) {
+    throw PrimitiveError{"buffer view " + std::to_string(view) + " refers to buffer " +
+                         std::to_string(bv.buffer) + ", the file has " +
+                         std::to_string(model_.buffers.size())};
+  }
+  const std::vector<unsigned char>& data = model_.buffers[size_t(bv.buffer)].data;
+  if (bv.byteOffset > data.size() || bv.byteLength > data.size() - bv.byteOffset) {
+    throw PrimitiveError{"buffer view " + std::to_string(view) + " (bytes " +
+                         std::to_string(bv.byteOffset) + " + " + std::to_string(bv.byteLength) +
+                         ") lies outside its buffer of " + std::to_string(data.size()) + " bytes"};
+  }
+  stride = useViewStride && bv.byteStride ? bv.byteStride : elementSize;
+  if (stride < elementSize) {
+    throw PrimitiveError{"buffer view " + std::to_string(view) + " has a byte stride of " +
+                         std::to_string(stride) + ", less than the " + std::to_string(elementSize) +
+                         " bytes of an element of " + what};
+  }
+  // count ≤ 2^31 and stride ≤ 2^8 (checked by the callers and tinygltf): no overflow in 64 bits.
+  if (count > 0 &&
+      (offset > bv.byteLength || (count - 1) * stride + elementSize > bv.byteLength - offset)) {
+    throw PrimitiveError{what + " reads past the end of buffer view " + std::to_string(view) +
+                         " (" + std::to_string(count) + " elements of " +
+                         std::to_string(elementSize) + " bytes from byte " +
+                         std::to_string(offset) + " of " + std::to_string(bv.byteLength) + ")"};
+  }
+  return data.data() + bv.byteOffset + offset;
+}
+
+std::vector<double> GltfReader::accessor(int index, int components, const std::string& what) const {
+  const std::string name = what + " (accessor " + std::to_string(index) + ")";
+  if (index < 0 || size_t(index) >= model_.accessors.size()) {
+    throw PrimitiveError{what + " refers to accessor " + std::to_string(index) + ", the file has " +
+                         std::to_string(model_.accessors.size())};
+  }
+  const tinygltf::Accessor& a = model_.accessors[size_t(index)];
+  if (componentCount(a.type) != components) {
+    throw PrimitiveError{name + " holds " + typeName(componentCount(a.type)) + ", expected " +
+                         typeName(components)};
+  }
+  const int size = componentSize(a.componentType);
+  if (size == 0) {
+    throw PrimitiveError{name + " has the unknown component type " +
+                         std::to_string(a.componentType)};
+  }
+  constexpr size_t kMaxElements = size_t(1) << 28;
+  if (a.count > kMaxElements) {
+    throw PrimitiveError{name + " has " + std::to_string(a.count) + " elements, more than " +
+                         std::to_string(kMaxElements)};
+  }
+  const size_t elementSize = size_t(size) * size_t(components);
+  std::vector<double> values(a.count * size_t(components), 0.0);  // no buffer view: zeros
+  if (a.bufferView >= 0) {
+    size_t stride = 0;
+    const unsigned char* p =
+        viewBytes(a.bufferView, a.byteOffset, a.count, elementSize, stride, true, name);
+    for (size_t i = 0; i < a.count; ++i)
+      for (int c = 0; c < components; ++c)
+        values[i * size_t(components) + size_t(c)] =
+            component(p + i * stride + size_t(c * size), a.componentType, a.normalized);
+  }
+  if (a.sparse.isSparse) {
+    const int n = a.sparse.count;
+    if (n < 0 || size_t(n) > a.count) {
+      throw PrimitiveError{name + " has " + std::to_string(n) + " sparse values for " +
+                           std::to_string(a.count) + " elements"};
+    }
+    const int indexType = a.sparse.indices.componentType;
+    const int indexSize = componentSize(indexType);
+    if (indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
+      throw PrimitiveError{name + ": sparse indices must be unsigned integers"};
+    }
+    size_t stride = 0;
+    const unsigned char* idx =
+        viewBytes(a.sparse.indices.bufferView, size_t(std::max(0, a.sparse.indices.byteOffset)),
+                  size_t(n), size_t(indexSize), stride, false, name + " sparse indices");
+    const unsigned char* val =
+        viewBytes(a.sparse.values.bufferView, size_t(std::max(0, a.sparse.values.byteOffset)),
+                  size_t(n), elementSize, stride, false, name + " sparse values");
+    for (size_t k = 0; k < size_t(n); ++k) {
+      const double target = component(idx + k * size_t(indexSize), indexType, false);
+      if (!(target < double(a.count))) {
+        throw PrimitiveError{name + ": sparse index " + std::to_string(uint64_t(target)) +
+                             " is beyond its " + std::to_string(a.count) + " elements"};
+      }
+      for (int c = 0; c < components; ++c)
+        values[size_t(target) * size_t(components) + size_t(c)] =
+            component(val + k * elementSize + size_t(c * size), a.componentType, a.normalized);
+    }
+  }
+  return values;
+}
+
+std::vector<uint32_t> GltfReader::indices(int index, const std::string& what) const {
+  if (index >= 0 && size_t(index) < model_.accessors.size()) {
+    const int type = model_.accessors[size_t(index)].componentType;
+    if (type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
+      throw PrimitiveError{what + " (accessor " + std::to_string(index) +
+                           ") must hold unsigned 8-, 16- or 32-bit integers"};
+    }
+  }
+  const std::vector<double> values = accessor(index, 1, what);
+  std::vector<uint32_t> out(values.size());
+  for (size_t i = 0; i < values.size(); ++i) out[i] = uint32_t(values[i]);
+  return out;
+}
+
+glm::dmat4 GltfReader::localTransform(const tinygltf::Node& node, int index) const {
+  const std::string name =
+      "node " + std::to_string(index) + (node.name.empty() ? "" : " '" + node.name + "'");
+  auto finite = [&](const std::vector<double>& v, size_t size, const char* what) {
+    if (v.empty()) return false;
+    if (v.size() != size) {
+      throw Error("mesh",
+                  name + ": " + what + " has " + std::to_string(v.size()) + " numbers, not " +
+                      std::to_string(size),
+                  path_);
+    }
+    for (double x : v)
+      if (!std::isfinite(x)) throw Error("mesh", name + ": " + what + " is not finite", path_);
+    return true;
+  };
+  if (finite(node.matrix, 16, "matrix")) {
+    glm::dmat4 m;
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) m[c][r] = node.matrix[size_t(4 * c + r)];  // column-major
+    return m;
+  }
+  glm::dmat4 m(1.0);
+  if (finite(node.translation, 3, "translation")) {
+    m[3] = glm::dvec4(node.translation[0], node.translation[1], node.translation[2], 1.0);
+  }
+  if (finite(node.rotation, 4, "rotation")) {
+    glm::dquat q(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]);
+    const double len = glm::length(q);
+    if (!(len > 0.0)) throw Error("mesh", name + ": rotation is a zero quaternion", path_);
+    m = m * glm::mat4_cast(q / len);
+  }
+  if (finite(node.scale, 3, "scale")) {
+    m = m * glm::dmat4(glm::dvec4(node.scale[0], 0, 0, 0), glm::dvec4(0, node.scale[1], 0, 0),
+                       glm::dvec4(0, 0, node.scale[2], 0), glm::dvec4(0, 0, 0, 1));
+  }
+  return m;
+}
+
+Image GltfReader::decodeImage(int imageIndex) {
+  if (imageIndex < 0 || size_t(imageIndex) >= model_.images.size()) {
+    throw Error("mesh", "refers to image " + std::to_string(imageIndex) + ", the file has " +
+                            std::to_string(model_.images.size()));
+  }
+  const tinygltf::Image& image = model_.images[size_t(imageIndex)];
+  if (!image.uri.empty()) {
+    // An image file beside the glTF: its URI is relative and percent-encoded.
+    std::string decoded;
+    for (size_t i = 0; i < image.uri.size(); ++i) {
+      if (image.uri[i] == '%' && i + 2 < image.uri.size() &&
+          std::isxdigit(static_cast<unsigned char>(image.uri[i + 1])) &&
+          std::isxdigit(static_cast<unsigned char>(image.uri[i + 2]))) {
+        decoded += char(std::stoi(image.uri.substr(i + 1, 2), nullptr, 16));
+        i += 2;
+      } else {
+        decoded += image.uri[i];
+      }
+    }
+    return textureImage(ingest::readImage(path_.parent_path() / decoded, "mesh").image, "sRGB");
+  }
+  std::span<const unsigned char> bytes(image.image);
+  std::string where = "embedded";
+  if (image.bufferView >= 0) {
+    const int view = image.bufferView;
+    size_t stride = 0;
+    size_t length = 0;
+    if (size_t(view) < model_.bufferViews.size())
+      length = model_.bufferViews[size_t(view)].byteLength;
+    try {
+      bytes = {viewBytes(view, 0, 1, length, stride, false, "image"), length};
+    } catch (const PrimitiveError& e) {
+      throw Error("mesh", e.what);
+    }
+    where = "in buffer view " + std::to_string(view);
+  }
+  // The format from the MIME type, else from the first bytes.
+  std::string ext;
+  const std::string& mime = image.mimeType;
+  if (mime == "image/png" || (bytes.size() >= 4 && std::memcmp(bytes.data(), "\x89PNG", 4) == 0))
+    ext = ".png";
+  else if (mime == "image/jpeg" ||
+           (bytes.size() >= 3 && std::memcmp(bytes.data(), "\xFF\xD8\xFF", 3) == 0))
+    ext = ".jpg";
+  else if (mime == "image/webp")
+    ext = ".webp";
+  if (ext.empty()) {
+    throw Error("mesh", "an image of type '" + (mime.empty() ? std::string("unknown") : mime) +
+                            "', which compose cannot decode");
+  }
+  const fs::path name = path_.string() + " image " + std::to_string(imageIndex) + " (" + where +
+                        (mime.empty() ? "" : ", " + mime) + ")" + ext;
+  return textureImage(ingest::readImageFromMemory(bytes, name, "mesh").image, "sRGB");
+}
+
+int GltfReader::texture(int gltfTexture, const std::string& materialName) {
+  const auto [it, inserted] = textures_.try_emplace(gltfTexture, -1);
+  if (!inserted) return it->second;
+  try {
+    if (gltfTexture < 0 || size_t(gltfTexture) >= model_.textures.size()) {
+      throw Error("mesh", "refers to texture " + std::to_string(gltfTexture) + ", the file has " +
+                              std::to_string(model_.textures.size()));
+    }
+    const tinygltf::Texture& t = model_.textures[size_t(gltfTexture)];
+    Texture texture;
+    texture.image = decodeImage(t.source);
+    const tinygltf::Image& image = model_.images[size_t(t.source)];
+    texture.file = image.uri.empty()
+                       ? fs::path(path_.string() + " image " + std::to_string(t.source))
+                       : path_.parent_path() / image.uri;
+    if (t.sampler >= 0 && size_t(t.sampler) < model_.samplers.size()) {
+      auto wrap = [](int mode) {
+        return mode == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE     ? Texture::Wrap::Clamp
+               : mode == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT ? Texture::Wrap::Mirror
+                                                               : Texture::Wrap::Repeat;
+      };
+      texture.wrapU = wrap(model_.samplers[size_t(t.sampler)].wrapS);
+      texture.wrapV = wrap(model_.samplers[size_t(t.sampler)].wrapT);
+    }
+    it->second = int(mesh_.textures.size());
+    mesh_.textures.push_back(std::move(texture));
+  } catch (const Error& e) {
+    mesh_.warnings.push_back("the base-colour texture of material '" + materialName +
+                             "' cannot be read (" + e.describe() +
+                             "): the material renders with its base colour factor");
+  }
+  return it->second;
+}
+
+uint32_t GltfReader::material(int gltfMaterial) {
+  if (gltfMaterial < 0 || size_t(gltfMaterial) >= model_.materials.size()) gltfMaterial = -1;
+  const auto [it, inserted] =
+      materials_.try_emplace(gltfMaterial, uint32_t(mesh_.materials.size()));
+  if (!inserted) return it->second;
+  Material m;
+  int set = 0;
+  if (gltfMaterial < 0) {
+    m.name = "(default)";
+    m.baseColor = glm::vec3(kDefaultAlbedo);
+  } else {
+    const tinygltf::Material& gm = model_.materials[size_t(gltfMaterial)];
+    m.name = gm.name.empty() ? "material " + std::to_string(gltfMaterial) : gm.name;
+    const std::vector<double>& f = gm.pbrMetallicRoughness.baseColorFactor;
+    if (f.size() >= 3 && std::isfinite(f[0] + f[1] + f[2])) {
+      m.baseColor = glm::vec3(float(f[0]), float(f[1]), float(f[2]));
+    } else {
+      mesh_.warnings.push_back("material '" + m.name +
+                               "' has no valid baseColorFactor: using white");
+    }
+    const tinygltf::TextureInfo& info = gm.pbrMetallicRoughness.baseColorTexture;
+    if (info.index >= 0) {
+      m.texture = texture(info.index, m.name);
+      set = info.texCoord;
+      // KHR_texture_transform, defined on glTF's texture coordinates (v down); ours have v up:
+      // uv' = F T R S F uv with F the flip (u, v) → (u, 1 - v).
+      const auto ext = info.extensions.find("KHR_texture_transform");
+      if (ext != info.extensions.end() && ext->second.IsObject()) {
+        const tinygltf::Value& t = ext->second;
+        auto number = [](const tinygltf::Value& v, double fallback) {
+          return v.IsNumber() ? v.GetNumberAsDouble() : fallback;
+        };
+        const double ox = number(t.Get("offset").Get(0), 0.0);
+        const double oy = number(t.Get("offset").Get(1), 0.0);
+        const double rotation = number(t.Get("rotation"), 0.0);
+        const double sx = number(t.Get("scale").Get(0), 1.0);
+        const double sy = number(t.Get("scale").Get(1), 1.0);
+        if (t.Has("texCoord") && t.Get("texCoord").IsNumber())
+          set = t.Get("texCoord").GetNumberAsInt();
+        const double c = std::cos(rotation), s = std::sin(rotation);
+        const glm::dmat3 translate(1, 0, 0, 0, 1, 0, ox, oy, 1);
+        const glm::dmat3 rotate(c, s, 0, -s, c, 0, 0, 0, 1);
+        const glm::dmat3 scale(sx, 0, 0, 0, sy, 0, 0, 0, 1);
+        const glm::dmat3 flip(1, 0, 0, 0, -1, 0, 0, 1, 1);
+        m.uvTransform = glm::mat3(flip * translate * rotate * scale * flip);
+      }
+    }
+  }
+  mesh_.materials.push_back(m);
+  texCoordSet_.push_back(set);
+  return it->second;
+}
+
+void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
+                              const glm::dmat4& objectFromNode) {
+  ++primitives_;
+  const int mode = primitive.mode < 0 ? TINYGLTF_MODE_TRIANGLES : primitive.mode;
+  if (mode == TINYGLTF_MODE_POINTS || mode == TINYGLTF_MODE_LINE ||
+      mode == TINYGLTF_MODE_LINE_LOOP || mode == TINYGLTF_MODE_LINE_STRIP) {
+    ++skippedLines;
+    return;
+  }
+  if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+      mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+    throw PrimitiveError{"unknown primitive mode " + std::to_string(mode)};
+  }
+  const auto attribute = [&](const std::string& name) {
+    const auto it = primitive.attributes.find(name);
+    return it == primitive.attributes.end() ? -1 : it->second;
+  };
+  const int positionAccessor = attribute("POSITION");
+  if (positionAccessor < 0) throw PrimitiveError{"no POSITION attribute"};
+  const std::vector<double> positions = accessor(positionAccessor, 3, "POSITION");
+  const size_t n = positions.size() / 3;
+  std::vector<double> normals;
+  if (const int a = attribute("NORMAL"); a >= 0) {
+    normals = accessor(a, 3, "NORMAL");
+    if (normals.size() != positions.size())
+      throw PrimitiveError{"NORMAL and POSITION have different counts"};
+  }
+  const uint32_t materialIndex = material(primitive.material);
+  (primitive.material >= 0 ? someMaterial_ : noMaterial_) = true;
+  std::vector<double> texcoords;
+  if (mesh_.materials[materialIndex].texture >= 0) {
+    const std::string set = "TEXCOORD_" + std::to_string(texCoordSet_[materialIndex]);
+    if (const int a = attribute(set); a >= 0) {
+      texcoords = accessor(a, 2, set);
+      if (texcoords.size() != 2 * n)
+        throw PrimitiveError{set + " and POSITION have different counts"};
+    } else {
+      ++missingTexcoords_;
+    }
+  }
+  if (attribute("COLOR_0") >= 0) ++colours_;
+  if (!primitive.targets.empty()) ++morphs_;
+
+  std::vector<uint32_t> order;
+  if (primitive.indices >= 0) {
+    order = indices(primitive.indices, "indices");
+  } else {
+    order.resize(n);
+    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
+  }
+  // Corners of the triangles (glTF 2.0 §3.7.2.1: strips alternate, fans turn about the first).
+  std::vector<uint32_t> corners;
+  if (mode == TINYGLTF_MODE_TRIANGLES) {
+    corners.assign(order.begin(), order.begin() + std::ptrdiff_t(order.size() / 3 * 3));
+  } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+    for (size_t i = 0; i + 2 < order.size(); ++i) {
+      corners.insert(corners.end(), {order[i], order[i + 1 + i % 2], order[i + 2 - i % 2]});
+    }
+  } else {
+    for (size_t i = 0; i + 2 < order.size(); ++i)
+      corners.insert(corners.end(), {order[i + 1], order[i + 2], order[0]});
+  }
+
+  // Into object space; a mirroring transform turns the winding round to keep it outwards.
+  const glm::dmat3 linear(objectFromNode);
+  const bool mirrored = glm::determinant(linear) < 0.0;
+  const glm::dmat3 normalFromNode = glm::transpose(glm::inverse(linear));
+  const uint32_t base = uint32_t(mesh_.positions.size());
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3 p(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
+    mesh_.positions.emplace_back(objectFromNode * glm::dvec4(p, 1.0));
+    if (!normals.empty()) {
+      const glm::dvec3 nn =
+          normalFromNode * glm::dvec3(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]);
+      mesh_.normals.emplace_back(nn);  // normalised (or rejected) in validation
+    } else {
+      mesh_.normals.emplace_back(0.0f);
+    }
+    out_.hasNormal.push_back(normals.empty() ? 0 : 1);
+    mesh_.texcoords.emplace_back(
+        texcoords.empty() ? glm::vec2(0.0f)
+                          : glm::vec2(float(texcoords[2 * i]), float(1.0 - texcoords[2 * i + 1])));
+  }
+  for (size_t t = 0; t + 2 < corners.size(); t += 3) {
+    uint32_t c[3] = {corners[t], corners[t + 1], corners[t + 2]};
+    if (c[0] >= n || c[1] >= n || c[2] >= n) {
+      ++droppedIndices;
+      continue;
+    }
+    if (mirrored) std::swap(c[1], c[2]);
+    for (uint32_t k : c) mesh_.indices.push_back(base + k);
+    mesh_.triangleMaterial.push_back(materialIndex);
+  }
+  triangles_ += corners.size() / 3;
+}
+
+void GltfReader::read() {
+  for (const std::string& ext : model_.extensionsRequired) {
+    if (supportedRequiredExtensions().count(ext)) continue;
+    std::string why =
+        "the file requires the glTF extension " + ext + ", which compose does not support";
+    if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression")
+      why += " (compressed geometry: export it without compression)";
+    throw Error("mesh", why, path_);
+  }
+  // The scene: the default one, else the first, else every root node.
+  std::vector<int> roots;
+  if (!model_.scenes.empty()) {
+    const int scene = model_.defaultScene >= 0 && size_t(model_.defaultScene) < model_.scenes.size()
+                          ? model_.defaultScene
+                          : 0;
+    roots = model_.scenes[size_t(scene)].nodes;
+  } else {
+    std::vector<uint8_t> isChild(model_.nodes.size(), 0);
+    for (const tinygltf::Node& node : model_.nodes)
+      for (int c : node.children)
+        if (c >= 0 && size_t(c) < isChild.size()) isChild[size_t(c)] = 1;
+    for (size_t i = 0; i < model_.nodes.size(); ++i)
+      if (!isChild[i]) roots.push_back(int(i));
+  }
+  // Depth first, without recursion (a deep hierarchy must not overflow the stack); glTF nodes
+  // form a forest, so a node met twice is a broken file.
+  std::vector<uint8_t> visited(model_.nodes.size(), 0);
+  std::vector<std::pair<int, glm::dmat4>> stack;
+  for (auto r = roots.rbegin(); r != roots.rend(); ++r) stack.emplace_back(*r, glm::dmat4(1.0));
+  std::vector<std::string> skipped;
+  while (!stack.empty()) {
+    const auto [index, parent] = stack.back();
+    stack.pop_back();
+    if (index < 0 || size_t(index) >= model_.nodes.size()) {
+      throw Error("mesh",
+                  "the scene refers to node " + std::to_string(index) + ", the file has " +
+                      std::to_string(model_.nodes.size()),
+                  path_);
+    }
+    if (visited[size_t(index)]) {
+      throw Error("mesh",
+                  "node " + std::to_string(index) +
+                      " appears twice in the node hierarchy (glTF nodes form a tree)",
+                  path_);
+    }
+    visited[size_t(index)] = 1;
+    const tinygltf::Node& node = model_.nodes[size_t(index)];
+    const glm::dmat4 objectFromNode = parent * localTransform(node, index);
+    if (node.mesh >= 0) {
+      if (size_t(node.mesh) >= model_.meshes.size()) {
+        throw Error("mesh",
+                    "node " + std::to_string(index) + " refers to mesh " +
+                        std::to_string(node.mesh) + ", the file has " +
+                        std::to_string(model_.meshes.size()),
+                    path_);
+      }
+      if (node.skin >= 0) ++skinned_;
+      const tinygltf::Mesh& m = model_.meshes[size_t(node.mesh)];
+      const std::string meshName =
+          "mesh " + std::to_string(node.mesh) + (m.name.empty() ? "" : " '" + m.name + "'");
+      for (size_t p = 0; p < m.primitives.size(); ++p) {
+        const std::string where = meshName + " primitive " + std::to_string(p);
+        try {
+          addPrimitive(m.primitives[p], objectFromNode);
+        } catch (const PrimitiveError& e) {
+          skipped.push_back(where + ": " + e.what);
+        }
+      }
+    }
+    for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
+      stack.emplace_back(*c, objectFromNode);
+  }
+
+  for (const std::string& s : skipped) mesh_.warnings.push_back("skipped " + s);
+  if (skippedLines) {
+    mesh_.warnings.push_back("skipped " + count(skippedLines, "primitive", "primitives") +
+                             " of points or lines (only triangles render)");
+  }
+  if (droppedIndices) {
+    mesh_.warnings.push_back("dropped " + std::to_string(droppedIndices) + " of " +
+                             std::to_string(triangles_) +
+                             " triangles whose indices refer to vertices the primitive does not "
+                             "have");
+  }
+  if (colours_) {
+    mesh_.warnings.push_back("ignored the vertex colours (COLOR_0) of " +
+                             count(colours_, "primitive", "primitives") +
+                             ": the albedo is the material's base colour");
+  }
+  if (morphs_) {
+    mesh_.warnings.push_back("ignored the morph targets of " +
+                             count(morphs_, "primitive", "primitives") +
+                             ": the base shape renders");
+  }
+  if (skinned_) {
+    mesh_.warnings.push_back(count(skinned_, "node is", "nodes are") +
+                             " skinned: rendered in the bind pose, under the node transforms");
+  }
+  if (missingTexcoords_) {
+    mesh_.warnings.push_back(count(missingTexcoords_, "primitive has", "primitives have") +
+                             " a base-colour texture but not its texture coordinates: rendered "
+                             "with the base colour factor");
+  }
+  if (mesh_.indices.empty()) {
+    std::string why = "nothing renderable: ";
+    if (primitives_ == 0) {
+      why += "the scene has no meshes";
+    } else {
+      why += "no triangles in " + count(primitives_, "primitive", "primitives");
+      if (!skipped.empty()) why += " (" + skipped.front() + ")";
+    }
+    throw Error("mesh", why, path_);
+  }
+  if (!someMaterial_) {
+    // No primitive names a material: the renderer's albedo (--albedo) applies everywhere.
+    mesh_.materials.clear();
+    mesh_.triangleMaterial.clear();
+  } else if (noMaterial_) {
+    mesh_.warnings.push_back("some primitives have no material: rendered with the default albedo");
+  }
+}
+
+}  // namespace
+
+LoadedMesh loadGltf(const fs::path& path) {
+  tinygltf::TinyGLTF parser;
+  parser.SetImageLoader(&keepEncodedImage, nullptr);
+  tinygltf::Model model;
+  std::string err, warn;
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  const bool ok = ext == ".glb" ? parser.LoadBinaryFromFile(&model, &err, &warn, path.string())
+                                : parser.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  auto lines = [](const std::string& text) {
+    std::vector<std::string> out;
+    size_t start = 0;
+    while (start < text.size()) {
+      size_t end = text.find('\n', start);
+      if (end == std::string::npos) end = text.size();
+      std::string line = text.substr(start, end - start);
+      while (!line.empty() && (line.back() == '\r' || line.back() == '.' || line.back() == ' '))
+        line.pop_back();
+      if (!line.empty()) out.push_back(line);
+      start = end + 1;
+    }
+    return out;
+  };
+  if (!ok) {
+    const std::vector<std::string> why = lines(err);
+    std::string joined;
+    for (const std::string& w : why) joined += (joined.empty() ? "" : "; ") + w;
+    throw Error("mesh", "cannot parse glTF: " + (joined.empty() ? "unknown reason" : joined), path);
+  }
+  LoadedMesh loaded;
+  GltfReader(model, path, loaded).read();
+  return loaded;
+}
+
+}  // namespace compose::render::detail

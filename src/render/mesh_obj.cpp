@@ -1,0 +1,352 @@
+// Wavefront OBJ and MTL (see mesh.h for what is read and how).
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <climits>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string_view>
+#include <unordered_map>
+
+#include <tiny_obj_loader.h>
+
+#include "core/error.h"
+#include "core/output_files.h"
+#include "ingest/image_io.h"
+#include "render/mesh_formats.h"
+
+namespace compose::render::detail {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// What the first pass over the text found besides malformed numbers.
+struct ObjScan {
+  bool smoothingGroups = false;  // an `s` statement
+  size_t linesAndPoints = 0;     // `l` and `p` elements (not rendered)
+};
+
+// tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so, and an
+// index beyond int's range wraps around. This pass over the text finds them first and names the
+// line: every field of v, vn and vt must be a finite number, and every corner of f an integer
+// reference within int's range.
+ObjScan scanObj(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  ObjScan scan;
+  std::string line;
+  size_t lineNo = 0;
+  auto fail = [&](const std::string& what) {
+    throw Error("mesh", "line " + std::to_string(lineNo) + ": " + what, path);
+  };
+  std::vector<std::string_view> fields;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    fields.clear();
+    for (size_t i = 0; i < line.size();) {
+      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      size_t j = i;
+      while (j < line.size() && !std::isspace(static_cast<unsigned char>(line[j]))) ++j;
+      if (j > i) fields.emplace_back(line.data() + i, j - i);
+      i = j;
+    }
+    if (fields.empty() || fields[0].front() == '#') continue;
+    const std::string_view key = fields[0];
+    if (key == "v" || key == "vn" || key == "vt") {
+      const size_t needed = key == "vt" ? 1 : 3;
+      if (fields.size() < needed + 1) {
+        fail("'" + std::string(key) + "' needs " + std::to_string(needed) + " numbers, has " +
+             std::to_string(fields.size() - 1));
+      }
+      for (size_t f = 1; f < fields.size(); ++f) {
+        const std::string text(fields[f]);
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end != text.c_str() + text.size() || !std::isfinite(v)) {
+          fail(std::string(key == "v"    ? "vertex coordinate"
+                           : key == "vn" ? "normal component"
+                                         : "texture coordinate") +
+               " '" + text + "' is not a finite number");
+        }
+      }
+    } else if (key == "f") {
+      if (fields.size() < 4) fail("a face needs at least 3 corners");
+      for (size_t f = 1; f < fields.size(); ++f) {
+        // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
+        const std::string_view corner = fields[f];
+        size_t start = 0;
+        for (int part = 0; part < 3 && start <= corner.size(); ++part) {
+          const size_t slash = std::min(corner.find('/', start), corner.size());
+          const std::string_view number = corner.substr(start, slash - start);
+          if (!(number.empty() && part > 0)) {
+            long long value = 0;
+            const auto [ptr, ec] =
+                std::from_chars(number.data(), number.data() + number.size(), value);
+            if (ec != std::errc() || ptr != number.data() + number.size() || value == 0 ||
+                value > INT_MAX || value < -INT_MAX) {
+              fail("face corner '" + std::string(corner) + "' is not a valid vertex reference");
+            }
+          }
+          if (slash == corner.size()) break;
+          start = slash + 1;
+        }
+      }
+    } else if (key == "s") {
+      scan.smoothingGroups = true;
+    } else if (key == "l" || key == "p") {
+      ++scan.linesAndPoints;
+    }
+  }
+  return scan;
+}
+
+// Material libraries, found relative to the OBJ's folder (Windows separators accepted); the ones
+// that cannot be read are remembered for a warning instead of failing the load.
+class MaterialLibraries : public tinyobj::MaterialReader {
+ public:
+  explicit MaterialLibraries(fs::path folder) : folder_(std::move(folder)) {}
+  bool operator()(const std::string& name, std::vector<tinyobj::material_t>* materials,
+                  std::map<std::string, int>* names, std::string* warn, std::string* err) override {
+    std::string relative = name;
+    std::replace(relative.begin(), relative.end(), '\\', '/');
+    const fs::path file = folder_ / relative;
+    std::error_code ec;
+    std::ifstream in;
+    if (!fs::is_directory(file, ec)) in.open(file, std::ios::binary);
+    if (!in) {
+      const int error = fs::is_directory(file, ec) ? EISDIR : errno;
+      unreadable.push_back("material library '" + name + "' cannot be read (" +
+                           std::strerror(error) + ")");
+      return false;
+    }
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    // tinyobjloader gives a material without Kd a black one: remember which have it.
+    std::istringstream lines(text);
+    std::string line, current;
+    while (std::getline(lines, line)) {
+      std::istringstream fields(line);
+      std::string key;
+      fields >> key;
+      if (key == "newmtl") {
+        std::getline(fields >> std::ws, current);
+        while (!current.empty() && std::isspace(static_cast<unsigned char>(current.back())))
+          current.pop_back();
+      } else if (key == "Kd") {
+        withKd.insert(current);
+      }
+    }
+    std::istringstream stream(text);
+    tinyobj::LoadMtl(names, materials, &stream, warn, err);
+    return true;
+  }
+  std::vector<std::string> unreadable;
+  std::set<std::string> withKd;  // materials that give Kd
+
+ private:
+  fs::path folder_;
+};
+
+// (position, texture coordinate, normal) indices of a face corner, -1 where absent.
+struct CornerKey {
+  int v, vt, vn;
+  bool operator==(const CornerKey&) const = default;
+};
+struct CornerHash {
+  size_t operator()(const CornerKey& k) const {
+    return (size_t(uint32_t(k.v)) * 0x9E3779B97F4A7C15ull) ^
+           (size_t(uint32_t(k.vt)) * 0xC2B2AE3D27D4EB4Full) ^ size_t(uint32_t(k.vn));
+  }
+};
+
+}  // namespace
+
+LoadedMesh loadObj(const fs::path& path) {
+  const ObjScan scan = scanObj(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  tinyobj::attrib_t attrib;
+  std::vector<tinyobj::shape_t> shapes;
+  std::vector<tinyobj::material_t> objMaterials;
+  std::string warn, err;
+  MaterialLibraries libraries(path.parent_path());
+  // Polygons are triangulated below, in their own plane (tinyobjloader's fans and
+  // shorter-diagonal quads can leave a concave polygon's outline).
+  if (!tinyobj::LoadObj(&attrib, &shapes, &objMaterials, &warn, &err, &in, &libraries,
+                        /*triangulate=*/false, /*default_vcols_fallback=*/false)) {
+    while (!err.empty() && (err.back() == '\n' || err.back() == '\r')) err.pop_back();
+    throw Error("mesh", "cannot parse OBJ: " + (err.empty() ? std::string("unknown reason") : err),
+                path);
+  }
+  const size_t vertexCount = attrib.vertices.size() / 3;
+  const size_t normalCount = attrib.normals.size() / 3;
+  const size_t texcoordCount = attrib.texcoords.size() / 2;
+
+  LoadedMesh loaded;
+  Mesh& mesh = loaded.mesh;
+  for (const std::string& w : libraries.unreadable)
+    mesh.warnings.push_back(w + ": its materials render with the default albedo");
+
+  // Materials in the order faces first use them; -1 (no material, or a name no library
+  // defines) becomes a default grey when other faces have materials.
+  std::map<int, uint32_t> materialIndex;
+  std::vector<int> usedMaterials;
+  auto materialOf = [&](int id) {
+    if (id < 0 || size_t(id) >= objMaterials.size()) id = -1;
+    const auto [it, inserted] = materialIndex.try_emplace(id, uint32_t(usedMaterials.size()));
+    if (inserted) usedMaterials.push_back(id);
+    return it->second;
+  };
+
+  std::unordered_map<CornerKey, uint32_t, CornerHash> vertexOf;
+  auto vertex = [&](const CornerKey& key) {
+    const auto [it, inserted] = vertexOf.try_emplace(key, uint32_t(mesh.positions.size()));
+    if (inserted) {
+      const float* p = &attrib.vertices[3 * size_t(key.v)];
+      mesh.positions.emplace_back(p[0], p[1], p[2]);
+      if (key.vn >= 0) {
+        const float* n = &attrib.normals[3 * size_t(key.vn)];
+        mesh.normals.emplace_back(n[0], n[1], n[2]);
+      } else {
+        mesh.normals.emplace_back(0.0f);
+      }
+      loaded.hasNormal.push_back(key.vn >= 0 ? 1 : 0);
+      if (key.vt >= 0) {
+        const float* t = &attrib.texcoords[2 * size_t(key.vt)];
+        mesh.texcoords.emplace_back(t[0], t[1]);
+      } else {
+        mesh.texcoords.emplace_back(0.0f);
+      }
+    }
+    return it->second;
+  };
+
+  size_t faces = 0, outOfRange = 0, noMaterial = 0;
+  std::vector<uint32_t> polygon;
+  std::vector<glm::vec3> corners;
+  for (const tinyobj::shape_t& shape : shapes) {
+    const tinyobj::mesh_t& m = shape.mesh;
+    size_t offset = 0;
+    for (size_t f = 0; f < m.num_face_vertices.size(); ++f) {
+      const size_t n = m.num_face_vertices[f];
+      const size_t first = offset;
+      offset += n;
+      ++faces;
+      bool valid = n >= 3 && offset <= m.indices.size();
+      for (size_t k = first; valid && k < offset; ++k) {
+        const tinyobj::index_t& idx = m.indices[k];
+        valid = idx.vertex_index >= 0 && size_t(idx.vertex_index) < vertexCount &&
+                idx.normal_index < int(std::min<size_t>(normalCount, INT_MAX)) &&
+                idx.texcoord_index < int(std::min<size_t>(texcoordCount, INT_MAX)) &&
+                idx.normal_index >= -1 && idx.texcoord_index >= -1;
+      }
+      if (!valid) {
+        ++outOfRange;
+        continue;
+      }
+      polygon.clear();
+      corners.clear();
+      for (size_t k = first; k < offset; ++k) {
+        const tinyobj::index_t& idx = m.indices[k];
+        polygon.push_back(vertex({idx.vertex_index, idx.texcoord_index, idx.normal_index}));
+        corners.push_back(mesh.positions[polygon.back()]);
+      }
+      const int objMaterial = f < m.material_ids.size() ? m.material_ids[f] : -1;
+      const uint32_t material = materialOf(objMaterial);
+      const uint32_t group = f < m.smoothing_group_ids.size() ? m.smoothing_group_ids[f] : 0;
+      for (uint32_t c : triangulatePolygon(corners)) mesh.indices.push_back(polygon[c]);
+      const size_t triangles = n - 2;
+      mesh.triangleMaterial.insert(mesh.triangleMaterial.end(), triangles, material);
+      loaded.smoothingGroup.insert(loaded.smoothingGroup.end(), triangles, group);
+      if (usedMaterials[material] < 0) noMaterial += 1;
+    }
+  }
+  if (outOfRange) {
+    const std::string what = "dropped " + std::to_string(outOfRange) + " of " +
+                             std::to_string(faces) +
+                             " faces that refer to vertices, texture coordinates or normals the "
+                             "file does not have (it has " +
+                             count(vertexCount, "vertex", "vertices") + ", " +
+                             count(texcoordCount, "texture coordinate", "texture coordinates") +
+                             ", " + count(normalCount, "normal", "normals") + ")";
+    if (outOfRange == faces) throw Error("mesh", "nothing renderable: " + what, path);
+    mesh.warnings.push_back(what);
+  }
+  if (scan.linesAndPoints) {
+    mesh.warnings.push_back(
+        "ignored " +
+        count(scan.linesAndPoints, "line or point element", "line and point elements") +
+        " (only faces render)");
+  }
+  if (!scan.smoothingGroups) loaded.smoothingGroup.clear();
+
+  // Materials: Kd is the base colour, map_Kd its texture (read once per file).
+  const bool anyMaterial =
+      std::any_of(usedMaterials.begin(), usedMaterials.end(), [](int id) { return id >= 0; });
+  if (anyMaterial) {
+    if (noMaterial) {
+      mesh.warnings.push_back(count(noMaterial, "face has", "faces have") +
+                              " no material (or one no material library defines): rendered "
+                              "with the default albedo");
+    }
+    std::map<fs::path, int> textureOf;
+    for (int id : usedMaterials) {
+      Material material;
+      if (id < 0) {
+        material.name = "(default)";
+        material.baseColor = glm::vec3(kDefaultAlbedo);
+        mesh.materials.push_back(material);
+        continue;
+      }
+      const tinyobj::material_t& om = objMaterials[size_t(id)];
+      material.name = om.name;
+      material.baseColor = glm::vec3(om.diffuse[0], om.diffuse[1], om.diffuse[2]);
+      if (!libraries.withKd.count(om.name)) {
+        // No Kd: the texture alone, or the default grey.
+        material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
+      }
+      if (!std::isfinite(material.baseColor.x + material.baseColor.y + material.baseColor.z)) {
+        mesh.warnings.push_back("material '" + om.name +
+                                "' has a non-finite Kd: using the default");
+        material.baseColor = glm::vec3(kDefaultAlbedo);
+      }
+      if (!om.diffuse_texname.empty()) {
+        std::string relative = om.diffuse_texname;
+        std::replace(relative.begin(), relative.end(), '\\', '/');
+        const fs::path file = path.parent_path() / relative;
+        auto [it, inserted] = textureOf.try_emplace(file, -1);
+        if (inserted) {
+          try {
+            Texture texture;
+            texture.file = file;
+            texture.image = textureImage(ingest::readImage(file, "mesh").image, "");
+            const tinyobj::texture_option_t& o = om.diffuse_texopt;
+            if (o.clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
+            it->second = int(mesh.textures.size());
+            mesh.textures.push_back(std::move(texture));
+          } catch (const Error& e) {
+            mesh.warnings.push_back("texture '" + om.diffuse_texname + "' of material '" + om.name +
+                                    "' cannot be read (" + e.what() +
+                                    "): the material renders with its Kd");
+          }
+        }
+        material.texture = it->second;
+        // map_Kd -s and -o: uv' = uv * scale + offset.
+        const tinyobj::texture_option_t& o = om.diffuse_texopt;
+        material.uvTransform = glm::mat3(o.scale[0], 0.0f, 0.0f, 0.0f, o.scale[1], 0.0f,
+                                         o.origin_offset[0], o.origin_offset[1], 1.0f);
+      }
+      mesh.materials.push_back(material);
+    }
+  } else {
+    mesh.triangleMaterial.clear();
+  }
+  return loaded;
+}
+
+}  // namespace compose::render::detail
