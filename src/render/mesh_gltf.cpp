@@ -154,7 +154,9 @@ class GltfReader {
   void addPrimitive(const tinygltf::Primitive& primitive, const glm::dmat4& objectFromNode);
   uint32_t material(int gltfMaterial);
   int texture(int gltfTexture, const std::string& materialName);
-  Image decodeImage(int imageIndex);
+  // The pixels of image `imageIndex`; `file` is set to its file, or to a description of where
+  // in the glTF it is embedded.
+  Image decodeImage(int imageIndex, fs::path& file);
 
   const tinygltf::Model& model_;
   const fs::path& path_;
@@ -324,7 +326,7 @@ glm::dmat4 GltfReader::localTransform(const tinygltf::Node& node, int index) con
   return m;
 }
 
-Image GltfReader::decodeImage(int imageIndex) {
+Image GltfReader::decodeImage(int imageIndex, fs::path& file) {
   if (imageIndex < 0 || size_t(imageIndex) >= model_.images.size()) {
     throw Error("mesh", "refers to image " + std::to_string(imageIndex) + ", the file has " +
                             std::to_string(model_.images.size()));
@@ -343,7 +345,8 @@ Image GltfReader::decodeImage(int imageIndex) {
         decoded += image.uri[i];
       }
     }
-    return textureImage(ingest::readImage(path_.parent_path() / decoded, "mesh").image, "sRGB");
+    file = path_.parent_path() / decoded;
+    return textureImage(ingest::readImage(file, "mesh").image, "sRGB");
   }
   std::span<const unsigned char> bytes(image.image);
   std::string where = "embedded";
@@ -374,9 +377,9 @@ Image GltfReader::decodeImage(int imageIndex) {
     throw Error("mesh", "an image of type '" + (mime.empty() ? std::string("unknown") : mime) +
                             "', which compose cannot decode");
   }
-  const fs::path name = path_.string() + " image " + std::to_string(imageIndex) + " (" + where +
-                        (mime.empty() ? "" : ", " + mime) + ")" + ext;
-  return textureImage(ingest::readImageFromMemory(bytes, name, "mesh").image, "sRGB");
+  file = path_.string() + " image " + std::to_string(imageIndex) + " (" + where +
+         (mime.empty() ? "" : ", " + mime) + ")" + ext;
+  return textureImage(ingest::readImageFromMemory(bytes, file, "mesh").image, "sRGB");
 }
 
 int GltfReader::texture(int gltfTexture, const std::string& materialName) {
@@ -389,11 +392,7 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
     }
     const tinygltf::Texture& t = model_.textures[size_t(gltfTexture)];
     Texture texture;
-    texture.image = decodeImage(t.source);
-    const tinygltf::Image& image = model_.images[size_t(t.source)];
-    texture.file = image.uri.empty()
-                       ? fs::path(path_.string() + " image " + std::to_string(t.source))
-                       : path_.parent_path() / image.uri;
+    texture.image = decodeImage(t.source, texture.file);
     if (t.sampler >= 0 && size_t(t.sampler) < model_.samplers.size()) {
       auto wrap = [](int mode) {
         return mode == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE     ? Texture::Wrap::Clamp

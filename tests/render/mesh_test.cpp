@@ -4,6 +4,8 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/image.h"
+#include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -207,6 +209,167 @@ TEST(Mesh, TrianglesWoundAgainstTheirNeighboursAreTurnedOutwards) {
   for (size_t i = 0; i < inside.positions.size(); ++i)
     EXPECT_GT(glm::dot(inside.normals[i], glm::normalize(inside.positions[i] - glm::vec3(0.5f))),
               0.99f);
+}
+
+// The area of a triangle list and whether every triangle faces +Z.
+std::pair<float, bool> areaFacingZ(const Mesh& m) {
+  float area = 0.0f;
+  bool up = true;
+  for (size_t t = 0; t < m.triangleCount(); ++t) {
+    const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                    c = m.positions[m.indices[3 * t + 2]];
+    const glm::vec3 n = glm::cross(b - a, c - a);
+    area += 0.5f * glm::length(n);
+    up = up && n.z > 0.0f;
+  }
+  return {area, up};
+}
+
+TEST(Mesh, ConcavePolygonsAreTriangulatedInsideTheirOutline) {
+  TempDir dir;
+  // A dart (concave quad: its 0-2 diagonal lies outside), an arrow of 7 corners and a U of 8,
+  // all in the plane z = 0 facing +Z. Triangles inside the outline add up to its area and all
+  // face the same way; a triangle outside it would overlap others or turn over.
+  const std::pair<std::string, float> cases[] = {
+      {"v 0 0 0\nv 2 1 0\nv 4 0 0\nv 2 3 0\nf 1 2 3 4\n", 4.0f},
+      {"v 0 1 0\nv 3 1 0\nv 3 0 0\nv 5 2 0\nv 3 4 0\nv 3 3 0\nv 0 3 0\nf 1 2 3 4 5 6 7\n",
+       6.0f + 4.0f},
+      {"v 0 0 0\nv 3 0 0\nv 3 3 0\nv 2 3 0\nv 2 1 0\nv 1 1 0\nv 1 3 0\nv 0 3 0\n"
+       "f 1 2 3 4 5 6 7 8\n",
+       7.0f},
+  };
+  for (const auto& [text, area] : cases) {
+    writeText(dir / "polygon.obj", text);
+    const Mesh m = loadMesh(dir / "polygon.obj");
+    const auto [sum, up] = areaFacingZ(m);
+    EXPECT_NEAR(sum, area, 1e-5f) << text;
+    EXPECT_TRUE(up) << text;
+  }
+  // The same U, tilted out of every axis plane and with its corners starting elsewhere.
+  std::vector<glm::vec3> u = {{1, 1, 0}, {1, 3, 0}, {0, 3, 0}, {0, 0, 0},
+                              {3, 0, 0}, {3, 3, 0}, {2, 3, 0}, {2, 1, 0}};
+  const glm::vec3 ex = glm::normalize(glm::vec3(1, 1, 0)), ey = glm::normalize(glm::vec3(-1, 1, 1));
+  const glm::vec3 ez = glm::cross(ex, ey);
+  for (glm::vec3& p : u) p = p.x * ex + p.y * ey + p.z * ez;
+  const std::vector<uint32_t> tri = triangulatePolygon(u);
+  ASSERT_EQ(tri.size(), 3u * 6u);
+  float sum = 0.0f;
+  for (size_t t = 0; t < tri.size(); t += 3) {
+    const glm::vec3 n = glm::cross(u[tri[t + 1]] - u[tri[t]], u[tri[t + 2]] - u[tri[t]]);
+    EXPECT_GT(glm::dot(n, ez), 0.0f);
+    sum += 0.5f * glm::length(n);
+  }
+  EXPECT_NEAR(sum, 7.0f, 1e-5f);
+}
+
+// A 2x2 8-bit PNG: red, green on the top row; blue, white below.
+void writeQuadrants(const std::filesystem::path& file) {
+  Image img(2, 2, 3, {"R", "G", "B"});
+  const float px[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+  std::copy(px, px + 12, img.pixels.begin());
+  img.colorSpace = "sRGB";
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::UInt8;
+  ingest::writeImage(file, img, options);
+}
+
+bool near(const glm::vec3& a, const glm::vec3& b) {
+  return glm::length(a - b) < 1e-6f;
+}
+
+TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "maps");
+  writeQuadrants(dir / "maps" / "quadrants.png");
+  // Kd times map_Kd (a Windows path); map_Kd alone (Blender writes no Kd then); Kd alone; and a
+  // name no library defines.
+  writeText(dir / "m.mtl",
+            "newmtl painted\nKd 0.5 1 1\nmap_Kd maps\\quadrants.png\n"
+            "newmtl texture\nmap_Kd -s 1 1 1 -o 0.5 0 0 maps/quadrants.png\n"
+            "newmtl plain\r\nKd 0.2 0.4 0.6\r\n");
+  // Texture coordinates (0.25, 0.75), (0.75, 0.75), (0.25, 0.25) in OBJ's convention (v up):
+  // the centres of the red, green and blue texels.
+  writeText(dir / "m.obj",
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
+            "v 4 0 0\nv 5 0 0\nv 4 1 0\nv 6 0 0\nv 7 0 0\nv 6 1 0\n"
+            "vt 0.25 0.75\nvt 0.75 0.75\nvt 0.25 0.25\n"
+            "g first\nusemtl painted\nf 1/1 2/2 3/3\ng second\nusemtl texture\nf 4/1 5/2 6/3\n"
+            "usemtl plain\nf 7 8 9\nusemtl nowhere\nf 10 11 12\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  ASSERT_EQ(m.triangleCount(), 4u);
+  ASSERT_EQ(m.materials.size(), 4u);
+  ASSERT_EQ(m.textures.size(), 1u) << "one file, read once";
+  EXPECT_EQ(m.colorSpace, "lin_rec709");
+  const std::vector<std::string> warnings = {
+      "1 face has no material (or one no material library defines): rendered with the default "
+      "albedo"};
+  EXPECT_EQ(m.warnings, warnings);
+  // Triangles in file order (materials in the order faces first use them).
+  EXPECT_TRUE(near(m.albedoAt(0, 0, 0), {0.5f, 0, 0})) << "red times Kd";
+  EXPECT_TRUE(near(m.albedoAt(0, 1, 0), {0, 1, 0})) << "green";
+  EXPECT_TRUE(near(m.albedoAt(0, 0, 1), {0, 0, 1})) << "blue times Kd";
+  EXPECT_TRUE(near(m.albedoAt(1, 0, 0), {0, 1, 0})) << "-o 0.5: red's place shows green";
+  EXPECT_TRUE(near(m.albedoAt(2, 0.3f, 0.3f), {0.2f, 0.4f, 0.6f}));
+  EXPECT_TRUE(near(m.albedoAt(3, 0.3f, 0.3f), glm::vec3(kDefaultAlbedo)));
+  EXPECT_FALSE(m.normalsFromFile);
+}
+
+TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
+  TempDir dir;
+  writeText(dir / "m.obj", "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
+  const Mesh none = loadMesh(dir / "m.obj");
+  ASSERT_EQ(none.warnings.size(), 1u);
+  EXPECT_EQ(none.warnings[0],
+            "material library 'missing.mtl' cannot be read (No such file or directory): its "
+            "materials render with the default albedo");
+  EXPECT_FALSE(none.hasMaterials()) << "the renderer's albedo applies";
+
+  writeText(dir / "t.mtl", "newmtl a\nKd 0.1 0.2 0.3\nmap_Kd gone.png\n");
+  writeText(dir / "t.obj",
+            "mtllib t.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl a\nf 1/1 2/1 3/1\n");
+  const Mesh untextured = loadMesh(dir / "t.obj");
+  ASSERT_EQ(untextured.warnings.size(), 1u);
+  EXPECT_NE(untextured.warnings[0].find("texture 'gone.png' of material 'a' cannot be read (file "
+                                        "not found): the material renders with its Kd"),
+            std::string::npos)
+      << untextured.warnings[0];
+  ASSERT_TRUE(untextured.hasMaterials());
+  EXPECT_TRUE(near(untextured.albedoAt(0, 0.2f, 0.2f), {0.1f, 0.2f, 0.3f}));
+}
+
+TEST(Mesh, FacesReferringToMissingVerticesAreDroppedWithCounts) {
+  TempDir dir;
+  writeText(dir / "m.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+            "f 1 2 3\nf 1 2 9\nf 1/2 2/1 3/1\nf 1//3 2//1 3//1\nf -1 -2 -7\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  EXPECT_EQ(m.triangleCount(), 1u);
+  ASSERT_GE(m.warnings.size(), 1u);
+  EXPECT_EQ(m.warnings[0],
+            "dropped 4 of 5 faces that refer to vertices, texture coordinates or normals the file "
+            "does not have (it has 3 vertices, 1 texture coordinate, 1 normal)");
+  writeText(dir / "none.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "none.obj"),
+                       "nothing renderable: dropped 1 of 1 faces that refer to vertices");
+  writeText(dir / "huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4294967299\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
+                       "line 4: face corner '4294967299' is not a valid vertex reference");
+}
+
+TEST(Mesh, FacesWithAndWithoutNormalsAndTextureCoordinates) {
+  TempDir dir;
+  // One quad with normals and texture coordinates, one with neither, one with texture
+  // coordinates only, sharing an edge each: file normals are kept, the rest computed.
+  writeText(dir / "m.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\nv 3 0 0\nv 3 1 0\n"
+            "vt 0 0\nvt 1 1\nvn 0 0 1\n"
+            "f 1/1/1 2/2/1 3/1/1 4/2/1\nf 2 5 6 3\nf 5/1 7/2 8/1 6/2\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  EXPECT_EQ(m.triangleCount(), 6u);
+  EXPECT_FALSE(m.normalsFromFile);
+  EXPECT_NE(m.normalsSource.find("from the file for 4 of"), std::string::npos) << m.normalsSource;
+  for (const glm::vec3& n : m.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
+  EXPECT_TRUE(m.texcoords.empty()) << "no textured material: texture coordinates unused";
 }
 
 TEST(Mesh, BicubicPatchesAreTessellatedWeldedAndTurnedUpright) {

@@ -1,0 +1,486 @@
+// glTF 2.0 loading on small files written here: the hierarchy, every primitive mode and index
+// width, sparse and quantised accessors, materials and textures (data URIs and .glb buffer
+// views), and every kind of broken input.
+#include <cmath>
+#include <limits>
+
+#include <glm/geometric.hpp>
+
+#include "core/image.h"
+#include "gltf_builder.h"
+#include "ingest/image_io.h"
+#include "render/mesh.h"
+#include "test_util.h"
+
+namespace compose::render {
+namespace {
+
+using compose::testing::base64;
+using compose::testing::GltfBuilder;
+using compose::testing::readBytes;
+using compose::testing::TempDir;
+using compose::testing::writeText;
+using nlohmann::json;
+
+constexpr int kU8 = 5121, kU16 = 5123, kU32 = 5125, kFloat = 5126;
+
+std::vector<uint8_t> asBytes(const std::vector<float>& v) {
+  std::vector<uint8_t> out(v.size() * 4);
+  std::memcpy(out.data(), v.data(), out.size());
+  return out;
+}
+
+void writeBytes(const std::filesystem::path& file, const std::vector<uint8_t>& bytes) {
+  std::ofstream out(file, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+}
+
+// Whether the mesh has a vertex at p (to 1e-5).
+bool hasPosition(const Mesh& m, const glm::vec3& p) {
+  for (const glm::vec3& q : m.positions)
+    if (glm::length(q - p) < 1e-5f) return true;
+  return false;
+}
+
+glm::vec3 faceNormal(const Mesh& m, size_t t) {
+  const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                  c = m.positions[m.indices[3 * t + 2]];
+  return glm::cross(b - a, c - a);
+}
+
+// A 2x2 8-bit PNG: red, green on the top row; blue, white below. Returns its bytes.
+std::vector<uint8_t> quadrantPng(const TempDir& dir) {
+  Image img(2, 2, 3, {"R", "G", "B"});
+  const float px[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+  std::copy(px, px + 12, img.pixels.begin());
+  img.colorSpace = "sRGB";
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::UInt8;
+  ingest::writeImage(dir / "quadrants.png", img, options);
+  return readBytes(dir / "quadrants.png");
+}
+
+TEST(Gltf, AHandWrittenTriangleWithoutNormals) {
+  TempDir dir;
+  const std::string data = base64(asBytes({0, 0, 0, 1, 0, 0, 0, 1, 0}));
+  writeText(dir / "triangle.gltf", R"({
+  "asset": {"version": "2.0"},
+  "scene": 0,
+  "scenes": [{"nodes": [0]}],
+  "nodes": [{"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+  "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,)" +
+                                       data + R"("}],
+  "bufferViews": [{"buffer": 0, "byteLength": 36}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                 "min": [0, 0, 0], "max": [1, 1, 0]}]
+})");
+  const Mesh m = loadMesh(dir / "triangle.gltf");
+  ASSERT_EQ(m.triangleCount(), 1u);
+  EXPECT_TRUE(m.warnings.empty());
+  EXPECT_FALSE(m.hasMaterials());
+  EXPECT_FALSE(m.normalsFromFile);
+  EXPECT_NE(m.normalsSource.find("not in the file"), std::string::npos);
+  for (const glm::vec3& n : m.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
+  EXPECT_EQ(m.boundsMax(), glm::vec3(1, 1, 0));
+}
+
+TEST(Gltf, IndicesOfEveryWidthGiveTheSameMesh) {
+  TempDir dir;
+  const std::vector<float> quad = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+  std::vector<std::vector<uint32_t>> results;
+  for (const int type : {kU8, kU16, kU32}) {
+    GltfBuilder b;
+    const int pos = b.vec3(quad);
+    int idx = 0;
+    if (type == kU8) idx = b.accessor(std::vector<uint8_t>{0, 1, 2, 0, 2, 3}, type, "SCALAR", 6);
+    if (type == kU16) idx = b.accessor(std::vector<uint16_t>{0, 1, 2, 0, 2, 3}, type, "SCALAR", 6);
+    if (type == kU32) idx = b.accessor(std::vector<uint32_t>{0, 1, 2, 0, 2, 3}, type, "SCALAR", 6);
+    b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", idx}})}})});
+    writeText(dir / "quad.gltf", b.gltf());
+    const Mesh m = loadMesh(dir / "quad.gltf");
+    EXPECT_EQ(m.triangleCount(), 2u) << type;
+    results.push_back(m.indices);
+  }
+  EXPECT_EQ(results[0], results[1]);
+  EXPECT_EQ(results[0], results[2]);
+  // Signed indices are not indices.
+  GltfBuilder b;
+  const int pos = b.vec3(quad);
+  const int idx = b.accessor(std::vector<int16_t>{0, 1, 2}, 5122, "SCALAR", 3);
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", idx}})}})});
+  writeText(dir / "signed.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "signed.gltf"),
+                       "indices (accessor 1) must hold unsigned 8-, 16- or 32-bit integers");
+}
+
+TEST(Gltf, StripsAndFansBecomeOutwardTriangles) {
+  TempDir dir;
+  // The unit square facing +Z, as a strip and as a fan (glTF 2.0 §3.7.2.1).
+  const std::pair<int, std::vector<float>> cases[] = {
+      {5, {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0}},
+      {6, {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}},
+  };
+  for (const auto& [mode, vertices] : cases) {
+    GltfBuilder b;
+    const int pos = b.vec3(vertices);
+    b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"mode", mode}})}})});
+    writeText(dir / "square.gltf", b.gltf());
+    const Mesh m = loadMesh(dir / "square.gltf", {.creaseDegrees = 0.0});
+    ASSERT_EQ(m.triangleCount(), 2u) << "mode " << mode;
+    float area = 0.0f;
+    for (size_t t = 0; t < 2; ++t) {
+      EXPECT_GT(faceNormal(m, t).z, 0.0f) << "mode " << mode << " triangle " << t;
+      area += 0.5f * glm::length(faceNormal(m, t));
+    }
+    EXPECT_NEAR(area, 1.0f, 1e-6f) << "mode " << mode;
+  }
+}
+
+TEST(Gltf, PointsAndLinesAreSkippedWithAWarning) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}}}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos}}}, {"mode", 1}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos}}}, {"mode", 0}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "mixed.gltf", b.gltf());
+  const Mesh mesh = loadMesh(dir / "mixed.gltf");
+  EXPECT_EQ(mesh.triangleCount(), 1u);
+  ASSERT_EQ(mesh.warnings.size(), 1u);
+  EXPECT_EQ(mesh.warnings[0], "skipped 2 primitives of points or lines (only triangles render)");
+
+  GltfBuilder lines;
+  const int p = lines.vec3({0, 0, 0, 1, 0, 0});
+  lines.scene(
+      {lines.node({{"mesh", lines.mesh({{"attributes", {{"POSITION", p}}}, {"mode", 1}})}})});
+  writeText(dir / "lines.gltf", lines.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "lines.gltf"),
+                       "mesh: nothing renderable: no triangles in 1 primitive (");
+}
+
+TEST(Gltf, TheNodeHierarchyIsFlattenedIntoObjectSpace) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int mesh = b.mesh({{"attributes", {{"POSITION", pos}}}});
+  const float h = std::sqrt(0.5f);
+  // parent: translate (10, 0, 0); child: rotate 90° about +Z, scale 2. Another root places the
+  // same mesh by a matrix (column-major) translating by (0, 5, 0).
+  const int child = b.node({{"mesh", mesh}, {"rotation", {0, 0, h, h}}, {"scale", {2, 2, 2}}});
+  const int parent = b.node({{"translation", {10, 0, 0}}, {"children", {child}}});
+  const int matrix =
+      b.node({{"mesh", mesh}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 5, 0, 1}}});
+  b.scene({parent, matrix});
+  writeText(dir / "tree.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "tree.gltf");
+  ASSERT_EQ(m.triangleCount(), 2u);
+  // (1, 0, 0): scaled to (2, 0, 0), turned to (0, 2, 0), moved to (10, 2, 0).
+  EXPECT_TRUE(hasPosition(m, {10, 2, 0}));
+  EXPECT_TRUE(hasPosition(m, {8, 0, 0}));
+  EXPECT_TRUE(hasPosition(m, {10, 0, 0}));
+  EXPECT_TRUE(hasPosition(m, {1, 5, 0}));
+  EXPECT_TRUE(hasPosition(m, {0, 6, 0}));
+  // Without scenes, every root node renders.
+  b.json.erase("scenes");
+  b.json.erase("scene");
+  writeText(dir / "noscene.gltf", b.gltf());
+  EXPECT_EQ(loadMesh(dir / "noscene.gltf").triangleCount(), 2u);
+}
+
+TEST(Gltf, AMirroringNodeKeepsTrianglesWoundOutwards) {
+  TempDir dir;
+  // A tetrahedron with flat outward normals, unindexed, under a scale of -1 in x.
+  const glm::vec3 c[4] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const int faces[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  std::vector<float> positions, normals;
+  for (const auto& f : faces) {
+    const glm::vec3 n = glm::normalize(glm::cross(c[f[1]] - c[f[0]], c[f[2]] - c[f[0]]));
+    for (int k = 0; k < 3; ++k) {
+      positions.insert(positions.end(), {c[f[k]].x, c[f[k]].y, c[f[k]].z});
+      normals.insert(normals.end(), {n.x, n.y, n.z});
+    }
+  }
+  for (const double sx : {1.0, -1.0}) {
+    GltfBuilder b;
+    const int pos = b.vec3(positions), nrm = b.vec3(normals);
+    b.scene({b.node({{"scale", {sx, 1, 1}},
+                     {"mesh", b.mesh({{"attributes", {{"POSITION", pos}, {"NORMAL", nrm}}}})}})});
+    writeText(dir / "tet.gltf", b.gltf());
+    const Mesh m = loadMesh(dir / "tet.gltf");
+    ASSERT_EQ(m.triangleCount(), 4u);
+    EXPECT_TRUE(m.normalsFromFile);
+    double volume = 0.0;
+    for (size_t t = 0; t < 4; ++t) {
+      const glm::vec3 fn = faceNormal(m, t);
+      for (int k = 0; k < 3; ++k)
+        EXPECT_GT(glm::dot(fn, m.normals[m.indices[3 * t + size_t(k)]]), 0.0f) << "scale " << sx;
+      volume += glm::dot(m.positions[m.indices[3 * t]], fn) / 6.0;
+    }
+    EXPECT_NEAR(volume, 1.0 / 6.0, 1e-6) << "scale " << sx;
+    EXPECT_TRUE(hasPosition(m, {float(sx), 0, 0}));
+  }
+}
+
+// Two triangles: one with material 0 (a factor times the quadrant texture), one with material 1
+// (a factor alone). Texture coordinates of the first: (0.25, 0.25), (0.75, 0.25), (0.25, 0.75) in
+// glTF's convention (v down), the centres of the red, green and blue texels.
+GltfBuilder texturedPair(const json& image) {
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int pos2 = b.vec3({2, 0, 0, 3, 0, 0, 2, 1, 0});
+  const int uv = b.vec2({0.25f, 0.25f, 0.75f, 0.25f, 0.25f, 0.75f});
+  b.json["images"] = json::array({image});
+  b.json["textures"] = json::array({{{"source", 0}}});
+  b.json["materials"] = json::array(
+      {{{"name", "painted"},
+        {"pbrMetallicRoughness",
+         {{"baseColorFactor", {0.5, 1, 1, 1}}, {"baseColorTexture", {{"index", 0}}}}}},
+       {{"name", "plain"}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.2, 0.4, 0.6, 1}}}}}});
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv}}}, {"material", 0}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos2}}}, {"material", 1}});
+  b.scene({b.node({{"mesh", m}})});
+  return b;
+}
+
+void expectPaintedPair(const Mesh& m) {
+  ASSERT_EQ(m.triangleCount(), 2u);
+  ASSERT_EQ(m.materials.size(), 2u);
+  ASSERT_EQ(m.textures.size(), 1u);
+  EXPECT_EQ(m.colorSpace, "lin_rec709");
+  EXPECT_EQ(m.textures[0].image.colorSpace, "sRGB");
+  EXPECT_EQ(m.materials[0].name, "painted");
+  // The first triangle's corners: barycentrics (0, 0), (1, 0), (0, 1). Texels are the 8-bit
+  // codes / 255, still encoded (the pipeline linearises them); exact at texel centres.
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  auto near = [](const glm::vec3& a, const glm::vec3& b) { return glm::length(a - b) < 1e-6f; };
+  EXPECT_TRUE(near(m.albedoAt(first, 0, 0), {0.5f, 0, 0})) << "red, top left";
+  EXPECT_TRUE(near(m.albedoAt(first, 1, 0), {0, 1, 0})) << "green, top right";
+  EXPECT_TRUE(near(m.albedoAt(first, 0, 1), {0, 0, 1})) << "blue, bottom left";
+  const glm::vec3 plain = m.albedoAt(1 - first, 0.3f, 0.3f);
+  EXPECT_TRUE(near(plain, {0.2f, 0.4f, 0.6f}));
+}
+
+TEST(Gltf, BaseColourFactorsAndTexturesFromDataUris) {
+  TempDir dir;
+  const std::string png = "data:image/png;base64," + base64(quadrantPng(dir));
+  writeText(dir / "pair.gltf", texturedPair({{"uri", png}}).gltf());
+  const Mesh m = loadMesh(dir / "pair.gltf");
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  expectPaintedPair(m);
+}
+
+TEST(Gltf, ABinaryGlbWithItsTextureInABufferView) {
+  TempDir dir;
+  const std::vector<uint8_t> png = quadrantPng(dir);
+  GltfBuilder b = texturedPair(json::object());
+  const int view = b.view(png.data(), png.size());
+  b.json["images"][0] = {{"bufferView", view}, {"mimeType", "image/png"}};
+  writeBytes(dir / "pair.glb", b.glb());
+  expectPaintedPair(loadMesh(dir / "pair.glb"));
+  // The same as a .gltf with the image beside it, its name percent-encoded.
+  std::filesystem::copy_file(dir / "quadrants.png", dir / "my texture.png");
+  writeText(dir / "pair.gltf", texturedPair({{"uri", "my%20texture.png"}}).gltf());
+  const Mesh external = loadMesh(dir / "pair.gltf");
+  expectPaintedPair(external);
+  EXPECT_EQ(external.textures[0].file.filename(), "my texture.png");
+}
+
+TEST(Gltf, TextureTransformAndWrapModes) {
+  TempDir dir;
+  const std::string png = "data:image/png;base64," + base64(quadrantPng(dir));
+  GltfBuilder b = texturedPair({{"uri", png}});
+  // An offset of half the texture to the right: red's place shows green.
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+      {"KHR_texture_transform", {{"offset", {0.5, 0}}}}};
+  writeText(dir / "offset.gltf", b.gltf());
+  Mesh m = loadMesh(dir / "offset.gltf");
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  EXPECT_LT(glm::length(m.albedoAt(first, 0, 0) - glm::vec3(0, 1, 0)), 1e-6f);
+  // u = 1.25: repeat wraps to red's column, clamp stays at green's.
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+      {"KHR_texture_transform", {{"offset", {1.0, 0}}}}};
+  for (const auto& [wrap, expected] :
+       {std::pair{10497, glm::vec3(0.5f, 0, 0)}, std::pair{33071, glm::vec3(0, 1, 0)},
+        std::pair{33648, glm::vec3(0, 1, 0)}}) {
+    b.json["samplers"] = json::array({{{"wrapS", wrap}, {"wrapT", wrap}}});
+    b.json["textures"][0]["sampler"] = 0;
+    writeText(dir / "wrap.gltf", b.gltf());
+    m = loadMesh(dir / "wrap.gltf");
+    EXPECT_LT(glm::length(m.albedoAt(first, 0, 0) - expected), 1e-6f) << "wrap " << wrap;
+  }
+}
+
+TEST(Gltf, SparseAndQuantisedAccessors) {
+  TempDir dir;
+  GltfBuilder b;
+  // A quad whose corner 3 is moved to (-1, 2, 0) by a sparse substitution.
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0});
+  const std::vector<uint16_t> which = {3};
+  const std::vector<float> value = {-1, 2, 0};
+  b.json["accessors"][size_t(pos)]["sparse"] = {
+      {"count", 1},
+      {"indices", {{"bufferView", b.view(which.data(), 2)}, {"componentType", kU16}}},
+      {"values", {{"bufferView", b.view(value.data(), 12)}}}};
+  const int idx = b.accessor(std::vector<uint8_t>{0, 1, 2, 0, 2, 3}, kU8, "SCALAR", 6);
+  // A second primitive whose positions have no buffer view at all: zeros, then sparse values.
+  const std::vector<uint8_t> at = {1, 2};
+  const std::vector<float> moved = {0, 0, 3, 0, 3, 3};
+  b.json["accessors"].push_back(
+      {{"componentType", kFloat},
+       {"count", 3},
+       {"type", "VEC3"},
+       {"sparse",
+        {{"count", 2},
+         {"indices", {{"bufferView", b.view(at.data(), 2)}, {"componentType", kU8}}},
+         {"values", {{"bufferView", b.view(moved.data(), 24)}}}}}});
+  const int zeros = int(b.json["accessors"].size()) - 1;
+  // A third, quantised as KHR_mesh_quantization allows: normalised unsigned shorts.
+  const int quantised = b.accessor(
+      std::vector<uint16_t>{0, 0, 65535, 65535, 0, 65535, 0, 65535, 65535}, kU16, "VEC3", 3, true);
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", idx}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back({{"attributes", {{"POSITION", zeros}}}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back({{"attributes", {{"POSITION", quantised}}}});
+  b.json["extensionsUsed"] = {"KHR_mesh_quantization"};
+  b.json["extensionsRequired"] = {"KHR_mesh_quantization"};
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "sparse.gltf", b.gltf());
+  const Mesh mesh = loadMesh(dir / "sparse.gltf");
+  EXPECT_EQ(mesh.triangleCount(), 4u) << ::testing::PrintToString(mesh.warnings);
+  EXPECT_TRUE(hasPosition(mesh, {-1, 2, 0}));
+  EXPECT_FALSE(hasPosition(mesh, {0, 1, 0})) << "replaced by the sparse value";
+  EXPECT_TRUE(hasPosition(mesh, {0, 0, 3}));
+  EXPECT_TRUE(hasPosition(mesh, {0, 3, 3}));
+  EXPECT_TRUE(hasPosition(mesh, {1, 0, 1}));
+  EXPECT_TRUE(hasPosition(mesh, {0, 1, 1}));
+
+  // A sparse index beyond the accessor skips its primitive, naming it.
+  b.json["accessors"][size_t(zeros)]["count"] = 2;
+  writeText(dir / "sparse.gltf", b.gltf());
+  const Mesh skipped = loadMesh(dir / "sparse.gltf");
+  ASSERT_EQ(skipped.warnings.size(), 1u);
+  EXPECT_EQ(skipped.warnings[0],
+            "skipped mesh 0 primitive 1: POSITION (accessor 2): sparse index 2 is beyond its 2 "
+            "elements");
+}
+
+TEST(Gltf, BadIndicesNonFiniteCoordinatesAndDuplicatesAreDroppedWithCounts) {
+  TempDir dir;
+  GltfBuilder b;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, nan, 0, 0});
+  // Good, good, a corner beyond the 5 vertices, a corner at NaN, a repeat, one with no area.
+  const int idx =
+      b.accessor(std::vector<uint16_t>{0, 1, 2, 0, 2, 3, 0, 2, 9, 0, 1, 4, 2, 1, 0, 0, 0, 1}, kU16,
+                 "SCALAR", 18);
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", idx}})}})});
+  writeText(dir / "bad.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "bad.gltf");
+  EXPECT_EQ(m.triangleCount(), 2u);
+  EXPECT_EQ(m.positions.size(), 4u) << "the NaN vertex is gone, so bounds stay finite";
+  const std::vector<std::string> expected = {
+      "dropped 1 of 6 triangles whose indices refer to vertices the primitive does not have",
+      "dropped 1 of 5 triangles with a corner whose coordinates are not finite numbers",
+      "dropped 1 of 5 triangles with no area", "dropped 1 of 5 triangles that repeat another one"};
+  EXPECT_EQ(m.warnings, expected);
+}
+
+TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
+  TempDir dir;
+  writeText(dir / "text.gltf", "this is not JSON");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "text.gltf"), "mesh: cannot parse glTF: ");
+  writeText(dir / "empty.glb", "");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "empty.glb"), "mesh: cannot parse glTF: ");
+  writeText(dir / "nomesh.gltf", R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": []}]})");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "nomesh.gltf"),
+                       "nothing renderable: the scene has no meshes (");
+
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}})}})});
+  // Missing buffer file.
+  json external = json::parse(b.gltf());
+  external["buffers"][0]["uri"] = "geometry.bin";
+  writeText(dir / "external.gltf", external.dump());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "external.gltf"), "cannot parse glTF: ");
+  // An accessor that reads past its buffer view.
+  b.json["accessors"][size_t(pos)]["count"] = 4;
+  writeText(dir / "short.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "short.gltf"),
+                       "nothing renderable: no triangles in 1 primitive (mesh 0 primitive 0: "
+                       "POSITION (accessor 0) reads past the end of buffer view 0 (4 elements of "
+                       "12 bytes from byte 0 of 36)) (");
+  b.json["accessors"][size_t(pos)]["count"] = 3;
+  // A cycle in the hierarchy.
+  b.json["nodes"][0]["children"] = {0};
+  writeText(dir / "cycle.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "cycle.gltf"), "node 0 appears twice in the node hierarchy");
+  b.json["nodes"][0].erase("children");
+  // A malformed transform.
+  b.json["nodes"][0]["translation"] = {0, 1};
+  writeText(dir / "short.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "short.gltf"), "node 0: translation has 2 numbers, not 3");
+  b.json["nodes"][0].erase("translation");
+  // A required extension compose cannot honour.
+  b.json["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+  b.json["extensionsRequired"] = {"KHR_draco_mesh_compression"};
+  writeText(dir / "draco.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "draco.gltf"),
+                       "requires the glTF extension KHR_draco_mesh_compression, which compose "
+                       "does not support (compressed geometry: export it without compression)");
+}
+
+TEST(Gltf, AnUnreadableTextureLeavesTheBaseColourWithAWarning) {
+  TempDir dir;
+  writeText(dir / "pair.gltf", texturedPair({{"uri", "missing.png"}}).gltf());
+  const Mesh m = loadMesh(dir / "pair.gltf");
+  ASSERT_EQ(m.warnings.size(), 1u);
+  EXPECT_NE(m.warnings[0].find("the base-colour texture of material 'painted' cannot be read"),
+            std::string::npos)
+      << m.warnings[0];
+  EXPECT_NE(m.warnings[0].find("missing.png"), std::string::npos) << m.warnings[0];
+  EXPECT_EQ(m.materials[0].texture, -1);
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  EXPECT_EQ(m.albedoAt(first, 0.2f, 0.2f), glm::vec3(0.5f, 1, 1));
+  // An embedded image that is not an image.
+  writeText(dir / "junk.gltf",
+            texturedPair({{"uri", "data:image/png;base64," + base64({1, 2, 3, 4, 5})}}).gltf());
+  const Mesh junk = loadMesh(dir / "junk.gltf");
+  ASSERT_EQ(junk.warnings.size(), 1u);
+  EXPECT_NE(junk.warnings[0].find("cannot be read (mesh: cannot read image"), std::string::npos)
+      << junk.warnings[0];
+}
+
+TEST(Gltf, NormalsVertexColoursAndPrimitivesWithoutMaterial) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int nrm = b.vec3({0, 0, 2, 0, 0, 2, 0, 0, 2});  // not unit: normalised
+  const int col = b.vec3({1, 0, 0, 0, 1, 0, 0, 0, 1});
+  const int pos2 = b.vec3({0, 0, 1, 1, 0, 1, 0, 1, 1});
+  b.json["materials"] =
+      json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 0, 0, 1}}}}}});
+  const int m = b.mesh(
+      {{"attributes", {{"POSITION", pos}, {"NORMAL", nrm}, {"COLOR_0", col}}}, {"material", 0}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back({{"attributes", {{"POSITION", pos2}}}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "colours.gltf", b.gltf());
+  const Mesh mesh = loadMesh(dir / "colours.gltf");
+  const std::vector<std::string> expected = {
+      "ignored the vertex colours (COLOR_0) of 1 primitive: the albedo is the material's base "
+      "colour",
+      "some primitives have no material: rendered with the default albedo"};
+  EXPECT_EQ(mesh.warnings, expected);
+  ASSERT_EQ(mesh.materials.size(), 2u);
+  EXPECT_EQ(mesh.materials[1].baseColor, glm::vec3(kDefaultAlbedo));
+  EXPECT_FALSE(mesh.normalsFromFile);
+  EXPECT_NE(mesh.normalsSource.find("from the file for 3 of 6 vertices"), std::string::npos);
+  for (const glm::vec3& n : mesh.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
+}
+
+}  // namespace
+}  // namespace compose::render
