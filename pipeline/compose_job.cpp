@@ -391,8 +391,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     result.notes.push_back("plate read as " + plateRead + ", environment as " + envRead +
                            ", working space '" + working + "' (config: " + colors.source() + ")");
     if (job.albedo && mesh.hasMaterials()) {
-      result.notes.push_back("--albedo given: the object's " +
-                             std::to_string(mesh.materials.size()) + " materials are not used");
+      result.notes.push_back("object: --albedo replaces the materials of the mesh");
     } else if (const std::string read = materialsToWorkingSpace(mesh, colors); !read.empty()) {
       result.notes.push_back(read);
     }

@@ -1,0 +1,110 @@
+// The object's material colours reach the renderer in the working space
+// (pipeline/materials.h): base colours as linear Rec.709, textures as their files declare.
+#include <cmath>
+
+#include "color/color.h"
+#include "pipeline/compose_job.h"
+#include "pipeline/materials.h"
+#include "render/mesh.h"
+#include "test_util.h"
+
+namespace compose::pipeline {
+namespace {
+
+// Linear Rec.709 to ACEScg (AP1), Bradford adaptation D65 → ACES white, as published with ACES
+// (rows).
+constexpr double kRec709ToAp1[3][3] = {{0.6130974, 0.3395231, 0.0473795},
+                                       {0.0701937, 0.9163539, 0.0134524},
+                                       {0.0206156, 0.1095698, 0.8698146}};
+
+glm::vec3 toAp1(const glm::vec3& c) {
+  glm::vec3 out;
+  for (int r = 0; r < 3; ++r)
+    out[r] = float(kRec709ToAp1[r][0] * c.x + kRec709ToAp1[r][1] * c.y + kRec709ToAp1[r][2] * c.z);
+  return out;
+}
+
+// The sRGB decoding (IEC 61966-2-1).
+float srgbToLinear(float v) {
+  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
+render::Mesh twoMaterials() {
+  render::Mesh mesh;
+  mesh.materials.resize(2);
+  mesh.materials[0].baseColor = glm::vec3(1.0f, 0.0f, 0.0f);
+  mesh.materials[1].baseColor = glm::vec3(0.2f, 0.4f, 0.6f);
+  mesh.materials[1].texture = 0;
+  render::Texture texture;
+  texture.file = "wood.png";
+  texture.image = Image(1, 1, 3, {"R", "G", "B"});
+  texture.image.pixels = {0.5f, 0.25f, 1.0f};
+  texture.image.colorSpace = "sRGB";
+  mesh.textures.push_back(texture);
+  return mesh;
+}
+
+// Tolerance: the published matrix has 7 digits and configs adapt the white in slightly
+// different ways; 1e-3 is a tenth of what a missed conversion (or one applied twice) changes.
+constexpr float kTolerance = 1e-3f;
+
+TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  render::Mesh mesh = twoMaterials();
+  const std::string line = materialsToWorkingSpace(mesh, colors);
+  EXPECT_NE(line.find("2 materials, base colours read as 'Linear Rec.709"), std::string::npos)
+      << line;
+  EXPECT_NE(line.find("1 texture (1 as 'sRGB"), std::string::npos) << line;
+  EXPECT_NE(line.find("converted to 'ACEScg'"), std::string::npos) << line;
+  EXPECT_EQ(mesh.colorSpace, "ACEScg");
+  for (int m = 0; m < 2; ++m) {
+    const glm::vec3 expected = toAp1(twoMaterials().materials[size_t(m)].baseColor);
+    EXPECT_LT(glm::length(mesh.materials[size_t(m)].baseColor - expected), kTolerance) << m;
+  }
+  const glm::vec3 texel = toAp1({srgbToLinear(0.5f), srgbToLinear(0.25f), srgbToLinear(1.0f)});
+  const float* p = mesh.textures[0].image.pixels.data();
+  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
+  EXPECT_EQ(mesh.textures[0].image.colorSpace, "ACEScg");
+  // A second call converts nothing twice.
+  const render::Mesh once = mesh;
+  materialsToWorkingSpace(mesh, colors);
+  EXPECT_EQ(mesh.materials[1].baseColor, once.materials[1].baseColor);
+  EXPECT_EQ(mesh.textures[0].image.pixels, once.textures[0].image.pixels);
+}
+
+TEST(MaterialColour, ATextureThatDeclaresNothingFollowsTheFileRules) {
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  render::Mesh mesh = twoMaterials();
+  mesh.textures[0].image.colorSpace.clear();
+  mesh.textures[0].file = "albedo.exr";  // the built-in rules: .exr is linear Rec.709
+  materialsToWorkingSpace(mesh, colors);
+  const glm::vec3 texel = toAp1({0.5f, 0.25f, 1.0f});
+  const float* p = mesh.textures[0].image.pixels.data();
+  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
+}
+
+TEST(MaterialColour, AMeshWithoutMaterialsIsLeftAlone) {
+  render::Mesh mesh;
+  EXPECT_EQ(materialsToWorkingSpace(mesh, color::ColorConfig::builtin()), "");
+  EXPECT_EQ(mesh.colorSpace, "lin_rec709");
+}
+
+TEST(MaterialColour, BlendersConfigWorksInLinearRec709) {
+  const auto file = samplesDirectory() / "ocio" / "blender" / "config.ocio";
+  if (!std::filesystem::exists(file)) GTEST_FAIL() << "sample data missing: " << file;
+  const color::ColorConfig colors = color::ColorConfig::fromFile(file);
+  render::Mesh mesh = twoMaterials();
+  const std::string line = materialsToWorkingSpace(mesh, colors);
+  // Blender's working space is linear Rec.709 itself: the base colours stay as they are, the
+  // texture is only decoded.
+  EXPECT_LT(glm::length(mesh.materials[1].baseColor - glm::vec3(0.2f, 0.4f, 0.6f)), kTolerance)
+      << line;
+  const float* p = mesh.textures[0].image.pixels.data();
+  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) -
+                        glm::vec3(srgbToLinear(0.5f), srgbToLinear(0.25f), 1.0f)),
+            kTolerance)
+      << line;
+}
+
+}  // namespace
+}  // namespace compose::pipeline
