@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/output_files.h"
+#include "ingest/image_io.h"
 #include "render/mesh_formats.h"
 
 namespace compose::render {
@@ -117,6 +118,14 @@ Image textureImage(Image decoded, const std::string& fallbackSpace) {
     }
   }
   return out;
+}
+
+Image readTextureFile(const fs::path& file, const std::string& fallbackSpace) {
+  std::error_code ec;
+  const fs::file_status status = fs::status(file, ec);
+  if (fs::exists(status) && !fs::is_regular_file(status) && !fs::is_directory(status))
+    throw Error("mesh", "not a regular file", file);
+  return textureImage(ingest::readImage(file, "mesh").image, fallbackSpace);
 }
 
 }  // namespace detail
@@ -611,22 +620,31 @@ std::vector<uint32_t> triangulatePolygon(const std::vector<glm::vec3>& corners) 
     return {0, 1, 2, 0, 2, 3};
   }
   // Ear clipping: cut off a convex corner whose triangle holds no other corner, until three
-  // remain. O(n²) per ear at worst; polygons in mesh files are small.
+  // remain. The search resumes beside the last ear and tests only reflex corners, so ordinary
+  // polygons take O(n²) time.
   std::vector<uint32_t> ring(n);
   for (size_t i = 0; i < n; ++i) ring[i] = uint32_t(i);
   auto inside = [&](const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b,
                     const glm::dvec2& c) {
     return cross2(a, b, p) >= -eps && cross2(b, c, p) >= -eps && cross2(c, a, p) >= -eps;
   };
+  size_t start = 0;  // where the search for the next ear begins: next to the last one
+  std::vector<uint32_t> reflex;
   while (ring.size() > 3) {
     const size_t m = ring.size();
+    // Only reflex (or flat) corners can lie inside an ear.
+    reflex.clear();
+    for (size_t j = 0; j < m; ++j)
+      if (!(cross2(q[ring[(j + m - 1) % m]], q[ring[j]], q[ring[(j + 1) % m]]) > eps))
+        reflex.push_back(ring[j]);
     size_t ear = m;
-    for (size_t i = 0; i < m && ear == m; ++i) {
+    for (size_t tried = 0; tried < m && ear == m; ++tried) {
+      const size_t i = (start + tried) % m;
       const uint32_t a = ring[(i + m - 1) % m], b = ring[i], c = ring[(i + 1) % m];
       if (!(cross2(q[a], q[b], q[c]) > eps)) continue;  // reflex or flat corner
       bool empty = true;
-      for (size_t j = 0; j < m && empty; ++j) {
-        const uint32_t p = ring[j];
+      for (size_t j = 0; j < reflex.size() && empty; ++j) {
+        const uint32_t p = reflex[j];
         if (p == a || p == b || p == c) continue;
         if (q[p] == q[a] || q[p] == q[b] || q[p] == q[c]) continue;  // a repeated corner
         empty = !inside(q[p], q[a], q[b], q[c]);
@@ -646,6 +664,7 @@ std::vector<uint32_t> triangulatePolygon(const std::vector<glm::vec3>& corners) 
     }
     out.insert(out.end(), {ring[(ear + m - 1) % m], ring[ear], ring[(ear + 1) % m]});
     ring.erase(ring.begin() + std::ptrdiff_t(ear));
+    start = ear == 0 ? 0 : ear - 1;
   }
   out.insert(out.end(), {ring[0], ring[1], ring[2]});
   return out;

@@ -29,6 +29,10 @@ LoadedMesh loadGltf(const std::filesystem::path& path);
 // "1 triangle", "3 triangles".
 std::string count(size_t n, const std::string& singular, const std::string& plural);
 
+// Reads an image file as an albedo texture (textureImage()); throws compose::Error (stage "mesh")
+// when it cannot: missing, not a regular file (a device would never end), undecodable.
+Image readTextureFile(const std::filesystem::path& file, const std::string& fallbackSpace);
+
 // An albedo texture from a decoded image: RGB (grey replicated, alpha dropped), tagged with the
 // colour space the image declared, or `fallbackSpace` when it declared none.
 Image textureImage(Image decoded, const std::string& fallbackSpace);

@@ -154,9 +154,10 @@ class GltfReader {
   void addPrimitive(const tinygltf::Primitive& primitive, const glm::dmat4& objectFromNode);
   uint32_t material(int gltfMaterial);
   int texture(int gltfTexture, const std::string& materialName);
-  // The pixels of image `imageIndex`; `file` is set to its file, or to a description of where
-  // in the glTF it is embedded.
-  Image decodeImage(int imageIndex, fs::path& file);
+  // The pixels of image `imageIndex`. Before decoding, `file` is set to its file, or for an
+  // embedded image to a name that says where it is (with the extension of its format, for the
+  // colour config's file rules), and `where` to a description for messages.
+  Image decodeImage(int imageIndex, fs::path& file, std::string& where);
 
   const tinygltf::Model& model_;
   const fs::path& path_;
@@ -166,7 +167,7 @@ class GltfReader {
   std::map<int, int> textures_;        // glTF texture → Mesh::textures (-1: unreadable)
   std::vector<int> texCoordSet_;       // per Mesh material: the TEXCOORD set its texture uses
   size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
-  size_t colours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0;
+  size_t colours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0, missingMaterials_ = 0;
   bool noMaterial_ = false, someMaterial_ = false;
 };
 
@@ -326,7 +327,7 @@ glm::dmat4 GltfReader::localTransform(const tinygltf::Node& node, int index) con
   return m;
 }
 
-Image GltfReader::decodeImage(int imageIndex, fs::path& file) {
+Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where) {
   if (imageIndex < 0 || size_t(imageIndex) >= model_.images.size()) {
     throw Error("mesh", "refers to image " + std::to_string(imageIndex) + ", the file has " +
                             std::to_string(model_.images.size()));
@@ -346,10 +347,11 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file) {
       }
     }
     file = path_.parent_path() / decoded;
-    return textureImage(ingest::readImage(file, "mesh").image, "sRGB");
+    where = file.string();
+    return readTextureFile(file, "sRGB");
   }
   std::span<const unsigned char> bytes(image.image);
-  std::string where = "embedded";
+  where = "image " + std::to_string(imageIndex) + ", embedded";
   if (image.bufferView >= 0) {
     const int view = image.bufferView;
     size_t stride = 0;
@@ -361,7 +363,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file) {
     } catch (const PrimitiveError& e) {
       throw Error("mesh", e.what);
     }
-    where = "in buffer view " + std::to_string(view);
+    where = "image " + std::to_string(imageIndex) + ", in buffer view " + std::to_string(view);
   }
   // The format from the MIME type, else from the first bytes.
   std::string ext;
@@ -377,14 +379,15 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file) {
     throw Error("mesh", "an image of type '" + (mime.empty() ? std::string("unknown") : mime) +
                             "', which compose cannot decode");
   }
-  file = path_.string() + " image " + std::to_string(imageIndex) + " (" + where +
-         (mime.empty() ? "" : ", " + mime) + ")" + ext;
+  if (!mime.empty()) where += ", " + mime;
+  file = path_.string() + " (" + where + ")" + ext;
   return textureImage(ingest::readImageFromMemory(bytes, file, "mesh").image, "sRGB");
 }
 
 int GltfReader::texture(int gltfTexture, const std::string& materialName) {
   const auto [it, inserted] = textures_.try_emplace(gltfTexture, -1);
   if (!inserted) return it->second;
+  std::string where = "texture " + std::to_string(gltfTexture);
   try {
     if (gltfTexture < 0 || size_t(gltfTexture) >= model_.textures.size()) {
       throw Error("mesh", "refers to texture " + std::to_string(gltfTexture) + ", the file has " +
@@ -392,7 +395,7 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
     }
     const tinygltf::Texture& t = model_.textures[size_t(gltfTexture)];
     Texture texture;
-    texture.image = decodeImage(t.source, texture.file);
+    texture.image = decodeImage(t.source, texture.file, where);
     if (t.sampler >= 0 && size_t(t.sampler) < model_.samplers.size()) {
       auto wrap = [](int mode) {
         return mode == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE     ? Texture::Wrap::Clamp
@@ -405,15 +408,18 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
     it->second = int(mesh_.textures.size());
     mesh_.textures.push_back(std::move(texture));
   } catch (const Error& e) {
-    mesh_.warnings.push_back("the base-colour texture of material '" + materialName +
-                             "' cannot be read (" + e.describe() +
+    mesh_.warnings.push_back("the base-colour texture of material '" + materialName + "' (" +
+                             where + ") cannot be read (" + e.what() +
                              "): the material renders with its base colour factor");
   }
   return it->second;
 }
 
 uint32_t GltfReader::material(int gltfMaterial) {
-  if (gltfMaterial < 0 || size_t(gltfMaterial) >= model_.materials.size()) gltfMaterial = -1;
+  if (gltfMaterial >= 0 && size_t(gltfMaterial) >= model_.materials.size()) {
+    ++missingMaterials_;
+    gltfMaterial = -1;
+  }
   const auto [it, inserted] =
       materials_.try_emplace(gltfMaterial, uint32_t(mesh_.materials.size()));
   if (!inserted) return it->second;
@@ -573,9 +579,12 @@ void GltfReader::read() {
   // The scene: the default one, else the first, else every root node.
   std::vector<int> roots;
   if (!model_.scenes.empty()) {
-    const int scene = model_.defaultScene >= 0 && size_t(model_.defaultScene) < model_.scenes.size()
-                          ? model_.defaultScene
-                          : 0;
+    int scene = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+    if (size_t(scene) >= model_.scenes.size()) {
+      mesh_.warnings.push_back("the default scene " + std::to_string(scene) +
+                               " does not exist: rendered scene 0");
+      scene = 0;
+    }
     roots = model_.scenes[size_t(scene)].nodes;
   } else {
     std::vector<uint8_t> isChild(model_.nodes.size(), 0);
@@ -658,6 +667,11 @@ void GltfReader::read() {
   if (skinned_) {
     mesh_.warnings.push_back(count(skinned_, "node is", "nodes are") +
                              " skinned: rendered in the bind pose, under the node transforms");
+  }
+  if (missingMaterials_) {
+    mesh_.warnings.push_back(count(missingMaterials_, "primitive refers", "primitives refer") +
+                             " to a material the file does not have: rendered with the default "
+                             "albedo");
   }
   if (missingTexcoords_) {
     mesh_.warnings.push_back(count(missingTexcoords_, "primitive has", "primitives have") +

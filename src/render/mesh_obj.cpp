@@ -17,7 +17,6 @@
 
 #include "core/error.h"
 #include "core/output_files.h"
-#include "ingest/image_io.h"
 #include "render/mesh_formats.h"
 
 namespace compose::render::detail {
@@ -118,11 +117,14 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     const fs::path file = folder_ / relative;
     std::error_code ec;
     std::ifstream in;
-    if (!fs::is_directory(file, ec)) in.open(file, std::ios::binary);
-    if (!in) {
-      const int error = fs::is_directory(file, ec) ? EISDIR : errno;
-      unreadable.push_back("material library '" + name + "' cannot be read (" +
-                           std::strerror(error) + ")");
+    const fs::file_status status = fs::status(file, ec);
+    // Regular files only: a device such as /dev/zero would never end.
+    if (fs::is_regular_file(status)) in.open(file, std::ios::binary);
+    if (!in.is_open()) {
+      const std::string why = !fs::exists(status)            ? std::strerror(ENOENT)
+                              : !fs::is_regular_file(status) ? "not a regular file"
+                                                             : std::strerror(errno);
+      unreadable.push_back("material library '" + name + "' cannot be read (" + why + ")");
       return false;
     }
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -324,7 +326,7 @@ LoadedMesh loadObj(const fs::path& path) {
           try {
             Texture texture;
             texture.file = file;
-            texture.image = textureImage(ingest::readImage(file, "mesh").image, "");
+            texture.image = readTextureFile(file, "");
             const tinyobj::texture_option_t& o = om.diffuse_texopt;
             if (o.clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
             it->second = int(mesh.textures.size());

@@ -335,6 +335,19 @@ TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
       << untextured.warnings[0];
   ASSERT_TRUE(untextured.hasMaterials());
   EXPECT_TRUE(near(untextured.albedoAt(0, 0.2f, 0.2f), {0.1f, 0.2f, 0.3f}));
+
+  // A device instead of a file would be read forever: refused, named.
+  writeText(dir / "dev.mtl", "newmtl a\nKd 0.1 0.2 0.3\nmap_Kd /dev/zero\n");
+  writeText(dir / "dev.obj",
+            "mtllib /dev/zero dev.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n"
+            "usemtl a\nf 1/1 2/1 3/1\n");
+  const Mesh device = loadMesh(dir / "dev.obj");
+  const std::vector<std::string> expected = {
+      "material library '/dev/zero' cannot be read (not a regular file): its materials render "
+      "with the default albedo",
+      "texture '/dev/zero' of material 'a' cannot be read (not a regular file): the material "
+      "renders with its Kd"};
+  EXPECT_EQ(device.warnings, expected);
 }
 
 TEST(Mesh, FacesReferringToMissingVerticesAreDroppedWithCounts) {
