@@ -40,8 +40,7 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
   const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
   if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
   const uint32_t* c = &indices[3 * size_t(triangle)];
-  const glm::vec2 uv =
-      (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
+  const glm::vec2 uv = (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
   const Image& img = textures[size_t(mat.texture)].image;
   // Texel centres at (i + 0.5) / width; v = 0 is the bottom row (OBJ and glTF flip differently:
   // loaders store v so that this holds).
