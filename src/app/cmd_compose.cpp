@@ -132,9 +132,12 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
       for (const auto& note : result.notes)
         std::fprintf(stderr, "compose: note: %s\n", note.c_str());
       for (const auto& s : result.stages) {
-        if (s.runs)
+        if (s.runs) {
           std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
                        s.reason.c_str());
+        } else {
+          std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(), s.reason.c_str());
+        }
       }
     }
     std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());
