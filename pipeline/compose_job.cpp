@@ -192,6 +192,20 @@ lighting::CaptureProxy captureProxy(const ComposeJob& job) {
   return proxy;
 }
 
+// A holdout mask: the first channel of any image the plate's size, as stored (no colour
+// management: it is data).
+Image loadHoldout(const fs::path& file, int width, int height) {
+  ingest::LoadedImage m = ingest::readImage(file, "composite");
+  if (m.image.width != width || m.image.height != height) {
+    throw Error("composite",
+                "the holdout mask is " + std::to_string(m.image.width) + "x" +
+                    std::to_string(m.image.height) + ", the plate " + std::to_string(width) + "x" +
+                    std::to_string(height) + ": it must be the plate's size",
+                file);
+  }
+  return std::move(m.image);
+}
+
 class StageTimer {
  public:
   explicit StageTimer(StageRecord& record)
@@ -317,11 +331,19 @@ std::vector<StageRecord> plan(const ComposeJob& job) {
   } else {
     s.push_back({"shadows", false, "--shadows off"});
   }
+  if (job.groundShadow) {
+    s.push_back({"ground", true,
+                 "the object's shadow on the ground: the plate times E_with / E_without where it "
+                 "can fall (the same transfer at ground points)"});
+  } else {
+    s.push_back({"ground", false, "--no-shadow"});
+  }
   s.push_back({"render", true,
                "ray-cast the object with " +
-                   std::to_string(job.samplesPerAxis * job.samplesPerAxis) +
-                   " samples per pixel; no ground shadow yet"});
-  s.push_back({"composite", true, "premultiplied over, in scene-linear light"});
+                   std::to_string(job.samplesPerAxis * job.samplesPerAxis) + " samples per pixel"});
+  s.push_back({"composite", true,
+               "premultiplied over, in scene-linear light" +
+                   std::string(job.holdout.empty() ? "" : ", the holdout mask's plate in front")});
   s.push_back({"output", true,
                "write " + exrPathFor(job).string() + " and " + displayPathFor(job).string()});
   return s;
@@ -489,7 +511,16 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     worldFromObjectRotation[c] = glm::normalize(worldFromObjectRotation[c]);
   const render::EmbreeScene objectScene(mesh.positions, mesh.indices);
 
-  // shadows
+  // shadows: on the object itself, then on the ground, with one shadow lighting for both.
+  const ShadowPlan shadowPlan = ShadowPlan::parse(job.shadowParams);
+  const glm::mat3 envFromObject = envFromWorld * worldFromObjectRotation;
+  std::optional<ShadowLighting> shadowLighting;
+  auto needShadowLighting = [&]() -> const ShadowLighting& {
+    if (!shadowLighting) {
+      shadowLighting = prepareShadowLighting(environment, shadowPlan, job.cache, progress);
+    }
+    return *shadowLighting;
+  };
   pipeline::ShadowResult shadows;
   bool shadowed = false;
   {
@@ -502,17 +533,33 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       record.runs = false;
       record.reason = "the object is closed and convex: it cannot shadow itself";
     } else {
-      const ShadowPlan shadowPlan = ShadowPlan::parse(job.shadowParams);
-      shadows = computeSelfShadowing(mesh, objectScene, environment,
-                                     envFromWorld * worldFromObjectRotation, shadowPlan, job.cache,
+      const ShadowLighting& sl = needShadowLighting();
+      shadows = computeSelfShadowing(mesh, objectScene, sl, envFromObject, shadowPlan, job.cache,
                                      progress);
-      record.reason = shadowPlan.describe() + ": " + shadows.reason;
+      record.reason = shadowPlan.describe() + ": " + shadows.reason + "; " + sl.reason;
       if (shadows.irradiance.clamped > 0) {
         result.notes.push_back(std::to_string(shadows.irradiance.clamped) +
                                " vertices' shadowed irradiance rang outside [0, unshadowed] "
                                "(truncation) and was clamped");
       }
       shadowed = true;
+    }
+  }
+
+  GroundShadowResult ground;
+  bool grounded = false;
+  {
+    StageRecord& record = stage(result.stages, "ground");
+    StageTimer t(record);
+    if (!job.groundShadow) {
+      record.runs = false;
+      record.reason = "--no-shadow";
+    } else {
+      const ShadowLighting& sl = needShadowLighting();
+      ground = computeGroundShadow(mesh, objectScene, worldFromObject, camera, sl, envFromWorld,
+                                   envFromObject, shadowPlan, progress);
+      record.reason = ground.reason;
+      grounded = !ground.grid.empty();
     }
   }
 
@@ -562,11 +609,18 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     result.objectPixels = rendered.coverage;
   }
 
-  // composite
+  // composite: the plate darkened by the ground shadow (in linear light), the object over it,
+  // and the holdout's pixels of the plate back in front.
   Image composite;
   {
     StageTimer t(stage(result.stages, "composite"));
-    composite = composite::over(rendered.beauty, rendered.x0, rendered.y0, plateLinear);
+    Image shadowedPlate = plateLinear;
+    if (grounded) composite::multiply(shadowedPlate, ground.ratio, ground.grid.x0, ground.grid.y0);
+    composite = composite::over(rendered.beauty, rendered.x0, rendered.y0, shadowedPlate);
+    if (!job.holdout.empty()) {
+      const Image mask = loadHoldout(job.holdout, composite.width, composite.height);
+      composite = composite::holdout(composite, plateLinear, mask);
+    }
   }
 
   // output: the composite (one part, the full frame) and the object with its AOVs (a second part
@@ -659,8 +713,17 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     }
     // Both files appear together or not at all: a failure keeps every previous output.
     OutputFiles outputs("output");
+    std::vector<ingest::ExrPart> parts = {compositePart, objectPart};
+    if (grounded) {
+      // The ground shadow's ratio, in its own data window: 1 where the plate is unchanged.
+      ingest::ExrPart shadowPart{
+          "shadow",        &ground.ratio,    ground.grid.x0,       ground.grid.y0,
+          composite.width, composite.height, compositePart.options};
+      shadowPart.options.alphaChannel = -1;
+      parts.push_back(shadowPart);
+    }
     const std::vector<ingest::WriteReport> written =
-        ingest::writeExrParts(outputs, result.exrPath, {compositePart, objectPart}, header);
+        ingest::writeExrParts(outputs, result.exrPath, parts, header);
     ingest::writeImage(outputs, result.displayPath, shown, {});
     outputs.commit();
     for (const ingest::WriteReport& w : written) {

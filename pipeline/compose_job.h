@@ -59,6 +59,10 @@ struct ComposeJob {
   // (pipeline/shadows.h).
   bool shadows = true;
   std::string shadowParams;
+  // The shadow the object casts on the ground of the plate (differential rendering).
+  bool groundShadow = true;
+  // A holdout mask (an image the plate's size, white where the plate is in front of the object).
+  std::filesystem::path holdout;
   // Root of the caches: projected lighting keyed by the environment's pixels and the basis
   // parameters, visibility passes keyed by the mesh and theirs; empty disables both.
   std::filesystem::path cache = cacheDirectory();

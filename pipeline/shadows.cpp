@@ -106,10 +106,64 @@ std::string ShadowPlan::describe() const {
   return s;
 }
 
+ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
+                                     const ShadowPlan& plan, const fs::path& cacheRoot,
+                                     const Progress& progress) {
+  ShadowLighting out;
+  // The lighting the transfer applies to: the environment without its brightest sources.
+  const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
+  out.split = lighting::splitBrightSources(environment, sourceCount);
+  if (plan.method == render::ShadowMethod::Chebyshev) {
+    lighting::ChebParams cp;
+    cp.order = plan.lightingOrder;
+    cp.samples = plan.transfer.grid;
+    out.lighting = std::make_unique<lighting::ChebLocalLighting>(cp);
+  } else if (plan.method == render::ShadowMethod::Harmonics) {
+    out.lighting = std::make_unique<lighting::ShLighting>(plan.lightingOrder);
+  } else {
+    // Ambient occlusion scales the unshadowed irradiance of the default basis.
+    out.lighting = lighting::createLighting("cheb-local");
+  }
+  const bool reused = projectCached(*out.lighting, out.split.residual, cacheRoot, progress);
+  out.reason = std::string(reused ? "reused" : "projected") + " its lighting (" +
+               out.lighting->describe() + ")";
+  if (!out.split.sources.empty()) {
+    char line[160];
+    std::snprintf(line, sizeof line, "; %zu bright sources (%.1f%% of the light) shadowed by rays",
+                  out.split.sources.size(), 100.0 * out.split.sourceShare);
+    out.reason += line;
+  }
+  return out;
+}
+
+namespace {
+
+// Shadowed and unshadowed irradiance at `points` from their transfer and the sources they see.
+render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
+                                     const render::VertexTransfer& transfer,
+                                     const render::EmbreeScene& scene,
+                                     const ShadowLighting& lighting, const glm::mat3& envFromObject,
+                                     const ShadowPlan& plan, int64_t& sourceRays) {
+  render::SourceVisibility seen;
+  if (!lighting.split.sources.empty()) {
+    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject);
+    sourceRays = seen.rays;
+  }
+  render::ShadowInputs inputs;
+  inputs.method = plan.method;
+  inputs.transfer = &transfer;
+  inputs.shadowLighting = lighting.lighting.get();
+  inputs.sources = lighting.split.sources;
+  inputs.sourceVisibility = &seen;
+  return render::shadeVertices(points, envFromObject, inputs);
+}
+
+}  // namespace
+
 ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
-                                  const lighting::Environment& environment,
-                                  const glm::mat3& envFromObject, const ShadowPlan& plan,
-                                  const fs::path& cacheRoot, const Progress& progress) {
+                                  const ShadowLighting& lighting, const glm::mat3& envFromObject,
+                                  const ShadowPlan& plan, const fs::path& cacheRoot,
+                                  const Progress& progress) {
   ShadowResult out;
   out.points = render::surfacePoints(mesh);
   // The visibility pass, cached by the mesh's content and the parameters.
@@ -144,43 +198,45 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     out.reason =
         "reused the visibility pass " + cache.pathFor(key).string() + " (same mesh and parameters)";
   }
-
-  // The lighting the transfer applies to: the environment without its brightest sources.
-  const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
-  lighting::SourceSplit split = lighting::splitBrightSources(environment, sourceCount);
-  std::unique_ptr<lighting::DiffuseLighting> shadowLighting;
-  if (plan.method == render::ShadowMethod::Chebyshev) {
-    lighting::ChebParams cp;
-    cp.order = plan.lightingOrder;
-    cp.samples = plan.transfer.grid;
-    shadowLighting = std::make_unique<lighting::ChebLocalLighting>(cp);
-  } else if (plan.method == render::ShadowMethod::Harmonics) {
-    shadowLighting = std::make_unique<lighting::ShLighting>(plan.lightingOrder);
-  } else {
-    // Ambient occlusion scales the unshadowed irradiance of the default basis.
-    shadowLighting = lighting::createLighting("cheb-local");
-  }
-  const bool lightingReused = projectCached(*shadowLighting, split.residual, cacheRoot, progress);
-  out.reason += std::string("; ") + (lightingReused ? "reused" : "projected") + " its lighting (" +
-                shadowLighting->describe() + ")";
-
-  render::SourceVisibility seen;
-  if (!split.sources.empty()) {
-    seen = render::traceSources(out.points, scene, split.sources, envFromObject);
-    char line[200];
-    std::snprintf(line, sizeof line, "; %zu bright sources (%.1f%% of the light) by %lld rays",
-                  split.sources.size(), 100.0 * split.sourceShare,
-                  static_cast<long long>(seen.rays));
-    out.reason += line;
-  }
-  render::ShadowInputs inputs;
-  inputs.method = plan.method;
-  inputs.transfer = &transfer;
-  inputs.shadowLighting = shadowLighting.get();
-  inputs.sources = split.sources;
-  inputs.sourceVisibility = &seen;
-  out.irradiance = render::shadeVertices(out.points, envFromObject, inputs);
+  int64_t sourceRays = 0;
+  out.irradiance =
+      shadePoints(out.points, transfer, scene, lighting, envFromObject, plan, sourceRays);
   out.occlusion = std::move(transfer.ao);
+  return out;
+}
+
+GroundShadowResult computeGroundShadow(
+    const render::Mesh& mesh, const render::EmbreeScene& scene, const glm::dmat4& worldFromObject,
+    const calib::PlateCamera& camera, const ShadowLighting& lighting, const glm::mat3& envFromWorld,
+    const glm::mat3& envFromObject, const ShadowPlan& plan, const Progress& progress) {
+  GroundShadowResult out;
+  const auto start = std::chrono::steady_clock::now();
+  // The sources in the world's frame, to follow their shadows across the ground.
+  std::vector<lighting::LightSource> worldSources = lighting.split.sources;
+  const glm::mat3 worldFromEnv = glm::transpose(envFromWorld);
+  for (auto& s : worldSources) s.direction = worldFromEnv * s.direction;
+  out.grid = render::groundGrid(mesh, worldFromObject, camera, worldSources);
+  if (out.grid.empty()) {
+    out.reason = "no ground around the object is in view";
+    out.ratio = render::groundRatio(out.grid, {});
+    return out;
+  }
+  render::TransferParams params = plan.transfer;
+  params.shBands = plan.method == render::ShadowMethod::Harmonics ? plan.transfer.shBands : 0;
+  const render::VertexTransfer transfer =
+      render::computeTransfer(mesh, out.grid.points, params, progress);
+  int64_t sourceRays = 0;
+  const render::VertexIrradiance irradiance =
+      shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, sourceRays);
+  out.ratio = render::groundRatio(out.grid, irradiance);
+  char line[240];
+  std::snprintf(line, sizeof line,
+                "ground shadow over %dx%d plate pixels from %zu ground points (every %d pixels): "
+                "%lld rays in %.2f s",
+                out.grid.x1 - out.grid.x0, out.grid.y1 - out.grid.y0, out.grid.points.count(),
+                out.grid.stride, static_cast<long long>(transfer.rays + sourceRays),
+                seconds(start));
+  out.reason = line;
   return out;
 }
 

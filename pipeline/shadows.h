@@ -3,14 +3,19 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <glm/mat3x3.hpp>
 
+#include "calib/plate_camera.h"
 #include "core/progress.h"
 #include "lighting/environment.h"
+#include "lighting/lighting.h"
+#include "lighting/sources.h"
 #include "render/embree_scene.h"
+#include "render/ground.h"
 #include "render/mesh.h"
 #include "render/transfer.h"
 
@@ -43,15 +48,36 @@ struct ShadowResult {
 std::filesystem::path lightingCacheFolder(const std::filesystem::path& root);
 std::filesystem::path visibilityCacheFolder(const std::filesystem::path& root);
 
-// The visibility pass of `mesh` (object space, traced in `scene`), from the cache under
-// `cacheRoot` when it holds this mesh with these parameters (an empty root: no cache), then the
-// lighting of the environment for the method (bright sources split off, each shadowed by a ray
-// per vertex), then the per-vertex shadowed and unshadowed irradiance. `envFromObject` turns
-// the mesh into the environment's frame (a yaw).
+// The lighting the shadows use: the environment with its brightest sources split off (each
+// shadowed by rays), the rest projected for the method (through the lighting cache).
+struct ShadowLighting {
+  lighting::SourceSplit split;
+  std::unique_ptr<lighting::DiffuseLighting> lighting;
+  std::string reason;
+};
+ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
+                                     const ShadowPlan& plan, const std::filesystem::path& cacheRoot,
+                                     const Progress& progress = {});
+
+// The visibility pass of `mesh` (object space, traced in `scene`) at its surface points, from the
+// cache under `cacheRoot` when it holds this mesh with these parameters (an empty root: no
+// cache), then their shadowed and unshadowed irradiance. `envFromObject` turns the mesh into the
+// environment's frame (a yaw).
 ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
-                                  const lighting::Environment& environment,
-                                  const glm::mat3& envFromObject, const ShadowPlan& plan,
-                                  const std::filesystem::path& cacheRoot,
+                                  const ShadowLighting& lighting, const glm::mat3& envFromObject,
+                                  const ShadowPlan& plan, const std::filesystem::path& cacheRoot,
                                   const Progress& progress = {});
+
+// The shadow the object casts on the ground (render/ground.h): the ratio E_with / E_without over
+// the plate pixels where it can fall, by the same transfer at ground points.
+struct GroundShadowResult {
+  render::GroundGrid grid;
+  Image ratio;  // RGB over [grid.x0, grid.x1) x [grid.y0, grid.y1) of the plate; 1 = no shadow
+  std::string reason;
+};
+GroundShadowResult computeGroundShadow(
+    const render::Mesh& mesh, const render::EmbreeScene& scene, const glm::dmat4& worldFromObject,
+    const calib::PlateCamera& camera, const ShadowLighting& lighting, const glm::mat3& envFromWorld,
+    const glm::mat3& envFromObject, const ShadowPlan& plan, const Progress& progress = {});
 
 }  // namespace compose::pipeline

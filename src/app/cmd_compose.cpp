@@ -15,7 +15,7 @@ struct ComposeOptions {
   pipeline::ComposeJob job;
   std::string place, albedo, lightingParams, exposure = "auto", shadows = "self", room, captureAt;
   double focal35 = 0.0, envRadius = 0.0;
-  bool explain = false, noCache = false;
+  bool explain = false, noCache = false, noShadow = false;
 };
 
 }  // namespace
@@ -94,6 +94,10 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
   app.add_option("--shadow-params", job.shadowParams,
                  "Self-shadowing parameters as key=value,...: method=cheb|sh|ao, order, grid, "
                  "boundary, sources");
+  app.add_flag("--no-shadow", o->noShadow,
+               "No shadow on the plate's ground (the object's own shadowing stays)");
+  app.add_option("--holdout", job.holdout,
+                 "Holdout mask, the plate's size: white where the plate is in front of the object");
   app.add_option("--calib", job.lensFile,
                  "Lens calibration of the plate's camera (JSON from compose calib lens)");
   app.add_flag("--explain", o->explain, "Say which stages run or are skipped and why, then exit");
@@ -113,6 +117,7 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     if (!o->captureAt.empty()) j.captureAt = parseTriple(o->captureAt, "--capture-at");
     j.lightingParams = o->lightingParams;
     if (o->noCache) j.cache.clear();
+    if (o->noShadow) j.groundShadow = false;
     if (o->shadows == "off") {
       j.shadows = false;
     } else if (o->shadows != "self") {
@@ -134,9 +139,12 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
       for (const auto& note : result.notes)
         std::fprintf(stderr, "compose: note: %s\n", note.c_str());
       for (const auto& s : result.stages) {
-        if (s.runs)
+        if (s.runs) {
           std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
                        s.reason.c_str());
+        } else {
+          std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(), s.reason.c_str());
+        }
       }
     }
     std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());

@@ -1,5 +1,6 @@
 #include "composite/composite.h"
 
+#include <algorithm>
 #include <string>
 
 #include "core/error.h"
@@ -49,6 +50,42 @@ Image over(const Image& fg, int x0, int y0, const Image& bg) {
         }
       },
       8);
+  return out;
+}
+
+void multiply(Image& image, const Image& factor, int x0, int y0) {
+  COMPOSE_CHECK(image.channels >= 3 && factor.channels >= 3);
+  COMPOSE_CHECK(x0 >= 0 && y0 >= 0 && x0 + factor.width <= image.width &&
+                y0 + factor.height <= image.height);
+  parallelFor(0, factor.height, [&](int64_t y) {
+    for (int x = 0; x < factor.width; ++x) {
+      const float* f = factor.at(x, int(y));
+      float* o = image.at(x + x0, int(y) + y0);
+      o[0] *= f[0];
+      o[1] *= f[1];
+      o[2] *= f[2];
+    }
+  });
+}
+
+Image holdout(const Image& comp, const Image& plate, const Image& mask) {
+  if (comp.width != plate.width || comp.height != plate.height || mask.width != comp.width ||
+      mask.height != comp.height) {
+    throw Error("composite", "holdout: the composite, the plate and the mask differ in size");
+  }
+  if (!comp.colorSpace.empty() && !plate.colorSpace.empty() && comp.colorSpace != plate.colorSpace)
+    throw Error("composite", "holdout: the composite and the plate are in different colour spaces");
+  COMPOSE_CHECK(comp.channels >= 3 && plate.channels >= 3 && mask.channels >= 1);
+  Image out = comp;
+  parallelFor(0, comp.height, [&](int64_t y) {
+    for (int x = 0; x < comp.width; ++x) {
+      const float m = std::clamp(mask.at(x, int(y))[0], 0.0f, 1.0f);
+      if (m == 0.0f) continue;
+      float* o = out.at(x, int(y));
+      const float* p = plate.at(x, int(y));
+      for (int c = 0; c < 3; ++c) o[c] = m * p[c] + (1.0f - m) * o[c];
+    }
+  });
   return out;
 }
 

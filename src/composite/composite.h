@@ -15,4 +15,14 @@ Image over(const Image& foreground, const Image& background);
 // must lie inside it); the rest of the background is copied unchanged.
 Image over(const Image& foreground, int x, int y, const Image& background);
 
+// Multiplies the first three channels of `image` over [x, x + w) x [y, y + h) by the RGB of
+// `factor` (w x h): the ground shadow's ratio applied to the plate in linear light. The rectangle
+// must lie inside the image.
+void multiply(Image& image, const Image& factor, int x, int y);
+
+// A holdout: where `mask` (one channel, 1 = the plate is in front of the object) is set, the plate
+// shows instead of the composite: out = mask × plate + (1 - mask) × composite, per pixel. All three
+// images are the same size; the plate's and the composite's colour spaces must agree.
+Image holdout(const Image& composite, const Image& plate, const Image& mask);
+
 }  // namespace compose::composite

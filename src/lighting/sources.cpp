@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 #include <glm/geometric.hpp>
 
@@ -54,7 +55,9 @@ SourceSplit splitBrightSources(const Environment& env, int count) {
         out.residual.setRadiance(x, y, glm::vec3(0.0f));
       }
     }
-    out.sources.push_back({glm::vec3(glm::normalize(centre)), glm::vec3(power)});
+    const float halfLat = float(0.5 * f * std::numbers::pi / env.height());
+    const float halfLon = float(f * std::numbers::pi / env.width());
+    out.sources.push_back({glm::vec3(glm::normalize(centre)), glm::vec3(power), halfLat, halfLon});
     taken += b.power;
   }
   out.sourceShare = total > 0.0 ? taken / total : 0.0;

@@ -23,6 +23,9 @@ namespace compose::lighting {
 struct LightSource {
   glm::vec3 direction;  // unit, the power-weighted centre of the block
   glm::vec3 power;      // Σ L Ω over the block (RGB): irradiance at normal incidence
+  // The block's extent: half its latitude span and half its longitude span (radians), so that
+  // shadows can be traced across the source's area rather than from one direction.
+  float halfLatitude = 0.0f, halfLongitude = 0.0f;
 };
 
 struct SourceSplit {

@@ -92,7 +92,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   COMPOSE_CHECK(settings.samplesPerAxis >= 1);
   COMPOSE_CHECK(!mesh.indices.empty() && mesh.normals.size() == mesh.positions.size());
   if (settings.shadows || settings.occlusion) COMPOSE_CHECK(settings.points != nullptr);
-  if (settings.shadows) COMPOSE_CHECK(settings.shadows->shadowed.size() == settings.points->count());
+  if (settings.shadows)
+    COMPOSE_CHECK(settings.shadows->shadowed.size() == settings.points->count());
   if (settings.occlusion) COMPOSE_CHECK(settings.occlusion->size() == settings.points->count());
 
   const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
@@ -181,8 +182,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             shadowedE[c] = e[c] * ratio;
           }
         }
-        const glm::vec3 albedo =
-            materials ? mesh.albedoAt(hit.triangle, u, v) : settings.albedo;
+        const glm::vec3 albedo = materials ? mesh.albedoAt(hit.triangle, u, v) : settings.albedo;
         colour += reflect * albedo * shadowedE;
         albedoSum += albedo;
         irradianceSum += e;

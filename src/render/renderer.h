@@ -12,10 +12,10 @@
 // irradiance of the lighting (lighting.h) at the interpolated vertex normal. With self-shadowing,
 // E is the unshadowed irradiance at the pixel's normal times the ratio of the shadowed to the
 // unshadowed irradiance interpolated from the surface points around the hit, so that the
-// per-pixel normal keeps its detail and the visibility comes from the transfer. Negative irradiance (SH ringing) is clamped
-// to 0. The shading normal faces the viewer: a back face is shaded from the side the camera sees,
-// and an interpolated normal that points away from the viewer is bent back to the tangent plane.
-// `envFromWorld` rotates world directions into the environment's frame.
+// per-pixel normal keeps its detail and the visibility comes from the transfer. Negative irradiance
+// (SH ringing) is clamped to 0. The shading normal faces the viewer: a back face is shaded from the
+// side the camera sees, and an interpolated normal that points away from the viewer is bent back to
+// the tangent plane. `envFromWorld` rotates world directions into the environment's frame.
 //
 // The mesh is traced in its own coordinates (one Embree scene serves the renderer and the
 // visibility precompute); camera rays are carried into it by the inverse of `worldFromObject`.
@@ -46,7 +46,7 @@ struct RenderSettings {
   glm::vec3 albedo{0.5f};  // in the working space
   // Use `albedo` even where the mesh has materials (the pipeline sets it for --albedo).
   bool overrideMaterials = false;
-  float exposure = 1.0f;   // linear multiplier on the object's radiance
+  float exposure = 1.0f;  // linear multiplier on the object's radiance
   glm::mat3 envFromWorld{1.0f};
   // Self-shadowing (transfer.h): the surface points, their irradiance with and without it, and
   // their ambient occlusion (for the AO AOV); null: no shadowing, AO 1.

@@ -94,6 +94,8 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budg
   SurfacePoints out;
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   out.size = std::max({extent.x, extent.y, extent.z});
+  out.centre = 0.5f * (mesh.boundsMin() + mesh.boundsMax());
+  out.radius = 0.5f * glm::length(extent);
   // Longest edge per triangle, then the finest spacing whose points fit the budget.
   const size_t triangles = mesh.triangleCount();
   std::vector<float> longestEdge(triangles);
@@ -211,6 +213,23 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
     omega[size_t(i)] = 2.0 * kPi / s * (a - b);     // the cell's solid angle
     cosine[size_t(i)] = kPi / s * (a * a - b * b);  // ∫_cell cos θ dω
   }
+  // Every direction of cell row i lies within cellRadius[i] of its centre direction (along the
+  // meridian, then along the parallel), for the bounding-cone test below.
+  std::vector<double> cellRadius(static_cast<size_t>(s)), rowSin(static_cast<size_t>(s)),
+      rowCos(static_cast<size_t>(s)), colSin(static_cast<size_t>(s)),
+      colCos(static_cast<size_t>(s));
+  for (int i = 0; i < s; ++i) {
+    cellRadius[size_t(i)] = 0.25 * kPi / s + kPi / s * std::sin((i + 1) * 0.5 * kPi / s) + 1e-6;
+    const double theta = (i + 0.5) * 0.5 * kPi / s, phi = 2.0 * kPi * (i + 0.5) / s;
+    rowSin[size_t(i)] = std::sin(theta);
+    rowCos[size_t(i)] = std::cos(theta);
+    colSin[size_t(i)] = std::sin(phi);
+    colCos[size_t(i)] = std::cos(phi);
+  }
+  // The object's bounding sphere, in its own coordinates.
+  const glm::dvec3 centre = 0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax()));
+  const double radius =
+      0.5 * glm::length(glm::dvec3(mesh.boundsMax()) - glm::dvec3(mesh.boundsMin()));
   std::atomic<size_t> done{0};
   std::atomic<int64_t> rays{0};
 
@@ -278,16 +297,37 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
           traced += int64_t(sc.batch.size());
         };
 
+        // A point outside the object's bounding sphere (a ground point) can only be shadowed
+        // from within the cone around the sphere: cells wholly outside it are visible untraced.
+        const glm::dvec3 toCentre = centre - glm::dvec3(points.positions[v]);
+        const double distance = glm::length(toCentre);
+        const bool outside = distance > radius * 1.0001;
+        const glm::dvec3 axis = outside ? toCentre / distance : glm::dvec3(0.0);
+        const double coneHalf = outside ? std::asin(std::min(1.0, radius / distance)) : kPi;
+        // In local coordinates (east, north, normal), for a dot product per cell.
+        const glm::dvec3 axisLocal(glm::dot(axis, east), glm::dot(axis, north), glm::dot(axis, n));
+
         // Pass 1: one jittered ray per cell.
         sc.batch.clear();
+        sc.batchCell.clear();
         for (int i = 0; i < s; ++i) {
           for (int j = 0; j < s; ++j, ++sample) {
             const glm::vec3 d = direction(i, j, hash01(2 * sample), hash01(2 * sample + 1));
             sc.dirs[size_t(i * s + j)] = d;
+            sc.occluded[size_t(i * s + j)] = 0;
+            if (outside && coneHalf + cellRadius[size_t(i)] < kPi) {
+              const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
+                                 rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
+              // Wholly outside the cone: cannot see the object.
+              if (glm::dot(c, axisLocal) < std::cos(coneHalf + cellRadius[size_t(i)])) continue;
+            }
             sc.batch.push_back(d);
+            sc.batchCell.push_back(i * s + j);
           }
         }
-        traceBatch([&](size_t index, bool occluded) { sc.occluded[index] = occluded ? 1 : 0; });
+        traceBatch([&](size_t index, bool occluded) {
+          sc.occluded[size_t(sc.batchCell[index])] = occluded ? 1 : 0;
+        });
 
         // Cells whose ray disagrees with a neighbour's lie on a shadow's edge: they get r x r
         // stratified rays; every other cell keeps its one ray.
@@ -422,14 +462,30 @@ const char* shadowMethodName(ShadowMethod method) {
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
                               const std::vector<lighting::LightSource>& sources,
                               const glm::mat3& envFromObject) {
-  COMPOSE_CHECK(sources.size() <= 64);
   SourceVisibility out;
   const size_t count = points.count();
-  out.visible.assign(count, 0);
+  out.count = sources.size();
+  out.visible.assign(count * sources.size(), 0.0f);
   if (sources.empty()) return out;
+  // Four directions per source: a 2 x 2 stratification of its latitude/longitude extent,
+  // jittered per point. The frame (east, north) of each source turns the offsets into directions.
+  constexpr int kPerSource = 4;
   const glm::mat3 objectFromEnv = glm::transpose(envFromObject);
-  std::vector<glm::vec3> dirs(sources.size());
-  for (size_t i = 0; i < sources.size(); ++i) dirs[i] = objectFromEnv * sources[i].direction;
+  struct Frame {
+    glm::vec3 centre, east, north;
+    float halfLat, halfLon;
+  };
+  std::vector<Frame> frames(sources.size());
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const glm::dvec3 d = glm::normalize(glm::dvec3(sources[i].direction));
+    const double lat = std::asin(std::clamp(d.y, -1.0, 1.0)), lon = std::atan2(d.x, d.z);
+    const glm::dvec3 east(std::cos(lon), 0.0, -std::sin(lon));
+    const glm::dvec3 north(-std::sin(lon) * std::sin(lat), std::cos(lat),
+                           -std::cos(lon) * std::sin(lat));
+    frames[i] = {objectFromEnv * glm::vec3(d), objectFromEnv * glm::vec3(east),
+                 objectFromEnv * glm::vec3(north), sources[i].halfLatitude,
+                 float(sources[i].halfLongitude * std::cos(lat))};
+  }
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
   std::atomic<int64_t> rays{0};
   parallelFor(
@@ -439,25 +495,48 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         const glm::vec3 n = points.normals[v];
         const glm::vec3 origin = points.positions[v] + lift * n;
         glm::vec3 batch[8];
-        int index[8];
+        size_t index[8];
         int m = 0;
-        uint64_t visible = 0;
         int64_t traced = 0;
+        float* seen = out.visible.data() + v * sources.size();
         auto flush = [&] {
           const uint32_t hit = scene.occluded8(origin, batch, (1u << m) - 1u, tnear);
           for (int b = 0; b < m; ++b)
-            if (!((hit >> b) & 1u)) visible |= uint64_t(1) << index[b];
+            if (!((hit >> b) & 1u)) seen[index[b] / kPerSource] += 1.0f / kPerSource;
           traced += m;
           m = 0;
         };
-        for (size_t i = 0; i < dirs.size(); ++i) {
-          if (glm::dot(n, dirs[i]) <= 0.0f) continue;  // below the horizon: no light anyway
-          batch[m] = dirs[i];
-          index[m] = int(i);
-          if (++m == 8) flush();
+        // Outside the bounding sphere, only directions within its cone can be blocked.
+        const glm::vec3 toCentre = points.centre - points.positions[v];
+        const float distance = glm::length(toCentre);
+        const bool outside = distance > points.radius * 1.0001f;
+        const float cosCone =
+            outside ? std::sqrt(std::max(
+                          0.0f, 1.0f - (points.radius * points.radius) / (distance * distance)))
+                    : -2.0f;
+        const glm::vec3 axis = outside ? toCentre / distance : glm::vec3(0.0f);
+        uint32_t bits[3];
+        std::memcpy(bits, &points.positions[v], sizeof bits);
+        uint32_t sample =
+            (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
+        for (size_t i = 0; i < sources.size(); ++i) {
+          const Frame& f = frames[i];
+          for (int k = 0; k < kPerSource; ++k, ++sample) {
+            const float a = (float(k & 1) + float(hash01(2 * sample))) * 0.5f - 0.5f;
+            const float b = (float(k >> 1) + float(hash01(2 * sample + 1))) * 0.5f - 0.5f;
+            const glm::vec3 d = glm::normalize(f.centre + 2.0f * a * f.halfLat * f.north +
+                                               2.0f * b * f.halfLon * f.east);
+            if (glm::dot(n, d) <= 0.0f) continue;  // below the horizon: no light anyway
+            if (outside && glm::dot(d, axis) < cosCone) {
+              seen[i] += 1.0f / kPerSource;  // cannot meet the object
+              continue;
+            }
+            batch[m] = d;
+            index[m] = i * kPerSource + size_t(k);
+            if (++m == 8) flush();
+          }
         }
         if (m > 0) flush();
-        out.visible[v] = visible;
         rays += traced;
       },
       256);
@@ -503,7 +582,8 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
   }
   const bool withSources = !in.sources.empty();
   if (withSources && method != ShadowMethod::AmbientOcclusion)
-    COMPOSE_CHECK(in.sourceVisibility && in.sourceVisibility->visible.size() == count);
+    COMPOSE_CHECK(in.sourceVisibility &&
+                  in.sourceVisibility->visible.size() == count * in.sources.size());
 
   VertexIrradiance out;
   out.shadowed.resize(count);
@@ -561,11 +641,11 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
             break;
         }
         if (withSources && method != ShadowMethod::AmbientOcclusion) {
-          const uint64_t seen = in.sourceVisibility->visible[v];
+          const float* seen = in.sourceVisibility->visible.data() + v * in.sources.size();
           for (size_t i = 0; i < in.sources.size(); ++i) {
-            if (!((seen >> i) & 1u)) continue;
+            if (seen[i] <= 0.0f) continue;
             const float c = glm::dot(nEnv, in.sources[i].direction);
-            if (c > 0.0f) shadowed += c * in.sources[i].power;
+            if (c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
           }
         }
         // Truncation can ring below 0 or above the unshadowed value: light is never negative and

@@ -78,6 +78,8 @@ struct SurfacePoints {
   std::vector<uint32_t> first;                // per triangle: index of its first own grid point
   std::vector<uint8_t> level;  // per triangle: segments per edge (1: the corners only)
   float size = 0.0f;           // the object's size: its bounding box's largest extent
+  glm::vec3 centre{0.0f};      // the object's bounding sphere (object space), to cull rays
+  float radius = 0.0f;
 
   size_t count() const { return positions.size(); }
   // The three points whose values, with these weights, interpolate at Embree's barycentrics
@@ -125,11 +127,15 @@ enum class ShadowMethod {
 };
 const char* shadowMethodName(ShadowMethod method);
 
-// Which bright sources (lighting/sources.h) each vertex sees: bit i of visible[v] for source i
-// (at most 64 sources). Rays go from the vertex, lifted as in computeTransfer, towards the
-// source's direction turned into the object's frame.
+// How much of each bright source (lighting/sources.h) each point sees: visible[p·count + i] in
+// [0, 1] for source i. Rays go from the point, lifted as in computeTransfer, to 2 x 2 directions
+// across the source's extent (its block of texels, stratified and jittered per point), turned
+// into the object's frame, so that a source's shadow has a penumbra rather than one hard edge.
+// From a point outside the object's bounding sphere, a source outside the sphere's cone is seen
+// without a ray.
 struct SourceVisibility {
-  std::vector<uint64_t> visible;
+  size_t count = 0;  // sources
+  std::vector<float> visible;
   int64_t rays = 0;
 };
 class EmbreeScene;

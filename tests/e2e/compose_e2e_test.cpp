@@ -153,7 +153,7 @@ class ComposeEndToEnd : public ::testing::Test {
     // with, and an exact reference at that normal measures the lighting alone.
     run_ = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) + " --object " +
                           quote((samples_ / "bunny.obj").string()) +
-                          " --samples 1 --shadows off --exposure " +
+                          " --samples 1 --shadows off --no-shadow --exposure " +
                           std::to_string(kExposureStops) + " --albedo " + std::to_string(kAlbedo) +
                           " --cache " + quote((dir_->path() / "cache").string()) + " --out " +
                           quote((dir_->path() / "comp").string()),
@@ -425,7 +425,8 @@ class ComposeOutputs : public ::testing::Test {
   }
   std::string args(const std::string& out) const {
     return "--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
-           quote((samples_ / "bunny.obj").string()) + " --samples 1 --no-cache --out " + quote(out);
+           quote((samples_ / "bunny.obj").string()) +
+           " --samples 1 --shadows off --no-shadow --no-cache --out " + quote(out);
   }
   fs::path samples_;
   TempDir dir_;
@@ -576,6 +577,48 @@ namespace {
 // The header carries the camera (worldToCamera, worldToNDC) and the placement
 // (compose:worldFromObject, mapping the mesh file's own coordinates to world space): rebuilt
 // from them and the OBJ alone, the scene projects onto the pixels the object covers.
+// The shadow on the plate: the plate is darkened, in linear light, exactly where the shadow
+// part's ratio is below 1, by that ratio, and untouched elsewhere (outside the object).
+TEST_F(ComposeOutputs, TheGroundShadowDarkensThePlateByItsRatioOnly) {
+  const auto r =
+      runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) + " --object " +
+                     quote((samples_ / "bunny.obj").string()) +
+                     " --samples 1 --shadows off --no-cache --out " + quote((dir_ / "g").string()),
+                 dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Raster e = readRaster(dir_ / "g.exr");
+  const Raster plate = readRaster(samples_ / "meadow.jpg");
+  const int R = e.channel("R"), a = e.channel("object.A"), s = e.channel("shadow.G");
+  int64_t darkened = 0, unchanged = 0;
+  double worst = 0.0;
+  for (int y = 0; y < e.height; ++y) {
+    for (int x = 0; x < e.width; ++x) {
+      if (e.at(x, y, a) > 0.0f) continue;
+      double lin[3], cg[3];
+      for (int c = 0; c < 3; ++c) lin[c] = srgbDecode(plate.at(x, y, c));
+      toAp1(lin, cg);
+      // Outside the shadow part the raster holds 0: the ratio there is 1.
+      const double ratio = e.at(x, y, s) > 0.0f ? e.at(x, y, s) : 1.0;
+      const double expected = cg[1] * ratio;
+      worst = std::max(worst, std::abs(e.at(x, y, R + 1) - expected) / std::max(expected, 1e-2));
+      if (ratio < 0.9) ++darkened;
+      if (ratio == 1.0) ++unchanged;
+    }
+  }
+  // Half floats (2^-11) for the composite and for the ratio.
+  EXPECT_LT(worst, 3e-3);
+  EXPECT_GT(darkened, 500) << "a visible shadow around the base";
+  EXPECT_GT(unchanged, int64_t(e.width) * e.height / 2) << "and most of the plate untouched";
+  // Without it, only the object changes the plate.
+  const auto off = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) +
+                                  " --object " + quote((samples_ / "bunny.obj").string()) +
+                                  " --samples 1 --shadows off --no-shadow --no-cache --out " +
+                                  quote((dir_ / "n").string()),
+                              dir_.path());
+  ASSERT_EQ(off.status, 0) << off.err;
+  EXPECT_NE(off.err.find("ground     skipped  --no-shadow"), std::string::npos) << off.err;
+}
+
 TEST_F(ComposeOutputs, TheHeaderRebuildsTheScene) {
   const auto r = runCompose(args((dir_ / "h").string()) + " --place 0.4,0.8 --yaw 35", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
