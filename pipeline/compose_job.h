@@ -1,5 +1,5 @@
-// The compose pipeline: the list of stages and the runner that takes a plate, an object and an
-// environment to a composite.
+// The compose pipeline's job: everything one composite is made from, and the runner's entry
+// points (the stages themselves are plugins, stage.h; the runner is runner.cpp).
 //
 // Stage contract (every stage library under src/ follows it):
 //  * A stage is a plain function over in-memory data that returns new data; the caller owns both.
@@ -13,8 +13,10 @@
 //    is a bug and aborts (COMPOSE_CHECK). Files are written atomically (temp file + rename), so a
 //    failed run leaves no half-written output.
 //
-// The stages, in order (stageNames()): ingest, merge, stitch, color, precompute, render,
-// composite, output. A stage a scene does not need is skipped, and plan() says which and why.
+// The stages, in order (stage.h, stages()): ingest, merge, stitch, color, precompute, shadows,
+// ground, render, composite, output. Each stage's outputs are keyed by the content of the inputs
+// they come from and the parameters; a stage whose outputs are in the stage cache is reused, one
+// the scene does not need is skipped, and plan() says which and why without reading any pixels.
 #pragma once
 
 #include <filesystem>
@@ -29,14 +31,12 @@
 
 namespace compose::pipeline {
 
-const std::vector<std::string>& stageNames();
-
 // Folder of the fetched sample data: $COMPOSE_SAMPLES_DIR, else $XDG_CACHE_HOME/compose/samples,
 // else ~/.cache/compose/samples (samples/fetch.sh fills it).
 std::filesystem::path samplesDirectory();
 // The environment used when none is given.
 std::filesystem::path defaultEnvironment();
-// Root of the on-disk caches (projected lighting in lighting/, visibility passes in visibility/):
+// Root of the on-disk caches (stage outputs in stages/, visibility passes in visibility/):
 // $COMPOSE_CACHE_DIR, else $XDG_CACHE_HOME/compose, else ~/.cache/compose.
 std::filesystem::path cacheDirectory();
 
@@ -63,9 +63,12 @@ struct ComposeJob {
   bool groundShadow = true;
   // A holdout mask (an image the plate's size, white where the plate is in front of the object).
   std::filesystem::path holdout;
-  // Root of the caches: projected lighting keyed by the environment's pixels and the basis
-  // parameters, visibility passes keyed by the mesh and theirs; empty disables both.
+  // Root of the caches: every expensive stage's outputs under stages/<stage>/, keyed by the
+  // contents of the inputs and the parameters; visibility passes keyed by the mesh under
+  // visibility/. Empty: no cache.
   std::filesystem::path cache = cacheDirectory();
+  // Worker threads (0: every core).
+  int threads = 0;
   double environmentYawDegrees = 0.0;
   // A lens calibration (compose calib lens) for the plate; empty: EXIF or --focal35.
   std::filesystem::path lensFile;
@@ -93,11 +96,20 @@ struct ComposeJob {
   std::optional<glm::dvec3> captureAt;
 };
 
+enum class StageState {
+  Run,     // computed in this run
+  Reused,  // its outputs were loaded from the stage cache
+  Skipped  // the scene does not need it, or nothing downstream needs its outputs
+};
+const char* stateName(StageState state);  // "run", "reused", "skipped"
+
 struct StageRecord {
   std::string name;
-  bool runs = true;
-  std::string reason;    // why it runs, is reused or is skipped
-  double seconds = 0.0;  // filled in by runCompose
+  StageState state = StageState::Run;
+  std::string reason;      // what it did, or why it is reused or skipped
+  double seconds = 0.0;    // wall-clock time in this run (loading, for a reused stage)
+  int64_t peakBytes = 0;   // peak resident memory of the process during the stage (0: unknown)
+  std::string cacheEntry;  // the stage cache entry read or written, if any
 };
 
 struct ComposeResult {
@@ -110,6 +122,9 @@ struct ComposeResult {
   float exposure = 1.0f;      // linear multiplier applied to the object's radiance
 };
 
+// The environment a job uses (its own, else defaultEnvironment()).
+std::filesystem::path environmentPathFor(const ComposeJob& job);
+
 // Output paths for a job.
 std::filesystem::path exrPathFor(const ComposeJob& job);
 std::filesystem::path displayPathFor(const ComposeJob& job);
@@ -118,8 +133,9 @@ std::filesystem::path displayPathFor(const ComposeJob& job);
 // status 2) naming the option. runCompose() calls it first.
 void validate(const ComposeJob& job);
 
-// What would run, and why, without reading any pixels.
-std::vector<StageRecord> plan(const ComposeJob& job);
+// What would run, be reused from the cache, or be skipped, and why, without reading any pixels
+// (the input files are hashed and the mesh is read).
+std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors);
 
 ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
                          const Progress& progress = {});

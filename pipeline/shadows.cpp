@@ -106,13 +106,8 @@ std::string ShadowPlan::describe() const {
   return s;
 }
 
-ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
-                                     const ShadowPlan& plan, const fs::path& cacheRoot,
-                                     const Progress& progress) {
+ShadowLighting shadowLightingFor(const ShadowPlan& plan) {
   ShadowLighting out;
-  // The lighting the transfer applies to: the environment without its brightest sources.
-  const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
-  out.split = lighting::splitBrightSources(environment, sourceCount);
   if (plan.method == render::ShadowMethod::Chebyshev) {
     lighting::ChebParams cp;
     cp.order = plan.lightingOrder;
@@ -124,7 +119,18 @@ ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
     // Ambient occlusion scales the unshadowed irradiance of the default basis.
     out.lighting = lighting::createLighting("cheb-local");
   }
+  return out;
+}
+
+ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
+                                     const ShadowPlan& plan, const fs::path& cacheRoot,
+                                     const Progress& progress) {
+  ShadowLighting out = shadowLightingFor(plan);
+  // The lighting the transfer applies to: the environment without its brightest sources.
+  const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
+  out.split = lighting::splitBrightSources(environment, sourceCount);
   const bool reused = projectCached(*out.lighting, out.split.residual, cacheRoot, progress);
+  out.split.residual = {};  // projected: the pixels are not needed any more
   out.reason = std::string(reused ? "reused" : "projected") + " its lighting (" +
                out.lighting->describe() + ")";
   if (!out.split.sources.empty()) {

@@ -55,6 +55,8 @@ struct ShadowLighting {
   std::unique_ptr<lighting::DiffuseLighting> lighting;
   std::string reason;
 };
+// The shadow lighting's basis for a plan, not yet projected (to be projected, or restored).
+ShadowLighting shadowLightingFor(const ShadowPlan& plan);
 ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
                                      const ShadowPlan& plan, const std::filesystem::path& cacheRoot,
                                      const Progress& progress = {});

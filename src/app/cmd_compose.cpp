@@ -1,4 +1,5 @@
 // The one-shot command: compose --plate PHOTO --object MESH [--env ENV] [--out BASE].
+#include <algorithm>
 #include <cstdio>
 
 #include "app/cli.h"
@@ -15,8 +16,38 @@ struct ComposeOptions {
   pipeline::ComposeJob job;
   std::string place, albedo, lightingParams, exposure = "auto", shadows = "self", room, captureAt;
   double focal35 = 0.0, envRadius = 0.0;
-  bool explain = false, noCache = false, noShadow = false;
+  bool explain = false, noCache = false, noShadow = false, timings = false;
 };
+
+// The stages of a run on stderr: what each did (unless quiet) and, with --timings, its time and
+// the peak memory during it.
+void printStages(const pipeline::ComposeResult& result, bool quiet, bool timings) {
+  if (!quiet) {
+    for (const auto& note : result.notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
+  }
+  double total = 0.0;
+  int64_t peak = 0;
+  for (const auto& s : result.stages) {
+    total += s.seconds;
+    peak = std::max(peak, s.peakBytes);
+    const char* state = pipeline::stateName(s.state);
+    if (timings) {
+      char memory[32] = "";
+      if (s.peakBytes > 0)
+        std::snprintf(memory, sizeof memory, "%7.0f MB", double(s.peakBytes) / 1e6);
+      std::fprintf(stderr, "compose: %-10s %-7s %8.3f s %10s  %s\n", s.name.c_str(), state,
+                   s.seconds, memory, quiet ? "" : s.reason.c_str());
+    } else if (s.state == pipeline::StageState::Skipped) {
+      std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(), s.reason.c_str());
+    } else {
+      std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
+                   s.reason.c_str());
+    }
+  }
+  if (timings)
+    std::fprintf(stderr, "compose: %-10s %-7s %8.3f s %7.0f MB  peak resident memory\n", "total",
+                 "", total, double(peak) / 1e6);
+}
 
 }  // namespace
 
@@ -100,7 +131,12 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
                  "Holdout mask, the plate's size: white where the plate is in front of the object");
   app.add_option("--calib", job.lensFile,
                  "Lens calibration of the plate's camera (JSON from compose calib lens)");
-  app.add_flag("--explain", o->explain, "Say which stages run or are skipped and why, then exit");
+  app.add_option("--threads", job.threads, "Worker threads [default: every core]");
+  app.add_flag("--timings", o->timings,
+               "Print each stage's time and the process's peak memory during it");
+  app.add_flag("--explain", o->explain,
+               "Say which stages would run, be reused from the cache or be skipped, and why, then "
+               "exit (reads the mesh and hashes the inputs; decodes no image)");
 
   return [o, &app, &globals]() -> int {
     pipeline::ComposeJob& j = o->job;
@@ -125,28 +161,18 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     }
     if (o->exposure != "auto") j.exposureStops = parseNumber(o->exposure, "--exposure");
 
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     if (o->explain) {
-      for (const auto& s : pipeline::plan(j)) {
-        std::printf("%-10s %-4s %s\n", s.name.c_str(), s.runs ? "run" : "skip", s.reason.c_str());
+      for (const auto& s : pipeline::plan(j, colors)) {
+        std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),
+                    s.reason.c_str());
       }
       return 0;
     }
 
-    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     ProgressPrinter printer(globals);
     const auto result = pipeline::runCompose(j, colors, printer.callback());
-    if (!globals.quiet) {
-      for (const auto& note : result.notes)
-        std::fprintf(stderr, "compose: note: %s\n", note.c_str());
-      for (const auto& s : result.stages) {
-        if (s.runs) {
-          std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
-                       s.reason.c_str());
-        } else {
-          std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(), s.reason.c_str());
-        }
-      }
-    }
+    if (!globals.quiet || o->timings) printStages(result, globals.quiet, o->timings);
     std::printf("%s\n%s\n", result.exrPath.string().c_str(), result.displayPath.string().c_str());
     return 0;
   };

@@ -205,41 +205,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       cubemap::StitchPhoto p;
       p.name = args[i].file.filename().string();
       p.worldFromCamera = rough[i];
-      if (lensFile) {
-        if (lensFile->width == h.width && lensFile->height == h.height) {
-          p.lens = *lensFile;
-        } else if (std::abs(double(lensFile->width) / lensFile->height -
-                            double(h.width) / h.height) < 1e-3) {
-          p.lens = lensFile->resized(h.width, h.height);
-        } else {
-          throw Error("stitch",
-                      "the lens file is for " + std::to_string(lensFile->width) + "x" +
-                          std::to_string(lensFile->height) + " images, the photo is " +
-                          std::to_string(h.width) + "x" + std::to_string(h.height) +
-                          " (another aspect ratio)",
-                      args[i].file);
-        }
-      } else if (o->fov > 0.0) {
-        p.lens = calib::Lens::fromFieldOfView(
-            h.width, h.height, o->fov,
-            o->fisheye ? calib::Projection::Equidistant : calib::Projection::Rectilinear);
-        p.lens.source = "--fov";
-      } else if (h.focalLength35mm) {
-        // A 35 mm-equivalent focal length refers to the 36 x 24 mm frame's diagonal.
-        constexpr double kDiagonalMm = 43.266615305567875;
-        p.lens = calib::Lens::fromFieldOfView(h.width, h.height, 90.0);
-        p.lens.fx = p.lens.fy = *h.focalLength35mm / kDiagonalMm * std::hypot(h.width, h.height);
-        p.lens.source =
-            "EXIF 35 mm focal length " + std::to_string(int(*h.focalLength35mm)) + " mm";
-      } else {
-        throw Error(
-            "stitch",
-            std::string("no intrinsics for this photo: its EXIF has no 35 mm equivalent "
-                        "focal length") +
-                (h.focalLengthMm ? " (only the true focal length, without the sensor size)" : "") +
-                "; give --fov DEG or --calib LENS.json",
-            args[i].file);
-      }
+      p.lens = cubemap::photoLens(args[i].file, h, lensFile, o->fov, o->fisheye);
       photos.push_back(p);
     }
     options.gains = o->gains == "on" ||

@@ -145,6 +145,14 @@ const std::string& ColorConfig::source() const {
   return impl_->source;
 }
 
+std::string ColorConfig::identity() const {
+  try {
+    return impl_->config->getCacheID();
+  } catch (const OCIO::Exception&) {
+    return impl_->source;
+  }
+}
+
 std::string ColorConfig::workingSpace() const {
   return resolve(OCIO::ROLE_SCENE_LINEAR, "the scene_linear role");
 }

@@ -31,6 +31,33 @@ struct Hash128 {
     }
     word(0xFFFFFFFEu);
   }
+  // Raw bytes (file contents), four at a time.
+  void data(const void* bytes, size_t size) {
+    const auto* p = static_cast<const unsigned char*>(bytes);
+    size_t i = 0;
+    for (; i + 4 <= size; i += 4) {
+      uint32_t w;
+      std::memcpy(&w, p + i, 4);
+      word(w);
+    }
+    uint32_t tail = 0;
+    std::memcpy(&tail, p + i, size - i);
+    word(tail);
+    word(uint32_t(size & 0xFFFFFFFFu));
+  }
+  void number(double v) {
+    uint64_t w;
+    std::memcpy(&w, &v, sizeof w);
+    word(uint32_t(w));
+    word(uint32_t(w >> 32));
+  }
+  void combine(const Hash128& other) {
+    word(uint32_t(other.a));
+    word(uint32_t(other.a >> 32));
+    word(uint32_t(other.b));
+    word(uint32_t(other.b >> 32));
+  }
+  bool operator==(const Hash128&) const = default;
   std::string hex() const {
     char buf[33];
     std::snprintf(buf, sizeof buf, "%016llx%016llx", static_cast<unsigned long long>(a),

@@ -347,6 +347,23 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
   return out;
 }
 
+std::vector<fs::path> environmentFiles(const fs::path& path) {
+  std::error_code ec;
+  if (path.string().find('%') != std::string::npos && !fs::exists(path, ec))
+    return facesOfPattern(path);
+  if (fs::is_directory(path, ec)) return facesInFolder(path);
+  if (!fs::exists(path, ec)) throw Error("ingest", "file not found", path);
+  if (const auto token = faceFromName(path.stem().string())) {
+    // A face file stands for its set when its siblings are there (readEnvironmentFile decides
+    // from the image's shape whether it is one).
+    try {
+      return siblingsOf(path, *token);
+    } catch (const Error&) {
+    }
+  }
+  return {path};
+}
+
 lighting::CubeMap cubeMapOf(const EnvironmentFile& file, lighting::SanitizeReport* report) {
   COMPOSE_CHECK(file.isCube());
   std::array<const Image*, kCubeFaces> faces;

@@ -53,6 +53,11 @@ struct EnvironmentFile {
 EnvironmentFile readEnvironmentFile(const std::vector<std::filesystem::path>& inputs,
                                     const ReadOptions& options = {});
 
+// The files whose contents an environment input depends on, without reading any pixels: the
+// six faces of a folder or a '%' pattern, a face file and its siblings, or the one file. Throws
+// compose::Error (stage "ingest") for a missing file or face.
+std::vector<std::filesystem::path> environmentFiles(const std::filesystem::path& input);
+
 // The layout an EXR's `envmap` attribute declares; nullopt for other files or no attribute.
 std::optional<Layout> exrEnvmapLayout(const std::filesystem::path& file);
 

@@ -1,5 +1,7 @@
 #include "cubemap/photo_header.h"
 
+#include <cmath>
+
 #include <OpenImageIO/imageio.h>
 
 #include "core/error.h"
@@ -35,6 +37,43 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   input->close();
   if (h.width <= 0 || h.height <= 0) throw Error("ingest", "image has no pixels", file);
   return h;
+}
+
+calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
+                      const std::optional<calib::Lens>& lensFile, double fovDegrees, bool fisheye) {
+  if (lensFile) {
+    if (lensFile->width == h.width && lensFile->height == h.height) return *lensFile;
+    if (std::abs(double(lensFile->width) / lensFile->height - double(h.width) / h.height) < 1e-3)
+      return lensFile->resized(h.width, h.height);
+    throw Error("stitch",
+                "the lens file is for " + std::to_string(lensFile->width) + "x" +
+                    std::to_string(lensFile->height) + " images, the photo is " +
+                    std::to_string(h.width) + "x" + std::to_string(h.height) +
+                    " (another aspect ratio)",
+                file);
+  }
+  if (fovDegrees > 0.0) {
+    calib::Lens lens = calib::Lens::fromFieldOfView(
+        h.width, h.height, fovDegrees,
+        fisheye ? calib::Projection::Equidistant : calib::Projection::Rectilinear);
+    lens.source = "--fov";
+    return lens;
+  }
+  if (h.focalLength35mm) {
+    // A 35 mm-equivalent focal length refers to the 36 x 24 mm frame's diagonal.
+    constexpr double kDiagonalMm = 43.266615305567875;
+    calib::Lens lens = calib::Lens::fromFieldOfView(h.width, h.height, 90.0);
+    lens.fx = lens.fy = *h.focalLength35mm / kDiagonalMm * std::hypot(h.width, h.height);
+    lens.source = "EXIF 35 mm focal length " + std::to_string(int(*h.focalLength35mm)) + " mm";
+    return lens;
+  }
+  throw Error(
+      "stitch",
+      std::string("no intrinsics for this photo: its EXIF has no 35 mm equivalent "
+                  "focal length") +
+          (h.focalLengthMm ? " (only the true focal length, without the sensor size)" : "") +
+          "; give --fov DEG or --calib LENS.json (a capture description: \"lens\")",
+      file);
 }
 
 }  // namespace compose::cubemap

@@ -6,6 +6,8 @@
 #include <optional>
 #include <string>
 
+#include "calib/lens.h"
+
 namespace compose::cubemap {
 
 struct PhotoHeader {
@@ -18,5 +20,13 @@ struct PhotoHeader {
 
 // Throws compose::Error (stage "ingest", naming the file) if the file is missing or unreadable.
 PhotoHeader readPhotoHeader(const std::filesystem::path& file);
+
+// The intrinsics of a photo for stitching, in order: a lens file (resized to the photo when the
+// aspect ratio agrees), a horizontal field of view (`fovDegrees` > 0; `fisheye`: equidistant),
+// the EXIF 35 mm equivalent focal length. Throws compose::Error (stage "stitch") naming the photo
+// when none applies or the lens file is for another aspect ratio.
+calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& header,
+                      const std::optional<calib::Lens>& lensFile, double fovDegrees = 0.0,
+                      bool fisheye = false);
 
 }  // namespace compose::cubemap

@@ -270,7 +270,15 @@ TEST_F(ComposeEndToEnd, ObjectPixelsMatchTheExactIrradianceReference) {
 
 // A second run with the same environment and lighting parameters loads the projection from the
 // cache instead of recomputing it, and produces the same pixels.
-TEST(ComposeCache, SecondRunReusesTheProjection) {
+// The line a run printed for a stage ("compose: <stage> ..."), or empty.
+std::string stageLine(const std::string& err, const std::string& stage) {
+  const std::string prefix = "compose: " + stage + " ";
+  size_t at = err.find(prefix);
+  if (at == std::string::npos) return {};
+  return err.substr(at, err.find('\n', at) - at);
+}
+
+TEST(ComposeCache, SecondRunReusesWhatIsUnchanged) {
   const fs::path samples = pipeline::samplesDirectory();
   if (!fs::exists(samples / "meadow.jpg") || !fs::exists(samples / "bunny.obj") ||
       !fs::exists(samples / "forest.exr")) {
@@ -284,18 +292,30 @@ TEST(ComposeCache, SecondRunReusesTheProjection) {
   };
   const RunResult first = runCompose(args("a"), dir.path());
   ASSERT_EQ(first.status, 0) << first.err;
-  EXPECT_NE(first.err.find("projected the environment and cached it"), std::string::npos)
+  EXPECT_NE(stageLine(first.err, "precompute").find("projected the environment"), std::string::npos)
       << first.err;
+  EXPECT_NE(stageLine(first.err, "precompute").find("cached in"), std::string::npos) << first.err;
+  // The same job again: the render and the ground shadow come from the cache, and nothing made
+  // from the environment's pixels is computed.
   const RunResult second = runCompose(args("b"), dir.path());
   ASSERT_EQ(second.status, 0) << second.err;
-  EXPECT_NE(second.err.find("reused the cached projection"), std::string::npos) << second.err;
+  EXPECT_NE(stageLine(second.err, "render").find("reused"), std::string::npos) << second.err;
+  EXPECT_NE(stageLine(second.err, "ground").find("reused"), std::string::npos) << second.err;
+  EXPECT_NE(stageLine(second.err, "precompute").find("skipped"), std::string::npos) << second.err;
   const Raster a = readRaster(dir.path() / "a.exr"), b = readRaster(dir.path() / "b.exr");
   ASSERT_EQ(a.px.size(), b.px.size());
-  EXPECT_TRUE(a.px == b.px) << "cached lighting must give identical pixels";
-  // A different basis parameter is a different entry: recomputed, not reused.
+  EXPECT_TRUE(a.px == b.px) << "cached stages must give identical pixels";
+  // The object elsewhere: rendered again, from the cached projection and self-shadowing.
+  const RunResult moved = runCompose(args("m") + " --place 0.45,0.75", dir.path());
+  ASSERT_EQ(moved.status, 0) << moved.err;
+  EXPECT_NE(stageLine(moved.err, "render").find("rays"), std::string::npos) << moved.err;
+  EXPECT_NE(stageLine(moved.err, "precompute").find("reused"), std::string::npos) << moved.err;
+  EXPECT_NE(stageLine(moved.err, "shadows").find("reused"), std::string::npos) << moved.err;
+  // A different basis parameter is a different entry: projected again, not reused.
   const RunResult third = runCompose(args("c") + " --lighting-params rows=17,cols=32", dir.path());
   ASSERT_EQ(third.status, 0) << third.err;
-  EXPECT_EQ(third.err.find("reused the cached projection"), std::string::npos) << third.err;
+  EXPECT_NE(stageLine(third.err, "precompute").find("projected the environment"), std::string::npos)
+      << third.err;
 }
 
 // --- error paths: clear message naming the file or option, non-zero exit, nothing written ---

@@ -1,0 +1,86 @@
+#include "pipeline/context.h"
+
+#include <numbers>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "calib/lens.h"
+#include "core/error.h"
+#include "pipeline/stage_util.h"
+
+namespace compose::pipeline {
+
+std::string EnvironmentInput::describe() const {
+  if (kind == Kind::Capture)
+    return "a capture of " + std::to_string(views) + " views" +
+           (bracketed ? " (exposure brackets)" : " (one exposure each)");
+  return files.size() == 6 ? "six cube faces" : "one image";
+}
+
+const Hash128& Context::key(const std::string& name) const {
+  const auto it = keys.find(name);
+  COMPOSE_CHECK(it != keys.end());
+  return it->second;
+}
+
+Hash128 Context::geometryKey() const {
+  Hash128 h;
+  h.bytes("geometry");
+  h.combine(key(artefact::kPlate));
+  h.combine(key(artefact::kMesh));
+  if (!job.lensFile.empty()) hashFile(h, job.lensFile, "camera");
+  h.number(job.camera.focal35mm.value_or(-1.0));
+  h.number(job.camera.height);
+  h.number(job.camera.pitchDegrees);
+  h.number(job.placement.imagePoint.x);
+  h.number(job.placement.imagePoint.y);
+  h.number(job.placement.heightFraction);
+  h.number(job.placement.yawDegrees);
+  h.number(job.environmentYawDegrees);
+  return h;
+}
+
+const Geometry& Context::geometry() {
+  if (geometry_) return *geometry_;
+  COMPOSE_CHECK(artefacts.plate && artefacts.mesh);
+  const ingest::LoadedImage& plate = *artefacts.plate;
+  const render::Mesh& mesh = *artefacts.mesh;
+  calib::CameraOptions options = job.camera;
+  if (!job.lensFile.empty()) options.lens = calib::readLens(job.lensFile);
+  Geometry g{calib::plateCamera(plate.image.width, plate.image.height, plate.info, options)};
+  g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin()),
+                                           glm::dvec3(mesh.boundsMax()));
+  const double envYaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
+  g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));
+  // The rotation part of the placement (a yaw and a uniform scale), normalised.
+  glm::mat3 rotation = glm::mat3(g.worldFromObject);
+  for (int c = 0; c < 3; ++c) rotation[c] = glm::normalize(rotation[c]);
+  g.envFromObject = g.envFromWorld * rotation;
+  geometry_ = g;
+  return *geometry_;
+}
+
+const render::EmbreeScene& Context::objectScene() {
+  if (!objectScene_) {
+    COMPOSE_CHECK(artefacts.mesh);
+    objectScene_ =
+        std::make_unique<render::EmbreeScene>(artefacts.mesh->positions, artefacts.mesh->indices);
+  }
+  return *objectScene_;
+}
+
+lighting::CaptureProxy Context::captureProxy() const {
+  lighting::CaptureProxy proxy;
+  proxy.capturePoint = job.captureAt ? *job.captureAt : glm::dvec3(0.0, job.camera.height, 0.0);
+  if (job.room) {
+    proxy.shape = lighting::CaptureProxy::Shape::Box;
+    proxy.boxMin = glm::dvec3(-0.5 * job.room->x, 0.0, -0.5 * job.room->z);
+    proxy.boxMax = glm::dvec3(0.5 * job.room->x, job.room->y, 0.5 * job.room->z);
+  } else if (job.environmentRadius) {
+    proxy.shape = lighting::CaptureProxy::Shape::Sphere;
+    proxy.radius = *job.environmentRadius;
+  }
+  return proxy;
+}
+
+}  // namespace compose::pipeline

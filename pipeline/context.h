@@ -1,0 +1,141 @@
+// The state of one compose job as its stages see it: the job, the colour config, the keys of
+// every artefact, and the artefacts themselves as the stages produce (or reload) them.
+//
+// An artefact is named by a string (the names stages declare as inputs and outputs, below) and
+// held in a typed slot of Artefacts. Its key is a 128-bit hash of everything it depends on: the
+// contents of the input files, the parameters of every stage on the way, and the version of each
+// stage's numbers. Equal keys mean equal artefacts, so a key found in the stage cache is reused.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+
+#include "calib/plate_camera.h"
+#include "color/color.h"
+#include "core/hash.h"
+#include "core/progress.h"
+#include "cubemap/environment_io.h"
+#include "hdr/capture_merge.h"
+#include "ingest/capture.h"
+#include "ingest/image_io.h"
+#include "lighting/capture_volume.h"
+#include "lighting/lighting.h"
+#include "pipeline/compose_job.h"
+#include "pipeline/shadows.h"
+#include "render/embree_scene.h"
+#include "render/mesh.h"
+#include "render/renderer.h"
+
+namespace compose::pipeline {
+
+// Artefact names.
+namespace artefact {
+inline const std::string kPlate = "plate";                       // the plate as read
+inline const std::string kMesh = "mesh";                         // the object as read
+inline const std::string kEnvironmentFile = "environment-file";  // an environment image as read
+inline const std::string kCapture = "capture";                 // a capture description and headers
+inline const std::string kMergedViews = "merged-views";        // HDR views, working space
+inline const std::string kStitched = "stitched-environment";   // lat-long, working space
+inline const std::string kPlateLinear = "plate-linear";        // RGB, working space
+inline const std::string kEnvironment = "environment";         // lat-long, working space
+inline const std::string kLighting = "lighting";               // the projected basis
+inline const std::string kShadowLighting = "shadow-lighting";  // sources + residual projection
+inline const std::string kSelfShadowing = "self-shadowing";    // shadowed irradiance per point
+inline const std::string kGroundShadow = "ground-shadow";      // the plate's shadow ratio
+inline const std::string kObject = "object";                   // the rendered object and AOVs
+inline const std::string kComposite = "composite";             // RGB, working space
+inline const std::string kFiles = "files";                     // the written outputs
+}  // namespace artefact
+
+// What --env names.
+struct EnvironmentInput {
+  enum class Kind {
+    Image,   // one image or a set of cube faces: read (and resampled to lat-long) by ingest
+    Capture  // a capture description (JSON): photos to merge and stitch
+  } kind = Kind::Image;
+  std::filesystem::path path;
+  std::vector<std::filesystem::path> files;  // every file whose content the environment depends on
+  bool bracketed = false;                    // Capture: some view holds more than one exposure
+  int views = 0;                             // Capture: how many views
+  std::string describe() const;
+};
+
+// Where things stand in the world: the plate camera, the object's placement, the environment's
+// turn. Derived from the plate (size, EXIF), the mesh's bounds and the job's options.
+struct Geometry {
+  calib::PlateCamera camera;
+  glm::dmat4 worldFromObject{1.0};
+  glm::mat3 envFromWorld{1.0f};
+  glm::mat3 envFromObject{1.0f};  // a turn about +Y: placement yaw and environment yaw
+};
+
+struct RenderedObject {
+  render::RenderOutput output;
+  float exposure = 1.0f;
+  std::vector<std::string> notes;  // how the exposure was chosen
+};
+
+struct Artefacts {
+  std::optional<ingest::LoadedImage> plate;
+  std::optional<render::Mesh> mesh;
+  std::optional<cubemap::LoadedEnvironment> environmentFile;
+  std::optional<ingest::Capture> capture;
+  std::optional<hdr::CaptureMergeResult> mergedViews;
+  std::optional<Image> stitched;
+  std::optional<Image> plateLinear;
+  std::optional<Image> environment;
+  std::unique_ptr<lighting::DiffuseLighting> lighting;
+  int lightingOrder = 0;  // the order order=auto chose (0: the basis' own)
+  std::optional<ShadowLighting> shadowLighting;
+  std::optional<ShadowResult> selfShadowing;
+  std::optional<GroundShadowResult> groundShadow;
+  std::optional<RenderedObject> object;
+  std::optional<Image> composite;
+};
+
+class Context {
+ public:
+  Context(const ComposeJob& theJob, const color::ColorConfig& theColors, Progress theProgress)
+      : job(theJob), colors(theColors), progress(std::move(theProgress)) {}
+
+  const ComposeJob& job;
+  const color::ColorConfig& colors;
+  Progress progress;
+
+  // Filled in before any stage runs (runner.cpp).
+  EnvironmentInput environmentInput;
+  std::map<std::string, Hash128> keys;  // per artefact
+  std::set<std::string> needed;         // artefacts some running stage consumes
+
+  Artefacts artefacts;
+  std::vector<std::string> notes;  // for the user, in the order they arose
+
+  bool needs(const std::string& name) const { return needed.count(name) > 0; }
+  const Hash128& key(const std::string& name) const;
+  bool hasKey(const std::string& name) const { return keys.count(name) > 0; }
+  // Everything the geometry depends on (the plate's content, the lens file, the camera and
+  // placement options, the mesh, the environment's turn).
+  Hash128 geometryKey() const;
+  void note(std::string text) { notes.push_back(std::move(text)); }
+
+  // The world as the plate and the mesh place it (needs the plate and the mesh).
+  const Geometry& geometry();
+  // The object's ray-tracing scene, built on first use (object space).
+  const render::EmbreeScene& objectScene();
+  // The proxy of the surroundings (distant when the job describes none).
+  lighting::CaptureProxy captureProxy() const;
+
+ private:
+  std::optional<Geometry> geometry_;
+  std::unique_ptr<render::EmbreeScene> objectScene_;
+};
+
+}  // namespace compose::pipeline

@@ -1,0 +1,174 @@
+// The runner: plans a job over the registered stages (stage.h) and runs what it must.
+#include <chrono>
+#include <fstream>
+#include <optional>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include "core/error.h"
+#include "pipeline/compose_job.h"
+#include "pipeline/context.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Peak resident memory of this process so far (VmHWM), in bytes; 0 when unknown.
+int64_t peakResidentBytes() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) return int64_t(std::stoll(line.substr(6))) * 1024;
+  }
+  return 0;
+}
+
+// Starts a new peak (Linux: "5" to clear_refs resets VmHWM to the current resident size).
+void resetPeak() {
+  std::ofstream out("/proc/self/clear_refs");
+  if (out) out << "5";
+}
+
+struct Planned {
+  std::vector<StageRecord> records;
+  std::vector<std::optional<StageCache>> entries;  // per stage: its cache entry, if it is cached
+};
+
+// The entry of a cached stage: keyed by the keys of all the outputs this job has.
+std::optional<StageCache> entryFor(const Context& ctx, const Stage& stage) {
+  if (!stage.cached() || ctx.job.cache.empty()) return std::nullopt;
+  Hash128 h;
+  h.bytes(stage.name());
+  bool any = false;
+  for (const std::string& o : stage.outputs()) {
+    if (!ctx.hasKey(o)) continue;
+    h.bytes(o);
+    h.combine(ctx.key(o));
+    any = true;
+  }
+  if (!any) return std::nullopt;
+  return StageCache(ctx.job.cache / "stages", stage.name(), h.hex());
+}
+
+// Prepares and keys every stage, then decides backwards from the written files what runs, what
+// is reused (`load`: restored now; otherwise only looked up) and what is skipped.
+Planned planJob(Context& ctx, bool load) {
+  const auto& list = stages();
+  Planned p;
+  p.records.resize(list.size());
+  p.entries.resize(list.size());
+  for (size_t i = 0; i < list.size(); ++i) {
+    const Stage& stage = *list[i];
+    StageRecord& r = p.records[i];
+    r.name = stage.name();
+    const auto start = std::chrono::steady_clock::now();
+    stage.prepare(ctx);
+    if (std::string why = stage.skip(ctx); !why.empty()) {
+      r.state = StageState::Skipped;
+      r.reason = std::move(why);
+    } else {
+      stage.keys(ctx);
+    }
+    r.seconds += secondsSince(start);
+  }
+
+  ctx.needed = {artefact::kFiles};
+  for (size_t i = list.size(); i-- > 0;) {
+    const Stage& stage = *list[i];
+    StageRecord& r = p.records[i];
+    if (r.state == StageState::Skipped) continue;
+    std::vector<std::string> wanted;
+    for (const std::string& o : stage.outputs())
+      if (ctx.needs(o) && ctx.hasKey(o)) wanted.push_back(o);
+    if (wanted.empty()) {
+      r.state = StageState::Skipped;
+      r.reason = "nothing needs its outputs: the stages that use them are reused from the cache";
+      continue;
+    }
+    p.entries[i] = entryFor(ctx, stage);
+    if (p.entries[i]) {
+      StageCache& entry = *p.entries[i];
+      const auto start = std::chrono::steady_clock::now();
+      const bool reused = load ? entry.open() && stage.load(ctx, entry) : entry.exists();
+      r.seconds += secondsSince(start);
+      if (reused) {
+        r.state = StageState::Reused;
+        r.cacheEntry = entry.path().string();
+        r.reason = "reused " + entry.path().string() + " (same inputs and parameters)";
+        continue;
+      }
+    }
+    r.state = StageState::Run;
+    for (const std::string& o : wanted)
+      for (const std::string& in : stage.inputsFor(o)) ctx.needed.insert(in);
+  }
+  return p;
+}
+
+}  // namespace
+
+std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors) {
+  validate(job);
+  Context ctx(job, colors, {});
+  Planned p = planJob(ctx, false);
+  for (size_t i = 0; i < p.records.size(); ++i) {
+    StageRecord& r = p.records[i];
+    r.seconds = 0.0;
+    if (r.state == StageState::Run) {
+      r.reason = stages()[i]->summary();
+      if (p.entries[i]) r.reason += "; cached in " + p.entries[i]->path().string();
+    }
+  }
+  return p.records;
+}
+
+ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
+                         const Progress& progress) {
+  validate(job);
+  std::optional<tbb::global_control> threads;
+  if (job.threads > 0)
+    threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(job.threads));
+
+  ComposeResult result;
+  result.exrPath = exrPathFor(job);
+  result.displayPath = displayPathFor(job);
+  Context ctx(job, colors, progress);
+  resetPeak();
+  Planned p = planJob(ctx, true);
+  const auto& list = stages();
+  for (size_t i = 0; i < list.size(); ++i) {
+    StageRecord& r = p.records[i];
+    if (r.state != StageState::Run) continue;
+    const Stage& stage = *list[i];
+    if (i > 0) resetPeak();
+    const auto start = std::chrono::steady_clock::now();
+    r.reason = stage.run(ctx);
+    if (p.entries[i]) {
+      if (stage.store(ctx, *p.entries[i])) {
+        r.cacheEntry = p.entries[i]->path().string();
+        r.reason += "; cached in " + r.cacheEntry;
+      }
+    }
+    r.seconds += secondsSince(start);
+    r.peakBytes = peakResidentBytes();
+  }
+  result.stages = std::move(p.records);
+  result.notes = std::move(ctx.notes);
+  if (ctx.artefacts.plate) {
+    result.width = ctx.artefacts.plate->image.width;
+    result.height = ctx.artefacts.plate->image.height;
+  }
+  if (ctx.artefacts.object) {
+    result.objectPixels = ctx.artefacts.object->output.coverage;
+    result.exposure = ctx.artefacts.object->exposure;
+  }
+  return result;
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,55 @@
+// StageCache: one stage's outputs kept on disk under their key, so that a later run with the same
+// inputs and parameters reloads them instead of computing them again.
+//
+// An entry is one file, <folder>/<stage>/<key>.stage: an 8-byte magic with the format version,
+// the length of a JSON header, the header (the stage, the key, the stage's own metadata, and the
+// name and length of every float array), then the arrays' floats. Entries are written to a
+// temporary file and renamed into place, so a reader never sees a half-written one; an entry that
+// is unreadable, truncated, of another stage or key, or whose header does not parse is a miss.
+// Nothing here throws on a bad entry: a cache that cannot be read or written only costs time.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/image.h"
+
+namespace compose::pipeline {
+
+class StageCache {
+ public:
+  // An empty folder: no cache (exists() and open() are false, write() does nothing).
+  StageCache(std::filesystem::path folder, std::string stage, std::string key);
+
+  const std::filesystem::path& path() const { return path_; }
+  bool enabled() const { return !path_.empty(); }
+  bool exists() const;
+
+  // Reads the whole entry; false on a miss or an entry that does not fit.
+  bool open();
+  // Writes the entry atomically; false (nothing left behind) if it could not be written.
+  bool write() const;
+
+  nlohmann::json& meta() { return meta_; }
+  const nlohmann::json& meta() const { return meta_; }
+
+  void put(const std::string& name, std::vector<float> values);
+  // The array of that name (empty if there is none).
+  const std::vector<float>& get(const std::string& name) const;
+
+  // An image: its size, channel names and colour space in the header, its pixels as an array.
+  void putImage(const std::string& name, const Image& image);
+  bool getImage(const std::string& name, Image& image) const;
+
+ private:
+  std::filesystem::path path_;
+  std::string stage_, key_;
+  nlohmann::json meta_ = nlohmann::json::object();
+  std::map<std::string, std::vector<float>> arrays_;
+};
+
+}  // namespace compose::pipeline

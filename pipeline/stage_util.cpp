@@ -1,0 +1,49 @@
+#include "pipeline/stage_util.h"
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <vector>
+
+#include "core/error.h"
+
+namespace compose::pipeline {
+
+void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage) {
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) throw Error(stage, "file not found", file);
+  if (std::filesystem::is_directory(file, ec)) throw Error(stage, "is a folder, not a file", file);
+  std::ifstream in(file, std::ios::binary);
+  if (!in) {
+    const int error = errno;
+    throw Error(stage, std::string("cannot read: ") + std::strerror(error), file);
+  }
+  hash.bytes(file.filename().string());
+  std::vector<char> buffer(size_t(1) << 20);
+  while (in) {
+    in.read(buffer.data(), std::streamsize(buffer.size()));
+    const std::streamsize n = in.gcount();
+    if (n > 0) hash.data(buffer.data(), size_t(n));
+  }
+  if (in.bad()) throw Error(stage, "read error", file);
+}
+
+Image toRgb(const Image& in) {
+  if (in.channels == 3) return in;
+  Image out(in.width, in.height, 3, {"R", "G", "B"});
+  out.colorSpace = in.colorSpace;
+  for (size_t i = 0; i < in.pixelCount(); ++i) {
+    const float* s = in.pixels.data() + i * size_t(in.channels);
+    float* d = out.pixels.data() + i * 3;
+    if (in.channels < 3) {
+      d[0] = d[1] = d[2] = s[0];
+    } else {
+      d[0] = s[0];
+      d[1] = s[1];
+      d[2] = s[2];
+    }
+  }
+  return out;
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,42 @@
+// Small pieces the stage implementations share (not part of the pipeline's interface).
+#pragma once
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/hash.h"
+#include "core/image.h"
+
+namespace compose::pipeline {
+
+// The contents of a file, into `hash` (its name too, which can carry meaning: cube faces).
+// Throws compose::Error (stage `stage`) naming the file when it cannot be read.
+void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage);
+
+inline void hashVector(Hash128& hash, const glm::dvec3& v) {
+  hash.number(v.x);
+  hash.number(v.y);
+  hash.number(v.z);
+}
+
+// Any image made RGB: grey is replicated, extra channels (alpha) are dropped.
+Image toRgb(const Image& in);
+
+inline double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// printf into a std::string.
+template <class... Args>
+std::string format(const char* pattern, Args... args) {
+  char line[512];
+  std::snprintf(line, sizeof line, pattern, args...);
+  return line;
+}
+
+}  // namespace compose::pipeline

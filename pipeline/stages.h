@@ -1,0 +1,32 @@
+// The stage implementations, for the registry (registry.cpp).
+#pragma once
+
+#include <memory>
+
+#include "pipeline/context.h"
+#include "pipeline/stage.h"
+
+namespace compose::pipeline {
+
+std::unique_ptr<Stage> makeIngestStage();
+std::unique_ptr<Stage> makeMergeStage();
+std::unique_ptr<Stage> makeStitchStage();
+std::unique_ptr<Stage> makeColorStage();
+std::unique_ptr<Stage> makePrecomputeStage();
+std::unique_ptr<Stage> makeShadowsStage();
+std::unique_ptr<Stage> makeGroundStage();
+std::unique_ptr<Stage> makeRenderStage();
+std::unique_ptr<Stage> makeCompositeStage();
+std::unique_ptr<Stage> makeOutputStage();
+
+// Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
+// its own data window, the ground shadow's ratio in its own) and the display image, together or
+// not at all. Returns notes for the user.
+std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
+                                           const Geometry& geometry, const Image& composite,
+                                           const render::RenderOutput& rendered,
+                                           const GroundShadowResult* ground,
+                                           const std::filesystem::path& exrPath,
+                                           const std::filesystem::path& displayPath);
+
+}  // namespace compose::pipeline

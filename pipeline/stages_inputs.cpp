@@ -1,0 +1,531 @@
+// The stages that bring the inputs in: ingest, merge, stitch, color.
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+#include "cubemap/layouts.h"
+#include "cubemap/photo_header.h"
+#include "cubemap/render_view.h"
+#include "cubemap/stitch.h"
+#include "lighting/sphere_resample.h"
+#include "pipeline/context.h"
+#include "pipeline/materials.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+#include "pipeline/stages.h"
+#include "render/transfer.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+using namespace artefact;
+
+namespace {
+
+bool isHdrFormat(const std::string& format) {
+  return format == "openexr" || format == "hdr" || format == "tiff" || format == "raw";
+}
+
+std::string plural(size_t n, const std::string& word) {
+  return std::to_string(n) + " " + word + (n == 1 ? "" : "s");
+}
+
+// Everything in a mesh the later stages read: geometry, normals, materials and textures.
+Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
+  Hash128 h;
+  h.bytes("mesh");
+  h.bytes(render::meshHash(mesh));
+  h.number(creaseDegrees);
+  if (!mesh.texcoords.empty())
+    h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
+  for (uint32_t m : mesh.triangleMaterial) h.word(m);
+  for (const render::Material& m : mesh.materials) {
+    h.floats(std::span<const float>(&m.baseColor.x, 3));
+    h.word(uint32_t(m.texture));
+  }
+  for (const render::Texture& t : mesh.textures) {
+    h.word(uint32_t(t.image.width));
+    h.word(uint32_t(t.image.height));
+    h.word(uint32_t(t.image.channels));
+    h.bytes(t.image.colorSpace);
+    h.bytes(t.file.filename().string());
+    h.floats(t.image.pixels);
+  }
+  h.bytes(mesh.colorSpace);
+  return h;
+}
+
+// Brings an input image to the working space and says how it was read. An explicit colour space
+// (--plate-space, --env-space) wins; an OpenEXR file that carries chromaticities is taken by
+// them (as the colour space of the config with those primaries, or converted by matrix);
+// otherwise the space the file declares, else the config's file rules.
+std::string toWorkingSpace(Image& image, const fs::path& file, const ingest::CaptureInfo& info,
+                           const std::string& explicitSpace, const std::string& option,
+                           const color::ColorConfig& colors) {
+  const std::string working = colors.workingSpace();
+  if (!explicitSpace.empty()) {
+    image.colorSpace = colors.resolve(explicitSpace, option);
+    colors.convert(image, working);
+    return "'" + image.colorSpace + "' (" + option + ")";
+  }
+  if (info.chromaticities) {
+    const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
+    if (!named.empty()) {
+      image.colorSpace = named;
+      colors.convert(image, working);
+      return "'" + named + "' (by the chromaticities in its header)";
+    }
+    colors.convertFromChromaticities(image, *info.chromaticities, working);
+    return "the RGB space of the chromaticities in its header (converted by matrix)";
+  }
+  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
+  const std::string read = image.colorSpace;
+  colors.convert(image, working);
+  return "'" + read + "'";
+}
+
+StageParameter pathParameter(std::string name, std::string help, fs::path ComposeJob::*member) {
+  return {std::move(name), std::move(help),
+          [member](const ComposeJob& job) { return nlohmann::json((job.*member).string()); },
+          [member, name](ComposeJob& job, const nlohmann::json& value) {
+            if (!value.is_string()) throw UsageError(name + " must be a path (a string)");
+            job.*member = value.get<std::string>();
+          }};
+}
+
+StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member) {
+  return {std::move(name), std::move(help),
+          [member](const ComposeJob& job) { return nlohmann::json(job.*member); },
+          [member, name](ComposeJob& job, const nlohmann::json& value) {
+            if (!value.is_string()) throw UsageError(name + " must be a string");
+            job.*member = value.get<std::string>();
+          }};
+}
+
+// ---------------------------------------------------------------------------------------------
+
+class IngestStage final : public Stage {
+ public:
+  std::string name() const override { return "ingest"; }
+  std::string summary() const override {
+    return "read the plate, the object, and the environment (an image, cube faces, or a capture "
+           "description of photos)";
+  }
+  std::vector<std::string> inputs() const override { return {}; }
+  std::vector<std::string> outputs() const override {
+    return {kPlate, kMesh, kEnvironmentFile, kCapture};
+  }
+  std::vector<StageParameter> parameters() const override {
+    return {pathParameter("plate", "the background photograph", &ComposeJob::plate),
+            pathParameter("object", "the mesh (OBJ, glTF, Geomview .bez)", &ComposeJob::object),
+            pathParameter("environment",
+                          "the environment: a lat-long map, cube faces, or a capture description "
+                          "(JSON) of photos to merge and stitch; empty: the forest sample",
+                          &ComposeJob::environment),
+            {"crease", "crease angle in degrees for normals computed where the mesh has none",
+             [](const ComposeJob& job) { return nlohmann::json(job.creaseDegrees); },
+             [](ComposeJob& job, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("crease must be a number of degrees");
+               job.creaseDegrees = v.get<double>();
+             }}};
+  }
+
+  void prepare(Context& ctx) const override {
+    const ComposeJob& job = ctx.job;
+    const fs::path envPath = environmentPathFor(job);
+    EnvironmentInput& in = ctx.environmentInput;
+    in.path = envPath;
+    std::error_code ec;
+    if (job.environment.empty() && !fs::exists(envPath, ec)) {
+      throw Error("ingest",
+                  "no --env given and the sample environment is missing; run samples/fetch.sh",
+                  envPath);
+    }
+    std::string ext = envPath.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    if (ext == ".json") {
+      in.kind = EnvironmentInput::Kind::Capture;
+      ingest::Capture capture = ingest::readCaptureDescription(envPath);
+      ingest::resolveExposures(capture);
+      in.files = {envPath};
+      for (const ingest::View& v : capture.views) {
+        for (const ingest::Shot& s : v.shots) in.files.push_back(s.file);
+        if (v.shots.size() > 1) in.bracketed = true;
+      }
+      if (!capture.lensFile.empty()) in.files.push_back(capture.lensFile);
+      in.views = int(capture.views.size());
+      ctx.artefacts.capture = std::move(capture);
+    } else {
+      in.kind = EnvironmentInput::Kind::Image;
+      in.files = cubemap::environmentFiles(envPath);
+    }
+    // The mesh is read here: its content is part of every later key.
+    ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
+    const render::Mesh& mesh = *ctx.artefacts.mesh;
+    if (!mesh.normalsFromFile) ctx.note("object normals: " + mesh.normalsSource);
+    for (const std::string& w : mesh.warnings) ctx.note("object: " + w);
+  }
+
+  void keys(Context& ctx) const override {
+    Hash128 plate;
+    plate.bytes("plate");
+    hashFile(plate, ctx.job.plate, "ingest");
+    ctx.keys[kPlate] = plate;
+    ctx.keys[kMesh] = meshKey(*ctx.artefacts.mesh, ctx.job.creaseDegrees);
+    Hash128 env;
+    env.bytes(ctx.environmentInput.kind == EnvironmentInput::Kind::Capture ? "capture"
+                                                                           : "environment");
+    for (const fs::path& f : ctx.environmentInput.files) hashFile(env, f, "ingest");
+    ctx.keys[ctx.environmentInput.kind == EnvironmentInput::Kind::Capture ? kCapture
+                                                                          : kEnvironmentFile] = env;
+  }
+
+  std::string run(Context& ctx) const override {
+    std::string reason;
+    if (ctx.needs(kPlate)) {
+      ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest");
+      const ingest::LoadedImage& p = *ctx.artefacts.plate;
+      reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
+    }
+    const render::Mesh& mesh = *ctx.artefacts.mesh;
+    reason +=
+        (reason.empty() ? "" : ", ") + format("the object (%zu triangles)", mesh.triangleCount());
+    if (ctx.needs(kEnvironmentFile)) {
+      ctx.artefacts.environmentFile =
+          cubemap::loadEnvironment(ctx.environmentInput.path, {}, ctx.progress);
+      const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
+      for (const std::string& n : env.notes) ctx.note(n);
+      if (!isHdrFormat(env.info.format)) {
+        ctx.note("the environment is a " + env.info.format +
+                 " file, not HDR: bright light sources are clipped and the lighting will be too "
+                 "dark");
+      }
+      reason += format(", the environment %dx%d", env.image.width, env.image.height);
+    } else if (ctx.environmentInput.kind == EnvironmentInput::Kind::Capture) {
+      reason +=
+          ", the capture description (" + plural(ctx.artefacts.capture->views.size(), "view") + ")";
+    } else {
+      reason += "; the environment's pixels are not needed (everything made from them is cached)";
+    }
+    report(ctx.progress, "ingest", 1.0);
+    return "read " + reason;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class MergeStage final : public Stage {
+ public:
+  // Bump when merging gives other numbers for the same photos.
+  static constexpr int kVersion = 1;
+
+  std::string name() const override { return "merge"; }
+  std::string summary() const override {
+    return "merge each view's bracketed exposures to scene-linear radiance (one response curve, "
+           "one exposure scale for every view)";
+  }
+  std::vector<std::string> inputs() const override { return {kCapture}; }
+  std::vector<std::string> outputs() const override { return {kMergedViews}; }
+
+  std::string skip(const Context& ctx) const override {
+    if (ctx.environmentInput.kind != EnvironmentInput::Kind::Capture)
+      return "the environment is an image, not photos: no exposure brackets to merge";
+    if (!ctx.environmentInput.bracketed)
+      return "every view of the capture is a single exposure: nothing to merge";
+    return {};
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("merge");
+    h.word(kVersion);
+    h.combine(ctx.key(kCapture));
+    h.bytes(ctx.colors.identity());
+    // A camera response stored for this camera is used instead of recovering one.
+    const ingest::Capture& capture = *ctx.artefacts.capture;
+    const fs::path response =
+        hdr::responseFileFor(hdr::responseDirectory(), capture.cameraMake, capture.cameraModel);
+    std::error_code ec;
+    if (!response.empty() && fs::is_regular_file(response, ec)) hashFile(h, response, "merge");
+    ctx.keys[kMergedViews] = h;
+  }
+  bool cached() const override { return true; }
+  bool load(Context& ctx, const StageCache& cache) const override {
+    const nlohmann::json& meta = cache.meta();
+    if (!meta.contains("views") || !meta["views"].is_array()) return false;
+    hdr::CaptureMergeResult merged;
+    for (size_t i = 0; i < meta["views"].size(); ++i) {
+      hdr::MergedView view;
+      view.name = meta["views"][i].get<std::string>();
+      if (!cache.getImage("view" + std::to_string(i), view.radiance)) return false;
+      merged.views.push_back(std::move(view));
+    }
+    merged.linearisation = meta.value("linearisation", "");
+    ctx.artefacts.mergedViews = std::move(merged);
+    return true;
+  }
+  bool store(const Context& ctx, StageCache& cache) const override {
+    const hdr::CaptureMergeResult& merged = *ctx.artefacts.mergedViews;
+    nlohmann::json names = nlohmann::json::array();
+    for (size_t i = 0; i < merged.views.size(); ++i) {
+      names.push_back(merged.views[i].name);
+      cache.putImage("view" + std::to_string(i), merged.views[i].radiance);
+    }
+    cache.meta()["views"] = names;
+    cache.meta()["linearisation"] = merged.linearisation;
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    const ingest::Capture& capture = *ctx.artefacts.capture;
+    std::vector<std::vector<ingest::LoadedImage>> photos;
+    size_t total = 0, done = 0;
+    for (const auto& v : capture.views) total += v.shots.size();
+    for (const auto& v : capture.views) {
+      photos.emplace_back();
+      for (const auto& s : v.shots) {
+        photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
+        report(ctx.progress, "read", double(++done) / double(total));
+      }
+    }
+    hdr::CaptureMergeOptions options;
+    hdr::CaptureMergeResult merged =
+        hdr::mergeCapture(capture, photos, options, ctx.colors, ctx.progress);
+    for (const std::string& n : merged.notes) ctx.note("merge: " + n);
+    if (merged.responseRecovered) {
+      ctx.note(
+          "merge: the camera's response was recovered from these photos (compose merge "
+          "keeps it per camera for later captures)");
+    }
+    std::string reason = "merged " + plural(merged.views.size(), "view") + " from " +
+                         plural(total, "photo") + " in " + format("%.2f s", merged.seconds);
+    if (!merged.linearisation.empty()) reason += "; " + merged.linearisation;
+    ctx.artefacts.mergedViews = std::move(merged);
+    return reason;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class StitchStage final : public Stage {
+ public:
+  static constexpr int kVersion = 1;
+
+  std::string name() const override { return "stitch"; }
+  std::string summary() const override {
+    return "stitch the capture's views into a lat-long environment (orientations refined by "
+           "feature matching)";
+  }
+  std::vector<std::string> inputs() const override { return {kCapture, kMergedViews}; }
+  std::vector<std::string> outputs() const override { return {kStitched}; }
+
+  std::string skip(const Context& ctx) const override {
+    if (ctx.environmentInput.kind != EnvironmentInput::Kind::Capture)
+      return "one environment image (lat-long, OpenEXR cube, cross or cube faces): nothing to "
+             "stitch (a cube is resampled to lat-long on reading)";
+    return {};
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("stitch");
+    h.word(kVersion);
+    h.combine(ctx.keys.count(kMergedViews) ? ctx.key(kMergedViews) : ctx.key(kCapture));
+    h.bytes(ctx.colors.identity());
+    ctx.keys[kStitched] = h;
+  }
+  bool cached() const override { return true; }
+  bool load(Context& ctx, const StageCache& cache) const override {
+    Image image;
+    if (!cache.getImage("environment", image)) return false;
+    ctx.artefacts.stitched = std::move(image);
+    return true;
+  }
+  bool store(const Context& ctx, StageCache& cache) const override {
+    cache.putImage("environment", *ctx.artefacts.stitched);
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    const ingest::Capture& capture = *ctx.artefacts.capture;
+    const hdr::CaptureMergeResult* merged =
+        ctx.artefacts.mergedViews ? &*ctx.artefacts.mergedViews : nullptr;
+    const std::string working = ctx.colors.workingSpace();
+    // A view's radiance in the working space: merged, or its one photo converted.
+    auto load = [&](int i) -> Image {
+      if (merged) {
+        Image rgb = toRgb(merged->views[size_t(i)].radiance);
+        rgb.colorSpace = working;
+        return rgb;
+      }
+      const ingest::Shot& shot = capture.views[size_t(i)].shots.front();
+      ingest::LoadedImage img = ingest::readImage(shot.file, "stitch");
+      Image rgb = toRgb(img.image);
+      rgb.colorSpace = shot.colorSpace.empty()
+                           ? ctx.colors.inputSpaceFor(shot.file, img.info.fileColorSpace)
+                           : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
+      ctx.colors.convert(rgb, working);
+      // Scaled by the shot's exposure, so that views of unequal exposure agree.
+      const float scale = shot.exposure ? float(1.0 / *shot.exposure) : 1.0f;
+      for (float& v : rgb.pixels) v *= scale;
+      return rgb;
+    };
+
+    if (capture.views.size() == 1) {
+      Image only = load(0);
+      if (only.width != 2 * only.height) {
+        throw Error("stitch",
+                    "a capture of one view must be a lat-long panorama (2:1); this one is " +
+                        std::to_string(only.width) + "x" + std::to_string(only.height) +
+                        ": stitching needs several views",
+                    ctx.environmentInput.path);
+      }
+      ctx.artefacts.stitched = std::move(only);
+      return "one view, a lat-long panorama: used as it is";
+    }
+
+    std::optional<calib::Lens> lensFile;
+    if (!capture.lensFile.empty()) lensFile = calib::readLens(capture.lensFile);
+    std::vector<cubemap::StitchPhoto> photos;
+    bool anyLdr = false;
+    for (const ingest::View& v : capture.views) {
+      const ingest::Shot& first = v.shots.front();
+      const cubemap::PhotoHeader header = cubemap::readPhotoHeader(first.file);
+      cubemap::StitchPhoto p;
+      p.name = v.name;
+      if (v.worldFromCamera) {
+        p.worldFromCamera = *v.worldFromCamera;
+      } else if (const auto token = cubemap::faceFromName(v.name)) {
+        p.worldFromCamera = cubemap::faceCameraRotation(token->face);
+      } else {
+        throw Error("stitch",
+                    "cannot tell where view '" + v.name +
+                        "' points: give it a worldFromCamera rotation in the capture description "
+                        "or name it for a cube face (px, nx, py, ny, pz, nz)",
+                    ctx.environmentInput.path);
+      }
+      p.lens = cubemap::photoLens(first.file, header, lensFile);
+      if (!merged && !header.floatingPoint) {
+        anyLdr = true;
+        Image white(1, 1, 3, {"R", "G", "B"});
+        white.pixels = {1.0f, 1.0f, 1.0f};
+        white.colorSpace =
+            first.colorSpace.empty() ? ctx.colors.inputSpaceFor(first.file, "") : first.colorSpace;
+        ctx.colors.convert(white, working);
+        const float scale = first.exposure ? float(1.0 / *first.exposure) : 1.0f;
+        p.saturation =
+            0.98f * scale * std::min({white.pixels[0], white.pixels[1], white.pixels[2]});
+      }
+      photos.push_back(p);
+    }
+    cubemap::StitchOptions options;
+    options.gains = anyLdr;
+    double fx = 1e9;
+    for (const auto& p : photos) fx = std::min(fx, p.lens.fx);
+    options.faceSize = std::clamp(int(std::lround(2.0 * fx / 8.0)) * 8, 64, 2048);
+    const cubemap::StitchResult result = cubemap::stitch(photos, load, options, ctx.progress);
+    for (const std::string& n : result.notes) ctx.note("stitch: " + n);
+    const lighting::Environment env =
+        lighting::latLongFromCube(result.cube, 4 * result.cube.size(), ctx.progress);
+    Image image(env.width(), env.height(), 3, {"R", "G", "B"});
+    image.pixels = env.texels();
+    image.colorSpace = working;
+    ctx.artefacts.stitched = std::move(image);
+    double worst = 0.0;
+    for (double c : result.correctionDegrees) worst = std::max(worst, c);
+    return format(
+        "stitched %zu views into %dx%d faces (orientations corrected by up to %.2f "
+        "degrees; %.2f %% of the sphere unseen and filled), as a %dx%d lat-long map",
+        photos.size(), result.cube.size(), result.cube.size(), worst,
+        100.0 * result.coverage.uncovered, env.width(), env.height());
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class ColorStage final : public Stage {
+ public:
+  std::string name() const override { return "color"; }
+  std::string summary() const override {
+    return "bring the plate, the environment and the object's materials to the working space "
+           "(role scene_linear of the OpenColorIO config)";
+  }
+  std::vector<std::string> inputs() const override { return {kPlate, kEnvironmentFile, kStitched}; }
+  std::vector<std::string> inputsFor(const std::string& output) const override {
+    if (output == kPlateLinear) return {kPlate};
+    return {kEnvironmentFile, kStitched};
+  }
+  std::vector<std::string> outputs() const override { return {kPlateLinear, kEnvironment}; }
+  std::vector<StageParameter> parameters() const override {
+    return {textParameter("plate-space", "colour space of the plate (empty: from the file)",
+                          &ComposeJob::plateSpace),
+            textParameter("env-space", "colour space of the environment (empty: from the file)",
+                          &ComposeJob::environmentSpace)};
+  }
+
+  void keys(Context& ctx) const override {
+    Hash128 plate;
+    plate.bytes("plate-linear");
+    plate.combine(ctx.key(kPlate));
+    plate.bytes(ctx.job.plateSpace);
+    plate.bytes(ctx.colors.identity());
+    ctx.keys[kPlateLinear] = plate;
+    Hash128 env;
+    env.bytes("environment");
+    env.combine(ctx.keys.count(kStitched) ? ctx.key(kStitched) : ctx.key(kEnvironmentFile));
+    env.bytes(ctx.job.environmentSpace);
+    env.bytes(ctx.colors.identity());
+    ctx.keys[kEnvironment] = env;
+  }
+
+  std::string run(Context& ctx) const override {
+    const std::string working = ctx.colors.workingSpace();
+    std::string reason;
+    if (ctx.needs(kPlateLinear)) {
+      const ingest::LoadedImage& plate = *ctx.artefacts.plate;
+      Image linear = toRgb(plate.image);
+      reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
+                                                 ctx.job.plateSpace, "--plate-space", ctx.colors);
+      ctx.artefacts.plateLinear = std::move(linear);
+    }
+    if (ctx.needs(kEnvironment)) {
+      if (ctx.artefacts.stitched) {
+        ctx.artefacts.environment = std::move(*ctx.artefacts.stitched);
+        ctx.artefacts.stitched.reset();
+        reason += ", environment merged and stitched in the working space";
+      } else {
+        const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
+        Image linear = toRgb(env.image);
+        reason += ", environment as " + toWorkingSpace(linear, env.file, env.info,
+                                                       ctx.job.environmentSpace, "--env-space",
+                                                       ctx.colors);
+        ctx.artefacts.environment = std::move(linear);
+        ctx.artefacts.environmentFile.reset();
+      }
+    }
+    render::Mesh& mesh = *ctx.artefacts.mesh;
+    if (ctx.job.albedo && mesh.hasMaterials()) {
+      ctx.note("object: --albedo replaces the materials of the mesh");
+    } else if (const std::string read = materialsToWorkingSpace(mesh, ctx.colors); !read.empty()) {
+      ctx.note(read);
+    }
+    return reason + "; working space '" + working + "' (config: " + ctx.colors.source() + ")";
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<Stage> makeIngestStage() {
+  return std::make_unique<IngestStage>();
+}
+std::unique_ptr<Stage> makeMergeStage() {
+  return std::make_unique<MergeStage>();
+}
+std::unique_ptr<Stage> makeStitchStage() {
+  return std::make_unique<StitchStage>();
+}
+std::unique_ptr<Stage> makeColorStage() {
+  return std::make_unique<ColorStage>();
+}
+
+}  // namespace compose::pipeline

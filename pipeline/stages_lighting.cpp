@@ -1,0 +1,469 @@
+// The stages that light the object: precompute (the environment projected onto the lighting
+// basis, and the shadow lighting), shadows (on the object itself), ground (its shadow on the
+// plate).
+#include <numbers>
+
+#include "core/error.h"
+#include "core/params.h"
+#include "lighting/capture_volume.h"
+#include "lighting/environment.h"
+#include "lighting/lighting_cache.h"
+#include "lighting/order_selector.h"
+#include "pipeline/context.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+#include "pipeline/stages.h"
+#include "render/transfer.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+using namespace artefact;
+
+namespace {
+
+bool wantsShadowLighting(const ComposeJob& job) {
+  return job.shadows || job.groundShadow;
+}
+
+// The job's lighting basis. order=auto (with an optional target=dB, default 45) takes the order
+// from the environment's own tail energy (`environment` given) or from `order` (a cached choice).
+struct BasisChoice {
+  std::unique_ptr<lighting::DiffuseLighting> basis;
+  int order = 0;  // the order chosen by order=auto; 0 otherwise
+  std::string note;
+};
+BasisChoice createBasis(const ComposeJob& job, const lighting::Environment* environment,
+                        int cachedOrder = 0) {
+  ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
+  const bool autoOrder = params.has("order") && params.getString("order", "") == "auto";
+  BasisChoice out;
+  if (!autoOrder) {
+    out.basis = lighting::createLighting(job.lighting, params);
+    return out;
+  }
+  const double targetDb = params.getDouble("target", 45.0, "lighting");
+  params.erase("order");
+  params.erase("target");
+  if (environment) {
+    const auto estimates = lighting::estimateOrders(job.lighting, *environment, params);
+    const lighting::OrderEstimate pick = lighting::selectOrder(estimates, targetDb);
+    out.order = pick.order;
+    out.note = format("order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
+                      job.lighting.c_str(), pick.order, pick.estimatedSnrDb, targetDb);
+  } else {
+    out.order = cachedOrder;
+  }
+  params.set("order", std::to_string(out.order));
+  out.basis = lighting::createLighting(job.lighting, params);
+  return out;
+}
+
+void hashProxy(const Context& ctx, Hash128& h) {
+  const lighting::CaptureProxy proxy = ctx.captureProxy();
+  h.word(uint32_t(proxy.shape));
+  if (proxy.shape == lighting::CaptureProxy::Shape::Distant) return;
+  hashVector(h, proxy.capturePoint);
+  hashVector(h, proxy.boxMin);
+  hashVector(h, proxy.boxMax);
+  h.number(proxy.radius);
+  h.combine(ctx.geometryKey());  // the object's centre
+}
+
+std::vector<float> sourcesToFloats(const std::vector<lighting::LightSource>& sources) {
+  std::vector<float> out;
+  for (const auto& s : sources) {
+    out.insert(out.end(), {s.direction.x, s.direction.y, s.direction.z, s.power.x, s.power.y,
+                           s.power.z, s.halfLatitude, s.halfLongitude});
+  }
+  return out;
+}
+
+std::vector<lighting::LightSource> sourcesFromFloats(const std::vector<float>& v) {
+  std::vector<lighting::LightSource> out;
+  for (size_t i = 0; i + 8 <= v.size(); i += 8) {
+    lighting::LightSource s;
+    s.direction = glm::vec3(v[i], v[i + 1], v[i + 2]);
+    s.power = glm::vec3(v[i + 3], v[i + 4], v[i + 5]);
+    s.halfLatitude = v[i + 6];
+    s.halfLongitude = v[i + 7];
+    out.push_back(s);
+  }
+  return out;
+}
+
+std::vector<float> vec3sToFloats(const std::vector<glm::vec3>& v) {
+  std::vector<float> out(3 * v.size());
+  for (size_t i = 0; i < v.size(); ++i) {
+    out[3 * i] = v[i].x;
+    out[3 * i + 1] = v[i].y;
+    out[3 * i + 2] = v[i].z;
+  }
+  return out;
+}
+
+std::vector<glm::vec3> vec3sFromFloats(const std::vector<float>& v) {
+  std::vector<glm::vec3> out(v.size() / 3);
+  for (size_t i = 0; i < out.size(); ++i) out[i] = glm::vec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+class PrecomputeStage final : public Stage {
+ public:
+  std::string name() const override { return "precompute"; }
+  std::string summary() const override {
+    return "project the environment onto the lighting basis (Chebyshev moments by default), and "
+           "split off its brightest sources for the shadows";
+  }
+  std::vector<std::string> inputs() const override { return {kEnvironment, kPlate, kMesh}; }
+  std::vector<std::string> inputsFor(const std::string&) const override {
+    return {kEnvironment};  // plate and mesh only place the object for parallax; always read
+  }
+  std::vector<std::string> outputs() const override { return {kLighting, kShadowLighting}; }
+  std::vector<StageParameter> parameters() const override {
+    return {{"lighting",
+             "the lighting basis: " +
+                 [] {
+                   std::string names;
+                   for (const auto& n : lighting::lightingNames())
+                     names += (names.empty() ? "" : ", ") + n;
+                   return names;
+                 }(),
+             [](const ComposeJob& j) { return nlohmann::json(j.lighting); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_string()) throw UsageError("lighting must be a basis name (a string)");
+               j.lighting = v.get<std::string>();
+             }},
+            {"lighting-params", "the basis' parameters, key=value,...",
+             [](const ComposeJob& j) { return nlohmann::json(j.lightingParams); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_string()) throw UsageError("lighting-params must be a string");
+               j.lightingParams = v.get<std::string>();
+             }},
+            {"env-yaw", "turn of the environment about the vertical, degrees",
+             [](const ComposeJob& j) { return nlohmann::json(j.environmentYawDegrees); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("env-yaw must be a number of degrees");
+               j.environmentYawDegrees = v.get<double>();
+             }},
+            {"room", "parallax: a room of [W, H, D] metres around the plate camera, or null",
+             [](const ComposeJob& j) {
+               return j.room ? nlohmann::json({j.room->x, j.room->y, j.room->z})
+                             : nlohmann::json(nullptr);
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v.is_null()) return j.room.reset();
+               if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+                   !v[2].is_number())
+                 throw UsageError("room must be [W, H, D] in metres");
+               j.room = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+             }},
+            {"env-radius", "parallax: a sphere of this radius (metres), or null",
+             [](const ComposeJob& j) {
+               return j.environmentRadius ? nlohmann::json(*j.environmentRadius)
+                                          : nlohmann::json(nullptr);
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v.is_null()) return j.environmentRadius.reset();
+               if (!v.is_number()) throw UsageError("env-radius must be a number of metres");
+               j.environmentRadius = v.get<double>();
+             }},
+            {"capture-at", "where the environment was captured, [X, Y, Z] metres, or null",
+             [](const ComposeJob& j) {
+               return j.captureAt ? nlohmann::json({j.captureAt->x, j.captureAt->y, j.captureAt->z})
+                                  : nlohmann::json(nullptr);
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v.is_null()) return j.captureAt.reset();
+               if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+                   !v[2].is_number())
+                 throw UsageError("capture-at must be [X, Y, Z] in metres");
+               j.captureAt = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+             }}};
+  }
+
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("lighting");
+    h.word(lighting::LightingCache::kProjectionVersion);
+    h.combine(ctx.key(kEnvironment));
+    h.bytes(ctx.job.lighting);
+    h.bytes(ctx.job.lightingParams);
+    hashProxy(ctx, h);
+    ctx.keys[kLighting] = h;
+    if (wantsShadowLighting(ctx.job)) {
+      Hash128 s;
+      s.bytes("shadow-lighting");
+      s.word(lighting::LightingCache::kProjectionVersion);
+      s.combine(ctx.key(kEnvironment));
+      s.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+      hashProxy(ctx, s);
+      ctx.keys[kShadowLighting] = s;
+    }
+  }
+
+  bool cached() const override { return true; }
+
+  bool load(Context& ctx, const StageCache& cache) const override {
+    const nlohmann::json& meta = cache.meta();
+    if (ctx.needs(kLighting)) {
+      if (!meta.contains("lighting")) return false;
+      BasisChoice choice = createBasis(ctx.job, nullptr, meta["lighting"].value("order", 0));
+      if (!choice.basis->importState(cache.get("lighting"))) return false;
+      ctx.artefacts.lighting = std::move(choice.basis);
+    }
+    if (ctx.needs(kShadowLighting)) {
+      if (!meta.contains("shadowLighting")) return false;
+      ShadowLighting sl = shadowLightingFor(ShadowPlan::parse(ctx.job.shadowParams));
+      if (!sl.lighting->importState(cache.get("shadowBasis"))) return false;
+      sl.split.sources = sourcesFromFloats(cache.get("sources"));
+      sl.split.sourceShare = meta["shadowLighting"].value("sourceShare", 0.0);
+      sl.reason = meta["shadowLighting"].value("reason", "");
+      ctx.artefacts.shadowLighting = std::move(sl);
+    }
+    return true;
+  }
+
+  bool store(const Context& ctx, StageCache& cache) const override {
+    if (ctx.artefacts.lighting) {
+      std::vector<float> state;
+      if (!ctx.artefacts.lighting->exportState(state)) return false;  // cheaper to project
+      cache.put("lighting", std::move(state));
+      cache.meta()["lighting"] = {{"order", ctx.artefacts.lightingOrder}};
+    }
+    if (ctx.artefacts.shadowLighting) {
+      const ShadowLighting& sl = *ctx.artefacts.shadowLighting;
+      std::vector<float> state;
+      if (!sl.lighting->exportState(state)) return false;
+      cache.put("shadowBasis", std::move(state));
+      cache.put("sources", sourcesToFloats(sl.split.sources));
+      cache.meta()["shadowLighting"] = {{"sourceShare", sl.split.sourceShare},
+                                        {"reason", sl.reason}};
+    }
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    lighting::SanitizeReport sanitized;
+    lighting::Environment environment = lighting::Environment::fromLatLong(
+        *ctx.artefacts.environment, ctx.environmentInput.path, &sanitized);
+    ctx.artefacts.environment.reset();  // nothing after this stage reads the pixels
+    if (sanitized.negativeTexels > 0) {
+      ctx.note(std::to_string(sanitized.negativeTexels) +
+               " environment texels had negative values (as low as " +
+               std::to_string(sanitized.mostNegative) + "): clamped to 0");
+    }
+    if (const lighting::CaptureProxy proxy = ctx.captureProxy();
+        proxy.shape != lighting::CaptureProxy::Shape::Distant) {
+      // Parallax: the environment as seen from the object's centre.
+      const Geometry& g = ctx.geometry();
+      const render::Mesh& mesh = *ctx.artefacts.mesh;
+      const glm::dvec3 centre(
+          g.worldFromObject *
+          glm::dvec4(0.5 * glm::dvec3(mesh.boundsMin() + mesh.boundsMax()), 1.0));
+      lighting::CaptureProxy placed = proxy;
+      placed.environmentFromWorld = glm::dmat3(g.envFromWorld);
+      environment = lighting::CaptureVolumeSource(environment, placed).at(glm::vec3(centre));
+      ctx.note(format("parallax: the environment as seen from the object's centre (%.2f, %.2f, "
+                      "%.2f) m; surroundings: ",
+                      centre.x, centre.y, centre.z) +
+               proxy.describe());
+      if (!proxy.contains(centre)) {
+        ctx.note(
+            "the object's centre is outside the surroundings given: it is lit as from the "
+            "nearest point inside them");
+      }
+    }
+    // Every output this job has is computed, so that the cache entry is whole.
+    std::string reason;
+    {
+      BasisChoice choice = createBasis(ctx.job, &environment);
+      if (!choice.note.empty()) ctx.note(choice.note);
+      ctx.artefacts.lightingOrder = choice.order;
+      choice.basis->project(environment, ctx.progress);
+      reason = "projected the environment: " + choice.basis->describe();
+      ctx.artefacts.lighting = std::move(choice.basis);
+    }
+    if (ctx.hasKey(kShadowLighting)) {
+      ctx.artefacts.shadowLighting = prepareShadowLighting(
+          environment, ShadowPlan::parse(ctx.job.shadowParams), {}, ctx.progress);
+      reason +=
+          (reason.empty() ? "" : "; shadow lighting: ") + ctx.artefacts.shadowLighting->reason;
+    }
+    return reason;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class ShadowsStage final : public Stage {
+ public:
+  static constexpr int kVersion = 1;
+
+  std::string name() const override { return "shadows"; }
+  std::string summary() const override {
+    return "the object's shadows on itself: a visibility pass at its surface points (Chebyshev "
+           "transfer) and exact rays to the bright sources";
+  }
+  std::vector<std::string> inputs() const override { return {kMesh, kPlate, kShadowLighting}; }
+  std::vector<std::string> outputs() const override { return {kSelfShadowing}; }
+  std::vector<StageParameter> parameters() const override {
+    return {{"shadows", "self (the object shadows itself; skipped when it is convex) or off",
+             [](const ComposeJob& j) { return nlohmann::json(j.shadows ? "self" : "off"); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_string() || (v != "self" && v != "off"))
+                 throw UsageError("shadows must be \"self\" or \"off\"");
+               j.shadows = v == "self";
+             }},
+            {"shadow-params", "method=cheb|sh|ao, order, grid, boundary, sources",
+             [](const ComposeJob& j) { return nlohmann::json(j.shadowParams); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_string()) throw UsageError("shadow-params must be a string");
+               j.shadowParams = v.get<std::string>();
+             }}};
+  }
+
+  std::string skip(const Context& ctx) const override {
+    if (!ctx.job.shadows) return "--shadows off";
+    if (render::isConvex(*ctx.artefacts.mesh))
+      return "the object is closed and convex: it cannot shadow itself";
+    return {};
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("self-shadowing");
+    h.word(kVersion);
+    h.combine(ctx.key(kMesh));
+    h.combine(ctx.key(kShadowLighting));
+    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+    h.number(ctx.job.placement.yawDegrees);
+    h.number(ctx.job.environmentYawDegrees);
+    ctx.keys[kSelfShadowing] = h;
+  }
+  bool cached() const override { return true; }
+  bool load(Context& ctx, const StageCache& cache) const override {
+    ShadowResult r;
+    r.points = render::surfacePoints(*ctx.artefacts.mesh);
+    r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
+    r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
+    r.irradiance.clamped = cache.meta().value("clamped", 0);
+    r.occlusion = cache.get("occlusion");
+    const size_t n = r.points.count();
+    if (r.irradiance.shadowed.size() != n || r.irradiance.unshadowed.size() != n ||
+        r.occlusion.size() != n)
+      return false;
+    ctx.artefacts.selfShadowing = std::move(r);
+    return true;
+  }
+  bool store(const Context& ctx, StageCache& cache) const override {
+    const ShadowResult& r = *ctx.artefacts.selfShadowing;
+    cache.put("shadowed", vec3sToFloats(r.irradiance.shadowed));
+    cache.put("unshadowed", vec3sToFloats(r.irradiance.unshadowed));
+    cache.put("occlusion", r.occlusion);
+    cache.meta()["clamped"] = r.irradiance.clamped;
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    const ShadowPlan plan = ShadowPlan::parse(ctx.job.shadowParams);
+    ShadowResult r =
+        computeSelfShadowing(*ctx.artefacts.mesh, ctx.objectScene(), *ctx.artefacts.shadowLighting,
+                             ctx.geometry().envFromObject, plan, ctx.job.cache, ctx.progress);
+    if (r.irradiance.clamped > 0) {
+      ctx.note(std::to_string(r.irradiance.clamped) +
+               " vertices' shadowed irradiance rang outside [0, unshadowed] (truncation) and was "
+               "clamped");
+    }
+    const std::string reason = plan.describe() + ": " + r.reason;
+    ctx.artefacts.selfShadowing = std::move(r);
+    return reason;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class GroundStage final : public Stage {
+ public:
+  static constexpr int kVersion = 1;
+
+  std::string name() const override { return "ground"; }
+  std::string summary() const override {
+    return "the object's shadow on the plate's ground, by differential rendering: the plate "
+           "times E_with / E_without where the shadow can fall";
+  }
+  std::vector<std::string> inputs() const override { return {kMesh, kPlate, kShadowLighting}; }
+  std::vector<std::string> outputs() const override { return {kGroundShadow}; }
+  std::vector<StageParameter> parameters() const override {
+    return {{"ground-shadow", "true: the object's shadow darkens the plate's ground",
+             [](const ComposeJob& j) { return nlohmann::json(j.groundShadow); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_boolean()) throw UsageError("ground-shadow must be true or false");
+               j.groundShadow = v.get<bool>();
+             }}};
+  }
+
+  std::string skip(const Context& ctx) const override {
+    return ctx.job.groundShadow ? std::string() : "--no-shadow";
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("ground-shadow");
+    h.word(kVersion);
+    h.combine(ctx.key(kShadowLighting));
+    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+    h.combine(ctx.geometryKey());
+    ctx.keys[kGroundShadow] = h;
+  }
+  bool cached() const override { return true; }
+  bool load(Context& ctx, const StageCache& cache) const override {
+    GroundShadowResult r;
+    const nlohmann::json& m = cache.meta();
+    if (!m.contains("x0")) return false;
+    r.grid.x0 = m["x0"];
+    r.grid.y0 = m["y0"];
+    r.grid.x1 = m["x1"];
+    r.grid.y1 = m["y1"];
+    r.reason = m.value("reason", "");
+    if (m.value("hasRatio", false) && !cache.getImage("ratio", r.ratio)) return false;
+    ctx.artefacts.groundShadow = std::move(r);
+    return true;
+  }
+  bool store(const Context& ctx, StageCache& cache) const override {
+    const GroundShadowResult& r = *ctx.artefacts.groundShadow;
+    cache.meta() = {{"x0", r.grid.x0}, {"y0", r.grid.y0},    {"x1", r.grid.x1},
+                    {"y1", r.grid.y1}, {"reason", r.reason}, {"hasRatio", !r.ratio.empty()}};
+    if (!r.ratio.empty()) cache.putImage("ratio", r.ratio);
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    const Geometry& g = ctx.geometry();
+    GroundShadowResult r =
+        computeGroundShadow(*ctx.artefacts.mesh, ctx.objectScene(), g.worldFromObject, g.camera,
+                            *ctx.artefacts.shadowLighting, g.envFromWorld, g.envFromObject,
+                            ShadowPlan::parse(ctx.job.shadowParams), ctx.progress);
+    if (r.grid.empty()) r.ratio = Image();
+    const std::string reason = r.reason;
+    ctx.artefacts.groundShadow = std::move(r);
+    return reason;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<Stage> makePrecomputeStage() {
+  return std::make_unique<PrecomputeStage>();
+}
+std::unique_ptr<Stage> makeShadowsStage() {
+  return std::make_unique<ShadowsStage>();
+}
+std::unique_ptr<Stage> makeGroundStage() {
+  return std::make_unique<GroundStage>();
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,525 @@
+// The stages that make the picture: render (the object and its AOVs), composite (the plate
+// darkened by the ground shadow, the object over it, the holdout in front), output (the files).
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "composite/composite.h"
+#include "core/error.h"
+#include "core/output_files.h"
+#include "pipeline/context.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+#include "pipeline/stages.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+using namespace artefact;
+
+namespace {
+
+// Automatic exposure: a mid-grey ball standing where the object stands, lit by the environment,
+// should look as bright in the composite as middle grey looks in the plate. The plate's middle
+// grey is its log-average (the key that a camera's reflected-light meter exposes for); the ball's
+// brightness is the mean radiance of its visible half, each normal weighted by its projected
+// area towards the camera. Unlike matching what the environment shows in the camera's field of
+// view, this follows the light that falls on the object, wherever it comes from (a softbox behind
+// the camera, a dark backdrop in view).
+struct ExposureMatch {
+  double scale = 1.0;         // plate units per environment unit
+  double plateKey = 0.0;      // log-average of the plate's RGB mean
+  double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
+};
+
+ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLighting& lighting,
+                           const glm::dvec3& towardCamera, const glm::mat3& envFromWorld) {
+  ExposureMatch m;
+  // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level.
+  constexpr double kFloor = 1e-4;
+  double logSum = 0.0;
+  int64_t count = 0;
+  const int step = std::max(1, int(std::sqrt(double(plateLinear.pixelCount()) / 65536.0)));
+  for (int y = step / 2; y < plateLinear.height; y += step) {
+    for (int x = step / 2; x < plateLinear.width; x += step) {
+      const float* p = plateLinear.at(x, y);
+      logSum += std::log(std::max(kFloor, (double(p[0]) + p[1] + p[2]) / 3.0));
+      ++count;
+    }
+  }
+  m.plateKey = std::exp(logSum / double(std::max<int64_t>(count, 1)));
+  // Ball: normals on the hemisphere facing the camera (a Fibonacci spiral, evenly spread).
+  const glm::dvec3 c = glm::normalize(towardCamera);
+  const glm::dvec3 helper = std::abs(c.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
+  const glm::dvec3 u = glm::normalize(glm::cross(helper, c)), v = glm::cross(c, u);
+  constexpr int kNormals = 256;
+  double weighted = 0.0, weights = 0.0;
+  for (int i = 0; i < kNormals; ++i) {
+    const double z = 1.0 - (i + 0.5) / kNormals;  // cos of the angle to the camera, (0, 1]
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const double phi = double(i) * 2.399963229728653;  // golden angle
+    const glm::dvec3 n = z * c + r * std::cos(phi) * u + r * std::sin(phi) * v;
+    const glm::vec3 e = glm::max(lighting.irradiance(envFromWorld * glm::vec3(n)), glm::vec3(0.0f));
+    weighted += z * (double(e.x) + e.y + e.z) / 3.0;
+    weights += z;
+  }
+  m.ballRadiance = 0.18 * weighted / weights / std::numbers::pi;
+  if (m.ballRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.ballRadiance;
+  return m;
+}
+
+// A holdout mask: the first channel of any image the plate's size, as stored (no colour
+// management: it is data).
+Image loadHoldout(const fs::path& file, int width, int height) {
+  ingest::LoadedImage m = ingest::readImage(file, "composite");
+  if (m.image.width != width || m.image.height != height) {
+    throw Error("composite",
+                "the holdout mask is " + std::to_string(m.image.width) + "x" +
+                    std::to_string(m.image.height) + ", the plate " + std::to_string(width) + "x" +
+                    std::to_string(height) + ": it must be the plate's size",
+                file);
+  }
+  return std::move(m.image);
+}
+
+StageParameter pathParameter(std::string name, std::string help, fs::path ComposeJob::*member) {
+  return {std::move(name), std::move(help),
+          [member](const ComposeJob& j) { return nlohmann::json((j.*member).string()); },
+          [member, name](ComposeJob& j, const nlohmann::json& v) {
+            if (!v.is_string()) throw UsageError(name + " must be a path (a string)");
+            j.*member = v.get<std::string>();
+          }};
+}
+
+StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member) {
+  return {std::move(name), std::move(help),
+          [member](const ComposeJob& j) { return nlohmann::json(j.*member); },
+          [member, name](ComposeJob& j, const nlohmann::json& v) {
+            if (!v.is_string()) throw UsageError(name + " must be a string");
+            j.*member = v.get<std::string>();
+          }};
+}
+
+glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
+  if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number())
+    throw UsageError(name + " must be [X, Y]");
+  return {v[0].get<double>(), v[1].get<double>()};
+}
+
+// ---------------------------------------------------------------------------------------------
+
+class RenderStage final : public Stage {
+ public:
+  static constexpr int kVersion = 1;
+
+  std::string name() const override { return "render"; }
+  std::string summary() const override {
+    return "ray-cast the object through the plate's lens, shaded by the lighting (and its "
+           "self-shadowing), with AOVs";
+  }
+  std::vector<std::string> inputs() const override {
+    return {kPlate, kMesh, kPlateLinear, kLighting, kSelfShadowing};
+  }
+  std::vector<std::string> outputs() const override { return {kObject}; }
+  std::vector<StageParameter> parameters() const override {
+    return {{"place", "image point [X, Y] in [0, 1] where the object stands",
+             [](const ComposeJob& j) {
+               return nlohmann::json({j.placement.imagePoint.x, j.placement.imagePoint.y});
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               j.placement.imagePoint = pairOf(v, "place");
+             }},
+            {"scale", "object height as a fraction of the plate height",
+             [](const ComposeJob& j) { return nlohmann::json(j.placement.heightFraction); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("scale must be a number");
+               j.placement.heightFraction = v.get<double>();
+             }},
+            {"yaw", "turn of the object about the vertical, degrees",
+             [](const ComposeJob& j) { return nlohmann::json(j.placement.yawDegrees); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("yaw must be a number of degrees");
+               j.placement.yawDegrees = v.get<double>();
+             }},
+            {"focal35", "35 mm equivalent focal length of the plate, or null (EXIF, else 50)",
+             [](const ComposeJob& j) {
+               return j.camera.focal35mm ? nlohmann::json(*j.camera.focal35mm)
+                                         : nlohmann::json(nullptr);
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v.is_null()) return j.camera.focal35mm.reset();
+               if (!v.is_number()) throw UsageError("focal35 must be a number of millimetres");
+               j.camera.focal35mm = v.get<double>();
+             }},
+            {"camera-height", "camera height above the ground, metres",
+             [](const ComposeJob& j) { return nlohmann::json(j.camera.height); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("camera-height must be a number of metres");
+               j.camera.height = v.get<double>();
+             }},
+            {"pitch", "camera tilt down, degrees",
+             [](const ComposeJob& j) { return nlohmann::json(j.camera.pitchDegrees); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number()) throw UsageError("pitch must be a number of degrees");
+               j.camera.pitchDegrees = v.get<double>();
+             }},
+            pathParameter("calib", "lens calibration of the plate's camera (compose calib lens)",
+                          &ComposeJob::lensFile),
+            {"albedo",
+             "[R, G, B] albedo in the working space for the whole object, or null (the "
+             "mesh's materials, else clay grey)",
+             [](const ComposeJob& j) {
+               return j.albedo ? nlohmann::json({j.albedo->x, j.albedo->y, j.albedo->z})
+                               : nlohmann::json(nullptr);
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v.is_null()) return j.albedo.reset();
+               if (v.is_number()) {
+                 j.albedo = glm::vec3(v.get<float>());
+                 return;
+               }
+               if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+                   !v[2].is_number())
+                 throw UsageError("albedo must be a number or [R, G, B]");
+               j.albedo = glm::vec3(v[0].get<float>(), v[1].get<float>(), v[2].get<float>());
+             }},
+            {"exposure", "exposure of the object in stops, or \"auto\"",
+             [](const ComposeJob& j) {
+               return j.exposureStops ? nlohmann::json(*j.exposureStops) : nlohmann::json("auto");
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v == "auto") return j.exposureStops.reset();
+               if (!v.is_number())
+                 throw UsageError("exposure must be a number of stops or \"auto\"");
+               j.exposureStops = v.get<double>();
+             }},
+            {"samples", "anti-aliasing: N x N samples per pixel",
+             [](const ComposeJob& j) { return nlohmann::json(j.samplesPerAxis); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (!v.is_number_integer()) throw UsageError("samples must be an integer");
+               j.samplesPerAxis = v.get<int>();
+             }}};
+  }
+
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("object");
+    h.word(kVersion);
+    h.combine(ctx.geometryKey());
+    h.combine(ctx.key(kLighting));
+    h.combine(ctx.key(kPlateLinear));  // auto exposure reads the plate
+    if (ctx.hasKey(kSelfShadowing)) h.combine(ctx.key(kSelfShadowing));
+    h.bytes(ctx.colors.identity());  // the materials' colours
+    if (ctx.job.albedo) h.floats(std::span<const float>(&ctx.job.albedo->x, 3));
+    h.number(ctx.job.exposureStops.value_or(1e300));
+    h.word(uint32_t(ctx.job.samplesPerAxis));
+    ctx.keys[kObject] = h;
+  }
+  bool cached() const override { return true; }
+  bool load(Context& ctx, const StageCache& cache) const override {
+    const nlohmann::json& m = cache.meta();
+    if (!m.contains("x0")) return false;
+    RenderedObject r;
+    r.output.x0 = m["x0"];
+    r.output.y0 = m["y0"];
+    r.output.x1 = m["x1"];
+    r.output.y1 = m["y1"];
+    r.output.rays = m.value("rays", int64_t(0));
+    r.output.coverage = m.value("coverage", 0.0);
+    r.exposure = m.value("exposure", 1.0f);
+    if (!cache.getImage("beauty", r.output.beauty) || !cache.getImage("aovs", r.output.aovs))
+      return false;
+    r.notes = m.value("notes", std::vector<std::string>());
+    for (const auto& n : r.notes) ctx.note(n);
+    ctx.artefacts.object = std::move(r);
+    return true;
+  }
+  bool store(const Context& ctx, StageCache& cache) const override {
+    const RenderedObject& r = *ctx.artefacts.object;
+    cache.meta() = {{"x0", r.output.x0},      {"y0", r.output.y0},
+                    {"x1", r.output.x1},      {"y1", r.output.y1},
+                    {"rays", r.output.rays},  {"coverage", r.output.coverage},
+                    {"exposure", r.exposure}, {"notes", r.notes}};
+    cache.putImage("beauty", r.output.beauty);
+    cache.putImage("aovs", r.output.aovs);
+    return cache.write();
+  }
+
+  std::string run(Context& ctx) const override {
+    const ComposeJob& job = ctx.job;
+    const Geometry& g = ctx.geometry();
+    render::RenderSettings settings;
+    settings.samplesPerAxis = job.samplesPerAxis;
+    settings.albedo = job.albedo.value_or(glm::vec3(render::kDefaultAlbedo));
+    settings.overrideMaterials = job.albedo.has_value();
+    settings.envFromWorld = g.envFromWorld;
+    if (ctx.artefacts.selfShadowing) {
+      const ShadowResult& s = *ctx.artefacts.selfShadowing;
+      settings.points = &s.points;
+      settings.shadows = &s.irradiance;
+      settings.occlusion = &s.occlusion;
+    }
+    RenderedObject r;
+    if (job.exposureStops) {
+      settings.exposure = float(std::exp2(*job.exposureStops));
+    } else {
+      const glm::dvec3 objectBase(g.worldFromObject[3]);
+      const ExposureMatch match =
+          autoExposure(*ctx.artefacts.plateLinear, *ctx.artefacts.lighting,
+                       g.camera.position() - objectBase, settings.envFromWorld);
+      settings.exposure = float(match.scale);
+      ctx.note(
+          format("auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
+                 "environment's units) matched to the plate's log-average (%.4g); override "
+                 "with --exposure",
+                 std::log2(match.scale), match.ballRadiance, match.plateKey));
+      r.notes.push_back(ctx.notes.back());
+    }
+    r.exposure = settings.exposure;
+    const auto start = std::chrono::steady_clock::now();
+    r.output = render::renderDiffuse(*ctx.artefacts.mesh, ctx.objectScene(), g.worldFromObject,
+                                     g.camera, *ctx.artefacts.lighting, settings, ctx.progress);
+    r.output.beauty.colorSpace = ctx.colors.workingSpace();
+    if (!(r.output.coverage > 0.0)) {
+      throw Error("render",
+                  "the object covers no pixel of the plate (--scale " +
+                      std::to_string(job.placement.heightFraction) + " of the plate height at " +
+                      "--place " + std::to_string(job.placement.imagePoint.x) + "," +
+                      std::to_string(job.placement.imagePoint.y) +
+                      "): make it larger or place it inside the frame",
+                  job.object);
+    }
+    const std::string reason =
+        format("%dx%d pixels at %d x %d samples: %lld rays in %.2f s", r.output.x1 - r.output.x0,
+               r.output.y1 - r.output.y0, job.samplesPerAxis, job.samplesPerAxis,
+               static_cast<long long>(r.output.rays), secondsSince(start));
+    ctx.artefacts.object = std::move(r);
+    return reason;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class CompositeStage final : public Stage {
+ public:
+  std::string name() const override { return "composite"; }
+  std::string summary() const override {
+    return "the plate times the ground shadow's ratio, the object over it (premultiplied, in "
+           "scene-linear light), the holdout's plate in front";
+  }
+  std::vector<std::string> inputs() const override {
+    return {kPlateLinear, kObject, kGroundShadow};
+  }
+  std::vector<std::string> outputs() const override { return {kComposite}; }
+  std::vector<StageParameter> parameters() const override {
+    return {pathParameter("holdout",
+                          "holdout mask, the plate's size: white where the plate is in front of "
+                          "the object",
+                          &ComposeJob::holdout)};
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("composite");
+    h.combine(ctx.key(kPlateLinear));
+    h.combine(ctx.key(kObject));
+    if (ctx.hasKey(kGroundShadow)) h.combine(ctx.key(kGroundShadow));
+    if (!ctx.job.holdout.empty()) hashFile(h, ctx.job.holdout, "composite");
+    ctx.keys[kComposite] = h;
+  }
+  std::string run(Context& ctx) const override {
+    const RenderedObject& object = *ctx.artefacts.object;
+    const Image& plate = *ctx.artefacts.plateLinear;
+    std::string reason = "the object over the plate";
+    Image base = plate;
+    if (ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()) {
+      const GroundShadowResult& ground = *ctx.artefacts.groundShadow;
+      composite::multiply(base, ground.ratio, ground.grid.x0, ground.grid.y0);
+      reason = "the plate darkened by the ground shadow, the object over it";
+    }
+    Image out = composite::over(object.output.beauty, object.output.x0, object.output.y0, base);
+    base = Image();
+    if (!ctx.job.holdout.empty()) {
+      const Image mask = loadHoldout(ctx.job.holdout, out.width, out.height);
+      out = composite::holdout(out, plate, mask);
+      reason += ", the holdout's plate in front";
+    }
+    ctx.artefacts.composite = std::move(out);
+    return reason + " (scene-linear)";
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+class OutputStage final : public Stage {
+ public:
+  std::string name() const override { return "output"; }
+  std::string summary() const override {
+    return "write the multi-part OpenEXR (composite, object with AOVs, shadow) and the display "
+           "image (JPEG or PNG) through the config's view";
+  }
+  std::vector<std::string> inputs() const override {
+    return {kComposite, kObject, kGroundShadow, kPlate, kMesh};
+  }
+  std::vector<std::string> outputs() const override { return {kFiles}; }
+  std::vector<StageParameter> parameters() const override {
+    return {pathParameter("out", "output base path: writes BASE.exr and BASE.jpg (or .png)",
+                          &ComposeJob::output),
+            textParameter("display", "OpenColorIO display for the JPEG/PNG (empty: the config's)",
+                          &ComposeJob::display),
+            textParameter("view", "OpenColorIO view for the JPEG/PNG (empty: the config's)",
+                          &ComposeJob::view)};
+  }
+  void keys(Context& ctx) const override {
+    Hash128 h;
+    h.bytes("files");
+    h.combine(ctx.key(kComposite));
+    ctx.keys[kFiles] = h;
+  }
+  std::string run(Context& ctx) const override {
+    const ComposeJob& job = ctx.job;
+    const fs::path exrPath = exrPathFor(job), displayPath = displayPathFor(job);
+    const RenderedObject& object = *ctx.artefacts.object;
+    const GroundShadowResult* ground =
+        ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
+            ? &*ctx.artefacts.groundShadow
+            : nullptr;
+    const std::vector<std::string> notes =
+        writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output,
+                          ground, exrPath, displayPath);
+    for (const auto& n : notes) ctx.note(n);
+    report(ctx.progress, "output", 1.0);
+    return "wrote " + exrPath.string() + " and " + displayPath.string();
+  }
+};
+
+}  // namespace
+
+std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
+                                           const Geometry& geometry, const Image& composite,
+                                           const render::RenderOutput& rendered,
+                                           const GroundShadowResult* ground,
+                                           const fs::path& exrPath, const fs::path& displayPath) {
+  std::vector<std::string> notes;
+  const std::string working = colors.workingSpace();
+  Image compositeRgba(composite.width, composite.height, 4, {"R", "G", "B", "A"});
+  compositeRgba.colorSpace = working;
+  for (size_t i = 0; i < composite.pixelCount(); ++i) {
+    std::copy_n(composite.pixels.data() + 3 * i, 3, compositeRgba.pixels.data() + 4 * i);
+    compositeRgba.pixels[4 * i + 3] = 1.0f;
+  }
+  const std::vector<std::string>& aovNames = render::aovChannelNames();
+  const int objectChannels = 4 + int(aovNames.size());
+  std::vector<std::string> objectNames = {"object.R", "object.G", "object.B", "object.A"};
+  objectNames.insert(objectNames.end(), aovNames.begin(), aovNames.end());
+  Image object(rendered.beauty.width, rendered.beauty.height, objectChannels, objectNames);
+  object.colorSpace = working;
+  for (size_t i = 0; i < object.pixelCount(); ++i) {
+    float* d = object.pixels.data() + i * size_t(objectChannels);
+    std::copy_n(rendered.beauty.pixels.data() + 4 * i, 4, d);
+    std::copy_n(rendered.aovs.pixels.data() + i * aovNames.size(), aovNames.size(), d + 4);
+  }
+  ingest::ExrPart compositePart{"composite",     &compositeRgba,   0, 0,
+                                composite.width, composite.height, {}};
+  compositePart.options.depth = ingest::WriteOptions::Depth::Half;
+  compositePart.options.alphaChannel = 3;
+  compositePart.options.chromaticities = colors.chromaticities(working);
+  ingest::ExrPart objectPart{"object",        &object,          rendered.x0,          rendered.y0,
+                             composite.width, composite.height, compositePart.options};
+  if (!compositePart.options.chromaticities) {
+    notes.push_back("the config (" + colors.source() +
+                    ") does not say what the primaries of the working space '" + working +
+                    "' are: the EXR carries its name but no chromaticities");
+  }
+  // The camera and the placement, so that another tool can rebuild the scene.
+  ingest::ExrHeader header;
+  auto asImath = [](const glm::dmat4& m) {
+    // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
+    // Imath's rows of the row-vector matrix (translation in the last row).
+    std::array<float, 16> out;
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) out[size_t(4 * c + r)] = float(m[c][r]);
+    return out;
+  };
+  const calib::PlateCamera& camera = geometry.camera;
+  // OpenEXR's camera space looks along +Z (left-handed): flip our -Z.
+  const glm::dmat4 flipZ = glm::scale(glm::dmat4(1.0), glm::dvec3(1.0, 1.0, -1.0));
+  const glm::dmat4 cameraFromWorld = camera.cameraFromWorld();
+  glm::dmat4 ndcFromCamera(0.0);  // pinhole part of the lens (distortion is not a matrix)
+  const calib::Lens& lens = camera.lens;
+  ndcFromCamera[0][0] = lens.fx / camera.width;
+  ndcFromCamera[2][0] = -lens.cx / camera.width;
+  ndcFromCamera[1][1] = -lens.fy / camera.height;
+  ndcFromCamera[2][1] = -lens.cy / camera.height;
+  ndcFromCamera[2][2] = -1.0;
+  ndcFromCamera[2][3] = -1.0;
+  header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
+  header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
+  header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
+  header.strings.emplace_back("compose:object", fs::absolute(job.object).string());
+  if (lens.hasDistortion()) {
+    header.strings.emplace_back("compose:lens",
+                                "distorted lens: worldToNDC holds its pinhole part only");
+  }
+
+  const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
+  const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
+  Image shown = colors.toDisplay(composite, display, view);
+  {
+    // Object pixels that the display image shows as clipped white: their shading is lost.
+    int64_t covered = 0, clipped = 0;
+    for (int y = 0; y < rendered.beauty.height; ++y) {
+      for (int x = 0; x < rendered.beauty.width; ++x) {
+        if (rendered.beauty.at(x, y)[3] < 0.5f) continue;
+        ++covered;
+        const float* d = shown.at(x + rendered.x0, y + rendered.y0);
+        if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped;
+      }
+    }
+    constexpr double kClippedShare = 0.02;
+    if (covered > 0 && double(clipped) > kClippedShare * double(covered)) {
+      notes.push_back(
+          format("warning: %.1f%% of the object's pixels are clipped to white in %s "
+                 "(view %s): lower --exposure to keep their shading",
+                 100.0 * double(clipped) / double(covered), displayPath.filename().string().c_str(),
+                 view.c_str()));
+    }
+  }
+  // Both files appear together or not at all: a failure keeps every previous output.
+  OutputFiles outputs("output");
+  std::vector<ingest::ExrPart> parts = {compositePart, objectPart};
+  if (ground) {
+    // The ground shadow's ratio, in its own data window: 1 where the plate is unchanged.
+    ingest::ExrPart shadowPart{
+        "shadow",        &ground->ratio,   ground->grid.x0,      ground->grid.y0,
+        composite.width, composite.height, compositePart.options};
+    shadowPart.options.alphaChannel = -1;
+    parts.push_back(shadowPart);
+  }
+  const std::vector<ingest::WriteReport> written =
+      ingest::writeExrParts(outputs, exrPath, parts, header);
+  ingest::writeImage(outputs, displayPath, shown, {});
+  outputs.commit();
+  for (const ingest::WriteReport& w : written) {
+    if (!w.promotedToFloat) continue;
+    notes.push_back(
+        format("values up to %g exceed half float's range (65504): that part of the "
+               "EXR is written as 32-bit float",
+               double(w.largestMagnitude)));
+  }
+  return notes;
+}
+
+std::unique_ptr<Stage> makeRenderStage() {
+  return std::make_unique<RenderStage>();
+}
+std::unique_ptr<Stage> makeCompositeStage() {
+  return std::make_unique<CompositeStage>();
+}
+std::unique_ptr<Stage> makeOutputStage() {
+  return std::make_unique<OutputStage>();
+}
+
+}  // namespace compose::pipeline
