@@ -97,8 +97,6 @@ fs::path displayPathFor(const ComposeJob& job) {
 }
 
 void validate(const ComposeJob& job) {
-  if (job.plate.empty()) throw UsageError("--plate is required");
-  if (job.object.empty()) throw UsageError("--object is required");
   if (job.output.empty()) throw UsageError("--out must not be empty");
   if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
     throw UsageError("--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -133,11 +134,33 @@ std::filesystem::path displayPathFor(const ComposeJob& job);
 // status 2) naming the option. runCompose() calls it first.
 void validate(const ComposeJob& job);
 
+class Context;
+
+// The outputs of some stages read from a file instead of computed: how the stage-by-stage
+// commands chain (compose render reads what compose precompute wrote).
+struct StageInput {
+  std::vector<std::string> stages;  // the stages whose outputs the file holds
+  std::filesystem::path file;
+  // Puts the outputs, and a key for each, into the context; throws compose::Error naming the
+  // file when it does not hold them.
+  std::function<void(Context&)> load;
+};
+
+// What a run is for: the artefacts wanted (context.h; by default the written files), the stages
+// read from files, and what to do with the context once the stages have run (a stage command
+// writes its own file from it).
+struct RunRequest {
+  std::vector<std::string> targets = {"files"};
+  std::vector<StageInput> inputs;
+  std::function<void(Context&)> finish;
+};
+
 // What would run, be reused from the cache, or be skipped, and why, without reading any pixels
 // (the input files are hashed and the mesh is read).
-std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors);
+std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors,
+                              const RunRequest& request = {});
 
 ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
-                         const Progress& progress = {});
+                         const Progress& progress = {}, const RunRequest& request = {});
 
 }  // namespace compose::pipeline

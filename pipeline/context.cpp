@@ -19,6 +19,11 @@ std::string EnvironmentInput::describe() const {
 
 const Hash128& Context::key(const std::string& name) const {
   const auto it = keys.find(name);
+  if (it != keys.end()) return it->second;
+  if (name == artefact::kPlate)
+    throw UsageError("this job needs a plate: give --plate (ingest.plate in a scene file)");
+  if (name == artefact::kMesh)
+    throw UsageError("this job needs an object: give --object (ingest.object in a scene file)");
   COMPOSE_CHECK(it != keys.end());
   return it->second;
 }

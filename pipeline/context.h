@@ -81,6 +81,7 @@ struct RenderedObject {
   render::RenderOutput output;
   float exposure = 1.0f;
   std::vector<std::string> notes;  // how the exposure was chosen
+  std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
 };
 
 struct Artefacts {
@@ -114,11 +115,16 @@ class Context {
   EnvironmentInput environmentInput;
   std::map<std::string, Hash128> keys;  // per artefact
   std::set<std::string> needed;         // artefacts some running stage consumes
+  std::set<std::string> reachable;      // artefacts the wanted ones may be made from
+  std::set<std::string> provided;       // artefacts read from files (RunRequest::inputs)
 
   Artefacts artefacts;
   std::vector<std::string> notes;  // for the user, in the order they arose
 
   bool needs(const std::string& name) const { return needed.count(name) > 0; }
+  bool mayNeed(const std::string& name) const { return reachable.count(name) > 0; }
+  // The key of an artefact; throws compose::UsageError when the job lacks the input it comes from
+  // (a plate, an object).
   const Hash128& key(const std::string& name) const;
   bool hasKey(const std::string& name) const { return keys.count(name) > 0; }
   // Everything the geometry depends on (the plate's content, the lens file, the camera and
@@ -128,6 +134,8 @@ class Context {
 
   // The world as the plate and the mesh place it (needs the plate and the mesh).
   const Geometry& geometry();
+  // The geometry as a file recorded it (compose composite reads it from the object's layer).
+  void setGeometry(const Geometry& g) { geometry_ = g; }
   // The object's ray-tracing scene, built on first use (object space).
   const render::EmbreeScene& objectScene();
   // The proxy of the surroundings (distant when the job describes none).

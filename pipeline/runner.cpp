@@ -56,17 +56,61 @@ std::optional<StageCache> entryFor(const Context& ctx, const Stage& stage) {
   return StageCache(ctx.job.cache / "stages", stage.name(), h.hex());
 }
 
-// Prepares and keys every stage, then decides backwards from the written files what runs, what
-// is reused (`load`: restored now; otherwise only looked up) and what is skipped.
-Planned planJob(Context& ctx, bool load) {
+// Whether the request reads this stage's outputs from a file.
+const StageInput* inputFor(const RunRequest& request, const Stage& stage) {
+  for (const StageInput& in : request.inputs)
+    for (const std::string& s : in.stages)
+      if (s == stage.name()) return &in;
+  return nullptr;
+}
+
+// Prepares and keys every stage, then decides backwards from the wanted artefacts what runs,
+// what is reused (`load`: restored now; otherwise only looked up) and what is skipped.
+Planned planJob(Context& ctx, bool load, const RunRequest& request) {
   const auto& list = stages();
   Planned p;
   p.records.resize(list.size());
   p.entries.resize(list.size());
+
+  // Which artefacts the wanted ones can come from, through the stages that are not read from a
+  // file: a stage none of whose outputs is among them is not part of this run.
+  ctx.reachable.insert(request.targets.begin(), request.targets.end());
+  std::vector<bool> part(list.size(), false);
+  for (size_t i = list.size(); i-- > 0;) {
+    const Stage& stage = *list[i];
+    if (inputFor(request, stage)) continue;
+    for (const std::string& o : stage.outputs()) {
+      if (!ctx.reachable.count(o)) continue;
+      part[i] = true;
+      for (const std::string& in : stage.inputsFor(o)) ctx.reachable.insert(in);
+    }
+  }
+
+  for (const StageInput& in : request.inputs) {
+    const auto start = std::chrono::steady_clock::now();
+    in.load(ctx);
+    for (const std::string& name : in.stages) {
+      const Stage& stage = findStage(name);
+      for (size_t i = 0; i < list.size(); ++i) {
+        if (list[i].get() != &stage) continue;
+        p.records[i].state = StageState::Reused;
+        p.records[i].reason = "read from " + in.file.string();
+        p.records[i].seconds = secondsSince(start);
+      }
+      for (const std::string& o : stage.outputs()) ctx.provided.insert(o);
+    }
+  }
+
   for (size_t i = 0; i < list.size(); ++i) {
     const Stage& stage = *list[i];
     StageRecord& r = p.records[i];
     r.name = stage.name();
+    if (inputFor(request, stage)) continue;
+    if (!part[i]) {
+      r.state = StageState::Skipped;
+      r.reason = "not needed for this command's outputs";
+      continue;
+    }
     const auto start = std::chrono::steady_clock::now();
     stage.prepare(ctx);
     if (std::string why = stage.skip(ctx); !why.empty()) {
@@ -78,11 +122,11 @@ Planned planJob(Context& ctx, bool load) {
     r.seconds += secondsSince(start);
   }
 
-  ctx.needed = {artefact::kFiles};
+  ctx.needed.insert(request.targets.begin(), request.targets.end());
   for (size_t i = list.size(); i-- > 0;) {
     const Stage& stage = *list[i];
     StageRecord& r = p.records[i];
-    if (r.state == StageState::Skipped) continue;
+    if (r.state != StageState::Run || !part[i]) continue;
     std::vector<std::string> wanted;
     for (const std::string& o : stage.outputs())
       if (ctx.needs(o) && ctx.hasKey(o)) wanted.push_back(o);
@@ -108,15 +152,20 @@ Planned planJob(Context& ctx, bool load) {
     for (const std::string& o : wanted)
       for (const std::string& in : stage.inputsFor(o)) ctx.needed.insert(in);
   }
+  for (const std::string& t : request.targets) {
+    if (!ctx.hasKey(t) && !ctx.provided.count(t) && t != artefact::kFiles)
+      throw UsageError("nothing in this job makes the " + t + " it is asked for");
+  }
   return p;
 }
 
 }  // namespace
 
-std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors) {
+std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& colors,
+                              const RunRequest& request) {
   validate(job);
   Context ctx(job, colors, {});
-  Planned p = planJob(ctx, false);
+  Planned p = planJob(ctx, false, request);
   for (size_t i = 0; i < p.records.size(); ++i) {
     StageRecord& r = p.records[i];
     r.seconds = 0.0;
@@ -129,7 +178,7 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
 }
 
 ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors,
-                         const Progress& progress) {
+                         const Progress& progress, const RunRequest& request) {
   validate(job);
   std::optional<tbb::global_control> threads;
   if (job.threads > 0)
@@ -140,7 +189,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   result.displayPath = displayPathFor(job);
   Context ctx(job, colors, progress);
   resetPeak();
-  Planned p = planJob(ctx, true);
+  Planned p = planJob(ctx, true, request);
   const auto& list = stages();
   for (size_t i = 0; i < list.size(); ++i) {
     StageRecord& r = p.records[i];
@@ -158,6 +207,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     r.seconds += secondsSince(start);
     r.peakBytes = peakResidentBytes();
   }
+  if (request.finish) request.finish(ctx);
   result.stages = std::move(p.records);
   result.notes = std::move(ctx.notes);
   if (ctx.artefacts.plate) {

@@ -35,7 +35,14 @@ struct StageParameter {
   std::function<nlohmann::json(const ComposeJob&)> get;
   // Throws compose::UsageError naming the parameter when the value does not fit.
   std::function<void(ComposeJob&, const nlohmann::json&)> set;
+  // A file or folder: a scene file holds it relative to the scene file's folder.
+  bool isPath = false;
 };
+
+// A parameter that is a path, or a string, held in that member of the job.
+StageParameter pathParameter(std::string name, std::string help,
+                             std::filesystem::path ComposeJob::*member);
+StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member);
 
 class Stage {
  public:

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -19,6 +20,13 @@ constexpr uint64_t kMaxHeader = 1 << 20;
 StageCache::StageCache(fs::path folder, std::string stage, std::string key)
     : stage_(std::move(stage)), key_(std::move(key)) {
   if (!folder.empty()) path_ = folder / stage_ / (key_ + ".stage");
+}
+
+StageCache StageCache::atFile(fs::path file, std::string stage) {
+  StageCache entry({}, std::move(stage), "file");
+  entry.path_ = std::move(file);
+  entry.anyKey_ = true;
+  return entry;
 }
 
 bool StageCache::exists() const {
@@ -39,7 +47,7 @@ bool StageCache::open() {
   if (!in.read(text.data(), std::streamsize(length))) return false;
   const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
   if (header.is_discarded() || !header.is_object() || header.value("stage", "") != stage_ ||
-      header.value("key", "") != key_ || !header.contains("arrays") ||
+      (!anyKey_ && header.value("key", "") != key_) || !header.contains("arrays") ||
       !header["arrays"].is_array() || !header.contains("meta"))
     return false;
   // Never trust stored counts further than the bytes actually present.
@@ -64,6 +72,7 @@ bool StageCache::open() {
   }
   meta_ = header["meta"];
   arrays_ = std::move(arrays);
+  if (anyKey_) key_ = header.value("key", "");
   return true;
 }
 
@@ -92,12 +101,14 @@ bool StageCache::write() const {
                 std::streamsize(values.size() * sizeof(float)));
     out.close();
     if (!out) {
+      error_ = std::strerror(errno);
       fs::remove(temp, ec);
       return false;
     }
   }
   fs::rename(temp, path_, ec);
   if (ec) {
+    error_ = ec.message();
     fs::remove(temp, ec);
     return false;
   }

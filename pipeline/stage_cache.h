@@ -24,6 +24,9 @@ class StageCache {
  public:
   // An empty folder: no cache (exists() and open() are false, write() does nothing).
   StageCache(std::filesystem::path folder, std::string stage, std::string key);
+  // A stage file a user names (compose precompute --out): the same format at that path, opened
+  // whatever key it was written under.
+  static StageCache atFile(std::filesystem::path file, std::string stage);
 
   const std::filesystem::path& path() const { return path_; }
   bool enabled() const { return !path_.empty(); }
@@ -31,8 +34,11 @@ class StageCache {
 
   // Reads the whole entry; false on a miss or an entry that does not fit.
   bool open();
-  // Writes the entry atomically; false (nothing left behind) if it could not be written.
+  // Writes the entry atomically; false (nothing left behind) if it could not be written, with the
+  // operating system's reason in error().
   bool write() const;
+  const std::string& error() const { return error_; }
+  const std::string& key() const { return key_; }
 
   nlohmann::json& meta() { return meta_; }
   const nlohmann::json& meta() const { return meta_; }
@@ -48,6 +54,8 @@ class StageCache {
  private:
   std::filesystem::path path_;
   std::string stage_, key_;
+  bool anyKey_ = false;
+  mutable std::string error_;
   nlohmann::json meta_ = nlohmann::json::object();
   std::map<std::string, std::vector<float>> arrays_;
 };

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "pipeline/stage.h"
 
 namespace compose::pipeline {
 
@@ -44,6 +45,28 @@ Image toRgb(const Image& in) {
     }
   }
   return out;
+}
+
+StageParameter pathParameter(std::string name, std::string help,
+                             std::filesystem::path ComposeJob::*member) {
+  StageParameter p{
+      name, std::move(help),
+      [member](const ComposeJob& job) { return nlohmann::json((job.*member).string()); },
+      [member, name](ComposeJob& job, const nlohmann::json& value) {
+        if (!value.is_string()) throw UsageError(name + " must be a path (a string)");
+        job.*member = value.get<std::string>();
+      }};
+  p.isPath = true;
+  return p;
+}
+
+StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member) {
+  return {name, std::move(help),
+          [member](const ComposeJob& job) { return nlohmann::json(job.*member); },
+          [member, name](ComposeJob& job, const nlohmann::json& value) {
+            if (!value.is_string()) throw UsageError(name + " must be a string");
+            job.*member = value.get<std::string>();
+          }};
 }
 
 }  // namespace compose::pipeline

@@ -19,6 +19,14 @@ std::unique_ptr<Stage> makeRenderStage();
 std::unique_ptr<Stage> makeCompositeStage();
 std::unique_ptr<Stage> makeOutputStage();
 
+// Brings an input image (RGB first, other channels left alone) to the working space, the way the
+// colour stage does, and says how it was read: an explicit colour space (`option`, e.g.
+// --plate-space) wins; an OpenEXR file's chromaticities come next; then the space the file
+// declares, else the config's file rules.
+std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
+                           const ingest::CaptureInfo& info, const std::string& explicitSpace,
+                           const std::string& option, const color::ColorConfig& colors);
+
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
 // not at all. Returns notes for the user.
@@ -26,6 +34,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const Geometry& geometry, const Image& composite,
                                            const render::RenderOutput& rendered,
                                            const GroundShadowResult* ground,
+                                           const std::string& meshFile,
                                            const std::filesystem::path& exrPath,
                                            const std::filesystem::path& displayPath);
 

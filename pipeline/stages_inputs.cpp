@@ -56,51 +56,37 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
   return h;
 }
 
-// Brings an input image to the working space and says how it was read. An explicit colour space
-// (--plate-space, --env-space) wins; an OpenEXR file that carries chromaticities is taken by
-// them (as the colour space of the config with those primaries, or converted by matrix);
-// otherwise the space the file declares, else the config's file rules.
-std::string toWorkingSpace(Image& image, const fs::path& file, const ingest::CaptureInfo& info,
-                           const std::string& explicitSpace, const std::string& option,
-                           const color::ColorConfig& colors) {
-  const std::string working = colors.workingSpace();
-  if (!explicitSpace.empty()) {
-    image.colorSpace = colors.resolve(explicitSpace, option);
-    colors.convert(image, working);
-    return "'" + image.colorSpace + "' (" + option + ")";
+// What --env names: an image (or cube faces), or a capture description of photos.
+void prepareEnvironment(Context& ctx) {
+  const ComposeJob& job = ctx.job;
+  const fs::path envPath = environmentPathFor(job);
+  EnvironmentInput& in = ctx.environmentInput;
+  in.path = envPath;
+  std::error_code ec;
+  if (job.environment.empty() && !fs::exists(envPath, ec)) {
+    throw Error("ingest",
+                "no --env given and the sample environment is missing; run samples/fetch.sh",
+                envPath);
   }
-  if (info.chromaticities) {
-    const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
-    if (!named.empty()) {
-      image.colorSpace = named;
-      colors.convert(image, working);
-      return "'" + named + "' (by the chromaticities in its header)";
+  std::string ext = envPath.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (ext == ".json") {
+    in.kind = EnvironmentInput::Kind::Capture;
+    ingest::Capture capture = ingest::readCaptureDescription(envPath);
+    ingest::resolveExposures(capture);
+    in.files = {envPath};
+    for (const ingest::View& v : capture.views) {
+      for (const ingest::Shot& s : v.shots) in.files.push_back(s.file);
+      if (v.shots.size() > 1) in.bracketed = true;
     }
-    colors.convertFromChromaticities(image, *info.chromaticities, working);
-    return "the RGB space of the chromaticities in its header (converted by matrix)";
+    if (!capture.lensFile.empty()) in.files.push_back(capture.lensFile);
+    in.views = int(capture.views.size());
+    ctx.artefacts.capture = std::move(capture);
+  } else {
+    in.kind = EnvironmentInput::Kind::Image;
+    in.files = cubemap::environmentFiles(envPath);
   }
-  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
-  const std::string read = image.colorSpace;
-  colors.convert(image, working);
-  return "'" + read + "'";
-}
-
-StageParameter pathParameter(std::string name, std::string help, fs::path ComposeJob::*member) {
-  return {std::move(name), std::move(help),
-          [member](const ComposeJob& job) { return nlohmann::json((job.*member).string()); },
-          [member, name](ComposeJob& job, const nlohmann::json& value) {
-            if (!value.is_string()) throw UsageError(name + " must be a path (a string)");
-            job.*member = value.get<std::string>();
-          }};
-}
-
-StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member) {
-  return {std::move(name), std::move(help),
-          [member](const ComposeJob& job) { return nlohmann::json(job.*member); },
-          [member, name](ComposeJob& job, const nlohmann::json& value) {
-            if (!value.is_string()) throw UsageError(name + " must be a string");
-            job.*member = value.get<std::string>();
-          }};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -133,47 +119,25 @@ class IngestStage final : public Stage {
 
   void prepare(Context& ctx) const override {
     const ComposeJob& job = ctx.job;
-    const fs::path envPath = environmentPathFor(job);
-    EnvironmentInput& in = ctx.environmentInput;
-    in.path = envPath;
-    std::error_code ec;
-    if (job.environment.empty() && !fs::exists(envPath, ec)) {
-      throw Error("ingest",
-                  "no --env given and the sample environment is missing; run samples/fetch.sh",
-                  envPath);
-    }
-    std::string ext = envPath.extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return std::tolower(c); });
-    if (ext == ".json") {
-      in.kind = EnvironmentInput::Kind::Capture;
-      ingest::Capture capture = ingest::readCaptureDescription(envPath);
-      ingest::resolveExposures(capture);
-      in.files = {envPath};
-      for (const ingest::View& v : capture.views) {
-        for (const ingest::Shot& s : v.shots) in.files.push_back(s.file);
-        if (v.shots.size() > 1) in.bracketed = true;
-      }
-      if (!capture.lensFile.empty()) in.files.push_back(capture.lensFile);
-      in.views = int(capture.views.size());
-      ctx.artefacts.capture = std::move(capture);
-    } else {
-      in.kind = EnvironmentInput::Kind::Image;
-      in.files = cubemap::environmentFiles(envPath);
-    }
+    if (ctx.mayNeed(kEnvironmentFile) || ctx.mayNeed(kCapture)) prepareEnvironment(ctx);
     // The mesh is read here: its content is part of every later key.
-    ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
-    const render::Mesh& mesh = *ctx.artefacts.mesh;
-    if (!mesh.normalsFromFile) ctx.note("object normals: " + mesh.normalsSource);
-    for (const std::string& w : mesh.warnings) ctx.note("object: " + w);
+    if (ctx.mayNeed(kMesh) && !job.object.empty()) {
+      ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
+      const render::Mesh& mesh = *ctx.artefacts.mesh;
+      if (!mesh.normalsFromFile) ctx.note("object normals: " + mesh.normalsSource);
+      for (const std::string& w : mesh.warnings) ctx.note("object: " + w);
+    }
   }
 
   void keys(Context& ctx) const override {
-    Hash128 plate;
-    plate.bytes("plate");
-    hashFile(plate, ctx.job.plate, "ingest");
-    ctx.keys[kPlate] = plate;
-    ctx.keys[kMesh] = meshKey(*ctx.artefacts.mesh, ctx.job.creaseDegrees);
+    if (ctx.mayNeed(kPlate) && !ctx.job.plate.empty()) {
+      Hash128 plate;
+      plate.bytes("plate");
+      hashFile(plate, ctx.job.plate, "ingest");
+      ctx.keys[kPlate] = plate;
+    }
+    if (ctx.artefacts.mesh) ctx.keys[kMesh] = meshKey(*ctx.artefacts.mesh, ctx.job.creaseDegrees);
+    if (ctx.environmentInput.path.empty()) return;
     Hash128 env;
     env.bytes(ctx.environmentInput.kind == EnvironmentInput::Kind::Capture ? "capture"
                                                                            : "environment");
@@ -189,9 +153,10 @@ class IngestStage final : public Stage {
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
     }
-    const render::Mesh& mesh = *ctx.artefacts.mesh;
-    reason +=
-        (reason.empty() ? "" : ", ") + format("the object (%zu triangles)", mesh.triangleCount());
+    if (ctx.artefacts.mesh) {
+      reason += (reason.empty() ? "" : ", ") +
+                format("the object (%zu triangles)", ctx.artefacts.mesh->triangleCount());
+    }
     if (ctx.needs(kEnvironmentFile)) {
       ctx.artefacts.environmentFile =
           cubemap::loadEnvironment(ctx.environmentInput.path, {}, ctx.progress);
@@ -206,7 +171,7 @@ class IngestStage final : public Stage {
     } else if (ctx.environmentInput.kind == EnvironmentInput::Kind::Capture) {
       reason +=
           ", the capture description (" + plural(ctx.artefacts.capture->views.size(), "view") + ")";
-    } else {
+    } else if (!ctx.environmentInput.path.empty()) {
       reason += "; the environment's pixels are not needed (everything made from them is cached)";
     }
     report(ctx.progress, "ingest", 1.0);
@@ -464,12 +429,15 @@ class ColorStage final : public Stage {
   }
 
   void keys(Context& ctx) const override {
-    Hash128 plate;
-    plate.bytes("plate-linear");
-    plate.combine(ctx.key(kPlate));
-    plate.bytes(ctx.job.plateSpace);
-    plate.bytes(ctx.colors.identity());
-    ctx.keys[kPlateLinear] = plate;
+    if (ctx.mayNeed(kPlateLinear)) {
+      Hash128 plate;
+      plate.bytes("plate-linear");
+      plate.combine(ctx.key(kPlate));
+      plate.bytes(ctx.job.plateSpace);
+      plate.bytes(ctx.colors.identity());
+      ctx.keys[kPlateLinear] = plate;
+    }
+    if (!ctx.mayNeed(kEnvironment)) return;
     Hash128 env;
     env.bytes("environment");
     env.combine(ctx.keys.count(kStitched) ? ctx.key(kStitched) : ctx.key(kEnvironmentFile));
@@ -492,28 +460,61 @@ class ColorStage final : public Stage {
       if (ctx.artefacts.stitched) {
         ctx.artefacts.environment = std::move(*ctx.artefacts.stitched);
         ctx.artefacts.stitched.reset();
-        reason += ", environment merged and stitched in the working space";
+        reason += std::string(reason.empty() ? "" : ", ") +
+                  "environment merged and stitched in the working space";
       } else {
         const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
         Image linear = toRgb(env.image);
-        reason += ", environment as " + toWorkingSpace(linear, env.file, env.info,
-                                                       ctx.job.environmentSpace, "--env-space",
-                                                       ctx.colors);
+        reason += std::string(reason.empty() ? "" : ", ") + "environment as " +
+                  toWorkingSpace(linear, env.file, env.info, ctx.job.environmentSpace,
+                                 "--env-space", ctx.colors);
         ctx.artefacts.environment = std::move(linear);
         ctx.artefacts.environmentFile.reset();
       }
     }
-    render::Mesh& mesh = *ctx.artefacts.mesh;
-    if (ctx.job.albedo && mesh.hasMaterials()) {
-      ctx.note("object: --albedo replaces the materials of the mesh");
-    } else if (const std::string read = materialsToWorkingSpace(mesh, ctx.colors); !read.empty()) {
-      ctx.note(read);
+    if (ctx.artefacts.mesh) {
+      render::Mesh& mesh = *ctx.artefacts.mesh;
+      if (ctx.job.albedo && mesh.hasMaterials()) {
+        ctx.note("object: --albedo replaces the materials of the mesh");
+      } else if (const std::string read = materialsToWorkingSpace(mesh, ctx.colors);
+                 !read.empty()) {
+        ctx.note(read);
+      }
     }
     return reason + "; working space '" + working + "' (config: " + ctx.colors.source() + ")";
   }
 };
 
 }  // namespace
+
+// Brings an input image to the working space and says how it was read. An explicit colour space
+// (--plate-space, --env-space) wins; an OpenEXR file that carries chromaticities is taken by
+// them (as the colour space of the config with those primaries, or converted by matrix);
+// otherwise the space the file declares, else the config's file rules.
+std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
+                           const ingest::CaptureInfo& info, const std::string& explicitSpace,
+                           const std::string& option, const color::ColorConfig& colors) {
+  const std::string working = colors.workingSpace();
+  if (!explicitSpace.empty()) {
+    image.colorSpace = colors.resolve(explicitSpace, option);
+    colors.convert(image, working);
+    return "'" + image.colorSpace + "' (" + option + ")";
+  }
+  if (info.chromaticities) {
+    const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
+    if (!named.empty()) {
+      image.colorSpace = named;
+      colors.convert(image, working);
+      return "'" + named + "' (by the chromaticities in its header)";
+    }
+    colors.convertFromChromaticities(image, *info.chromaticities, working);
+    return "the RGB space of the chromaticities in its header (converted by matrix)";
+  }
+  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
+  const std::string read = image.colorSpace;
+  colors.convert(image, working);
+  return "'" + read + "'";
+}
 
 std::unique_ptr<Stage> makeIngestStage() {
   return std::make_unique<IngestStage>();

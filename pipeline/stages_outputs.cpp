@@ -85,24 +85,6 @@ Image loadHoldout(const fs::path& file, int width, int height) {
   return std::move(m.image);
 }
 
-StageParameter pathParameter(std::string name, std::string help, fs::path ComposeJob::*member) {
-  return {std::move(name), std::move(help),
-          [member](const ComposeJob& j) { return nlohmann::json((j.*member).string()); },
-          [member, name](ComposeJob& j, const nlohmann::json& v) {
-            if (!v.is_string()) throw UsageError(name + " must be a path (a string)");
-            j.*member = v.get<std::string>();
-          }};
-}
-
-StageParameter textParameter(std::string name, std::string help, std::string ComposeJob::*member) {
-  return {std::move(name), std::move(help),
-          [member](const ComposeJob& j) { return nlohmann::json(j.*member); },
-          [member, name](ComposeJob& j, const nlohmann::json& v) {
-            if (!v.is_string()) throw UsageError(name + " must be a string");
-            j.*member = v.get<std::string>();
-          }};
-}
-
 glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
   if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number())
     throw UsageError(name + " must be [X, Y]");
@@ -113,7 +95,7 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 
 class RenderStage final : public Stage {
  public:
-  static constexpr int kVersion = 1;
+  static constexpr int kVersion = 2;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -233,16 +215,17 @@ class RenderStage final : public Stage {
     if (!cache.getImage("beauty", r.output.beauty) || !cache.getImage("aovs", r.output.aovs))
       return false;
     r.notes = m.value("notes", std::vector<std::string>());
+    r.meshFile = m.value("mesh", "");
     for (const auto& n : r.notes) ctx.note(n);
     ctx.artefacts.object = std::move(r);
     return true;
   }
   bool store(const Context& ctx, StageCache& cache) const override {
     const RenderedObject& r = *ctx.artefacts.object;
-    cache.meta() = {{"x0", r.output.x0},      {"y0", r.output.y0},
-                    {"x1", r.output.x1},      {"y1", r.output.y1},
-                    {"rays", r.output.rays},  {"coverage", r.output.coverage},
-                    {"exposure", r.exposure}, {"notes", r.notes}};
+    cache.meta() = {
+        {"x0", r.output.x0},      {"y0", r.output.y0},     {"x1", r.output.x1},
+        {"y1", r.output.y1},      {"rays", r.output.rays}, {"coverage", r.output.coverage},
+        {"exposure", r.exposure}, {"notes", r.notes},      {"mesh", r.meshFile}};
     cache.putImage("beauty", r.output.beauty);
     cache.putImage("aovs", r.output.aovs);
     return cache.write();
@@ -279,6 +262,7 @@ class RenderStage final : public Stage {
       r.notes.push_back(ctx.notes.back());
     }
     r.exposure = settings.exposure;
+    r.meshFile = fs::absolute(job.object).string();
     const auto start = std::chrono::steady_clock::now();
     r.output = render::renderDiffuse(*ctx.artefacts.mesh, ctx.objectScene(), g.worldFromObject,
                                      g.camera, *ctx.artefacts.lighting, settings, ctx.progress);
@@ -360,9 +344,7 @@ class OutputStage final : public Stage {
     return "write the multi-part OpenEXR (composite, object with AOVs, shadow) and the display "
            "image (JPEG or PNG) through the config's view";
   }
-  std::vector<std::string> inputs() const override {
-    return {kComposite, kObject, kGroundShadow, kPlate, kMesh};
-  }
+  std::vector<std::string> inputs() const override { return {kComposite, kObject, kGroundShadow}; }
   std::vector<std::string> outputs() const override { return {kFiles}; }
   std::vector<StageParameter> parameters() const override {
     return {pathParameter("out", "output base path: writes BASE.exr and BASE.jpg (or .png)",
@@ -388,7 +370,7 @@ class OutputStage final : public Stage {
             : nullptr;
     const std::vector<std::string> notes =
         writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output,
-                          ground, exrPath, displayPath);
+                          ground, object.meshFile, exrPath, displayPath);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
     return "wrote " + exrPath.string() + " and " + displayPath.string();
@@ -401,7 +383,8 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const Geometry& geometry, const Image& composite,
                                            const render::RenderOutput& rendered,
                                            const GroundShadowResult* ground,
-                                           const fs::path& exrPath, const fs::path& displayPath) {
+                                           const std::string& meshFile, const fs::path& exrPath,
+                                           const fs::path& displayPath) {
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
   Image compositeRgba(composite.width, composite.height, 4, {"R", "G", "B", "A"});
@@ -458,7 +441,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
   header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
   header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
-  header.strings.emplace_back("compose:object", fs::absolute(job.object).string());
+  if (!meshFile.empty()) header.strings.emplace_back("compose:object", meshFile);
   if (lens.hasDistortion()) {
     header.strings.emplace_back("compose:lens",
                                 "distorted lens: worldToNDC holds its pinhole part only");

@@ -31,6 +31,14 @@ const std::vector<Command>& commands() {
       {"calib", "Lens calibration and plate pose from chessboard photos", setupCalib},
       {"convert", "Convert environment maps between layouts; unwrap mirror balls", setupConvert},
       {"stitch", "Stitch photos from one point into a cube-map environment", setupStitch},
+      {"color", "Convert an image to the working space (or another) as OpenEXR", setupColor},
+      {"precompute", "Project an environment onto the lighting basis: a lighting file",
+       setupPrecompute},
+      {"render", "Render the object's layer (with AOVs and ground shadow) from a lighting file",
+       setupRender},
+      {"composite", "Composite an object's layer into the plate: EXR and JPEG", setupComposite},
+      {"run", "Run the job a scene file (JSON) describes", setupRun},
+      {"bench", "Time a job stage by stage, cold and warm, with peak memory", setupBench},
   };
   return list;
 }

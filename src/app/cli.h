@@ -63,6 +63,12 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals);
 Runner setupCalib(CLI::App& command, const Globals& globals);
 Runner setupConvert(CLI::App& command, const Globals& globals);
 Runner setupStitch(CLI::App& command, const Globals& globals);
+Runner setupColor(CLI::App& command, const Globals& globals);
+Runner setupPrecompute(CLI::App& command, const Globals& globals);
+Runner setupRender(CLI::App& command, const Globals& globals);
+Runner setupComposite(CLI::App& command, const Globals& globals);
+Runner setupRun(CLI::App& command, const Globals& globals);
+Runner setupBench(CLI::App& command, const Globals& globals);
 
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);

@@ -1,0 +1,147 @@
+#include "pipeline/scene.h"
+
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/output_files.h"
+#include "pipeline/stage.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string namesOf(const std::vector<StageParameter>& parameters) {
+  std::string s;
+  for (const auto& p : parameters) s += (s.empty() ? "" : ", ") + p.name;
+  return s.empty() ? "none" : s;
+}
+
+const StageParameter& findParameter(const Stage& stage,
+                                    const std::vector<StageParameter>& parameters,
+                                    const std::string& name) {
+  for (const auto& p : parameters)
+    if (p.name == name) return p;
+  throw UsageError("the stage " + stage.name() + " has no parameter '" + name +
+                   "'; its parameters are " + namesOf(parameters));
+}
+
+void setOne(ComposeJob& job, const Stage& stage, const std::string& name, nlohmann::json value,
+            const fs::path& folder) {
+  const std::vector<StageParameter> parameters = stage.parameters();
+  const StageParameter& p = findParameter(stage, parameters, name);
+  if (p.isPath && value.is_string() && !value.get<std::string>().empty() && !folder.empty()) {
+    const fs::path path = value.get<std::string>();
+    if (path.is_relative()) value = (folder / path).lexically_normal().string();
+  }
+  try {
+    p.set(job, value);
+  } catch (const UsageError& e) {
+    throw UsageError(stage.name() + "." + name + ": " + e.what());
+  }
+}
+
+}  // namespace
+
+nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folder) {
+  nlohmann::ordered_json scene;
+  scene["compose"] = "scene";
+  scene["version"] = kSceneVersion;
+  nlohmann::ordered_json all = nlohmann::ordered_json::object();
+  const fs::path base = fs::absolute(folder).lexically_normal();
+  for (const auto& stage : stages()) {
+    nlohmann::ordered_json values = nlohmann::ordered_json::object();
+    for (const StageParameter& p : stage->parameters()) {
+      nlohmann::json value = p.get(job);
+      if (p.isPath && value.is_string() && !value.get<std::string>().empty()) {
+        // Relative when the file is near the scene (below the same top folder), else absolute.
+        const fs::path path = fs::absolute(value.get<std::string>()).lexically_normal();
+        auto top = [](const fs::path& full) {
+          auto it = full.begin();
+          return it != full.end() && ++it != full.end() ? *it : fs::path();
+        };
+        if (!top(path).empty() && top(path) == top(base))
+          value = path.lexically_proximate(base).string();
+        else
+          value = path.string();
+      }
+      values[p.name] = value;
+    }
+    if (!values.empty()) all[stage->name()] = values;
+  }
+  scene["stages"] = all;
+  return scene;
+}
+
+void saveScene(const ComposeJob& job, const fs::path& file) {
+  const std::string text = sceneFromJob(job, file.parent_path()).dump(2) + "\n";
+  OutputFiles outputs("scene");
+  const fs::path temp = outputs.add(file);
+  {
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.close();
+    if (!out) throw Error("scene", "cannot write the scene file", file);
+  }
+  outputs.commit();
+}
+
+void applyScene(const nlohmann::json& scene, const fs::path& folder, ComposeJob& job) {
+  if (!scene.is_object() || scene.value("compose", "") != "scene")
+    throw UsageError("not a compose scene (it needs \"compose\": \"scene\")");
+  const int version = scene.value("version", 0);
+  if (version != kSceneVersion)
+    throw UsageError("scene version " + std::to_string(version) + " is not the one this compose " +
+                     "reads (" + std::to_string(kSceneVersion) + ")");
+  for (const auto& [key, value] : scene.items()) {
+    if (key != "compose" && key != "version" && key != "stages")
+      throw UsageError("unknown key '" + key + "'; a scene has compose, version and stages");
+  }
+  if (!scene.contains("stages")) return;
+  if (!scene["stages"].is_object())
+    throw UsageError("stages must be an object of stage names to parameters");
+  for (const auto& [stageName, values] : scene["stages"].items()) {
+    const Stage& stage = findStage(stageName);
+    if (!values.is_object())
+      throw UsageError("the parameters of " + stageName + " must be an object");
+    for (const auto& [name, value] : values.items()) setOne(job, stage, name, value, folder);
+  }
+}
+
+ComposeJob loadScene(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) throw Error("scene", "scene file not found", file);
+  std::ifstream in(file, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  if (!in) throw Error("scene", "cannot read the scene file", file);
+  nlohmann::json scene;
+  try {
+    scene = nlohmann::json::parse(text.str());
+  } catch (const nlohmann::json::parse_error& e) {
+    throw Error("scene", std::string("not JSON: ") + e.what(), file);
+  }
+  ComposeJob job;
+  try {
+    applyScene(scene, fs::absolute(file).parent_path(), job);
+  } catch (const UsageError& e) {
+    throw Error("scene", e.what(), file);
+  }
+  return job;
+}
+
+void setParameter(ComposeJob& job, const std::string& assignment) {
+  const size_t dot = assignment.find('.'), equals = assignment.find('=');
+  if (dot == std::string::npos || equals == std::string::npos || dot > equals)
+    throw UsageError("--set expects STAGE.PARAMETER=VALUE, got '" + assignment + "'");
+  const Stage& stage = findStage(assignment.substr(0, dot));
+  const std::string name = assignment.substr(dot + 1, equals - dot - 1);
+  const std::string text = assignment.substr(equals + 1);
+  nlohmann::json value = nlohmann::json::parse(text, nullptr, false);
+  if (value.is_discarded()) value = text;
+  setOne(job, stage, name, value, {});  // relative to where compose runs
+}
+
+}  // namespace compose::pipeline

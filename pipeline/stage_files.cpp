@@ -1,0 +1,317 @@
+#include "pipeline/stage_files.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <memory>
+
+#include "calib/lens_json.h"
+#include "core/error.h"
+#include "core/output_files.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+using namespace artefact;
+
+namespace {
+
+constexpr int kLayerFormat = 1;
+constexpr const char* kLayerAttribute = "compose:layer";
+
+// A key for each output read from `file`: its content and the output's name.
+void keyFromFile(Context& ctx, const fs::path& file, const std::vector<std::string>& outputs,
+                 const std::string& stage) {
+  Hash128 content;
+  hashFile(content, file, stage);
+  for (const std::string& o : outputs) {
+    Hash128 h = content;
+    h.bytes(o);
+    ctx.keys[o] = h;
+  }
+}
+
+template <class Matrix>
+nlohmann::json matrixToJson(const Matrix& m) {
+  nlohmann::json out = nlohmann::json::array();
+  for (int c = 0; c < m.length(); ++c)
+    for (int r = 0; r < m[c].length(); ++r) out.push_back(m[c][r]);
+  return out;
+}
+
+template <class Matrix>
+Matrix matrixFromJson(const nlohmann::json& j) {
+  Matrix m(1.0);
+  const int columns = m.length(), rows = m[0].length();
+  if (!j.is_array() || int(j.size()) != columns * rows)
+    throw nlohmann::json::other_error::create(501, "a matrix of the wrong size", nullptr);
+  for (int c = 0; c < columns; ++c)
+    for (int r = 0; r < rows; ++r)
+      m[c][r] = j.at(size_t(c * rows + r)).template get<typename Matrix::value_type>();
+  return m;
+}
+
+nlohmann::json geometryToJson(const Geometry& g) {
+  const calib::PlateCamera& c = g.camera;
+  return {{"camera",
+           {{"width", c.width},
+            {"height", c.height},
+            {"lens", calib::lensToJson(c.lens)},
+            {"focal35mm", c.focal35mm},
+            {"focalSource", c.focalSource},
+            {"worldFromCamera", matrixToJson(c.worldFromCamera)}}},
+          {"worldFromObject", matrixToJson(g.worldFromObject)},
+          {"envFromWorld", matrixToJson(g.envFromWorld)},
+          {"envFromObject", matrixToJson(g.envFromObject)}};
+}
+
+Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
+  Geometry g;
+  const nlohmann::json& c = j.at("camera");
+  g.camera.width = c.at("width").get<int>();
+  g.camera.height = c.at("height").get<int>();
+  g.camera.lens = calib::lensFromJson(c.at("lens"), file);
+  g.camera.focal35mm = c.at("focal35mm").get<double>();
+  g.camera.focalSource = c.at("focalSource").get<std::string>();
+  g.camera.worldFromCamera = matrixFromJson<glm::dmat4>(c.at("worldFromCamera"));
+  g.worldFromObject = matrixFromJson<glm::dmat4>(j.at("worldFromObject"));
+  g.envFromWorld = matrixFromJson<glm::mat3>(j.at("envFromWorld"));
+  g.envFromObject = matrixFromJson<glm::mat3>(j.at("envFromObject"));
+  return g;
+}
+
+// The parameters a precompute file fixes for the stages that use it.
+nlohmann::json lightingParameters(const ComposeJob& job) {
+  return {{"lighting", job.lighting},
+          {"lighting-params", job.lightingParams},
+          {"shadow-params", job.shadowParams}};
+}
+
+}  // namespace
+
+void savePrecompute(const Context& ctx, const fs::path& file) {
+  StageCache entry = StageCache::atFile(file, "precompute");
+  entry.meta()["parameters"] = lightingParameters(ctx.job);
+  entry.meta()["environment"] = fs::absolute(ctx.environmentInput.path).string();
+  if (!findStage("precompute").store(ctx, entry)) {
+    if (!entry.error().empty())
+      throw Error("precompute", "cannot write the lighting file: " + entry.error(), file);
+    throw Error("precompute",
+                "the lighting basis '" + ctx.job.lighting +
+                    "' keeps no state that can be saved (it reads the environment while "
+                    "shading); choose another with --lighting",
+                file);
+  }
+}
+
+StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
+  auto entry = std::make_shared<StageCache>(StageCache::atFile(file, "precompute"));
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) throw Error("render", "lighting file not found", file);
+  if (!entry->open())
+    throw Error("render",
+                "not a lighting file of compose precompute (or a damaged one): write it again "
+                "with compose precompute",
+                file);
+  const nlohmann::json& meta = entry->meta();
+  if (!meta.contains("parameters") || !meta["parameters"].is_object())
+    throw Error("render", "the lighting file does not say what it was made with", file);
+  const nlohmann::json& p = meta["parameters"];
+  job.lighting = p.value("lighting", job.lighting);
+  job.lightingParams = p.value("lighting-params", std::string());
+  job.shadowParams = p.value("shadow-params", std::string());
+
+  StageInput in;
+  in.stages = {"precompute"};
+  in.file = file;
+  in.load = [entry, file](Context& ctx) {
+    std::vector<std::string> outputs = {kLighting};
+    if (entry->meta().contains("shadowLighting")) {
+      outputs.push_back(kShadowLighting);
+    } else if (ctx.job.shadows || ctx.job.groundShadow) {
+      throw Error("render",
+                  "the lighting file was made with --shadows off --no-shadow: it holds no light "
+                  "sources for the shadows (render with --shadows off --no-shadow, or precompute "
+                  "again)",
+                  file);
+    }
+    const std::set<std::string> needed = ctx.needed;
+    ctx.needed.insert(outputs.begin(), outputs.end());
+    const bool loaded = findStage("precompute").load(ctx, *entry);
+    ctx.needed = needed;
+    if (!loaded) throw Error("render", "the lighting file's contents do not fit its basis", file);
+    keyFromFile(ctx, file, outputs, "render");
+  };
+  return in;
+}
+
+void saveObjectLayer(Context& ctx, const fs::path& file) {
+  const RenderedObject& object = *ctx.artefacts.object;
+  const render::RenderOutput& r = object.output;
+  const Geometry& g = ctx.geometry();
+  const std::vector<std::string>& aovNames = render::aovChannelNames();
+  const int channels = 4 + int(aovNames.size());
+  std::vector<std::string> names = {"R", "G", "B", "A"};
+  names.insert(names.end(), aovNames.begin(), aovNames.end());
+  Image layer(r.beauty.width, r.beauty.height, channels, names);
+  layer.colorSpace = r.beauty.colorSpace;
+  for (size_t i = 0; i < layer.pixelCount(); ++i) {
+    float* d = layer.pixels.data() + i * size_t(channels);
+    std::copy_n(r.beauty.pixels.data() + 4 * i, 4, d);
+    std::copy_n(r.aovs.pixels.data() + i * aovNames.size(), aovNames.size(), d + 4);
+  }
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;  // the composite reads these numbers back
+  options.alphaChannel = 3;
+  options.chromaticities = ctx.colors.chromaticities(ctx.colors.workingSpace());
+  std::vector<ingest::ExrPart> parts = {
+      {"object", &layer, r.x0, r.y0, g.camera.width, g.camera.height, options}};
+
+  nlohmann::json header = {{"format", kLayerFormat},
+                           {"render",
+                            {{"x0", r.x0},
+                             {"y0", r.y0},
+                             {"x1", r.x1},
+                             {"y1", r.y1},
+                             {"rays", r.rays},
+                             {"coverage", r.coverage},
+                             {"exposure", object.exposure},
+                             {"notes", object.notes},
+                             {"mesh", object.meshFile},
+                             {"beautyChannels", r.beauty.channelNames},
+                             {"aovChannels", r.aovs.channelNames},
+                             {"colorSpace", r.beauty.colorSpace}}},
+                           {"geometry", geometryToJson(g)},
+                           {"ground", nullptr}};
+  const GroundShadowResult* ground =
+      ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
+          ? &*ctx.artefacts.groundShadow
+          : nullptr;
+  if (ground) {
+    ingest::WriteOptions ratioOptions = options;
+    ratioOptions.alphaChannel = -1;
+    parts.push_back({"shadow", &ground->ratio, ground->grid.x0, ground->grid.y0, g.camera.width,
+                     g.camera.height, ratioOptions});
+    header["ground"] = {{"x0", ground->grid.x0},
+                        {"y0", ground->grid.y0},
+                        {"x1", ground->grid.x1},
+                        {"y1", ground->grid.y1},
+                        {"reason", ground->reason},
+                        {"channels", ground->ratio.channelNames},
+                        {"colorSpace", ground->ratio.colorSpace}};
+  } else if (ctx.artefacts.groundShadow) {
+    header["ground"] = {{"reason", ctx.artefacts.groundShadow->reason}};
+  }
+  ingest::ExrHeader exrHeader;
+  exrHeader.strings.emplace_back(kLayerAttribute, header.dump());
+  OutputFiles outputs("render");
+  ingest::writeExrParts(outputs, file, parts, exrHeader);
+  outputs.commit();
+}
+
+StageInput objectLayerInput(const fs::path& file) {
+  StageInput in;
+  in.stages = {"shadows", "ground", "render"};
+  in.file = file;
+  in.load = [file](Context& ctx) {
+    std::error_code ec;
+    if (!fs::is_regular_file(file, ec)) throw Error("composite", "object layer not found", file);
+    auto input = OIIO::ImageInput::open(file.string());
+    if (!input) throw Error("composite", "cannot read the object layer: " + OIIO::geterror(), file);
+    const std::string text = input->spec().get_string_attribute(kLayerAttribute);
+    const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
+    if (text.empty() || header.is_discarded() || header.value("format", 0) != kLayerFormat)
+      throw Error("composite",
+                  "not an object layer of compose render (no compose:layer header of format " +
+                      std::to_string(kLayerFormat) + ")",
+                  file);
+    // Reads the part of that name, in float, with its data window.
+    auto readPart = [&](const std::string& name, int& x, int& y) {
+      for (int sub = 0; input->seek_subimage(sub, 0); ++sub) {
+        const OIIO::ImageSpec& spec = input->spec();
+        if (spec.get_string_attribute("name") != name) continue;
+        Image image(spec.width, spec.height, spec.nchannels, spec.channelnames);
+        if (!input->read_image(sub, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT,
+                               image.pixels.data()))
+          throw Error("composite",
+                      "cannot read part '" + name + "' of the object layer: " + input->geterror(),
+                      file);
+        x = spec.x;
+        y = spec.y;
+        return image;
+      }
+      throw Error("composite", "the object layer has no part '" + name + "'", file);
+    };
+    try {
+      const nlohmann::json& rj = header.at("render");
+      RenderedObject object;
+      render::RenderOutput& r = object.output;
+      r.x0 = rj.at("x0");
+      r.y0 = rj.at("y0");
+      r.x1 = rj.at("x1");
+      r.y1 = rj.at("y1");
+      r.rays = rj.at("rays");
+      r.coverage = rj.at("coverage");
+      object.exposure = rj.at("exposure");
+      object.notes = rj.at("notes").get<std::vector<std::string>>();
+      object.meshFile = rj.value("mesh", "");
+      int x = 0, y = 0;
+      const Image layer = readPart("object", x, y);
+      const auto beautyNames = rj.at("beautyChannels").get<std::vector<std::string>>();
+      const auto aovNames = rj.at("aovChannels").get<std::vector<std::string>>();
+      if (x != r.x0 || y != r.y0 || layer.width != r.x1 - r.x0 || layer.height != r.y1 - r.y0 ||
+          beautyNames.size() != 4 || layer.channels != int(4 + aovNames.size()))
+        throw Error("composite", "the object part does not match its header", file);
+      r.beauty = Image(layer.width, layer.height, 4, beautyNames);
+      r.aovs = Image(layer.width, layer.height, int(aovNames.size()), aovNames);
+      r.beauty.colorSpace = rj.at("colorSpace").get<std::string>();
+      // OpenEXR keeps channels in its own order: find each by the name it was written under.
+      std::vector<std::string> written = {"R", "G", "B", "A"};
+      written.insert(written.end(), aovNames.begin(), aovNames.end());
+      std::vector<size_t> from;
+      for (const std::string& name : written) {
+        const auto it = std::find(layer.channelNames.begin(), layer.channelNames.end(), name);
+        if (it == layer.channelNames.end())
+          throw Error("composite", "the object part has no channel '" + name + "'", file);
+        from.push_back(size_t(it - layer.channelNames.begin()));
+      }
+      const size_t n = aovNames.size();
+      for (size_t i = 0; i < layer.pixelCount(); ++i) {
+        const float* s = layer.pixels.data() + i * size_t(layer.channels);
+        for (size_t c = 0; c < 4; ++c) r.beauty.pixels[4 * i + c] = s[from[c]];
+        for (size_t c = 0; c < n; ++c) r.aovs.pixels[n * i + c] = s[from[4 + c]];
+      }
+      for (const auto& note : object.notes) ctx.note(note);
+      ctx.artefacts.object = std::move(object);
+
+      GroundShadowResult ground;
+      const nlohmann::json& gj = header.at("ground");
+      if (gj.is_object() && gj.contains("x0")) {
+        ground.grid.x0 = gj.at("x0");
+        ground.grid.y0 = gj.at("y0");
+        ground.grid.x1 = gj.at("x1");
+        ground.grid.y1 = gj.at("y1");
+        ground.ratio = readPart("shadow", x, y);
+        if (x != ground.grid.x0 || y != ground.grid.y0)
+          throw Error("composite", "the shadow part does not match its header", file);
+        ground.ratio.channelNames = gj.at("channels").get<std::vector<std::string>>();
+        ground.ratio.colorSpace = gj.value("colorSpace", "");
+      }
+      if (gj.is_object()) {
+        ground.reason = gj.value("reason", "");
+        ctx.artefacts.groundShadow = std::move(ground);
+      }
+      ctx.setGeometry(geometryFromJson(header.at("geometry"), file));
+    } catch (const nlohmann::json::exception& e) {
+      throw Error("composite", std::string("the object layer's header is damaged: ") + e.what(),
+                  file);
+    }
+    keyFromFile(ctx, file, {kObject, kGroundShadow, kSelfShadowing}, "composite");
+  };
+  return in;
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,282 @@
+// The pipeline's stages as commands, file in, file out: compose color, precompute, render,
+// composite, and compose run (a whole job from a scene file). Chained by hand they give what the
+// one-shot command gives (tests/e2e/stages_e2e_test.cpp checks it).
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+
+#include "app/cli.h"
+#include "app/compose_options.h"
+#include "color/color.h"
+#include "core/error.h"
+#include "core/output_files.h"
+#include "ingest/image_io.h"
+#include "pipeline/context.h"
+#include "pipeline/scene.h"
+#include "pipeline/stage_files.h"
+#include "pipeline/stages.h"
+
+namespace compose::app {
+
+namespace fs = std::filesystem;
+
+Runner setupColor(CLI::App& cmd, const Globals& globals) {
+  struct Options {
+    std::string in, out, from, to, depth = "half";
+  };
+  auto o = std::make_shared<Options>();
+  cmd.description(
+      "Convert an image to the working space (role scene_linear of the OpenColorIO config) or to "
+      "another colour space, as the pipeline's colour stage reads plates and environments, and "
+      "write it as OpenEXR with the space's chromaticities and name in the header.\n\n"
+      "Example:\n"
+      "  compose color plate.jpg --out plate_linear.exr\n"
+      "  compose color env.hdr --from lin_rec709 --to ACEScg --out env_acescg.exr");
+  cmd.add_option("image", o->in, "Image to convert (JPEG, PNG, TIFF, EXR, HDR, ...)")->required();
+  cmd.add_option("--out", o->out, "Output OpenEXR")->required();
+  cmd.add_option("--from", o->from, "Colour space of the input [default: from the file]");
+  cmd.add_option("--to", o->to, "Colour space to write [default: the working space]");
+  cmd.add_option("--depth", o->depth, "half or float")->capture_default_str();
+  return [o, &globals]() -> int {
+    if (o->depth != "half" && o->depth != "float")
+      throw UsageError("--depth must be half or float, got '" + o->depth + "'");
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    const std::string target =
+        o->to.empty() ? colors.workingSpace() : colors.resolve(o->to, "--to");
+    ingest::LoadedImage loaded = ingest::readImage(o->in, "color");
+    Image& image = loaded.image;
+    if (image.channels < 3) {
+      Image rgb(image.width, image.height, 3, {"R", "G", "B"});
+      for (size_t i = 0; i < image.pixelCount(); ++i)
+        for (int c = 0; c < 3; ++c)
+          rgb.pixels[3 * i + size_t(c)] = image.pixels[i * size_t(image.channels)];
+      rgb.colorSpace = image.colorSpace;
+      image = std::move(rgb);
+    }
+    const std::string read =
+        pipeline::toWorkingSpace(image, o->in, loaded.info, o->from, "--from", colors);
+    if (target != image.colorSpace) colors.convert(image, target);
+    ingest::WriteOptions options;
+    options.depth = o->depth == "float" ? ingest::WriteOptions::Depth::Float
+                                        : ingest::WriteOptions::Depth::Half;
+    if (image.channels >= 4) options.alphaChannel = 3;
+    options.chromaticities = colors.chromaticities(target);
+    const ingest::WriteReport report = ingest::writeImage(o->out, image, options);
+    if (!globals.quiet) {
+      std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", o->in.c_str(), read.c_str(),
+                   target.c_str());
+      if (!options.chromaticities)
+        std::fprintf(stderr,
+                     "compose: note: the config does not say what the primaries of '%s' are: the "
+                     "EXR carries its name but no chromaticities\n",
+                     target.c_str());
+      if (report.promotedToFloat)
+        std::fprintf(stderr,
+                     "compose: note: values up to %g exceed half float's range: written as float\n",
+                     double(report.largestMagnitude));
+    }
+    std::printf("%s\n", o->out.c_str());
+    return 0;
+  };
+}
+
+Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  auto out = std::make_shared<std::string>();
+  cmd.description(
+      "Project an environment onto the lighting basis (the pipeline's precompute stage) and split "
+      "off its brightest sources for the shadows; write both to a lighting file for compose "
+      "render. The file fixes the basis, its parameters and the shadow parameters.\n\n"
+      "Example:\n"
+      "  compose precompute --env forest.exr --out forest.lighting\n"
+      "  compose render --plate plate.jpg --object bunny.obj --lighting-file forest.lighting "
+      "--out bunny.exr\n"
+      "  compose composite --plate plate.jpg --layer bunny.exr --out final");
+  o->addEnvironment(cmd);
+  o->addLighting(cmd);
+  o->addShadows(cmd, true);
+  o->addRun(cmd);
+  cmd.add_option("--out", *out, "Lighting file to write")->required();
+  return [o, out, &cmd, &globals]() -> int {
+    o->apply(cmd);
+    if (o->job.room || o->job.environmentRadius)
+      throw UsageError(
+          "parallax (--room, --env-radius) is resolved at the object's position: use the "
+          "one-shot command or compose run");
+    pipeline::RunRequest request;
+    request.targets = {pipeline::artefact::kLighting};
+    if (o->job.shadows || o->job.groundShadow)
+      request.targets.push_back(pipeline::artefact::kShadowLighting);
+    const fs::path file = *out;
+    request.finish = [file](pipeline::Context& ctx) { pipeline::savePrecompute(ctx, file); };
+    const int status = runJob(*o, globals, request, false);
+    if (!o->explain) std::printf("%s\n", file.c_str());
+    return status;
+  };
+}
+
+Runner setupRender(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  auto out = std::make_shared<std::string>();
+  auto lightingFile = std::make_shared<std::string>();
+  cmd.description(
+      "Render the object as the plate's camera sees it (the pipeline's shadows, ground and render "
+      "stages), lit by a lighting file of compose precompute, into the object's layer: a float "
+      "multi-part OpenEXR the plate's size (part object: premultiplied RGBA and the AOVs; part "
+      "shadow: the ground shadow's ratio), with the camera and placement in its header.\n\n"
+      "Example:\n"
+      "  compose render --plate plate.jpg --object bunny.obj --lighting-file forest.lighting "
+      "--place 0.5,0.7 --scale 0.3 --out bunny.exr");
+  o->addPlate(cmd);
+  o->addObject(cmd);
+  o->addShadows(cmd, false);
+  o->addRun(cmd);
+  cmd.add_option("--lighting-file", *lightingFile, "Lighting file (compose precompute)")
+      ->required();
+  cmd.add_option("--out", *out, "Object layer to write (OpenEXR)")->required();
+  return [o, out, lightingFile, &cmd, &globals]() -> int {
+    o->apply(cmd);
+    pipeline::RunRequest request;
+    request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
+    request.targets = {pipeline::artefact::kObject};
+    if (o->job.groundShadow) request.targets.push_back(pipeline::artefact::kGroundShadow);
+    const fs::path file = *out;
+    request.finish = [file](pipeline::Context& ctx) { pipeline::saveObjectLayer(ctx, file); };
+    const int status = runJob(*o, globals, request, false);
+    if (!o->explain) std::printf("%s\n", file.c_str());
+    return status;
+  };
+}
+
+Runner setupComposite(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  auto layer = std::make_shared<std::string>();
+  cmd.description(
+      "Composite an object's layer (compose render) into the plate (the pipeline's composite and "
+      "output stages): the plate darkened by the ground shadow's ratio in linear light, the "
+      "object over it, a holdout's plate in front; writes BASE.exr and BASE.jpg as the one-shot "
+      "command does.\n\n"
+      "Example:\n"
+      "  compose composite --plate plate.jpg --layer bunny.exr --holdout post_mask.png --out "
+      "final");
+  o->addPlate(cmd);
+  o->addOutput(cmd);
+  o->addRun(cmd);
+  cmd.add_option("--layer", *layer, "Object layer (compose render)")->required();
+  return [o, layer, &cmd, &globals]() -> int {
+    o->apply(cmd);
+    pipeline::RunRequest request;
+    request.inputs.push_back(pipeline::objectLayerInput(*layer));
+    return runJob(*o, globals, request);
+  };
+}
+
+Runner setupRun(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  auto scene = std::make_shared<std::string>();
+  auto sets = std::make_shared<std::vector<std::string>>();
+  cmd.description(
+      "Run the whole job a scene file (JSON) describes. Write one from a command line with "
+      "compose --save-scene SCENE ...; every stage's parameters may appear under its name, paths "
+      "relative to the scene file.\n\n"
+      "Example:\n"
+      "  compose --plate plate.jpg --object bunny.obj --env forest.exr --save-scene bunny.json\n"
+      "  compose run bunny.json --set render.scale=0.4 --set output.out=out/bigger");
+  cmd.add_option("scene", *scene, "Scene file (JSON)")->required();
+  cmd.add_option("--set", *sets,
+                 "Override a parameter: STAGE.PARAMETER=VALUE (VALUE as JSON, else a string); "
+                 "repeatable");
+  cmd.add_option("--cache", o->job.cache, "Folder of the caches")->capture_default_str();
+  cmd.add_flag("--no-cache", o->noCache, "Neither read nor write the caches");
+  cmd.add_option("--threads", o->job.threads, "Worker threads [default: every core]");
+  cmd.add_flag("--timings", o->timings, "Print each stage's time and peak memory");
+  cmd.add_flag("--explain", o->explain,
+               "Say which stages would run, be reused or be skipped, and why, then exit");
+  return [o, scene, sets, &globals]() -> int {
+    {
+      // A malformed --set is a bad command line: refused before the scene is read.
+      pipeline::ComposeJob scratch;
+      for (const std::string& s : *sets) pipeline::setParameter(scratch, s);
+    }
+    const fs::path cache = o->job.cache;
+    const int threads = o->job.threads;
+    o->job = pipeline::loadScene(*scene);
+    o->job.cache = o->noCache ? fs::path() : cache;
+    o->job.threads = threads;
+    for (const std::string& s : *sets) pipeline::setParameter(o->job, s);
+    return runJob(*o, globals);
+  };
+}
+
+Runner setupBench(CLI::App& cmd, const Globals& globals) {
+  auto o = std::make_shared<ComposeOptions>();
+  auto repeat = std::make_shared<int>(3);
+  cmd.description(
+      "Time a compose job stage by stage: one cold run (an empty cache: every stage computes) and "
+      "then warm runs (the cache filled: what is unchanged is reused), with each stage's median "
+      "time and the peak resident memory. The outputs go to a temporary folder.\n\n"
+      "Example:\n"
+      "  compose bench --plate meadow.jpg --object bunny.obj --env forest.exr --repeat 5");
+  o->addPlate(cmd);
+  o->addObject(cmd);
+  o->addEnvironment(cmd);
+  o->addLighting(cmd);
+  o->addShadows(cmd, true);
+  cmd.add_option("--holdout", o->job.holdout, "Holdout mask, as for compose");
+  cmd.add_option("--threads", o->job.threads, "Worker threads [default: every core]");
+  cmd.add_option("--repeat", *repeat, "Warm runs")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
+  return [o, repeat, &cmd, &globals]() -> int {
+    o->apply(cmd);
+    if (o->job.plate.empty() || o->job.object.empty())
+      throw UsageError("compose bench needs --plate and --object");
+    std::error_code ec;
+    const fs::path scratch =
+        fs::temp_directory_path() / ("compose-bench-" + std::to_string(::getpid()));
+    fs::remove_all(scratch, ec);
+    struct Cleanup {
+      fs::path path;
+      ~Cleanup() {
+        std::error_code e;
+        fs::remove_all(path, e);
+      }
+    } cleanup{scratch};
+    o->job.cache = scratch / "cache";
+    o->job.output = scratch / "out" / "compose";
+    pipeline::validate(o->job);
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    std::vector<pipeline::ComposeResult> runs;
+    for (int i = 0; i <= *repeat; ++i) {
+      if (!globals.quiet)
+        std::fprintf(stderr, "compose: bench: %s run %d\n", i == 0 ? "cold" : "warm", i);
+      runs.push_back(pipeline::runCompose(o->job, colors));
+    }
+    auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      return v.empty() ? 0.0 : v[v.size() / 2];
+    };
+    std::printf("%-10s %10s %10s %8s  %s\n", "stage", "cold s", "warm s", "peak MB", "warm state");
+    double coldTotal = 0.0;
+    std::vector<double> warmTotals(runs.size() - 1, 0.0);
+    int64_t peak = 0;
+    for (size_t s = 0; s < runs[0].stages.size(); ++s) {
+      const pipeline::StageRecord& cold = runs[0].stages[s];
+      std::vector<double> warm;
+      for (size_t r = 1; r < runs.size(); ++r) {
+        warm.push_back(runs[r].stages[s].seconds);
+        warmTotals[r - 1] += runs[r].stages[s].seconds;
+      }
+      coldTotal += cold.seconds;
+      peak = std::max(peak, cold.peakBytes);
+      std::printf("%-10s %10.3f %10.3f %8.0f  %s\n", cold.name.c_str(), cold.seconds, median(warm),
+                  double(cold.peakBytes) / 1e6, pipeline::stateName(runs.back().stages[s].state));
+    }
+    std::printf("%-10s %10.3f %10.3f %8.0f  (%dx%d plate, %d warm runs)\n", "total", coldTotal,
+                median(warmTotals), double(peak) / 1e6, runs[0].width, runs[0].height, *repeat);
+    return 0;
+  };
+}
+
+}  // namespace compose::app

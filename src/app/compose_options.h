@@ -1,0 +1,40 @@
+// The options of the compose job, shared by the one-shot command, the stage commands that run
+// part of the pipeline (precompute, render, composite) and compose run. Each command adds the
+// groups it takes; apply() turns what was given into the job.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "app/cli.h"
+#include "pipeline/compose_job.h"
+
+namespace compose::app {
+
+struct ComposeOptions {
+  pipeline::ComposeJob job;
+  std::string place, albedo, lightingParams, exposure = "auto", shadows = "self", room, captureAt;
+  double focal35 = 0.0, envRadius = 0.0;
+  bool explain = false, noCache = false, noShadow = false, timings = false;
+
+  // Option groups.
+  void addPlate(CLI::App& app);                     // --plate, --plate-space
+  void addEnvironment(CLI::App& app);               // --env, --env-space, --env-yaw, parallax
+  void addLighting(CLI::App& app);                  // --lighting, --lighting-params
+  void addShadows(CLI::App& app, bool parameters);  // --shadows, --no-shadow [, --shadow-params]
+  void addObject(CLI::App& app);  // --object, --crease, placement, camera, shading
+  void addOutput(CLI::App& app);  // --out BASE, --display, --view, --holdout
+  void addRun(CLI::App& app);     // --cache, --no-cache, --threads, --timings, --explain
+
+  // Applies the options given on `app` to the job; throws UsageError for a malformed value.
+  void apply(const CLI::App& app);
+};
+
+// Runs the job through the pipeline for `request`: with --explain prints the plan and returns;
+// otherwise prints the stages (and --timings) on stderr. Returns the exit status.
+int runJob(const ComposeOptions& o, const Globals& globals,
+           const pipeline::RunRequest& request = {}, bool printOutputs = true);
+
+}  // namespace compose::app

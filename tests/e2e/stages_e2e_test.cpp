@@ -1,0 +1,248 @@
+// The stage-by-stage commands end to end: compose precompute → render → composite chained by hand
+// gives the one-shot command's files bit for bit; a scene file saved from a command line runs the
+// same job; --explain and the stage files' errors.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
+
+#include "pipeline/compose_job.h"
+#include "test_util.h"
+
+namespace compose {
+namespace {
+
+namespace fs = std::filesystem;
+using compose::testing::TempDir;
+
+struct RunResult {
+  int status = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string quote(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
+
+RunResult run(const std::string& args, const fs::path& scratch) {
+  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
+  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out) + " 2>" +
+                          quote(err) + " </dev/null";
+  const int raw = std::system(cmd.c_str());
+  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, slurp(out), slurp(err)};
+}
+
+// Every part of an EXR: name, data window, channel names and float pixels.
+struct Part {
+  std::string name;
+  int x = 0, y = 0, width = 0, height = 0;
+  std::vector<std::string> channels;
+  std::vector<float> pixels;
+};
+
+std::vector<Part> readParts(const fs::path& path) {
+  std::vector<Part> parts;
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) {
+    ADD_FAILURE() << "cannot open " << path;
+    return parts;
+  }
+  for (int sub = 0; in->seek_subimage(sub, 0); ++sub) {
+    const OIIO::ImageSpec& s = in->spec();
+    Part p{s.get_string_attribute("name"), s.x, s.y, s.width, s.height, s.channelnames, {}};
+    p.pixels.resize(size_t(s.width) * size_t(s.height) * size_t(s.nchannels));
+    EXPECT_TRUE(in->read_image(sub, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, p.pixels.data()));
+    parts.push_back(std::move(p));
+  }
+  return parts;
+}
+
+class StageCommands : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    samples_ = pipeline::samplesDirectory();
+    if (!fs::exists(samples_ / "meadow.jpg") || !fs::exists(samples_ / "forest.exr") ||
+        !fs::exists(samples_ / "monkey.obj"))
+      GTEST_FAIL() << "sample data missing in " << samples_ << ": run samples/fetch.sh";
+    // A small plate keeps the test quick: the meadow at 320 pixels wide.
+    plate_ = dir_ / "plate.jpg";
+    OIIO::ImageBuf full((samples_ / "meadow.jpg").string());
+    OIIO::ImageBuf small =
+        OIIO::ImageBufAlgo::resize(full, "", 0.0f, OIIO::ROI(0, 320, 0, 213, 0, 1, 0, 3));
+    ASSERT_TRUE(small.write(plate_.string()));
+  }
+  // The options the one-shot and the stages share, the monkey facing the camera at 2x2 samples.
+  std::string objectOptions() const {
+    return "--object " + quote(samples_ / "monkey.obj") + " --samples 2 --scale 0.4 --yaw 20";
+  }
+
+  TempDir dir_;
+  fs::path samples_, plate_;
+};
+
+TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
+  const std::string env = " --env " + quote(samples_ / "forest.exr");
+  const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
+  const RunResult one =
+      run("-q --plate " + quote(plate_) + " " + objectOptions() + env + lighting + " --out " +
+              quote(dir_ / "one" / "compose") + " --cache " + quote(dir_ / "cache1"),
+          dir_.path());
+  ASSERT_EQ(one.status, 0) << one.err;
+
+  const fs::path light = dir_ / "forest.lighting", layer = dir_ / "monkey.exr";
+  const RunResult pre = run("-q precompute" + env + lighting + " --out " + quote(light) +
+                                " --cache " + quote(dir_ / "cache2"),
+                            dir_.path());
+  ASSERT_EQ(pre.status, 0) << pre.err;
+  const RunResult ren =
+      run("-q render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(light) + " --out " + quote(layer) + " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(ren.status, 0) << ren.err;
+  const RunResult comp =
+      run("-q composite --plate " + quote(plate_) + " --layer " + quote(layer) + " --out " +
+              quote(dir_ / "two" / "compose") + " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(comp.status, 0) << comp.err;
+
+  const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
+  const std::vector<Part> b = readParts(dir_ / "two" / "compose.exr");
+  ASSERT_EQ(a.size(), 3u);  // composite, object, shadow
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    SCOPED_TRACE(a[i].name);
+    EXPECT_EQ(a[i].name, b[i].name);
+    EXPECT_EQ(a[i].x, b[i].x);
+    EXPECT_EQ(a[i].y, b[i].y);
+    EXPECT_EQ(a[i].width, b[i].width);
+    EXPECT_EQ(a[i].height, b[i].height);
+    EXPECT_EQ(a[i].channels, b[i].channels);
+    ASSERT_EQ(a[i].pixels.size(), b[i].pixels.size());
+    size_t differing = 0;
+    for (size_t k = 0; k < a[i].pixels.size(); ++k)
+      if (std::memcmp(&a[i].pixels[k], &b[i].pixels[k], sizeof(float)) != 0) ++differing;
+    EXPECT_EQ(differing, 0u) << "values differ between the one-shot and the chained stages";
+  }
+  EXPECT_EQ(slurp(dir_ / "one" / "compose.jpg"), slurp(dir_ / "two" / "compose.jpg"));
+
+  // The object moved the plate at all: the comparison above is not of two copies of the plate.
+  const Part& object = a[1];
+  double alpha = 0.0;
+  const size_t stride = object.channels.size();
+  for (size_t k = 3; k < object.pixels.size(); k += stride) alpha += object.pixels[k];
+  EXPECT_GT(alpha, 100.0);
+}
+
+TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
+  const std::string common = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
+                             quote(samples_ / "forest.exr") +
+                             " --shadows off --lighting-params order=2";
+  const fs::path scene = dir_ / "scenes" / "monkey.json";
+  fs::create_directories(scene.parent_path());
+  const RunResult save =
+      run(common + " --out " + quote(dir_ / "a" / "compose") + " --save-scene " + quote(scene),
+          dir_.path());
+  ASSERT_EQ(save.status, 0) << save.err;
+  EXPECT_FALSE(fs::exists(dir_ / "a" / "compose.exr")) << "--save-scene writes the scene only";
+  const std::string text = slurp(scene);
+  EXPECT_NE(text.find("\"plate\": \"../plate.jpg\""), std::string::npos)
+      << "paths near the scene are relative to it:\n"
+      << text;
+
+  // Run from another folder: the scene's paths do not depend on where compose runs.
+  const RunResult fromScene =
+      run("-q run " + quote(scene) + " --no-cache", dir_.path().parent_path());
+  ASSERT_EQ(fromScene.status, 0) << fromScene.err;
+  const RunResult direct =
+      run("-q " + common + " --out " + quote(dir_ / "b" / "compose") + " --no-cache", dir_.path());
+  ASSERT_EQ(direct.status, 0) << direct.err;
+  EXPECT_EQ(slurp(dir_ / "a" / "compose.jpg"), slurp(dir_ / "b" / "compose.jpg"));
+
+  // --set overrides a parameter; the result changes.
+  const RunResult moved = run(
+      "-q run " + quote(scene) +
+          " --no-cache --set render.scale=0.2 --set output.out=" + quote(dir_ / "c" / "compose"),
+      dir_.path());
+  ASSERT_EQ(moved.status, 0) << moved.err;
+  EXPECT_NE(slurp(dir_ / "a" / "compose.jpg"), slurp(dir_ / "c" / "compose.jpg"));
+}
+
+TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
+  const fs::path scene = dir_ / "bad.json";
+  compose::testing::writeText(
+      scene, R"({"compose": "scene", "version": 1, "stages": {"render": {"sclae": 0.3}}})");
+  RunResult r = run("run " + quote(scene), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("no parameter 'sclae'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("scale"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("bad.json"), std::string::npos) << r.err;
+
+  compose::testing::writeText(scene,
+                              R"({"compose": "scene", "version": 1, "stages": {"rendre": {}}})");
+  r = run("run " + quote(scene), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("unknown stage 'rendre'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("ingest, merge, stitch"), std::string::npos) << r.err;
+
+  compose::testing::writeText(scene, "{ not json");
+  r = run("run " + quote(scene), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not JSON"), std::string::npos) << r.err;
+
+  r = run("run " + quote(dir_ / "missing.json"), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not found"), std::string::npos) << r.err;
+
+  r = run("run " + quote(scene) + " --set render.scale", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+}
+
+TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
+  const fs::path notLighting = dir_ / "not.lighting";
+  compose::testing::writeText(notLighting, "COMPSTG1 but not really");
+  RunResult r =
+      run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(notLighting) + " --out " + quote(dir_ / "o.exr"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not.lighting"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "o.exr"));
+
+  // An EXR that is not an object layer: the plate as EXR.
+  const fs::path plainExr = dir_ / "plain.exr";
+  OIIO::ImageBuf plate(plate_.string());
+  ASSERT_TRUE(plate.write(plainExr.string()));
+  r = run("composite --plate " + quote(plate_) + " --layer " + quote(plainExr) + " --out " +
+              quote(dir_ / "c"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not an object layer"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
+}
+
+TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
+  const RunResult r = run("precompute --explain --env " + quote(samples_ / "forest.exr") +
+                              " --out " + quote(dir_ / "l.lighting") + " --no-cache",
+                          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("precompute run"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("render     skipped not needed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("merge      skipped the environment is an image"), std::string::npos)
+      << r.out;
+  EXPECT_FALSE(fs::exists(dir_ / "l.lighting"));
+}
+
+}  // namespace
+}  // namespace compose

@@ -1,0 +1,237 @@
+// The stage registry: a consistent graph, named errors, the skips a scene implies, the stage cache
+// and scene files.
+#include <fstream>
+#include <map>
+#include <set>
+
+#include "core/error.h"
+#include "pipeline/compose_job.h"
+#include "pipeline/scene.h"
+#include "pipeline/stage.h"
+#include "pipeline/stage_cache.h"
+#include "test_util.h"
+
+namespace compose::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+using compose::testing::TempDir;
+using compose::testing::writeText;
+
+TEST(Registry, EveryInputIsMadeByAnEarlierStageAndEveryOutputByOne) {
+  std::map<std::string, std::string> producer;
+  std::set<std::string> names;
+  for (const auto& stage : stages()) {
+    EXPECT_TRUE(names.insert(stage->name()).second) << "two stages named " << stage->name();
+    for (const std::string& in : stage->inputs())
+      EXPECT_TRUE(producer.count(in))
+          << stage->name() << " reads " << in << " that no earlier stage makes";
+    for (const std::string& out : stage->outputs()) {
+      for (const std::string& in : stage->inputsFor(out)) {
+        const auto& all = stage->inputs();
+        EXPECT_NE(std::find(all.begin(), all.end(), in), all.end())
+            << stage->name() << ": " << out << " is made from " << in << ", not an input";
+      }
+      EXPECT_TRUE(producer.emplace(out, stage->name()).second)
+          << out << " is made by both " << producer[out] << " and " << stage->name();
+    }
+  }
+  EXPECT_EQ(producer["files"], stages().back()->name());
+  for (const char* expected :
+       {"ingest", "merge", "stitch", "color", "precompute", "render", "composite", "output"})
+    EXPECT_TRUE(names.count(expected)) << expected;
+}
+
+TEST(Registry, AnUnknownStageIsAnErrorListingTheValidOnes) {
+  try {
+    findStage("rendr");
+    FAIL() << "no error";
+  } catch (const UsageError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("'rendr'"), std::string::npos) << what;
+    for (const std::string& n : stageNames()) EXPECT_NE(what.find(n), std::string::npos) << n;
+  }
+  EXPECT_EQ(findStage("render").name(), "render");
+}
+
+TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
+  ComposeJob job;
+  job.placement.heightFraction = 0.42;
+  job.lighting = "sh";
+  job.albedo = glm::vec3(0.2f, 0.3f, 0.4f);
+  job.room = glm::dvec3(4, 3, 5);
+  job.exposureStops = -1.5;
+  job.groundShadow = false;
+  const auto scene = sceneFromJob(job, "/nowhere");
+  ComposeJob copy;
+  applyScene(scene, "/nowhere", copy);
+  EXPECT_EQ(sceneFromJob(copy, "/nowhere").dump(), scene.dump());
+  EXPECT_EQ(copy.placement.heightFraction, 0.42);
+  EXPECT_EQ(copy.lighting, "sh");
+  EXPECT_FALSE(copy.groundShadow);
+  ASSERT_TRUE(copy.exposureStops);
+  EXPECT_EQ(*copy.exposureStops, -1.5);
+
+  for (const auto& stage : stages()) {
+    for (const StageParameter& p : stage->parameters()) {
+      ComposeJob j;
+      // An object is the wrong kind for every parameter.
+      EXPECT_THROW(p.set(j, nlohmann::json::object({{"x", 1}})), UsageError)
+          << stage->name() << "." << p.name;
+    }
+  }
+}
+
+TEST(Registry, SceneParametersAreCheckedByName) {
+  ComposeJob job;
+  EXPECT_THROW(setParameter(job, "render.sclae=0.3"), UsageError);
+  EXPECT_THROW(setParameter(job, "rendre.scale=0.3"), UsageError);
+  EXPECT_THROW(setParameter(job, "render.scale"), UsageError);
+  EXPECT_THROW(setParameter(job, "render.scale=\"big\""), UsageError);
+  setParameter(job, "render.scale=0.25");
+  EXPECT_EQ(job.placement.heightFraction, 0.25);
+  setParameter(job, "precompute.lighting=cheb-global");  // not JSON: taken as a string
+  EXPECT_EQ(job.lighting, "cheb-global");
+  EXPECT_THROW(applyScene(nlohmann::json::parse(R"({"compose": "scene", "version": 99})"), {}, job),
+               UsageError);
+  EXPECT_THROW(applyScene(nlohmann::json::parse(R"({"stages": {}})"), {}, job), UsageError);
+}
+
+TEST(Registry, ScenePathsAreRelativeToTheSceneFile) {
+  TempDir dir;
+  fs::create_directories(dir / "scenes");
+  writeText(dir / "scenes" / "s.json",
+            R"({"compose": "scene", "version": 1,
+                "stages": {"ingest": {"plate": "../plate.jpg", "object": "/abs/mesh.obj"},
+                           "output": {"out": "out/x"}}})");
+  const ComposeJob job = loadScene(dir / "scenes" / "s.json");
+  EXPECT_EQ(job.plate, fs::absolute(dir / "plate.jpg").lexically_normal());
+  EXPECT_EQ(job.object, fs::path("/abs/mesh.obj"));
+  EXPECT_EQ(job.output, fs::absolute(dir / "scenes" / "out" / "x").lexically_normal());
+}
+
+// plan() over a job: each stage's state and reason, by name.
+std::map<std::string, StageRecord> planned(const ComposeJob& job) {
+  std::map<std::string, StageRecord> out;
+  for (const StageRecord& r : plan(job, color::ColorConfig::builtin())) out[r.name] = r;
+  return out;
+}
+
+class RegistrySkips : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    env_ = samplesDirectory() / "forest.exr";
+    if (!fs::exists(env_)) GTEST_FAIL() << "sample data missing: run samples/fetch.sh";
+    // plan() hashes the plate without decoding it.
+    writeText(dir_ / "plate.jpg", "plate bytes");
+    // A tetrahedron: closed and convex. A second one beside it: not convex as a whole.
+    writeText(dir_ / "convex.obj",
+              "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
+    writeText(dir_ / "pair.obj",
+              "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+              "v 3 0 0\nv 4 0 0\nv 3 1 0\nv 3 0 1\nf 5 7 6\nf 5 6 8\nf 5 8 7\nf 6 7 8\n");
+    job_.plate = dir_ / "plate.jpg";
+    job_.object = dir_ / "pair.obj";
+    job_.environment = env_;
+    job_.cache = dir_ / "cache";
+  }
+  TempDir dir_;
+  fs::path env_;
+  ComposeJob job_;
+};
+
+TEST_F(RegistrySkips, ALatLongMapNeedsNoMergeNorStitch) {
+  auto p = planned(job_);
+  EXPECT_EQ(p["merge"].state, StageState::Skipped);
+  EXPECT_NE(p["merge"].reason.find("not photos"), std::string::npos) << p["merge"].reason;
+  EXPECT_EQ(p["stitch"].state, StageState::Skipped);
+  for (const char* s :
+       {"ingest", "color", "precompute", "shadows", "ground", "render", "composite", "output"})
+    EXPECT_EQ(p[s].state, StageState::Run) << s << ": " << p[s].reason;
+}
+
+TEST_F(RegistrySkips, ShadowsOffOrAConvexObjectNeedNoVisibilityPass) {
+  ComposeJob off = job_;
+  off.shadows = false;
+  auto p = planned(off);
+  EXPECT_EQ(p["shadows"].state, StageState::Skipped);
+  EXPECT_EQ(p["shadows"].reason, "--shadows off");
+
+  ComposeJob convex = job_;
+  convex.object = dir_ / "convex.obj";
+  p = planned(convex);
+  EXPECT_EQ(p["shadows"].state, StageState::Skipped);
+  EXPECT_NE(p["shadows"].reason.find("convex"), std::string::npos) << p["shadows"].reason;
+  EXPECT_EQ(p["ground"].state, StageState::Run) << "a convex object still shadows the ground";
+}
+
+TEST_F(RegistrySkips, NoShadowNeedsNoGroundPass) {
+  ComposeJob job = job_;
+  job.groundShadow = false;
+  auto p = planned(job);
+  EXPECT_EQ(p["ground"].state, StageState::Skipped);
+  EXPECT_EQ(p["ground"].reason, "--no-shadow");
+  EXPECT_EQ(p["shadows"].state, StageState::Run);
+}
+
+TEST_F(RegistrySkips, AJobWithoutAPlateSaysSo) {
+  ComposeJob job = job_;
+  job.plate.clear();
+  try {
+    planned(job);
+    FAIL() << "no error";
+  } catch (const UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("--plate"), std::string::npos) << e.what();
+  }
+}
+
+TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {
+  TempDir dir;
+  StageCache entry(dir.path(), "render", "0123abcd");
+  entry.meta()["x0"] = 7;
+  entry.put("values", {1.0f, -2.5f, 3.25f});
+  Image image(2, 1, 3, {"R", "G", "B"});
+  image.pixels = {1, 2, 3, 4, 5, 6};
+  image.colorSpace = "ACEScg";
+  entry.putImage("beauty", image);
+  ASSERT_TRUE(entry.write());
+
+  StageCache read(dir.path(), "render", "0123abcd");
+  ASSERT_TRUE(read.open());
+  EXPECT_EQ(read.meta()["x0"], 7);
+  EXPECT_EQ(read.get("values"), (std::vector<float>{1.0f, -2.5f, 3.25f}));
+  Image back;
+  ASSERT_TRUE(read.getImage("beauty", back));
+  EXPECT_EQ(back.pixels, image.pixels);
+  EXPECT_EQ(back.colorSpace, "ACEScg");
+
+  // Another key or stage at the same path is a miss.
+  StageCache other(dir.path(), "render", "ffff");
+  EXPECT_FALSE(other.open());
+
+  // Truncated: a miss, never a crash or a short array.
+  const fs::path path = entry.path();
+  const auto size = fs::file_size(path);
+  fs::resize_file(path, size - 4);
+  StageCache truncated(dir.path(), "render", "0123abcd");
+  EXPECT_FALSE(truncated.open());
+  // Zeroed.
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << std::string(size, '\0');
+  }
+  StageCache zeroed(dir.path(), "render", "0123abcd");
+  EXPECT_FALSE(zeroed.open());
+
+  // A user-named file opens whatever key it was written under.
+  StageCache named = StageCache::atFile(dir / "mine.lighting", "precompute");
+  named.put("a", {1.0f});
+  ASSERT_TRUE(named.write());
+  StageCache reopened = StageCache::atFile(dir / "mine.lighting", "precompute");
+  EXPECT_TRUE(reopened.open());
+  StageCache wrongStage = StageCache::atFile(dir / "mine.lighting", "render");
+  EXPECT_FALSE(wrongStage.open());
+}
+
+}  // namespace
+}  // namespace compose::pipeline
