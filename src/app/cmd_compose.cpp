@@ -160,8 +160,16 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
       throw UsageError("--shadows must be self or off, got '" + o->shadows + "'");
     }
     if (o->exposure != "auto") j.exposureStops = parseNumber(o->exposure, "--exposure");
-
+    // Names the colour config must know are command-line values like any other: a misspelt one
+    // is a usage error, reported before any file is read.
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    asUsage([&] {
+      if (!j.plateSpace.empty()) colors.resolve(j.plateSpace, "--plate-space");
+      if (!j.environmentSpace.empty()) colors.resolve(j.environmentSpace, "--env-space");
+      const std::string display = j.display.empty() ? colors.defaultDisplay() : j.display;
+      colors.checkDisplayView(display, j.view.empty() ? colors.defaultView(display) : j.view);
+    });
+
     if (o->explain) {
       for (const auto& s : pipeline::plan(j, colors)) {
         std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),
