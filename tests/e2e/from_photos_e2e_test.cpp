@@ -1,18 +1,19 @@
 // End-to-end from photos (issue 9 §4): the compose executable run as a photographer would, on the
 // sample data. Every scenario ends in the one-shot command putting the Stanford bunny into the
-// tabletop plate (reduced to 640 pixels wide to keep the run short), lit by the courtyard HDRI:
-//  * FromBrackets: virtual-camera brackets in six views (capture-sim), grouped by ingest, merged,
-//    stitched to a lat-long EXR, and that environment given to compose;
-//  * FromLatLong: the lat-long HDRI itself, with merge and stitch skipped as --explain says;
-//  * FromCaptureDescription: compose --env capture.json, merging and stitching by itself (skipped
-//    while the one-shot command does not take a capture description).
+// tabletop plate (reduced to 480 pixels wide to keep the run short), lit by the courtyard HDRI:
+//  * FromBrackets: virtual-camera brackets in six views (capture-sim), then two ways to the
+//    composite: the stage commands by hand (ingest grouping the photos, merge, stitch to a lat-long
+//    EXR, compose with it), and the one-shot command given the capture description
+//    (compose --env capture.json), which merges and stitches by itself as --explain says;
+//  * FromLatLong: the lat-long HDRI itself, with merge and stitch skipped as --explain says.
 // Each checks (a) the object's pixels against an independent reference, the exact irradiance of
 // the ground-truth HDRI at the rendered normals integrated here texel by texel; (b) the ground
 // shadow: the plate darker where the object occludes it, beside the object; (c) the plate
 // unchanged away from the object and its shadow; (d) a golden thumbnail of the composite
-// (tests/e2e/golden; COMPOSE_UPDATE_GOLDEN=1 rewrites them instead of comparing).
-// Then bad input end to end: a named error, a non-zero exit, and no output: every previous output
-// is left as it was.
+// (tests/e2e/golden; COMPOSE_UPDATE_GOLDEN=1 rewrites them instead of comparing). The composites
+// from photos are also compared with the one from the HDRI, and with each other.
+// Then bad input end to end: a named error, a non-zero exit, and no output: a previous output is
+// left as it was.
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -84,8 +85,8 @@ bool samplesPresent(std::string& missing) {
   return true;
 }
 
-// The status word --explain prints for a stage ("run", "skip"; "reused" once stages are cached),
-// or empty when the stage is not listed. Lines are "<stage> <status> <reason>".
+// The status word --explain prints for a stage ("run", "reused" or "skipped"), or empty when the
+// stage is not listed. Lines are "<stage> <status> <reason>".
 std::string explainStatus(const std::string& explain, const std::string& stage) {
   std::istringstream lines(explain);
   std::string line;
@@ -96,10 +97,6 @@ std::string explainStatus(const std::string& explain, const std::string& stage) 
     if (name == stage) return status;
   }
   return {};
-}
-
-bool skipped(const std::string& status) {
-  return status.rfind("skip", 0) == 0;
 }
 
 // --- images ---
@@ -364,7 +361,7 @@ ObjectFigures checkObject(const ImageFile& exr, const TruthIrradiance& truth, do
   for (int y = object->y0; y < object->y0 + object->height; ++y)
     for (int x = object->x0; x < object->x0 + object->width; ++x)
       if (object->at(x, y, a) == 1.0f) covered.emplace_back(x, y);
-  EXPECT_GT(covered.size(), 5000u) << "the bunny should cover a sizeable part of the plate";
+  EXPECT_GT(covered.size(), 2000u) << "the bunny should cover a sizeable part of the plate";
   if (covered.empty()) return f;
   constexpr size_t kReferencePixels = 300;  // each costs one pass over the 1024x512 truth
   const size_t step = std::max<size_t>(1, covered.size() / kReferencePixels);
@@ -396,30 +393,6 @@ ObjectFigures checkObject(const ImageFile& exr, const TruthIrradiance& truth, do
   f.p95Error = quantile(errors, 0.95);
   f.worstError = quantile(errors, 1.0);
   return f;
-}
-
-// The scale of an environment that never leaves compose (merged inside it), fitted on the object:
-// the median over covered pixels of the irradiance AOV's RGB sum over the reference's.
-double objectScale(const ImageFile& exr, const TruthIrradiance& truth, double exposure) {
-  const Layer* object = exr.part("object");
-  if (!object) return 1.0;
-  const int a = object->channel("object.A"), nx = object->channel("N.X");
-  const int e = object->channel("irradiance.R");
-  std::vector<double> ratios;
-  constexpr int kStride = 7;  // about 200 pixels of the bunny
-  for (int y = object->y0; y < object->y0 + object->height; y += kStride) {
-    for (int x = object->x0; x < object->x0 + object->width; x += kStride) {
-      if (object->at(x, y, a) != 1.0f) continue;
-      std::array<double, 3> n = {object->at(x, y, nx), object->at(x, y, nx + 1),
-                                 object->at(x, y, nx + 2)};
-      const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      for (double& v : n) v /= len;
-      const auto ref = toAp1(truth(n));
-      ratios.push_back((object->at(x, y, e) + object->at(x, y, e + 1) + object->at(x, y, e + 2)) /
-                       (exposure * (ref[0] + ref[1] + ref[2])));
-    }
-  }
-  return median(ratios);
 }
 
 struct PlateFigures {
@@ -501,8 +474,9 @@ PlateFigures checkPlate(const ImageFile& exr, const Layer& plate) {
 
 // --- golden thumbnails ---
 
-// The composite reduced 4x by a box filter in linear light (a 640-pixel plate gives 160).
-constexpr int kThumbnailFactor = 4;
+// The composite reduced 6x by a box filter in linear light (a 480-pixel plate gives 80): small
+// files to commit, and still the object, its shading and its shadow.
+constexpr int kThumbnailFactor = 6;
 
 Layer thumbnail(const ImageFile& exr) {
   const Layer* composite = exr.part("composite");
@@ -540,11 +514,11 @@ void writeGolden(const fs::path& path, const Layer& t) {
   out->close();
 }
 
-// Thresholds, measured: the same build gives the same pixels run after run (every random draw is
-// seeded, threads do not change results); GCC and clang builds differ by float rounding only.
-// (See the figures printed by each scenario; the regressions they must catch, measured on this
-// scene: the environment turned by 90° costs ~25 dB, the object 0.1 stop brighter ~40 dB, no
-// ground shadow ~45 dB.)
+// Thresholds: the same build gives the same pixels run after run (every random draw is seeded),
+// so an unchanged composite compares exactly; the bounds leave room for other compilers' float
+// rounding and catch what a person would see. The regressions they must catch, measured on these
+// 80x54 thumbnails of the composite from the HDRI: the environment turned by 90° 26 dB, the
+// object 0.1 stop brighter 43 dB (largest difference 0.05), no ground shadow 42 dB (0.23).
 constexpr double kGoldenPsnrDb = 60.0;  // over the thumbnail, peak 1 (the plate's white)
 constexpr double kGoldenMaxAbs = 0.01;  // largest difference of one thumbnail value
 
@@ -580,20 +554,117 @@ void checkGolden(const std::string& name, const ImageFile& exr) {
   EXPECT_LT(worst, kGoldenMaxAbs) << path;
 }
 
+// --- two composites of one scene compared ---
+
+// How far a composite made from photos is from the one made from the HDRI directly: on the
+// object (pixels covered in both), and on the plate (pixels outside both objects: the ground
+// shadow and the untouched plate).
+struct Agreement {
+  int64_t objectPixels = 0;
+  double objectMedian = 0.0, objectP95 = 0.0;  // |got − ref|₁ / |ref|₁ over RGB, per pixel
+  double objectBias = 0.0;                     // mean (Σgot − Σref) / Σref
+  double objectPsnr = 0.0;                     // dB, peak the reference's brightest object value
+  int64_t platePixels = 0;
+  double platePsnr = 0.0;   // dB, peak 1 (the plate's white)
+  double plateWorst = 0.0;  // largest |got − ref| / max(ref, 0.01) of one value
+  double shadowWorst = 0.0, shadowMean = 0.0;  // |ratio got − ratio ref| where either shadows
+};
+
+double psnr(double sum2, int64_t n, double peak) {
+  if (n == 0) return 0.0;
+  const double mse = sum2 / double(n);
+  return mse > 0.0 ? 10.0 * std::log10(peak * peak / mse) : 999.0;
+}
+
+Agreement compare(const ImageFile& got, const ImageFile& ref) {
+  Agreement a;
+  const Layer *gc = got.part("composite"), *rc = ref.part("composite");
+  const Layer *go = got.part("object"), *ro = ref.part("object");
+  if (!gc || !rc || !go || !ro) {
+    ADD_FAILURE() << "composite or object part missing";
+    return a;
+  }
+  EXPECT_EQ(gc->width, rc->width);
+  EXPECT_EQ(gc->height, rc->height);
+  if (gc->width != rc->width || gc->height != rc->height) return a;
+  const int ga = go->channel("object.A"), ra = ro->channel("object.A");
+  auto alpha = [](const Layer* o, int c, int x, int y) {
+    return o->contains(x, y) ? o->at(x, y, c) : 0.0f;
+  };
+  const Layer *gs = got.part("shadow"), *rs = ref.part("shadow");
+  auto ratio = [](const Layer* s, int x, int y) {
+    return s && s->contains(x, y) ? double(s->at(x, y, 0)) : 1.0;
+  };
+  std::vector<double> errors;
+  double objectSum2 = 0.0, plateSum2 = 0.0, peak = 0.0, shadowSum = 0.0;
+  int64_t objectValues = 0, shadowPixels = 0;
+  for (int y = 0; y < rc->height; ++y) {
+    for (int x = 0; x < rc->width; ++x) {
+      const float ag = alpha(go, ga, x, y), ar = alpha(ro, ra, x, y);
+      if (ag == 1.0f && ar == 1.0f) {
+        double diff = 0.0, sumGot = 0.0, sumRef = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          const double g = gc->at(x, y, c), r = rc->at(x, y, c);
+          diff += std::abs(g - r);
+          sumGot += g;
+          sumRef += r;
+          objectSum2 += (g - r) * (g - r);
+          peak = std::max(peak, r);
+        }
+        objectValues += 3;
+        errors.push_back(diff / std::max(sumRef, 1e-6));
+        a.objectBias += (sumGot - sumRef) / std::max(sumRef, 1e-6);
+      } else if (ag == 0.0f && ar == 0.0f) {
+        ++a.platePixels;
+        for (int c = 0; c < 3; ++c) {
+          const double g = gc->at(x, y, c), r = rc->at(x, y, c);
+          plateSum2 += (g - r) * (g - r);
+          a.plateWorst = std::max(a.plateWorst, std::abs(g - r) / std::max(r, 1e-2));
+        }
+        const double sg = ratio(gs, x, y), sr = ratio(rs, x, y);
+        if (sg < 1.0 || sr < 1.0) {
+          ++shadowPixels;
+          shadowSum += std::abs(sg - sr);
+          a.shadowWorst = std::max(a.shadowWorst, std::abs(sg - sr));
+        }
+      }
+    }
+  }
+  a.objectPixels = int64_t(errors.size());
+  if (!errors.empty()) a.objectBias /= double(errors.size());
+  a.objectMedian = median(errors);
+  a.objectP95 = quantile(errors, 0.95);
+  a.objectPsnr = psnr(objectSum2, objectValues, peak);
+  a.platePsnr = psnr(plateSum2, 3 * a.platePixels, 1.0);
+  a.shadowMean = shadowPixels ? shadowSum / double(shadowPixels) : 0.0;
+  return a;
+}
+
+void printAgreement(const std::string& what, const Agreement& a) {
+  std::printf(
+      "[ figures ] %s: object over %lld pixels: PSNR %.1f dB, median %.2f %%, p95 %.2f %%, mean "
+      "signed %+.2f %%; plate over %lld pixels: PSNR %.1f dB, worst %.2e; shadow ratio mean "
+      "|diff| %.4f, worst %.3f\n",
+      what.c_str(), static_cast<long long>(a.objectPixels), a.objectPsnr, 100.0 * a.objectMedian,
+      100.0 * a.objectP95, 100.0 * a.objectBias, static_cast<long long>(a.platePixels), a.platePsnr,
+      a.plateWorst, a.shadowMean, a.shadowWorst);
+}
+
 // --- the scenarios ---
 
-// Plate width: small enough for a short run, large enough for ~10,000 object pixels.
-constexpr int kPlateWidth = 640;
+// Plate width: small enough for a short run (the ground shadow's rays grow with the plate's
+// pixels), large enough for a few thousand object pixels.
+constexpr int kPlateWidth = 480;
 constexpr double kAlbedo = 0.5;
 
 // The one-shot command, with one sample per pixel (the N AOV is the shading normal) and without
 // self-shadowing (the reference is the unshadowed irradiance; self-shadowing has its own
 // benchmark against ray tracing). The ground shadow is on.
-std::string composeArgs(const fs::path& plate, const std::string& env, double exposureStops,
+std::string composeArgs(const fs::path& plate, const fs::path& env, double exposureStops,
                         const fs::path& out) {
   char exposure[32];
   std::snprintf(exposure, sizeof exposure, "%g", exposureStops);
-  return "--plate " + q(plate) + " --object " + q(sample("bunny.obj")) + " --env " + env +
+  return "--plate " + q(plate) + " --object " + q(sample("bunny.obj")) + " --env " + q(env) +
          " --samples 1 --shadows off --albedo " + std::to_string(kAlbedo) + " --exposure " +
          exposure + " --no-cache --out " + q(out);
 }
@@ -624,41 +695,102 @@ void expectPlateFigures(const PlateFigures& p, const Layer& plate) {
   EXPECT_LT(p.worstUntouched, kPlateUnchanged) << "the plate changed away from object and shadow";
   EXPECT_LT(p.worstShadowRatio, kShadowProduct) << "the shadow is not the plate times its ratio";
   EXPECT_GT(p.untouched, int64_t(plate.width) * plate.height / 2) << "most of the plate untouched";
-  EXPECT_GT(p.darkShadow, 200) << "a visible shadow (ratio below 0.9)";
+  EXPECT_GT(p.darkShadow, 100) << "a visible shadow (ratio below 0.9)";
   EXPECT_LT(p.darkestRatio, 0.7) << "a contact shadow, clearly darker than the plate";
   // The darkest shadow touches the object (it stands on the ground there): within 2 % of the
   // plate's width of its silhouette.
   EXPECT_LT(p.shadowDistance, 0.02 * plate.width);
 }
 
+// The photos: the virtual camera's brackets of the courtyard in the six cube directions, three
+// exposures 2 EV apart, 100° views, 152x114 pixels: the one-shot command stitches them into
+// 128-pixel faces (a quarter of the lens's focal length in pixels, rounded to 8) and a 512x256
+// lat-long map, and the stitch by hand is asked for the same.
+constexpr const char* kCaptureSize = "152x114";
+constexpr int kFaceSize = 128;
+// The middle exposure, 1/8 s. Merged radiance is in units of the photos' exposure, the light that
+// gives a code of 1 in one second: the HDRI times 8 (3 stops) for a perfect merge. The composites
+// from photos are given 3 stops less exposure than the one from the HDRI, and any difference left
+// is the merge's own error of scale.
+constexpr double kMiddleExposure = 0.125;
+constexpr double kDirectStops = -0.5;
+const double kPhotoStops = kDirectStops + std::log2(kMiddleExposure);
+
 class FromPhotos : public ::testing::Test {
  protected:
   void SetUp() override {
     std::string missing;
     if (!samplesPresent(missing))
-      GTEST_FAIL() << "sample data missing (" << missing << "): run samples/fetch.sh";
+      GTEST_SKIP() << "sample data missing (" << missing << "): run samples/fetch.sh";
     plate_ = writeSmallPlate(dir_.path(), kPlateWidth);
     plateLinear_ = linearPlate(plate_);
   }
-  // Virtual-camera brackets of the courtyard in the six cube directions: three exposures 2 EV
-  // apart, 100° views (the photographer's convention of README "From your own photos").
   void capture(const fs::path& folder) {
+    char exposure[32];
+    std::snprintf(exposure, sizeof exposure, "%g", kMiddleExposure);
     const RunResult r =
         run("capture-sim --env " + q(sample("courtyard.exr")) + " --out " + q(folder) + " --size " +
-                kCaptureSize + " --views 6 --brackets 3 --ev-step 2 --fov 100 --seed 9",
+                kCaptureSize +
+                " --views 6 --brackets 3 --ev-step 2 --fov 100 --seed 9 --exposure " + exposure,
             dir_.path());
     ASSERT_EQ(r.status, 0) << r.err;
   }
-  static constexpr const char* kCaptureSize = "320x240";
+  // The same scene composed from the HDRI itself, the reference of the composites from photos.
+  ImageFile direct() {
+    const RunResult r = run(
+        composeArgs(plate_, sample("courtyard.exr"), kDirectStops, dir_ / "direct"), dir_.path());
+    EXPECT_EQ(r.status, 0) << r.err;
+    return readImageFile(dir_ / "direct.exr");
+  }
 
   TempDir dir_;
   fs::path plate_;
   Layer plateLinear_;
 };
 
-// From photos: capture-sim → ingest (grouped by file name) → merge → stitch → compose.
+// Agreement of a composite from photos with the one from the HDRI. Measured (gcc Release, this
+// scene): by hand, on the object PSNR 35.0 dB, median 2.2 %, p95 2.6 %, mean signed +1.7 %; on the
+// plate PSNR 71.8 dB, the shadow's ratio off by 0.001 on average and 0.019 at worst; the one-shot
+// command within 0.3 dB of that. What differs: the merge's scale (the HDRI times 8.03 instead of
+// 8: +0.4 % on the whole object), the sun clipped in every exposure (its light a lower bound) and
+// the 4-5 % of the sphere no photo saw, filled from around it, with the blur of 128-pixel faces;
+// the shadow follows the light, so its ratio differs most at its edges. The bounds leave about
+// twice the measured error (5 dB of PSNR, 1.8x).
+constexpr double kPhotosObjectPsnrDb = 30.0;
+constexpr double kPhotosObjectMedian = 0.04;
+constexpr double kPhotosObjectBias = 0.03;
+constexpr double kPhotosPlatePsnrDb = 65.0;
+constexpr double kPhotosShadowWorst = 0.04;
+
+// Capture, merge and stitch, against the exact irradiance of the HDRI the virtual camera
+// photographed, the stitched map's scale taken out. Measured: median 1.9 %, p95 2.5 %, worst
+// 2.7 %, mean signed +1.2 % (the one-shot command within 0.1 % of that). The merge alone is within
+// ~2 % per pixel (README, tests/hdr); irradiance averages that over a hemisphere, but the sun is
+// clipped in every exposure (a lower bound) and 4-5 % of the sphere, seen by no photo, is filled
+// from its surroundings: normals facing those get the largest errors. Bounds: about twice that.
+constexpr double kMedianFromPhotos = 0.04;
+constexpr double kWorstFromPhotos = 0.06;
+
+void expectAgreesWithDirect(const Agreement& a) {
+  EXPECT_GT(a.objectPixels, 2000);
+  EXPECT_GT(a.objectPsnr, kPhotosObjectPsnrDb) << "object from photos vs from the HDRI";
+  EXPECT_LT(a.objectMedian, kPhotosObjectMedian) << "object from photos vs from the HDRI";
+  EXPECT_LT(std::abs(a.objectBias), kPhotosObjectBias) << "object from photos vs from the HDRI";
+  EXPECT_GT(a.platePsnr, kPhotosPlatePsnrDb) << "plate (and shadow) from photos vs from the HDRI";
+  EXPECT_LT(a.shadowWorst, kPhotosShadowWorst) << "shadow ratio from photos vs from the HDRI";
+}
+
+// From photos, two ways: the stage commands chained by hand (capture-sim → ingest → merge →
+// stitch → compose with the stitched lat-long map), and the one-shot command given the capture
+// description (compose --env capture.json, which merges and stitches by itself); each against
+// the exact irradiance of the HDRI, and against the composite from the HDRI.
 TEST_F(FromPhotos, FromBrackets) {
   capture(dir_ / "shots");
+  const ImageFile truthFile = readImageFile(sample("courtyard.exr"));
+  const Layer& truthMap = truthFile.parts.at(0);
+  const TruthIrradiance truth(truthMap);
+  const ImageFile reference = direct();
+
   // ingest: the photos grouped into views by their names ({view}_{bracket}.jpg), EXIF exposures.
   std::string photos;
   for (const auto& e : fs::directory_iterator(dir_ / "shots"))
@@ -678,49 +810,87 @@ TEST_F(FromPhotos, FromBrackets) {
     merged += " " + q(dir_ / "merged" / (std::string(v) + ".exr"));
   }
   // stitch: directions from the names, intrinsics from the capture's lens file (merged EXRs carry
-  // no EXIF focal length), straight to a lat-long map half the truth's resolution.
-  r = run("stitch --calib " + q(dir_ / "shots" / "camera.json") +
-              " --to latlong --size 128 --width 512 --out " + q(dir_ / "env.exr") + merged,
+  // no EXIF focal length), to a lat-long map the one-shot command would make.
+  r = run("stitch --calib " + q(dir_ / "shots" / "camera.json") + " --to latlong --size " +
+              std::to_string(kFaceSize) + " --width " + std::to_string(4 * kFaceSize) + " --out " +
+              q(dir_ / "env.exr") + merged,
           dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
-  // compose with the stitched environment.
-  constexpr double kExposureStops = -3.5;  // the merged scale is ~8x the HDRI's
-  r = run(composeArgs(plate_, q(dir_ / "env.exr"), kExposureStops, dir_ / "comp"), dir_.path());
+  // compose with the stitched environment: an image, so merge and stitch are skipped.
+  const std::string byHandArgs = composeArgs(plate_, dir_ / "env.exr", kPhotoStops, dir_ / "hand");
+  r = run(byHandArgs + " --explain", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(explainStatus(r.out, "merge"), "skipped") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "stitch"), "skipped") << r.out;
+  r = run(byHandArgs, dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const ImageFile hand = readImageFile(dir_ / "hand.exr");
 
-  const ImageFile truthFile = readImageFile(sample("courtyard.exr"));
-  const Layer& truth = truthFile.parts.at(0);
-  const double scale = captureScale(readImageFile(dir_ / "env.exr").parts.at(0), truth);
-  std::printf("[ figures ] FromBrackets: stitched map = %.4f x the HDRI\n", scale);
-  const ImageFile exr = readImageFile(dir_ / "comp.exr");
-  const ObjectFigures o =
-      checkObject(exr, TruthIrradiance(truth), scale, std::exp2(kExposureStops), kAlbedo);
-  const PlateFigures p = checkPlate(exr, plateLinear_);
-  printFigures("FromBrackets", o, p);
-  // Capture, merge and stitch, against the exact irradiance of the HDRI the virtual camera
-  // photographed. Measured: median 1.1 %, worst 3.3 %. The merge alone is within ~2 % per pixel
-  // (README, tests/hdr); irradiance averages that over a hemisphere, but the sun is clipped in
-  // every exposure (a lower bound, ~5 % of the +X view) and 4-5 % of the sphere, seen by no
-  // photo, is filled from its surroundings: normals facing those get the largest errors.
-  constexpr double kMedianFromPhotos = 0.03;
-  constexpr double kWorstFromPhotos = 0.08;
-  EXPECT_LT(o.medianError, kMedianFromPhotos);
-  EXPECT_LT(o.worstError, kWorstFromPhotos);
-  EXPECT_LT(o.worstBeauty, kBeautyVsAov);
-  expectPlateFigures(p, plateLinear_);
-  checkGolden("from_brackets", exr);
+  const double scale = captureScale(readImageFile(dir_ / "env.exr").parts.at(0), truthMap);
+  std::printf("[ figures ] by hand: stitched map = %.4f x the HDRI (8 for a perfect merge)\n",
+              scale);
+  {
+    const ObjectFigures o = checkObject(hand, truth, scale, std::exp2(kPhotoStops), kAlbedo);
+    const PlateFigures p = checkPlate(hand, plateLinear_);
+    printFigures("by hand", o, p);
+    EXPECT_LT(o.medianError, kMedianFromPhotos);
+    EXPECT_LT(o.worstError, kWorstFromPhotos);
+    EXPECT_LT(o.worstBeauty, kBeautyVsAov);
+    expectPlateFigures(p, plateLinear_);
+    const Agreement a = compare(hand, reference);
+    printAgreement("by hand vs from the HDRI", a);
+    expectAgreesWithDirect(a);
+  }
+
+  // The one-shot command on the capture description: merge and stitch run, and say so.
+  const std::string oneShotArgs =
+      composeArgs(plate_, dir_ / "shots" / "capture.json", kPhotoStops, dir_ / "oneshot");
+  r = run(oneShotArgs + " --explain", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(explainStatus(r.out, "merge"), "run") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "stitch"), "run") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "ingest"), "run") << r.out;
+  EXPECT_FALSE(fs::exists(dir_ / "oneshot.exr")) << "--explain writes nothing";
+  r = run(oneShotArgs, dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("merged 6 views from 18 photos"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("stitched 6 views into 128x128 faces"), std::string::npos) << r.err;
+  const ImageFile oneShot = readImageFile(dir_ / "oneshot.exr");
+  {
+    const ObjectFigures o = checkObject(oneShot, truth, scale, std::exp2(kPhotoStops), kAlbedo);
+    const PlateFigures p = checkPlate(oneShot, plateLinear_);
+    printFigures("one-shot", o, p);
+    EXPECT_LT(o.medianError, kMedianFromPhotos);
+    EXPECT_LT(o.worstError, kWorstFromPhotos);
+    EXPECT_LT(o.worstBeauty, kBeautyVsAov);
+    expectPlateFigures(p, plateLinear_);
+    const Agreement a = compare(oneShot, reference);
+    printAgreement("one-shot vs from the HDRI", a);
+    expectAgreesWithDirect(a);
+    // The one-shot command and the commands by hand run the same merge and stitch; what differs:
+    // the by-hand map is written as half floats in the file's colour space and read back, and the
+    // views' rough directions come from their names rather than the capture's rotations. Measured:
+    // object PSNR 63.2 dB (median 0.08 %), plate 89.3 dB: bounds 8-9 dB below.
+    const Agreement same = compare(oneShot, hand);
+    printAgreement("one-shot vs by hand", same);
+    constexpr double kOneShotVsHandObjectPsnrDb = 55.0;
+    constexpr double kOneShotVsHandPlatePsnrDb = 80.0;
+    EXPECT_GT(same.objectPsnr, kOneShotVsHandObjectPsnrDb) << "one-shot vs by hand";
+    EXPECT_GT(same.platePsnr, kOneShotVsHandPlatePsnrDb) << "one-shot vs by hand";
+  }
+  checkGolden("from_brackets", hand);
+  checkGolden("from_capture_description", oneShot);
 }
 
 // From the lat-long HDRI itself: merge and stitch are skipped, and --explain says so.
 TEST_F(FromPhotos, FromLatLong) {
-  constexpr double kExposureStops = -0.5;
   const std::string args =
-      composeArgs(plate_, q(sample("courtyard.exr")), kExposureStops, dir_ / "comp");
+      composeArgs(plate_, sample("courtyard.exr"), kDirectStops, dir_ / "comp");
   RunResult r = run(args + " --explain", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_TRUE(skipped(explainStatus(r.out, "merge"))) << r.out;
-  EXPECT_TRUE(skipped(explainStatus(r.out, "stitch"))) << r.out;
-  EXPECT_FALSE(skipped(explainStatus(r.out, "render"))) << r.out;
+  EXPECT_EQ(explainStatus(r.out, "merge"), "skipped") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "stitch"), "skipped") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "render"), "run") << r.out;
   EXPECT_FALSE(fs::exists(dir_ / "comp.exr")) << "--explain writes nothing";
   r = run(args, dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
@@ -728,16 +898,16 @@ TEST_F(FromPhotos, FromLatLong) {
   EXPECT_NE(r.err.find("compose: merge      skipped"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("compose: stitch     skipped"), std::string::npos) << r.err;
   // The bunny's OBJ has no normals: computed, and said.
-  EXPECT_NE(r.err.find("the object has no normals in its file"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("object normals: not in the file"), std::string::npos) << r.err;
 
   const ImageFile truthFile = readImageFile(sample("courtyard.exr"));
   const ImageFile exr = readImageFile(dir_ / "comp.exr");
   const ObjectFigures o = checkObject(exr, TruthIrradiance(truthFile.parts.at(0)), 1.0,
-                                      std::exp2(kExposureStops), kAlbedo);
+                                      std::exp2(kDirectStops), kAlbedo);
   const PlateFigures p = checkPlate(exr, plateLinear_);
-  printFigures("FromLatLong", o, p);
+  printFigures("from the HDRI", o, p);
   // The default lighting (cheb-local) is within ~57 dB of the exact integral on this map
-  // (README), the AOV a half float (2^-11): measured median 0.05 %, worst 0.2 %.
+  // (README), the AOV a half float (2^-11): measured median 0.10 %, worst 0.32 %.
   constexpr double kWorstDirect = 0.01;
   EXPECT_LT(o.worstError, kWorstDirect);
   EXPECT_LT(o.worstBeauty, kBeautyVsAov);
@@ -745,39 +915,90 @@ TEST_F(FromPhotos, FromLatLong) {
   checkGolden("from_latlong", exr);
 }
 
-// The capture description given to the one-shot command, which merges and stitches by itself.
-TEST_F(FromPhotos, FromCaptureDescription) {
+// Bad input end to end, through the one-shot command on a capture description: each is a named
+// error with a non-zero exit, and leaves the outputs as they were (a previous composite stays, no
+// temporary file is left beside it).
+TEST_F(FromPhotos, BadInputIsANamedErrorAndLeavesNoOutput) {
   capture(dir_ / "shots");
-  constexpr double kExposureStops = -3.5;
-  const std::string args =
-      composeArgs(plate_, q(dir_ / "shots" / "capture.json"), kExposureStops, dir_ / "comp");
-  RunResult r = run(args + " --explain", dir_.path());
-  ASSERT_EQ(r.status, 0) << r.err;
-  if (skipped(explainStatus(r.out, "merge"))) {
-    GTEST_SKIP() << "compose --env does not take a capture description yet (--explain reports "
-                    "merge skipped):\n"
-                 << r.out;
+  const fs::path out = dir_ / "out";
+  fs::create_directories(out);
+  compose::testing::writeText(out / "comp.exr", "a previous composite");
+  const std::vector<std::string> before = {"comp.exr"};
+  auto outputs = [&] {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(out)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::string description = slurp(dir_ / "shots" / "capture.json");
+  // A capture description like the virtual camera's, with one edit, beside its photos.
+  auto edited = [&](const std::string& name, const std::string& from, const std::string& to) {
+    std::string text = description;
+    const size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+    compose::testing::writeText(dir_ / "shots" / name, text);
+    return dir_ / "shots" / name;
+  };
+  const std::string bytes = slurp(dir_ / "shots" / "pz_2.jpg");
+  compose::testing::writeText(dir_ / "shots" / "cut.jpg", bytes.substr(0, bytes.size() * 2 / 3));
+  struct Case {
+    std::string what;
+    fs::path env;
+    std::string extra;
+    int status;
+    std::vector<std::string> needles;
+  };
+  const std::vector<Case> cases = {
+      {"a photo the description names is missing",
+       edited("missing.json", "\"px_2.jpg\"", "\"px_9.jpg\""),
+       "",
+       1,
+       {"ingest: file not found", "px_9.jpg"}},
+      {"a truncated photo",
+       edited("truncated.json", "\"pz_2.jpg\"", "\"cut.jpg\""),
+       "",
+       1,
+       {"merge: truncated file", "cut.jpg"}},
+      {"not JSON",
+       edited("broken.json", "\"views\"", "views"),
+       "",
+       1,
+       {"ingest: not a valid JSON capture description", "broken.json"}},
+      {"a view that says nowhere where it looks",
+       edited("nowhere.json", "\"name\": \"px\",\n      \"worldFromCamera\"",
+              "\"name\": \"garden\",\n      \"rotation\""),
+       "",
+       1,
+       {"stitch: cannot tell where view 'garden'"}},
+      {"an unknown colour space, refused before anything is read",
+       dir_ / "shots" / "capture.json",
+       " --env-space no-such-space",
+       2,
+       {"unknown colour space 'no-such-space' for --env-space"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const RunResult r =
+        run(composeArgs(plate_, c.env, kPhotoStops, out / "comp") + c.extra, dir_.path());
+    EXPECT_EQ(r.status, c.status) << r.err;
+    for (const std::string& n : c.needles)
+      EXPECT_NE(r.err.find(n), std::string::npos) << "stderr: " << r.err << "\nexpected: " << n;
+    EXPECT_EQ(outputs(), before);
+    EXPECT_EQ(slurp(out / "comp.exr"), "a previous composite");
   }
-  EXPECT_FALSE(skipped(explainStatus(r.out, "stitch"))) << r.out;
-  r = run(args, dir_.path());
-  ASSERT_EQ(r.status, 0) << r.err;
-
-  const ImageFile truthFile = readImageFile(sample("courtyard.exr"));
-  const TruthIrradiance truth(truthFile.parts.at(0));
-  const ImageFile exr = readImageFile(dir_ / "comp.exr");
-  // The merged environment stays inside compose: its scale (one number) is fitted on the object's
-  // own pixels, and what is checked is how the light varies over the normals.
-  const double scale = objectScale(exr, truth, std::exp2(kExposureStops));
-  std::printf("[ figures ] FromCaptureDescription: fitted scale %.4f x the HDRI\n", scale);
-  const ObjectFigures o = checkObject(exr, truth, scale, std::exp2(kExposureStops), kAlbedo);
-  const PlateFigures p = checkPlate(exr, plateLinear_);
-  printFigures("FromCaptureDescription", o, p);
-  // As from the brackets by hand (FromBrackets).
-  EXPECT_LT(o.medianError, 0.03);
-  EXPECT_LT(o.worstError, 0.08);
-  EXPECT_LT(o.worstBeauty, kBeautyVsAov);
-  expectPlateFigures(p, plateLinear_);
-  checkGolden("from_capture_description", exr);
+  // The composite cannot be written (a folder where the JPEG goes): neither file is replaced.
+  // (From the HDRI and without the ground shadow, to be quick: only the output stage matters.)
+  fs::create_directories(out / "comp.jpg");
+  const RunResult r =
+      run(composeArgs(plate_, sample("courtyard.exr"), kDirectStops, out / "comp") + " --no-shadow",
+          dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("compose: error: output: output path is an existing folder"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(outputs(), (std::vector<std::string>{"comp.exr", "comp.jpg"}));
+  EXPECT_EQ(slurp(out / "comp.exr"), "a previous composite");
 }
 
 }  // namespace
