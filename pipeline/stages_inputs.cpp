@@ -157,7 +157,9 @@ class IngestStage final : public Stage {
       reason += (reason.empty() ? "" : ", ") +
                 format("the object (%zu triangles)", ctx.artefacts.mesh->triangleCount());
     }
-    if (ctx.needs(kEnvironmentFile)) {
+    // The colour stage asks for the environment file or the stitched map, whichever this job has:
+    // a capture description has no environment file to read.
+    if (ctx.needs(kEnvironmentFile) && ctx.hasKey(kEnvironmentFile)) {
       ctx.artefacts.environmentFile =
           cubemap::loadEnvironment(ctx.environmentInput.path, {}, ctx.progress);
       const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;

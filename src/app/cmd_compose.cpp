@@ -180,6 +180,15 @@ void ComposeOptions::apply(const CLI::App& app) {
 int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunRequest& request,
            bool printOutputs) {
   const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+  // Names the colour config must know are command-line values like any other: a misspelt one is
+  // a usage error, reported before any file is read.
+  const pipeline::ComposeJob& j = o.job;
+  asUsage([&] {
+    if (!j.plateSpace.empty()) colors.resolve(j.plateSpace, "--plate-space");
+    if (!j.environmentSpace.empty()) colors.resolve(j.environmentSpace, "--env-space");
+    const std::string display = j.display.empty() ? colors.defaultDisplay() : j.display;
+    colors.checkDisplayView(display, j.view.empty() ? colors.defaultView(display) : j.view);
+  });
   if (o.explain) {
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),

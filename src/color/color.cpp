@@ -305,8 +305,7 @@ std::vector<std::string> ColorConfig::views(const std::string& display) const {
   return out;
 }
 
-Image ColorConfig::toDisplay(const Image& image, const std::string& display,
-                             const std::string& view) const {
+void ColorConfig::checkDisplayView(const std::string& display, const std::string& view) const {
   auto join = [](const std::vector<std::string>& v) {
     std::string s;
     for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
@@ -321,6 +320,11 @@ Image ColorConfig::toDisplay(const Image& image, const std::string& display,
     throw Error("color", "unknown view '" + view + "' for display '" + display +
                              "'; it has: " + join(knownViews));
   }
+}
+
+Image ColorConfig::toDisplay(const Image& image, const std::string& display,
+                             const std::string& view) const {
+  checkDisplayView(display, view);
   Image out = image;
   try {
     OCIO::DisplayViewTransformRcPtr t = OCIO::DisplayViewTransform::Create();

@@ -80,6 +80,9 @@ class ColorConfig {
   std::string defaultView(const std::string& display) const;
   std::vector<std::string> displays() const;
   std::vector<std::string> views(const std::string& display) const;
+  // Throws compose::Error (stage "color") listing the valid names when the config has no such
+  // display, or no such view for it (toDisplay() checks this first).
+  void checkDisplayView(const std::string& display, const std::string& view) const;
 
   // Applies the display/view transform to the first three channels; the result is display-encoded
   // (to be quantised and written as JPEG/PNG) and tagged "<display>/<view>".
