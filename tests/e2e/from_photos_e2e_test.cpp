@@ -721,7 +721,7 @@ class FromPhotos : public ::testing::Test {
   void SetUp() override {
     std::string missing;
     if (!samplesPresent(missing))
-      GTEST_SKIP() << "sample data missing (" << missing << "): run samples/fetch.sh";
+      GTEST_FAIL() << "sample data missing (" << missing << "): run samples/fetch.sh";
     plate_ = writeSmallPlate(dir_.path(), kPlateWidth);
     plateLinear_ = linearPlate(plate_);
   }
