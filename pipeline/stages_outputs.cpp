@@ -316,6 +316,13 @@ class CompositeStage final : public Stage {
   std::string run(Context& ctx) const override {
     const RenderedObject& object = *ctx.artefacts.object;
     const Image& plate = *ctx.artefacts.plateLinear;
+    const calib::PlateCamera& camera = ctx.geometry().camera;
+    if (camera.width != plate.width || camera.height != plate.height) {
+      throw Error("composite",
+                  format("the object was rendered for a %dx%d plate; this plate is %dx%d",
+                         camera.width, camera.height, plate.width, plate.height),
+                  ctx.job.plate);
+    }
     std::string reason = "the object over the plate";
     Image base = plate;
     if (ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()) {

@@ -143,6 +143,18 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   const size_t stride = object.channels.size();
   for (size_t k = 3; k < object.pixels.size(); k += stride) alpha += object.pixels[k];
   EXPECT_GT(alpha, 100.0);
+
+  // The layer belongs to its plate: another plate size is a named error and writes nothing.
+  const fs::path smaller = dir_ / "smaller.jpg";
+  OIIO::ImageBuf full(plate_.string());
+  ASSERT_TRUE(OIIO::ImageBufAlgo::resize(full, "", 0.0f, OIIO::ROI(0, 160, 0, 106, 0, 1, 0, 3))
+                  .write(smaller.string()));
+  const RunResult wrong = run("composite --plate " + quote(smaller) + " --layer " + quote(layer) +
+                                  " --out " + quote(dir_ / "three" / "compose") + " --no-cache",
+                              dir_.path());
+  EXPECT_EQ(wrong.status, 1);
+  EXPECT_NE(wrong.err.find("rendered for a 320x213 plate"), std::string::npos) << wrong.err;
+  EXPECT_FALSE(fs::exists(dir_ / "three" / "compose.exr"));
 }
 
 TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
