@@ -47,7 +47,10 @@ inline std::vector<glm::vec3> randomNormals(int count, uint32_t seed) {
   std::normal_distribution<float> g;
   std::vector<glm::vec3> out;
   while (int(out.size()) < count) {
-    const glm::vec3 v(g(rng), g(rng), g(rng));
+    // One draw at a time: the order of a call's argument evaluation is unspecified in C++ (GCC
+    // and clang differ); this is the order the GCC builds used.
+    const float z = g(rng), y = g(rng), x = g(rng);
+    const glm::vec3 v(x, y, z);
     const float len = std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
     if (len > 1e-3f) out.push_back(v / len);
   }

@@ -59,7 +59,7 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
                    "Without --lens: 35 mm equivalent focal length [default: EXIF, else 50]");
   pose->add_option("--out", o->poseOut, "Pose file (JSON)")->required();
 
-  return [o, lens, pose, &globals]() -> int {
+  return [o, lens, &globals]() -> int {
     if (lens->parsed()) {
       calib::Board board;
       calib::CalibrationParams params;

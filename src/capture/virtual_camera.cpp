@@ -313,13 +313,18 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
     glm::dmat3 jitter(1.0);
     if (p.orientationJitterDegrees > 0.0) {
       const double k = p.orientationJitterDegrees * kPi / 180.0;
-      jitter = rotationAbout({0, 1, 0}, k * unit(rng)) * rotationAbout({1, 0, 0}, k * unit(rng)) *
-               rotationAbout({0, 0, 1}, k * unit(rng));
+      // Drawn one at a time: C++ leaves the order in which a call's arguments are evaluated
+      // unspecified (GCC and clang differ), and a seed must give the same photos with any
+      // compiler. This is the order the GCC builds have always used.
+      const double aboutZ = k * unit(rng), aboutX = k * unit(rng), aboutY = k * unit(rng);
+      jitter = rotationAbout({0, 1, 0}, aboutY) * rotationAbout({1, 0, 0}, aboutX) *
+               rotationAbout({0, 0, 1}, aboutZ);
     }
     v.worldFromCamera = nominal * jitter;
     v.shots.resize(size_t(p.brackets));
     for (SimulatedShot& s : v.shots) {
-      s.shift = glm::dvec2(p.shakePixels * unit(rng), p.shakePixels * unit(rng));
+      const double dy = p.shakePixels * unit(rng), dx = p.shakePixels * unit(rng);  // (see above)
+      s.shift = glm::dvec2(dx, dy);
       s.rollDegrees = p.shakeRollDegrees * unit(rng);
     }
     const SimulatedShot& ref = v.shots[size_t(mid)];

@@ -394,8 +394,9 @@ Photometric alignPhotometric(int i, const std::vector<int>& neighbours,
   };
   auto sampleAt = [](const cv::Mat& lum, double fx, double fy) {
     const double u = fx - 0.5, v = fy - 0.5;
+    // Range-checked in double first: a ray far outside the photo (or NaN) has no int pixel.
+    if (!(u >= 0.0 && v >= 0.0 && u < lum.cols - 1 && v < lum.rows - 1)) return -1.0f;
     const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
-    if (x0 < 0 || y0 < 0 || x0 + 1 >= lum.cols || y0 + 1 >= lum.rows) return -1.0f;
     const float tx = float(u - x0), ty = float(v - y0);
     const float a = lum.at<float>(y0, x0), b = lum.at<float>(y0, x0 + 1);
     const float c = lum.at<float>(y0 + 1, x0), d = lum.at<float>(y0 + 1, x0 + 1);

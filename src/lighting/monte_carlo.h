@@ -54,6 +54,7 @@ class MonteCarloLighting final : public DiffuseLighting {
 
   // Unshadowed irradiance at unit normal n with samples() samples.
   glm::vec3 irradiance(const glm::vec3& n) const override;
+  using DiffuseLighting::irradiance;  // the view-dependent form, not hidden by the one below
   // Irradiance counting only directions for which visible(direction) is true.
   glm::vec3 irradiance(const glm::vec3& n, const VisibilityFn& visible) const;
   // The same estimator with another sample count (1..kMaxMcSamples, else compose::Error); no

@@ -105,8 +105,9 @@ int main(int argc, char** argv) {
     const fs::path p = dir / (std::string("forest_") + names[f] + ".jpg");
     photos.push_back(p.string());
     if (fs::exists(p)) continue;
-    const glm::dmat3 r =
-        cubemap::faceCameraRotation(f) * cubemap::cameraRotation(off(rng), off(rng), off(rng));
+    // Drawn in a fixed order: C++ leaves a call's argument evaluation order unspecified.
+    const double roll = off(rng), pitch = off(rng), yaw = off(rng);
+    const glm::dmat3 r = cubemap::faceCameraRotation(f) * cubemap::cameraRotation(yaw, pitch, roll);
     Image view = cubemap::renderView(scene, lens, r, 1);
     std::vector<float> lum;
     for (size_t i = 0; i < view.pixels.size(); i += 97) lum.push_back(view.pixels[i]);

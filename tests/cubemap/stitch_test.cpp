@@ -59,7 +59,8 @@ Capture views(const lighting::FilteredCube& env, const calib::Lens& lens,
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> off(-offDegrees, offDegrees);
   for (size_t k = 0; k < nominal.size(); ++k) {
-    c.truth.push_back(nominal[k] * cameraRotation(off(rng), off(rng), off(rng)));
+    const double roll = off(rng), pitch = off(rng), yaw = off(rng);  // a fixed order (see below)
+    c.truth.push_back(nominal[k] * cameraRotation(yaw, pitch, roll));
     c.photos.push_back({"view " + std::to_string(k), lens, nominal[k], 0.0f});
   }
   // The part of the errors common to all photos turns the whole world: nothing in the photos can
@@ -275,7 +276,10 @@ TEST(Stitch, NarrowLensRingWithHolesFilledAndReported) {
   std::uniform_real_distribution<double> off(-2.0, 2.0);
   auto shoot = [&](double yaw, double pitch) {
     const glm::dmat3 nominal = cameraRotation(yaw, pitch, 0.0);
-    const glm::dmat3 real = nominal * cameraRotation(off(rng), off(rng), off(rng));
+    // Drawn in a fixed order: C++ leaves the order of a call's argument evaluation unspecified
+    // (GCC and clang differ); this is the order GCC builds used for the published figures.
+    const double dRoll = off(rng), dPitch = off(rng), dYaw = off(rng);
+    const glm::dmat3 real = nominal * cameraRotation(dYaw, dPitch, dRoll);
     truth.push_back(real);
     images.push_back(renderView(scene, lens, real, 2));
     photos.push_back({"yaw " + std::to_string(int(yaw)) + " pitch " + std::to_string(int(pitch)),

@@ -164,8 +164,9 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
   const char* names[kCubeFaces] = {"px", "nx", "py", "ny", "pz", "nz"};
   std::string photos;
   for (int f = 0; f < kCubeFaces; ++f) {
-    const glm::dmat3 r =
-        cubemap::faceCameraRotation(f) * cubemap::cameraRotation(off(rng), off(rng), off(rng));
+    // Drawn in a fixed order: C++ leaves a call's argument evaluation order unspecified.
+    const double roll = off(rng), pitch = off(rng), yaw = off(rng);
+    const glm::dmat3 r = cubemap::faceCameraRotation(f) * cubemap::cameraRotation(yaw, pitch, roll);
     ingest::WriteOptions w;
     w.depth = ingest::WriteOptions::Depth::Float;
     const fs::path p = dir / (std::string("yard_") + names[f] + ".exr");

@@ -13,8 +13,6 @@
 namespace compose::lighting {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 // A cube whose texels hold a smooth function of their direction, plus one bright texel.
 CubeMap testCube(int n) {
   CubeMap cube(n);
