@@ -22,15 +22,17 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-// Projects `basis` onto `env`, through the lighting cache when there is one.
+// Projects `basis` onto `env`, through the lighting cache when there is one; what was wrong with
+// the cache goes to `notes`.
 bool projectCached(lighting::DiffuseLighting& basis, const lighting::Environment& env,
-                   const fs::path& cacheRoot, const Progress& progress) {
+                   const fs::path& cacheRoot, const Progress& progress,
+                   std::vector<std::string>& notes) {
   if (!cacheRoot.empty()) {
     const lighting::LightingCache cache(lightingCacheFolder(cacheRoot));
     const std::string key = lighting::LightingCache::key(env, basis);
-    if (cache.load(key, basis)) return true;
+    if (cache.load(key, basis, &notes)) return true;
     basis.project(env, progress);
-    cache.store(key, basis);
+    cache.store(key, basis, &notes);
     return false;
   }
   basis.project(env, progress);
@@ -129,7 +131,7 @@ ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
   // The lighting the transfer applies to: the environment without its brightest sources.
   const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
   out.split = lighting::splitBrightSources(environment, sourceCount);
-  const bool reused = projectCached(*out.lighting, out.split.residual, cacheRoot, progress);
+  const bool reused = projectCached(*out.lighting, out.split.residual, cacheRoot, progress, out.notes);
   out.split.residual = {};  // projected: the pixels are not needed any more
   out.reason = std::string(reused ? "reused" : "projected") + " its lighting (" +
                out.lighting->describe() + ")";
@@ -181,12 +183,20 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   h.bytes(plan.transfer.key());
   h.word(uint32_t(out.points.count()));
   const std::string key = h.hex();
-  const FloatCache cache(visibilityCacheFolder(cacheRoot), "COMPVIS1", ".visibility");
+  const FloatCache cache(visibilityCacheFolder(cacheRoot), "COMPVIS2", ".visibility");
   const std::string description =
       "transfer " + plan.transfer.key() + " points " + std::to_string(out.points.count());
   if (!cacheRoot.empty()) {
-    if (auto state = cache.load(key, description)) {
-      reused = transfer.importState(plan.transfer, out.points.count(), *state);
+    const FloatCache::Read r = cache.read(key, description);
+    std::string problem = r.problem;
+    if (r.status == FloatCache::Read::Status::Hit) {
+      reused = transfer.importState(plan.transfer, out.points.count(), r.values);
+      if (!reused)
+        problem = "does not fit the mesh (" + std::to_string(r.values.size()) + " values)";
+    }
+    if (!problem.empty()) {
+      out.notes.push_back("the cached visibility pass " + cache.pathFor(key).string() + " " +
+                          problem + ": ignored, computed again and rewritten");
     }
   }
   if (!reused) {
@@ -198,8 +208,15 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
                   out.points.count(), mesh.positions.size(), static_cast<long long>(transfer.rays),
                   double(transfer.rays) / double(out.points.count()), seconds(start));
     out.reason = line;
-    if (!cacheRoot.empty() && cache.store(key, description, transfer.exportState()))
-      out.reason += ", cached in " + cache.pathFor(key).string();
+    std::string problem;
+    if (!cacheRoot.empty()) {
+      if (cache.store(key, description, transfer.exportState(), &problem)) {
+        out.reason += ", cached in " + cache.pathFor(key).string();
+      } else {
+        out.notes.push_back("the visibility pass was not cached (" + problem +
+                            "): " + cache.folder().string());
+      }
+    }
   } else {
     out.reason =
         "reused the visibility pass " + cache.pathFor(key).string() + " (same mesh and parameters)";

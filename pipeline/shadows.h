@@ -54,6 +54,7 @@ struct ShadowLighting {
   lighting::SourceSplit split;
   std::unique_ptr<lighting::DiffuseLighting> lighting;
   std::string reason;
+  std::vector<std::string> notes;  // what was wrong with the lighting cache, for the user
 };
 // The shadow lighting's basis for a plan, not yet projected (to be projected, or restored).
 ShadowLighting shadowLightingFor(const ShadowPlan& plan);

@@ -292,6 +292,8 @@ class PrecomputeStage final : public Stage {
     if (ctx.hasKey(kShadowLighting)) {
       ctx.artefacts.shadowLighting = prepareShadowLighting(
           environment, ShadowPlan::parse(ctx.job.shadowParams), {}, ctx.progress);
+      for (std::string& n : ctx.artefacts.shadowLighting->notes) ctx.note(std::move(n));
+      ctx.artefacts.shadowLighting->notes.clear();
       reason +=
           (reason.empty() ? "" : "; shadow lighting: ") + ctx.artefacts.shadowLighting->reason;
     }
@@ -374,6 +376,8 @@ class ShadowsStage final : public Stage {
     ShadowResult r =
         computeSelfShadowing(*ctx.artefacts.mesh, ctx.objectScene(), *ctx.artefacts.shadowLighting,
                              ctx.geometry().envFromObject, plan, ctx.job.cache, ctx.progress);
+    for (std::string& n : r.notes) ctx.note(std::move(n));
+    r.notes.clear();
     if (r.irradiance.clamped > 0) {
       ctx.note(std::to_string(r.irradiance.clamped) +
                " vertices' shadowed irradiance rang outside [0, unshadowed] (truncation) and was "

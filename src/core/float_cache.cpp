@@ -2,20 +2,37 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <span>
 
 #include "core/error.h"
+#include "core/hash.h"
 
 namespace compose {
 
 namespace fs = std::filesystem;
 
 namespace {
+
 // The longest description accepted on load: anything longer is not one of ours.
 constexpr uint64_t kMaxDescription = 4096;
+constexpr size_t kHeaderBytes = 8 + 8;  // magic, description length
+constexpr size_t kChecksumBytes = 16;
+
+std::array<uint64_t, 2> checksum(const std::string& description, std::span<const float> values) {
+  Hash128 h;
+  h.bytes(description);
+  h.floats(values);
+  return {h.a, h.b};
+}
+
 }  // namespace
 
 FloatCache::FloatCache(fs::path folder, const std::string& magic, std::string extension)
@@ -28,59 +45,114 @@ fs::path FloatCache::pathFor(const std::string& key) const {
   return folder_ / (key + extension_);
 }
 
-std::optional<std::vector<float>> FloatCache::load(const std::string& key,
-                                                   const std::string& description) const {
+FloatCache::Read FloatCache::read(const std::string& key, const std::string& description) const {
+  Read r;
+  auto invalid = [&](std::string problem) {
+    r.status = Read::Status::Invalid;
+    r.problem = std::move(problem);
+    r.values.clear();
+    return r;
+  };
   std::ifstream in(pathFor(key), std::ios::binary);
-  if (!in) return std::nullopt;
-  char magic[8];
-  uint64_t length = 0, count = 0;
-  if (!in.read(magic, sizeof magic) || std::memcmp(magic, magic_.data(), sizeof magic) != 0)
-    return std::nullopt;
-  if (!in.read(reinterpret_cast<char*>(&length), sizeof length) || length > kMaxDescription)
-    return std::nullopt;
-  std::string stored(length, '\0');
-  if (!in.read(stored.data(), std::streamsize(length)) || stored != description)
-    return std::nullopt;
-  if (!in.read(reinterpret_cast<char*>(&count), sizeof count)) return std::nullopt;
-  // Never trust the stored count further than the bytes actually present.
-  const std::streamoff here = in.tellg();
+  if (!in) return r;  // Missing (or unreadable: the next store replaces it)
+  // The whole file, then every field checked against the bytes actually present.
   in.seekg(0, std::ios::end);
   const std::streamoff end = in.tellg();
-  in.seekg(here);
-  if (here < 0 || end < here || uint64_t(end - here) != count * sizeof(float)) return std::nullopt;
+  in.seekg(0);
+  if (end < 0) return invalid("cannot be read");
+  const uint64_t size = uint64_t(end);
+  if (size == 0) return invalid("is empty (0 bytes)");
+  char magic[8] = {};
+  if (size < kHeaderBytes || !in.read(magic, sizeof magic))
+    return invalid("is truncated (" + std::to_string(size) + " bytes, shorter than its header)");
+  if (std::memcmp(magic, magic_.data(), sizeof magic) != 0) {
+    if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
+      return invalid("is zeroed (no header)");
+    if (std::memcmp(magic, magic_.data(), 7) == 0) {
+      return invalid(std::string("is of format version '") + magic[7] +
+                     "', this compose reads version '" + magic_[7] + "'");
+    }
+    return invalid("is not a compose cache file of this kind (unknown header)");
+  }
+  uint64_t length = 0, count = 0;
+  in.read(reinterpret_cast<char*>(&length), sizeof length);
+  if (length > kMaxDescription) return invalid("has a damaged header (description too long)");
+  if (size < kHeaderBytes + length + 8)
+    return invalid("is truncated (" + std::to_string(size) + " bytes)");
+  std::string stored(length, '\0');
+  in.read(stored.data(), std::streamsize(length));
+  in.read(reinterpret_cast<char*>(&count), sizeof count);
+  const uint64_t payload = size - (kHeaderBytes + length + 8);
+  // Never trust the stored count further than the bytes present (and never multiply it first).
+  if (count > payload / sizeof(float) || payload != count * sizeof(float) + kChecksumBytes) {
+    return invalid("is truncated or damaged (" + std::to_string(size) + " bytes for " +
+                   std::to_string(count) + " values)");
+  }
+  if (stored != description) return invalid("holds other contents than its name says");
   std::vector<float> values(count);
-  if (!in.read(reinterpret_cast<char*>(values.data()), std::streamsize(count * sizeof(float))))
-    return std::nullopt;
-  return values;
+  uint64_t sum[2] = {0, 0};
+  if (!in.read(reinterpret_cast<char*>(values.data()), std::streamsize(count * sizeof(float))) ||
+      !in.read(reinterpret_cast<char*>(sum), sizeof sum)) {
+    return invalid("cannot be read to the end");
+  }
+  const auto expected = checksum(description, values);
+  if (sum[0] != expected[0] || sum[1] != expected[1])
+    return invalid("fails its checksum (damaged)");
+  for (float v : values) {
+    if (!(std::abs(v) <= kMaxMagnitude)) return invalid("holds a value that is not finite");
+  }
+  r.status = Read::Status::Hit;
+  r.values = std::move(values);
+  return r;
+}
+
+std::optional<std::vector<float>> FloatCache::load(const std::string& key,
+                                                   const std::string& description) const {
+  Read r = read(key, description);
+  if (r.status != Read::Status::Hit) return std::nullopt;
+  return std::move(r.values);
 }
 
 bool FloatCache::store(const std::string& key, const std::string& description,
-                       const std::vector<float>& values) const {
+                       const std::vector<float>& values, std::string* problem) const {
+  auto fail = [&](const std::string& why) {
+    if (problem) *problem = why;
+    return false;
+  };
   std::error_code ec;
   fs::create_directories(folder_, ec);
+  if (ec) return fail("cannot create the cache folder: " + ec.message());
   const fs::path final = pathFor(key);
+  static std::atomic<unsigned> counter{0};
   fs::path temp = final;
-  temp += ".partial-" + std::to_string(::getpid()) + "-" +
-          std::to_string(reinterpret_cast<uintptr_t>(&values) & 0xFFFF);
+  temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
   {
+    errno = 0;
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out)
+      return fail(std::string("cannot write into the cache folder: ") +
+                  std::strerror(errno ? errno : EIO));
     const uint64_t length = description.size(), count = values.size();
+    const auto sum = checksum(description, values);
     out.write(magic_.data(), std::streamsize(magic_.size()));
     out.write(reinterpret_cast<const char*>(&length), sizeof length);
     out.write(description.data(), std::streamsize(length));
     out.write(reinterpret_cast<const char*>(&count), sizeof count);
     out.write(reinterpret_cast<const char*>(values.data()),
               std::streamsize(values.size() * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(sum.data()), std::streamsize(sizeof sum));
     out.close();
     if (!out) {
+      const int err = errno ? errno : EIO;
       fs::remove(temp, ec);
-      return false;
+      return fail(std::string("cannot write the cache file: ") + std::strerror(err));
     }
   }
   fs::rename(temp, final, ec);
   if (ec) {
+    const std::string why = ec.message();
     fs::remove(temp, ec);
-    return false;
+    return fail("cannot move the cache file into place: " + why);
   }
   return true;
 }

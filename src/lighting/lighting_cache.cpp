@@ -23,15 +23,30 @@ std::string LightingCache::key(const Environment& env, const DiffuseLighting& ba
   return h.hex();
 }
 
-bool LightingCache::load(const std::string& key, DiffuseLighting& basis) const {
-  const std::optional<std::vector<float>> state = files_.load(key, basis.parameterKey());
-  return state && basis.importState(*state);
+bool LightingCache::load(const std::string& key, DiffuseLighting& basis,
+                         std::vector<std::string>* notes) const {
+  const FloatCache::Read r = files_.read(key, basis.parameterKey());
+  std::string problem = r.problem;
+  if (r.status == FloatCache::Read::Status::Hit) {
+    if (basis.importState(r.values)) return true;
+    problem = "does not fit the basis (" + std::to_string(r.values.size()) + " values)";
+  }
+  if (notes && !problem.empty()) {
+    notes->push_back("the cached lighting " + pathFor(key).string() + " " + problem +
+                     ": ignored, projected again and rewritten");
+  }
+  return false;
 }
 
-bool LightingCache::store(const std::string& key, const DiffuseLighting& basis) const {
+bool LightingCache::store(const std::string& key, const DiffuseLighting& basis,
+                          std::vector<std::string>* notes) const {
   std::vector<float> state;
   if (!basis.exportState(state)) return false;
-  return files_.store(key, basis.parameterKey(), state);
+  std::string problem;
+  if (files_.store(key, basis.parameterKey(), state, &problem)) return true;
+  if (notes)
+    notes->push_back("the lighting was not cached (" + problem + "): " + files_.folder().string());
+  return false;
 }
 
 }  // namespace compose::lighting

@@ -4,8 +4,9 @@
 // The key is a 128-bit hash of the environment's radiance (every texel, bit for bit), its size,
 // the basis' parameterKey() (every parameter and internal constant that changes the numbers), and
 // kProjectionVersion. Entries are single files named by the key, written atomically (temporary
-// file + rename); a file that is unreadable, truncated or does not match is ignored and
-// rewritten. Only bases whose exportState() returns true are cached.
+// file + rename; core/float_cache.h), so that concurrent runs share one folder safely. A file
+// that is truncated, zeroed, of an older format, damaged or does not fit the basis is ignored
+// with a note for the user, and rewritten. Only bases whose exportState() returns true are cached.
 //
 // kProjectionVersion names the numbers a projection produces. Any change to how a cacheable basis
 // projects must bump it: tests/lighting/cache_version_test.cpp holds a fingerprint of a golden
@@ -14,6 +15,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/float_cache.h"
 #include "lighting/lighting.h"
@@ -25,15 +27,19 @@ class LightingCache {
   static constexpr int kProjectionVersion = 3;
 
   explicit LightingCache(std::filesystem::path folder)
-      : files_(std::move(folder), "COMPLIT3", ".lighting") {}
+      : files_(std::move(folder), "COMPLIT4", ".lighting") {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);
   std::filesystem::path pathFor(const std::string& key) const { return files_.pathFor(key); }
 
-  // Restores `basis` from the entry for `key`; false on a miss or an entry that does not fit.
-  bool load(const std::string& key, DiffuseLighting& basis) const;
-  // Writes the entry; false (nothing left behind) if the basis is not cacheable or the write fails.
-  bool store(const std::string& key, const DiffuseLighting& basis) const;
+  // Restores `basis` from the entry for `key`; false on a miss or an entry that is invalid or
+  // does not fit, which adds a note to `notes` (when given) saying what was wrong with which file.
+  bool load(const std::string& key, DiffuseLighting& basis,
+            std::vector<std::string>* notes = nullptr) const;
+  // Writes the entry; false (nothing left behind) if the basis is not cacheable or the write fails,
+  // which adds a note with the reason to `notes` (when given).
+  bool store(const std::string& key, const DiffuseLighting& basis,
+             std::vector<std::string>* notes = nullptr) const;
 
  private:
   FloatCache files_;
