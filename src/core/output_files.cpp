@@ -1,6 +1,10 @@
 #include "core/output_files.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
+
+#include <algorithm>
 
 #include <atomic>
 #include <cerrno>
@@ -28,6 +32,34 @@ fs::path temporaryNear(const fs::path& destination, const char* tag) {
   temp.replace_filename(name);
   return temp;
 }
+
+// Advisory locks on the destination folders for the length of a commit, so that the outputs of
+// two runs committing into the same folder at once never interleave (one run's EXR with the
+// other's JPEG): each set appears whole, the later one replacing the earlier. Folders are locked
+// in sorted order, so two commits cannot wait for each other. A folder that cannot be opened or
+// locked (a file system without flock) is committed without the lock.
+class FolderLocks {
+ public:
+  explicit FolderLocks(std::vector<fs::path> folders) {
+    std::sort(folders.begin(), folders.end());
+    folders.erase(std::unique(folders.begin(), folders.end()), folders.end());
+    for (const fs::path& f : folders) {
+      const int fd = ::open(f.empty() ? "." : f.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+      if (fd < 0) continue;
+      while (::flock(fd, LOCK_EX) != 0 && errno == EINTR) {
+      }
+      fds_.push_back(fd);
+    }
+  }
+  ~FolderLocks() {
+    for (int fd : fds_) ::close(fd);  // closing releases the lock
+  }
+  FolderLocks(const FolderLocks&) = delete;
+  FolderLocks& operator=(const FolderLocks&) = delete;
+
+ private:
+  std::vector<int> fds_;
+};
 
 }  // namespace
 
@@ -61,6 +93,12 @@ fs::path OutputFiles::add(const fs::path& destination) {
 
 void OutputFiles::commit() {
   COMPOSE_CHECK(!committed_);
+  std::vector<fs::path> folders;
+  for (const Entry& e : entries_) {
+    std::error_code ec;
+    folders.push_back(fs::absolute(e.destination, ec).parent_path());
+  }
+  const FolderLocks locks(std::move(folders));
   // Keep the previous outputs under backup names (hard links: the originals stay in place until
   // they are replaced), so that a failed move can put them back.
   struct Moved {

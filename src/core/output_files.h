@@ -6,6 +6,8 @@
 // moves them into place. If a move fails, the outputs already moved are put back as they were
 // (previous files restored, new ones removed), so a failure leaves every previous output
 // untouched. Temporaries that were never committed are removed when the object goes away.
+// Commits into one folder are serialised by an advisory lock on the folder (flock), so that two
+// runs writing the same outputs at once leave one run's complete set, never a mix of the two.
 //
 // Errors throw compose::Error with the given stage, the file, and the operating system's reason.
 #pragma once
