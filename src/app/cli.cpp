@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -10,12 +11,33 @@
 
 namespace compose::app {
 
+namespace {
+
+// Seconds between progress lines when stderr is not a terminal.
+constexpr double kProgressLineSeconds = 5.0;
+
+double monotonicSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+}  // namespace
+
 ProgressPrinter::ProgressPrinter(const Globals& globals)
-    : globals_(globals), tty_(::isatty(STDERR_FILENO) != 0) {}
+    : globals_(globals),
+      tty_(::isatty(STDERR_FILENO) != 0),
+      lines_(kProgressLineSeconds, monotonicSeconds()) {}
 
 void ProgressPrinter::operator()(std::string_view stage, double fraction) {
-  if (globals_.quiet || !tty_) return;
+  if (globals_.quiet) return;
   std::lock_guard lock(mutex_);
+  if (!tty_) {
+    if (lines_.due(monotonicSeconds())) {
+      std::fprintf(stderr, "compose: progress: %.*s %d%%\n", int(stage.size()), stage.data(),
+                   int(fraction * 100.0 + 0.5));
+      std::fflush(stderr);
+    }
+    return;
+  }
   std::fprintf(stderr, "\r  %-10.*s %3d%%", int(stage.size()), stage.data(),
                int(fraction * 100.0 + 0.5));
   if (fraction >= 1.0) std::fprintf(stderr, "\r\033[K");

@@ -13,6 +13,7 @@
 #include <glm/vec3.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/progress.h"
 
 namespace compose::app {
@@ -20,10 +21,12 @@ namespace compose::app {
 // Options every command honours.
 struct Globals {
   bool quiet = false;
+  ResourceLimits limits;  // --max-pixels, --max-triangles (core/limits.h)
 };
 
-// Progress on stderr, one line per stage, redrawn in place on a terminal; nothing when quiet or
-// when stderr is not a terminal.
+// Progress on stderr: on a terminal one line per stage, redrawn in place; otherwise (a log, a
+// pipe, CI) a line "compose: progress: <stage> NN%" every few seconds of long work; nothing when
+// quiet.
 class ProgressPrinter {
  public:
   explicit ProgressPrinter(const Globals& globals);
@@ -35,6 +38,7 @@ class ProgressPrinter {
  private:
   const Globals& globals_;
   bool tty_;
+  ProgressThrottle lines_;
   std::mutex mutex_;
 };
 

@@ -1,6 +1,7 @@
 // compose: put a synthetic diffuse object into a photograph, lit by the place the photo shows.
 // This file only parses the command line and maps errors to exit statuses; the commands are in
 // cmd_*.cpp and the work is in the libraries.
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 
@@ -21,6 +22,12 @@ int main(int argc, char** argv) {
   app.require_subcommand(0, 1);
   Globals globals;
   app.add_flag("-q,--quiet", globals.quiet, "Print only the output paths and errors");
+  app.add_option("--max-pixels", globals.limits.maxPixels,
+                 "Refuse images larger than this many pixels, before decoding them (any command)")
+      ->capture_default_str();
+  app.add_option("--max-triangles", globals.limits.maxTriangles,
+                 "Refuse meshes of more triangles than this, before loading them (any command)")
+      ->capture_default_str();
 
   std::vector<std::pair<CLI::App*, Runner>> runners;
   for (const Command& c : commands()) {
@@ -41,7 +48,11 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  // A file-size limit (ulimit -f) makes a write fail with "File too large" instead of killing
+  // the process: the failed write is then reported, and the outputs stay as they were.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
+    compose::setResourceLimits(globals.limits);
     for (auto& [sub, run] : runners) {
       if (sub->parsed()) return run();
     }

@@ -19,6 +19,24 @@ inline void report(const Progress& progress, std::string_view stage, double frac
   if (progress) progress(stage, fraction);
 }
 
+// Progress written as lines (to a log or a pipe, where a bar redrawn in place would not show):
+// at most one line every `intervalSeconds`, the first after that long, so that short runs stay
+// quiet and long ones show they are alive. Times are seconds on any monotonic clock.
+class ProgressThrottle {
+ public:
+  ProgressThrottle(double intervalSeconds, double startSeconds)
+      : interval_(intervalSeconds), last_(startSeconds) {}
+  // Whether a line is due at `nowSeconds`; if so, the next one is due `intervalSeconds` later.
+  bool due(double nowSeconds) {
+    if (nowSeconds - last_ < interval_) return false;
+    last_ = nowSeconds;
+    return true;
+  }
+
+ private:
+  double interval_, last_;
+};
+
 // Progress from inside a parallel loop of `total` steps: step() may be called from any thread;
 // the callback is called at most every `every` steps and never concurrently (a busy reporter is
 // skipped, not waited for).

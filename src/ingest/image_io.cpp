@@ -16,6 +16,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "core/error.h"
+#include "core/limits.h"
 
 namespace compose::ingest {
 
@@ -97,6 +98,7 @@ void fillCaptureInfo(const OIIO::ImageSpec& spec, CaptureInfo& info) {
   info.sampleType = spec.format.c_str();
   info.bitsPerSample = spec.get_int_attribute("oiio:BitsPerSample", int(spec.format.size()) * 8);
   info.orientation = spec.get_int_attribute("Orientation", 1);
+  if (info.orientation < 1 || info.orientation > 8) info.orientation = 1;  // not an EXIF value
   info.exposureTime = floatAttribute(spec, "ExposureTime");
   info.fNumber = floatAttribute(spec, "FNumber");
   info.iso = floatAttribute(spec, "Exif:PhotographicSensitivity");
@@ -156,6 +158,27 @@ std::string readerError(OIIO::ImageInput& input) {
 }
 
 }  // namespace
+
+CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
+                                      const std::vector<ImageAttribute>& attributes) {
+  OIIO::ImageSpec spec(width, height, channels, OIIO::TypeDesc::UINT8);
+  for (const ImageAttribute& a : attributes) {
+    if (const int* i = std::get_if<int>(&a.value)) {
+      spec.attribute(a.name, *i);
+    } else if (const double* d = std::get_if<double>(&a.value)) {
+      spec.attribute(a.name, float(*d));
+    } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
+      spec.attribute(a.name, *t);
+    } else {
+      const auto& v = std::get<std::vector<float>>(a.value);
+      if (v.empty()) continue;
+      spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, int(v.size())), v.data());
+    }
+  }
+  CaptureInfo info;
+  fillCaptureInfo(spec, info);
+  return info;
+}
 
 std::optional<double> CaptureInfo::relativeExposure() const {
   if (!exposureTime) return std::nullopt;
@@ -253,6 +276,8 @@ LoadedImage readOpened(OIIO::ImageInput& input, const fs::path& path, const std:
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
     throw Error(stage, "image has no pixels", path);
   }
+  // What the header claims, checked before a pixel buffer is allocated (core/limits.h).
+  checkImageSize(spec.width, spec.height, spec.nchannels, stage, path);
   fillCaptureInfo(spec, info);
 
   Image& img = out.image;

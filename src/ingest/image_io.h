@@ -105,6 +105,8 @@ struct ReadOptions {
 };
 
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.
+// An image whose header claims more pixels (or values) than resourceLimits() allows is refused
+// before any pixel is decoded (core/limits.h).
 LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
                       const ReadOptions& options = {});
 
@@ -147,6 +149,12 @@ struct WriteReport {
 // The EXIF attributes of `info` (exposure, focal lengths, focal-plane resolution, camera, time),
 // for WriteOptions::attributes, so that readImage() reads them back.
 std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info);
+
+// The capture metadata that a file header with these attributes (named as OpenImageIO names them:
+// "ExposureTime", "Exif:FocalLength", "Orientation", ...) gives: what readCaptureInfo() makes of a
+// real file's EXIF, without encoding one. For tests and fuzzing of the EXIF interpretation.
+CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
+                                      const std::vector<ImageAttribute>& attributes);
 
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
 WriteReport writeImage(const std::filesystem::path& path, const Image& image,

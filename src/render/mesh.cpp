@@ -15,6 +15,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
@@ -516,6 +517,8 @@ detail::LoadedMesh loadBezierPatches(const fs::path& path) {
       throw Error("mesh", "'" + token + "' is not a finite number", path);
     }
     numbers.push_back(v);
+    // Every 48 numbers make a patch of 2 kSteps² triangles: refuse a file beyond the limit early.
+    if (numbers.size() % 48 == 0) checkTriangleCount(int64_t(numbers.size() / 48) * 512, path);
   }
   if (numbers.empty() || numbers.size() % 48 != 0) {
     throw Error("mesh",
@@ -524,6 +527,7 @@ detail::LoadedMesh loadBezierPatches(const fs::path& path) {
                 path);
   }
   constexpr int kSteps = 16;
+  static_assert(2 * kSteps * kSteps == 512, "the triangle count checked while reading");
   auto bernstein = [](double t, double b[4]) {
     const double s = 1.0 - t;
     b[0] = s * s * s;

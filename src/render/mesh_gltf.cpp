@@ -12,6 +12,7 @@
 #include <glm/mat4x4.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
 
@@ -538,6 +539,9 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
   const glm::dmat3 linear(objectFromNode);
   const bool mirrored = glm::determinant(linear) < 0.0;
   const glm::dmat3 normalFromNode = glm::transpose(glm::inverse(linear));
+  // The hierarchy may instance a mesh any number of times: the triangles so far, this instance's
+  // included, are checked against the limit before any of them is added.
+  checkTriangleCount(int64_t(mesh_.indices.size() / 3 + corners.size() / 3), path_);
   const uint32_t base = uint32_t(mesh_.positions.size());
   for (size_t i = 0; i < n; ++i) {
     const glm::dvec3 p(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);

@@ -16,6 +16,7 @@
 #include <tiny_obj_loader.h>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "render/mesh_formats.h"
 
@@ -45,6 +46,7 @@ ObjScan scanObj(const fs::path& path) {
     throw Error("mesh", "line " + std::to_string(lineNo) + ": " + what, path);
   };
   std::vector<std::string_view> fields;
+  int64_t triangles = 0;
   while (std::getline(in, line)) {
     ++lineNo;
     fields.clear();
@@ -76,6 +78,8 @@ ObjScan scanObj(const fs::path& path) {
       }
     } else if (key == "f") {
       if (fields.size() < 4) fail("a face needs at least 3 corners");
+      triangles += int64_t(fields.size()) - 3;  // a polygon of n corners makes n - 2 triangles
+      checkTriangleCount(triangles, path);
       for (size_t f = 1; f < fields.size(); ++f) {
         // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
         const std::string_view corner = fields[f];

@@ -1,0 +1,77 @@
+#include "core/limits.h"
+
+#include <cstdio>
+
+#include "core/error.h"
+
+namespace compose {
+
+namespace {
+
+ResourceLimits& current() {
+  static ResourceLimits limits;
+  return limits;
+}
+
+std::string millions(int64_t n) {
+  char text[48];
+  if (n >= 10'000'000) {
+    std::snprintf(text, sizeof text, "%lld", static_cast<long long>(n / 1'000'000));
+  } else {
+    std::snprintf(text, sizeof text, "%.3g", double(n) / 1e6);
+  }
+  return text;
+}
+
+}  // namespace
+
+void ResourceLimits::validate() const {
+  if (maxPixels < 1) throw UsageError("--max-pixels must be a positive number of pixels");
+  if (maxTriangles < 1) throw UsageError("--max-triangles must be a positive number of triangles");
+}
+
+const ResourceLimits& resourceLimits() {
+  return current();
+}
+
+void setResourceLimits(const ResourceLimits& limits) {
+  limits.validate();
+  current() = limits;
+}
+
+void checkImageSize(int64_t width, int64_t height, int64_t channels, const std::string& stage,
+                    const std::filesystem::path& file) {
+  const ResourceLimits& limits = resourceLimits();
+  if (width < 1 || height < 1 || channels < 1) throw Error(stage, "image has no pixels", file);
+  // width and height come from int fields, so the products below cannot overflow int64.
+  const int64_t pixels = width * height;
+  if (pixels > limits.maxPixels) {
+    throw Error(stage,
+                "image is " + std::to_string(width) + " x " + std::to_string(height) + " pixels (" +
+                    millions(pixels) + " megapixels), more than the limit of " +
+                    millions(limits.maxPixels) + " megapixels (raise it with --max-pixels)",
+                file);
+  }
+  if (channels > ResourceLimits::kValuesPerPixel &&
+      pixels * channels > limits.maxPixels * ResourceLimits::kValuesPerPixel) {
+    throw Error(stage,
+                "image is " + std::to_string(width) + " x " + std::to_string(height) +
+                    " pixels of " + std::to_string(channels) +
+                    " channels, more values than the limit of " + millions(limits.maxPixels) +
+                    " megapixels x 4 channels (raise it with "
+                    "--max-pixels)",
+                file);
+  }
+}
+
+void checkTriangleCount(int64_t triangles, const std::filesystem::path& file) {
+  const ResourceLimits& limits = resourceLimits();
+  if (triangles > limits.maxTriangles) {
+    throw Error("mesh",
+                "mesh has " + std::to_string(triangles) + " triangles, more than the limit of " +
+                    std::to_string(limits.maxTriangles) + " (raise it with --max-triangles)",
+                file);
+  }
+}
+
+}  // namespace compose
