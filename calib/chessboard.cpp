@@ -328,7 +328,7 @@ void writePose(const fs::path& file, const PlatePose& pose) {
   writeTextFile(file, poseText(pose), kStage);
 }
 
-PlatePose readPose(const fs::path& file) {
+PlatePose readPose(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "pose file not found", file);
   std::ifstream in(file);
@@ -368,6 +368,10 @@ PlatePose readPose(const fs::path& file) {
   pose.lens = lensFromJson(j["lens"], file);
   pose.rms = j.value("rms", 0.0);
   return pose;
+} catch (const nlohmann::json::exception& e) {
+  // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
+  // exception; it is bad input like any other, named with its file.
+  throw Error(kStage, std::string("not a valid pose file: ") + e.what(), file);
 }
 
 }  // namespace compose::calib

@@ -161,7 +161,7 @@ void Lens::validate(const fs::path& file) const {
     if (!std::isfinite(d)) fail("distortion coefficients must be finite");
 }
 
-Lens lensFromJson(const nlohmann::json& j, const fs::path& file) {
+Lens lensFromJson(const nlohmann::json& j, const fs::path& file) try {
   if (!j.is_object()) throw Error("calib", "lens file must hold a JSON object", file);
   auto number = [&](const char* key) -> double {
     if (!j.contains(key) || !j[key].is_number())
@@ -198,6 +198,10 @@ Lens lensFromJson(const nlohmann::json& j, const fs::path& file) {
   lens.source = "lens file " + file.string();
   lens.validate(file);
   return lens;
+} catch (const nlohmann::json::exception& e) {
+  // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
+  // exception; it is bad input like any other, named with its file.
+  throw Error("calib", std::string("not a valid lens file: ") + e.what(), file);
 }
 
 nlohmann::ordered_json lensToJson(const Lens& lens) {

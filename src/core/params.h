@@ -5,6 +5,7 @@
 #pragma once
 
 #include <charconv>
+#include <cmath>
 #include <map>
 #include <string>
 #include <vector>
@@ -17,7 +18,8 @@ class ParamSet {
  public:
   ParamSet() = default;
 
-  // Parses "key=value,key=value". Throws compose::Error (stage `stage`) on malformed text.
+  // Parses "key=value,key=value". Throws compose::Error (stage `stage`) on malformed text and on a
+  // key given twice (which of the two was meant cannot be known).
   static ParamSet parse(const std::string& text, const std::string& stage) {
     ParamSet p;
     size_t start = 0;
@@ -29,7 +31,9 @@ class ParamSet {
       if (eq == std::string::npos || eq == 0) {
         throw Error(stage, "malformed parameter '" + item + "', expected key=value");
       }
-      p.set(item.substr(0, eq), item.substr(eq + 1));
+      const std::string key = item.substr(0, eq);
+      if (p.has(key)) throw Error(stage, "parameter '" + key + "' is given twice");
+      p.set(key, item.substr(eq + 1));
       start = end + 1;
     }
     return p;
@@ -52,19 +56,22 @@ class ParamSet {
     return v;
   }
 
+  // A finite number: "nan", "inf" and out-of-range values are errors.
   double getDouble(const std::string& key, double fallback, const std::string& stage) {
     auto it = values_.find(key);
     if (it == values_.end()) return fallback;
     it->second.used = true;
     const std::string& s = it->second.value;
+    double v = 0.0;
     try {
       size_t n = 0;
-      double v = std::stod(s, &n);
+      v = std::stod(s, &n);
       if (n != s.size()) throw std::invalid_argument(s);
-      return v;
     } catch (const std::exception&) {
       throw Error(stage, "parameter " + key + "='" + s + "' is not a number");
     }
+    if (!std::isfinite(v)) throw Error(stage, "parameter " + key + "='" + s + "' is not finite");
+    return v;
   }
 
   std::string getString(const std::string& key, const std::string& fallback) {

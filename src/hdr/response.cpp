@@ -350,7 +350,7 @@ void writeResponse(const fs::path& file, const ResponseCurve& curve) {
   writeTextFile(file, responseText(curve), kStage);
 }
 
-ResponseCurve readResponse(const fs::path& file) {
+ResponseCurve readResponse(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "response file not found", file);
   std::ifstream in(file);
@@ -386,6 +386,10 @@ ResponseCurve readResponse(const fs::path& file) {
   }
   curve.validate(file);
   return curve;
+} catch (const nlohmann::json::exception& e) {
+  // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
+  // exception; it is bad input like any other, named with its file.
+  throw Error(kStage, std::string("not a valid response file: ") + e.what(), file);
 }
 
 fs::path responseDirectory() {

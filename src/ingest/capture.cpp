@@ -207,7 +207,7 @@ Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
   return capture;
 }
 
-Capture readCaptureDescription(const fs::path& file) {
+Capture readCaptureDescription(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "capture description not found", file);
   std::ifstream in(file);
@@ -316,6 +316,10 @@ Capture readCaptureDescription(const fs::path& file) {
   }
   fillCamera(capture);
   return capture;
+} catch (const nlohmann::json::exception& e) {
+  // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
+  // exception; it is bad input like any other, named with its file.
+  throw Error(kStage, std::string("not a valid capture description: ") + e.what(), file);
 }
 
 std::string captureDescriptionText(const fs::path& file, const Capture& capture) {
