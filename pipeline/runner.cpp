@@ -1,6 +1,7 @@
 // The runner: plans a job over the registered stages (stage.h) and runs what it must.
 #include <chrono>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -139,7 +140,19 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
     if (p.entries[i]) {
       StageCache& entry = *p.entries[i];
       const auto start = std::chrono::steady_clock::now();
-      const bool reused = load ? entry.open() && stage.load(ctx, entry) : entry.exists();
+      bool reused = false;
+      if (!load) {
+        reused = entry.exists();
+      } else if (entry.open()) {
+        reused = stage.load(ctx, entry);
+        if (!reused) {
+          ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() +
+                   ") does not fit this job: ignored, computed again and rewritten");
+        }
+      } else if (!entry.problem().empty()) {
+        ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
+                 entry.problem() + ": ignored, computed again and rewritten");
+      }
       r.seconds += secondsSince(start);
       if (reused) {
         r.state = StageState::Reused;
@@ -191,6 +204,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   resetPeak();
   Planned p = planJob(ctx, true, request);
   const auto& list = stages();
+  std::map<std::string, std::vector<std::string>> unstored;  // why -> stages not cached
   for (size_t i = 0; i < list.size(); ++i) {
     StageRecord& r = p.records[i];
     if (r.state != StageState::Run) continue;
@@ -202,12 +216,22 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       if (stage.store(ctx, *p.entries[i])) {
         r.cacheEntry = p.entries[i]->path().string();
         r.reason += "; cached in " + r.cacheEntry;
+      } else if (!p.entries[i]->error().empty()) {
+        unstored[p.entries[i]->error()].push_back(stage.name());
       }
     }
     r.seconds += secondsSince(start);
     r.peakBytes = peakResidentBytes();
   }
   if (request.finish) request.finish(ctx);
+  // A cache folder that cannot be written (read-only, full) is one note per reason, not one per
+  // stage: the run goes on without caching.
+  for (const auto& [why, names] : unstored) {
+    std::string which;
+    for (const std::string& n : names) which += (which.empty() ? "" : ", ") + n;
+    ctx.note("the cache folder " + (job.cache / "stages").string() + " cannot be written (" + why +
+             "): the outputs of " + which + " were not cached");
+  }
   result.stages = std::move(p.records);
   result.notes = std::move(ctx.notes);
   if (ctx.artefacts.plate) {

@@ -2,19 +2,35 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
+#include <climits>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <iterator>
+
+#include "core/hash.h"
+#include "core/limits.h"
 
 namespace compose::pipeline {
 
 namespace fs = std::filesystem;
 
 namespace {
-constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '1'};
+constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '2'};
 constexpr uint64_t kMaxHeader = 1 << 20;
+constexpr uint64_t kChecksumBytes = 16;
+
+std::array<uint64_t, 2> checksum(const std::string& header,
+                                 const std::map<std::string, std::vector<float>>& arrays) {
+  Hash128 h;
+  h.bytes(header);
+  for (const auto& [name, values] : arrays) h.floats(values);
+  return {h.a, h.b};
+}
 }  // namespace
 
 StageCache::StageCache(fs::path folder, std::string stage, std::string key)
@@ -35,51 +51,104 @@ bool StageCache::exists() const {
 }
 
 bool StageCache::open() {
+  problem_.clear();
   if (!enabled()) return false;
+  auto invalid = [&](std::string why) {
+    problem_ = std::move(why);
+    return false;
+  };
+  std::error_code ec;
+  const fs::file_status status = fs::status(path_, ec);
+  if (!fs::exists(status)) return false;  // a plain miss
+  if (!fs::is_regular_file(status)) return invalid("is not a regular file");
   std::ifstream in(path_, std::ios::binary);
-  if (!in) return false;
-  char magic[8];
-  uint64_t length = 0;
-  if (!in.read(magic, sizeof magic) || std::memcmp(magic, kMagic, sizeof magic) != 0) return false;
-  if (!in.read(reinterpret_cast<char*>(&length), sizeof length) || length > kMaxHeader)
-    return false;
-  std::string text(length, '\0');
-  if (!in.read(text.data(), std::streamsize(length))) return false;
-  const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
-  if (header.is_discarded() || !header.is_object() || header.value("stage", "") != stage_ ||
-      (!anyKey_ && header.value("key", "") != key_) || !header.contains("arrays") ||
-      !header["arrays"].is_array() || !header.contains("meta"))
-    return false;
-  // Never trust stored counts further than the bytes actually present.
-  const std::streamoff here = in.tellg();
+  if (!in) return invalid(std::string("cannot be read: ") + std::strerror(errno ? errno : EIO));
+  // The size first; every field is then checked against the bytes actually present.
   in.seekg(0, std::ios::end);
   const std::streamoff end = in.tellg();
-  in.seekg(here);
-  uint64_t total = 0;
-  for (const auto& a : header["arrays"]) {
-    if (!a.is_array() || a.size() != 2 || !a[0].is_string() || !a[1].is_number_unsigned())
-      return false;
-    total += a[1].get<uint64_t>();
+  in.seekg(0);
+  if (end < 0) return invalid("cannot be read");
+  const uint64_t size = uint64_t(end);
+  if (size == 0) return invalid("is empty (0 bytes)");
+  char magic[8] = {};
+  if (size < sizeof magic + 8 || !in.read(magic, sizeof magic))
+    return invalid("is truncated (" + std::to_string(size) + " bytes, shorter than its header)");
+  if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
+    if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
+      return invalid("is zeroed (no header)");
+    if (std::memcmp(magic, kMagic, 7) == 0) {
+      return invalid(std::string("is of format version '") + magic[7] +
+                     "', this compose reads version '" + kMagic[7] + "'");
+    }
+    return invalid("is not a compose stage cache entry (unknown header)");
   }
-  if (here < 0 || end < here || uint64_t(end - here) != total * sizeof(float)) return false;
+  uint64_t length = 0;
+  in.read(reinterpret_cast<char*>(&length), sizeof length);
+  if (length > kMaxHeader) return invalid("has a damaged header (header length)");
+  const uint64_t headerEnd = sizeof magic + 8 + length;
+  if (size < headerEnd + kChecksumBytes)
+    return invalid("is truncated (" + std::to_string(size) + " bytes)");
+  std::string text(length, '\0');
+  if (!in.read(text.data(), std::streamsize(length))) return invalid("cannot be read to the end");
+  const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
+  if (header.is_discarded() || !header.is_object())
+    return invalid("has a damaged header (not JSON)");
+  const auto text_of = [&](const char* name) {
+    const auto it = header.find(name);
+    return it != header.end() && it->is_string() ? it->get<std::string>() : std::string();
+  };
+  if (text_of("stage") != stage_ || (!anyKey_ && text_of("key") != key_))
+    return invalid("holds another stage's or key's outputs than its name says");
+  const auto arraysIt = header.find("arrays");
+  if (arraysIt == header.end() || !arraysIt->is_array() || !header.contains("meta"))
+    return invalid("has a damaged header (no arrays or meta)");
+  // The stored counts never trusted further than the bytes present (and never summed blindly).
+  const uint64_t payload = size - headerEnd - kChecksumBytes;
+  uint64_t total = 0;
+  for (const auto& a : *arraysIt) {
+    if (!a.is_array() || a.size() != 2 || !a[0].is_string() || !a[1].is_number_unsigned())
+      return invalid("has a damaged header (array list)");
+    const uint64_t n = a[1].get<uint64_t>();
+    if (n > payload / sizeof(float) - total)
+      return invalid("is truncated or damaged (" + std::to_string(size) + " bytes)");
+    total += n;
+  }
+  if (payload != total * sizeof(float))
+    return invalid("is truncated or damaged (" + std::to_string(size) + " bytes for " +
+                   std::to_string(total) + " values)");
   std::map<std::string, std::vector<float>> arrays;
-  for (const auto& a : header["arrays"]) {
+  for (const auto& a : *arraysIt) {
+    const std::string name = a[0].get<std::string>();
+    if (arrays.count(name)) return invalid("has a damaged header (an array named twice)");
     std::vector<float> values(a[1].get<uint64_t>());
     if (!in.read(reinterpret_cast<char*>(values.data()),
                  std::streamsize(values.size() * sizeof(float))))
-      return false;
-    arrays[a[0].get<std::string>()] = std::move(values);
+      return invalid("cannot be read to the end");
+    arrays[name] = std::move(values);
   }
+  uint64_t sum[2] = {0, 0};
+  if (!in.read(reinterpret_cast<char*>(sum), sizeof sum))
+    return invalid("cannot be read to the end");
+  // The checksum covers the arrays in the order write() wrote them: by name (std::map order).
+  const auto expected = checksum(text, arrays);
+  if (sum[0] != expected[0] || sum[1] != expected[1])
+    return invalid("fails its checksum (damaged)");
   meta_ = header["meta"];
   arrays_ = std::move(arrays);
-  if (anyKey_) key_ = header.value("key", "");
+  if (anyKey_) key_ = text_of("key");
   return true;
 }
 
 bool StageCache::write() const {
+  error_.clear();
   if (!enabled()) return false;
+  auto fail = [&](std::string why) {
+    error_ = std::move(why);
+    return false;
+  };
   std::error_code ec;
   fs::create_directories(path_.parent_path(), ec);
+  if (ec) return fail(ec.message());
   nlohmann::json header;
   header["stage"] = stage_;
   header["key"] = key_;
@@ -87,11 +156,14 @@ bool StageCache::write() const {
   header["arrays"] = nlohmann::json::array();
   for (const auto& [name, values] : arrays_) header["arrays"].push_back({name, values.size()});
   const std::string text = header.dump();
+  const auto sum = checksum(text, arrays_);
   static std::atomic<int> serial{0};
   fs::path temp = path_;
   temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(serial++);
   {
+    errno = 0;
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out) return fail(std::strerror(errno ? errno : EIO));
     const uint64_t length = text.size();
     out.write(kMagic, sizeof kMagic);
     out.write(reinterpret_cast<const char*>(&length), sizeof length);
@@ -99,18 +171,19 @@ bool StageCache::write() const {
     for (const auto& [name, values] : arrays_)
       out.write(reinterpret_cast<const char*>(values.data()),
                 std::streamsize(values.size() * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(sum.data()), std::streamsize(sizeof sum));
     out.close();
     if (!out) {
-      error_ = std::strerror(errno);
+      const int err = errno ? errno : EIO;
       fs::remove(temp, ec);
-      return false;
+      return fail(std::strerror(err));
     }
   }
   fs::rename(temp, path_, ec);
   if (ec) {
-    error_ = ec.message();
+    const std::string why = ec.message();
     fs::remove(temp, ec);
-    return false;
+    return fail(why);
   }
   return true;
 }
@@ -137,11 +210,22 @@ void StageCache::putImage(const std::string& name, const Image& image) {
 bool StageCache::getImage(const std::string& name, Image& image) const {
   if (!meta_.contains("images") || !meta_["images"].contains(name)) return false;
   const nlohmann::json& m = meta_["images"][name];
+  // Whole numbers in int's range only (a conversion from anything else would be undefined).
+  auto whole = [&](const char* key) -> int {
+    const auto it = m.find(key);
+    if (it == m.end() || !it->is_number_integer()) return -1;
+    const int64_t v = it->get<int64_t>();
+    return v >= 0 && v <= INT32_MAX ? int(v) : -1;
+  };
+  if (!m.is_object()) return false;
   try {
-    const int width = m.at("width").get<int>(), height = m.at("height").get<int>(),
-              channels = m.at("channels").get<int>();
+    const int width = whole("width"), height = whole("height"), channels = whole("channels");
     const std::vector<float>& values = get(name);
-    if (width < 0 || height < 0 || channels < 0 ||
+    // Sizes within the pixel limit (so that the product below cannot overflow) and matching the
+    // stored values exactly.
+    const int64_t maxPixels = resourceLimits().maxPixels;
+    if (width < 0 || height < 0 || channels < 0 || channels > 64 ||
+        (height > 0 && int64_t(width) > maxPixels / height) ||
         values.size() != size_t(width) * size_t(height) * size_t(channels))
       return false;
     Image out;
@@ -149,6 +233,7 @@ bool StageCache::getImage(const std::string& name, Image& image) const {
     out.height = height;
     out.channels = channels;
     out.channelNames = m.at("names").get<std::vector<std::string>>();
+    if (!out.channelNames.empty() && out.channelNames.size() != size_t(channels)) return false;
     out.colorSpace = m.at("colorSpace").get<std::string>();
     out.pixels = values;
     image = std::move(out);

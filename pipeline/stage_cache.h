@@ -1,12 +1,20 @@
 // StageCache: one stage's outputs kept on disk under their key, so that a later run with the same
 // inputs and parameters reloads them instead of computing them again.
 //
-// An entry is one file, <folder>/<stage>/<key>.stage: an 8-byte magic with the format version,
-// the length of a JSON header, the header (the stage, the key, the stage's own metadata, and the
-// name and length of every float array), then the arrays' floats. Entries are written to a
-// temporary file and renamed into place, so a reader never sees a half-written one; an entry that
-// is unreadable, truncated, of another stage or key, or whose header does not parse is a miss.
-// Nothing here throws on a bad entry: a cache that cannot be read or written only costs time.
+// An entry is one file, <folder>/<stage>/<key>.stage: an 8-byte magic (7 bytes naming the kind,
+// the last the format version), the length of a JSON header, the header (the stage, the key, the
+// stage's own metadata, and the name and length of every float array), the arrays' floats, and a
+// 128-bit checksum of the header and the floats. Entries are written to a temporary file (unique
+// per process and write) and renamed into place, so a reader never sees a half-written one and
+// any number of runs may share one folder: the last complete write wins.
+//
+// open() checks every field against the bytes actually present before allocating anything: an
+// entry that is empty, truncated, zeroed, of another format version, of another stage or key,
+// whose header does not parse, whose sizes do not add up or whose checksum fails is *invalid*:
+// open() returns false and problem() says what is wrong, so that the runner can tell the user
+// (the stage then runs and its store() rewrites the entry). A missing entry is a plain miss
+// (problem() empty). Nothing here throws on a bad entry: a cache that cannot be read or written
+// only costs time; write() failing leaves the reason in error().
 #pragma once
 
 #include <filesystem>
@@ -32,13 +40,16 @@ class StageCache {
   bool enabled() const { return !path_.empty(); }
   bool exists() const;
 
-  // Reads the whole entry; false on a miss or an entry that does not fit.
+  // Reads the whole entry; false on a miss or an invalid entry (problem() says what is wrong).
   bool open();
   // Writes the entry atomically; false (nothing left behind) if it could not be written, with the
-  // operating system's reason in error().
+  // operating system's reason in error() ("Permission denied", "No space left on device").
   bool write() const;
   const std::string& error() const { return error_; }
   const std::string& key() const { return key_; }
+  // What was wrong with the entry the last open() found; empty after a success or a plain miss
+  // (no entry).
+  const std::string& problem() const { return problem_; }
 
   nlohmann::json& meta() { return meta_; }
   const nlohmann::json& meta() const { return meta_; }
@@ -58,6 +69,7 @@ class StageCache {
   mutable std::string error_;
   nlohmann::json meta_ = nlohmann::json::object();
   std::map<std::string, std::vector<float>> arrays_;
+  mutable std::string problem_;
 };
 
 }  // namespace compose::pipeline
