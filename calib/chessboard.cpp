@@ -12,6 +12,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 
 namespace compose::calib {
@@ -331,6 +332,7 @@ void writePose(const fs::path& file, const PlatePose& pose) {
 PlatePose readPose(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "pose file not found", file);
+  requireRegularFile(file, kStage);
   std::ifstream in(file);
   nlohmann::json j;
   try {

@@ -10,6 +10,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 
 namespace compose::calib {
@@ -223,6 +224,7 @@ nlohmann::ordered_json lensToJson(const Lens& lens) {
 Lens readLens(const fs::path& file) {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
+  requireRegularFile(file, "calib");
   std::ifstream in(file);
   if (!in) throw Error("calib", "cannot open the lens file", file);
   nlohmann::json j;

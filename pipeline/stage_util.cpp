@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "pipeline/stage.h"
 
 namespace compose::pipeline {
@@ -14,6 +15,7 @@ void hashFile(Hash128& hash, const std::filesystem::path& file, const std::strin
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw Error(stage, "file not found", file);
   if (std::filesystem::is_directory(file, ec)) throw Error(stage, "is a folder, not a file", file);
+  requireRegularFile(file, stage);
   std::ifstream in(file, std::ios::binary);
   if (!in) {
     const int error = errno;

@@ -74,4 +74,32 @@ void checkTriangleCount(int64_t triangles, const std::filesystem::path& file) {
   }
 }
 
+void requireRegularFile(const std::filesystem::path& file, const std::string& stage) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status status = fs::status(file, ec);
+  const char* kind = nullptr;
+  switch (status.type()) {
+    case fs::file_type::character:
+      kind = "a character device";
+      break;
+    case fs::file_type::block:
+      kind = "a block device";
+      break;
+    case fs::file_type::fifo:
+      kind = "a FIFO (named pipe)";
+      break;
+    case fs::file_type::socket:
+      kind = "a socket";
+      break;
+    case fs::file_type::unknown:
+      kind = "of an unknown kind";
+      break;
+    default:
+      return;  // regular, folder, missing: the caller's concern
+  }
+  throw Error(
+      stage, std::string("is ") + kind + ", not a regular file (inputs are read from files)", file);
+}
+
 }  // namespace compose

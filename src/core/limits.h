@@ -45,4 +45,10 @@ void checkImageSize(int64_t width, int64_t height, int64_t channels, const std::
 // The same for a mesh of `triangles` triangles (stage "mesh").
 void checkTriangleCount(int64_t triangles, const std::filesystem::path& file);
 
+// Inputs are regular files: a device (/dev/zero, /dev/urandom), a FIFO or a socket can be read
+// forever or block forever. Throws compose::Error (stage `stage`, naming `file`) when `file`
+// exists and is one of those ("is a character device, not a regular file"); a missing file or a
+// folder is left to the caller, which has its own message for them. Symbolic links are followed.
+void requireRegularFile(const std::filesystem::path& file, const std::string& stage);
+
 }  // namespace compose

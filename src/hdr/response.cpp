@@ -12,6 +12,7 @@
 #include <opencv2/photo.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "hdr/opencv_util.h"
@@ -353,6 +354,7 @@ void writeResponse(const fs::path& file, const ResponseCurve& curve) {
 ResponseCurve readResponse(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "response file not found", file);
+  requireRegularFile(file, kStage);
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the response file", file);
   nlohmann::json j;

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 
 namespace compose::ingest {
@@ -210,6 +211,7 @@ Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
 Capture readCaptureDescription(const fs::path& file) try {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "capture description not found", file);
+  requireRegularFile(file, kStage);
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the capture description", file);
   nlohmann::json j;

@@ -211,6 +211,7 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
   if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+  requireRegularFile(path, stage);
   auto input = OIIO::ImageInput::open(path.string());
   if (!input) {
     std::string why = OIIO::geterror();
@@ -301,6 +302,7 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
   if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+  requireRegularFile(path, stage);
 
   auto input = OIIO::ImageInput::open(path.string());
   if (!input) {

@@ -754,6 +754,7 @@ Mesh loadMesh(const fs::path& path, const MeshOptions& options) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error("mesh", "file not found", path);
   if (fs::is_directory(path, ec)) throw Error("mesh", "is a folder, expected a mesh file", path);
+  requireRegularFile(path, "mesh");
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
