@@ -1,0 +1,321 @@
+// The compose command against hostile inputs and a hostile machine: devices and FIFOs as inputs,
+// headers claiming huge sizes, the limits' options, eight runs sharing one cache folder at once,
+// two runs writing the same outputs, damaged cache entries, a cache folder that cannot be
+// written, a full disk (a file-size limit) and an output folder that does not exist.
+//
+// The inputs are small and made here (a 96x64 plate, two octahedra that shadow each other, a
+// 64x32 environment), so that many runs stay cheap.
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "ingest/image_io.h"
+#include "test_util.h"
+
+namespace compose {
+namespace {
+
+namespace fs = std::filesystem;
+using compose::testing::TempDir;
+
+struct RunResult {
+  int status = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string quote(const std::string& s) {
+  return "'" + s + "'";
+}
+
+// Runs a shell command line (sh), its output and errors captured.
+RunResult runShell(const std::string& command, const fs::path& scratch, const std::string& tag) {
+  const fs::path out = scratch / (tag + ".out"), err = scratch / (tag + ".err");
+  const std::string cmd =
+      "{ " + command + "; } >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
+  const int raw = std::system(cmd.c_str());
+  RunResult r;
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+const std::string kCompose = quote(COMPOSE_EXECUTABLE);
+
+// The report line of one stage ("compose: render ... reused ...").
+std::string stageLine(const std::string& err, const std::string& stage) {
+  const std::string prefix = "compose: " + stage + " ";
+  const size_t at = err.find(prefix);
+  if (at == std::string::npos) return {};
+  return err.substr(at, err.find('\n', at) - at);
+}
+
+class Robustness : public ::testing::Test {
+ protected:
+  TempDir dir;
+
+  void SetUp() override {
+    Image plate(96, 64, 3, {"R", "G", "B"});
+    for (int y = 0; y < plate.height; ++y)
+      for (int x = 0; x < plate.width; ++x)
+        for (int c = 0; c < 3; ++c)
+          plate.pixels[(size_t(y) * 96 + size_t(x)) * 3 + size_t(c)] =
+              0.2f + 0.5f * float(y) / 64.0f + 0.1f * float(c) + 0.002f * float(x);
+    ingest::writeImage(dir / "plate.jpg", plate);
+    Image env(64, 32, 3, {"R", "G", "B"});
+    for (int y = 0; y < env.height; ++y)
+      for (int x = 0; x < env.width; ++x)
+        for (int c = 0; c < 3; ++c)
+          env.pixels[(size_t(y) * 64 + size_t(x)) * 3 + size_t(c)] =
+              (y < 8 ? 3.0f : 0.3f) + 0.01f * float(x % 7) + 0.05f * float(c);
+    env.colorSpace = "lin_rec709";
+    ingest::writeImage(dir / "env.exr", env);
+    // Two octahedra side by side: not convex, so the self-shadowing stage runs and is cached.
+    std::string obj;
+    const float corners[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                 {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+    const int faces[8][3] = {{1, 3, 5}, {3, 2, 5}, {2, 4, 5}, {4, 1, 5},
+                             {3, 1, 6}, {2, 3, 6}, {4, 2, 6}, {1, 4, 6}};
+    const float offsets[2][2] = {{-1.2f, 0.0f}, {1.2f, 0.5f}};
+    for (const auto& o : offsets)
+      for (const auto& p : corners)
+        obj += "v " + std::to_string(p[0] + o[0]) + " " + std::to_string(p[1] + o[1]) + " " +
+               std::to_string(p[2]) + "\n";
+    for (int k = 0; k < 2; ++k)
+      for (const auto& f : faces)
+        obj += "f " + std::to_string(f[0] + 6 * k) + " " + std::to_string(f[1] + 6 * k) + " " +
+               std::to_string(f[2] + 6 * k) + "\n";
+    compose::testing::writeText(dir / "two.obj", obj);
+  }
+
+  std::string inputs(const std::string& plate = "", const std::string& object = "") const {
+    return "--plate " + quote(plate.empty() ? (dir / "plate.jpg").string() : plate) + " --object " +
+           quote(object.empty() ? (dir / "two.obj").string() : object) + " --env " +
+           quote((dir / "env.exr").string()) +
+           " --samples 1 --shadow-params order=4,grid=4,sources=4";
+  }
+  std::string job(const std::string& out, const std::string& extra = "") const {
+    return kCompose + " " + inputs() + " --cache " + quote((dir / "cache").string()) + " --out " +
+           quote((dir / out).string()) + " " + extra;
+  }
+  RunResult run(const std::string& out, const std::string& extra = "") const {
+    std::string tag = out;
+    for (char& c : tag)
+      if (c == '/') c = '_';
+    return runShell(job(out, extra), dir.path(), tag);
+  }
+  std::vector<float> pixels(const std::string& file) const {
+    return ingest::readImage(dir / file).image.pixels;
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+TEST_F(Robustness, DevicesAndFifosAsInputsAreNamedErrorsNotHangs) {
+  const RunResult zero =
+      runShell(kCompose + " " + inputs("/dev/zero") + " --out " + quote((dir / "z").string()),
+               dir.path(), "zero");
+  EXPECT_EQ(zero.status, 1) << zero.err;
+  EXPECT_NE(zero.err.find("is a character device, not a regular file"), std::string::npos)
+      << zero.err;
+  EXPECT_NE(zero.err.find("/dev/zero"), std::string::npos) << zero.err;
+  // A FIFO nobody writes to: opening it would block forever.
+  ASSERT_EQ(::mkfifo((dir / "pipe.obj").c_str(), 0600), 0);
+  const RunResult fifo = runShell(kCompose + " " + inputs("", (dir / "pipe.obj").string()) +
+                                      " --out " + quote((dir / "f").string()),
+                                  dir.path(), "fifo");
+  EXPECT_EQ(fifo.status, 1) << fifo.err;
+  EXPECT_NE(fifo.err.find("is a FIFO (named pipe)"), std::string::npos) << fifo.err;
+  EXPECT_FALSE(fs::exists(dir / "z.exr"));
+}
+
+TEST_F(Robustness, LimitsRefuseWithTheirOptionNamed) {
+  const RunResult pixels = run("p", "--max-pixels 1000");
+  EXPECT_EQ(pixels.status, 1) << pixels.err;
+  EXPECT_NE(pixels.err.find("image is 96 x 64 pixels"), std::string::npos) << pixels.err;
+  EXPECT_NE(pixels.err.find("raise it with --max-pixels"), std::string::npos) << pixels.err;
+  const RunResult triangles = run("t", "--max-triangles 10");
+  EXPECT_EQ(triangles.status, 1) << triangles.err;
+  EXPECT_NE(triangles.err.find("more than the limit of 10 (raise it with --max-triangles)"),
+            std::string::npos)
+      << triangles.err;
+  for (const char* bad : {"--max-pixels 0", "--max-triangles -5", "--samples 65"}) {
+    const RunResult r = run("u", bad);
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.err;
+  }
+  EXPECT_FALSE(fs::exists(dir / "p.exr"));
+}
+
+TEST_F(Robustness, EightRunsAtOnceShareOneCacheFolder) {
+  // Eight processes started together on the same inputs and the same (empty) cache folder.
+  std::string script;
+  for (int i = 0; i < 8; ++i) {
+    const std::string n = std::to_string(i);
+    script += "( " + job("run" + n) + " >" + quote((dir / ("run" + n + ".log")).string()) +
+              " 2>&1; echo $? >" + quote((dir / ("run" + n + ".status")).string()) + " ) & ";
+  }
+  script += "wait";
+  runShell(script, dir.path(), "eight");
+  const std::vector<float> first = pixels("run0.exr");
+  ASSERT_FALSE(first.empty());
+  for (int i = 0; i < 8; ++i) {
+    const std::string n = std::to_string(i);
+    EXPECT_EQ(slurp(dir / ("run" + n + ".status")), "0\n") << slurp(dir / ("run" + n + ".log"));
+    EXPECT_EQ(pixels("run" + n + ".exr"), first) << "run " << i << " differs";
+    EXPECT_EQ(slurp(dir / ("run" + n + ".log")).find("ignored"), std::string::npos)
+        << "run " << i << " found a damaged cache entry:\n"
+        << slurp(dir / ("run" + n + ".log"));
+  }
+  // The cache is valid afterwards: no temporaries left, and a ninth run reuses every stage it
+  // needs without a note about a damaged entry, with the same pixels.
+  for (const auto& e : fs::recursive_directory_iterator(dir / "cache"))
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  const RunResult ninth = run("ninth");
+  ASSERT_EQ(ninth.status, 0) << ninth.err;
+  EXPECT_EQ(ninth.err.find("ignored"), std::string::npos) << ninth.err;
+  EXPECT_NE(stageLine(ninth.err, "render").find("reused"), std::string::npos) << ninth.err;
+  EXPECT_EQ(pixels("ninth.exr"), first);
+}
+
+TEST_F(Robustness, TwoRunsWritingTheSameOutputsLeaveOneRunsCompleteSet) {
+  // References, one run at a time: two jobs that differ in their pixels.
+  ASSERT_EQ(run("a", "--albedo 0.2").status, 0);
+  ASSERT_EQ(run("b", "--albedo 0.8").status, 0);
+  const std::vector<float> a = pixels("a.exr"), b = pixels("b.exr");
+  ASSERT_NE(a, b);
+  const std::vector<float> aJpg = pixels("a.jpg"), bJpg = pixels("b.jpg");
+  for (int round = 0; round < 3; ++round) {
+    runShell(
+        "( " + job("same", "--albedo 0.2") + " ) & ( " + job("same", "--albedo 0.8") + " ) & wait",
+        dir.path(), "both");
+    const std::vector<float> exr = pixels("same.exr"), jpg = pixels("same.jpg");
+    const bool isA = exr == a, isB = exr == b;
+    EXPECT_TRUE(isA || isB) << "round " << round << ": the EXR is neither run's";
+    // The display JPEG belongs to the same run as the EXR: never one run's EXR with the other's.
+    EXPECT_EQ(jpg, isA ? aJpg : bJpg) << "round " << round;
+  }
+  for (const auto& e : fs::directory_iterator(dir.path()))
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+}
+
+TEST_F(Robustness, DamagedCacheEntriesAreNotedRecomputedAndRewritten) {
+  ASSERT_EQ(run("first").status, 0);
+  const std::vector<float> reference = pixels("first.exr");
+  struct Damage {
+    const char* name;
+    const char* note;
+    void (*apply)(const fs::path&);
+  };
+  const Damage damages[] = {
+      {"truncated", "is truncated",
+       [](const fs::path& p) { fs::resize_file(p, fs::file_size(p) / 2); }},
+      {"zeroed", "is zeroed",
+       [](const fs::path& p) {
+         const auto n = fs::file_size(p);
+         std::ofstream(p, std::ios::binary | std::ios::trunc) << std::string(n, '\0');
+       }},
+      {"old version", "is of format version '1'",
+       [](const fs::path& p) {
+         std::fstream f(p, std::ios::binary | std::ios::in | std::ios::out);
+         f.seekp(7);
+         f.put('1');
+       }},
+      {"empty", "is empty", [](const fs::path& p) { fs::resize_file(p, 0); }},
+  };
+  for (const Damage& d : damages) {
+    // Every entry of every stage damaged the same way.
+    int damaged = 0;
+    for (const auto& e : fs::recursive_directory_iterator(dir / "cache" / "stages")) {
+      if (e.is_regular_file()) {
+        d.apply(e.path());
+        ++damaged;
+      }
+    }
+    ASSERT_GT(damaged, 2);
+    const RunResult r = run("again");
+    ASSERT_EQ(r.status, 0) << d.name << ": " << r.err;
+    EXPECT_NE(r.err.find(d.note), std::string::npos) << d.name << ": " << r.err;
+    EXPECT_NE(r.err.find("ignored, computed again and rewritten"), std::string::npos) << r.err;
+    EXPECT_EQ(pixels("again.exr"), reference) << d.name;
+    // Rewritten: the next run reuses them without a note.
+    const RunResult next = run("next");
+    ASSERT_EQ(next.status, 0) << next.err;
+    EXPECT_EQ(next.err.find("ignored"), std::string::npos) << d.name << ": " << next.err;
+    EXPECT_NE(stageLine(next.err, "render").find("reused"), std::string::npos) << next.err;
+  }
+  // The visibility pass's own cache (core/float_cache.h) the same way: a damaged file is named.
+  for (const auto& e : fs::recursive_directory_iterator(dir / "cache" / "visibility"))
+    if (e.is_regular_file()) fs::resize_file(e.path(), 10);
+  fs::remove_all(dir / "cache" / "stages");
+  const RunResult vis = run("vis");
+  ASSERT_EQ(vis.status, 0) << vis.err;
+  EXPECT_NE(vis.err.find("the cached visibility pass"), std::string::npos) << vis.err;
+  EXPECT_NE(vis.err.find("is truncated"), std::string::npos) << vis.err;
+  EXPECT_EQ(pixels("vis.exr"), reference);
+}
+
+TEST_F(Robustness, AReadOnlyCacheFolderIsANoteAndTheRunGoesOn) {
+  fs::create_directories(dir / "cache");
+  std::string prefix;
+  if (::geteuid() == 0) {
+    // Root writes through permission bits: a read-only file system instead (a private mount).
+    const RunResult probe = runShell("unshare -m true", dir.path(), "probe");
+    if (probe.status != 0) GTEST_SKIP() << "running as root without unshare -m: " << probe.err;
+    prefix = "unshare -m sh -c " + quote("mount -t tmpfs -o ro,size=1m tmpfs " +
+                                         (dir / "cache").string() + " && exec " + job("ro"));
+  } else {
+    fs::permissions(dir / "cache", fs::perms::owner_read | fs::perms::owner_exec);
+    prefix = job("ro");
+  }
+  const RunResult r = runShell(prefix, dir.path(), "ro");
+  fs::permissions(dir / "cache", fs::perms::owner_all);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("cannot be written ("), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("were not cached"), std::string::npos) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "ro.exr"));
+  EXPECT_TRUE(fs::exists(dir / "ro.jpg"));
+}
+
+TEST_F(Robustness, AFullDiskIsANamedErrorAndThePreviousOutputsStay) {
+  ASSERT_EQ(run("out", "--albedo 0.3").status, 0);
+  const std::string exr = slurp(dir / "out.exr"), jpg = slurp(dir / "out.jpg");
+  // A file-size limit of 8 KB (ulimit -f counts 512-byte blocks in sh): the EXR cannot be written.
+  const RunResult r =
+      runShell("ulimit -f 16; " + job("out", "--albedo 0.7 --no-cache"), dir.path(), "full");
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("File too large"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("out."), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(dir / "out.exr"), exr) << "the previous EXR was changed";
+  EXPECT_EQ(slurp(dir / "out.jpg"), jpg) << "the previous JPEG was changed";
+  for (const auto& e : fs::directory_iterator(dir.path()))
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+}
+
+TEST_F(Robustness, AnOutputFolderThatDoesNotExistIsCreated) {
+  const RunResult r = run("new/folder/deep/x");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "new/folder/deep/x.exr"));
+  EXPECT_TRUE(fs::exists(dir / "new/folder/deep/x.jpg"));
+  // A file where a folder of the path should be: a named error.
+  compose::testing::writeText(dir / "blocker", "x");
+  const RunResult blocked = run("blocker/x");
+  EXPECT_EQ(blocked.status, 1) << blocked.err;
+  EXPECT_NE(blocked.err.find("compose: error: output:"), std::string::npos) << blocked.err;
+}
+
+}  // namespace
+}  // namespace compose
