@@ -701,11 +701,31 @@ void GltfReader::read() {
   }
 }
 
+// tinygltf's file callbacks, for regular files only: a buffer or image URI naming a FIFO would
+// block forever (tinygltf's own existence check opens the file), a device be read without end.
+bool fileExists(const std::string& file, void*) {
+  std::error_code ec;
+  return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)
+}
+
+bool readRegularFile(std::vector<unsigned char>* out, std::string* err, const std::string& file,
+                     void* user) {
+  std::error_code ec;
+  if (fs::exists(file, ec) && !fs::is_regular_file(file, ec)) {
+    if (err) *err += "'" + file + "' is not a regular file\n";
+    return false;
+  }
+  return tinygltf::ReadWholeFile(out, err, file, user);
+}
+
 }  // namespace
 
 LoadedMesh loadGltf(const fs::path& path) {
   tinygltf::TinyGLTF parser;
   parser.SetImageLoader(&keepEncodedImage, nullptr);
+  parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &tinygltf::ExpandFilePath,
+                                              &readRegularFile, &tinygltf::WriteWholeFile,
+                                              nullptr});
   tinygltf::Model model;
   std::string err, warn;
   std::string ext = path.extension().string();

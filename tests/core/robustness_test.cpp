@@ -123,6 +123,15 @@ TEST(RegularFilesOnly, DevicesAndFifosAreNamedErrors) {
   COMPOSE_EXPECT_ERROR(ingest::readImage(dir / "pipe.jpg"), "is a FIFO (named pipe)");
   ASSERT_EQ(::mkfifo((dir / "pipe.obj").c_str(), 0600), 0);
   COMPOSE_EXPECT_ERROR(render::loadMesh(dir / "pipe.obj"), "is a FIFO");
+  // A glTF whose buffer is a FIFO: the buffer is not read (it would block).
+  ASSERT_EQ(::mkfifo((dir / "buffer.bin").c_str(), 0600), 0);
+  compose::testing::writeText(
+      dir / "fifo.gltf",
+      R"({"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],
+          "buffers":[{"uri":"buffer.bin","byteLength":36}],
+          "bufferViews":[{"buffer":0,"byteLength":36}],
+          "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}]})");
+  COMPOSE_EXPECT_ERROR(render::loadMesh(dir / "fifo.gltf"), "not a regular file");
   compose::testing::writeText(dir / "plain.txt", "x");
   requireRegularFile(dir / "plain.txt", "ingest");
   requireRegularFile(dir / "missing.txt", "ingest");  // the caller says "not found"
