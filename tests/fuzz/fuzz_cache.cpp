@@ -1,5 +1,6 @@
-// The on-disk caches (core/float_cache.h): lighting projections (lighting/lighting_cache.h) and
-// visibility passes (pipeline/shadows.cpp), as a run finds them in its cache folder.
+// The on-disk caches as a run finds them in its cache folder: the float caches (core/float_cache.h:
+// lighting projections, lighting/lighting_cache.h, and visibility passes, pipeline/shadows.cpp) and
+// the stage cache's entries (pipeline/stage_cache.h, with the images stages keep in them).
 //
 // The first byte chooses how the rest is used: even, as the raw bytes of a cache file (headers,
 // versions, truncation, checksums); odd, as the floats of a well-formed entry that the target
@@ -13,6 +14,7 @@
 #include "fuzz_util.h"
 #include "lighting/lighting.h"
 #include "lighting/lighting_cache.h"
+#include "pipeline/stage_cache.h"
 #include "render/transfer.h"
 
 using namespace compose;
@@ -54,6 +56,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::filesystem::create_directories(folder / "visibility");
     fuzz::writeInput("cache/lighting/" + key + ".lighting", data + 1, size - 1);
     fuzz::writeInput("cache/visibility/" + key + ".visibility", data + 1, size - 1);
+    std::filesystem::create_directories(folder / "stages" / "render");
+    fuzz::writeInput("cache/stages/render/" + key + ".stage", data + 1, size - 1);
   } else {
     // A state of the basis' own size (or one off it), holding the input's floats.
     static const size_t stateSize = [] {
@@ -72,6 +76,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         .store(key, basis->parameterKey(), values);
     values.resize(shape % 2 ? 15 : values.size());  // the visibility state of 3 points: 15 values
     visibilityFiles.store(key, description, values);
+    // A well-formed stage entry whose image header says what the input says.
+    pipeline::StageCache entry(folder / "stages", "render", key);
+    const int width = in.byte() % 9, height = in.byte() % 9, channels = in.byte() % 6;
+    entry.meta()["images"]["image"] = {{"width", width},
+                                       {"height", height},
+                                       {"channels", channels},
+                                       {"names", std::vector<std::string>(in.byte() % 5, "R")},
+                                       {"colorSpace", "ACEScg"}};
+    entry.meta()["clamped"] = int(in.byte());
+    entry.put("image", values);
+    entry.put("shadowed", std::vector<float>(values.begin(), values.begin() + long(shape % 7)));
+    entry.write();
   }
 
   std::vector<std::string> notes;
@@ -89,6 +105,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (t.importState(transfer, 3, r.values)) FUZZ_CHECK(t.cheb.size() == 12 && t.ao.size() == 3);
   } else if (r.status == FloatCache::Read::Status::Invalid) {
     FUZZ_CHECK(!r.problem.empty());
+  }
+  pipeline::StageCache entry(folder / "stages", "render", key);
+  if (entry.open()) {
+    FUZZ_CHECK(entry.problem().empty());
+    Image image;
+    if (entry.getImage("image", image)) {
+      FUZZ_CHECK(image.pixels.size() ==
+                 size_t(image.width) * size_t(image.height) * size_t(image.channels));
+      FUZZ_CHECK(image.channelNames.empty() || int(image.channelNames.size()) == image.channels);
+    }
+    entry.get("shadowed");
+    entry.get("no such array");
+  } else {
+    FUZZ_CHECK(std::filesystem::exists(entry.path()) != entry.problem().empty());
   }
   return 0;
 }

@@ -1,5 +1,6 @@
-// Meshes through the loader, normal generation included: OBJ (COMPOSE_FUZZ_MESH_EXT=".obj") and
-// Geomview bicubic patches (".bez"), one binary per format.
+// Meshes through the loader, normal generation included: OBJ (COMPOSE_FUZZ_MESH_EXT=".obj"),
+// glTF 2.0 (".gltf" text, ".glb" binary) and Geomview bicubic patches (".bez"), one binary per
+// format.
 #include <algorithm>
 #include <cmath>
 
