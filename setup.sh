@@ -2,7 +2,10 @@
 # One-stop set-up for a Debian 12 machine: installs the build dependencies (a no-op when they are
 # present), builds compose in Release, fetches and verifies the sample data, then
 #   ./setup.sh demo    composites the bunny into the meadow plate: out/compose.exr + out/compose.jpg
-#   ./setup.sh test    runs the whole test suite (what CI runs)
+#   ./setup.sh test    what CI runs: the whole test suite on the Release build, then the whole suite
+#                      again on a clang build with AddressSanitizer + UndefinedBehaviorSanitizer
+#                      (build-sanitize/, -O1), which also holds the libFuzzer targets, then a fuzz
+#                      smoke pass of COMPOSE_FUZZ_SECONDS (20) seconds per target
 #   ./setup.sh build   stops after building
 # Installing needs root: run as root, or with sudo available.
 set -euo pipefail
@@ -15,13 +18,17 @@ PACKAGES=(
   libtinyobjloader-dev libembree-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev libfilament-tools openexr
 )
+# What `test` needs beyond the build: clang with its sanitizer and libFuzzer runtimes, and
+# llvm-symbolizer for readable sanitizer reports.
+TEST_PACKAGES=(clang libclang-rt-dev llvm)
 BUILD_DIR=${COMPOSE_BUILD_DIR:-build}
+SANITIZE_DIR=${COMPOSE_SANITIZE_BUILD_DIR:-build-sanitize}
 
 say() { printf 'setup: %s\n' "$*" >&2; }
 
 install_packages() {
   local missing=()
-  for p in "${PACKAGES[@]}"; do
+  for p in "${PACKAGES[@]}" "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
@@ -37,6 +44,19 @@ build() {
   cmake --build "$BUILD_DIR" -j"$(nproc)"
 }
 
+# The hardening build: every project target with -fsanitize=address,undefined
+# -fno-sanitize-recover=all (any report fails the test), and the libFuzzer targets of tests/fuzz.
+# -O1 with line tables: quick to build, stack traces with file and line. No benchmarks.
+build_sanitize() {
+  CXX=clang++ cmake -S . -B "$SANITIZE_DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -gline-tables-only -DNDEBUG" \
+    -DCOMPOSE_SANITIZE=ON -DCOMPOSE_FUZZ=ON -DCOMPOSE_WERROR=ON -DCOMPOSE_BUILD_BENCHMARKS=OFF >/dev/null
+  cmake --build "$SANITIZE_DIR" -j"$(nproc)"
+}
+
+# Seconds since the start of the script, for the phase lines.
+phase() { say "$(printf '%4d:%02d' $((SECONDS / 60)) $((SECONDS % 60))) $*"; }
+
 fetch_samples() {
   SAMPLES=$(bash samples/fetch.sh | tail -n 1)
   export COMPOSE_SAMPLES_DIR=$SAMPLES
@@ -50,10 +70,21 @@ case "${1:-demo}" in
     "$BUILD_DIR/src/app/compose" --plate "$SAMPLES/meadow.jpg" --object "$SAMPLES/bunny.obj" --out out/compose
     ;;
   test)
-    install_packages
+    install_packages "${TEST_PACKAGES[@]}"
+    phase "Release build"
     build
     fetch_samples
+    phase "Release suite"
     ctest --test-dir "$BUILD_DIR" --output-on-failure -j"$(nproc)"
+    phase "sanitizer build (clang, AddressSanitizer + UndefinedBehaviorSanitizer, fuzz targets)"
+    build_sanitize
+    phase "sanitizer suite (with the fuzz targets' corpora and regressions)"
+    ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0} \
+      UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1} \
+      ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)"
+    phase "fuzz smoke pass (${COMPOSE_FUZZ_SECONDS:-20} s per target)"
+    COMPOSE_FUZZ_BUILD_DIR=$SANITIZE_DIR tests/fuzz/run.sh "${COMPOSE_FUZZ_SECONDS:-20}"
+    phase "done"
     ;;
   build)
     install_packages
