@@ -214,13 +214,17 @@ class PrecomputeStage final : public Stage {
     if (ctx.needs(kLighting)) {
       if (!meta.contains("lighting")) return false;
       BasisChoice choice = createBasis(ctx.job, nullptr, meta["lighting"].value("order", 0));
-      if (!choice.basis->importState(cache.get("lighting"))) return false;
+      if (!choice.basis->importState(cache.get("lighting")) ||
+          !lighting::LightingCache::finiteIrradiance(*choice.basis))
+        return false;
       ctx.artefacts.lighting = std::move(choice.basis);
     }
     if (ctx.needs(kShadowLighting)) {
       if (!meta.contains("shadowLighting")) return false;
       ShadowLighting sl = shadowLightingFor(ShadowPlan::parse(ctx.job.shadowParams));
-      if (!sl.lighting->importState(cache.get("shadowBasis"))) return false;
+      if (!sl.lighting->importState(cache.get("shadowBasis")) ||
+          !lighting::LightingCache::finiteIrradiance(*sl.lighting))
+        return false;
       sl.split.sources = sourcesFromFloats(cache.get("sources"));
       sl.split.sourceShare = meta["shadowLighting"].value("sourceShare", 0.0);
       sl.reason = meta["shadowLighting"].value("reason", "");

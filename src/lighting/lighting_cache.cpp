@@ -1,10 +1,13 @@
 #include "lighting/lighting_cache.h"
 
-#include "core/hash.h"
-
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+
+#include <glm/geometric.hpp>
+
+#include "core/hash.h"
 
 namespace compose::lighting {
 
@@ -23,13 +26,30 @@ std::string LightingCache::key(const Environment& env, const DiffuseLighting& ba
   return h.hex();
 }
 
+bool LightingCache::finiteIrradiance(const DiffuseLighting& basis) {
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z) {
+        if (x == 0 && y == 0 && z == 0) continue;
+        const glm::vec3 e =
+            basis.irradiance(glm::normalize(glm::vec3(float(x), float(y), float(z))));
+        if (!(std::isfinite(e.x) && std::isfinite(e.y) && std::isfinite(e.z))) return false;
+      }
+  return true;
+}
+
 bool LightingCache::load(const std::string& key, DiffuseLighting& basis,
                          std::vector<std::string>* notes) const {
   const FloatCache::Read r = files_.read(key, basis.parameterKey());
   std::string problem = r.problem;
   if (r.status == FloatCache::Read::Status::Hit) {
-    if (basis.importState(r.values)) return true;
-    problem = "does not fit the basis (" + std::to_string(r.values.size()) + " values)";
+    if (!basis.importState(r.values)) {
+      problem = "does not fit the basis (" + std::to_string(r.values.size()) + " values)";
+    } else if (!finiteIrradiance(basis)) {
+      problem = "holds values that give non-finite irradiance";
+    } else {
+      return true;
+    }
   }
   if (notes && !problem.empty()) {
     notes->push_back("the cached lighting " + pathFor(key).string() + " " + problem +

@@ -30,6 +30,10 @@ class LightingCache {
       : files_(std::move(folder), "COMPLIT4", ".lighting") {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);
+  // Whether a restored basis gives finite irradiance (probed at the 26 axis and diagonal
+  // directions): a state of finite numbers can still overflow when evaluated (products of
+  // coefficients), which no projection of ours produces. A restored state that fails is refused.
+  static bool finiteIrradiance(const DiffuseLighting& basis);
   std::filesystem::path pathFor(const std::string& key) const { return files_.pathFor(key); }
 
   // Restores `basis` from the entry for `key`; false on a miss or an entry that is invalid or
