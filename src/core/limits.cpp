@@ -68,8 +68,9 @@ void checkTriangleCount(int64_t triangles, const std::filesystem::path& file) {
   const ResourceLimits& limits = resourceLimits();
   if (triangles > limits.maxTriangles) {
     throw Error("mesh",
-                "mesh has " + std::to_string(triangles) + " triangles, more than the limit of " +
-                    std::to_string(limits.maxTriangles) + " (raise it with --max-triangles)",
+                "mesh has at least " + std::to_string(triangles) +
+                    " triangles, more than the limit of " + std::to_string(limits.maxTriangles) +
+                    " (raise it with --max-triangles)",
                 file);
   }
 }

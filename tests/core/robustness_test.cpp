@@ -109,7 +109,7 @@ TEST(ResourceLimits, MeshesBeyondTheTriangleLimitAreRefused) {
   one.maxTriangles = 1;
   const ScopedLimits scoped(one);
   COMPOSE_EXPECT_ERROR(render::loadMesh(dir / "quad.obj"),
-                       "mesh has 2 triangles, more than the limit of 1 (raise it with "
+                       "mesh has at least 2 triangles, more than the limit of 1 (raise it with "
                        "--max-triangles)");
 }
 
