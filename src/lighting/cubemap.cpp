@@ -134,6 +134,13 @@ CubeMap CubeMap::fromFaces(const std::array<const Image*, kCubeFaces>& faces,
                             std::to_string(x) + ", " + std::to_string(y) + ")",
                         where(f));
           }
+          if (v > kMaxRadiance) {
+            throw Error("ingest",
+                        "radiance " + std::to_string(v) + " in cube face " + faceName(f) +
+                            " at texel (" + std::to_string(x) + ", " + std::to_string(y) +
+                            ") is beyond any light (more than 1e18): a damaged file?",
+                        where(f));
+          }
           if (v < 0.0f) {
             local.mostNegative = std::min(local.mostNegative, v);
             negative = true;

@@ -73,6 +73,14 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
                           std::to_string(x) + ", " + std::to_string(y) + ")",
                       file);
         }
+        if (v > kMaxRadiance) {
+          throw Error("lighting",
+                      "radiance " + std::to_string(v) + " at texel (" + std::to_string(x) + ", " +
+                          std::to_string(y) +
+                          ") is beyond any light (more than 1e18): a damaged "
+                          "file?",
+                      file);
+        }
         if (v < 0.0f) {
           local.mostNegative = std::min(local.mostNegative, v);
           negative = true;

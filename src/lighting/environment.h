@@ -25,6 +25,12 @@
 namespace compose::lighting {
 
 // What fromLatLong() did to make the data usable.
+// The largest radiance an environment texel may hold: 10^18, a billion times the sun's luminance
+// in cd/m² (1.6·10^9). Anything beyond it is damage, not light, and its integrals would overflow
+// single precision (found by fuzzing: a texel of 3·10^38 gave infinite irradiance); such a texel
+// is an error, like NaN and infinity.
+inline constexpr float kMaxRadiance = 1e18f;
+
 struct SanitizeReport {
   int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
   float mostNegative = 0.0f;
@@ -35,9 +41,9 @@ class Environment {
   Environment() = default;
 
   // Takes an RGB (or RGBA: alpha is dropped) lat-long image of radiance. The width must be twice
-  // the height. NaN or infinite texels are rejected (compose::Error naming `file` and the first bad
-  // texel); negative values, which lossy HDR codecs produce near zero, are clamped to 0 and
-  // counted in `report`.
+  // the height. NaN, infinite or larger than kMaxRadiance texels are rejected (compose::Error
+  // naming `file` and the first bad texel); negative values, which lossy HDR codecs produce near
+  // zero, are clamped to 0 and counted in `report`.
   static Environment fromLatLong(const Image& image, const std::filesystem::path& file = {},
                                  SanitizeReport* report = nullptr);
 
