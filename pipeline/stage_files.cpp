@@ -113,8 +113,9 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   if (!fs::is_regular_file(file, ec)) throw Error("render", "lighting file not found", file);
   if (!entry->open())
     throw Error("render",
-                "not a lighting file of compose precompute (or a damaged one): write it again "
-                "with compose precompute",
+                "not a lighting file of compose precompute (or a damaged one" +
+                    (entry->problem().empty() ? std::string() : ": it " + entry->problem()) +
+                    "): write it again with compose precompute",
                 file);
   const nlohmann::json& meta = entry->meta();
   if (!meta.contains("parameters") || !meta["parameters"].is_object())
