@@ -150,6 +150,10 @@ class RenderStage final : public Stage {
              }},
             pathParameter("calib", "lens calibration of the plate's camera (compose calib lens)",
                           &ComposeJob::lensFile),
+            pathParameter("pose",
+                          "plate pose over a chessboard (compose calib pose): its plane is the "
+                          "ground",
+                          &ComposeJob::poseFile),
             {"albedo",
              "[R, G, B] albedo in the working space for the whole object, or null (the "
              "mesh's materials, else clay grey)",
