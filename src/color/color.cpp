@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
+#include <utility>
 
 #include <OpenColorIO/OpenColorIO.h>
 #include <glm/mat3x3.hpp>
@@ -324,11 +325,16 @@ void ColorConfig::checkDisplayView(const std::string& display, const std::string
 
 Image ColorConfig::toDisplay(const Image& image, const std::string& display,
                              const std::string& view) const {
+  return toDisplay(Image(image), display, view);
+}
+
+Image ColorConfig::toDisplay(Image&& image, const std::string& display,
+                             const std::string& view) const {
   checkDisplayView(display, view);
-  Image out = image;
+  Image out = std::move(image);
   try {
     OCIO::DisplayViewTransformRcPtr t = OCIO::DisplayViewTransform::Create();
-    t->setSrc(resolve(image.colorSpace, "an image").c_str());
+    t->setSrc(resolve(out.colorSpace, "an image").c_str());
     t->setDisplay(display.c_str());
     t->setView(view.c_str());
     applyRgb(impl_->config->getProcessor(t), out);

@@ -87,6 +87,9 @@ class ColorConfig {
   // Applies the display/view transform to the first three channels; the result is display-encoded
   // (to be quantised and written as JPEG/PNG) and tagged "<display>/<view>".
   Image toDisplay(const Image& image, const std::string& display, const std::string& view) const;
+  // The same on an image the caller gives up: its pixels are transformed in place and returned,
+  // with no copy of the frame.
+  Image toDisplay(Image&& image, const std::string& display, const std::string& view) const;
 
   struct Impl;  // the OpenColorIO config; defined in color.cpp
 
