@@ -134,28 +134,47 @@ void StageCache::putImage(const std::string& name, const Image& image) {
   put(name, image.pixels);
 }
 
-bool StageCache::getImage(const std::string& name, Image& image) const {
-  if (!meta_.contains("images") || !meta_["images"].contains(name)) return false;
+const std::vector<float>* StageCache::imageWithoutPixels(const std::string& name,
+                                                         Image& image) const {
+  if (!meta_.contains("images") || !meta_["images"].contains(name)) return nullptr;
   const nlohmann::json& m = meta_["images"][name];
   try {
     const int width = m.at("width").get<int>(), height = m.at("height").get<int>(),
               channels = m.at("channels").get<int>();
-    const std::vector<float>& values = get(name);
-    if (width < 0 || height < 0 || channels < 0 ||
-        values.size() != size_t(width) * size_t(height) * size_t(channels))
-      return false;
+    const auto it = arrays_.find(name);
+    if (it == arrays_.end() || width < 0 || height < 0 || channels < 0 ||
+        it->second.size() != size_t(width) * size_t(height) * size_t(channels))
+      return nullptr;
     Image out;
     out.width = width;
     out.height = height;
     out.channels = channels;
     out.channelNames = m.at("names").get<std::vector<std::string>>();
     out.colorSpace = m.at("colorSpace").get<std::string>();
-    out.pixels = values;
     image = std::move(out);
-    return true;
+    return &it->second;
   } catch (const nlohmann::json::exception&) {
-    return false;
+    return nullptr;
   }
+}
+
+bool StageCache::getImage(const std::string& name, Image& image) const {
+  Image out;
+  const std::vector<float>* pixels = imageWithoutPixels(name, out);
+  if (!pixels) return false;
+  out.pixels = *pixels;
+  image = std::move(out);
+  return true;
+}
+
+bool StageCache::takeImage(const std::string& name, Image& image) {
+  Image out;
+  if (!imageWithoutPixels(name, out)) return false;
+  std::vector<float>& pixels = arrays_[name];
+  out.pixels = std::move(pixels);
+  pixels = {};
+  image = std::move(out);
+  return true;
 }
 
 }  // namespace compose::pipeline

@@ -218,14 +218,14 @@ class MergeStage final : public Stage {
     ctx.keys[kMergedViews] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& meta = cache.meta();
     if (!meta.contains("views") || !meta["views"].is_array()) return false;
     hdr::CaptureMergeResult merged;
     for (size_t i = 0; i < meta["views"].size(); ++i) {
       hdr::MergedView view;
       view.name = meta["views"][i].get<std::string>();
-      if (!cache.getImage("view" + std::to_string(i), view.radiance)) return false;
+      if (!cache.takeImage("view" + std::to_string(i), view.radiance)) return false;
       merged.views.push_back(std::move(view));
     }
     merged.linearisation = meta.value("linearisation", "");
@@ -302,9 +302,9 @@ class StitchStage final : public Stage {
     ctx.keys[kStitched] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     Image image;
-    if (!cache.getImage("environment", image)) return false;
+    if (!cache.takeImage("environment", image)) return false;
     ctx.artefacts.stitched = std::move(image);
     return true;
   }
@@ -452,8 +452,19 @@ class ColorStage final : public Stage {
     const std::string working = ctx.colors.workingSpace();
     std::string reason;
     if (ctx.needs(kPlateLinear)) {
-      const ingest::LoadedImage& plate = *ctx.artefacts.plate;
-      Image linear = toRgb(plate.image);
+      ingest::LoadedImage& plate = *ctx.artefacts.plate;
+      // An RGB plate's pixels become the linear plate, converted in place: no later stage reads
+      // the plate as decoded, only its size and header (the camera), which it keeps.
+      Image linear;
+      if (plate.image.channels == 3) {
+        linear = std::move(plate.image);
+        plate.image.pixels = {};
+        plate.image.width = linear.width;
+        plate.image.height = linear.height;
+        plate.image.channels = linear.channels;
+      } else {
+        linear = toRgb(plate.image);
+      }
       reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
                                                  ctx.job.plateSpace, "--plate-space", ctx.colors);
       ctx.artefacts.plateLinear = std::move(linear);

@@ -460,7 +460,7 @@ bool writeRows(OIIO::ImageOutput& output, int y0, const ChannelSources& sources)
 
 void describeExr(OIIO::ImageSpec& spec, const std::string& colorSpace,
                  const WriteOptions& options) {
-  spec.attribute("compression", "zip");
+  spec.attribute("compression", options.exrCompression);
   if (!colorSpace.empty()) spec.attribute("colorSpace", colorSpace);
   if (options.chromaticities) {
     float c[8];
@@ -582,7 +582,7 @@ std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const fs::path& pat
     spec.alpha_channel = part.options.alphaChannel;
     spec.attribute("name", part.name);
     spec.attribute("Software", "compose");
-    describeExr(spec, image.colorSpace, part.options);
+    describeExr(spec, part.colorSpace.empty() ? image.colorSpace : part.colorSpace, part.options);
     for (const auto& [name, m] : header.matrices) spec.attribute(name, OIIO::TypeMatrix, m.data());
     for (const auto& [name, value] : header.strings) spec.attribute(name, value);
     specs.push_back(std::move(spec));
