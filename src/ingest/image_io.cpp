@@ -359,9 +359,12 @@ float largestFiniteMagnitude(const ChannelSources& sources) {
   for (const Image* image : sources.images) {
     std::vector<float> rowLargest(size_t(image->height), 0.0f);
     parallelFor(0, image->height, [&](int64_t y) {
+      // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
       float m = 0.0f;
-      for (float v : image->row(int(y)))
-        if (std::isfinite(v)) m = std::max(m, std::abs(v));
+      for (float v : image->row(int(y))) {
+        const float a = std::abs(v);
+        m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+      }
       rowLargest[size_t(y)] = m;
     });
     for (float m : rowLargest) largest = std::max(largest, m);
