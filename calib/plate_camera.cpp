@@ -99,6 +99,7 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   const double pitch = options.pitchDegrees * std::numbers::pi / 180.0;
   cam.worldFromCamera = glm::translate(glm::dmat4(1.0), glm::dvec3(0.0, options.height, 0.0)) *
                         glm::rotate(glm::dmat4(1.0), -pitch, glm::dvec3(1.0, 0.0, 0.0));
+  if (options.worldFromCamera) cam.worldFromCamera = *options.worldFromCamera;
   return cam;
 }
 

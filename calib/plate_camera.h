@@ -49,6 +49,9 @@ struct CameraOptions {
   std::optional<double> focal35mm;  // overrides EXIF
   double height = 1.6;              // metres above the ground
   double pitchDegrees = 0.0;        // positive tilts the camera down
+  // The camera's pose in a world whose ground is y = 0 (a plate pose from `compose calib pose`:
+  // the board's frame); overrides height and pitch.
+  std::optional<glm::dmat4> worldFromCamera;
 
   // Throws compose::UsageError naming the option when a value is out of range.
   void validate() const;

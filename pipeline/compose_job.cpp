@@ -118,6 +118,10 @@ void validate(const ComposeJob& job) {
   job.placement.validate();
   ShadowPlan::parse(job.shadowParams);
   if (job.room && job.environmentRadius) throw UsageError("give either --room or --env-radius");
+  if (!job.poseFile.empty() && (job.room || job.environmentRadius) && !job.captureAt)
+    throw UsageError(
+        "with --pose, parallax needs --capture-at (in the board's frame and units): where the "
+        "environment was captured");
   if (job.captureAt && !job.room && !job.environmentRadius)
     throw UsageError(
         "--capture-at needs --room or --env-radius (a distant environment has no "

@@ -73,6 +73,9 @@ struct ComposeJob {
   double environmentYawDegrees = 0.0;
   // A lens calibration (compose calib lens) for the plate; empty: EXIF or --focal35.
   std::filesystem::path lensFile;
+  // A plate pose (compose calib pose): the camera's position and tilt over the chessboard's plane,
+  // which becomes the ground the object stands on (and its lens, unless lensFile is given).
+  std::filesystem::path poseFile;
 
   calib::CameraOptions camera;
   calib::Placement placement;

@@ -4,6 +4,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "calib/chessboard.h"
 #include "calib/lens.h"
 #include "core/error.h"
 #include "pipeline/stage_util.h"
@@ -34,6 +35,7 @@ Hash128 Context::geometryKey() const {
   h.combine(key(artefact::kPlate));
   h.combine(key(artefact::kMesh));
   if (!job.lensFile.empty()) hashFile(h, job.lensFile, "camera");
+  if (!job.poseFile.empty()) hashFile(h, job.poseFile, "camera");
   h.number(job.camera.focal35mm.value_or(-1.0));
   h.number(job.camera.height);
   h.number(job.camera.pitchDegrees);
@@ -52,6 +54,12 @@ const Geometry& Context::geometry() {
   const render::Mesh& mesh = *artefacts.mesh;
   calib::CameraOptions options = job.camera;
   if (!job.lensFile.empty()) options.lens = calib::readLens(job.lensFile);
+  if (!job.poseFile.empty()) {
+    // The board's plane is the ground; the pose's lens is the plate's unless --calib says else.
+    const calib::PlatePose pose = calib::readPose(job.poseFile);
+    if (!options.lens) options.lens = pose.lens;
+    options.worldFromCamera = pose.worldFromCamera;
+  }
   Geometry g{calib::plateCamera(plate.image.width, plate.image.height, plate.info, options)};
   g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin()),
                                            glm::dvec3(mesh.boundsMax()));

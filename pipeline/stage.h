@@ -68,8 +68,9 @@ class Stage {
   virtual void keys(Context& context) const = 0;
   // Whether the outputs are kept in the stage cache (expensive ones are; cheap ones are not).
   virtual bool cached() const { return false; }
-  // Restores the outputs from a cache entry; false if it does not fit (the stage then runs).
-  virtual bool load(Context& /*context*/, const StageCache& /*cache*/) const { return false; }
+  // Restores the outputs from a cache entry; false if it does not fit (the stage then runs). It
+  // may take the entry's arrays (StageCache::takeImage) rather than copy them.
+  virtual bool load(Context& /*context*/, StageCache& /*cache*/) const { return false; }
   // Computes the outputs the context needs; returns what it did (one line for the report).
   virtual std::string run(Context& context) const = 0;
   // Writes the outputs into the entry and the entry to disk; false if that failed.

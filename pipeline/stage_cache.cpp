@@ -207,8 +207,9 @@ void StageCache::putImage(const std::string& name, const Image& image) {
   put(name, image.pixels);
 }
 
-bool StageCache::getImage(const std::string& name, Image& image) const {
-  if (!meta_.contains("images") || !meta_["images"].contains(name)) return false;
+const std::vector<float>* StageCache::imageWithoutPixels(const std::string& name,
+                                                         Image& image) const {
+  if (!meta_.contains("images") || !meta_["images"].contains(name)) return nullptr;
   const nlohmann::json& m = meta_["images"][name];
   // Whole numbers in int's range only (a conversion from anything else would be undefined).
   auto whole = [&](const char* key) -> int {
@@ -217,30 +218,48 @@ bool StageCache::getImage(const std::string& name, Image& image) const {
     const int64_t v = it->get<int64_t>();
     return v >= 0 && v <= INT32_MAX ? int(v) : -1;
   };
-  if (!m.is_object()) return false;
+  if (!m.is_object()) return nullptr;
   try {
     const int width = whole("width"), height = whole("height"), channels = whole("channels");
-    const std::vector<float>& values = get(name);
+    const auto it = arrays_.find(name);
     // Sizes within the pixel limit (so that the product below cannot overflow) and matching the
     // stored values exactly.
     const int64_t maxPixels = resourceLimits().maxPixels;
-    if (width < 0 || height < 0 || channels < 0 || channels > 64 ||
+    if (it == arrays_.end() || width < 0 || height < 0 || channels < 0 || channels > 64 ||
         (height > 0 && int64_t(width) > maxPixels / height) ||
-        values.size() != size_t(width) * size_t(height) * size_t(channels))
-      return false;
+        it->second.size() != size_t(width) * size_t(height) * size_t(channels))
+      return nullptr;
     Image out;
     out.width = width;
     out.height = height;
     out.channels = channels;
     out.channelNames = m.at("names").get<std::vector<std::string>>();
-    if (!out.channelNames.empty() && out.channelNames.size() != size_t(channels)) return false;
+    if (!out.channelNames.empty() && out.channelNames.size() != size_t(channels)) return nullptr;
     out.colorSpace = m.at("colorSpace").get<std::string>();
-    out.pixels = values;
     image = std::move(out);
-    return true;
+    return &it->second;
   } catch (const nlohmann::json::exception&) {
-    return false;
+    return nullptr;
   }
+}
+
+bool StageCache::getImage(const std::string& name, Image& image) const {
+  Image out;
+  const std::vector<float>* pixels = imageWithoutPixels(name, out);
+  if (!pixels) return false;
+  out.pixels = *pixels;
+  image = std::move(out);
+  return true;
+}
+
+bool StageCache::takeImage(const std::string& name, Image& image) {
+  Image out;
+  if (!imageWithoutPixels(name, out)) return false;
+  std::vector<float>& pixels = arrays_[name];
+  out.pixels = std::move(pixels);
+  pixels = {};
+  image = std::move(out);
+  return true;
 }
 
 }  // namespace compose::pipeline

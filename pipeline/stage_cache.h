@@ -61,6 +61,9 @@ class StageCache {
   // An image: its size, channel names and colour space in the header, its pixels as an array.
   void putImage(const std::string& name, const Image& image);
   bool getImage(const std::string& name, Image& image) const;
+  // The same, moving the pixels out of the entry instead of copying them (the entry's array is
+  // left empty): a large image is then held once, not twice.
+  bool takeImage(const std::string& name, Image& image);
 
  private:
   std::filesystem::path path_;
@@ -69,6 +72,10 @@ class StageCache {
   mutable std::string error_;
   nlohmann::json meta_ = nlohmann::json::object();
   std::map<std::string, std::vector<float>> arrays_;
+
+  // The image of that name with its size, names and colour space but no pixels, and the array
+  // that holds them; nullptr if there is none or it does not fit.
+  const std::vector<float>* imageWithoutPixels(const std::string& name, Image& image) const;
   mutable std::string problem_;
 };
 

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "cubemap/layouts.h"
 #include "cubemap/photo_header.h"
 #include "cubemap/render_view.h"
@@ -89,6 +90,17 @@ void prepareEnvironment(Context& ctx) {
   }
 }
 
+// The float pixels of an image read as its 8-bit codes (code / 255, as OpenImageIO converts).
+void floatsFromCodes(ingest::LoadedImage& loaded) {
+  Image& image = loaded.image;
+  image.pixels.resize(loaded.codes.size());
+  parallelFor(0, image.height, [&](int64_t y) {
+    const size_t n = size_t(image.width) * size_t(image.channels), first = size_t(y) * n;
+    for (size_t i = first; i < first + n; ++i) image.pixels[i] = float(loaded.codes[i]) / 255.0f;
+  });
+  loaded.codes = {};
+}
+
 // ---------------------------------------------------------------------------------------------
 
 class IngestStage final : public Stage {
@@ -149,7 +161,9 @@ class IngestStage final : public Stage {
   std::string run(Context& ctx) const override {
     std::string reason;
     if (ctx.needs(kPlate)) {
-      ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest");
+      // An 8-bit plate stays as its codes, a quarter of the memory: the colour stage converts
+      // them to the working space in one pass.
+      ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest", {.codesForEightBit = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
     }
@@ -218,14 +232,14 @@ class MergeStage final : public Stage {
     ctx.keys[kMergedViews] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& meta = cache.meta();
     if (!meta.contains("views") || !meta["views"].is_array()) return false;
     hdr::CaptureMergeResult merged;
     for (size_t i = 0; i < meta["views"].size(); ++i) {
       hdr::MergedView view;
       view.name = meta["views"][i].get<std::string>();
-      if (!cache.getImage("view" + std::to_string(i), view.radiance)) return false;
+      if (!cache.takeImage("view" + std::to_string(i), view.radiance)) return false;
       merged.views.push_back(std::move(view));
     }
     merged.linearisation = meta.value("linearisation", "");
@@ -302,9 +316,9 @@ class StitchStage final : public Stage {
     ctx.keys[kStitched] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     Image image;
-    if (!cache.getImage("environment", image)) return false;
+    if (!cache.takeImage("environment", image)) return false;
     ctx.artefacts.stitched = std::move(image);
     return true;
   }
@@ -452,10 +466,36 @@ class ColorStage final : public Stage {
     const std::string working = ctx.colors.workingSpace();
     std::string reason;
     if (ctx.needs(kPlateLinear)) {
-      const ingest::LoadedImage& plate = *ctx.artefacts.plate;
-      Image linear = toRgb(plate.image);
-      reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
-                                                 ctx.job.plateSpace, "--plate-space", ctx.colors);
+      // No later stage reads the plate as decoded, only its size and header (the camera): its
+      // pixels become the linear plate. An 8-bit RGB plate (a JPEG) is converted from its codes
+      // into a new float image; any other RGB plate is converted in place.
+      ingest::LoadedImage& plate = *ctx.artefacts.plate;
+      Image linear;
+      if (!plate.codes.empty() && plate.image.channels >= 3 && !plate.info.chromaticities) {
+        const bool named = !ctx.job.plateSpace.empty();
+        const std::string space =
+            named ? ctx.colors.resolve(ctx.job.plateSpace, "--plate-space")
+                  : ctx.colors.inputSpaceFor(ctx.job.plate, plate.info.fileColorSpace);
+        linear = ctx.colors.convertCodes(plate.codes, plate.image.width, plate.image.height,
+                                         plate.image.channels, space, working);
+        plate.codes = {};
+        reason = "plate read as '" + space + "'" + (named ? " (--plate-space)" : "");
+      } else {
+        if (!plate.codes.empty()) {
+          floatsFromCodes(plate);
+        }
+        if (plate.image.channels == 3) {
+          linear = std::move(plate.image);
+          plate.image.pixels = {};
+          plate.image.width = linear.width;
+          plate.image.height = linear.height;
+          plate.image.channels = linear.channels;
+        } else {
+          linear = toRgb(plate.image);
+        }
+        reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
+                                                   ctx.job.plateSpace, "--plate-space", ctx.colors);
+      }
       ctx.artefacts.plateLinear = std::move(linear);
     }
     if (ctx.needs(kEnvironment)) {

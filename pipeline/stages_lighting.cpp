@@ -1,9 +1,12 @@
 // The stages that light the object: precompute (the environment projected onto the lighting
 // basis, and the shadow lighting), shadows (on the object itself), ground (its shadow on the
 // plate).
+#include <algorithm>
 #include <numbers>
+#include <span>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "core/params.h"
 #include "lighting/capture_volume.h"
 #include "lighting/environment.h"
@@ -209,7 +212,7 @@ class PrecomputeStage final : public Stage {
 
   bool cached() const override { return true; }
 
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& meta = cache.meta();
     if (ctx.needs(kLighting)) {
       if (!meta.contains("lighting")) return false;
@@ -352,7 +355,7 @@ class ShadowsStage final : public Stage {
     ctx.keys[kSelfShadowing] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     ShadowResult r;
     r.points = render::surfacePoints(*ctx.artefacts.mesh);
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
@@ -395,9 +398,55 @@ class ShadowsStage final : public Stage {
 
 // ---------------------------------------------------------------------------------------------
 
+// The ratio cut to the rectangle where it is below 1 (the shadow), and the grid's rectangle with
+// it; no ratio at all when the object casts no shadow on the ground in the frame. The rest of the
+// grid is ground the object does not shade (the sky above the horizon, ground beyond the shadow):
+// 1 there, the plate unchanged, nothing to multiply or to write.
+void cropToShadow(GroundShadowResult& r) {
+  const Image& ratio = r.ratio;
+  if (ratio.empty()) return;
+  std::vector<int> first(size_t(ratio.height), ratio.width), last(size_t(ratio.height), -1);
+  parallelFor(0, ratio.height, [&](int64_t y) {
+    const std::span<const float> row = ratio.row(int(y));
+    for (int x = 0; x < ratio.width; ++x) {
+      const float* p = row.data() + size_t(x) * size_t(ratio.channels);
+      bool shaded = false;
+      for (int c = 0; c < ratio.channels; ++c) shaded = shaded || p[c] != 1.0f;
+      if (!shaded) continue;
+      first[size_t(y)] = std::min(first[size_t(y)], x);
+      last[size_t(y)] = x;
+    }
+  });
+  int x0 = ratio.width, x1 = -1, y0 = -1, y1 = -1;
+  for (int y = 0; y < ratio.height; ++y) {
+    if (last[size_t(y)] < 0) continue;
+    if (y0 < 0) y0 = y;
+    y1 = y;
+    x0 = std::min(x0, first[size_t(y)]);
+    x1 = std::max(x1, last[size_t(y)]);
+  }
+  if (y0 < 0) {
+    r.ratio = Image();
+    return;
+  }
+  if (x0 == 0 && y0 == 0 && x1 == ratio.width - 1 && y1 == ratio.height - 1) return;
+  Image cut(x1 + 1 - x0, y1 + 1 - y0, ratio.channels, ratio.channelNames);
+  cut.colorSpace = ratio.colorSpace;
+  parallelFor(0, cut.height, [&](int64_t y) {
+    const float* s = ratio.at(x0, y0 + int(y));
+    std::copy_n(s, size_t(cut.width) * size_t(cut.channels), cut.row(int(y)).data());
+  });
+  r.grid.x0 += x0;
+  r.grid.y0 += y0;
+  r.grid.x1 = r.grid.x0 + cut.width;
+  r.grid.y1 = r.grid.y0 + cut.height;
+  r.ratio = std::move(cut);
+}
+
 class GroundStage final : public Stage {
  public:
-  static constexpr int kVersion = 1;
+  // 2: the ratio cut to where it is below 1.
+  static constexpr int kVersion = 2;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {
@@ -428,7 +477,7 @@ class GroundStage final : public Stage {
     ctx.keys[kGroundShadow] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     GroundShadowResult r;
     const nlohmann::json& m = cache.meta();
     if (!m.contains("x0")) return false;
@@ -437,7 +486,7 @@ class GroundStage final : public Stage {
     r.grid.x1 = m["x1"];
     r.grid.y1 = m["y1"];
     r.reason = m.value("reason", "");
-    if (m.value("hasRatio", false) && !cache.getImage("ratio", r.ratio)) return false;
+    if (m.value("hasRatio", false) && !cache.takeImage("ratio", r.ratio)) return false;
     ctx.artefacts.groundShadow = std::move(r);
     return true;
   }
@@ -456,7 +505,11 @@ class GroundStage final : public Stage {
                             *ctx.artefacts.shadowLighting, g.envFromWorld, g.envFromObject,
                             ShadowPlan::parse(ctx.job.shadowParams), ctx.progress);
     if (r.grid.empty()) r.ratio = Image();
-    const std::string reason = r.reason;
+    cropToShadow(r);
+    std::string reason = r.reason;
+    reason += r.ratio.empty()
+                  ? "; no shadow falls in the frame"
+                  : format("; the shadow covers %dx%d pixels", r.ratio.width, r.ratio.height);
     ctx.artefacts.groundShadow = std::move(r);
     return reason;
   }

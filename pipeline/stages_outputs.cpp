@@ -2,13 +2,16 @@
 // darkened by the ground shadow, the object over it, the holdout in front), output (the files).
 #include <algorithm>
 #include <cmath>
+#include <future>
 #include <numbers>
+#include <optional>
 
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "composite/composite.h"
 #include "core/error.h"
 #include "core/output_files.h"
+#include "core/parallel.h"
 #include "pipeline/context.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
@@ -85,6 +88,41 @@ Image loadHoldout(const fs::path& file, int width, int height) {
   return std::move(m.image);
 }
 
+// The EXR's compression: lossless, and of OpenImageIO's codecs the cheapest on these images (a
+// photograph's noise in half floats): PIZ writes in about half ZIP's time, files about a fifth
+// larger (compose-bench-pipeline, README).
+const char* const kExrCompression = "piz";
+
+// A warning when the display image shows more than 2 % of the object's pixels as clipped white
+// (their shading is lost).
+std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendered,
+                                             const Image& shown, const fs::path& displayPath,
+                                             const std::string& view) {
+  const Image& beauty = rendered.beauty;
+  std::vector<int64_t> covered(size_t(beauty.height), 0), clipped(size_t(beauty.height), 0);
+  parallelFor(0, beauty.height, [&](int64_t y) {
+    for (int x = 0; x < beauty.width; ++x) {
+      if (beauty.at(x, int(y))[3] < 0.5f) continue;
+      ++covered[size_t(y)];
+      const float* d = shown.at(x + rendered.x0, int(y) + rendered.y0);
+      if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped[size_t(y)];
+    }
+  });
+  int64_t allCovered = 0, allClipped = 0;
+  for (size_t y = 0; y < covered.size(); ++y) {
+    allCovered += covered[y];
+    allClipped += clipped[y];
+  }
+  constexpr double kClippedShare = 0.02;
+  if (allCovered == 0 || double(allClipped) <= kClippedShare * double(allCovered))
+    return std::nullopt;
+  return format(
+      "warning: %.1f%% of the object's pixels are clipped to white in %s (view %s): lower "
+      "--exposure to keep their shading",
+      100.0 * double(allClipped) / double(allCovered), displayPath.filename().string().c_str(),
+      view.c_str());
+}
+
 glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
   if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number())
     throw UsageError(name + " must be [X, Y]");
@@ -150,6 +188,10 @@ class RenderStage final : public Stage {
              }},
             pathParameter("calib", "lens calibration of the plate's camera (compose calib lens)",
                           &ComposeJob::lensFile),
+            pathParameter("pose",
+                          "plate pose over a chessboard (compose calib pose): its plane is the "
+                          "ground",
+                          &ComposeJob::poseFile),
             {"albedo",
              "[R, G, B] albedo in the working space for the whole object, or null (the "
              "mesh's materials, else clay grey)",
@@ -201,7 +243,7 @@ class RenderStage final : public Stage {
     ctx.keys[kObject] = h;
   }
   bool cached() const override { return true; }
-  bool load(Context& ctx, const StageCache& cache) const override {
+  bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& m = cache.meta();
     if (!m.contains("x0")) return false;
     RenderedObject r;
@@ -212,7 +254,7 @@ class RenderStage final : public Stage {
     r.output.rays = m.value("rays", int64_t(0));
     r.output.coverage = m.value("coverage", 0.0);
     r.exposure = m.value("exposure", 1.0f);
-    if (!cache.getImage("beauty", r.output.beauty) || !cache.getImage("aovs", r.output.aovs))
+    if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))
       return false;
     r.notes = m.value("notes", std::vector<std::string>());
     r.meshFile = m.value("mesh", "");
@@ -315,26 +357,36 @@ class CompositeStage final : public Stage {
   }
   std::string run(Context& ctx) const override {
     const RenderedObject& object = *ctx.artefacts.object;
-    const Image& plate = *ctx.artefacts.plateLinear;
-    const calib::PlateCamera& camera = ctx.geometry().camera;
-    if (camera.width != plate.width || camera.height != plate.height) {
-      throw Error("composite",
-                  format("the object was rendered for a %dx%d plate; this plate is %dx%d",
-                         camera.width, camera.height, plate.width, plate.height),
-                  ctx.job.plate);
+    {
+      const Image& plate = *ctx.artefacts.plateLinear;
+      const calib::PlateCamera& camera = ctx.geometry().camera;
+      if (camera.width != plate.width || camera.height != plate.height) {
+        throw Error("composite",
+                    format("the object was rendered for a %dx%d plate; this plate is %dx%d",
+                           camera.width, camera.height, plate.width, plate.height),
+                    ctx.job.plate);
+      }
     }
     std::string reason = "the object over the plate";
-    Image base = plate;
+    // Made in place in the linear plate, which no later stage reads; a holdout needs the plate
+    // as it was, so it is copied then.
+    const bool holdout = !ctx.job.holdout.empty();
+    Image out;
+    if (holdout) {
+      out = *ctx.artefacts.plateLinear;
+    } else {
+      out = std::move(*ctx.artefacts.plateLinear);
+      ctx.artefacts.plateLinear.reset();
+    }
     if (ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()) {
       const GroundShadowResult& ground = *ctx.artefacts.groundShadow;
-      composite::multiply(base, ground.ratio, ground.grid.x0, ground.grid.y0);
+      composite::multiply(out, ground.ratio, ground.grid.x0, ground.grid.y0);
       reason = "the plate darkened by the ground shadow, the object over it";
     }
-    Image out = composite::over(object.output.beauty, object.output.x0, object.output.y0, base);
-    base = Image();
-    if (!ctx.job.holdout.empty()) {
+    composite::overInPlace(out, object.output.beauty, object.output.x0, object.output.y0);
+    if (holdout) {
       const Image mask = loadHoldout(ctx.job.holdout, out.width, out.height);
-      out = composite::holdout(out, plate, mask);
+      out = composite::holdout(out, *ctx.artefacts.plateLinear, mask);
       reason += ", the holdout's plate in front";
     }
     ctx.artefacts.composite = std::move(out);
@@ -394,30 +446,27 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const fs::path& displayPath) {
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
-  Image compositeRgba(composite.width, composite.height, 4, {"R", "G", "B", "A"});
-  compositeRgba.colorSpace = working;
-  for (size_t i = 0; i < composite.pixelCount(); ++i) {
-    std::copy_n(composite.pixels.data() + 3 * i, 3, compositeRgba.pixels.data() + 4 * i);
-    compositeRgba.pixels[4 * i + 3] = 1.0f;
-  }
-  const std::vector<std::string>& aovNames = render::aovChannelNames();
-  const int objectChannels = 4 + int(aovNames.size());
-  std::vector<std::string> objectNames = {"object.R", "object.G", "object.B", "object.A"};
-  objectNames.insert(objectNames.end(), aovNames.begin(), aovNames.end());
-  Image object(rendered.beauty.width, rendered.beauty.height, objectChannels, objectNames);
-  object.colorSpace = working;
-  for (size_t i = 0; i < object.pixelCount(); ++i) {
-    float* d = object.pixels.data() + i * size_t(objectChannels);
-    std::copy_n(rendered.beauty.pixels.data() + 4 * i, 4, d);
-    std::copy_n(rendered.aovs.pixels.data() + i * aovNames.size(), aovNames.size(), d + 4);
-  }
-  ingest::ExrPart compositePart{"composite",     &compositeRgba,   0, 0,
+  COMPOSE_CHECK(composite.channels == 3 && rendered.beauty.channels == 4);
+  // The parts are written from the images as they are, without interleaving them into new ones
+  // first: the composite's RGB with an opaque alpha added on the way, the object's RGBA followed
+  // by its AOVs.
+  ingest::ExrPart compositePart{"composite",     &composite,       0, 0,
                                 composite.width, composite.height, {}};
+  compositePart.channelNames = {"R", "G", "B"};
+  compositePart.constantChannels = {{"A", 1.0f}};
+  compositePart.colorSpace = working;
   compositePart.options.depth = ingest::WriteOptions::Depth::Half;
   compositePart.options.alphaChannel = 3;
   compositePart.options.chromaticities = colors.chromaticities(working);
-  ingest::ExrPart objectPart{"object",        &object,          rendered.x0,          rendered.y0,
+  compositePart.options.exrCompression = kExrCompression;
+  ingest::ExrPart objectPart{"object",        &rendered.beauty, rendered.x0,          rendered.y0,
                              composite.width, composite.height, compositePart.options};
+  const std::vector<std::string>& aovNames = render::aovChannelNames();
+  COMPOSE_CHECK(rendered.aovs.channels == int(aovNames.size()));
+  objectPart.colorSpace = working;
+  objectPart.moreImages = {&rendered.aovs};
+  objectPart.channelNames = {"object.R", "object.G", "object.B", "object.A"};
+  objectPart.channelNames.insert(objectPart.channelNames.end(), aovNames.begin(), aovNames.end());
   if (!compositePart.options.chromaticities) {
     notes.push_back("the config (" + colors.source() +
                     ") does not say what the primaries of the working space '" + working +
@@ -456,41 +505,37 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
 
   const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
   const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
-  Image shown = colors.toDisplay(composite, display, view);
-  {
-    // Object pixels that the display image shows as clipped white: their shading is lost.
-    int64_t covered = 0, clipped = 0;
-    for (int y = 0; y < rendered.beauty.height; ++y) {
-      for (int x = 0; x < rendered.beauty.width; ++x) {
-        if (rendered.beauty.at(x, y)[3] < 0.5f) continue;
-        ++covered;
-        const float* d = shown.at(x + rendered.x0, y + rendered.y0);
-        if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped;
-      }
-    }
-    constexpr double kClippedShare = 0.02;
-    if (covered > 0 && double(clipped) > kClippedShare * double(covered)) {
-      notes.push_back(
-          format("warning: %.1f%% of the object's pixels are clipped to white in %s "
-                 "(view %s): lower --exposure to keep their shading",
-                 100.0 * double(clipped) / double(covered), displayPath.filename().string().c_str(),
-                 view.c_str()));
-    }
-  }
   // Both files appear together or not at all: a failure keeps every previous output.
   OutputFiles outputs("output");
   std::vector<ingest::ExrPart> parts = {compositePart, objectPart};
   if (ground) {
-    // The ground shadow's ratio, in its own data window: 1 where the plate is unchanged.
+    // The ground shadow's ratio, in its own data window (where it is below 1): 1 elsewhere.
     ingest::ExrPart shadowPart{
         "shadow",        &ground->ratio,   ground->grid.x0,      ground->grid.y0,
         composite.width, composite.height, compositePart.options};
     shadowPart.options.alphaChannel = -1;
     parts.push_back(shadowPart);
   }
-  const std::vector<ingest::WriteReport> written =
-      ingest::writeExrParts(outputs, exrPath, parts, header);
-  ingest::writeImage(outputs, displayPath, shown, {});
+  // The display image (the view transform, the clipping check, the JPEG) is made on a thread of
+  // its own while the EXR is written: OpenEXR compresses on its own threads and leaves cores idle
+  // between blocks of rows, and the JPEG encoder runs on one core.
+  std::future<std::vector<std::string>> displayed = std::async(std::launch::async, [&] {
+    std::vector<std::string> displayNotes;
+    const Image shown = colors.toDisplay(composite, display, view);
+    if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
+      displayNotes.push_back(*n);
+    ingest::writeImage(outputs, displayPath, shown, {});
+    return displayNotes;
+  });
+  std::vector<ingest::WriteReport> written;
+  try {
+    written = ingest::writeExrParts(outputs, exrPath, parts, header);
+  } catch (...) {
+    displayed.wait();  // the display thread uses `outputs`: let it finish before unwinding
+    throw;
+  }
+  const std::vector<std::string> displayNotes = displayed.get();
+  notes.insert(notes.end(), displayNotes.begin(), displayNotes.end());
   outputs.commit();
   for (const ingest::WriteReport& w : written) {
     if (!w.promotedToFloat) continue;

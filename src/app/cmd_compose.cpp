@@ -121,6 +121,10 @@ void ComposeOptions::addObject(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--calib", job.lensFile,
                  "Lens calibration of the plate's camera (JSON from compose calib lens)");
+  app.add_option("--pose", job.poseFile,
+                 "Plate pose over a chessboard (JSON from compose calib pose): the object stands "
+                 "on the board's plane, the camera where the pose puts it (replaces "
+                 "--camera-height and --pitch; lengths in the board's square units)");
   app.add_option("--albedo", albedo,
                  "Object albedo, one value or R,G,B in the working space, instead of the "
                  "mesh's materials [default: the materials, else 0.5]");
@@ -174,6 +178,9 @@ void ComposeOptions::apply(const CLI::App& app) {
   } else if (shadows != "self") {
     throw UsageError("--shadows must be self or off, got '" + shadows + "'");
   }
+  if (!j.poseFile.empty() && (given("--camera-height") || given("--pitch")))
+    throw UsageError(
+        "--pose sets the camera's height and tilt: leave out --camera-height and --pitch");
   if (exposure != "auto") j.exposureStops = parseNumber(exposure, "--exposure");
 }
 

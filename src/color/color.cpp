@@ -1,8 +1,10 @@
 #include "color/color.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
+#include <utility>
 
 #include <OpenColorIO/OpenColorIO.h>
 #include <glm/mat3x3.hpp>
@@ -179,6 +181,42 @@ std::string ColorConfig::inputSpaceFor(const std::filesystem::path& file,
   return resolve(OCIO::ROLE_DEFAULT, "the default role");
 }
 
+Image ColorConfig::convertCodes(std::span<const uint8_t> codes, int width, int height, int channels,
+                                const std::string& from, const std::string& to) const {
+  COMPOSE_CHECK(channels >= 3 && width >= 0 && height >= 0);
+  COMPOSE_CHECK(codes.size() == size_t(width) * size_t(height) * size_t(channels));
+  const std::string src = resolve(from, "an image");
+  const std::string dst = resolve(to, "a conversion target");
+  Image out(width, height, 3, {"R", "G", "B"});
+  out.colorSpace = dst;
+  try {
+    // Lossless, plus the per-channel prefix of the transform as a table of the input's codes.
+    const auto flags = OCIO::OptimizationFlags(OCIO::OPTIMIZATION_LOSSLESS |
+                                               OCIO::OPTIMIZATION_COMP_SEPARABLE_PREFIX);
+    OCIO::ConstCPUProcessorRcPtr cpu =
+        impl_->config->getProcessor(src.c_str(), dst.c_str())
+            ->getOptimizedCPUProcessor(OCIO::BIT_DEPTH_UINT8, OCIO::BIT_DEPTH_F32, flags);
+    constexpr int kRowsPerTask = 16;
+    const int tasks = (height + kRowsPerTask - 1) / kRowsPerTask;
+    parallelFor(0, tasks, [&](int64_t t) {
+      const int y0 = int(t) * kRowsPerTask;
+      const int rows = std::min(kRowsPerTask, height - y0);
+      // OpenColorIO takes a non-const pointer for the source too; it only reads it.
+      uint8_t* in = const_cast<uint8_t*>(codes.data()) + size_t(y0) * size_t(width) * channels;
+      OCIO::PackedImageDesc source(in, width, rows, OCIO::CHANNEL_ORDERING_RGB,
+                                   OCIO::BIT_DEPTH_UINT8, 1, channels, ptrdiff_t(width) * channels);
+      OCIO::PackedImageDesc target(out.row(y0).data(), width, rows, OCIO::CHANNEL_ORDERING_RGB,
+                                   OCIO::BIT_DEPTH_F32, ptrdiff_t(sizeof(float)),
+                                   ptrdiff_t(3 * sizeof(float)),
+                                   ptrdiff_t(3 * sizeof(float)) * width);
+      cpu->apply(source, target);
+    });
+  } catch (const OCIO::Exception& e) {
+    throw Error("color", "cannot convert " + src + " to " + dst + ": " + e.what());
+  }
+  return out;
+}
+
 void ColorConfig::convert(Image& image, const std::string& to) const {
   const std::string src = resolve(image.colorSpace, "an image");
   const std::string dst = resolve(to, "a conversion target");
@@ -324,11 +362,16 @@ void ColorConfig::checkDisplayView(const std::string& display, const std::string
 
 Image ColorConfig::toDisplay(const Image& image, const std::string& display,
                              const std::string& view) const {
+  return toDisplay(Image(image), display, view);
+}
+
+Image ColorConfig::toDisplay(Image&& image, const std::string& display,
+                             const std::string& view) const {
   checkDisplayView(display, view);
-  Image out = image;
+  Image out = std::move(image);
   try {
     OCIO::DisplayViewTransformRcPtr t = OCIO::DisplayViewTransform::Create();
-    t->setSrc(resolve(image.colorSpace, "an image").c_str());
+    t->setSrc(resolve(out.colorSpace, "an image").c_str());
     t->setDisplay(display.c_str());
     t->setView(view.c_str());
     applyRgb(impl_->config->getProcessor(t), out);

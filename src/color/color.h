@@ -9,9 +9,11 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -59,6 +61,13 @@ class ColorConfig {
   // Converts the first three channels of `image` from image.colorSpace to `to` in place and sets
   // image.colorSpace. Other channels (alpha, AOVs) are left alone. The image needs >= 3 channels.
   void convert(Image& image, const std::string& to) const;
+  // The same for an 8-bit image given as its codes (width x height x channels, interleaved, at
+  // least 3 channels; only the first three are read) in the space `from`: returns the RGB in `to`,
+  // as float. The conversion starts from the codes, so the per-channel part of the transform (an
+  // sRGB curve, say) is a table of the 256 codes, each computed exactly as convert() would; the
+  // values agree with convert() on the codes divided by 255 to float rounding.
+  Image convertCodes(std::span<const uint8_t> codes, int width, int height, int channels,
+                     const std::string& from, const std::string& to) const;
 
   // Chromaticities of a linear colour space of the config, found through the config's
   // interchange role (aces_interchange or cie_xyz_d65_interchange): the space's unit primaries
@@ -87,6 +96,9 @@ class ColorConfig {
   // Applies the display/view transform to the first three channels; the result is display-encoded
   // (to be quantised and written as JPEG/PNG) and tagged "<display>/<view>".
   Image toDisplay(const Image& image, const std::string& display, const std::string& view) const;
+  // The same on an image the caller gives up: its pixels are transformed in place and returned,
+  // with no copy of the frame.
+  Image toDisplay(Image&& image, const std::string& display, const std::string& view) const;
 
   struct Impl;  // the OpenColorIO config; defined in color.cpp
 

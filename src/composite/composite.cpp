@@ -18,6 +18,12 @@ Image over(const Image& fg, const Image& bg) {
 }
 
 Image over(const Image& fg, int x0, int y0, const Image& bg) {
+  Image out = bg;
+  overInPlace(out, fg, x0, y0);
+  return out;
+}
+
+void overInPlace(Image& bg, const Image& fg, int x0, int y0) {
   if (fg.channels != 4)
     throw Error("composite",
                 "foreground must be RGBA, it has " + std::to_string(fg.channels) + " channels");
@@ -32,7 +38,6 @@ Image over(const Image& fg, int x0, int y0, const Image& bg) {
     throw Error("composite", "colour-space mismatch: foreground is " + fg.colorSpace +
                                  ", background is " + bg.colorSpace);
   }
-  Image out = bg;
   const bool bgAlpha = bg.channels >= 4;
   parallelFor(
       0, fg.height,
@@ -41,7 +46,7 @@ Image over(const Image& fg, int x0, int y0, const Image& bg) {
           const float* f = fg.at(x, int(y));
           const float a = f[3];
           if (a == 0.0f && f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f) continue;
-          float* o = out.at(x + x0, int(y) + y0);
+          float* o = bg.at(x + x0, int(y) + y0);
           const float k = 1.0f - a;
           o[0] = f[0] + o[0] * k;
           o[1] = f[1] + o[1] * k;
@@ -50,7 +55,6 @@ Image over(const Image& fg, int x0, int y0, const Image& bg) {
         }
       },
       8);
-  return out;
 }
 
 void multiply(Image& image, const Image& factor, int x0, int y0) {

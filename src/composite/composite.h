@@ -15,6 +15,10 @@ Image over(const Image& foreground, const Image& background);
 // must lie inside it); the rest of the background is copied unchanged.
 Image over(const Image& foreground, int x, int y, const Image& background);
 
+// The same, in place: `background` becomes the composite (its pixels outside the foreground's
+// rectangle are not touched, and no copy of the frame is made). Errors as over().
+void overInPlace(Image& background, const Image& foreground, int x, int y);
+
 // Multiplies the first three channels of `image` over [x, x + w) x [y, y + h) by the RGB of
 // `factor` (w x h): the ground shadow's ratio applied to the plate in linear light. The rectangle
 // must lie inside the image.

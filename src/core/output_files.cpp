@@ -87,6 +87,7 @@ fs::path OutputFiles::add(const fs::path& destination) {
   if (!dir.empty() && !fs::is_directory(dir, ec))
     throw Error(stage_, "cannot write into the output folder: it is a file, not a folder", dir);
   Entry e{temporaryNear(destination, "partial"), destination};
+  const std::lock_guard<std::mutex> lock(mutex_);
   entries_.push_back(e);
   return e.temporary;
 }

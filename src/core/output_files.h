@@ -13,6 +13,7 @@
 #pragma once
 
 #include <filesystem>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -27,7 +28,8 @@ class OutputFiles {
 
   // Checks that `destination` can be written (its folder exists or can be made, it is not a
   // folder itself) and returns a fresh temporary path next to it, with the same extension so that
-  // writers that choose a format by extension pick the right one.
+  // writers that choose a format by extension pick the right one. Outputs may be added (and
+  // written) from several threads at once; commit() is called once, after they are all written.
   std::filesystem::path add(const std::filesystem::path& destination);
 
   // Moves every temporary into place. On failure, restores what was there and throws.
@@ -39,6 +41,7 @@ class OutputFiles {
   };
   std::string stage_;
   std::vector<Entry> entries_;
+  std::mutex mutex_;  // guards entries_ in add()
   bool committed_ = false;
 };
 

@@ -14,15 +14,24 @@
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
+#include <tbb/task_arena.h>
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/parallel.h"
 
 namespace compose::ingest {
 
 namespace fs = std::filesystem;
 
 namespace {
+
+// OpenEXR compresses and decompresses blocks of scanlines on its own thread pool; it gets as many
+// threads as oneTBB may use (every core unless the process is limited), so that zlib runs on every
+// core. OpenImageIO hands the number to OpenEXR when a reader or writer is created.
+void useEveryCoreForExr() {
+  OIIO::attribute("exr_threads", tbb::this_task_arena::max_concurrency());
+}
 
 std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* name) {
   const OIIO::ParamValue* p = spec.find_attribute(name);
@@ -304,6 +313,7 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
   requireRegularFile(path, stage);
 
+  useEveryCoreForExr();
   auto input = OIIO::ImageInput::open(path.string());
   if (!input) {
     std::string why = OIIO::geterror();
@@ -353,8 +363,44 @@ std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
 
 namespace {
 
-// The pixel format for `image` under `options`, and whether a half request became float.
-OIIO::TypeDesc pixelFormat(const Image& image, const WriteOptions& options, bool isExr,
+// The channels of one output file or part: images of one size whose channels follow one another,
+// then channels of one value.
+struct ChannelSources {
+  std::vector<const Image*> images;
+  std::vector<float> constants;
+
+  int width() const { return images.front()->width; }
+  int height() const { return images.front()->height; }
+  int channels() const {
+    int n = int(constants.size());
+    for (const Image* image : images) n += image->channels;
+    return n;
+  }
+};
+
+// The largest finite magnitude among the sources' values, rows on every core.
+float largestFiniteMagnitude(const ChannelSources& sources) {
+  float largest = 0.0f;
+  for (float v : sources.constants)
+    if (std::isfinite(v)) largest = std::max(largest, std::abs(v));
+  for (const Image* image : sources.images) {
+    std::vector<float> rowLargest(size_t(image->height), 0.0f);
+    parallelFor(0, image->height, [&](int64_t y) {
+      // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
+      float m = 0.0f;
+      for (float v : image->row(int(y))) {
+        const float a = std::abs(v);
+        m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+      }
+      rowLargest[size_t(y)] = m;
+    });
+    for (float m : rowLargest) largest = std::max(largest, m);
+  }
+  return largest;
+}
+
+// The pixel format for `sources` under `options`, and whether a half request became float.
+OIIO::TypeDesc pixelFormat(const ChannelSources& sources, const WriteOptions& options, bool isExr,
                            WriteReport& report) {
   OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
   switch (options.depth) {
@@ -375,10 +421,7 @@ OIIO::TypeDesc pixelFormat(const Image& image, const WriteOptions& options, bool
       break;
   }
   if (format == OIIO::TypeDesc::HALF) {
-    for (float v : image.pixels) {
-      if (std::isfinite(v))
-        report.largestMagnitude = std::max(report.largestMagnitude, std::abs(v));
-    }
+    report.largestMagnitude = largestFiniteMagnitude(sources);
     if (report.largestMagnitude > kHalfMax) {
       format = OIIO::TypeDesc::FLOAT;
       report.promotedToFloat = true;
@@ -387,9 +430,68 @@ OIIO::TypeDesc pixelFormat(const Image& image, const WriteOptions& options, bool
   return format;
 }
 
-void describeExr(OIIO::ImageSpec& spec, const Image& image, const WriteOptions& options) {
-  spec.attribute("compression", "zip");
-  if (!image.colorSpace.empty()) spec.attribute("colorSpace", image.colorSpace);
+// Writes the rows of `sources` into the current image (or part) of `output`, whose data window
+// starts at row `y0`, in the pixel type the opened writer stores (which is not always the one
+// asked for: Radiance HDR is always float). The conversion from float is OpenImageIO's own (so the
+// values are those write_image() would store), done a band of rows at a time on every core; each
+// band is then handed over in the file's format, and OpenEXR compresses its blocks of scanlines on
+// its thread pool. Only one band is held converted: no full-size copy of the image is made.
+bool writeRows(OIIO::ImageOutput& output, int y0, const ChannelSources& sources) {
+  const OIIO::TypeDesc format = output.spec().format;
+  const int width = sources.width(), height = sources.height();
+  const int channels = sources.channels();
+  const size_t valueBytes = format.size();
+  const size_t pixelBytes = size_t(channels) * valueBytes;
+  const size_t rowBytes = pixelBytes * size_t(width);
+  // Bands of about 8 MB, in whole blocks of 16 scanlines (OpenEXR's ZIP block), so that every
+  // band gives the compressor several blocks to work on at once.
+  constexpr size_t kBandBytes = size_t(8) << 20;
+  constexpr int kBlockRows = 16;
+  const int bandRows = std::max(kBlockRows, int(kBandBytes / rowBytes) / kBlockRows * kBlockRows);
+  std::vector<unsigned char> band(size_t(std::min(bandRows, height)) * rowBytes);
+  std::vector<unsigned char> constantBytes(sources.constants.size() * valueBytes);
+  if (!sources.constants.empty()) {
+    OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, sources.constants.data(), format,
+                               constantBytes.data(), int(sources.constants.size()));
+  }
+  // One source written straight into the band; several are converted row by row and interleaved.
+  const bool direct = sources.images.size() == 1 && sources.constants.empty();
+  for (int r0 = 0; r0 < height; r0 += bandRows) {
+    const int rows = std::min(bandRows, height - r0);
+    parallelFor(0, rows, [&](int64_t r) {
+      unsigned char* dst = band.data() + size_t(r) * rowBytes;
+      if (direct) {
+        const Image& image = *sources.images.front();
+        OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, image.row(r0 + int(r)).data(), format,
+                                   dst, width * channels);
+        return;
+      }
+      std::vector<unsigned char> converted;
+      size_t offset = 0;  // of the source's first channel in a pixel, in bytes
+      for (const Image* image : sources.images) {
+        const size_t sourceBytes = size_t(image->channels) * valueBytes;
+        converted.resize(sourceBytes * size_t(width));
+        OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, image->row(r0 + int(r)).data(), format,
+                                   converted.data(), width * image->channels);
+        for (int x = 0; x < width; ++x) {
+          std::memcpy(dst + size_t(x) * pixelBytes + offset,
+                      converted.data() + size_t(x) * sourceBytes, sourceBytes);
+        }
+        offset += sourceBytes;
+      }
+      for (int x = 0; x < width && !constantBytes.empty(); ++x)
+        std::memcpy(dst + size_t(x) * pixelBytes + offset, constantBytes.data(),
+                    constantBytes.size());
+    });
+    if (!output.write_scanlines(y0 + r0, y0 + r0 + rows, 0, format, band.data())) return false;
+  }
+  return true;
+}
+
+void describeExr(OIIO::ImageSpec& spec, const std::string& colorSpace,
+                 const WriteOptions& options) {
+  spec.attribute("compression", options.exrCompression);
+  if (!colorSpace.empty()) spec.attribute("colorSpace", colorSpace);
   if (options.chromaticities) {
     float c[8];
     for (int i = 0; i < 8; ++i) c[i] = float((*options.chromaticities)[size_t(i)]);
@@ -403,40 +505,15 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   COMPOSE_CHECK(image.width > 0 && image.height > 0 && image.channels > 0);
   COMPOSE_CHECK(image.pixels.size() == image.pixelCount() * size_t(image.channels));
 
+  const std::string ext = lowerExtension(shown);
+  const bool isExr = ext == ".exr";
+  if (isExr) useEveryCoreForExr();
   auto output = OIIO::ImageOutput::create(shown.string());
   if (!output) throw Error("output", "no image writer for this file extension", shown);
 
-  const std::string ext = lowerExtension(shown);
-  const bool isExr = ext == ".exr";
   WriteReport report;
-  OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
-  switch (options.depth) {
-    case WriteOptions::Depth::Auto:
-      format = isExr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::UINT8;
-      break;
-    case WriteOptions::Depth::UInt8:
-      format = OIIO::TypeDesc::UINT8;
-      break;
-    case WriteOptions::Depth::UInt16:
-      format = OIIO::TypeDesc::UINT16;
-      break;
-    case WriteOptions::Depth::Half:
-      format = OIIO::TypeDesc::HALF;
-      break;
-    case WriteOptions::Depth::Float:
-      format = OIIO::TypeDesc::FLOAT;
-      break;
-  }
-  if (format == OIIO::TypeDesc::HALF) {
-    for (float v : image.pixels) {
-      if (std::isfinite(v))
-        report.largestMagnitude = std::max(report.largestMagnitude, std::abs(v));
-    }
-    if (report.largestMagnitude > kHalfMax) {
-      format = OIIO::TypeDesc::FLOAT;
-      report.promotedToFloat = true;
-    }
-  }
+  const ChannelSources sources{{&image}, {}};
+  const OIIO::TypeDesc format = pixelFormat(sources, options, isExr, report);
   OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
   if (!image.channelNames.empty()) {
     COMPOSE_CHECK(int(image.channelNames.size()) == image.channels);
@@ -445,7 +522,7 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   spec.alpha_channel = options.alphaChannel;
   if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
   spec.attribute("Software", "compose");
-  if (isExr) describeExr(spec, image, options);
+  if (isExr) describeExr(spec, image.colorSpace, options);
   const bool isJpeg = ext == ".jpg" || ext == ".jpeg";
   if (isJpeg) {
     spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
@@ -474,7 +551,7 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   };
   errno = 0;
   if (!output->open(file.string(), spec)) fail("cannot open for writing");
-  if (!output->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data())) fail("cannot write image");
+  if (!writeRows(*output, 0, sources)) fail("cannot write image");
   if (!output->close()) fail("cannot finish writing");
   return report;
 }
@@ -492,29 +569,56 @@ std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const fs::path& pat
                                        const std::vector<ExrPart>& parts, const ExrHeader& header) {
   COMPOSE_CHECK(!parts.empty());
   std::vector<WriteReport> reports(parts.size());
+  std::vector<ChannelSources> sources(parts.size());
+  std::vector<OIIO::TypeDesc> formats(parts.size());
   std::vector<OIIO::ImageSpec> specs;
   for (size_t i = 0; i < parts.size(); ++i) {
     const ExrPart& part = parts[i];
+    COMPOSE_CHECK(part.image != nullptr);
     const Image& image = *part.image;
-    COMPOSE_CHECK(image.width > 0 && image.height > 0 && image.channels > 0);
-    const OIIO::TypeDesc format = pixelFormat(image, part.options, true, reports[i]);
-    OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
+    ChannelSources& s = sources[i];
+    s.images.push_back(&image);
+    for (const Image* more : part.moreImages) {
+      COMPOSE_CHECK(more != nullptr && more->width == image.width && more->height == image.height);
+      s.images.push_back(more);
+    }
+    // The channels' names: the part's own, else the images' (when every image has them).
+    std::vector<std::string> names = part.channelNames;
+    for (const Image* source : s.images) {
+      COMPOSE_CHECK(source->width > 0 && source->height > 0 && source->channels > 0);
+      COMPOSE_CHECK(source->pixels.size() == source->pixelCount() * size_t(source->channels));
+      if (!part.channelNames.empty()) continue;
+      if (source->channelNames.empty()) {
+        names.clear();
+        break;
+      }
+      COMPOSE_CHECK(int(source->channelNames.size()) == source->channels);
+      names.insert(names.end(), source->channelNames.begin(), source->channelNames.end());
+    }
+    COMPOSE_CHECK(names.empty() || int(names.size()) == s.channels());
+    for (const auto& [name, value] : part.constantChannels) {
+      s.constants.push_back(value);
+      if (!names.empty()) names.push_back(name);
+    }
+    formats[i] = pixelFormat(s, part.options, true, reports[i]);
+    OIIO::ImageSpec spec(image.width, image.height, s.channels(), formats[i]);
     spec.x = part.x;
     spec.y = part.y;
     spec.full_x = 0;
     spec.full_y = 0;
     spec.full_width = part.fullWidth > 0 ? part.fullWidth : image.width;
     spec.full_height = part.fullHeight > 0 ? part.fullHeight : image.height;
-    if (!image.channelNames.empty()) spec.channelnames = image.channelNames;
+    if (!names.empty()) spec.channelnames = names;
     spec.alpha_channel = part.options.alphaChannel;
     spec.attribute("name", part.name);
     spec.attribute("Software", "compose");
-    describeExr(spec, image, part.options);
+    describeExr(spec, part.colorSpace.empty() ? image.colorSpace : part.colorSpace, part.options);
     for (const auto& [name, m] : header.matrices) spec.attribute(name, OIIO::TypeMatrix, m.data());
     for (const auto& [name, value] : header.strings) spec.attribute(name, value);
     specs.push_back(std::move(spec));
   }
   const fs::path file = outputs.add(path);
+  useEveryCoreForExr();
   auto output = OIIO::ImageOutput::create(path.string());
   if (!output) throw Error("output", "no image writer for this file extension", path);
   auto fail = [&](const std::string& what) {
@@ -529,7 +633,7 @@ std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const fs::path& pat
   for (size_t i = 0; i < parts.size(); ++i) {
     if (i > 0 && !output->open(file.string(), specs[i], OIIO::ImageOutput::AppendSubimage))
       fail("cannot start part '" + parts[i].name + "'");
-    if (!output->write_image(OIIO::TypeDesc::FLOAT, parts[i].image->pixels.data()))
+    if (!writeRows(*output, specs[i].y, sources[i]))
       fail("cannot write part '" + parts[i].name + "'");
   }
   if (!output->close()) fail("cannot finish writing");

@@ -1,7 +1,9 @@
 #include "color/color.h"
 
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
+#include <vector>
 
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -56,6 +58,42 @@ TEST(ColorConfig, DecodesSrgbAndConvertsToAcescg) {
   EXPECT_NEAR(red.pixels[0], 0.6130973f, kFloatTolerance);
   EXPECT_NEAR(red.pixels[1], 0.0701942f, kFloatTolerance);
   EXPECT_NEAR(red.pixels[2], 0.0206156f, kFloatTolerance);
+}
+
+// An 8-bit plate converted from its codes (a table for the sRGB curve, then the matrix) gives the
+// values the float path gives on code / 255, for every code in every channel, with the codes'
+// fourth channel (alpha) skipped and a width that splits into uneven rows.
+TEST(ColorConfig, CodesConvertLikeTheirFloats) {
+  const ColorConfig c = ColorConfig::builtin();
+  for (const int channels : {3, 4}) {
+    SCOPED_TRACE(channels);
+    const int width = 97, height = 41;  // 3977 pixels: every code in every channel, many times
+    std::vector<uint8_t> codes(size_t(width) * height * size_t(channels));
+    Image floats(width, height, 3, {"R", "G", "B"});
+    floats.colorSpace = "sRGB - Texture";
+    for (size_t p = 0; p < size_t(width) * height; ++p) {
+      for (int k = 0; k < channels; ++k) {
+        // Each channel its own sequence of codes, so that swapped channels would show.
+        const auto code = uint8_t((p * (k + 1) * 37 + size_t(k) * 101) % 256);
+        codes[p * size_t(channels) + size_t(k)] = code;
+        if (k < 3) floats.pixels[p * 3 + size_t(k)] = float(code) / 255.0f;
+      }
+    }
+    const Image fromCodes =
+        c.convertCodes(codes, width, height, channels, "srgb_tx", c.workingSpace());
+    c.convert(floats, c.workingSpace());
+    ASSERT_EQ(fromCodes.width, width);
+    ASSERT_EQ(fromCodes.height, height);
+    ASSERT_EQ(fromCodes.channels, 3);
+    EXPECT_EQ(fromCodes.colorSpace, "ACEScg");
+    for (size_t i = 0; i < floats.pixels.size(); ++i)
+      ASSERT_NEAR(fromCodes.pixels[i], floats.pixels[i], kFloatTolerance) << i;
+    // And against the sRGB curve written out: code 255 in red alone is AP1's share of red.
+    const std::vector<uint8_t> red = {255, 0, 0};
+    const Image one = c.convertCodes(red, 1, 1, 3, "srgb_tx", "lin_rec709");
+    EXPECT_NEAR(one.pixels[0], srgbToLinear(1.0), kFloatTolerance);
+    EXPECT_NEAR(one.pixels[1], 0.0, kFloatTolerance);
+  }
 }
 
 TEST(ColorConfig, DisplayTransformEncodesSrgbAndClips) {

@@ -11,6 +11,10 @@
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "calib/chessboard.h"
+#include "calib/plate_camera.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -254,6 +258,67 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
   EXPECT_NE(r.out.find("merge      skipped the environment is an image"), std::string::npos)
       << r.out;
   EXPECT_FALSE(fs::exists(dir_ / "l.lighting"));
+}
+
+// compose --pose: the object stands on the chessboard's plane, seen from where the pose puts the
+// camera. A pose written for a known camera; the object placed where the board's centre is seen.
+TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
+  calib::PlatePose pose;
+  pose.width = 320;
+  pose.height = 213;
+  pose.lens = calib::Lens::fromFieldOfView(320, 213, 60.0);
+  pose.lens.source = "test lens";
+  pose.board.columns = 9;
+  pose.board.rows = 6;
+  pose.board.square = 0.025;
+  const glm::dvec3 eye(0.3, 0.6, 1.4);
+  pose.worldFromCamera = glm::inverse(glm::lookAt(eye, glm::dvec3(0.0), glm::dvec3(0, 1, 0)));
+  const fs::path poseFile = dir_ / "pose.json";
+  calib::writePose(poseFile, pose);
+
+  calib::CameraOptions options;
+  options.lens = pose.lens;
+  options.worldFromCamera = pose.worldFromCamera;
+  const calib::PlateCamera camera = calib::plateCamera(320, 213, {}, options);
+  glm::dvec2 pixel;
+  ASSERT_TRUE(camera.project(glm::dvec3(0.0), pixel));
+  char place[64];
+  std::snprintf(place, sizeof place, "%.6f,%.6f", pixel.x / 320.0, pixel.y / 213.0);
+
+  // A box whose base centre is its own origin: world-from-object then carries the ground point.
+  compose::testing::writeText(dir_ / "box.obj",
+                              "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv -1 2 -1\nv 1 2 -1\n"
+                              "v 1 2 1\nv -1 2 1\nf 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\n"
+                              "f 3 7 8 4\nf 4 8 5 1\n");
+  const RunResult r =
+      run("-q --plate " + quote(plate_) + " --object " + quote(dir_ / "box.obj") + " --pose " +
+              quote(poseFile) + " --place " + place + " --scale 0.2 --samples 1 --no-cache --out " +
+              quote(dir_ / "posed" / "compose"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  auto in = OIIO::ImageInput::open((dir_ / "posed" / "compose.exr").string());
+  ASSERT_TRUE(in);
+  float m[16] = {};
+  ASSERT_TRUE(in->spec().getattribute("compose:worldFromObject", OIIO::TypeMatrix, m));
+  // Imath layout: the translation is the last row.
+  EXPECT_NEAR(m[12], 0.0, 1e-3);
+  EXPECT_NEAR(m[13], 0.0, 1e-6) << "the object's base is on the board's plane";
+  EXPECT_NEAR(m[14], 0.0, 1e-3);
+  float toCamera[16] = {};
+  ASSERT_TRUE(in->spec().getattribute("worldToCamera", OIIO::TypeMatrix, toCamera));
+  // The camera sits where the pose says: world-to-camera maps the eye to the origin.
+  const glm::dvec3 e = eye;
+  for (int row = 0; row < 3; ++row) {
+    const double v = e.x * toCamera[0 + row] + e.y * toCamera[4 + row] + e.z * toCamera[8 + row] +
+                     toCamera[12 + row];
+    EXPECT_NEAR(v, 0.0, 1e-4) << row;
+  }
+
+  // --pose replaces the height and tilt: giving both is a usage error.
+  const RunResult both = run("--plate " + quote(plate_) + " --object " + quote(dir_ / "box.obj") +
+                                 " --pose " + quote(poseFile) + " --pitch 10",
+                             dir_.path());
+  EXPECT_EQ(both.status, 2) << both.err;
 }
 
 }  // namespace

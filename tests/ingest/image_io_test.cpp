@@ -1,7 +1,13 @@
 #include "ingest/image_io.h"
 
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <random>
+
 #include <OpenImageIO/imageio.h>
 
+#include "core/output_files.h"
 #include "test_util.h"
 
 namespace compose::ingest {
@@ -141,6 +147,201 @@ TEST(ImageIo, ValuesBeyondHalfRangeAreWrittenAsFloatNotInf) {
   // Within range: half as asked.
   img.pixels[5] = 60000.0f;
   EXPECT_FALSE(writeImage(dir / "ok.exr", img, opt).promotedToFloat);
+}
+
+// Values that exercise every kind of half: ordinary, negative, signed zero, subnormal in half,
+// the largest half, infinities and NaN.
+Image mixedValues(int w, int h, int c, std::vector<std::string> names, uint32_t seed) {
+  Image img(w, h, c, std::move(names));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-4.0f, 4.0f);
+  for (float& v : img.pixels) v = u(rng);
+  const float specials[] = {-0.0f,
+                            1e-7f,
+                            -3e-6f,
+                            kHalfMax,
+                            -kHalfMax,
+                            1.0e-20f,
+                            0.125f,
+                            std::numeric_limits<float>::infinity(),
+                            std::numeric_limits<float>::quiet_NaN()};
+  for (size_t i = 0; i < std::size(specials); ++i)
+    img.pixels[i * 7 % img.pixels.size()] = specials[i];
+  return img;
+}
+
+struct ReadPart {
+  OIIO::ImageSpec spec;
+  std::vector<float> pixels;
+};
+
+std::vector<ReadPart> readParts(const std::filesystem::path& file) {
+  std::vector<ReadPart> parts;
+  auto in = OIIO::ImageInput::open(file.string());
+  EXPECT_TRUE(in) << OIIO::geterror();
+  if (!in) return parts;
+  for (int sub = 0; in->seek_subimage(sub, 0); ++sub) {
+    ReadPart p;
+    p.spec = in->spec();
+    p.pixels.resize(p.spec.image_pixels() * size_t(p.spec.nchannels));
+    EXPECT_TRUE(
+        in->read_image(sub, 0, 0, p.spec.nchannels, OIIO::TypeDesc::FLOAT, p.pixels.data()));
+    parts.push_back(std::move(p));
+  }
+  return parts;
+}
+
+// What OpenImageIO stores for `interleaved` float pixels written as `format` with write_image():
+// the same file written the plain way, read back.
+std::vector<float> plainWriteReadBack(const std::filesystem::path& file, int w, int h,
+                                      const std::vector<std::string>& names, OIIO::TypeDesc format,
+                                      const std::vector<float>& interleaved) {
+  OIIO::ImageSpec spec(w, h, int(names.size()), format);
+  spec.channelnames = names;
+  spec.attribute("compression", "zip");
+  auto out = OIIO::ImageOutput::create(file.string());
+  EXPECT_TRUE(out && out->open(file.string(), spec));
+  EXPECT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, interleaved.data()));
+  out->close();
+  return readParts(file).at(0).pixels;
+}
+
+bool sameBits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+// The composite's output: a full-frame RGB image with an opaque alpha added on the way out, a
+// part of two images interleaved (a beauty and its AOVs) in its own data window, and a float part.
+// Each part reads back with its data window and names, and with exactly the values the plain
+// OpenImageIO write of the same pixels, interleaved in memory, stores. The full frame is wide and
+// tall enough to be written in several bands of rows.
+TEST(ImageIo, MultiPartExrReadsBackExactlyAsWritten) {
+  TempDir dir;
+  const int fullW = 2100, fullH = 700;
+  const Image rgb = mixedValues(fullW, fullH, 3, {"R", "G", "B"}, 1);
+  const Image beauty = mixedValues(300, 170, 4, {"R", "G", "B", "A"}, 2);
+  const Image aovs = mixedValues(300, 170, 3, {"N.X", "N.Y", "N.Z"}, 3);
+  Image ratio = mixedValues(50, 40, 3, {"R", "G", "B"}, 4);
+  ratio.pixels[3] = 1e6f;  // beyond half: this part is written as float
+
+  ExrPart composite{"composite", &rgb, 0, 0, fullW, fullH, {}};
+  composite.options.depth = WriteOptions::Depth::Half;
+  composite.options.alphaChannel = 3;
+  composite.constantChannels = {{"A", 1.0f}};
+  ExrPart object{"object", &beauty, 1700, 513, fullW, fullH, composite.options};
+  object.moreImages = {&aovs};
+  object.channelNames = {"object.R", "object.G", "object.B", "object.A", "N.X", "N.Y", "N.Z"};
+  ExrPart shadow{"shadow", &ratio, 10, 20, fullW, fullH, {}};
+  shadow.options.depth = WriteOptions::Depth::Half;
+  {
+    OutputFiles outputs("output");
+    const std::vector<WriteReport> reports =
+        writeExrParts(outputs, dir / "parts.exr", {composite, object, shadow});
+    outputs.commit();
+    ASSERT_EQ(reports.size(), 3u);
+    EXPECT_FALSE(reports[0].promotedToFloat);
+    EXPECT_FALSE(reports[1].promotedToFloat);
+    EXPECT_TRUE(reports[2].promotedToFloat);
+  }
+  const std::vector<ReadPart> parts = readParts(dir / "parts.exr");
+  ASSERT_EQ(parts.size(), 3u);
+
+  struct Expected {
+    const char* name;
+    int x, y, w, h;
+    std::vector<std::string> names;
+    OIIO::TypeDesc format;
+    std::vector<float> interleaved;
+  };
+  std::vector<Expected> expected(3);
+  expected[0] = {"composite", 0, 0, fullW, fullH, {"R", "G", "B", "A"}, OIIO::TypeDesc::HALF, {}};
+  for (size_t i = 0; i < rgb.pixelCount(); ++i) {
+    expected[0].interleaved.insert(expected[0].interleaved.end(), rgb.pixels.begin() + 3 * i,
+                                   rgb.pixels.begin() + 3 * i + 3);
+    expected[0].interleaved.push_back(1.0f);
+  }
+  expected[1] = {"object", 1700, 513, 300, 170, object.channelNames, OIIO::TypeDesc::HALF, {}};
+  for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+    expected[1].interleaved.insert(expected[1].interleaved.end(), beauty.pixels.begin() + 4 * i,
+                                   beauty.pixels.begin() + 4 * i + 4);
+    expected[1].interleaved.insert(expected[1].interleaved.end(), aovs.pixels.begin() + 3 * i,
+                                   aovs.pixels.begin() + 3 * i + 3);
+  }
+  expected[2] = {"shadow", 10, 20, 50, 40, {"R", "G", "B"}, OIIO::TypeDesc::FLOAT, ratio.pixels};
+
+  for (size_t p = 0; p < 3; ++p) {
+    SCOPED_TRACE(expected[p].name);
+    const OIIO::ImageSpec& spec = parts[p].spec;
+    EXPECT_EQ(spec.get_string_attribute("name"), expected[p].name);
+    EXPECT_EQ(spec.x, expected[p].x);
+    EXPECT_EQ(spec.y, expected[p].y);
+    EXPECT_EQ(spec.width, expected[p].w);
+    EXPECT_EQ(spec.height, expected[p].h);
+    EXPECT_EQ(spec.full_x, 0);
+    EXPECT_EQ(spec.full_y, 0);
+    EXPECT_EQ(spec.full_width, fullW);
+    EXPECT_EQ(spec.full_height, fullH);
+    EXPECT_EQ(spec.format, expected[p].format);
+    EXPECT_EQ(spec.get_string_attribute("compression"), "zip");
+    // OpenEXR stores channels sorted by name; OpenImageIO reads them back in its own order, so
+    // compare by name.
+    ASSERT_EQ(spec.channelnames.size(), expected[p].names.size());
+    const std::vector<float> plain = plainWriteReadBack(
+        dir / (std::string("plain_") + expected[p].name + ".exr"), expected[p].w, expected[p].h,
+        expected[p].names, expected[p].format, expected[p].interleaved);
+    EXPECT_TRUE(sameBits(parts[p].pixels, plain)) << "pixels differ from the plain write";
+    // And the plain write keeps the floats themselves where it is float, or their half rounding.
+    if (expected[p].format == OIIO::TypeDesc::FLOAT) {
+      EXPECT_EQ(spec.channelnames, expected[p].names);
+      EXPECT_TRUE(sameBits(parts[p].pixels, expected[p].interleaved));
+    }
+  }
+  // The alpha added on the way out is 1 everywhere.
+  const OIIO::ImageSpec& c = parts[0].spec;
+  const int alpha = c.channelindex("A");
+  ASSERT_GE(alpha, 0);
+  for (size_t i = 0; i < size_t(fullW) * fullH; ++i)
+    ASSERT_EQ(parts[0].pixels[i * 4 + size_t(alpha)], 1.0f);
+}
+
+TEST(ImageIo, EightBitWriteMatchesThePlainWrite) {
+  // JPEG and PNG outputs are quantised by OpenImageIO's own conversion, a band of rows at a time:
+  // the same codes as a plain write_image() of the floats.
+  TempDir dir;
+  Image img = mixedValues(1500, 900, 3, {"R", "G", "B"}, 5);
+  for (float& v : img.pixels) v = std::isfinite(v) ? std::abs(v) / 4.0f : 0.5f;
+  for (const char* ext : {".png", ".jpg"}) {
+    SCOPED_TRACE(ext);
+    const std::filesystem::path ours = dir / (std::string("ours") + ext);
+    const std::filesystem::path plain = dir / (std::string("plain") + ext);
+    writeImage(ours, img);
+    OIIO::ImageSpec spec(img.width, img.height, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("Compression", "jpeg:95");
+    auto out = OIIO::ImageOutput::create(plain.string());
+    ASSERT_TRUE(out && out->open(plain.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.pixels.data()));
+    out->close();
+    const LoadedImage a = readImage(ours), b = readImage(plain);
+    EXPECT_TRUE(sameBits(a.image.pixels, b.image.pixels));
+  }
+}
+
+TEST(ImageIo, RadianceHdrKeepsValuesAboveOne) {
+  // A Radiance HDR writer stores float (RGBE) whatever depth is asked for: the rows are handed
+  // over in the type the writer stores, so nothing is clamped to 8 bits on the way.
+  TempDir dir;
+  Image img(64, 40, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = float(i % 97) / 10.0f;
+  img.pixels[3 * (10 * 64 + 20)] = 5000.0f;
+  writeImage(dir / "a.hdr", img);  // default depth: 8 bits for a non-EXR file
+  const LoadedImage back = readImage(dir / "a.hdr");
+  ASSERT_EQ(back.image.pixels.size(), img.pixels.size());
+  for (size_t i = 0; i < img.pixels.size(); ++i) {
+    // RGBE: an 8-bit mantissa shared by the pixel's three values.
+    const float* p = img.pixels.data() + i / 3 * 3;
+    const float largest = std::max({p[0], p[1], p[2]});
+    ASSERT_NEAR(back.image.pixels[i], img.pixels[i], largest / 128.0f + 1e-6f) << i;
+  }
 }
 
 }  // namespace
