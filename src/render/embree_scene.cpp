@@ -103,12 +103,15 @@ uint32_t EmbreeScene::occluded8(const glm::vec3& o, const glm::vec3* d, uint32_t
   alignas(32) RTCRay8 rays{};
   for (int i = 0; i < 8; ++i) {
     valid[i] = (active >> i) & 1u ? -1 : 0;
+    // Only the active directions are read: a batch of fewer than 8 ends before the inactive ones
+    // (reading them overflowed the caller's array, found by AddressSanitizer).
+    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
     rays.org_x[i] = o.x;
     rays.org_y[i] = o.y;
     rays.org_z[i] = o.z;
-    rays.dir_x[i] = d[i].x;
-    rays.dir_y[i] = d[i].y;
-    rays.dir_z[i] = d[i].z;
+    rays.dir_x[i] = dir.x;
+    rays.dir_y[i] = dir.y;
+    rays.dir_z[i] = dir.z;
     rays.tnear[i] = tnear;
     rays.tfar[i] = tfar;
     rays.mask[i] = 0xFFFFFFFFu;
