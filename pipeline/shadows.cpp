@@ -131,7 +131,8 @@ ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
   // The lighting the transfer applies to: the environment without its brightest sources.
   const int sourceCount = plan.method == render::ShadowMethod::AmbientOcclusion ? 0 : plan.sources;
   out.split = lighting::splitBrightSources(environment, sourceCount);
-  const bool reused = projectCached(*out.lighting, out.split.residual, cacheRoot, progress, out.notes);
+  const bool reused =
+      projectCached(*out.lighting, out.split.residual, cacheRoot, progress, out.notes);
   out.split.residual = {};  // projected: the pixels are not needed any more
   out.reason = std::string(reused ? "reused" : "projected") + " its lighting (" +
                out.lighting->describe() + ")";
