@@ -25,11 +25,12 @@
 namespace compose::lighting {
 
 // What fromLatLong() did to make the data usable.
-// The largest radiance an environment texel may hold: 10^18, a billion times the sun's luminance
-// in cd/m² (1.6·10^9). Anything beyond it is damage, not light, and its integrals would overflow
-// single precision (found by fuzzing: a texel of 3·10^38 gave infinite irradiance); such a texel
+// The largest radiance an environment texel may hold: 10^30, far beyond any light (the sun is
+// 1.6·10^9 cd/m²) and still leaving the lighting integrals room below single precision's 3.4·10^38
+// (the end-to-end tests light an object with 10^30 to check float EXR output). Beyond it is
+// damage, not light: a texel of 3·10^38 (found by fuzzing) gave infinite irradiance. Such a texel
 // is an error, like NaN and infinity.
-inline constexpr float kMaxRadiance = 1e18f;
+inline constexpr float kMaxRadiance = 1e30f;
 
 struct SanitizeReport {
   int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
