@@ -138,7 +138,7 @@ CubeMap CubeMap::fromFaces(const std::array<const Image*, kCubeFaces>& faces,
             throw Error("ingest",
                         "radiance " + std::to_string(v) + " in cube face " + faceName(f) +
                             " at texel (" + std::to_string(x) + ", " + std::to_string(y) +
-                            ") is beyond any light (more than 1e30): a damaged file?",
+                            ") is beyond any light (more than 1e32): a damaged file?",
                         where(f));
           }
           if (v < 0.0f) {

@@ -77,7 +77,7 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
           throw Error("lighting",
                       "radiance " + std::to_string(v) + " at texel (" + std::to_string(x) + ", " +
                           std::to_string(y) +
-                          ") is beyond any light (more than 1e30): a damaged "
+                          ") is beyond any light (more than 1e32): a damaged "
                           "file?",
                       file);
         }

@@ -24,14 +24,14 @@
 
 namespace compose::lighting {
 
-// What fromLatLong() did to make the data usable.
-// The largest radiance an environment texel may hold: 10^30, far beyond any light (the sun is
-// 1.6·10^9 cd/m²) and still leaving the lighting integrals room below single precision's 3.4·10^38
-// (the end-to-end tests light an object with 10^30 to check float EXR output). Beyond it is
-// damage, not light: a texel of 3·10^38 (found by fuzzing) gave infinite irradiance. Such a texel
-// is an error, like NaN and infinity.
-inline constexpr float kMaxRadiance = 1e30f;
+// The largest radiance an environment texel may hold: 10^32, far beyond any light (the sun is
+// 1.6·10^9 cd/m²) and still leaving the lighting integrals room below single precision's
+// 3.4·10^38 (the end-to-end tests light an object with 10^30, a little more after colour
+// conversion, to check float EXR output). Beyond it is damage, not light: a texel of 3·10^38
+// (found by fuzzing) gave infinite irradiance. Such a texel is an error, like NaN and infinity.
+inline constexpr float kMaxRadiance = 1e32f;
 
+// What fromLatLong() did to make the data usable.
 struct SanitizeReport {
   int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
   float mostNegative = 0.0f;
