@@ -12,9 +12,9 @@
 // relative error over an even spread of fully covered pixels.
 //
 // Methods: no shadows; ambient occlusion x irradiance; SH transfer (Sloan et al. 2002) with 9,
-// 16, 25, 49 and 81 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both transfers with
-// and without the 64 brightest sources split off and shadowed by rays; and Monte Carlo with
-// visibility rays per pixel at several sample counts.
+// 16, 25, 49 and 81 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both
+// transfers with and without the 64 brightest sources split off and shadowed by rays; and Monte
+// Carlo with visibility rays per pixel at several sample counts.
 //
 // Writes shadows.csv, shadows.md and one SVG plot per mesh (SNR against the floats stored per
 // vertex) into DIR (default out/bench), and prints the tables.
