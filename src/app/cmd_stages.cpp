@@ -187,12 +187,7 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--set", *sets,
                  "Override a parameter: STAGE.PARAMETER=VALUE (VALUE as JSON, else a string); "
                  "repeatable");
-  cmd.add_option("--cache", o->job.cache, "Folder of the caches")->capture_default_str();
-  cmd.add_flag("--no-cache", o->noCache, "Neither read nor write the caches");
-  cmd.add_option("--threads", o->job.threads, "Worker threads [default: every core]");
-  cmd.add_flag("--timings", o->timings, "Print each stage's time and peak memory");
-  cmd.add_flag("--explain", o->explain,
-               "Say which stages would run, be reused or be skipped, and why, then exit");
+  o->addRun(cmd);
   return [o, scene, sets, &globals]() -> int {
     {
       // A malformed --set is a bad command line: refused before the scene is read.
