@@ -1,5 +1,6 @@
 // The runner: plans a job over the registered stages (stage.h) and runs what it must.
 #include <chrono>
+#include <exception>
 #include <fstream>
 #include <map>
 #include <optional>
@@ -39,6 +40,7 @@ void resetPeak() {
 struct Planned {
   std::vector<StageRecord> records;
   std::vector<std::optional<StageCache>> entries;  // per stage: its cache entry, if it is cached
+  std::vector<std::string> problems;  // per stage: what is wrong with its entry (planning only)
 };
 
 // The entry of a cached stage: keyed by the keys of all the outputs this job has.
@@ -72,6 +74,7 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
   Planned p;
   p.records.resize(list.size());
   p.entries.resize(list.size());
+  p.problems.resize(list.size());
 
   // Which artefacts the wanted ones can come from, through the stages that are not read from a
   // file: a stage none of whose outputs is among them is not part of this run.
@@ -142,12 +145,24 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
       const auto start = std::chrono::steady_clock::now();
       bool reused = false;
       if (!load) {
-        reused = entry.exists();
+        // Planning only (--explain): an entry whose bytes are damaged is not counted as reused.
+        // Its contents are not restored here, so one that checks out but does not fit the job
+        // (see below) still shows as reused.
+        reused = entry.verify();
+        if (!reused && !entry.problem().empty()) p.problems[i] = entry.problem();
       } else if (entry.open()) {
-        reused = stage.load(ctx, entry);
+        // A stage's loader may find the entry's contents wrong for this job (or, in an entry
+        // forged with a valid checksum, not what it wrote): either way a note, never an error.
+        std::string why;
+        try {
+          reused = stage.load(ctx, entry);
+        } catch (const std::exception& e) {
+          reused = false;
+          why = std::string(" (") + e.what() + ")";
+        }
         if (!reused) {
           ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() +
-                   ") does not fit this job: ignored, computed again and rewritten");
+                   ") does not fit this job" + why + ": ignored, computed again and rewritten");
         }
       } else if (!entry.problem().empty()) {
         ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
@@ -184,7 +199,13 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
     r.seconds = 0.0;
     if (r.state == StageState::Run) {
       r.reason = stages()[i]->summary();
-      if (p.entries[i]) r.reason += "; cached in " + p.entries[i]->path().string();
+      if (p.entries[i]) {
+        if (!p.problems[i].empty())
+          r.reason += "; its cache entry " + p.entries[i]->path().string() + " " + p.problems[i] +
+                      ": computed again and rewritten";
+        else
+          r.reason += "; cached in " + p.entries[i]->path().string();
+      }
     }
   }
   return p.records;

@@ -50,6 +50,13 @@ bool StageCache::exists() const {
   return enabled() && fs::is_regular_file(path_, ec);
 }
 
+bool StageCache::verify() {
+  const bool ok = open();
+  arrays_.clear();
+  meta_ = nlohmann::json::object();
+  return ok;
+}
+
 bool StageCache::open() {
   problem_.clear();
   if (!enabled()) return false;

@@ -42,6 +42,8 @@ class StageCache {
 
   // Reads the whole entry; false on a miss or an invalid entry (problem() says what is wrong).
   bool open();
+  // open(), keeping nothing of the entry's contents: whether it would open.
+  bool verify();
   // Writes the entry atomically; false (nothing left behind) if it could not be written, with the
   // operating system's reason in error() ("Permission denied", "No space left on device").
   bool write() const;

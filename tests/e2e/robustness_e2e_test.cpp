@@ -17,6 +17,7 @@
 
 #include "core/image.h"
 #include "ingest/image_io.h"
+#include "pipeline/stage_cache.h"
 #include "test_util.h"
 
 namespace compose {
@@ -246,6 +247,11 @@ TEST_F(Robustness, DamagedCacheEntriesAreNotedRecomputedAndRewritten) {
       }
     }
     ASSERT_GT(damaged, 2);
+    // --explain sees the damage without running anything: no damaged entry counts as reused.
+    const RunResult explain = run("explain", "--explain");
+    ASSERT_EQ(explain.status, 0) << d.name << ": " << explain.err;
+    EXPECT_EQ(explain.out.find("reused"), std::string::npos) << d.name << ": " << explain.out;
+    EXPECT_NE(explain.out.find(d.note), std::string::npos) << d.name << ": " << explain.out;
     const RunResult r = run("again");
     ASSERT_EQ(r.status, 0) << d.name << ": " << r.err;
     EXPECT_NE(r.err.find(d.note), std::string::npos) << d.name << ": " << r.err;
@@ -257,6 +263,29 @@ TEST_F(Robustness, DamagedCacheEntriesAreNotedRecomputedAndRewritten) {
     EXPECT_EQ(next.err.find("ignored"), std::string::npos) << d.name << ": " << next.err;
     EXPECT_NE(stageLine(next.err, "render").find("reused"), std::string::npos) << next.err;
   }
+  // Forged: entries that check out (a valid checksum over what is there) but whose contents are
+  // not what their stage wrote: every metadata value replaced by a string, every array cut to
+  // one value. Each stage's loader refuses it with a note; nothing throws out of the run.
+  for (const auto& e : fs::recursive_directory_iterator(dir / "cache" / "stages")) {
+    if (!e.is_regular_file()) continue;
+    const std::string stage = e.path().parent_path().filename().string();
+    pipeline::StageCache entry(dir / "cache" / "stages", stage, e.path().stem().string());
+    ASSERT_TRUE(entry.open()) << e.path() << ": " << entry.problem();
+    pipeline::StageCache forged(dir / "cache" / "stages", stage, e.path().stem().string());
+    for (auto& [name, value] : entry.meta().items()) forged.meta()[name] = "forged";
+    for (const char* name : {"image", "values", "beauty", "radiance", "object"})
+      forged.put(name, {1.0f});
+    ASSERT_TRUE(forged.write()) << forged.error();
+  }
+  const RunResult forged = run("forged");
+  ASSERT_EQ(forged.status, 0) << forged.err;
+  EXPECT_NE(forged.err.find("does not fit this job"), std::string::npos) << forged.err;
+  EXPECT_EQ(pixels("forged.exr"), reference);
+  const RunResult after = run("after");
+  ASSERT_EQ(after.status, 0) << after.err;
+  EXPECT_EQ(after.err.find("ignored"), std::string::npos) << after.err;
+  EXPECT_NE(stageLine(after.err, "render").find("reused"), std::string::npos) << after.err;
+
   // The visibility pass's own cache (core/float_cache.h) the same way: a damaged file is named.
   for (const auto& e : fs::recursive_directory_iterator(dir / "cache" / "visibility"))
     if (e.is_regular_file()) fs::resize_file(e.path(), 10);
