@@ -89,12 +89,12 @@ void saveScene(const ComposeJob& job, const fs::path& file) {
 }
 
 void applyScene(const nlohmann::json& scene, const fs::path& folder, ComposeJob& job) {
-  if (!scene.is_object() || scene.value("compose", "") != "scene")
+  if (!scene.is_object() || !scene.contains("compose") || scene["compose"] != "scene")
     throw UsageError("not a compose scene (it needs \"compose\": \"scene\")");
-  const int version = scene.value("version", 0);
+  const nlohmann::json version = scene.contains("version") ? scene["version"] : nlohmann::json();
   if (version != kSceneVersion)
-    throw UsageError("scene version " + std::to_string(version) + " is not the one this compose " +
-                     "reads (" + std::to_string(kSceneVersion) + ")");
+    throw UsageError("scene version " + (version.is_null() ? "(none)" : version.dump()) +
+                     " is not the one this compose reads (" + std::to_string(kSceneVersion) + ")");
   for (const auto& [key, value] : scene.items()) {
     if (key != "compose" && key != "version" && key != "stages")
       throw UsageError("unknown key '" + key + "'; a scene has compose, version and stages");
@@ -120,7 +120,7 @@ ComposeJob loadScene(const fs::path& file) {
   nlohmann::json scene;
   try {
     scene = nlohmann::json::parse(text.str());
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {
     throw Error("scene", std::string("not JSON: ") + e.what(), file);
   }
   ComposeJob job;
@@ -128,6 +128,8 @@ ComposeJob loadScene(const fs::path& file) {
     applyScene(scene, fs::absolute(file).parent_path(), job);
   } catch (const UsageError& e) {
     throw Error("scene", e.what(), file);
+  } catch (const nlohmann::json::exception& e) {
+    throw Error("scene", std::string("a value does not fit: ") + e.what(), file);
   }
   return job;
 }

@@ -154,8 +154,11 @@ bool StageCache::write() const {
     return false;
   };
   std::error_code ec;
-  fs::create_directories(path_.parent_path(), ec);
-  if (ec) return fail(ec.message());
+  // A bare file name (compose precompute --out x.stage) has no folder to make.
+  if (!path_.parent_path().empty()) {
+    fs::create_directories(path_.parent_path(), ec);
+    if (ec) return fail(ec.message());
+  }
   nlohmann::json header;
   header["stage"] = stage_;
   header["key"] = key_;

@@ -7,6 +7,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
@@ -121,9 +122,14 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   if (!meta.contains("parameters") || !meta["parameters"].is_object())
     throw Error("render", "the lighting file does not say what it was made with", file);
   const nlohmann::json& p = meta["parameters"];
-  job.lighting = p.value("lighting", job.lighting);
-  job.lightingParams = p.value("lighting-params", std::string());
-  job.shadowParams = p.value("shadow-params", std::string());
+  try {
+    job.lighting = p.value("lighting", job.lighting);
+    job.lightingParams = p.value("lighting-params", std::string());
+    job.shadowParams = p.value("shadow-params", std::string());
+  } catch (const nlohmann::json::exception& e) {
+    throw Error("render", std::string("the lighting file's parameters are damaged: ") + e.what(),
+                file);
+  }
 
   StageInput in;
   in.stages = {"precompute"};
@@ -141,7 +147,12 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
     }
     const std::set<std::string> needed = ctx.needed;
     ctx.needed.insert(outputs.begin(), outputs.end());
-    const bool loaded = findStage("precompute").load(ctx, *entry);
+    bool loaded = false;
+    try {
+      loaded = findStage("precompute").load(ctx, *entry);
+    } catch (const nlohmann::json::exception&) {
+      loaded = false;  // a header that does not say what the stage wrote
+    }
     ctx.needed = needed;
     if (!loaded) throw Error("render", "the lighting file's contents do not fit its basis", file);
     keyFromFile(ctx, file, outputs, "render");
@@ -224,16 +235,39 @@ StageInput objectLayerInput(const fs::path& file) {
     if (!input) throw Error("composite", "cannot read the object layer: " + OIIO::geterror(), file);
     const std::string text = input->spec().get_string_attribute(kLayerAttribute);
     const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
-    if (text.empty() || header.is_discarded() || header.value("format", 0) != kLayerFormat)
+    if (text.empty() || !header.is_object() || !header.contains("format") ||
+        header["format"] != kLayerFormat)
       throw Error("composite",
                   "not an object layer of compose render (no compose:layer header of format " +
                       std::to_string(kLayerFormat) + ")",
                   file);
-    // Reads the part of that name, in float, with its data window.
+    // The camera the layer was rendered for: every part lies inside its frame.
+    Geometry geometry;
+    try {
+      geometry = geometryFromJson(header.at("geometry"), file);
+    } catch (const nlohmann::json::exception& e) {
+      throw Error("composite", std::string("the object layer's header is damaged: ") + e.what(),
+                  file);
+    }
+    const int frameWidth = geometry.camera.width, frameHeight = geometry.camera.height;
+    if (frameWidth <= 0 || frameHeight <= 0)
+      throw Error("composite", "the object layer's header has no frame size", file);
+    checkImageSize(frameWidth, frameHeight, 1, "composite", file);
+    // Reads the part of that name, in float, with its data window, which must lie in the frame.
     auto readPart = [&](const std::string& name, int& x, int& y) {
       for (int sub = 0; input->seek_subimage(sub, 0); ++sub) {
         const OIIO::ImageSpec& spec = input->spec();
         if (spec.get_string_attribute("name") != name) continue;
+        if (spec.x < 0 || spec.y < 0 || spec.width <= 0 || spec.height <= 0 ||
+            int64_t(spec.x) + spec.width > frameWidth ||
+            int64_t(spec.y) + spec.height > frameHeight)
+          throw Error("composite",
+                      format("part '%s' of the object layer (%dx%d at %d,%d) does not lie in its "
+                             "%dx%d frame",
+                             name.c_str(), spec.width, spec.height, spec.x, spec.y, frameWidth,
+                             frameHeight),
+                      file);
+        checkImageSize(spec.width, spec.height, spec.nchannels, "composite", file);
         Image image(spec.width, spec.height, spec.nchannels, spec.channelnames);
         if (!input->read_image(sub, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT,
                                image.pixels.data()))
@@ -296,16 +330,19 @@ StageInput objectLayerInput(const fs::path& file) {
         ground.grid.x1 = gj.at("x1");
         ground.grid.y1 = gj.at("y1");
         ground.ratio = readPart("shadow", x, y);
-        if (x != ground.grid.x0 || y != ground.grid.y0)
-          throw Error("composite", "the shadow part does not match its header", file);
         ground.ratio.channelNames = gj.at("channels").get<std::vector<std::string>>();
+        if (x != ground.grid.x0 || y != ground.grid.y0 ||
+            ground.ratio.width != ground.grid.x1 - ground.grid.x0 ||
+            ground.ratio.height != ground.grid.y1 - ground.grid.y0 || ground.ratio.channels < 3 ||
+            int(ground.ratio.channelNames.size()) != ground.ratio.channels)
+          throw Error("composite", "the shadow part does not match its header", file);
         ground.ratio.colorSpace = gj.value("colorSpace", "");
       }
       if (gj.is_object()) {
         ground.reason = gj.value("reason", "");
         ctx.artefacts.groundShadow = std::move(ground);
       }
-      ctx.setGeometry(geometryFromJson(header.at("geometry"), file));
+      ctx.setGeometry(geometry);
     } catch (const nlohmann::json::exception& e) {
       throw Error("composite", std::string("the object layer's header is damaged: ") + e.what(),
                   file);

@@ -486,7 +486,13 @@ class GroundStage final : public Stage {
     r.grid.x1 = m["x1"];
     r.grid.y1 = m["y1"];
     r.reason = m.value("reason", "");
-    if (m.value("hasRatio", false) && !cache.takeImage("ratio", r.ratio)) return false;
+    if (m.value("hasRatio", false)) {
+      if (!cache.takeImage("ratio", r.ratio)) return false;
+      // The grid and the ratio it holds agree (the composite places the ratio by it).
+      if (r.grid.x0 < 0 || r.grid.y0 < 0 || r.ratio.width != r.grid.x1 - r.grid.x0 ||
+          r.ratio.height != r.grid.y1 - r.grid.y0 || r.ratio.channels < 3)
+        return false;
+    }
     ctx.artefacts.groundShadow = std::move(r);
     return true;
   }

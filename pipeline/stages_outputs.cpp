@@ -256,6 +256,12 @@ class RenderStage final : public Stage {
     r.exposure = m.value("exposure", 1.0f);
     if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))
       return false;
+    // The rectangle and the images it holds agree (the composite places them by it).
+    const int w = r.output.x1 - r.output.x0, h = r.output.y1 - r.output.y0;
+    if (r.output.x0 < 0 || r.output.y0 < 0 || r.output.beauty.width != w ||
+        r.output.beauty.height != h || r.output.beauty.channels != 4 || r.output.aovs.width != w ||
+        r.output.aovs.height != h)
+      return false;
     r.notes = m.value("notes", std::vector<std::string>());
     r.meshFile = m.value("mesh", "");
     for (const auto& n : r.notes) ctx.note(n);

@@ -58,9 +58,15 @@ void overInPlace(Image& bg, const Image& fg, int x0, int y0) {
 }
 
 void multiply(Image& image, const Image& factor, int x0, int y0) {
-  COMPOSE_CHECK(image.channels >= 3 && factor.channels >= 3);
-  COMPOSE_CHECK(x0 >= 0 && y0 >= 0 && x0 + factor.width <= image.width &&
-                y0 + factor.height <= image.height);
+  if (image.channels < 3 || factor.channels < 3)
+    throw Error("composite", "multiply needs RGB channels in the image and the factor");
+  if (x0 < 0 || y0 < 0 || x0 + factor.width > image.width || y0 + factor.height > image.height) {
+    throw Error("composite", "the factor (" + std::to_string(factor.width) + "x" +
+                                 std::to_string(factor.height) + " at " + std::to_string(x0) + "," +
+                                 std::to_string(y0) + ") does not lie inside the image (" +
+                                 std::to_string(image.width) + "x" + std::to_string(image.height) +
+                                 ")");
+  }
   parallelFor(0, factor.height, [&](int64_t y) {
     for (int x = 0; x < factor.width; ++x) {
       const float* f = factor.at(x, int(y));

@@ -248,6 +248,33 @@ TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
   EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
 }
 
+// Bare file names, as one types them in the folder one works in: written there.
+TEST_F(StageCommands, BareFileNamesAreWrittenInTheWorkingFolder) {
+  const fs::path work = dir_ / "work";
+  fs::create_directories(work);
+  const std::string cd = "cd " + quote(work) + " && ";
+  const std::string compose = quote(COMPOSE_EXECUTABLE);
+  auto shell = [&](const std::string& command) {
+    const int raw = std::system(
+        (cd + command + " >/dev/null 2>" + quote(dir_ / "err.txt") + " </dev/null").c_str());
+    return std::pair(WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, slurp(dir_ / "err.txt"));
+  };
+  auto [status, err] = shell(compose + " -q precompute --env " + quote(samples_ / "forest.exr") +
+                             " --lighting-params order=4 --out l.stage --no-cache");
+  ASSERT_EQ(status, 0) << err;
+  EXPECT_TRUE(fs::is_regular_file(work / "l.stage"));
+  std::tie(status, err) =
+      shell(compose + " -q render --plate " + quote(plate_) + " " + objectOptions() +
+            " --shadows off --no-shadow" + " --lighting-file l.stage --out layer.exr --no-cache");
+  ASSERT_EQ(status, 0) << err;
+  EXPECT_TRUE(fs::is_regular_file(work / "layer.exr"));
+  std::tie(status, err) = shell(compose + " -q composite --plate " + quote(plate_) +
+                                " --layer layer.exr --out c --no-cache");
+  ASSERT_EQ(status, 0) << err;
+  EXPECT_TRUE(fs::is_regular_file(work / "c.exr"));
+  EXPECT_TRUE(fs::is_regular_file(work / "c.jpg"));
+}
+
 TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
   const RunResult r = run("precompute --explain --env " + quote(samples_ / "forest.exr") +
                               " --out " + quote(dir_ / "l.lighting") + " --no-cache",

@@ -1,7 +1,8 @@
 // The JSON files of ours: lens files (calib/lens.h), plate poses (calib/chessboard.h), capture
 // descriptions (ingest/capture.h: the photos they name are looked up beside the file; the scratch
 // folder holds a small JPEG "a.jpg" with EXIF for them to find) and camera response curves
-// (hdr/response.h). COMPOSE_FUZZ_JSON selects the reader: lens, pose, capture, response.
+// (hdr/response.h) and scene files (pipeline/scene.h). COMPOSE_FUZZ_JSON selects the reader:
+// lens, pose, capture, response, scene.
 #include <cmath>
 #include <cstring>
 
@@ -11,6 +12,7 @@
 #include "hdr/response.h"
 #include "ingest/capture.h"
 #include "ingest/image_io.h"
+#include "pipeline/scene.h"
 
 using namespace compose;
 
@@ -50,6 +52,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       ingest::resolveExposures(capture);
       for (const ingest::View& v : capture.views)
         for (const ingest::Shot& s : v.shots) FUZZ_CHECK(s.exposure && *s.exposure > 0.0);
+    } else if (kind == "scene") {
+      // What a scene sets, written back out and read again, sets the same again.
+      const pipeline::ComposeJob job = pipeline::loadScene(file);
+      const auto folder = file.parent_path();
+      pipeline::saveScene(job, fuzz::scratch() / "again.json");
+      const pipeline::ComposeJob again = pipeline::loadScene(fuzz::scratch() / "again.json");
+      FUZZ_CHECK(pipeline::sceneFromJob(job, folder) == pipeline::sceneFromJob(again, folder));
     } else {
       const hdr::ResponseCurve curve = hdr::readResponse(file);
       for (const auto& channel : curve.inverse)
