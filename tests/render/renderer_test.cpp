@@ -215,5 +215,75 @@ TEST(Renderer, ABoundingBoxCornerJustInFrontOfTheCameraIsClamped) {
   EXPECT_GT(out.coverage, 0.0) << "the wall is seen";
 }
 
+// The plate's lens distortion applies to the object's rays: the straight top edge of a wall bends
+// in the render exactly as the lens model bends a straight line of the scene (a ruler held in front
+// of the camera), and not as a pinhole would draw it.
+TEST(Renderer, AStraightEdgeBendsLikeThePlatesLens) {
+  calib::CameraOptions options;
+  options.height = 1e-3;
+  calib::Lens lens;
+  lens.width = 320;
+  lens.height = 240;
+  lens.fx = lens.fy = 200.0;
+  lens.cx = 160.0;
+  lens.cy = 120.0;
+  lens.distortion = {-0.2, 0.0, 0.0, 0.0, 0.0};  // barrel, as a wide zoom at its short end
+  options.lens = lens;
+  const calib::PlateCamera camera = calib::plateCamera(320, 240, {}, options);
+
+  // A wall 5 units in front of the camera, wider than the view, its top edge 1.5 units above the
+  // optical axis and its bottom below the frame.
+  Mesh wall;
+  wall.positions = {{-8, -3, 0}, {8, -3, 0}, {8, 1.5f, 0}, {-8, 1.5f, 0}};
+  wall.normals.assign(4, glm::vec3(0, 0, 1));
+  wall.indices = {0, 1, 2, 0, 2, 3};
+  wall.normalsFromFile = true;
+  const EmbreeScene bvh(wall.positions, wall.indices);
+  const glm::dvec3 centre = camera.position() + glm::dvec3(0, 0, -5);
+  const glm::dmat4 worldFromObject = glm::translate(glm::dmat4(1.0), centre);
+  lighting::ShLighting sh(2);  // only the coverage matters here
+  sh.project(lighting::Environment::constant(glm::vec3(1.0f), 16));
+  RenderSettings settings;
+  settings.samplesPerAxis = 4;
+  const RenderOutput out = renderDiffuse(wall, bvh, worldFromObject, camera, sh, settings);
+  ASSERT_GT(out.coverage, 0.0);
+
+  // Where the lens puts the edge in column x: the point of the edge's line that projects to the
+  // column's centre (found by bisection: the projection's x grows with the point's x).
+  auto expectedEdge = [&](int x) {
+    double lo = -8.0, hi = 8.0;
+    glm::dvec2 px;
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      EXPECT_TRUE(camera.project(centre + glm::dvec3(mid, 1.5, 0), px));
+      (px.x < x + 0.5 ? lo : hi) = mid;
+    }
+    camera.project(centre + glm::dvec3(0.5 * (lo + hi), 1.5, 0), px);
+    return px.y;
+  };
+  // Where the render puts it: the uncovered part of the column above row 150 (the edge lies in
+  // rows 60-70 and nearly level, so a partly covered pixel holds the edge's sub-pixel position).
+  auto renderedEdge = [&](int x) {
+    double uncovered = 0.0;
+    for (int y = 0; y < 150; ++y) {
+      const bool inside = x >= out.x0 && x < out.x1 && y >= out.y0 && y < out.y1;
+      uncovered += 1.0 - (inside ? double(out.beauty.at(x - out.x0, y - out.y0)[3]) : 0.0);
+    }
+    return uncovered;
+  };
+  double worst = 0.0, bow = 0.0;
+  const double middle = expectedEdge(160);
+  // Above the principal point the radial term already acts: r² = 0.3², 1 + k1 r² = 0.982.
+  EXPECT_NEAR(middle, 120.0 - 200.0 * 0.3 * (1.0 - 0.2 * 0.09), 0.01);
+  for (int x = 8; x < 312; x += 8) {
+    const double expected = expectedEdge(x), rendered = renderedEdge(x);
+    worst = std::max(worst, std::abs(rendered - expected));
+    bow = std::max(bow, std::abs(expected - middle));
+  }
+  EXPECT_LT(worst, 0.25) << "pixels between the rendered edge and the lens model's";
+  // The test can tell: a pinhole would draw the edge level, this lens bends it by this much.
+  EXPECT_GT(bow, 6.0);
+}
+
 }  // namespace
 }  // namespace compose::render
