@@ -12,6 +12,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
 
@@ -343,14 +344,14 @@ PlatePose readPose(const fs::path& file) try {
   auto fail = [&](const std::string& what) { throw Error(kStage, what, file); };
   if (!j.is_object() || j.value("format", std::string()) != "compose-pose")
     fail("not a pose file (\"format\" must be \"compose-pose\")");
-  if (j.value("version", 0) != 1) fail("unsupported pose file version (this compose reads 1)");
+  if (wholeMember(j, "version") != 1) fail("unsupported pose file version (this compose reads 1)");
   PlatePose pose;
   pose.image = j.value("image", std::string());
-  pose.width = j.value("width", 0);
-  pose.height = j.value("height", 0);
+  pose.width = int(wholeMember(j, "width").value_or(0));
+  pose.height = int(wholeMember(j, "height").value_or(0));
   if (!j.contains("board") || !j["board"].is_object()) fail("a pose file needs \"board\"");
-  pose.board.columns = j["board"].value("columns", 0);
-  pose.board.rows = j["board"].value("rows", 0);
+  pose.board.columns = int(wholeMember(j["board"], "columns").value_or(0));
+  pose.board.rows = int(wholeMember(j["board"], "rows").value_or(0));
   pose.board.square = j["board"].value("square", 0.0);
   pose.board.validate();
   const auto& m = j.value("worldFromCamera", nlohmann::json());

@@ -7,6 +7,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
 #include "pipeline/stage.h"
@@ -72,8 +73,11 @@ nlohmann::json geometryToJson(const Geometry& g) {
 Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
   Geometry g;
   const nlohmann::json& c = j.at("camera");
-  g.camera.width = c.at("width").get<int>();
-  g.camera.height = c.at("height").get<int>();
+  const auto width = wholeMember(c, "width", 1), height = wholeMember(c, "height", 1);
+  if (!width || !height)
+    throw Error("composite", "the layer's camera needs a whole width and height in pixels", file);
+  g.camera.width = int(*width);
+  g.camera.height = int(*height);
   g.camera.lens = calib::lensFromJson(c.at("lens"), file);
   g.camera.focal35mm = c.at("focal35mm").get<double>();
   g.camera.focalSource = c.at("focalSource").get<std::string>();
@@ -152,6 +156,8 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
       loaded = findStage("precompute").load(ctx, *entry);
     } catch (const nlohmann::json::exception&) {
       loaded = false;  // a header that does not say what the stage wrote
+    } catch (const Error&) {
+      loaded = false;  // parameters its basis refuses
     }
     ctx.needed = needed;
     if (!loaded) throw Error("render", "the lighting file's contents do not fit its basis", file);
@@ -284,11 +290,20 @@ StageInput objectLayerInput(const fs::path& file) {
       const nlohmann::json& rj = header.at("render");
       RenderedObject object;
       render::RenderOutput& r = object.output;
-      r.x0 = rj.at("x0");
-      r.y0 = rj.at("y0");
-      r.x1 = rj.at("x1");
-      r.y1 = rj.at("y1");
-      r.rays = rj.at("rays");
+      auto whole = [&](const nlohmann::json& j, const char* key,
+                       int64_t hi = std::numeric_limits<int>::max()) {
+        const std::optional<int64_t> v = wholeMember(j, key, 0, hi);
+        if (!v)
+          throw Error("composite",
+                      std::string("the object layer's header needs a whole number '") + key + "'",
+                      file);
+        return *v;
+      };
+      r.x0 = int(whole(rj, "x0"));
+      r.y0 = int(whole(rj, "y0"));
+      r.x1 = int(whole(rj, "x1"));
+      r.y1 = int(whole(rj, "y1"));
+      r.rays = whole(rj, "rays", std::numeric_limits<int64_t>::max());
       r.coverage = rj.at("coverage");
       object.exposure = rj.at("exposure");
       object.notes = rj.at("notes").get<std::vector<std::string>>();
@@ -325,10 +340,10 @@ StageInput objectLayerInput(const fs::path& file) {
       GroundShadowResult ground;
       const nlohmann::json& gj = header.at("ground");
       if (gj.is_object() && gj.contains("x0")) {
-        ground.grid.x0 = gj.at("x0");
-        ground.grid.y0 = gj.at("y0");
-        ground.grid.x1 = gj.at("x1");
-        ground.grid.y1 = gj.at("y1");
+        ground.grid.x0 = int(whole(gj, "x0"));
+        ground.grid.y0 = int(whole(gj, "y0"));
+        ground.grid.x1 = int(whole(gj, "x1"));
+        ground.grid.y1 = int(whole(gj, "y1"));
         ground.ratio = readPart("shadow", x, y);
         ground.ratio.channelNames = gj.at("channels").get<std::vector<std::string>>();
         if (x != ground.grid.x0 || y != ground.grid.y0 ||

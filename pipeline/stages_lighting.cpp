@@ -6,6 +6,7 @@
 #include <span>
 
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/parallel.h"
 #include "core/params.h"
 #include "lighting/capture_volume.h"
@@ -216,7 +217,12 @@ class PrecomputeStage final : public Stage {
     const nlohmann::json& meta = cache.meta();
     if (ctx.needs(kLighting)) {
       if (!meta.contains("lighting")) return false;
-      BasisChoice choice = createBasis(ctx.job, nullptr, meta["lighting"].value("order", 0));
+      const nlohmann::json& lj = meta["lighting"];
+      const std::optional<int64_t> order = lj.is_object() && lj.contains("order")
+                                               ? wholeMember(lj, "order", 0, 4096)
+                                               : std::optional<int64_t>(0);
+      if (!order) return false;
+      BasisChoice choice = createBasis(ctx.job, nullptr, int(*order));
       if (!choice.basis->importState(cache.get("lighting")) ||
           !lighting::LightingCache::finiteIrradiance(*choice.basis))
         return false;
@@ -360,7 +366,7 @@ class ShadowsStage final : public Stage {
     r.points = render::surfacePoints(*ctx.artefacts.mesh);
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
     r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
-    r.irradiance.clamped = cache.meta().value("clamped", 0);
+    r.irradiance.clamped = int(wholeMember(cache.meta(), "clamped", 0).value_or(0));
     r.occlusion = cache.get("occlusion");
     const size_t n = r.points.count();
     if (r.irradiance.shadowed.size() != n || r.irradiance.unshadowed.size() != n ||
@@ -480,11 +486,13 @@ class GroundStage final : public Stage {
   bool load(Context& ctx, StageCache& cache) const override {
     GroundShadowResult r;
     const nlohmann::json& m = cache.meta();
-    if (!m.contains("x0")) return false;
-    r.grid.x0 = m["x0"];
-    r.grid.y0 = m["y0"];
-    r.grid.x1 = m["x1"];
-    r.grid.y1 = m["y1"];
+    const auto x0 = wholeMember(m, "x0"), y0 = wholeMember(m, "y0"), x1 = wholeMember(m, "x1"),
+               y1 = wholeMember(m, "y1");
+    if (!x0 || !y0 || !x1 || !y1) return false;
+    r.grid.x0 = int(*x0);
+    r.grid.y0 = int(*y0);
+    r.grid.x1 = int(*x1);
+    r.grid.y1 = int(*y1);
     r.reason = m.value("reason", "");
     if (m.value("hasRatio", false)) {
       if (!cache.takeImage("ratio", r.ratio)) return false;

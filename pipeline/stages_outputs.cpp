@@ -10,6 +10,7 @@
 
 #include "composite/composite.h"
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "pipeline/context.h"
@@ -223,8 +224,9 @@ class RenderStage final : public Stage {
             {"samples", "anti-aliasing: N x N samples per pixel",
              [](const ComposeJob& j) { return nlohmann::json(j.samplesPerAxis); },
              [](ComposeJob& j, const nlohmann::json& v) {
-               if (!v.is_number_integer()) throw UsageError("samples must be an integer");
-               j.samplesPerAxis = v.get<int>();
+               const std::optional<int64_t> n = wholeNumber(v);
+               if (!n) throw UsageError("samples must be a whole number");
+               j.samplesPerAxis = int(*n);
              }}};
   }
 
@@ -245,13 +247,16 @@ class RenderStage final : public Stage {
   bool cached() const override { return true; }
   bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& m = cache.meta();
-    if (!m.contains("x0")) return false;
+    const auto x0 = wholeMember(m, "x0"), y0 = wholeMember(m, "y0"), x1 = wholeMember(m, "x1"),
+               y1 = wholeMember(m, "y1");
+    if (!x0 || !y0 || !x1 || !y1) return false;
     RenderedObject r;
-    r.output.x0 = m["x0"];
-    r.output.y0 = m["y0"];
-    r.output.x1 = m["x1"];
-    r.output.y1 = m["y1"];
-    r.output.rays = m.value("rays", int64_t(0));
+    r.output.x0 = int(*x0);
+    r.output.y0 = int(*y0);
+    r.output.x1 = int(*x1);
+    r.output.y1 = int(*y1);
+    r.output.rays =
+        wholeMember(m, "rays", 0, std::numeric_limits<int64_t>::max()).value_or(int64_t(0));
     r.output.coverage = m.value("coverage", 0.0);
     r.exposure = m.value("exposure", 1.0f);
     if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))

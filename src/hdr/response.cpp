@@ -12,6 +12,7 @@
 #include <opencv2/photo.hpp>
 
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
@@ -365,7 +366,7 @@ ResponseCurve readResponse(const fs::path& file) try {
   }
   if (!j.is_object() || j.value("format", std::string()) != "compose-response")
     throw Error(kStage, "not a response file (\"format\" must be \"compose-response\")", file);
-  if (j.value("version", 0) != 1)
+  if (wholeMember(j, "version") != 1)
     throw Error(kStage, "unsupported response file version (this compose reads version 1)", file);
   ResponseCurve curve;
   if (j.contains("camera") && j["camera"].is_object()) {

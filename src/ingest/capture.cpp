@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
 
@@ -224,7 +225,7 @@ Capture readCaptureDescription(const fs::path& file) try {
   if (!j.is_object()) fail("a capture description must hold a JSON object");
   if (j.value("format", std::string()) != "compose-capture")
     fail("not a capture description (\"format\" must be \"compose-capture\")");
-  if (j.value("version", 0) != 1)
+  if (wholeMember(j, "version") != 1)
     fail("unsupported capture description version (this compose reads version 1)");
   if (!j.contains("views") || !j["views"].is_array() || j["views"].empty())
     fail("a capture description needs a non-empty \"views\" array");

@@ -322,7 +322,7 @@ int main(int argc, char** argv) {
         for (int bands : {2, 3, 4, 6, 8})
           run("sh", bands, std::make_unique<lighting::ShLighting>(bands),
               render::ShadowMethod::Harmonics, lighting::shCount(bands));
-        for (int k : {1, 2, 3, 4, 5, 6, 8, 10, 12, 16}) {
+        for (int k : {1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 16}) {
           if (quick && (k == 2 || k == 10)) continue;
           lighting::ChebParams cp;
           cp.order = k;

@@ -11,6 +11,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "command_util.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -20,35 +21,12 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 
+using RunResult = compose::testing::CommandResult;
+using compose::testing::quote;
+using compose::testing::runCompose;
+using compose::testing::slurp;
+
 constexpr double kPi = std::numbers::pi;
-
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-std::string quote(const std::string& s) {
-  return "'" + s + "'";
-}
-
-RunResult runCompose(const std::string& args, const fs::path& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out.string()) +
-                          " 2>" + quote(err.string()) + " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  RunResult r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
 
 struct Raster {
   int width = 0, height = 0, channels = 0;

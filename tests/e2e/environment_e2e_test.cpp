@@ -12,6 +12,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "command_util.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/render_view.h"
 #include "ingest/image_io.h"
@@ -29,32 +30,14 @@ using lighting::Environment;
 using lighting::kCubeFaces;
 using testing::TempDir;
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
+using RunResult = compose::testing::CommandResult;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+std::string q(const fs::path& p) {
+  return compose::testing::quote(p);
 }
 
 RunResult run(const std::string& args, const TempDir& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = std::string("'") + COMPOSE_EXECUTABLE + "' " + args + " >'" +
-                          out.string() + "' 2>'" + err.string() + "' </dev/null";
-  const int raw = std::system(cmd.c_str());
-  RunResult r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
-
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
+  return compose::testing::runCompose(args, scratch.path());
 }
 
 fs::path sample(const std::string& name) {

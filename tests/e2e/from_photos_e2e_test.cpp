@@ -27,6 +27,7 @@
 #include <Imath/half.h>
 #include <OpenImageIO/imageio.h>
 
+#include "command_util.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -40,37 +41,19 @@ constexpr double kPi = std::numbers::pi;
 
 // --- running the executable ---
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
-
 // Runs compose with its camera-response store in `scratch` (never the user's), so that every run
 // recovers the response from its own photos.
-RunResult run(const std::string& args, const fs::path& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = "COMPOSE_RESPONSE_DIR=" + q(scratch / "responses") + " " +
-                          q(COMPOSE_EXECUTABLE) + " " + args + " >" + q(out) + " 2>" + q(err) +
-                          " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  RunResult r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+using RunResult = compose::testing::CommandResult;
+using compose::testing::slurp;
+
+std::string q(const fs::path& p) {
+  return compose::testing::quote(p);
 }
 
+RunResult run(const std::string& args, const fs::path& scratch) {
+  return compose::testing::runCompose(args, scratch,
+                                      "COMPOSE_RESPONSE_DIR=" + q(scratch / "responses"));
+}
 fs::path sample(const std::string& name) {
   return pipeline::samplesDirectory() / name;
 }

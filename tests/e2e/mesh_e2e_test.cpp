@@ -11,6 +11,7 @@
 #include <OpenImageIO/imageio.h>
 #include <glm/vec3.hpp>
 
+#include "command_util.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -23,34 +24,13 @@ using compose::testing::writeText;
 
 const fs::path kData = COMPOSE_TEST_DATA_DIR;
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-std::string quote(const std::string& s) {
-  return "'" + s + "'";
-}
+using RunResult = compose::testing::CommandResult;
+using compose::testing::quote;
+using compose::testing::slurp;
 
 RunResult run(const std::string& args, const fs::path& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out.string()) +
-                          " 2>" + quote(err.string()) + " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  RunResult r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return compose::testing::runCompose(args, scratch);
 }
-
 // The mean albedo AOV over the object's fully covered pixels (part "object" of the EXR).
 glm::vec3 meanAlbedo(const fs::path& exr, int& pixels) {
   pixels = 0;

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "command_util.h"
 #include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -17,36 +18,18 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 
-struct CommandRun {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+// Runs compose with its response store in `dir` (never the user's).
+using CommandRun = compose::testing::CommandResult;
+using compose::testing::slurp;
 
 std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
+  return compose::testing::quote(p);
 }
 
-// Runs compose with its response store in `dir` (never the user's).
 CommandRun compose(const std::string& args, const TempDir& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string cmd = "COMPOSE_RESPONSE_DIR=" + q(dir / "responses") + " " +
-                          q(COMPOSE_EXECUTABLE) + " " + args + " >" + q(out) + " 2>" + q(err) +
-                          " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  CommandRun r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return compose::testing::runCompose(args, dir.path(),
+                                      "COMPOSE_RESPONSE_DIR=" + q(dir / "responses"));
 }
-
 // Only the files a test put there: no output and no temporary left behind.
 std::vector<std::string> filesIn(const fs::path& dir) {
   std::vector<std::string> names;

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "command_util.h"
 #include "core/image.h"
 #include "ingest/image_io.h"
 #include "pipeline/stage_cache.h"
@@ -26,35 +27,14 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
+using RunResult = compose::testing::CommandResult;
+using compose::testing::quote;
+using compose::testing::slurp;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-std::string quote(const std::string& s) {
-  return "'" + s + "'";
-}
-
-// Runs a shell command line (sh), its output and errors captured.
+// Runs a shell command line (sh), its output and errors captured as <tag>.out and <tag>.err.
 RunResult runShell(const std::string& command, const fs::path& scratch, const std::string& tag) {
-  const fs::path out = scratch / (tag + ".out"), err = scratch / (tag + ".err");
-  const std::string cmd =
-      "{ " + command + "; } >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  RunResult r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return compose::testing::runShell(command, scratch / (tag + ".out"), scratch / (tag + ".err"));
 }
-
 const std::string kCompose = quote(COMPOSE_EXECUTABLE);
 
 // The report line of one stage ("compose: render ... reused ...").

@@ -15,6 +15,7 @@
 
 #include "calib/chessboard.h"
 #include "calib/plate_camera.h"
+#include "command_util.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -24,30 +25,13 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-std::string quote(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
+using RunResult = compose::testing::CommandResult;
+using compose::testing::quote;
+using compose::testing::slurp;
 
 RunResult run(const std::string& args, const fs::path& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = quote(COMPOSE_EXECUTABLE) + " " + args + " >" + quote(out) + " 2>" +
-                          quote(err) + " </dev/null";
-  const int raw = std::system(cmd.c_str());
-  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, slurp(out), slurp(err)};
+  return compose::testing::runCompose(args, scratch);
 }
-
 // Every part of an EXR: name, data window, channel names and float pixels.
 struct Part {
   std::string name;

@@ -1,0 +1,43 @@
+// Whole numbers from JSON: only whole numbers in range, never a conversion out of range.
+#include "core/json_number.h"
+
+#include <gtest/gtest.h>
+
+namespace compose {
+namespace {
+
+using nlohmann::json;
+
+TEST(JsonNumber, TakesWholeNumbersWrittenEitherWay) {
+  EXPECT_EQ(wholeNumber(json(3)), 3);
+  EXPECT_EQ(wholeNumber(json(3.0)), 3);
+  EXPECT_EQ(wholeNumber(json(-7)), -7);
+  EXPECT_EQ(wholeNumber(json(uint64_t(12))), 12);
+  EXPECT_EQ(wholeNumber(json::parse("2147483647")), 2147483647);
+}
+
+TEST(JsonNumber, RefusesFractionsOutOfRangeAndOtherTypes) {
+  EXPECT_FALSE(wholeNumber(json(3.5)));
+  EXPECT_FALSE(wholeNumber(json::parse("3e39")));  // a float far beyond int
+  EXPECT_FALSE(wholeNumber(json::parse("-1e20")));
+  EXPECT_FALSE(wholeNumber(json(int64_t(1) << 40)));  // would wrap to 0 as an int
+  EXPECT_FALSE(wholeNumber(json::parse("18446744073709551615")));
+  EXPECT_FALSE(wholeNumber(json("3")));
+  EXPECT_FALSE(wholeNumber(json(true)));
+  EXPECT_FALSE(wholeNumber(json()));
+  EXPECT_FALSE(wholeNumber(json(5), 0, 4)) << "above the caller's range";
+  EXPECT_FALSE(wholeNumber(json(-1), 0));
+}
+
+TEST(JsonNumber, MembersAreLookedUpOnObjectsOnly) {
+  const json j = json::parse(R"({"x0": 4, "y0": 2.5, "big": 1e300})");
+  EXPECT_EQ(wholeMember(j, "x0"), 4);
+  EXPECT_FALSE(wholeMember(j, "y0"));
+  EXPECT_FALSE(wholeMember(j, "big"));
+  EXPECT_FALSE(wholeMember(j, "missing"));
+  EXPECT_FALSE(wholeMember(json::array({1, 2}), "x0"));
+  EXPECT_FALSE(wholeMember(json(4), "x0"));
+}
+
+}  // namespace
+}  // namespace compose
