@@ -75,6 +75,46 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
   return m;
 }
 
+// Exposure from EXIF: when the environment was merged from 8-bit photos whose exposures are their
+// EXIF ones (t · ISO / N²), and the plate is an 8-bit photo of the same camera (EXIF Make and
+// Model) with its own exposure in EXIF, the merged radiance is in the plate's units at relative
+// exposure 1 (hdr/capture_merge.h, Units): the plate's relative exposure is the scale. Empty, with
+// the reason in `why`, when any of that does not hold.
+std::optional<double> exifExposure(const Context& ctx, std::string& why) {
+  const ingest::CaptureInfo& plate = ctx.artefacts.plate->info;
+  if (!ctx.artefacts.capture) {
+    why = "the environment is not from photos";
+    return std::nullopt;
+  }
+  const ingest::Capture& capture = *ctx.artefacts.capture;
+  ingest::CaptureInfo captureCamera;
+  captureCamera.cameraMake = capture.cameraMake;
+  captureCamera.cameraModel = capture.cameraModel;
+  if (plate.camera().empty() || plate.camera() != captureCamera.camera()) {
+    why = "the plate's camera (" + (plate.camera().empty() ? "not in EXIF" : plate.camera()) +
+          ") is not the capture's (" +
+          (captureCamera.camera().empty() ? "unknown" : captureCamera.camera()) + ")";
+    return std::nullopt;
+  }
+  const std::optional<double> e = plate.relativeExposure();
+  if (!e || !plate.exposureAssumptions().empty() || plate.bitsPerSample != 8) {
+    why = "the plate is not an 8-bit photo with its exposure time, f-number and ISO in EXIF";
+    return std::nullopt;
+  }
+  for (const ingest::View& view : capture.views) {
+    for (const ingest::Shot& shot : view.shots) {
+      const std::optional<double> own = shot.info.relativeExposure();
+      if (shot.info.bitsPerSample != 8 || !shot.exposure || !own ||
+          !shot.info.exposureAssumptions().empty() ||
+          std::abs(*shot.exposure / *own - 1.0) > 1e-6) {
+        why = "the capture's photos are not all 8-bit with their exposures from EXIF";
+        return std::nullopt;
+      }
+    }
+  }
+  return *e;
+}
+
 // A holdout mask: the first channel of any image the plate's size, as stored (no colour
 // management: it is data).
 Image loadHoldout(const fs::path& file, int width, int height) {
@@ -306,12 +346,26 @@ class RenderStage final : public Stage {
       const ExposureMatch match =
           autoExposure(*ctx.artefacts.plateLinear, *ctx.artefacts.lighting,
                        g.camera.position() - objectBase, settings.envFromWorld);
-      settings.exposure = float(match.scale);
-      ctx.note(
-          format("auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
-                 "environment's units) matched to the plate's log-average (%.4g); override "
-                 "with --exposure",
-                 std::log2(match.scale), match.ballRadiance, match.plateKey));
+      std::string why;
+      if (const std::optional<double> exif = exifExposure(ctx, why)) {
+        settings.exposure = float(*exif);
+        const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
+        ctx.note(format(
+            "exposure from EXIF: %+.2f stops: the plate and the capture come from one camera "
+            "(%s); the plate's relative exposure %.4g (%.4g s, f/%.3g, ISO %.0f) puts the "
+            "capture's radiance in the plate's units (the automatic match would give %+.2f "
+            "stops); override with --exposure",
+            std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
+            *info.iso, std::log2(match.scale)));
+      } else {
+        settings.exposure = float(match.scale);
+        ctx.note(
+            format("auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
+                   "environment's units) matched to the plate's log-average (%.4g)%s; override "
+                   "with --exposure",
+                   std::log2(match.scale), match.ballRadiance, match.plateKey,
+                   ctx.artefacts.capture ? (" (not from EXIF: " + why + ")").c_str() : ""));
+      }
       r.notes.push_back(ctx.notes.back());
     }
     r.exposure = settings.exposure;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 namespace compose::hdr {
 
@@ -238,6 +239,15 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     result.linearisation += "; camera RGB taken as " + linearSpace + " (" + why + ")";
   }
 
+  // The unit of 8-bit views: middle grey as the sRGB curve decodes it (capture_merge.h, Units).
+  if (anyEightBit) {
+    constexpr int kMiddleGreyCode = 118;
+    const ResponseCurve srgb = ResponseCurve::srgb();
+    for (size_t c = 0; c < 3; ++c)
+      result.unitScale[c] = double(srgb.inverse[c][kMiddleGreyCode]) /
+                            double(result.response.inverse[c][kMiddleGreyCode]);
+  }
+
   // Merge view by view.
   const size_t views = capture.views.size();
   for (size_t v = 0; v < views; ++v) {
@@ -273,6 +283,14 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     out.stats = mergeBracket(input, options.merge, progress ? viewProgress : Progress{});
     out.radiance = std::move(out.stats.radiance);
     out.stats.radiance = Image();
+    if (input.eightBit) {
+      const int ch = out.radiance.channels;
+      parallelFor(0, out.radiance.height, [&](int64_t y) {
+        float* p = out.radiance.row(int(y)).data();
+        for (int x = 0; x < out.radiance.width; ++x, p += ch)
+          for (int c = 0; c < 3; ++c) p[c] = float(p[c] * result.unitScale[size_t(c)]);
+      });
+    }
     out.radiance.colorSpace = input.eightBit ? linearSpace : working;
     colors.convert(out.radiance, working);
     result.openCvSeconds += out.stats.openCvSeconds;

@@ -16,9 +16,20 @@
 //  * Deeper photos (16-bit, half, float) are converted from their colour space to the working
 //    space by OpenColorIO and merged by our own weighted average.
 //
+// Units. Radiance from 8-bit photos is the curve's linear value over the relative exposure,
+// X(z) / e (hdr/merge.h), rescaled per channel by k_c = sRGB⁻¹(118/255) / X_c(118): code 118 is
+// where the sRGB curve puts middle grey (0.18). A unit of the merged radiance is then the light
+// that a photo of this camera at relative exposure 1 shows as an sRGB-decoded value of 1 at
+// middle grey, whatever the curve's own scale (a recovered curve is 1 at code 128). A plate shot
+// with the same camera and decoded as sRGB shows radiance L as about L · e_plate, so the plate's
+// EXIF fixes the exposure of an object lit by this capture (pipeline: "exposure from EXIF"). For
+// a curve that is the sRGB decoding itself, k = 1. Deeper photos keep their own linear unit over
+// the relative exposure.
+//
 // Errors: compose::Error (stage "merge", or "color" for colour-space names) naming the file.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -55,8 +66,9 @@ struct MergedView {
 
 struct CaptureMergeResult {
   std::vector<MergedView> views;
-  ResponseCurve response;                   // the curve used for 8-bit photos (empty if none)
-  bool responseRecovered = false;           // recovered in this run
+  ResponseCurve response;  // the curve used for 8-bit photos (empty if none)
+  std::array<double, 3> unitScale{1.0, 1.0, 1.0};  // k_c applied to 8-bit views (see Units)
+  bool responseRecovered = false;                  // recovered in this run
   std::filesystem::path responseCacheFile;  // where a recovered curve belongs (empty: nowhere)
   std::string linearisation;                // one sentence: how photos became linear
   std::vector<std::string> notes;

@@ -731,8 +731,14 @@ LoadedMesh loadGltf(const fs::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
-  const bool ok = ext == ".glb" ? parser.LoadBinaryFromFile(&model, &err, &warn, path.string())
-                                : parser.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  bool ok = false;
+  try {
+    ok = ext == ".glb" ? parser.LoadBinaryFromFile(&model, &err, &warn, path.string())
+                       : parser.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  } catch (const std::exception& e) {
+    // tinygltf itself may throw on a malformed file (an index checked with vector::at).
+    throw Error("mesh", std::string("cannot parse glTF: ") + e.what(), path);
+  }
   auto lines = [](const std::string& text) {
     std::vector<std::string> out;
     size_t start = 0;

@@ -28,6 +28,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
+#include "hdr/response.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -691,13 +692,20 @@ void expectPlateFigures(const PlateFigures& p, const Layer& plate) {
 // lat-long map, and the stitch by hand is asked for the same.
 constexpr const char* kCaptureSize = "152x114";
 constexpr int kFaceSize = 128;
-// The middle exposure, 1/8 s. Merged radiance is in units of the photos' exposure, the light that
-// gives a code of 1 in one second: the HDRI times 8 (3 stops) for a perfect merge. The composites
-// from photos are given 3 stops less exposure than the one from the HDRI, and any difference left
-// is the merge's own error of scale.
+// The middle exposure, 1/8 s.
 constexpr double kMiddleExposure = 0.125;
+// Merged radiance from 8-bit photos is in the plate's units (hdr/capture_merge.h, Units): middle
+// grey, code 118, decodes to what the sRGB curve gives it. The virtual camera's sensor signal is
+// K L e (K = 1) and its curve the filmic f(s) = sRGB(2s / (s + 1)), so f⁻¹(v) = u / (2 - u) with
+// u = sRGB⁻¹(v): a perfect merge is the HDRI times sRGB⁻¹(118/255) / f⁻¹(118/255) = 2 - u,
+// 1.82, and the composites from photos are given that much less exposure than the one from the
+// HDRI. Any difference left is the merge's own error of scale.
+double mergeUnit() {
+  const double u = srgbDecode(118.0 / 255.0);
+  return u / (u / (2.0 - u));  // sRGB⁻¹(118/255) / f⁻¹(118/255)
+}
 constexpr double kDirectStops = -0.5;
-const double kPhotoStops = kDirectStops + std::log2(kMiddleExposure);
+const double kPhotoStops = kDirectStops - std::log2(mergeUnit());
 
 class FromPhotos : public ::testing::Test {
  protected:
@@ -732,13 +740,13 @@ class FromPhotos : public ::testing::Test {
 };
 
 // Agreement of a composite from photos with the one from the HDRI. Measured (gcc Release, this
-// scene): by hand, on the object PSNR 35.0 dB, median 2.2 %, p95 2.6 %, mean signed +1.7 %; on the
+// scene): by hand, on the object PSNR 33.4 dB, median 2.1 %, p95 3.1 %, mean signed -1.9 %; on the
 // plate PSNR 71.8 dB, the shadow's ratio off by 0.001 on average and 0.019 at worst; the one-shot
-// command within 0.3 dB of that. What differs: the merge's scale (the HDRI times 8.03 instead of
-// 8: +0.4 % on the whole object), the sun clipped in every exposure (its light a lower bound) and
-// the 4-5 % of the sphere no photo saw, filled from around it, with the blur of 128-pixel faces;
-// the shadow follows the light, so its ratio differs most at its edges. The bounds leave about
-// twice the measured error (5 dB of PSNR, 1.8x).
+// command within 0.1 dB of that. What differs: the merge's scale (the HDRI times 1.755 instead of
+// 1.819: -3.5 % on the whole object), the sun clipped in every exposure (its light a lower bound)
+// and the 4-5 % of the sphere no photo saw, filled from around it, with the blur of 128-pixel
+// faces; the shadow follows the light, so its ratio differs most at its edges. The bounds leave
+// about twice the measured error (5 dB of PSNR, 1.8x).
 constexpr double kPhotosObjectPsnrDb = 30.0;
 constexpr double kPhotosObjectMedian = 0.04;
 constexpr double kPhotosObjectBias = 0.03;
@@ -810,8 +818,8 @@ TEST_F(FromPhotos, FromBrackets) {
   const ImageFile hand = readImageFile(dir_ / "hand.exr");
 
   const double scale = captureScale(readImageFile(dir_ / "env.exr").parts.at(0), truthMap);
-  std::printf("[ figures ] by hand: stitched map = %.4f x the HDRI (8 for a perfect merge)\n",
-              scale);
+  std::printf("[ figures ] by hand: stitched map = %.4f x the HDRI (%.4f for a perfect merge)\n",
+              scale, mergeUnit());
   {
     const ObjectFigures o = checkObject(hand, truth, scale, std::exp2(kPhotoStops), kAlbedo);
     const PlateFigures p = checkPlate(hand, plateLinear_);
@@ -901,6 +909,87 @@ TEST_F(FromPhotos, FromLatLong) {
 // Bad input end to end, through the one-shot command on a capture description: each is a named
 // error with a non-zero exit, and leaves the outputs as they were (a previous composite stays, no
 // temporary file is left beside it).
+// Exposure from EXIF: a plate photographed with the capture's own camera fixes the object's
+// exposure, with no guess about what the plate shows. The scene is uniform light (an environment of
+// one radiance everywhere), where the answer is known: a white Lambertian object without shadows
+// reflects exactly the light around it, so it must look like the plate, which shows that light.
+// The virtual camera photographs it in six views (the true response in the per-camera store,
+// since a uniform scene gives recovery nothing to work with); the plate is one of those photos.
+// Expected with EXIF: the object as bright as the plate, up to the gap between the camera's filmic
+// curve and the sRGB decoding the plate gets, which is nil at middle grey (code 118, where the
+// merge's unit is anchored) and +7 % at code 151. Here the plate sits at code 117: measured
+// 0.998. The automatic match, which takes the plate's average for the light off a mid-grey
+// (0.18) ball, would make the white object 1 / 0.18 = 5.6 times the plate.
+constexpr double kExifExposureTolerance = 0.05;
+
+TEST_F(FromPhotos, ExposureFromExifWhenThePlateIsFromTheCapturesCamera) {
+  const fs::path uniform = dir_ / "uniform.exr";
+  {
+    std::vector<float> px(64 * 32 * 3, 0.5f);
+    auto out = OIIO::ImageOutput::create(uniform.string());
+    OIIO::ImageSpec spec(64, 32, 3, OIIO::TypeDesc::FLOAT);
+    spec.attribute("oiio:ColorSpace", "lin_rec709");
+    ASSERT_TRUE(out && out->open(uniform.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    ASSERT_TRUE(out->close());
+  }
+  const fs::path shots = dir_ / "uniform-shots";
+  RunResult r = run("capture-sim --env " + q(uniform) + " --out " + q(shots) +
+                        " --size 64x48 --views 6 --brackets 3 --ev-step 2 --fov 100 --seed 5",
+                    dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const fs::path stored = hdr::responseFileFor(dir_ / "responses", "compose", "virtual camera");
+  fs::create_directories(stored.parent_path());
+  fs::copy_file(shots / "response_truth.json", stored, fs::copy_options::overwrite_existing);
+
+  const fs::path plate = shots / "pz_2.jpg";
+  const std::string object = " --object " + q(sample("bunny.obj")) +
+                             " --albedo 1 --shadows off --no-shadow --samples 1 --no-cache";
+  r = run("--plate " + q(plate) + " --env " + q(shots / "capture.json") + object + " --out " +
+              q(dir_ / "exif"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("compose virtual camera"), std::string::npos) << r.err;
+
+  // The object's fully covered pixels against the plate (uniform but for noise), both linear.
+  const ImageFile out = readImageFile(dir_ / "exif.exr");
+  const Layer* layer = out.part("object");
+  ASSERT_NE(layer, nullptr);
+  const int alpha = layer->channel("object.A");
+  const int rgb[3] = {layer->channel("object.R"), layer->channel("object.G"),
+                      layer->channel("object.B")};
+  ASSERT_GE(std::min({alpha, rgb[0], rgb[1], rgb[2]}), 0) << "the object part's channels";
+  double objectSum = 0.0;
+  int covered = 0;
+  for (int y = layer->y0; y < layer->y0 + layer->height; ++y)
+    for (int x = layer->x0; x < layer->x0 + layer->width; ++x)
+      if (layer->at(x, y, alpha) == 1.0f) {
+        for (int c : rgb) objectSum += layer->at(x, y, c);
+        ++covered;
+      }
+  ASSERT_GT(covered, 50);
+  const Layer plateLinear = linearPlate(plate);
+  double plateSum = 0.0;
+  for (float v : plateLinear.px) plateSum += v;
+  const double ratio = (objectSum / covered) / (plateSum / double(plateLinear.px.size() / 3));
+  std::printf(
+      "[ figures ] exposure from EXIF: a white object in uniform light %.4f, the plate %.4f: "
+      "ratio %.4f\n",
+      objectSum / 3.0 / covered, plateSum / double(plateLinear.px.size()), ratio);
+  EXPECT_NEAR(ratio, 1.0, kExifExposureTolerance);
+
+  // A plate from another camera (the small tabletop plate: no EXIF): the automatic match, and
+  // the reason EXIF was not used.
+  r = run("--plate " + q(plate_) + " --env " + q(shots / "capture.json") + object + " --out " +
+              q(dir_ / "auto"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("auto exposure"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("not from EXIF: the plate's camera (not in EXIF)"), std::string::npos)
+      << r.err;
+}
+
 TEST_F(FromPhotos, BadInputIsANamedErrorAndLeavesNoOutput) {
   capture(dir_ / "shots");
   const fs::path out = dir_ / "out";
