@@ -20,6 +20,7 @@
 
 #include <tbb/global_control.h>
 
+#include "bench_util.h"
 #include "core/parallel.h"
 #include "cubemap/layouts.h"
 #include "ingest/image_io.h"
@@ -28,22 +29,17 @@
 #include "pipeline/compose_job.h"
 
 using namespace compose;
-using Clock = std::chrono::steady_clock;
 
 namespace {
-
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
 
 // Best of `repeats` timings of f().
 template <class F>
 double best(int repeats, F&& f) {
   double b = 1e30;
   for (int i = 0; i < repeats; ++i) {
-    const auto t = Clock::now();
+    const auto t = bench::Clock::now();
     f();
-    b = std::min(b, since(t));
+    b = std::min(b, bench::secondsSince(t));
   }
   return b;
 }

@@ -1,4 +1,5 @@
-// compose-bench-lighting: run time against error for every lighting basis (docs/design.md §5-7, issue 3).
+// compose-bench-lighting: run time against error for every lighting basis (docs/design.md §5-7,
+// issue 3).
 //
 // For each sample environment, a sphere seen from the front and from the back (all normals) is
 // shaded with every basis over a sweep of its parameters. Each row reports: coefficients per

@@ -8,7 +8,6 @@
 //
 // The photos are made first; the merge runs in a child process (this program again, with
 // --merge-only), so that its peak memory does not include the virtual camera's.
-#include <sys/resource.h>
 
 #include <chrono>
 #include <cstdio>
@@ -17,6 +16,7 @@
 #include <filesystem>
 #include <string>
 
+#include "bench_util.h"
 #include "capture/virtual_camera.h"
 #include "color/color.h"
 #include "hdr/capture_merge.h"
@@ -30,16 +30,6 @@ using namespace compose;
 
 namespace {
 
-double since(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
-
-double peakMegabytes() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;  // kilobytes on Linux
-}
-
 int mergeOnly(const fs::path& dir, bool align) {
   const auto t0 = std::chrono::steady_clock::now();
   ingest::Capture capture = ingest::readCaptureDescription(dir / "capture.json");
@@ -49,7 +39,7 @@ int mergeOnly(const fs::path& dir, bool align) {
   read.codesForEightBit = true;  // as compose merge reads them
   for (const auto& s : capture.views[0].shots)
     photos[0].push_back(ingest::readImage(s.file, "merge", read));
-  const double decode = since(t0);
+  const double decode = bench::secondsSince(t0);
 
   const color::ColorConfig colors = color::ColorConfig::builtin();
   hdr::CaptureMergeOptions options;
@@ -63,7 +53,7 @@ int mergeOnly(const fs::path& dir, bool align) {
   ingest::WriteOptions w;
   w.depth = ingest::WriteOptions::Depth::Float;
   ingest::writeImage(dir / "merged.exr", r.views[0].radiance, w);
-  const double write = since(t2);
+  const double write = bench::secondsSince(t2);
 
   const double plumbing = r.seconds - r.openCvSeconds;
   const auto& img = r.views[0].radiance;
@@ -80,9 +70,9 @@ int mergeOnly(const fs::path& dir, bool align) {
   std::printf("  %-46s %8.1f %%  (target <= 20 %%)\n", "  plumbing on top of the OpenCV calls",
               100.0 * plumbing / r.openCvSeconds);
   std::printf("  %-46s %8.3f s\n", "write float EXR (OpenImageIO)", write);
-  std::printf("  %-46s %8.3f s\n", "end to end", since(t0));
+  std::printf("  %-46s %8.3f s\n", "end to end", bench::secondsSince(t0));
   std::printf("  %-46s %8.0f MB\n", "peak memory of the merging process (ru_maxrss)",
-              peakMegabytes());
+              bench::peakResidentMb());
   return 0;
 }
 
@@ -139,8 +129,8 @@ int main(int argc, char** argv) {
       const capture::SimulatedCapture sim = capture::simulateCapture(env, p);
       capture::writeCapture(dir, sim);
     }
-    std::printf("setup: the virtual camera took and wrote 3 JPEGs in %.1f s (%s)\n", since(t0),
-                dir.string().c_str());
+    std::printf("setup: the virtual camera took and wrote 3 JPEGs in %.1f s (%s)\n",
+                bench::secondsSince(t0), dir.string().c_str());
     std::fflush(stdout);
     const std::string cmd = "'/proc/" + std::to_string(getpid()) + "/exe' --merge-only '" +
                             dir.string() + "'" + (align ? " --align" : "");

@@ -57,6 +57,7 @@
 #include <OpenImageIO/imageio.h>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "bench_util.h"
 #include "calib/plate_camera.h"
 #include "color/color.h"
 #include "composite/composite.h"
@@ -74,11 +75,6 @@ namespace {
 
 using namespace compose;
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double since(Clock::time_point a) {
-  return std::chrono::duration<double>(Clock::now() - a).count();
-}
 
 double loadAverage() {
   double l[3] = {0, 0, 0};
@@ -108,20 +104,13 @@ double residentMb() {
   return n == 2 ? double(resident) * double(page) / (1024.0 * 1024.0) : 0.0;
 }
 
-// The peak resident set of this process so far (MB), VmHWM.
-double peakResidentMb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;
-}
-
 // Samples the resident memory every 2 ms on a thread of its own.
 class MemorySampler {
  public:
-  MemorySampler() : start_(Clock::now()) {
+  MemorySampler() : start_(bench::Clock::now()) {
     thread_ = std::thread([this] {
       while (!stop_) {
-        samples_.push_back({since(start_), residentMb()});
+        samples_.push_back({bench::secondsSince(start_), residentMb()});
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
       }
     });
@@ -131,7 +120,7 @@ class MemorySampler {
     stop_ = true;
     if (thread_.joinable()) thread_.join();
   }
-  double now() const { return since(start_); }
+  double now() const { return bench::secondsSince(start_); }
   // The largest sample in [t0, t1] (seconds from the start), 0 when there is none.
   double peak(double t0, double t1) const {
     double m = 0.0;
@@ -141,7 +130,7 @@ class MemorySampler {
   }
 
  private:
-  Clock::time_point start_;
+  bench::Clock::time_point start_;
   std::atomic<bool> stop_{false};
   std::vector<std::pair<double, double>> samples_;
   std::thread thread_;
@@ -228,14 +217,14 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
     display.resize(displaySpec.image_pixels() * size_t(displaySpec.nchannels));
     in->read_image(0, 0, 0, displaySpec.nchannels, OIIO::TypeDesc::FLOAT, display.data());
   }
-  auto t = Clock::now();
+  auto t = bench::Clock::now();
   const std::vector<float> platePixels = decode(plate);
-  std::printf("decode_plate %.6f\n", since(t));
-  t = Clock::now();
+  std::printf("decode_plate %.6f\n", bench::secondsSince(t));
+  t = bench::Clock::now();
   const std::vector<float> envPixels = decode(env);
-  std::printf("decode_env %.6f\n", since(t));
+  std::printf("decode_env %.6f\n", bench::secondsSince(t));
 
-  t = Clock::now();
+  t = bench::Clock::now();
   {
     const fs::path file = scratch / "baseline.exr";
     auto out = OIIO::ImageOutput::create(file.string());
@@ -249,8 +238,8 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
     }
     out->close();
   }
-  std::printf("encode_exr %.6f\n", since(t));
-  t = Clock::now();
+  std::printf("encode_exr %.6f\n", bench::secondsSince(t));
+  t = bench::Clock::now();
   {
     const fs::path file = scratch / "baseline.jpg";
     OIIO::ImageSpec spec(displaySpec.width, displaySpec.height, displaySpec.nchannels,
@@ -261,14 +250,14 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
       throw std::runtime_error(out->geterror());
     out->close();
   }
-  std::printf("encode_jpeg %.6f\n", since(t));
+  std::printf("encode_jpeg %.6f\n", bench::secondsSince(t));
   std::printf("parts %zu\n", reference.specs.size());
   for (const OIIO::ImageSpec& s : reference.specs) {
     std::printf("part %s %dx%d+%d+%d %d %s %s\n", s.get_string_attribute("name").c_str(), s.width,
                 s.height, s.x, s.y, s.nchannels, s.format.c_str(),
                 s.get_string_attribute("compression").c_str());
   }
-  std::printf("hwm %.1f\n", peakResidentMb());
+  std::printf("hwm %.1f\n", bench::peakResidentMb());
   return platePixels.empty() || envPixels.empty() ? 1 : 0;
 }
 
@@ -288,21 +277,21 @@ int childRender(const fs::path& cache, int repeat) {
 
   std::vector<double> bvh;
   for (int i = 0; i < repeat; ++i) {
-    const auto t = Clock::now();
+    const auto t = bench::Clock::now();
     const render::EmbreeScene s(mesh.positions, mesh.indices);
-    bvh.push_back(since(t));
+    bvh.push_back(bench::secondsSince(t));
   }
   std::printf("bvh %.6f\n", median(bvh));
   const render::EmbreeScene scene(mesh.positions, mesh.indices);
   const pipeline::ShadowPlan plan = pipeline::ShadowPlan::parse("");
-  auto t = Clock::now();
+  auto t = bench::Clock::now();
   const pipeline::ShadowLighting coldLighting =
       pipeline::prepareShadowLighting(environment, plan, cache);
-  std::printf("shadow_lighting_cold %.6f\n", since(t));
-  t = Clock::now();
+  std::printf("shadow_lighting_cold %.6f\n", bench::secondsSince(t));
+  t = bench::Clock::now();
   const pipeline::ShadowLighting shadowLighting =
       pipeline::prepareShadowLighting(environment, plan, cache);
-  std::printf("shadow_lighting_warm %.6f\n", since(t));
+  std::printf("shadow_lighting_warm %.6f\n", bench::secondsSince(t));
 
   const calib::PlateCamera camera = calib::plateCamera(1920, 1080, {}, {});
   for (const double height : {0.3, 0.6}) {
@@ -314,31 +303,31 @@ int childRender(const fs::path& cache, int repeat) {
     for (int c = 0; c < 3; ++c) envFromObject[c] = glm::normalize(envFromObject[c]);
     if (height == 0.3) {
       // The visibility pass, without a cache and then through one (cold, then warm).
-      t = Clock::now();
+      t = bench::Clock::now();
       const pipeline::ShadowResult cold =
           pipeline::computeSelfShadowing(mesh, scene, shadowLighting, envFromObject, plan, {});
-      std::printf("visibility_cold %.6f %zu\n", since(t), cold.points.count());
+      std::printf("visibility_cold %.6f %zu\n", bench::secondsSince(t), cold.points.count());
       pipeline::computeSelfShadowing(mesh, scene, shadowLighting, envFromObject, plan, cache);
     }
     std::vector<double> shade, draw;
     render::RenderOutput out;
     for (int i = 0; i < repeat; ++i) {
-      t = Clock::now();
+      t = bench::Clock::now();
       const pipeline::ShadowResult shadows =
           pipeline::computeSelfShadowing(mesh, scene, shadowLighting, envFromObject, plan, cache);
-      shade.push_back(since(t));
+      shade.push_back(bench::secondsSince(t));
       render::RenderSettings settings;
       settings.points = &shadows.points;
       settings.shadows = &shadows.irradiance;
       settings.occlusion = &shadows.occlusion;
-      t = Clock::now();
+      t = bench::Clock::now();
       out = render::renderDiffuse(mesh, scene, worldFromObject, camera, *lighting, settings);
-      draw.push_back(since(t));
+      draw.push_back(bench::secondsSince(t));
     }
     std::printf("render %.1f %.6f %.6f %d %d %lld %.1f\n", height, median(shade), median(draw),
                 out.x1 - out.x0, out.y1 - out.y0, static_cast<long long>(out.rays), out.coverage);
   }
-  std::printf("hwm %.1f\n", peakResidentMb());
+  std::printf("hwm %.1f\n", bench::peakResidentMb());
   return 0;
 }
 
@@ -352,9 +341,9 @@ int childBuffers(int width, int height, int repeat) {
   auto measure = [&](const char* name, auto&& body) {
     std::vector<double> s;
     for (int i = 0; i < repeat; ++i) {
-      const auto t = Clock::now();
+      const auto t = bench::Clock::now();
       body();
-      s.push_back(since(t));
+      s.push_back(bench::secondsSince(t));
     }
     std::printf("buffer %s %.6f\n", name, median(s));
   };
@@ -390,9 +379,9 @@ int childBuffers(int width, int height, int repeat) {
   });
   measure("display_in_place", [&] {
     Image mine = rgb;  // the copy is what the in-place conversion saves; timed apart above
-    const auto t = Clock::now();
+    const auto t = bench::Clock::now();
     const Image shown = colors.toDisplay(std::move(mine), display, view);
-    std::printf("buffer display_in_place_only %.6f\n", since(t));
+    std::printf("buffer display_in_place_only %.6f\n", bench::secondsSince(t));
   });
   return 0;
 }
@@ -424,7 +413,7 @@ struct Child {
 Child run(const std::string& exe, const std::vector<std::string>& args, const fs::path& errFile) {
   int pipeFd[2];
   if (pipe(pipeFd) != 0) std::abort();
-  const auto start = Clock::now();
+  const auto start = bench::Clock::now();
   const pid_t pid = fork();
   if (pid == 0) {
     std::vector<std::string> copy = args;
@@ -450,7 +439,7 @@ Child run(const std::string& exe, const std::vector<std::string>& args, const fs
   int status = 0;
   struct rusage usage {};
   wait4(pid, &status, 0, &usage);
-  c.seconds = since(start);
+  c.seconds = bench::secondsSince(start);
   c.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   c.peakMb = double(usage.ru_maxrss) / 1024.0;
   std::istringstream in(text);

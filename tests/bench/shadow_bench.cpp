@@ -18,7 +18,6 @@
 //
 // Writes shadows.csv, shadows.md and one SVG plot per mesh (SNR against the floats stored per
 // vertex) into DIR (default out/bench), and prints the tables.
-#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -34,6 +33,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "bench_util.h"
 #include "calib/plate_camera.h"
 #include "ingest/image_io.h"
 #include "lighting/chebyshev.h"
@@ -52,17 +52,6 @@ namespace {
 
 using namespace compose;
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double seconds(Clock::time_point a) {
-  return std::chrono::duration<double>(Clock::now() - a).count();
-}
-
-double peakRssMb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;
-}
 
 struct Pixel {
   int x, y;
@@ -152,10 +141,10 @@ int main(int argc, char** argv) {
     tp.order = 16;
     tp.shBands = 8;
     tp.boundaryRays = boundary;
-    const auto t0 = Clock::now();
+    const auto t0 = bench::Clock::now();
     const render::SurfacePoints points = render::surfacePoints(mesh, pointFraction);
     const render::VertexTransfer transfer = render::computeTransfer(mesh, points, tp);
-    const double transferS = seconds(t0);
+    const double transferS = bench::secondsSince(t0);
     notes.push_back(std::string(meshName) + ": " + std::to_string(mesh.positions.size()) +
                     " vertices, " + std::to_string(mesh.triangleCount()) + " triangles, " +
                     std::to_string(points.count()) + " surface points; visibility pass " +
@@ -229,10 +218,10 @@ int main(int argc, char** argv) {
           if (unshadowed) (*unshadowed)[i] = e;
         }
       };
-      const auto r0 = Clock::now();
+      const auto r0 = bench::Clock::now();
       std::vector<glm::dvec3> ref, ref2, refUnshadowed;
       reference(11, ref, &refUnshadowed);
-      const double referenceS = seconds(r0);
+      const double referenceS = bench::secondsSince(r0);
       reference(12, ref2, nullptr);
       const Measure converged = compare(ref2, ref);
       const Measure lightingOnly = [&] {
@@ -284,12 +273,12 @@ int main(int argc, char** argv) {
         auto run = [&](const std::string& method, int order,
                        std::unique_ptr<lighting::DiffuseLighting> lighting, render::ShadowMethod m,
                        double floatsPerVertex) {
-          const auto p0 = Clock::now();
+          const auto p0 = bench::Clock::now();
           lighting->project(shadowEnv);
-          const double projectS = seconds(p0);
+          const double projectS = bench::secondsSince(p0);
           in.method = m;
           in.shadowLighting = lighting.get();
-          const auto s0 = Clock::now();
+          const auto s0 = bench::Clock::now();
           const render::VertexIrradiance vi = render::shadeVertices(points, envFromObject, in);
           const render::RenderOutput out = renderWith(*unshadowedLighting, &vi);
           if (std::getenv("COMPOSE_BENCH_WORST") && method == "cheb" && order == 16 &&
@@ -313,7 +302,7 @@ int main(int argc, char** argv) {
             }
           }
           add(method, order, withSources, floatsPerVertex + (withSources ? 1.0 : 0.0),
-              double(lighting->floatsStored()), projectS, seconds(s0), measure(out));
+              double(lighting->floatsStored()), projectS, bench::secondsSince(s0), measure(out));
         };
         if (!withSources) {
           run("ao", 1, lighting::createLighting("cheb-local"),
@@ -336,7 +325,7 @@ int main(int argc, char** argv) {
         lighting::MonteCarloLighting mc(n, 99);
         mc.project(env);
         std::vector<glm::dvec3> got(px.size());
-        const auto m0 = Clock::now();
+        const auto m0 = bench::Clock::now();
         for (size_t i = 0; i < px.size(); ++i) {
           const glm::vec3 nw = glm::normalize(px[i].n);
           const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
@@ -347,7 +336,7 @@ int main(int argc, char** argv) {
           got[i] = glm::dvec3(mc.irradiance(nw, visible));
         }
         // Time scaled to the whole frame's covered pixels.
-        const double frameS = seconds(m0) * double(all.size()) / double(px.size());
+        const double frameS = bench::secondsSince(m0) * double(all.size()) / double(px.size());
         add("mc", n, false, 0, double(mc.floatsStored()), 0, frameS, compare(got, ref));
       }
     }
@@ -438,8 +427,9 @@ int main(int argc, char** argv) {
     stem = stem.substr(0, stem.find('.'));
     bench::writeSvg(chart, outDir / ("shadows_" + stem + ".svg"));
   }
-  md << "Peak resident memory of the benchmark: " << fmt("%.0f", peakRssMb()) << " MB.\n";
-  std::printf("peak resident memory %.0f MB; wrote %s\n", peakRssMb(),
+  md << "Peak resident memory of the benchmark: " << fmt("%.0f", bench::peakResidentMb())
+     << " MB.\n";
+  std::printf("peak resident memory %.0f MB; wrote %s\n", bench::peakResidentMb(),
               (outDir / "shadows.md").c_str());
   return 0;
 }
