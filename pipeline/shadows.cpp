@@ -155,7 +155,7 @@ render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
                                      const ShadowPlan& plan, int64_t& sourceRays) {
   render::SourceVisibility seen;
   if (!lighting.split.sources.empty()) {
-    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject);
+    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject, &transfer);
     sourceRays = seen.rays;
   }
   render::ShadowInputs inputs;
@@ -184,16 +184,17 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   h.bytes(plan.transfer.key());
   h.word(uint32_t(out.points.count()));
   const std::string key = h.hex();
-  const FloatCache cache(visibilityCacheFolder(cacheRoot), "COMPVIS2", ".visibility");
+  const FloatCache cache(visibilityCacheFolder(cacheRoot), render::kTransferCacheMagic,
+                         ".visibility");
   const std::string description =
       "transfer " + plan.transfer.key() + " points " + std::to_string(out.points.count());
   if (!cacheRoot.empty()) {
-    const FloatCache::Read r = cache.read(key, description);
+    FloatCache::Read r = cache.read(key, description);
     std::string problem = r.problem;
     if (r.status == FloatCache::Read::Status::Hit) {
-      reused = transfer.importState(plan.transfer, out.points.count(), r.values);
-      if (!reused)
-        problem = "does not fit the mesh (" + std::to_string(r.values.size()) + " values)";
+      const size_t values = r.values.size();
+      reused = transfer.importState(plan.transfer, out.points.count(), std::move(r.values));
+      if (!reused) problem = "does not fit the mesh (" + std::to_string(values) + " values)";
     }
     if (!problem.empty()) {
       out.notes.push_back("the cached visibility pass " + cache.pathFor(key).string() + " " +

@@ -25,7 +25,7 @@ EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) throw Error("render", "cannot create the Embree device");
   impl_->scene = rtcNewScene(impl_->device);
-  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
   RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
       geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), positions.size()));
@@ -78,6 +78,43 @@ EmbreeScene::Hit EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, 
   return hit;
 }
 
+void EmbreeScene::intersect16(const glm::vec3* origins, const glm::vec3* directions,
+                              uint32_t active, Hit* hits, float tnear, float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  alignas(64) int valid[16];
+  alignas(64) RTCRayHit16 rh{};
+  for (int i = 0; i < 16; ++i) {
+    valid[i] = (active >> i) & 1u ? -1 : 0;
+    // Only the active rays are read (the caller's arrays may be shorter).
+    const glm::vec3 o = valid[i] ? origins[i] : glm::vec3(0.0f);
+    const glm::vec3 d = valid[i] ? directions[i] : glm::vec3(0.0f, 1.0f, 0.0f);
+    rh.ray.org_x[i] = o.x;
+    rh.ray.org_y[i] = o.y;
+    rh.ray.org_z[i] = o.z;
+    rh.ray.dir_x[i] = d.x;
+    rh.ray.dir_y[i] = d.y;
+    rh.ray.dir_z[i] = d.z;
+    rh.ray.tnear[i] = tnear;
+    rh.ray.tfar[i] = tfar;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  rtcIntersect16(valid, impl_->scene, &context, &rh);
+  for (int i = 0; i < 16; ++i) {
+    Hit& hit = hits[i];
+    hit = Hit{};
+    if (!valid[i] || rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    hit.found = true;
+    hit.triangle = rh.hit.primID[i];
+    hit.u = rh.hit.u[i];
+    hit.v = rh.hit.v[i];
+    hit.distance = rh.ray.tfar[i];
+    hit.geometricNormal = glm::vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]);
+  }
+}
+
 bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -120,6 +157,32 @@ uint32_t EmbreeScene::occluded8(const glm::vec3& o, const glm::vec3* d, uint32_t
   rtcOccluded8(valid, impl_->scene, &context, &rays);
   uint32_t hits = 0;
   for (int i = 0; i < 8; ++i)
+    if (valid[i] && rays.tfar[i] < 0.0f) hits |= 1u << i;
+  return hits;
+}
+
+uint32_t EmbreeScene::occluded16(const glm::vec3& o, const glm::vec3* d, uint32_t active,
+                                 float tnear, float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  alignas(64) int valid[16];
+  alignas(64) RTCRay16 rays{};
+  for (int i = 0; i < 16; ++i) {
+    valid[i] = (active >> i) & 1u ? -1 : 0;
+    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
+    rays.org_x[i] = o.x;
+    rays.org_y[i] = o.y;
+    rays.org_z[i] = o.z;
+    rays.dir_x[i] = dir.x;
+    rays.dir_y[i] = dir.y;
+    rays.dir_z[i] = dir.z;
+    rays.tnear[i] = tnear;
+    rays.tfar[i] = tfar;
+    rays.mask[i] = 0xFFFFFFFFu;
+  }
+  rtcOccluded16(valid, impl_->scene, &context, &rays);
+  uint32_t hits = 0;
+  for (int i = 0; i < 16; ++i)
     if (valid[i] && rays.tfar[i] < 0.0f) hits |= 1u << i;
   return hits;
 }

@@ -30,6 +30,11 @@ class EmbreeScene {
   // Closest hit along origin + t·direction, t in [tnear, tfar].
   Hit intersect(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
                 float tfar = 1e30f) const;
+  // Closest hits of up to 16 rays at once, those whose bit is set in `active` (only their
+  // origins and directions are read; the others' hits are not found). For rays that stay close
+  // together, such as the samples of one pixel: Embree traces them as one coherent packet.
+  void intersect16(const glm::vec3* origins, const glm::vec3* directions, uint32_t active,
+                   Hit* hits, float tnear = 0.0f, float tfar = 1e30f) const;
   // Whether anything lies along origin + t·direction, t in [tnear, tfar].
   bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
                 float tfar = 1e30f) const;
@@ -37,6 +42,9 @@ class EmbreeScene {
   // are read: `directions` may hold fewer than 8); returns a bit mask of the occluded ones.
   uint32_t occluded8(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
                      float tnear, float tfar = 1e30f) const;
+  // The same for 16 rays from one origin.
+  uint32_t occluded16(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
+                      float tnear, float tfar = 1e30f) const;
 
  private:
   struct Impl;

@@ -4,10 +4,12 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <unordered_map>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
@@ -37,6 +39,33 @@ double hash01(uint32_t x) {
 }
 
 // The tangent frame of a normal (transfer.h): east along increasing longitude.
+// The indices of `points` along a Morton (Z-order) curve through their bounding box, so that
+// consecutive indices are near each other.
+std::vector<uint32_t> spatialOrder(const std::vector<glm::vec3>& points) {
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (const glm::vec3& p : points) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const glm::vec3 scale = 1023.0f / glm::max(hi - lo, glm::vec3(1e-30f));
+  auto spread = [](uint32_t x) {  // bit b of 10 to bit 3b
+    x = (x | (x << 16)) & 0x030000FFu;
+    x = (x | (x << 8)) & 0x0300F00Fu;
+    x = (x | (x << 4)) & 0x030C30C3u;
+    return (x | (x << 2)) & 0x09249249u;
+  };
+  std::vector<std::pair<uint32_t, uint32_t>> code(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const glm::vec3 q = glm::clamp((points[i] - lo) * scale, glm::vec3(0.0f), glm::vec3(1023.0f));
+    code[i] = {spread(uint32_t(q.x)) | (spread(uint32_t(q.y)) << 1) | (spread(uint32_t(q.z)) << 2),
+               uint32_t(i)};
+  }
+  std::sort(code.begin(), code.end());
+  std::vector<uint32_t> order(points.size());
+  for (size_t i = 0; i < code.size(); ++i) order[i] = code[i].second;
+  return order;
+}
+
 void tangentFrame(const glm::dvec3& n, glm::dvec3& east, glm::dvec3& north) {
   const double h = std::sqrt(n.x * n.x + n.z * n.z);
   east = h > 1e-6 ? glm::dvec3(n.z / h, 0.0, -n.x / h) : glm::dvec3(1.0, 0.0, 0.0);
@@ -73,19 +102,28 @@ std::vector<float> VertexTransfer::exportState() const {
   out.insert(out.end(), cheb.begin(), cheb.end());
   out.insert(out.end(), sh.begin(), sh.end());
   out.insert(out.end(), ao.begin(), ao.end());
+  for (const uint16_t word : cells) out.push_back(float(word));  // exact: below 2^24
   return out;
 }
 
-bool VertexTransfer::importState(const TransferParams& p, size_t vertices,
-                                 const std::vector<float>& in) {
+bool VertexTransfer::importState(const TransferParams& p, size_t vertices, std::vector<float> in) {
   const size_t kk = size_t(p.order) * size_t(p.order);
   const size_t nsh = size_t(lighting::shCount(p.shBands));
-  if (in.size() != vertices * (kk + nsh + 1)) return false;
+  const size_t words = 2 * ((size_t(p.grid) * size_t(p.grid) + 15) / 16);
+  if (in.size() != vertices * (kk + nsh + 1 + words)) return false;
+  const auto firstCell = in.begin() + ptrdiff_t(vertices * (kk + nsh + 1));
+  if (!std::all_of(firstCell, in.end(),
+                   [](float w) { return w >= 0.0f && w <= 65535.0f && w == std::floor(w); }))
+    return false;
   params = p;
   vertexCount = vertices;
-  cheb.assign(in.begin(), in.begin() + ptrdiff_t(vertices * kk));
   sh.assign(in.begin() + ptrdiff_t(vertices * kk), in.begin() + ptrdiff_t(vertices * (kk + nsh)));
-  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), in.end());
+  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), firstCell);
+  cells.resize(vertices * words);
+  std::transform(firstCell, in.end(), cells.begin(), [](float w) { return uint16_t(w); });
+  // The moments come first: they stay where they are.
+  in.resize(vertices * kk);
+  cheb = std::move(in);
   return true;
 }
 
@@ -197,6 +235,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   out.cheb.assign(count * kk, 0.0f);
   out.sh.assign(count * size_t(nsh), 0.0f);
   out.ao.assign(count, 0.0f);
+  const size_t words = out.cellWords();
+  out.cells.assign(count * 2 * words, 0);
 
   const EmbreeScene scene(mesh.positions, mesh.indices);
   // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
@@ -286,12 +326,12 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
           const double weight = glm::dot(dd, n) * share * omega[size_t(cell / s)];
           for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
         };
-        // Traces sc.batch (any length) in groups of 8; calls answer(index, occluded).
+        // Traces sc.batch (any length) in groups of 16; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
-          for (size_t first = 0; first < sc.batch.size(); first += 8) {
-            const int m = int(std::min<size_t>(8, sc.batch.size() - first));
+          for (size_t first = 0; first < sc.batch.size(); first += 16) {
+            const int m = int(std::min<size_t>(16, sc.batch.size() - first));
             const uint32_t hit =
-                scene.occluded8(origin, sc.batch.data() + first, (1u << m) - 1u, tnear);
+                scene.occluded16(origin, sc.batch.data() + first, (1u << m) - 1u, tnear);
             for (int b = 0; b < m; ++b) answer(first + size_t(b), ((hit >> b) & 1u) != 0);
           }
           traced += int64_t(sc.batch.size());
@@ -310,9 +350,18 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         // Pass 1: one jittered ray per cell.
         sc.batch.clear();
         sc.batchCell.clear();
-        for (int i = 0; i < s; ++i) {
-          for (int j = 0; j < s; ++j, ++sample) {
-            const glm::vec3 d = direction(i, j, hash01(2 * sample), hash01(2 * sample + 1));
+        // In blocks of 4 x 4 neighbouring cells: a batch of 16 then holds nearby directions.
+        const uint32_t firstSample = sample;
+        sample += uint32_t(s * s);
+        const int blocksPerRow = (s + 3) / 4;
+        for (int cell = 0; cell < 16 * blocksPerRow * blocksPerRow; ++cell) {
+          const int block = cell / 16, within = cell % 16;
+          const int i = 4 * (block / blocksPerRow) + within / 4;
+          const int j = 4 * (block % blocksPerRow) + within % 4;
+          if (i >= s || j >= s) continue;
+          {
+            const uint32_t at = firstSample + uint32_t(i * s + j);
+            const glm::vec3 d = direction(i, j, hash01(2 * at), hash01(2 * at + 1));
             sc.dirs[size_t(i * s + j)] = d;
             sc.occluded[size_t(i * s + j)] = 0;
             if (outside && coneHalf + cellRadius[size_t(i)] < kPi) {
@@ -336,9 +385,21 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
         sc.batch.clear();
         sc.batchCell.clear();
+        uint16_t* blockedBits = out.cells.data() + v * 2 * words;
+        uint16_t* edgeBits = blockedBits + words;
         for (int i = 0; i < s; ++i) {
           for (int j = 0; j < s; ++j) {
             const char c = at(i, j);
+            // A shadow's edge may cross the cell (whatever the rays spent on it below).
+            bool edge = i == 0 && poleMixed;
+            for (int di = -1; di <= 1 && !edge; ++di) {
+              const int ii = i + di;
+              if (ii < 0 || ii >= s) continue;
+              for (int dj = -1; dj <= 1; ++dj) edge = edge || at(ii, j + dj) != c;
+            }
+            const int bit = i * s + j;
+            if (c) blockedBits[bit / 16] |= uint16_t(1u << (bit % 16));
+            if (edge) edgeBits[bit / 16] |= uint16_t(1u << (bit % 16));
             bool boundary = r > 1 && i == 0 && poleMixed;
             for (int di = -1; di <= 1 && r > 1 && !boundary; ++di) {
               const int ii = i + di;
@@ -461,7 +522,7 @@ const char* shadowMethodName(ShadowMethod method) {
 
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
                               const std::vector<lighting::LightSource>& sources,
-                              const glm::mat3& envFromObject) {
+                              const glm::mat3& envFromObject, const VertexTransfer* transfer) {
   SourceVisibility out;
   const size_t count = points.count();
   out.count = sources.size();
@@ -486,7 +547,21 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
                  objectFromEnv * glm::vec3(north), sources[i].halfLatitude,
                  float(sources[i].halfLongitude * std::cos(lat))};
   }
+  // Sources near each other in the sky traced one after another: a packet of rays then holds
+  // nearby directions, which Embree traverses faster.
+  std::vector<glm::vec3> directions(sources.size());
+  for (size_t i = 0; i < sources.size(); ++i) directions[i] = sources[i].direction;
+  const std::vector<uint32_t> sourceOrder = spatialOrder(directions);
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
+  // The transfer's cells: a source in a cell away from shadow edges, above the horizon row, takes
+  // the cell's verdict.
+  const bool byCells = transfer && transfer->vertexCount == count &&
+                       transfer->cells.size() == count * 2 * transfer->cellWords();
+  const int s = byCells ? transfer->params.grid : 0;
+  const size_t words = byCells ? transfer->cellWords() : 0;
+  const float rowStep = s > 0 ? float(0.5 * kPi / s) : 1.0f;
+  const float colStep = s > 0 ? float(2.0 * kPi / s) : 1.0f;
+  const float aboveHorizonRow = s > 0 ? float(std::cos((s - 1) * 0.5 * kPi / s)) : 2.0f;
   std::atomic<int64_t> rays{0};
   parallelFor(
       0, int64_t(count),
@@ -494,13 +569,13 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         const size_t v = size_t(vi);
         const glm::vec3 n = points.normals[v];
         const glm::vec3 origin = points.positions[v] + lift * n;
-        glm::vec3 batch[8];
-        size_t index[8];
+        glm::vec3 batch[16];
+        size_t index[16];
         int m = 0;
         int64_t traced = 0;
         float* seen = out.visible.data() + v * sources.size();
         auto flush = [&] {
-          const uint32_t hit = scene.occluded8(origin, batch, (1u << m) - 1u, tnear);
+          const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear);
           for (int b = 0; b < m; ++b)
             if (!((hit >> b) & 1u)) seen[index[b] / kPerSource] += 1.0f / kPerSource;
           traced += m;
@@ -517,11 +592,40 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         const glm::vec3 axis = outside ? toCentre / distance : glm::vec3(0.0f);
         uint32_t bits[3];
         std::memcpy(bits, &points.positions[v], sizeof bits);
-        uint32_t sample =
+        const uint32_t firstSample =
             (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
-        for (size_t i = 0; i < sources.size(); ++i) {
+        glm::vec3 east(0.0f), north(0.0f), normal(0.0f);
+        const uint16_t* blockedBits = nullptr;
+        const uint16_t* edgeBits = nullptr;
+        if (byCells) {
+          const glm::dvec3 nd = glm::normalize(glm::dvec3(n));
+          glm::dvec3 e, no;
+          tangentFrame(nd, e, no);
+          east = glm::vec3(e);
+          north = glm::vec3(no);
+          normal = glm::vec3(nd);
+          blockedBits = transfer->cells.data() + v * 2 * words;
+          edgeBits = blockedBits + words;
+        }
+        for (const uint32_t i : sourceOrder) {
           const Frame& f = frames[i];
-          for (int k = 0; k < kPerSource; ++k, ++sample) {
+          if (byCells) {
+            const float z = glm::dot(normal, f.centre);
+            if (z > aboveHorizonRow) {
+              const int row = std::min(int(std::acos(std::min(z, 1.0f)) / rowStep), s - 1);
+              float phi = std::atan2(glm::dot(north, f.centre), glm::dot(east, f.centre));
+              if (phi < 0.0f) phi += float(2.0 * kPi);
+              const int col = std::min(int(phi / colStep), s - 1);
+              const int bit = row * s + col;
+              if (!((edgeBits[bit / 16] >> (bit % 16)) & 1u)) {
+                if (!((blockedBits[bit / 16] >> (bit % 16)) & 1u)) seen[i] = 1.0f;
+                continue;
+              }
+            }
+          }
+          for (int k = 0; k < kPerSource; ++k) {
+            // The point's own sequence of draws, one per (source, direction).
+            const uint32_t sample = firstSample + i * kPerSource + uint32_t(k);
             const float a = (float(k & 1) + float(hash01(2 * sample))) * 0.5f - 0.5f;
             const float b = (float(k >> 1) + float(hash01(2 * sample + 1))) * 0.5f - 0.5f;
             const glm::vec3 d = glm::normalize(f.centre + 2.0f * a * f.halfLat * f.north +
@@ -533,7 +637,7 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
             }
             batch[m] = d;
             index[m] = i * kPerSource + size_t(k);
-            if (++m == 8) flush();
+            if (++m == 16) flush();
           }
         }
         if (m > 0) flush();
