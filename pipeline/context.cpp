@@ -49,9 +49,9 @@ Hash128 Context::geometryKey() const {
 
 const Geometry& Context::geometry() {
   if (geometry_) return *geometry_;
-  COMPOSE_CHECK(artefacts.plate && artefacts.mesh);
+  COMPOSE_CHECK(artefacts.plate && meshSummary);
   const ingest::LoadedImage& plate = *artefacts.plate;
-  const render::Mesh& mesh = *artefacts.mesh;
+  const MeshSummary& mesh = *meshSummary;
   calib::CameraOptions options = job.camera;
   if (!job.lensFile.empty()) options.lens = calib::readLens(job.lensFile);
   if (!job.poseFile.empty()) {
@@ -61,8 +61,8 @@ const Geometry& Context::geometry() {
     options.worldFromCamera = pose.worldFromCamera;
   }
   Geometry g{calib::plateCamera(plate.image.width, plate.image.height, plate.info, options)};
-  g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin()),
-                                           glm::dvec3(mesh.boundsMax()));
+  g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
+                                           glm::dvec3(mesh.boundsMax));
   const double envYaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
   g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));
   // The rotation part of the placement (a yaw and a uniform scale), normalised.
@@ -73,11 +73,15 @@ const Geometry& Context::geometry() {
   return *geometry_;
 }
 
+const render::Mesh& Context::mesh() {
+  COMPOSE_CHECK(artefacts.mesh);
+  return *artefacts.mesh;
+}
+
 const render::EmbreeScene& Context::objectScene() {
   if (!objectScene_) {
-    COMPOSE_CHECK(artefacts.mesh);
-    objectScene_ =
-        std::make_unique<render::EmbreeScene>(artefacts.mesh->positions, artefacts.mesh->indices);
+    const render::Mesh& m = mesh();
+    objectScene_ = std::make_unique<render::EmbreeScene>(m.positions, m.indices);
   }
   return *objectScene_;
 }

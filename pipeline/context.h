@@ -29,6 +29,7 @@
 #include "lighting/capture_volume.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
+#include "pipeline/mesh_summary.h"
 #include "pipeline/shadows.h"
 #include "render/embree_scene.h"
 #include "render/mesh.h"
@@ -136,6 +137,10 @@ class Context {
   const Geometry& geometry();
   // The geometry as a file recorded it (compose composite reads it from the object's layer).
   void setGeometry(const Geometry& g) { geometry_ = g; }
+  // What ingest knows of the object (its key, bounds, size, convexity), read or cached.
+  std::optional<MeshSummary> meshSummary;
+  // The object's mesh (ingest reads it, or takes it from the cache).
+  const render::Mesh& mesh();
   // The object's ray-tracing scene, built on first use (object space).
   const render::EmbreeScene& objectScene();
   // The proxy of the surroundings (distant when the job describes none).

@@ -32,31 +32,6 @@ std::string plural(size_t n, const std::string& word) {
   return std::to_string(n) + " " + word + (n == 1 ? "" : "s");
 }
 
-// Everything in a mesh the later stages read: geometry, normals, materials and textures.
-Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
-  Hash128 h;
-  h.bytes("mesh");
-  h.bytes(render::meshHash(mesh));
-  h.number(creaseDegrees);
-  if (!mesh.texcoords.empty())
-    h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
-  for (uint32_t m : mesh.triangleMaterial) h.word(m);
-  for (const render::Material& m : mesh.materials) {
-    h.floats(std::span<const float>(&m.baseColor.x, 3));
-    h.word(uint32_t(m.texture));
-  }
-  for (const render::Texture& t : mesh.textures) {
-    h.word(uint32_t(t.image.width));
-    h.word(uint32_t(t.image.height));
-    h.word(uint32_t(t.image.channels));
-    h.bytes(t.image.colorSpace);
-    h.bytes(t.file.filename().string());
-    h.floats(t.image.pixels);
-  }
-  h.bytes(mesh.colorSpace);
-  return h;
-}
-
 // What --env names: an image (or cube faces), or a capture description of photos.
 void prepareEnvironment(Context& ctx) {
   const ComposeJob& job = ctx.job;
@@ -132,12 +107,27 @@ class IngestStage final : public Stage {
   void prepare(Context& ctx) const override {
     const ComposeJob& job = ctx.job;
     if (ctx.mayNeed(kEnvironmentFile) || ctx.mayNeed(kCapture)) prepareEnvironment(ctx);
-    // The mesh is read here: its content is part of every later key.
+    // The mesh's content is part of every later key: it is read here (or taken from the cache,
+    // as a previous run read the same file).
     if (ctx.mayNeed(kMesh) && !job.object.empty()) {
-      ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
-      const render::Mesh& mesh = *ctx.artefacts.mesh;
-      if (!mesh.normalsFromFile) ctx.note("object normals: " + mesh.normalsSource);
-      for (const std::string& w : mesh.warnings) ctx.note("object: " + w);
+      Hash128 contentKey;
+      std::string problem;
+      std::optional<CachedMesh> cached =
+          cachedMesh(job.cache, job.object, job.creaseDegrees, contentKey, problem);
+      if (!problem.empty()) {
+        ctx.note("the cached reading of the object " + job.object.string() + " " + problem +
+                 ": ignored, computed again and rewritten");
+      }
+      if (cached) {
+        ctx.artefacts.mesh = std::move(cached->mesh);
+        ctx.meshSummary = std::move(cached->summary);
+      } else {
+        ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
+        ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
+        if (!storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
+          ctx.note("the object as read was not cached (" + problem + ")");
+      }
+      for (const std::string& n : ctx.meshSummary->notes) ctx.note(n);
     }
   }
 
@@ -148,7 +138,7 @@ class IngestStage final : public Stage {
       hashFile(plate, ctx.job.plate, "ingest");
       ctx.keys[kPlate] = plate;
     }
-    if (ctx.artefacts.mesh) ctx.keys[kMesh] = meshKey(*ctx.artefacts.mesh, ctx.job.creaseDegrees);
+    if (ctx.meshSummary) ctx.keys[kMesh] = ctx.meshSummary->key;
     if (ctx.environmentInput.path.empty()) return;
     Hash128 env;
     env.bytes(ctx.environmentInput.kind == EnvironmentInput::Kind::Capture ? "capture"
@@ -167,9 +157,12 @@ class IngestStage final : public Stage {
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
     }
-    if (ctx.artefacts.mesh) {
+    if (ctx.meshSummary) {
+      const size_t triangles = ctx.meshSummary->triangles;
       reason += (reason.empty() ? "" : ", ") +
-                format("the object (%zu triangles)", ctx.artefacts.mesh->triangleCount());
+                (ctx.meshSummary->fromCache
+                     ? format("the object (%zu triangles, from the cache)", triangles)
+                     : format("the object (%zu triangles)", triangles));
     }
     // The colour stage asks for the environment file or the stitched map, whichever this job has:
     // a capture description has no environment file to read.

@@ -275,10 +275,9 @@ class PrecomputeStage final : public Stage {
         proxy.shape != lighting::CaptureProxy::Shape::Distant) {
       // Parallax: the environment as seen from the object's centre.
       const Geometry& g = ctx.geometry();
-      const render::Mesh& mesh = *ctx.artefacts.mesh;
-      const glm::dvec3 centre(
-          g.worldFromObject *
-          glm::dvec4(0.5 * glm::dvec3(mesh.boundsMin() + mesh.boundsMax()), 1.0));
+      const MeshSummary& mesh = *ctx.meshSummary;
+      const glm::dvec3 centre(g.worldFromObject *
+                              glm::dvec4(0.5 * glm::dvec3(mesh.boundsMin + mesh.boundsMax), 1.0));
       lighting::CaptureProxy placed = proxy;
       placed.environmentFromWorld = glm::dmat3(g.envFromWorld);
       environment = lighting::CaptureVolumeSource(environment, placed).at(glm::vec3(centre));
@@ -345,7 +344,7 @@ class ShadowsStage final : public Stage {
 
   std::string skip(const Context& ctx) const override {
     if (!ctx.job.shadows) return "--shadows off";
-    if (render::isConvex(*ctx.artefacts.mesh))
+    if (ctx.meshSummary && ctx.meshSummary->convex)
       return "the object is closed and convex: it cannot shadow itself";
     return {};
   }
@@ -363,7 +362,7 @@ class ShadowsStage final : public Stage {
   bool cached() const override { return true; }
   bool load(Context& ctx, StageCache& cache) const override {
     ShadowResult r;
-    r.points = render::surfacePoints(*ctx.artefacts.mesh);
+    r.points = render::surfacePoints(ctx.mesh());
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
     r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
     r.irradiance.clamped = int(wholeMember(cache.meta(), "clamped", 0).value_or(0));
@@ -387,7 +386,7 @@ class ShadowsStage final : public Stage {
   std::string run(Context& ctx) const override {
     const ShadowPlan plan = ShadowPlan::parse(ctx.job.shadowParams);
     ShadowResult r =
-        computeSelfShadowing(*ctx.artefacts.mesh, ctx.objectScene(), *ctx.artefacts.shadowLighting,
+        computeSelfShadowing(ctx.mesh(), ctx.objectScene(), *ctx.artefacts.shadowLighting,
                              ctx.geometry().envFromObject, plan, ctx.job.cache, ctx.progress);
     for (std::string& n : r.notes) ctx.note(std::move(n));
     r.notes.clear();
@@ -514,10 +513,9 @@ class GroundStage final : public Stage {
 
   std::string run(Context& ctx) const override {
     const Geometry& g = ctx.geometry();
-    GroundShadowResult r =
-        computeGroundShadow(*ctx.artefacts.mesh, ctx.objectScene(), g.worldFromObject, g.camera,
-                            *ctx.artefacts.shadowLighting, g.envFromWorld, g.envFromObject,
-                            ShadowPlan::parse(ctx.job.shadowParams), ctx.progress);
+    GroundShadowResult r = computeGroundShadow(
+        ctx.mesh(), ctx.objectScene(), g.worldFromObject, g.camera, *ctx.artefacts.shadowLighting,
+        g.envFromWorld, g.envFromObject, ShadowPlan::parse(ctx.job.shadowParams), ctx.progress);
     if (r.grid.empty()) r.ratio = Image();
     cropToShadow(r);
     std::string reason = r.reason;

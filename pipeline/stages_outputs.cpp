@@ -371,8 +371,8 @@ class RenderStage final : public Stage {
     r.exposure = settings.exposure;
     r.meshFile = fs::absolute(job.object).string();
     const auto start = std::chrono::steady_clock::now();
-    r.output = render::renderDiffuse(*ctx.artefacts.mesh, ctx.objectScene(), g.worldFromObject,
-                                     g.camera, *ctx.artefacts.lighting, settings, ctx.progress);
+    r.output = render::renderDiffuse(ctx.mesh(), ctx.objectScene(), g.worldFromObject, g.camera,
+                                     *ctx.artefacts.lighting, settings, ctx.progress);
     r.output.beauty.colorSpace = ctx.colors.workingSpace();
     if (!(r.output.coverage > 0.0)) {
       throw Error("render",

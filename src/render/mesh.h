@@ -87,6 +87,9 @@ struct Mesh {
   bool normalsFromFile = false;       // every normal came from the file
   std::string normalsSource;          // how the normals were obtained, for the user
   std::vector<std::string> warnings;  // what loading dropped, ignored or repaired, for the user
+  // Every file besides the mesh file itself that loading read or looked for (material
+  // libraries, textures, glTF buffers and images): empty when the mesh file alone gives the mesh.
+  std::vector<std::filesystem::path> otherFiles;
 
   // Materials: empty when the file has none (the renderer then uses --albedo everywhere).
   std::vector<glm::vec2> texcoords;        // one per position, or empty

@@ -348,6 +348,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
       }
     }
     file = path_.parent_path() / decoded;
+    mesh_.otherFiles.push_back(file);
     where = file.string();
     return readTextureFile(file, "sRGB");
   }
@@ -708,14 +709,22 @@ bool fileExists(const std::string& file, void*) {
   return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)
 }
 
+// What the callbacks saw: the files read besides the glTF itself.
+struct ReadFiles {
+  fs::path main;
+  std::vector<fs::path> others;
+};
+
 bool readRegularFile(std::vector<unsigned char>* out, std::string* err, const std::string& file,
                      void* user) {
+  if (auto* seen = static_cast<ReadFiles*>(user); seen && fs::path(file) != seen->main)
+    seen->others.push_back(file);
   std::error_code ec;
   if (fs::exists(file, ec) && !fs::is_regular_file(file, ec)) {
     if (err) *err += "'" + file + "' is not a regular file\n";
     return false;
   }
-  return tinygltf::ReadWholeFile(out, err, file, user);
+  return tinygltf::ReadWholeFile(out, err, file, nullptr);
 }
 
 }  // namespace
@@ -723,9 +732,9 @@ bool readRegularFile(std::vector<unsigned char>* out, std::string* err, const st
 LoadedMesh loadGltf(const fs::path& path) {
   tinygltf::TinyGLTF parser;
   parser.SetImageLoader(&keepEncodedImage, nullptr);
+  ReadFiles seen{path, {}};
   parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &tinygltf::ExpandFilePath,
-                                              &readRegularFile, &tinygltf::WriteWholeFile,
-                                              nullptr});
+                                              &readRegularFile, &tinygltf::WriteWholeFile, &seen});
   tinygltf::Model model;
   std::string err, warn;
   std::string ext = path.extension().string();
@@ -760,6 +769,7 @@ LoadedMesh loadGltf(const fs::path& path) {
     throw Error("mesh", "cannot parse glTF: " + (joined.empty() ? "unknown reason" : joined), path);
   }
   LoadedMesh loaded;
+  loaded.mesh.otherFiles = seen.others;
   GltfReader(model, path, loaded).read();
   return loaded;
 }

@@ -119,6 +119,7 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     std::string relative = name;
     std::replace(relative.begin(), relative.end(), '\\', '/');
     const fs::path file = folder_ / relative;
+    looked.push_back(file);
     std::error_code ec;
     std::ifstream in;
     const fs::file_status status = fs::status(file, ec);
@@ -152,6 +153,7 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     return true;
   }
   std::vector<std::string> unreadable;
+  std::vector<fs::path> looked;  // every library file asked for
   std::set<std::string> withKd;  // materials that give Kd
 
  private:
@@ -197,6 +199,7 @@ LoadedMesh loadObj(const fs::path& path) {
   Mesh& mesh = loaded.mesh;
   for (const std::string& w : libraries.unreadable)
     mesh.warnings.push_back(w + ": its materials render with the default albedo");
+  mesh.otherFiles = libraries.looked;
 
   // Materials in the order faces first use them; -1 (no material, or a name no library
   // defines) becomes a default grey when other faces have materials.
@@ -327,6 +330,7 @@ LoadedMesh loadObj(const fs::path& path) {
         const fs::path file = path.parent_path() / relative;
         auto [it, inserted] = textureOf.try_emplace(file, -1);
         if (inserted) {
+          mesh.otherFiles.push_back(file);
           try {
             Texture texture;
             texture.file = file;

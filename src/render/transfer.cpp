@@ -13,6 +13,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/fast_math.h"
 #include "core/hash.h"
 #include "core/parallel.h"
 
@@ -559,9 +560,11 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
                        transfer->cells.size() == count * 2 * transfer->cellWords();
   const int s = byCells ? transfer->params.grid : 0;
   const size_t words = byCells ? transfer->cellWords() : 0;
-  const float rowStep = s > 0 ? float(0.5 * kPi / s) : 1.0f;
+  // Row i holds cos θ in (rowCos[i + 1], rowCos[i]]; the last row (the horizon's) is traced.
+  std::vector<float> rowCos(size_t(s) + 1);
+  for (int i = 0; i <= s; ++i) rowCos[size_t(i)] = float(std::cos(i * 0.5 * kPi / s));
+  const float aboveHorizonRow = s > 0 ? rowCos[size_t(s) - 1] : 2.0f;
   const float colStep = s > 0 ? float(2.0 * kPi / s) : 1.0f;
-  const float aboveHorizonRow = s > 0 ? float(std::cos((s - 1) * 0.5 * kPi / s)) : 2.0f;
   std::atomic<int64_t> rays{0};
   parallelFor(
       0, int64_t(count),
@@ -612,8 +615,9 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
           if (byCells) {
             const float z = glm::dot(normal, f.centre);
             if (z > aboveHorizonRow) {
-              const int row = std::min(int(std::acos(std::min(z, 1.0f)) / rowStep), s - 1);
-              float phi = std::atan2(glm::dot(north, f.centre), glm::dot(east, f.centre));
+              int row = 0;
+              while (rowCos[size_t(row) + 1] >= z) ++row;  // stops before the horizon row
+              float phi = fastAtan2(glm::dot(north, f.centre), glm::dot(east, f.centre));
               if (phi < 0.0f) phi += float(2.0 * kPi);
               const int col = std::min(int(phi / colStep), s - 1);
               const int bit = row * s + col;

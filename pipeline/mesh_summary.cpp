@@ -1,0 +1,188 @@
+#include "pipeline/mesh_summary.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+
+#include "core/error.h"
+#include "core/limits.h"
+#include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
+#include "render/transfer.h"
+
+namespace compose::pipeline {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Raise when reading a mesh file gives anything different (the loaders, the normals, the
+// repairs): an entry kept by an older compose would otherwise stand for a different mesh.
+constexpr uint32_t kMeshVersion = 1;
+
+StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
+  return StageCache(cacheRoot / "meshes", "mesh", contentKey.hex());
+}
+
+std::optional<uint64_t> hexWord(const nlohmann::json& value) {
+  if (!value.is_string()) return std::nullopt;
+  const std::string s = value.get<std::string>();
+  if (s.size() != 16 || s.find_first_not_of("0123456789abcdef") != std::string::npos)
+    return std::nullopt;
+  return std::strtoull(s.c_str(), nullptr, 16);
+}
+
+}  // namespace
+
+Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
+  Hash128 h;
+  h.bytes("mesh");
+  h.bytes(render::meshHash(mesh));
+  h.number(creaseDegrees);
+  if (!mesh.texcoords.empty())
+    h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
+  for (uint32_t m : mesh.triangleMaterial) h.word(m);
+  for (const render::Material& m : mesh.materials) {
+    h.floats(std::span<const float>(&m.baseColor.x, 3));
+    h.word(uint32_t(m.texture));
+  }
+  for (const render::Texture& t : mesh.textures) {
+    h.word(uint32_t(t.image.width));
+    h.word(uint32_t(t.image.height));
+    h.word(uint32_t(t.image.channels));
+    h.bytes(t.image.colorSpace);
+    h.bytes(t.file.filename().string());
+    h.floats(t.image.pixels);
+  }
+  h.bytes(mesh.colorSpace);
+  return h;
+}
+
+std::vector<std::string> meshNotes(const render::Mesh& mesh) {
+  std::vector<std::string> notes;
+  if (!mesh.normalsFromFile) notes.push_back("object normals: " + mesh.normalsSource);
+  for (const std::string& w : mesh.warnings) notes.push_back("object: " + w);
+  return notes;
+}
+
+MeshSummary summarize(const render::Mesh& mesh, double creaseDegrees) {
+  MeshSummary s;
+  s.key = meshKey(mesh, creaseDegrees);
+  s.boundsMin = mesh.boundsMin();
+  s.boundsMax = mesh.boundsMax();
+  s.triangles = mesh.triangleCount();
+  s.convex = render::isConvex(mesh);
+  s.notes = meshNotes(mesh);
+  return s;
+}
+
+std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& file,
+                                     double creaseDegrees, Hash128& contentKey,
+                                     std::string& problem) {
+  problem.clear();
+  contentKey = Hash128{};
+  if (cacheRoot.empty()) return std::nullopt;
+  // Whatever is wrong with the file is for the mesh reader to say, in its own words.
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return std::nullopt;
+  Hash128 h;
+  h.bytes("mesh as read");
+  h.word(kMeshVersion);
+  h.number(creaseDegrees);
+  h.bytes(file.extension().string());
+  try {
+    hashFile(h, file, "ingest");
+  } catch (const Error&) {
+    return std::nullopt;
+  }
+  contentKey = h;
+  StageCache entry = meshEntry(cacheRoot, contentKey);
+  if (!entry.open()) {
+    problem = entry.problem();
+    return std::nullopt;
+  }
+  problem = "does not fit this job";
+  const nlohmann::json& m = entry.meta();
+  const auto a = m.contains("keyA") ? hexWord(m["keyA"]) : std::nullopt;
+  const auto b = m.contains("keyB") ? hexWord(m["keyB"]) : std::nullopt;
+  if (!a || !b || !m.contains("convex") || !m["convex"].is_boolean() ||
+      !m.contains("normalsFromFile") || !m["normalsFromFile"].is_boolean() ||
+      !m.contains("normalsSource") || !m["normalsSource"].is_string() || !m.contains("warnings") ||
+      !m["warnings"].is_array())
+    return std::nullopt;
+  CachedMesh out;
+  render::Mesh& mesh = out.mesh;
+  mesh.normalsFromFile = m["normalsFromFile"].get<bool>();
+  mesh.normalsSource = m["normalsSource"].get<std::string>();
+  for (const nlohmann::json& w : m["warnings"]) {
+    if (!w.is_string()) return std::nullopt;
+    mesh.warnings.push_back(w.get<std::string>());
+  }
+  const std::vector<float>& positions = entry.get("positions");
+  const std::vector<float>& normals = entry.get("normals");
+  const std::vector<float>& indices = entry.get("indices");
+  const std::vector<float>& texcoords = entry.get("texcoords");
+  const size_t n = positions.size() / 3;
+  if (n == 0 || positions.size() != 3 * n || normals.size() != 3 * n || indices.empty() ||
+      indices.size() % 3 != 0 || (!texcoords.empty() && texcoords.size() != 2 * n))
+    return std::nullopt;
+  for (const float i : indices)
+    if (!(i >= 0.0f && i < float(n) && i == std::floor(i))) return std::nullopt;
+  // The limit holds for the mesh as kept, as for one read (--max-triangles).
+  checkTriangleCount(int64_t(indices.size() / 3), file);
+  mesh.positions.resize(n);
+  mesh.normals.resize(n);
+  std::memcpy(&mesh.positions[0].x, positions.data(), positions.size() * sizeof(float));
+  std::memcpy(&mesh.normals[0].x, normals.data(), normals.size() * sizeof(float));
+  mesh.indices.assign(indices.begin(), indices.end());
+  if (!texcoords.empty()) {
+    mesh.texcoords.resize(n);
+    std::memcpy(&mesh.texcoords[0].x, texcoords.data(), texcoords.size() * sizeof(float));
+  }
+  // What the entry says of the mesh must be the mesh it holds.
+  MeshSummary& s = out.summary;
+  s.key = meshKey(mesh, creaseDegrees);
+  if (s.key.a != *a || s.key.b != *b) return std::nullopt;
+  s.boundsMin = mesh.boundsMin();
+  s.boundsMax = mesh.boundsMax();
+  s.triangles = mesh.triangleCount();
+  s.convex = m["convex"].get<bool>();
+  s.notes = meshNotes(mesh);
+  s.fromCache = true;
+  problem.clear();
+  return out;
+}
+
+bool storeMesh(const fs::path& cacheRoot, const Hash128& contentKey, const render::Mesh& mesh,
+               const MeshSummary& summary, std::string& problem) {
+  problem.clear();
+  // Indices are kept as floats: exact below 2^24.
+  if (cacheRoot.empty() || contentKey == Hash128{} || !mesh.otherFiles.empty() ||
+      mesh.hasMaterials() || mesh.positions.empty() || mesh.positions.size() >= (size_t(1) << 24))
+    return true;
+  StageCache entry = meshEntry(cacheRoot, contentKey);
+  char word[17];
+  std::snprintf(word, sizeof word, "%016llx", static_cast<unsigned long long>(summary.key.a));
+  entry.meta()["keyA"] = word;
+  std::snprintf(word, sizeof word, "%016llx", static_cast<unsigned long long>(summary.key.b));
+  entry.meta()["keyB"] = word;
+  entry.meta()["convex"] = summary.convex;
+  entry.meta()["normalsFromFile"] = mesh.normalsFromFile;
+  entry.meta()["normalsSource"] = mesh.normalsSource;
+  entry.meta()["warnings"] = mesh.warnings;
+  const auto floats = [](const auto& v, size_t per) {
+    std::vector<float> out(v.size() * per);
+    if (!v.empty()) std::memcpy(out.data(), &v[0].x, out.size() * sizeof(float));
+    return out;
+  };
+  entry.put("positions", floats(mesh.positions, 3));
+  entry.put("normals", floats(mesh.normals, 3));
+  entry.put("indices", std::vector<float>(mesh.indices.begin(), mesh.indices.end()));
+  if (!mesh.texcoords.empty()) entry.put("texcoords", floats(mesh.texcoords, 2));
+  if (entry.write()) return true;
+  problem = entry.error();
+  return false;
+}
+
+}  // namespace compose::pipeline

@@ -1,0 +1,133 @@
+// The object as read, kept in the cache under its file's content (pipeline/mesh_summary.h).
+#include <fstream>
+
+#include "pipeline/mesh_summary.h"
+#include "pipeline/stage_cache.h"
+#include "render/transfer.h"
+#include "test_util.h"
+
+namespace compose::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+using compose::testing::TempDir;
+using compose::testing::writeText;
+
+// A square pyramid without normals (they are computed: a note says so) and with a degenerate
+// triangle (dropped: a warning says so), so that every part of a reading is kept.
+const char* kPyramid =
+    "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv 0 1.5 0\n"
+    "f 1 2 3\nf 1 3 4\nf 1 5 2\nf 2 5 3\nf 3 5 4\nf 4 5 1\nf 1 1 2\n";
+
+class MeshCache : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    file_ = dir_.path() / "pyramid.obj";
+    writeText(file_, kPyramid);
+    cache_ = dir_.path() / "cache";
+  }
+  // The first run: a miss, then the mesh read and kept.
+  void readAndStore() {
+    Hash128 key;
+    std::string problem;
+    ASSERT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+    ASSERT_TRUE(problem.empty()) << problem;
+    read_ = render::loadMesh(file_, {.creaseDegrees = 60.0});
+    summary_ = summarize(read_, 60.0);
+    ASSERT_TRUE(storeMesh(cache_, key, read_, summary_, problem)) << problem;
+  }
+  fs::path entryFile() const {
+    for (const auto& e : fs::recursive_directory_iterator(cache_ / "meshes"))
+      if (e.is_regular_file()) return e.path();
+    return {};
+  }
+  TempDir dir_;
+  fs::path file_, cache_;
+  render::Mesh read_;
+  MeshSummary summary_;
+};
+
+TEST_F(MeshCache, ASecondRunTakesTheSameMeshAndSummaryFromTheCache) {
+  readAndStore();
+  ASSERT_FALSE(read_.warnings.empty());
+  ASSERT_FALSE(read_.normalsFromFile);
+  Hash128 key;
+  std::string problem;
+  const std::optional<CachedMesh> cached = cachedMesh(cache_, file_, 60.0, key, problem);
+  ASSERT_TRUE(cached) << problem;
+  EXPECT_TRUE(cached->summary.fromCache);
+  EXPECT_FALSE(summary_.fromCache);
+  EXPECT_EQ(cached->summary.key, summary_.key);
+  EXPECT_EQ(cached->summary.triangles, read_.triangleCount());
+  EXPECT_EQ(cached->summary.convex, summary_.convex);
+  EXPECT_EQ(cached->summary.boundsMin, read_.boundsMin());
+  EXPECT_EQ(cached->summary.boundsMax, read_.boundsMax());
+  EXPECT_EQ(cached->summary.notes, meshNotes(read_));
+  EXPECT_EQ(cached->mesh.positions, read_.positions);
+  EXPECT_EQ(cached->mesh.normals, read_.normals);
+  EXPECT_EQ(cached->mesh.indices, read_.indices);
+  EXPECT_EQ(render::meshHash(cached->mesh), render::meshHash(read_));
+  // Another crease angle, or another file content, is another reading.
+  EXPECT_FALSE(cachedMesh(cache_, file_, 30.0, key, problem));
+  EXPECT_TRUE(problem.empty());
+  writeText(file_, std::string(kPyramid) + "v 0 3 0\n");
+  EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+  EXPECT_TRUE(problem.empty());
+}
+
+TEST_F(MeshCache, ADamagedOrForgedEntryIsAProblemNotAMesh) {
+  readAndStore();
+  const fs::path entry = entryFile();
+  ASSERT_FALSE(entry.empty());
+  Hash128 key;
+  std::string problem;
+  // Truncated.
+  const auto size = fs::file_size(entry);
+  fs::resize_file(entry, size / 2);
+  EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+  EXPECT_NE(problem.find("is truncated"), std::string::npos) << problem;
+  // Forged: a valid entry whose mesh is not the one its key names (one position moved).
+  StageCache forged(cache_ / "meshes", "mesh", key.hex());
+  forged.meta() = {{"keyA", "0123456789abcdef"},
+                   {"keyB", "0123456789abcdef"},
+                   {"convex", true},
+                   {"normalsFromFile", true},
+                   {"normalsSource", "file"},
+                   {"warnings", nlohmann::json::array()}};
+  forged.put("positions", {0, 0, 0, 1, 0, 0, 0, 1, 0});
+  forged.put("normals", {0, 0, 1, 0, 0, 1, 0, 0, 1});
+  forged.put("indices", {0, 1, 2});
+  ASSERT_TRUE(forged.write()) << forged.error();
+  EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+  EXPECT_EQ(problem, "does not fit this job");
+  // Indices out of range, or not whole.
+  forged.meta()["keyA"] = "0000000000000000";
+  for (const std::vector<float>& bad : {std::vector<float>{0, 1, 3}, {0, 1, 1.5f}, {0, 1, -1}}) {
+    forged.put("indices", bad);
+    ASSERT_TRUE(forged.write());
+    EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+    EXPECT_EQ(problem, "does not fit this job");
+  }
+  // Rewritten, it is taken again.
+  ASSERT_TRUE(storeMesh(cache_, key, read_, summary_, problem)) << problem;
+  EXPECT_TRUE(cachedMesh(cache_, file_, 60.0, key, problem)) << problem;
+}
+
+TEST_F(MeshCache, AMeshThatReadsOtherFilesIsNotKept) {
+  // A material library beside the OBJ (missing here, and it may appear later): always read.
+  writeText(file_, std::string("mtllib pyramid.mtl\n") + kPyramid);
+  readAndStore();
+  EXPECT_FALSE(read_.otherFiles.empty());
+  EXPECT_FALSE(fs::exists(cache_ / "meshes"));
+  Hash128 key;
+  std::string problem;
+  EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
+  // Without a cache folder nothing is kept either.
+  writeText(file_, kPyramid);
+  EXPECT_FALSE(cachedMesh({}, file_, 60.0, key, problem));
+  EXPECT_TRUE(storeMesh({}, key, read_, summary_, problem));
+  EXPECT_FALSE(fs::exists(cache_ / "meshes"));
+}
+
+}  // namespace
+}  // namespace compose::pipeline
