@@ -12,6 +12,7 @@
 #include <fstream>
 #include <iterator>
 
+#include "core/checksum.h"
 #include "core/hash.h"
 #include "core/limits.h"
 
@@ -20,7 +21,7 @@ namespace compose::pipeline {
 namespace fs = std::filesystem;
 
 namespace {
-constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '2'};
+constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '3'};
 constexpr uint64_t kMaxHeader = 1 << 20;
 constexpr uint64_t kChecksumBytes = 16;
 
@@ -28,7 +29,7 @@ std::array<uint64_t, 2> checksum(const std::string& header,
                                  const std::map<std::string, std::vector<float>>& arrays) {
   Hash128 h;
   h.bytes(header);
-  for (const auto& [name, values] : arrays) h.floats(values);
+  for (const auto& [name, values] : arrays) h.combine(checksumFloats(values));
   return {h.a, h.b};
 }
 }  // namespace

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <span>
 
+#include "core/checksum.h"
 #include "core/error.h"
 #include "core/hash.h"
 
@@ -29,7 +30,7 @@ constexpr size_t kChecksumBytes = 16;
 std::array<uint64_t, 2> checksum(const std::string& description, std::span<const float> values) {
   Hash128 h;
   h.bytes(description);
-  h.floats(values);
+  h.combine(checksumFloats(values));
   return {h.a, h.b};
 }
 
