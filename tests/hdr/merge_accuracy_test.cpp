@@ -63,7 +63,9 @@ void responseError(const ResponseCurve& recovered, const ResponseCurve& truth, F
   f.responseRms = std::sqrt(sum2 / count);
 }
 
-Figures mergeAndCompare(const std::string& envName, int brackets) {
+Figures mergeAndCompare(const std::string& envName, int brackets,
+                        RecoveryMethod recovery = RecoveryMethod::Debevec,
+                        MergeMethod method = MergeMethod::Debevec) {
   TempDir dir;
   const auto env = loadSampleEnvironment(envName);
   auto on = captureOnDisk(env, smallCaptureParams(brackets), dir / "capture");
@@ -71,6 +73,8 @@ Figures mergeAndCompare(const std::string& envName, int brackets) {
   CaptureMergeOptions options;
   options.response = ResponseMode::Recover;
   options.responseFolder = dir / "responses";
+  options.recovery.method = recovery;
+  options.merge.method = method;
   const CaptureMergeResult merged = mergeCapture(on.capture, on.photos, options, colors);
 
   // One scale for the whole capture: the median ratio of truth to merged luminance.
@@ -123,10 +127,13 @@ Figures mergeAndCompare(const std::string& envName, int brackets) {
   f.clippedFraction = double(clipped) / double(total);
   f.scale = scale;
   responseError(merged.response, on.simulated.params.curve.inverseTable(), f);
+  const std::string methods =
+      std::string(recovery == RecoveryMethod::Debevec ? "Debevec" : "Robertson") + " recovery, " +
+      (method == MergeMethod::Debevec ? "Debevec" : "Robertson") + " merge";
   std::printf(
-      "[ figures ] %-9s %d exposures: radiance median error %.2f %%, p90 %.2f %%, clipped in "
+      "[ figures ] %-9s %d exposures, %s: radiance median error %.2f %%, p90 %.2f %%, clipped in "
       "every exposure %.3f %%, views' scales within %.2f %%; response RMS %.2f %%, max %.2f %%\n",
-      envName.c_str(), brackets, 100.0 * f.medianError, 100.0 * f.p90Error,
+      envName.c_str(), brackets, methods.c_str(), 100.0 * f.medianError, 100.0 * f.p90Error,
       100.0 * f.clippedFraction, 100.0 * f.worstViewScale, 100.0 * f.responseRms,
       100.0 * f.responseMax);
   return f;
@@ -150,6 +157,34 @@ INSTANTIATE_TEST_SUITE_P(SampleHdris, MergeAccuracy,
                            return std::get<0>(param.param) + "_" +
                                   std::to_string(std::get<1>(param.param)) + "exposures";
                          });
+
+// Robertson's method on the same captures. Its merge (MergeRobertson) with the recovered curve
+// meets the same thresholds. Its recovery (CalibrateRobertson, every pixel, 30 iterations) is
+// measured 2-3 times less accurate than Debevec's here (radiance 3.5-5.3 % median, response RMS
+// 4.2-7.6 %; more iterations drift further: 11.3 % on the courtyard at 200), which is why Debevec
+// is the default: it is held to what it measures, with a margin, so that a regression still fails.
+constexpr double kRobertsonRadianceError = 0.065;
+constexpr double kRobertsonResponseRms = 0.09;
+constexpr double kRobertsonViewScaleAgreement = 0.07;
+
+class MergeAccuracyRobertson : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(MergeAccuracyRobertson, MergeMeetsTheThresholdsWithTheRecoveredCurve) {
+  const Figures f = mergeAndCompare(GetParam(), 3, RecoveryMethod::Debevec, MergeMethod::Robertson);
+  EXPECT_LT(f.medianError, kMedianRadianceError);
+  EXPECT_LT(f.worstViewScale, kViewScaleAgreement);
+}
+
+TEST_P(MergeAccuracyRobertson, RecoveryIsWithinItsMeasuredAccuracy) {
+  const Figures f =
+      mergeAndCompare(GetParam(), 3, RecoveryMethod::Robertson, MergeMethod::Robertson);
+  EXPECT_LT(f.medianError, kRobertsonRadianceError);
+  EXPECT_LT(f.responseRms, kRobertsonResponseRms);
+  EXPECT_LT(f.worstViewScale, kRobertsonViewScaleAgreement);
+}
+
+INSTANTIATE_TEST_SUITE_P(SampleHdris, MergeAccuracyRobertson,
+                         ::testing::Values("courtyard", "forest", "interior", "sunset"));
 
 }  // namespace
 }  // namespace compose::hdr
