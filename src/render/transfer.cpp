@@ -245,6 +245,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
 
   const lighting::TchebichefBasis basis(s, k);
+  double y00 = 0.0;  // the constant SH basis function
+  lighting::evalSh(0, glm::dvec3(0.0, 1.0, 0.0), &y00);
   // Cell boundaries: altitude θ_i = iπ/(2s) (as the cheb-local grid), azimuth φ_j = 2πj/s.
   std::vector<double> cosBound(size_t(s) + 1), omega(static_cast<size_t>(s)),
       cosine(static_cast<size_t>(s));
@@ -277,8 +279,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   // Per-thread scratch, so that no point allocates.
   struct Scratch {
     std::vector<double> visible, y, shSum;
-    std::vector<glm::vec3> dirs;   // the first pass' direction per cell
+    std::vector<glm::vec3> dirs;   // the first pass' direction per cell (where needed)
+    std::vector<double> cosines;   // the first pass' cos θ per cell
+    std::vector<double> coneCos;   // per row: cos of the cone's half angle plus the cell's radius
     std::vector<char> occluded;    // the first pass' answer per cell
+    std::vector<char> wrapped;     // the same, each row padded with its wrapped-around neighbours
     std::vector<glm::vec3> batch;  // rays of one trace call
     std::vector<int> batchCell;
   };
@@ -288,7 +293,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
     sc.y.resize(size_t(nsh));
     sc.shSum.resize(size_t(nsh));
     sc.dirs.resize(cells);
+    sc.cosines.resize(cells);
+    sc.coneCos.resize(size_t(s));
     sc.occluded.resize(cells);
+    sc.wrapped.resize(size_t(s) * size_t(s + 2));
     return sc;
   });
 
@@ -311,21 +319,30 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         uint32_t sample = (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^
                           (bits[2] * 0xC2B2AE3Du) ^ (params.seed * 0x27D4EB2Fu);
 
-        // A direction in cell (i, j) at fractional position (u, w), uniform in solid angle.
+        // A direction in cell (i, j) at fractional position (u, w), uniform in solid angle: its
+        // cos θ, then the direction itself.
+        auto cosineAt = [&](int i, double u) {
+          return cosBound[size_t(i)] - u * (cosBound[size_t(i)] - cosBound[size_t(i) + 1]);
+        };
         auto direction = [&](int i, int j, double u, double w) {
-          const double cosT =
-              cosBound[size_t(i)] - u * (cosBound[size_t(i)] - cosBound[size_t(i) + 1]);
+          const double cosT = cosineAt(i, u);
           const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
           const double phi = 2.0 * kPi * (j + w) / s;
           return glm::vec3(sinT * std::cos(phi) * east + sinT * std::sin(phi) * north + cosT * n);
         };
-        // A ray that reaches the environment: its share of the cell and of the SH integral.
+        // A ray that reaches the environment: its share of the cell and of the SH integral. Band
+        // 0 alone (the ground's transfer) needs only the ray's cos θ.
         auto seen = [&](int cell, const glm::vec3& d, double share) {
           sc.visible[size_t(cell)] += share;
           const glm::dvec3 dd(d);
           lighting::evalSh(params.shBands, dd, sc.y.data());
           const double weight = glm::dot(dd, n) * share * omega[size_t(cell / s)];
           for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
+        };
+        auto seenFirst = [&](int cell) {
+          if (nsh > 1) return seen(cell, sc.dirs[size_t(cell)], 1.0);
+          sc.visible[size_t(cell)] += 1.0;
+          sc.shSum[0] += y00 * sc.cosines[size_t(cell)] * omega[size_t(cell / s)];
         };
         // Traces sc.batch (any length) in groups of 16; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
@@ -347,6 +364,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         const double coneHalf = outside ? std::asin(std::min(1.0, radius / distance)) : kPi;
         // In local coordinates (east, north, normal), for a dot product per cell.
         const glm::dvec3 axisLocal(glm::dot(axis, east), glm::dot(axis, north), glm::dot(axis, n));
+        if (outside)
+          for (int i = 0; i < s; ++i)
+            sc.coneCos[size_t(i)] = coneHalf + cellRadius[size_t(i)] < kPi
+                                        ? std::cos(coneHalf + cellRadius[size_t(i)])
+                                        : -2.0;  // the cone covers the whole row
 
         // Pass 1: one jittered ray per cell.
         sc.batch.clear();
@@ -362,15 +384,21 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
           if (i >= s || j >= s) continue;
           {
             const uint32_t at = firstSample + uint32_t(i * s + j);
-            const glm::vec3 d = direction(i, j, hash01(2 * at), hash01(2 * at + 1));
-            sc.dirs[size_t(i * s + j)] = d;
+            const double u = hash01(2 * at), w = hash01(2 * at + 1);
             sc.occluded[size_t(i * s + j)] = 0;
-            if (outside && coneHalf + cellRadius[size_t(i)] < kPi) {
+            sc.cosines[size_t(i * s + j)] = cosineAt(i, u);
+            if (outside) {
               const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
                                  rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
-              // Wholly outside the cone: cannot see the object.
-              if (glm::dot(c, axisLocal) < std::cos(coneHalf + cellRadius[size_t(i)])) continue;
+              // Wholly outside the cone: cannot see the object; its direction is needed only
+              // for the SH integral above band 0.
+              if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) {
+                if (nsh > 1) sc.dirs[size_t(i * s + j)] = direction(i, j, u, w);
+                continue;
+              }
             }
+            const glm::vec3 d = direction(i, j, u, w);
+            sc.dirs[size_t(i * s + j)] = d;
             sc.batch.push_back(d);
             sc.batchCell.push_back(i * s + j);
           }
@@ -381,7 +409,16 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
 
         // Cells whose ray disagrees with a neighbour's lie on a shadow's edge: they get r x r
         // stratified rays; every other cell keeps its one ray.
-        auto at = [&](int i, int j) { return sc.occluded[size_t(i * s + ((j % s + s) % s))]; };
+        // Each row with its neighbours across the azimuth's wrap-around, so that the edge test
+        // below indexes without a modulo: wrapped[i][j + 1] for j in -1..s.
+        const int ws = s + 2;
+        for (int i = 0; i < s; ++i) {
+          char* row = sc.wrapped.data() + size_t(i * ws);
+          std::copy_n(sc.occluded.data() + size_t(i * s), size_t(s), row + 1);
+          row[0] = row[s];
+          row[s + 1] = row[1];
+        }
+        auto at = [&](int i, int j) { return sc.wrapped[size_t(i * ws + j + 1)]; };
         bool poleMixed = false;
         for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
         sc.batch.clear();
@@ -401,14 +438,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
             const int bit = i * s + j;
             if (c) blockedBits[bit / 16] |= uint16_t(1u << (bit % 16));
             if (edge) edgeBits[bit / 16] |= uint16_t(1u << (bit % 16));
-            bool boundary = r > 1 && i == 0 && poleMixed;
-            for (int di = -1; di <= 1 && r > 1 && !boundary; ++di) {
-              const int ii = i + di;
-              if (ii < 0 || ii >= s) continue;
-              for (int dj = -1; dj <= 1; ++dj) boundary = boundary || at(ii, j + dj) != c;
-            }
-            if (!boundary) {
-              if (!c) seen(i * s + j, sc.dirs[size_t(i * s + j)], 1.0);
+            if (r == 1 || !edge) {
+              if (!c) seenFirst(i * s + j);
               continue;
             }
             for (int a = 0; a < r; ++a) {
