@@ -721,6 +721,26 @@ int main(int argc, char** argv) {
     }
     warmProcess[p.name] = median(proc);
     warmProcessMb[p.name] = median(procMb);
+    // The object moved at each run (a new --place): the visibility pass and the self-shadowing
+    // come from the cache, the ground shadow and the render are computed, as when a user places
+    // the object by hand.
+    std::vector<double> moved;
+    if (!p.large) {
+      for (int i = 0; i < std::max(repeat, 3); ++i) {
+        const std::string place = "0.5," + std::to_string(0.80 + 0.01 * i);
+        const Child c =
+            run(COMPOSE_EXECUTABLE,
+                {"--plate", p.file.string(), "--object", (samples / "bunny.obj").string(), "--env",
+                 env.string(), "--scale", "0.6", "--place", place, "--cache", cache.string(),
+                 "--out", out.string(), "-q", "--timings"},
+                work / "stderr.txt");
+        if (c.status != 0) {
+          std::fprintf(stderr, "compose executable failed:\n%s\n", c.err.c_str());
+          return 1;
+        }
+        moved.push_back(c.seconds);
+      }
+    }
 
     rep.both("\n## " + std::string(p.name) + " plate, " + std::to_string(p.width) + "x" +
              std::to_string(p.height) + "\n\n");
@@ -734,6 +754,16 @@ int main(int argc, char** argv) {
                   warmProcess[p.name], warmProcessMb[p.name], repeat, loadAverage());
     rep.both(line);
     if (!p.large) {
+      std::snprintf(line, sizeof line,
+                    "The compose executable with the object moved at each run (a new --place: the "
+                    "visibility pass and the self-shadowing from the cache, the ground shadow and "
+                    "the render computed), whole process: %.3f s (median of %zu).\n\n",
+                    median(moved), moved.size());
+      rep.both(line);
+      goals.push_back(
+          {"1080p whole compose with the visibility cached and the object moved (ground shadow "
+           "and render computed), < 0.5 s (issue 8, the stricter reading)",
+           median(moved) < 0.5, num("%.3f s", median(moved)) + " whole process"});
       goals.push_back({"1080p whole compose, caches warm, < 0.5 s (issue 8)",
                        warmProcess[p.name] < 0.5,
                        num("%.3f s", warmProcess[p.name]) + " whole process, " +
