@@ -250,17 +250,30 @@ GroundShadowResult computeGroundShadow(
   params.shBands = plan.method == render::ShadowMethod::Harmonics ? plan.transfer.shBands : 0;
   const render::VertexTransfer transfer =
       render::computeTransfer(mesh, out.grid.points, params, progress);
-  int64_t sourceRays = 0;
+  int64_t sourceRays = 0, fineSourceRays = 0;
   const render::VertexIrradiance irradiance =
       shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, sourceRays);
-  out.ratio = render::groundRatio(out.grid, irradiance);
-  char line[240];
+  // Where the shadow has a sharp edge between grid nodes, a finer grid there.
+  const size_t refined = render::refineGroundGrid(out.grid, irradiance, worldFromObject, camera);
+  render::VertexIrradiance fine;
+  int64_t fineRays = 0;
+  if (out.grid.finePoints.count() > 0) {
+    const render::VertexTransfer fineTransfer =
+        render::computeTransfer(mesh, out.grid.finePoints, params);
+    fine = shadePoints(out.grid.finePoints, fineTransfer, scene, lighting, envFromObject, plan,
+                       fineSourceRays);
+    fineRays = fineTransfer.rays + fineSourceRays;
+  }
+  out.ratio = render::groundRatio(out.grid, irradiance, fine);
+  char line[320];
   std::snprintf(line, sizeof line,
-                "ground shadow over %dx%d plate pixels from %zu ground points (every %d pixels): "
-                "%lld rays in %.2f s",
+                "ground shadow over %dx%d plate pixels from %zu ground points (every %d pixels; "
+                "%zu cells across sharp shadow edges refined %d x %d, %zu more points): %lld rays "
+                "in %.2f s",
                 out.grid.x1 - out.grid.x0, out.grid.y1 - out.grid.y0, out.grid.points.count(),
-                out.grid.stride, static_cast<long long>(transfer.rays + sourceRays),
-                seconds(start));
+                out.grid.stride, refined, out.grid.steps, out.grid.steps,
+                out.grid.finePoints.count(),
+                static_cast<long long>(transfer.rays + sourceRays + fineRays), seconds(start));
   out.reason = line;
   return out;
 }

@@ -451,7 +451,7 @@ void cropToShadow(GroundShadowResult& r) {
 class GroundStage final : public Stage {
  public:
   // 2: the ratio cut to where it is below 1.
-  static constexpr int kVersion = 2;
+  static constexpr int kVersion = 3;  // 3: refined across sharp shadow edges
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

@@ -1,6 +1,7 @@
 // The shadow an object casts on the ground, against ray tracing.
 #include "render/ground.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <glm/geometric.hpp>
@@ -115,6 +116,86 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
   // transfer; the reference's noise (8192 samples on the blocked part) is ~0.01.
   EXPECT_LT(worst, 0.06);
   std::printf("ground ratio against ray tracing: worst difference %.3f\n", worst);
+}
+
+// A sharp sun shadow on a coarse grid (every ~25 pixels): bilinear interpolation between the
+// nodes draws its edge as a staircase of grid-sized steps. The cells across the edge are refined,
+// and the ratio between the nodes moves towards the ratio computed at each pixel's own point.
+TEST(GroundShadow, SharpEdgesAreRefinedBetweenGridNodes) {
+  const Mesh box = cube();
+  const EmbreeScene scene(box.positions, box.indices);
+  calib::CameraOptions co;
+  co.pitchDegrees = 35.0;
+  const calib::PlateCamera camera = calib::plateCamera(1200, 900, {}, co);
+  calib::Placement place;
+  place.imagePoint = {0.5, 0.5};
+  place.heightFraction = 0.25;
+  place.yawDegrees = 30.0;  // the shadow's edges run across the grid's rows and columns
+  const glm::dmat4 worldFromObject =
+      calib::placeOnGround(camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+  const lighting::Environment env = sunAndSky({std::cos(0.7f), std::sin(0.7f), 0.0f});
+  const pipeline::ShadowPlan plan = pipeline::ShadowPlan::parse("");
+  const pipeline::ShadowLighting lighting = pipeline::prepareShadowLighting(env, plan, {});
+  glm::mat3 envFromObject = glm::mat3(worldFromObject);
+  for (int c = 0; c < 3; ++c) envFromObject[c] = glm::normalize(envFromObject[c]);
+  TransferParams params = plan.transfer;
+  params.shBands = 0;
+  auto shade = [&](const SurfacePoints& points) {
+    const VertexTransfer transfer = computeTransfer(box, points, params);
+    const SourceVisibility seen =
+        traceSources(points, scene, lighting.split.sources, envFromObject, &transfer);
+    ShadowInputs in;
+    in.transfer = &transfer;
+    in.shadowLighting = lighting.lighting.get();
+    in.sources = lighting.split.sources;
+    in.sourceVisibility = &seen;
+    return shadeVertices(points, envFromObject, in);
+  };
+  GroundSettings settings;
+  settings.maxPoints = 1500;
+  GroundGrid grid = groundGrid(box, worldFromObject, camera, lighting.split.sources, settings);
+  ASSERT_GE(grid.stride, 16);
+  const VertexIrradiance coarse = shade(grid.points);
+  const Image before = groundRatio(grid, coarse);
+  const size_t refined = refineGroundGrid(grid, coarse, worldFromObject, camera, settings);
+  EXPECT_GT(refined, 0u);
+  EXPECT_EQ(grid.steps, (grid.stride + 3) / 4);
+  const Image after = groundRatio(grid, coarse, shade(grid.finePoints));
+
+  // The ratio at each pixel's own ground point, for every 3rd pixel of the refined cells.
+  SurfacePoints exact;
+  exact.size = grid.points.size, exact.centre = grid.points.centre;
+  exact.radius = grid.points.radius;
+  std::vector<glm::ivec2> pixels;
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  for (int y = 0; y < before.height; y += 3) {
+    for (int x = 0; x < before.width; x += 3) {
+      const int i = std::min(x / grid.stride, grid.columns - 2);
+      const int j = std::min(y / grid.stride, grid.rows - 2);
+      if (grid.refinedCell[size_t(j) * size_t(grid.columns - 1) + size_t(i)] < 0) continue;
+      glm::dvec3 origin, dir;
+      if (!camera.ray(grid.x0 + x + 0.5, grid.y0 + y + 0.5, origin, dir) || !(dir.y < -1e-9))
+        continue;
+      const glm::dvec3 g = origin + dir * (-origin.y / dir.y);
+      exact.positions.push_back(glm::vec3(glm::dvec3(objectFromWorld * glm::dvec4(g, 1.0))));
+      exact.normals.emplace_back(0.0f, 1.0f, 0.0f);
+      pixels.emplace_back(x, y);
+    }
+  }
+  ASSERT_GT(pixels.size(), 500u);
+  const VertexIrradiance truth = shade(exact);
+  double errBefore = 0.0, errAfter = 0.0;
+  for (size_t k = 0; k < pixels.size(); ++k) {
+    const glm::vec3 un = truth.unshadowed[k], sh = truth.shadowed[k];
+    const double ref = un.y > 1e-20f ? std::clamp(sh.y / un.y, 0.0f, 1.0f) : 1.0;
+    errBefore += std::abs(before.at(pixels[k].x, pixels[k].y)[1] - ref);
+    errAfter += std::abs(after.at(pixels[k].x, pixels[k].y)[1] - ref);
+  }
+  errBefore /= double(pixels.size());
+  errAfter /= double(pixels.size());
+  std::printf("stride %d, %zu cells refined %d x %d: mean |ratio - per-pixel ratio| %.4f -> %.4f\n",
+              grid.stride, refined, grid.steps, grid.steps, errBefore, errAfter);
+  EXPECT_LT(errAfter, 0.5 * errBefore);
 }
 
 }  // namespace
