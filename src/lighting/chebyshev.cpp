@@ -125,8 +125,9 @@ void NormalGrid::interpolation(const glm::vec3& n, size_t nodes[4], float weight
 }
 
 void NormalGrid::interpolationAt(double lat, double lon, size_t nodes[4], float weights[4]) const {
-  lon = std::fmod(lon, 2.0 * kPi);
-  if (lon < 0.0) lon += 2.0 * kPi;
+  // Into [0, 2π): one subtraction for the usual case (atan2's range, or one turn of yaw beyond).
+  if (lon < 0.0 || lon >= 2.0 * kPi) lon -= 2.0 * kPi * std::floor(lon / (2.0 * kPi));
+  if (lon >= 2.0 * kPi) lon = 0.0;  // rounding just below a whole turn
   const double u = (0.5 - lat / kPi) * (rows_ - 1);
   const double v = lon / (2.0 * kPi) * cols_;
   const int r0 = std::clamp(int(std::floor(u)), 0, rows_ - 2);
