@@ -95,8 +95,26 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
       py0 = std::min(py0, px.y), py1 = std::max(py1, px.y);
     }
   }
-  if (behind) {  // the whole frame; pixels above the horizon get no ground point
-    px0 = 0.0, px1 = camera.width, py0 = 0.0, py1 = camera.height;
+  if (behind) {
+    // Part of the region is behind the camera: the part in front is bounded by the projections
+    // of a fine lattice over the region (those in front of the camera), padded by a lattice cell
+    // in the image; where none is in front, nothing of the ground is in view.
+    constexpr int kLattice = 128;
+    px0 = py0 = std::numeric_limits<double>::max(), px1 = py1 = -px0;
+    for (int j = 0; j <= kLattice; ++j) {
+      for (int i = 0; i <= kLattice; ++i) {
+        const glm::dvec3 g(x0 + (x1 - x0) * i / kLattice, 0.0, z0 + (z1 - z0) * j / kLattice);
+        glm::dvec2 px;
+        if (!camera.project(g, px)) continue;
+        px0 = std::min(px0, px.x), px1 = std::max(px1, px.x);
+        py0 = std::min(py0, px.y), py1 = std::max(py1, px.y);
+      }
+    }
+    if (px0 > px1) return grid;
+    const double pad = 2.0 * std::max(camera.width, camera.height) / kLattice;
+    px0 -= pad, py0 -= pad, px1 += pad, py1 += pad;
+    // Ground nearer than the lattice's first row in front of the camera reaches the bottom edge.
+    py1 = std::max(py1, double(camera.height));
   }
   constexpr double kLimit = 1e7;
   auto clampInt = [&](double v, int lo_, int hi_) {

@@ -39,7 +39,7 @@ struct GroundSettings {
   // two neighbours along a row or a column (the second difference) by more than `bend`, in any
   // channel, into steps x steps cells of about `fineStride` pixels (none when the grid is that
   // fine already); at most `maxRefinedPoints` points are added (the sharpest cells first).
-  float bend = 0.03f;
+  float bend = 0.05f;
   int fineStride = 4;
   size_t maxRefinedPoints = 60000;
 };

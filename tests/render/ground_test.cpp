@@ -198,5 +198,48 @@ TEST(GroundShadow, SharpEdgesAreRefinedBetweenGridNodes) {
   EXPECT_LT(errAfter, 0.5 * errBefore);
 }
 
+// An object close to the camera: its shadow's region reaches behind it. The grid covers only the
+// part of the frame that shows the region, and no pixel outside it shows any of the region.
+TEST(GroundShadow, ARegionReachingBehindTheCameraCoversOnlyWhatTheFrameShows) {
+  const Mesh box = cube();
+  calib::CameraOptions co;
+  co.pitchDegrees = 5.0;
+  const calib::PlateCamera camera = calib::plateCamera(800, 600, {}, co);
+  calib::Placement place;
+  place.imagePoint = {0.5, 0.97};
+  place.heightFraction = 1.0;
+  const glm::dmat4 worldFromObject =
+      calib::placeOnGround(camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+  const GroundGrid grid = groundGrid(box, worldFromObject, camera, {});
+  ASSERT_FALSE(grid.empty());
+  // The region does reach behind the camera (the case this is about).
+  glm::dvec2 px;
+  bool behind = false;
+  for (const double x : {grid.regionX0, grid.regionX1})
+    for (const double z : {grid.regionZ0, grid.regionZ1})
+      behind = behind || !camera.project(glm::dvec3(x, 0.0, z), px);
+  ASSERT_TRUE(behind);
+  // Not the whole frame (as it used to be): the sky above the horizon is left out.
+  glm::dvec3 o, d;
+  ASSERT_TRUE(camera.ray(400.5, 0.5, o, d));
+  ASSERT_GT(d.y, 0.0) << "the top row sees the sky";
+  EXPECT_GT(grid.y0, 0) << "the grid covers " << grid.x1 - grid.x0 << "x" << grid.y1 - grid.y0;
+  int outsideShowingRegion = 0, inside = 0;
+  for (int y = 0; y < 600; y += 4) {
+    for (int x = 0; x < 800; x += 4) {
+      glm::dvec3 origin, dir;
+      if (!camera.ray(x + 0.5, y + 0.5, origin, dir) || !(dir.y < -1e-9)) continue;
+      const glm::dvec3 g = origin + dir * (-origin.y / dir.y);
+      const bool inRegion = g.x >= grid.regionX0 && g.x <= grid.regionX1 && g.z >= grid.regionZ0 &&
+                            g.z <= grid.regionZ1;
+      const bool inGrid = x >= grid.x0 && x < grid.x1 && y >= grid.y0 && y < grid.y1;
+      inside += inRegion && inGrid;
+      outsideShowingRegion += inRegion && !inGrid;
+    }
+  }
+  EXPECT_GT(inside, 100);
+  EXPECT_EQ(outsideShowingRegion, 0);
+}
+
 }  // namespace
 }  // namespace compose::render
