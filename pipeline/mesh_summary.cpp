@@ -18,8 +18,10 @@ namespace fs = std::filesystem;
 namespace {
 
 // Raise when reading a mesh file gives anything different (the loaders, the normals, the
-// repairs): an entry kept by an older compose would otherwise stand for a different mesh.
+// repairs) or when the convexity test (render::isConvex) changes: an entry kept by an older
+// compose would otherwise stand for a different mesh, or skip the self-shadowing wrongly.
 constexpr uint32_t kMeshVersion = 1;
+constexpr uint32_t kConvexityVersion = 1;
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
   return StageCache(cacheRoot / "meshes", "mesh", contentKey.hex());
@@ -89,6 +91,7 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   Hash128 h;
   h.bytes("mesh as read");
   h.word(kMeshVersion);
+  h.word(kConvexityVersion);
   h.number(creaseDegrees);
   h.bytes(file.extension().string());
   try {

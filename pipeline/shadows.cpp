@@ -155,7 +155,7 @@ render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
                                      const ShadowPlan& plan, int64_t& sourceRays) {
   render::SourceVisibility seen;
   if (!lighting.split.sources.empty()) {
-    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject, &transfer);
+    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject);
     sourceRays = seen.rays;
   }
   render::ShadowInputs inputs;

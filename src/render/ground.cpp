@@ -111,10 +111,12 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
       }
     }
     if (px0 > px1) return grid;
+    // Only the far side is trusted to the lattice: the ground nearer than its first row in front
+    // of the camera can reach any of the other edges (a rolled camera, a low one), so the
+    // rectangle keeps the frame's full width and reaches its bottom edge.
     const double pad = 2.0 * std::max(camera.width, camera.height) / kLattice;
-    px0 -= pad, py0 -= pad, px1 += pad, py1 += pad;
-    // Ground nearer than the lattice's first row in front of the camera reaches the bottom edge.
-    py1 = std::max(py1, double(camera.height));
+    py0 -= pad;
+    px0 = 0.0, px1 = camera.width, py1 = camera.height;
   }
   constexpr double kLimit = 1e7;
   auto clampInt = [&](double v, int lo_, int hi_) {

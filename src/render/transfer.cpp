@@ -13,7 +13,6 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
-#include "core/fast_math.h"
 #include "core/hash.h"
 #include "core/parallel.h"
 
@@ -103,25 +102,17 @@ std::vector<float> VertexTransfer::exportState() const {
   out.insert(out.end(), cheb.begin(), cheb.end());
   out.insert(out.end(), sh.begin(), sh.end());
   out.insert(out.end(), ao.begin(), ao.end());
-  for (const uint16_t word : cells) out.push_back(float(word));  // exact: below 2^24
   return out;
 }
 
 bool VertexTransfer::importState(const TransferParams& p, size_t vertices, std::vector<float> in) {
   const size_t kk = size_t(p.order) * size_t(p.order);
   const size_t nsh = size_t(lighting::shCount(p.shBands));
-  const size_t words = 2 * ((size_t(p.grid) * size_t(p.grid) + 15) / 16);
-  if (in.size() != vertices * (kk + nsh + 1 + words)) return false;
-  const auto firstCell = in.begin() + ptrdiff_t(vertices * (kk + nsh + 1));
-  if (!std::all_of(firstCell, in.end(),
-                   [](float w) { return w >= 0.0f && w <= 65535.0f && w == std::floor(w); }))
-    return false;
+  if (in.size() != vertices * (kk + nsh + 1)) return false;
   params = p;
   vertexCount = vertices;
   sh.assign(in.begin() + ptrdiff_t(vertices * kk), in.begin() + ptrdiff_t(vertices * (kk + nsh)));
-  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), firstCell);
-  cells.resize(vertices * words);
-  std::transform(firstCell, in.end(), cells.begin(), [](float w) { return uint16_t(w); });
+  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), in.end());
   // The moments come first: they stay where they are.
   in.resize(vertices * kk);
   cheb = std::move(in);
@@ -236,8 +227,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   out.cheb.assign(count * kk, 0.0f);
   out.sh.assign(count * size_t(nsh), 0.0f);
   out.ao.assign(count, 0.0f);
-  const size_t words = out.cellWords();
-  out.cells.assign(count * 2 * words, 0);
 
   const EmbreeScene scene(mesh.positions, mesh.indices);
   // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
@@ -423,8 +412,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
         sc.batch.clear();
         sc.batchCell.clear();
-        uint16_t* blockedBits = out.cells.data() + v * 2 * words;
-        uint16_t* edgeBits = blockedBits + words;
         for (int i = 0; i < s; ++i) {
           for (int j = 0; j < s; ++j) {
             const char c = at(i, j);
@@ -435,9 +422,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
               if (ii < 0 || ii >= s) continue;
               for (int dj = -1; dj <= 1; ++dj) edge = edge || at(ii, j + dj) != c;
             }
-            const int bit = i * s + j;
-            if (c) blockedBits[bit / 16] |= uint16_t(1u << (bit % 16));
-            if (edge) edgeBits[bit / 16] |= uint16_t(1u << (bit % 16));
             if (r == 1 || !edge) {
               if (!c) seenFirst(i * s + j);
               continue;
@@ -554,7 +538,7 @@ const char* shadowMethodName(ShadowMethod method) {
 
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
                               const std::vector<lighting::LightSource>& sources,
-                              const glm::mat3& envFromObject, const VertexTransfer* transfer) {
+                              const glm::mat3& envFromObject) {
   SourceVisibility out;
   const size_t count = points.count();
   out.count = sources.size();
@@ -585,17 +569,6 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
   for (size_t i = 0; i < sources.size(); ++i) directions[i] = sources[i].direction;
   const std::vector<uint32_t> sourceOrder = spatialOrder(directions);
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
-  // The transfer's cells: a source in a cell away from shadow edges, above the horizon row, takes
-  // the cell's verdict.
-  const bool byCells = transfer && transfer->vertexCount == count &&
-                       transfer->cells.size() == count * 2 * transfer->cellWords();
-  const int s = byCells ? transfer->params.grid : 0;
-  const size_t words = byCells ? transfer->cellWords() : 0;
-  // Row i holds cos θ in (rowCos[i + 1], rowCos[i]]; the last row (the horizon's) is traced.
-  std::vector<float> rowCos(size_t(s) + 1);
-  for (int i = 0; i <= s; ++i) rowCos[size_t(i)] = float(std::cos(i * 0.5 * kPi / s));
-  const float aboveHorizonRow = s > 0 ? rowCos[size_t(s) - 1] : 2.0f;
-  const float colStep = s > 0 ? float(2.0 * kPi / s) : 1.0f;
   std::atomic<int64_t> rays{0};
   parallelFor(
       0, int64_t(count),
@@ -628,36 +601,8 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         std::memcpy(bits, &points.positions[v], sizeof bits);
         const uint32_t firstSample =
             (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
-        glm::vec3 east(0.0f), north(0.0f), normal(0.0f);
-        const uint16_t* blockedBits = nullptr;
-        const uint16_t* edgeBits = nullptr;
-        if (byCells) {
-          const glm::dvec3 nd = glm::normalize(glm::dvec3(n));
-          glm::dvec3 e, no;
-          tangentFrame(nd, e, no);
-          east = glm::vec3(e);
-          north = glm::vec3(no);
-          normal = glm::vec3(nd);
-          blockedBits = transfer->cells.data() + v * 2 * words;
-          edgeBits = blockedBits + words;
-        }
         for (const uint32_t i : sourceOrder) {
           const Frame& f = frames[i];
-          if (byCells) {
-            const float z = glm::dot(normal, f.centre);
-            if (z > aboveHorizonRow) {
-              int row = 0;
-              while (rowCos[size_t(row) + 1] >= z) ++row;  // stops before the horizon row
-              float phi = fastAtan2(glm::dot(north, f.centre), glm::dot(east, f.centre));
-              if (phi < 0.0f) phi += float(2.0 * kPi);
-              const int col = std::min(int(phi / colStep), s - 1);
-              const int bit = row * s + col;
-              if (!((edgeBits[bit / 16] >> (bit % 16)) & 1u)) {
-                if (!((blockedBits[bit / 16] >> (bit % 16)) & 1u)) seen[i] = 1.0f;
-                continue;
-              }
-            }
-          }
           for (int k = 0; k < kPerSource; ++k) {
             // The point's own sequence of draws, one per (source, direction).
             const uint32_t sample = firstSample + i * kPerSource + uint32_t(k);

@@ -98,15 +98,9 @@ struct VertexTransfer {
   std::vector<float> cheb;  // k² per vertex: moments of V on the local grid
   std::vector<float> sh;    // (shBands + 1)² per vertex: Sloan's transfer vector
   std::vector<float> ao;    // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
-  // Per vertex, the first pass' verdict on each cell, as two bit sets of s² bits in 16-bit words
-  // (cellWords() each): `blocked` (its ray met the object), then `edge` (a neighbouring cell's
-  // ray disagrees: a shadow's edge may cross it). Away from edges a direction's visibility is its
-  // cell's: traceSources() then needs no ray towards a source there.
-  std::vector<uint16_t> cells;
   int64_t rays = 0;
 
-  size_t cellWords() const { return (size_t(params.grid) * size_t(params.grid) + 15) / 16; }
-  size_t floatsStored() const { return cheb.size() + sh.size() + ao.size() + cells.size(); }
+  size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
   // Plain floats for the on-disk cache, and back (taking `in`'s storage); false if `in` does not
   // fit these parameters.
   std::vector<float> exportState() const;
@@ -115,7 +109,7 @@ struct VertexTransfer {
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS3";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS4";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal.
@@ -143,10 +137,8 @@ const char* shadowMethodName(ShadowMethod method);
 // across the source's extent (its block of texels, stratified and jittered per point), turned
 // into the object's frame, so that a source's shadow has a penumbra rather than one hard edge.
 // From a point outside the object's bounding sphere, a source outside the sphere's cone is seen
-// without a ray. Given the points' transfer (with its cells), a source whose centre lies in a
-// cell away from any shadow's edge and above the horizon row takes that cell's verdict without
-// rays: a source is at most 0.35° across, far less than a cell, so all its directions lie among
-// the cell's neighbours, which agree with it.
+// without a ray. Every other source is traced: the visibility pass' one ray per cell can miss a
+// thin occluder (a leg, a handle) that a small bright source's shadow must still show.
 struct SourceVisibility {
   size_t count = 0;  // sources
   std::vector<float> visible;
@@ -155,8 +147,7 @@ struct SourceVisibility {
 class EmbreeScene;
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& objectScene,
                               const std::vector<lighting::LightSource>& sources,
-                              const glm::mat3& envFromObject,
-                              const VertexTransfer* transfer = nullptr);
+                              const glm::mat3& envFromObject);
 
 // What shading with self-shadowing needs besides the mesh.
 struct ShadowInputs {

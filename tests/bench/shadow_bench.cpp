@@ -283,48 +283,8 @@ int main(int argc, char** argv) {
       add("none", 0, false, 0, double(unshadowedLighting->floatsStored()), 0, 0, measure(plain));
 
       const lighting::SourceSplit split = lighting::splitBrightSources(env, 64);
-      // As the pipeline does: sources away from shadow edges take their cell's verdict from the
-      // visibility pass. Beside it, every source traced by rays, to show what that costs.
-      const auto cells0 = bench::Clock::now();
       const render::SourceVisibility seen =
-          render::traceSources(points, scene, split.sources, envFromObject, &transfer);
-      const double cellsS = bench::secondsSince(cells0);
-      const auto rays0 = bench::Clock::now();
-      const render::SourceVisibility seenByRays =
           render::traceSources(points, scene, split.sources, envFromObject);
-      const double raysS = bench::secondsSince(rays0);
-      {
-        lighting::ChebParams cp;
-        cp.order = 16;
-        cp.samples = 16;
-        lighting::ChebLocalLighting residual(cp);
-        residual.project(split.residual);
-        render::ShadowInputs in;
-        in.transfer = &transfer;
-        in.shadowLighting = &residual;
-        in.sources = split.sources;
-        double db[2];
-        for (int i = 0; i < 2; ++i) {
-          in.sourceVisibility = i == 0 ? &seen : &seenByRays;
-          const render::VertexIrradiance vi = render::shadeVertices(points, envFromObject, in);
-          db[i] = measure(renderWith(*unshadowedLighting, &vi)).snrDb;
-        }
-        size_t differ = 0;
-        for (size_t i = 0; i < seen.visible.size(); ++i)
-          differ += std::abs(seen.visible[i] - seenByRays.visible[i]) > 0.26f;
-        char sourcesLine[400];
-        std::snprintf(
-            sourcesLine, sizeof sourcesLine,
-            "%s / %s: sources with the visibility pass' cells %lld rays in %.3f s, every "
-            "source by rays %lld rays in %.3f s; %.2f %% of point-source verdicts differ; "
-            "cheb k=16 +sources %.1f dB with cells, %.1f dB by rays alone",
-            meshName, envName, static_cast<long long>(seen.rays), cellsS,
-            static_cast<long long>(seenByRays.rays), raysS,
-            100.0 * double(differ) / double(std::max<size_t>(1, seen.visible.size())), db[0],
-            db[1]);
-        notes.push_back(sourcesLine);
-        std::printf("%s\n", sourcesLine);
-      }
       for (const bool withSources : {false, true}) {
         const lighting::Environment& shadowEnv = withSources ? split.residual : env;
         render::ShadowInputs in;

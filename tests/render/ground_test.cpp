@@ -143,7 +143,7 @@ TEST(GroundShadow, SharpEdgesAreRefinedBetweenGridNodes) {
   auto shade = [&](const SurfacePoints& points) {
     const VertexTransfer transfer = computeTransfer(box, points, params);
     const SourceVisibility seen =
-        traceSources(points, scene, lighting.split.sources, envFromObject, &transfer);
+        traceSources(points, scene, lighting.split.sources, envFromObject);
     ShadowInputs in;
     in.transfer = &transfer;
     in.shadowLighting = lighting.lighting.get();

@@ -195,47 +195,6 @@ TEST_F(FloorAndWall, ChebyshevTransferMatchesRayTracingAtThePole) {
   }
 }
 
-// A source whose centre lies in a cell away from any shadow's edge takes that cell's verdict
-// from the visibility pass: far fewer rays, and the same picture as tracing every source.
-TEST_F(FloorAndWall, SourcesAwayFromShadowEdgesTakeTheirCellsVerdict) {
-  const lighting::Environment env = skyWithSun({-1.0f, 0.5f, 0.3f});
-  const glm::mat3 envFromObject =
-      glm::mat3(glm::rotate(glm::dmat4(1.0), 30.0 * kPi / 180.0, glm::dvec3(0, 1, 0)));
-  const lighting::SourceSplit split = lighting::splitBrightSources(env, 16);
-  const EmbreeScene scene(mesh_.positions, mesh_.indices);
-  const SourceVisibility byRays = traceSources(points_, scene, split.sources, envFromObject);
-  const SourceVisibility byCells =
-      traceSources(points_, scene, split.sources, envFromObject, &transfer_);
-  ASSERT_EQ(byCells.visible.size(), byRays.visible.size());
-  size_t differ = 0;
-  for (size_t i = 0; i < byRays.visible.size(); ++i)
-    differ += std::abs(byRays.visible[i] - byCells.visible[i]) > 0.26f;
-  std::printf("rays %lld by rays, %lld with cells; %zu of %zu verdicts differ\n",
-              static_cast<long long>(byRays.rays), static_cast<long long>(byCells.rays), differ,
-              byRays.visible.size());
-  EXPECT_LT(byCells.rays, byRays.rays / 2);
-  EXPECT_LE(differ, byRays.visible.size() / 50);
-
-  lighting::ChebParams cp;
-  cp.order = 12;
-  cp.samples = 16;
-  lighting::ChebLocalLighting residual(cp);
-  residual.project(split.residual);
-  ShadowInputs in;
-  in.transfer = &transfer_;
-  in.shadowLighting = &residual;
-  in.sources = split.sources;
-  in.sourceVisibility = &byRays;
-  const auto ref = reference(mesh_, env, envFromObject, floor_);
-  const double raysDb = snrDb(shadeVertices(points_, envFromObject, in).shadowed, ref, floor_);
-  in.sourceVisibility = &byCells;
-  const double cellsDb = snrDb(shadeVertices(points_, envFromObject, in).shadowed, ref, floor_);
-  std::printf("floor against the reference: %.1f dB by rays, %.1f dB with cells\n", raysDb,
-              cellsDb);
-  EXPECT_GT(cellsDb, 38.0);
-  EXPECT_GT(cellsDb, raysDb - 1.0);
-}
-
 TEST_F(FloorAndWall, HarmonicTransferTurnsWithTheYaw) {
   const lighting::Environment env = skyWithSun({-1.0f, 0.5f, 0.3f});
   lighting::ShLighting sh(4);
