@@ -132,35 +132,6 @@ bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, 
   return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
 }
 
-uint32_t EmbreeScene::occluded8(const glm::vec3& o, const glm::vec3* d, uint32_t active,
-                                float tnear, float tfar) const {
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  alignas(32) int valid[8];
-  alignas(32) RTCRay8 rays{};
-  for (int i = 0; i < 8; ++i) {
-    valid[i] = (active >> i) & 1u ? -1 : 0;
-    // Only the active directions are read: a batch of fewer than 8 ends before the inactive ones
-    // (reading them overflowed the caller's array, found by AddressSanitizer).
-    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
-    rays.org_x[i] = o.x;
-    rays.org_y[i] = o.y;
-    rays.org_z[i] = o.z;
-    rays.dir_x[i] = dir.x;
-    rays.dir_y[i] = dir.y;
-    rays.dir_z[i] = dir.z;
-    rays.tnear[i] = tnear;
-    rays.tfar[i] = tfar;
-    rays.mask[i] = 0xFFFFFFFFu;
-    rays.time[i] = 0.0f;
-  }
-  rtcOccluded8(valid, impl_->scene, &context, &rays);
-  uint32_t hits = 0;
-  for (int i = 0; i < 8; ++i)
-    if (valid[i] && rays.tfar[i] < 0.0f) hits |= 1u << i;
-  return hits;
-}
-
 uint32_t EmbreeScene::occluded16(const glm::vec3& o, const glm::vec3* d, uint32_t active,
                                  float tnear, float tfar) const {
   RTCIntersectContext context;
@@ -169,6 +140,8 @@ uint32_t EmbreeScene::occluded16(const glm::vec3& o, const glm::vec3* d, uint32_
   alignas(64) RTCRay16 rays{};
   for (int i = 0; i < 16; ++i) {
     valid[i] = (active >> i) & 1u ? -1 : 0;
+    // Only the active directions are read: a batch of fewer than 16 ends before the inactive
+    // ones (reading them overflowed the caller's array, found by AddressSanitizer).
     const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
     rays.org_x[i] = o.x;
     rays.org_y[i] = o.y;

@@ -38,11 +38,9 @@ class EmbreeScene {
   // Whether anything lies along origin + t·direction, t in [tnear, tfar].
   bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
                 float tfar = 1e30f) const;
-  // The same for 8 rays from one origin; `active` masks the rays to trace (only their directions
-  // are read: `directions` may hold fewer than 8); returns a bit mask of the occluded ones.
-  uint32_t occluded8(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
-                     float tnear, float tfar = 1e30f) const;
-  // The same for 16 rays from one origin.
+  // Whether anything lies along each of up to 16 rays from one origin; `active` masks the rays
+  // to trace (only their directions are read: `directions` may hold fewer than 16); returns a bit
+  // mask of the occluded ones.
   uint32_t occluded16(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
                       float tnear, float tfar = 1e30f) const;
 

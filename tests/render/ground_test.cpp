@@ -52,25 +52,43 @@ lighting::Environment sunAndSky(const glm::vec3& sun) {
   return lighting::Environment::fromLatLong(img);
 }
 
+// The plate camera (`pitch` degrees down) and the object stood on the ground at `at` (plate
+// fractions), `height` of the plate high, turned by `yaw` degrees.
+struct Shot {
+  calib::PlateCamera camera;
+  glm::dmat4 worldFromObject{1.0};
+  glm::mat3 envFromObject{1.0f};  // the placement's rotation (world = environment frame here)
+};
+Shot shoot(const Mesh& mesh, int width, int height, double pitch, glm::dvec2 at,
+           double heightFraction, double yaw = 0.0) {
+  calib::CameraOptions co;
+  co.pitchDegrees = pitch;
+  Shot shot{calib::plateCamera(width, height, {}, co)};
+  calib::Placement place;
+  place.imagePoint = at;
+  place.heightFraction = heightFraction;
+  place.yawDegrees = yaw;
+  shot.worldFromObject = calib::placeOnGround(shot.camera, place, glm::dvec3(mesh.boundsMin()),
+                                              glm::dvec3(mesh.boundsMax()));
+  shot.envFromObject = glm::mat3(shot.worldFromObject);
+  for (int c = 0; c < 3; ++c) shot.envFromObject[c] = glm::normalize(shot.envFromObject[c]);
+  return shot;
+}
+
 TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
   const Mesh box = cube();
   const EmbreeScene scene(box.positions, box.indices);
-  calib::CameraOptions co;
-  co.pitchDegrees = 35.0;  // looking down at the ground
-  const calib::PlateCamera camera = calib::plateCamera(400, 300, {}, co);
-  calib::Placement place;
-  place.imagePoint = {0.5, 0.5};
-  place.heightFraction = 0.25;
-  const glm::dmat4 worldFromObject =
-      calib::placeOnGround(camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+  // Looking down at the ground, 35°.
+  const Shot shot = shoot(box, 400, 300, 35.0, {0.5, 0.5}, 0.25);
+  const calib::PlateCamera& camera = shot.camera;
+  const glm::dmat4& worldFromObject = shot.worldFromObject;
   // The sun 40° up, from +X: the shadow falls towards -X.
   const glm::vec3 sun(std::cos(0.7f), std::sin(0.7f), 0.0f);
   const lighting::Environment env = sunAndSky(sun);
   const pipeline::ShadowPlan plan = pipeline::ShadowPlan::parse("");
   const pipeline::ShadowLighting lighting = pipeline::prepareShadowLighting(env, plan, {});
   const glm::mat3 identity(1.0f);
-  glm::mat3 envFromObject = glm::mat3(worldFromObject);
-  for (int c = 0; c < 3; ++c) envFromObject[c] = glm::normalize(envFromObject[c]);
+  const glm::mat3& envFromObject = shot.envFromObject;
   const pipeline::GroundShadowResult ground = pipeline::computeGroundShadow(
       box, scene, worldFromObject, camera, lighting, identity, envFromObject, plan);
   ASSERT_FALSE(ground.grid.empty());
@@ -124,20 +142,14 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
 TEST(GroundShadow, SharpEdgesAreRefinedBetweenGridNodes) {
   const Mesh box = cube();
   const EmbreeScene scene(box.positions, box.indices);
-  calib::CameraOptions co;
-  co.pitchDegrees = 35.0;
-  const calib::PlateCamera camera = calib::plateCamera(1200, 900, {}, co);
-  calib::Placement place;
-  place.imagePoint = {0.5, 0.5};
-  place.heightFraction = 0.25;
-  place.yawDegrees = 30.0;  // the shadow's edges run across the grid's rows and columns
-  const glm::dmat4 worldFromObject =
-      calib::placeOnGround(camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+  // Turned by 30°: the shadow's edges run across the grid's rows and columns.
+  const Shot shot = shoot(box, 1200, 900, 35.0, {0.5, 0.5}, 0.25, 30.0);
+  const calib::PlateCamera& camera = shot.camera;
+  const glm::dmat4& worldFromObject = shot.worldFromObject;
   const lighting::Environment env = sunAndSky({std::cos(0.7f), std::sin(0.7f), 0.0f});
   const pipeline::ShadowPlan plan = pipeline::ShadowPlan::parse("");
   const pipeline::ShadowLighting lighting = pipeline::prepareShadowLighting(env, plan, {});
-  glm::mat3 envFromObject = glm::mat3(worldFromObject);
-  for (int c = 0; c < 3; ++c) envFromObject[c] = glm::normalize(envFromObject[c]);
+  const glm::mat3& envFromObject = shot.envFromObject;
   TransferParams params = plan.transfer;
   params.shBands = 0;
   auto shade = [&](const SurfacePoints& points) {
@@ -202,14 +214,9 @@ TEST(GroundShadow, SharpEdgesAreRefinedBetweenGridNodes) {
 // part of the frame that shows the region, and no pixel outside it shows any of the region.
 TEST(GroundShadow, ARegionReachingBehindTheCameraCoversOnlyWhatTheFrameShows) {
   const Mesh box = cube();
-  calib::CameraOptions co;
-  co.pitchDegrees = 5.0;
-  const calib::PlateCamera camera = calib::plateCamera(800, 600, {}, co);
-  calib::Placement place;
-  place.imagePoint = {0.5, 0.97};
-  place.heightFraction = 1.0;
-  const glm::dmat4 worldFromObject =
-      calib::placeOnGround(camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+  const Shot shot = shoot(box, 800, 600, 5.0, {0.5, 0.97}, 1.0);
+  const calib::PlateCamera& camera = shot.camera;
+  const glm::dmat4& worldFromObject = shot.worldFromObject;
   const GroundGrid grid = groundGrid(box, worldFromObject, camera, {});
   ASSERT_FALSE(grid.empty());
   // The region does reach behind the camera (the case this is about).
