@@ -2,15 +2,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <sstream>
 #include <utility>
 
 #include <OpenColorIO/OpenColorIO.h>
 #include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
 #include <glm/matrix.hpp>
 
 #include "color/builtin_config.h"
+#include "color/separable_table.h"
 #include "core/error.h"
 #include "core/parallel.h"
 
@@ -62,6 +65,58 @@ void applyRgb(const OCIO::ConstProcessorRcPtr& processor, Image& image) {
                                pixelStride * image.width);
     cpu->apply(desc);
   });
+}
+
+// --- display transforms by table -----------------------------------------------------------------
+
+// A display image is quantised to 8 bits (or 16): the table may differ from OpenColorIO by at most
+// a two-hundredth of an 8-bit step.
+constexpr double kDisplayTableTolerance = 2e-5;
+// Building the table evaluates the transform at about 127,000 values: not worth it for less.
+constexpr int64_t kDisplayTableMinPixels = 1 << 18;
+
+// The processor as a matrix and per-channel curves (separable_table.h), when OpenColorIO's
+// optimised form of it is leading matrices followed by transforms with no channel crosstalk;
+// empty otherwise (then the caller applies the processor itself).
+std::optional<SeparableTable> separableTable(const OCIO::ConstConfigRcPtr& config,
+                                             const OCIO::ConstProcessorRcPtr& processor) {
+  const OCIO::GroupTransformRcPtr group = processor->createGroupTransform();
+  glm::dmat4 matrix(1.0);  // homogeneous: the offset in the last column
+  int first = 0;
+  for (; first < group->getNumTransforms(); ++first) {
+    const auto step = OCIO::DynamicPtrCast<const OCIO::MatrixTransform>(group->getTransform(first));
+    if (!step) break;
+    double m[16], offset[4];
+    step->getMatrix(m);
+    step->getOffset(offset);
+    if (m[3] != 0.0 || m[7] != 0.0 || m[11] != 0.0) return std::nullopt;  // RGB reads alpha
+    glm::dmat4 h(1.0);  // glm is column-major: h[column][row]
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) h[c][r] = m[4 * r + c];
+      h[3][r] = offset[r];
+    }
+    if (step->getDirection() == OCIO::TRANSFORM_DIR_INVERSE) h = glm::inverse(h);
+    matrix = h * matrix;
+  }
+  const OCIO::GroupTransformRcPtr rest = OCIO::GroupTransform::Create();
+  for (int i = first; i < group->getNumTransforms(); ++i)
+    rest->appendTransform(group->getTransform(i)->createEditableCopy());
+  const OCIO::ConstProcessorRcPtr curves = config->getProcessor(rest);
+  if (curves->hasChannelCrosstalk()) return std::nullopt;
+  const OCIO::ConstCPUProcessorRcPtr cpu =
+      curves->getOptimizedCPUProcessor(OCIO::OPTIMIZATION_LOSSLESS);
+  SeparableTable::Matrix rows;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) rows[size_t(4 * r + c)] = matrix[c][r];
+    rows[size_t(4 * r + 3)] = matrix[3][r];
+  }
+  return SeparableTable::build(
+      rows,
+      [&](float* rgb, int64_t count) {
+        OCIO::PackedImageDesc desc(rgb, long(count), 1, 3);
+        cpu->apply(desc);
+      },
+      kDisplayTableTolerance);
 }
 
 // --- linear RGB spaces from chromaticities ------------------------------------------------------
@@ -374,7 +429,17 @@ Image ColorConfig::toDisplay(Image&& image, const std::string& display,
     t->setSrc(resolve(out.colorSpace, "an image").c_str());
     t->setDisplay(display.c_str());
     t->setView(view.c_str());
-    applyRgb(impl_->config->getProcessor(t), out);
+    const OCIO::ConstProcessorRcPtr processor = impl_->config->getProcessor(t);
+    std::optional<SeparableTable> table;
+    if (int64_t(out.width) * out.height >= kDisplayTableMinPixels)
+      table = separableTable(impl_->config, processor);
+    if (table) {
+      const OCIO::ConstCPUProcessorRcPtr cpu =
+          processor->getOptimizedCPUProcessor(OCIO::OPTIMIZATION_LOSSLESS);
+      table->apply(out, [&](float* rgb) { cpu->applyRGB(rgb); });
+    } else {
+      applyRgb(processor, out);
+    }
   } catch (const OCIO::Exception& e) {
     throw Error("color",
                 "cannot apply display transform " + display + "/" + view + ": " + e.what());
