@@ -122,10 +122,10 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
     if (!w.is_string()) return std::nullopt;
     mesh.warnings.push_back(w.get<std::string>());
   }
-  const std::vector<float>& positions = entry.get("positions");
-  const std::vector<float>& normals = entry.get("normals");
-  const std::vector<float>& indices = entry.get("indices");
-  const std::vector<float>& texcoords = entry.get("texcoords");
+  const std::span<const float> positions = entry.get("positions");
+  const std::span<const float> normals = entry.get("normals");
+  const std::span<const float> indices = entry.get("indices");
+  const std::span<const float> texcoords = entry.get("texcoords");
   const size_t n = positions.size() / 3;
   if (n == 0 || positions.size() != 3 * n || normals.size() != 3 * n || indices.empty() ||
       indices.size() % 3 != 0 || (!texcoords.empty() && texcoords.size() != 2 * n))

@@ -1,5 +1,7 @@
 #include "pipeline/stage_cache.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -11,6 +13,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <optional>
 
 #include "core/checksum.h"
 #include "core/hash.h"
@@ -26,7 +29,7 @@ constexpr uint64_t kMaxHeader = 1 << 20;
 constexpr uint64_t kChecksumBytes = 16;
 
 std::array<uint64_t, 2> checksum(const std::string& header,
-                                 const std::map<std::string, std::vector<float>>& arrays) {
+                                 const std::map<std::string, Pixels>& arrays) {
   Hash128 h;
   h.bytes(header);
   for (const auto& [name, values] : arrays) h.combine(checksumFloats(values));
@@ -69,17 +72,41 @@ bool StageCache::open() {
   const fs::file_status status = fs::status(path_, ec);
   if (!fs::exists(status)) return false;  // a plain miss
   if (!fs::is_regular_file(status)) return invalid("is not a regular file");
-  std::ifstream in(path_, std::ios::binary);
-  if (!in) return invalid(std::string("cannot be read: ") + std::strerror(errno ? errno : EIO));
+  // One descriptor for the whole entry: a writer replacing the file meanwhile (by rename) cannot
+  // mix two entries' bytes.
+  const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return invalid(std::string("cannot be read: ") + std::strerror(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  const auto cannotRead = [&]() {
+    return invalid(errno != 0 ? std::string("cannot be read: ") + std::strerror(errno)
+                              : std::string("cannot be read to the end"));
+  };
+  // Reads exactly n bytes at `at`; false on an error or a short file (errno 0).
+  const auto readAt = [&](void* to, size_t n, uint64_t at) {
+    char* p = static_cast<char*>(to);
+    while (n > 0) {
+      const ssize_t got = ::pread(fd, p, n, off_t(at));
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) {
+        if (got == 0) errno = 0;
+        return false;
+      }
+      p += got;
+      at += uint64_t(got);
+      n -= size_t(got);
+    }
+    return true;
+  };
   // The size first; every field is then checked against the bytes actually present.
-  in.seekg(0, std::ios::end);
-  const std::streamoff end = in.tellg();
-  in.seekg(0);
-  if (end < 0) return invalid("cannot be read");
-  const uint64_t size = uint64_t(end);
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) return cannotRead();
+  const uint64_t size = uint64_t(st.st_size);
   if (size == 0) return invalid("is empty (0 bytes)");
   char magic[8] = {};
-  if (size < sizeof magic + 8 || !in.read(magic, sizeof magic))
+  if (size < sizeof magic + 8 || !readAt(magic, sizeof magic, 0))
     return invalid("is truncated (" + std::to_string(size) + " bytes, shorter than its header)");
   if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
     if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
@@ -91,13 +118,13 @@ bool StageCache::open() {
     return invalid("is not a compose stage cache entry (unknown header)");
   }
   uint64_t length = 0;
-  in.read(reinterpret_cast<char*>(&length), sizeof length);
+  if (!readAt(&length, sizeof length, sizeof magic)) return cannotRead();
   if (length > kMaxHeader) return invalid("has a damaged header (header length)");
   const uint64_t headerEnd = sizeof magic + 8 + length;
   if (size < headerEnd + kChecksumBytes)
     return invalid("is truncated (" + std::to_string(size) + " bytes)");
   std::string text(length, '\0');
-  if (!in.read(text.data(), std::streamsize(length))) return invalid("cannot be read to the end");
+  if (!readAt(text.data(), length, sizeof magic + 8)) return cannotRead();
   const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
   if (header.is_discarded() || !header.is_object())
     return invalid("has a damaged header (not JSON)");
@@ -124,23 +151,27 @@ bool StageCache::open() {
   if (payload != total * sizeof(float))
     return invalid("is truncated or damaged (" + std::to_string(size) + " bytes for " +
                    std::to_string(total) + " values)");
-  std::map<std::string, std::vector<float>> arrays;
+  // Each array is read and checksummed in one parallel pass; the sums are combined in the order
+  // write() wrote them: by name (std::map order), whatever the order in the file.
+  std::map<std::string, Pixels> arrays;
+  std::map<std::string, Hash128> sums;
+  uint64_t at = headerEnd;
   for (const auto& a : *arraysIt) {
     const std::string name = a[0].get<std::string>();
     if (arrays.count(name)) return invalid("has a damaged header (an array named twice)");
-    std::vector<float> values(a[1].get<uint64_t>());
-    if (!in.read(reinterpret_cast<char*>(values.data()),
-                 std::streamsize(values.size() * sizeof(float))))
-      return invalid("cannot be read to the end");
+    Pixels values(a[1].get<uint64_t>());  // not zeroed: the reading threads touch it first
+    const std::optional<Hash128> sum = readChecksummedFloats(fd, at, values);
+    if (!sum) return cannotRead();
+    at += values.size() * sizeof(float);
+    sums[name] = *sum;
     arrays[name] = std::move(values);
   }
   uint64_t sum[2] = {0, 0};
-  if (!in.read(reinterpret_cast<char*>(sum), sizeof sum))
-    return invalid("cannot be read to the end");
-  // The checksum covers the arrays in the order write() wrote them: by name (std::map order).
-  const auto expected = checksum(text, arrays);
-  if (sum[0] != expected[0] || sum[1] != expected[1])
-    return invalid("fails its checksum (damaged)");
+  if (!readAt(sum, sizeof sum, at)) return cannotRead();
+  Hash128 expected;
+  expected.bytes(text);
+  for (const auto& [name, s] : sums) expected.combine(s);
+  if (sum[0] != expected.a || sum[1] != expected.b) return invalid("fails its checksum (damaged)");
   meta_ = header["meta"];
   arrays_ = std::move(arrays);
   if (anyKey_) key_ = text_of("key");
@@ -199,14 +230,18 @@ bool StageCache::write() const {
   return true;
 }
 
-void StageCache::put(const std::string& name, std::vector<float> values) {
+void StageCache::put(const std::string& name, std::span<const float> values) {
+  arrays_[name].assign(values.begin(), values.end());
+}
+
+void StageCache::put(const std::string& name, Pixels&& values) {
   arrays_[name] = std::move(values);
 }
 
-const std::vector<float>& StageCache::get(const std::string& name) const {
-  static const std::vector<float> none;
+std::span<const float> StageCache::get(const std::string& name) const {
   const auto it = arrays_.find(name);
-  return it == arrays_.end() ? none : it->second;
+  if (it == arrays_.end()) return {};
+  return it->second;
 }
 
 void StageCache::putImage(const std::string& name, const Image& image) {
@@ -218,8 +253,7 @@ void StageCache::putImage(const std::string& name, const Image& image) {
   put(name, image.pixels);
 }
 
-const std::vector<float>* StageCache::imageWithoutPixels(const std::string& name,
-                                                         Image& image) const {
+const Pixels* StageCache::imageWithoutPixels(const std::string& name, Image& image) const {
   if (!meta_.contains("images") || !meta_["images"].contains(name)) return nullptr;
   const nlohmann::json& m = meta_["images"][name];
   // Whole numbers in int's range only (a conversion from anything else would be undefined).
@@ -256,7 +290,7 @@ const std::vector<float>* StageCache::imageWithoutPixels(const std::string& name
 
 bool StageCache::getImage(const std::string& name, Image& image) const {
   Image out;
-  const std::vector<float>* pixels = imageWithoutPixels(name, out);
+  const Pixels* pixels = imageWithoutPixels(name, out);
   if (!pixels) return false;
   out.pixels = *pixels;
   image = std::move(out);
@@ -266,7 +300,7 @@ bool StageCache::getImage(const std::string& name, Image& image) const {
 bool StageCache::takeImage(const std::string& name, Image& image) {
   Image out;
   if (!imageWithoutPixels(name, out)) return false;
-  std::vector<float>& pixels = arrays_[name];
+  Pixels& pixels = arrays_[name];
   out.pixels = std::move(pixels);
   pixels = {};
   image = std::move(out);

@@ -19,6 +19,7 @@
 
 #include <filesystem>
 #include <map>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -56,9 +57,10 @@ class StageCache {
   nlohmann::json& meta() { return meta_; }
   const nlohmann::json& meta() const { return meta_; }
 
-  void put(const std::string& name, std::vector<float> values);
+  void put(const std::string& name, std::span<const float> values);
+  void put(const std::string& name, Pixels&& values);
   // The array of that name (empty if there is none).
-  const std::vector<float>& get(const std::string& name) const;
+  std::span<const float> get(const std::string& name) const;
 
   // An image: its size, channel names and colour space in the header, its pixels as an array.
   void putImage(const std::string& name, const Image& image);
@@ -73,11 +75,11 @@ class StageCache {
   bool anyKey_ = false;
   mutable std::string error_;
   nlohmann::json meta_ = nlohmann::json::object();
-  std::map<std::string, std::vector<float>> arrays_;
+  std::map<std::string, Pixels> arrays_;
 
   // The image of that name with its size, names and colour space but no pixels, and the array
   // that holds them; nullptr if there is none or it does not fit.
-  const std::vector<float>* imageWithoutPixels(const std::string& name, Image& image) const;
+  const Pixels* imageWithoutPixels(const std::string& name, Image& image) const;
   mutable std::string problem_;
 };
 

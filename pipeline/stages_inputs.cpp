@@ -402,7 +402,7 @@ class StitchStage final : public Stage {
     const lighting::Environment env =
         lighting::latLongFromCube(result.cube, 4 * result.cube.size(), ctx.progress);
     Image image(env.width(), env.height(), 3, {"R", "G", "B"});
-    image.pixels = env.texels();
+    image.pixels.assign(env.texels().begin(), env.texels().end());
     image.colorSpace = working;
     ctx.artefacts.stitched = std::move(image);
     double worst = 0.0;

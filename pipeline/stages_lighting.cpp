@@ -86,7 +86,7 @@ std::vector<float> sourcesToFloats(const std::vector<lighting::LightSource>& sou
   return out;
 }
 
-std::vector<lighting::LightSource> sourcesFromFloats(const std::vector<float>& v) {
+std::vector<lighting::LightSource> sourcesFromFloats(std::span<const float> v) {
   std::vector<lighting::LightSource> out;
   for (size_t i = 0; i + 8 <= v.size(); i += 8) {
     lighting::LightSource s;
@@ -109,7 +109,7 @@ std::vector<float> vec3sToFloats(const std::vector<glm::vec3>& v) {
   return out;
 }
 
-std::vector<glm::vec3> vec3sFromFloats(const std::vector<float>& v) {
+std::vector<glm::vec3> vec3sFromFloats(std::span<const float> v) {
   std::vector<glm::vec3> out(v.size() / 3);
   for (size_t i = 0; i < out.size(); ++i) out[i] = glm::vec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
   return out;
@@ -366,7 +366,8 @@ class ShadowsStage final : public Stage {
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
     r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
     r.irradiance.clamped = int(wholeMember(cache.meta(), "clamped", 0).value_or(0));
-    r.occlusion = cache.get("occlusion");
+    const std::span<const float> occlusion = cache.get("occlusion");
+    r.occlusion.assign(occlusion.begin(), occlusion.end());
     const size_t n = r.points.count();
     if (r.irradiance.shadowed.size() != n || r.irradiance.unshadowed.size() != n ||
         r.occlusion.size() != n)

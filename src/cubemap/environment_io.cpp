@@ -202,7 +202,7 @@ std::string layoutTitle(Layout layout) {
   return "";
 }
 
-float maxValue(const std::vector<float>& v) {
+float maxValue(std::span<const float> v) {
   float m = 0.0f;
   for (float x : v) m = std::max(m, x);
   return m;
@@ -401,7 +401,7 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
   const lighting::Environment env = lighting::latLongFromCube(cube, 4 * cube.size(), progress);
   out.image = Image(env.width(), env.height(), 3, {"R", "G", "B"});
   out.image.colorSpace = file.info.fileColorSpace;
-  out.image.pixels = env.texels();
+  out.image.pixels.assign(env.texels().begin(), env.texels().end());
   out.notes.push_back("environment: " + file.describe() + " (" + file.how +
                       "), resampled exactly to a " + std::to_string(env.width()) + "x" +
                       std::to_string(env.height()) + " lat-long map");
@@ -466,7 +466,7 @@ std::vector<std::string> writeLatLong(OutputFiles& outputs, const fs::path& path
   std::vector<std::string> notes;
   Image img(env.width(), env.height(), 3, {"R", "G", "B"});
   img.colorSpace = env.colorSpace();
-  img.pixels = env.texels();
+  img.pixels.assign(env.texels().begin(), env.texels().end());
   const bool half = chooseHalf(options.depth, maxValue(img.pixels), path, notes);
   writeAny(outputs.add(path), path, img, half, Layout::LatLong, options);
   return notes;

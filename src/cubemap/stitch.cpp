@@ -123,7 +123,7 @@ class PhotoPyramid {
  private:
   struct Level {
     int width, height;
-    std::vector<float> rgb;
+    Pixels rgb;
     const float* at(int x, int y) const {
       return rgb.data() + (size_t(y) * size_t(width) + size_t(x)) * 3;
     }

@@ -241,9 +241,9 @@ namespace {
 // Decodes every pixel of `input` as `type` into `pixels`, orientation applied; returns the upright
 // spec. Decoded with ImageInput rather than ImageBuf: the JPEG reader reports a truncated file
 // only as an error message after a "successful" read, which ImageBuf drops.
-template <class T>
+template <class Vector>
 OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int orientation,
-                       OIIO::TypeDesc type, std::vector<T>& pixels, const fs::path& path,
+                       OIIO::TypeDesc type, Vector& pixels, const fs::path& path,
                        const std::string& stage) {
   pixels.resize(size_t(spec.width) * size_t(spec.height) * size_t(spec.nchannels));
   const bool ok = input.read_image(0, 0, 0, spec.nchannels, type, pixels.data());
@@ -264,7 +264,7 @@ OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int
   if (upright.has_error())
     throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
   const OIIO::ImageSpec& s = upright.spec();
-  std::vector<T> turned(pixels.size());
+  Vector turned(pixels.size());
   OIIO::ROI roi(s.x, s.x + s.width, s.y, s.y + s.height, 0, 1, 0, s.nchannels);
   if (!upright.get_pixels(roi, type, turned.data()))
     throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);

@@ -187,7 +187,7 @@ bool ChebBase::exportState(std::vector<float>& out) const {
   return true;
 }
 
-bool ChebBase::importState(const std::vector<float>& in) {
+bool ChebBase::importState(std::span<const float> in) {
   const size_t stride = size_t(blocks_) * size_t(params_.order) * size_t(params_.order) *
                         (name_ == "cheb-local" ? 3 : 1);
   const size_t tableSize = grid_.size() * stride;

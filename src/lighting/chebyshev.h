@@ -83,7 +83,7 @@ class ChebBase : public DiffuseLighting {
   size_t floatsStored() const override;
   std::string parameterKey() const override;
   bool exportState(std::vector<float>& out) const override;
-  bool importState(const std::vector<float>& in) override;
+  bool importState(std::span<const float> in) override;
 
   // Truncation estimate from the moments' tail: for each k = 1..order, the SNR of the order-k
   // inner product against the full-order one, over the normal-grid nodes (all channels):

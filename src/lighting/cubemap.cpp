@@ -159,7 +159,7 @@ CubeMap CubeMap::fromFaces(const std::array<const Image*, kCubeFaces>& faces,
 Image CubeMap::faceImage(int f) const {
   Image img(size_, size_, 3, {"R", "G", "B"});
   img.colorSpace = colorSpace;
-  img.pixels = faces_[size_t(f)];
+  img.pixels.assign(faces_[size_t(f)].begin(), faces_[size_t(f)].end());
   return img;
 }
 

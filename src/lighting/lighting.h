@@ -17,6 +17,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -59,7 +60,7 @@ class DiffuseLighting {
   // projection costs less than reading it back) keeps the defaults and is always recomputed.
   virtual bool exportState(std::vector<float>& /*out*/) const { return false; }
   // Restores a state written by exportState for the same parameterKey(); false if it does not fit.
-  virtual bool importState(const std::vector<float>& /*in*/) { return false; }
+  virtual bool importState(std::span<const float> /*in*/) { return false; }
 };
 
 // Names accepted by createLighting, in a stable order.

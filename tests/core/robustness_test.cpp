@@ -256,7 +256,8 @@ TEST_F(StageCacheFiles, AWrittenEntryOpensWithItsArraysAndImages) {
   pipeline::StageCache entry(dir.path(), stage, key);
   ASSERT_TRUE(entry.open()) << entry.problem();
   EXPECT_TRUE(entry.problem().empty());
-  EXPECT_EQ(entry.get("a"), (std::vector<float>{1.0f, 2.0f, 3.0f}));
+  const std::span<const float> a = entry.get("a");
+  EXPECT_EQ(std::vector<float>(a.begin(), a.end()), (std::vector<float>{1.0f, 2.0f, 3.0f}));
   EXPECT_EQ(entry.meta().value("exposure", 0.0), 0.5);
   Image img;
   ASSERT_TRUE(entry.getImage("image", img));

@@ -99,7 +99,7 @@ class Robustness : public ::testing::Test {
       if (c == '/') c = '_';
     return runShell(job(out, extra), dir.path(), tag);
   }
-  std::vector<float> pixels(const std::string& file) const {
+  Pixels pixels(const std::string& file) const {
     return ingest::readImage(dir / file).image.pixels;
   }
 };
@@ -151,7 +151,7 @@ TEST_F(Robustness, EightRunsAtOnceShareOneCacheFolder) {
   }
   script += "wait";
   runShell(script, dir.path(), "eight");
-  const std::vector<float> first = pixels("run0.exr");
+  const Pixels first = pixels("run0.exr");
   ASSERT_FALSE(first.empty());
   for (int i = 0; i < 8; ++i) {
     const std::string n = std::to_string(i);
@@ -176,14 +176,14 @@ TEST_F(Robustness, TwoRunsWritingTheSameOutputsLeaveOneRunsCompleteSet) {
   // References, one run at a time: two jobs that differ in their pixels.
   ASSERT_EQ(run("a", "--albedo 0.2").status, 0);
   ASSERT_EQ(run("b", "--albedo 0.8").status, 0);
-  const std::vector<float> a = pixels("a.exr"), b = pixels("b.exr");
+  const Pixels a = pixels("a.exr"), b = pixels("b.exr");
   ASSERT_NE(a, b);
-  const std::vector<float> aJpg = pixels("a.jpg"), bJpg = pixels("b.jpg");
+  const Pixels aJpg = pixels("a.jpg"), bJpg = pixels("b.jpg");
   for (int round = 0; round < 3; ++round) {
     runShell(
         "( " + job("same", "--albedo 0.2") + " ) & ( " + job("same", "--albedo 0.8") + " ) & wait",
         dir.path(), "both");
-    const std::vector<float> exr = pixels("same.exr"), jpg = pixels("same.jpg");
+    const Pixels exr = pixels("same.exr"), jpg = pixels("same.jpg");
     const bool isA = exr == a, isB = exr == b;
     EXPECT_TRUE(isA || isB) << "round " << round << ": the EXR is neither run's";
     // The display JPEG belongs to the same run as the EXR: never one run's EXR with the other's.
@@ -195,7 +195,7 @@ TEST_F(Robustness, TwoRunsWritingTheSameOutputsLeaveOneRunsCompleteSet) {
 
 TEST_F(Robustness, DamagedCacheEntriesAreNotedRecomputedAndRewritten) {
   ASSERT_EQ(run("first").status, 0);
-  const std::vector<float> reference = pixels("first.exr");
+  const Pixels reference = pixels("first.exr");
   struct Damage {
     const char* name;
     const char* note;
