@@ -242,7 +242,7 @@ Image ColorConfig::convertCodes(std::span<const uint8_t> codes, int width, int h
   COMPOSE_CHECK(codes.size() == size_t(width) * size_t(height) * size_t(channels));
   const std::string src = resolve(from, "an image");
   const std::string dst = resolve(to, "a conversion target");
-  Image out(width, height, 3, {"R", "G", "B"});
+  Image out = Image::unfilled(width, height, 3, {"R", "G", "B"});
   out.colorSpace = dst;
   try {
     // Lossless, plus the per-channel prefix of the transform as a table of the input's codes.

@@ -58,6 +58,18 @@ struct Image {
         pixels(size_t(w) * size_t(h) * size_t(c), 0.0f),
         channelNames(std::move(names)) {}
 
+  // The same size and names with the samples left unset: for a frame whose every sample is about
+  // to be written (decoded, converted, read), which the writing threads then touch first.
+  static Image unfilled(int w, int h, int c, std::vector<std::string> names = {}) {
+    Image image;
+    image.width = w;
+    image.height = h;
+    image.channels = c;
+    image.pixels.resize(size_t(w) * size_t(h) * size_t(c));
+    image.channelNames = std::move(names);
+    return image;
+  }
+
   bool empty() const { return pixels.empty(); }
   size_t pixelCount() const { return size_t(width) * size_t(height); }
 
