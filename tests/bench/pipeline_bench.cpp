@@ -808,17 +808,33 @@ int main(int argc, char** argv) {
           parts += (i ? "; " : "") + std::string("`") + it->second[i] + "`";
       }
       rep.both(parts + " (name, data window, channels, type, compression).\n\n");
+      // Any OpenImageIO tool pays for starting: a process linked to OpenImageIO alone that
+      // does nothing. The whole compose process is compared with the baseline plus that.
+      std::vector<double> startups;
+      for (int i = 0; i < std::max(5, repeat); ++i) {
+        const Child c = run(COMPOSE_OIIO_STARTUP, {}, work / "stderr.txt");
+        if (c.status != 0) {
+          std::fprintf(stderr, "%s failed\n", COMPOSE_OIIO_STARTUP);
+          return 1;
+        }
+        startups.push_back(c.seconds);
+      }
+      const double startup = median(startups);
       const double ratio = warm.total / baseline;
-      const double processRatio = warmProcess[p.name] / baseline;
+      const double processRatio = warmProcess[p.name] / (baseline + startup);
       std::snprintf(line, sizeof line,
-                    "**Warm compose / OpenImageIO alone: %.2f** (runCompose %.3f s / %.3f s; the "
-                    "whole compose process %.3f s gives %.2f). Goal: at most 1.2.\n\n",
-                    ratio, warm.total, baseline, warmProcess[p.name], processRatio);
+                    "**Warm compose / OpenImageIO alone: %.2f** (runCompose %.3f s / %.3f s). "
+                    "Whole processes: a program linked to OpenImageIO alone takes %.3f s to start "
+                    "and exit (the dynamic loader; median of %zu), so OpenImageIO alone as a "
+                    "process would take %.3f s; the whole compose process takes %.3f s: **%.2f**. "
+                    "Goal: at most 1.2.\n\n",
+                    ratio, warm.total, baseline, startup, startups.size(), baseline + startup,
+                    warmProcess[p.name], processRatio);
       rep.both(line);
       goals.push_back({p.name + " warm compose at most 1.2x OpenImageIO alone (issue 9)",
-                       ratio <= 1.2,
+                       ratio <= 1.2 && processRatio <= 1.2,
                        num("%.2f", ratio) + " (runCompose), " + num("%.2f", processRatio) +
-                           " (whole process)"});
+                           " (whole processes, start-up included on both sides)"});
       // Peak memory against the size of the images: a float RGB frame of the plate, and the
       // files' own pixels (the EXR's parts at their pixel type, the JPEG's bytes).
       const double frameMb = double(p.width) * p.height * 3 * sizeof(float) / (1024.0 * 1024.0);
