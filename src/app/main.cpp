@@ -4,6 +4,7 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -20,6 +21,7 @@ int main(int argc, char** argv) {
       "Stage by stage: compose COMMAND ... (compose COMMAND --help for each)",
       "compose"};
   app.require_subcommand(0, 1);
+  app.set_version_flag("--version", std::string("compose ") + COMPOSE_VERSION);
   Globals globals;
   app.add_flag("-q,--quiet", globals.quiet, "Print only the output paths and errors");
   app.add_option("--max-pixels", globals.limits.maxPixels,
@@ -42,6 +44,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::cerr << "compose: error: cli: " << e.what() << "\n(run compose --help for usage)\n";

@@ -80,6 +80,13 @@ class StageCommands : public ::testing::Test {
   fs::path samples_, plate_;
 };
 
+TEST(Compose, VersionIsPrintedAndExitsZero) {
+  TempDir dir;
+  const RunResult r = testing::runCompose("--version", dir.path());
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.out, std::string("compose ") + COMPOSE_VERSION + "\n");
+}
+
 TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   const std::string env = " --env " + quote(samples_ / "forest.exr");
   const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
