@@ -438,8 +438,13 @@ Image ColorConfig::toDisplay(Image&& image, const std::string& display,
     t->setView(view.c_str());
     const OCIO::ConstProcessorRcPtr processor = impl_->config->getProcessor(t);
     std::optional<SeparableTable> table;
-    if (int64_t(out.width) * out.height >= kDisplayTableMinPixels)
-      table = separableTable(impl_->config, processor);
+    if (int64_t(out.width) * out.height >= kDisplayTableMinPixels) {
+      try {
+        table = separableTable(impl_->config, processor);
+      } catch (const OCIO::Exception&) {
+        table.reset();  // a transform OpenColorIO cannot take apart: it is applied whole
+      }
+    }
     if (table) {
       const OCIO::ConstCPUProcessorRcPtr cpu =
           processor->getOptimizedCPUProcessor(OCIO::OPTIMIZATION_LOSSLESS);

@@ -195,11 +195,12 @@ ExrFile readExr(const fs::path& file) {
   return e;
 }
 
-std::vector<float> decode(const fs::path& file) {
+// Into a buffer that is not zeroed first (compose's own frames are not either).
+Pixels decode(const fs::path& file) {
   auto in = OIIO::ImageInput::open(file.string());
   if (!in) throw std::runtime_error("cannot open " + file.string());
   const OIIO::ImageSpec& s = in->spec();
-  std::vector<float> px(s.image_pixels() * size_t(s.nchannels));
+  Pixels px(s.image_pixels() * size_t(s.nchannels));
   if (!in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, px.data()))
     throw std::runtime_error("cannot decode " + file.string());
   return px;
@@ -218,10 +219,10 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
     in->read_image(0, 0, 0, displaySpec.nchannels, OIIO::TypeDesc::FLOAT, display.data());
   }
   auto t = bench::Clock::now();
-  const std::vector<float> platePixels = decode(plate);
+  const Pixels platePixels = decode(plate);
   std::printf("decode_plate %.6f\n", bench::secondsSince(t));
   t = bench::Clock::now();
-  const std::vector<float> envPixels = decode(env);
+  const Pixels envPixels = decode(env);
   std::printf("decode_env %.6f\n", bench::secondsSince(t));
 
   t = bench::Clock::now();
