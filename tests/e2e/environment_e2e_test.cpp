@@ -7,11 +7,15 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <sstream>
 
 #include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+#include <nlohmann/json.hpp>
 
+#include "color/color.h"
 #include "command_util.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/render_view.h"
@@ -221,6 +225,148 @@ TEST(StitchCommand, AutoExposedJpegsAreBroughtToOneScale) {
         << lighting::faceName(f) << " scene ratio " << expected;
   }
 }
+
+// The rotation nearest to m (polar decomposition by Newton's iteration; m is close to one).
+glm::dmat3 nearestRotation(glm::dmat3 m) {
+  for (int i = 0; i < 30; ++i) m = 0.5 * (m + glm::transpose(glm::inverse(m)));
+  return m;
+}
+
+glm::dmat3 matrixOf(const nlohmann::json& rows) {
+  glm::dmat3 m;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) m[c][r] = rows.at(size_t(r)).at(size_t(c)).get<double>();
+  return m;
+}
+
+// The issue's stitch test on photographs: the virtual camera's bracketed JPEGs of each sample HDRI
+// (six views, 100° field of view, each view off its nominal direction by up to ±3° about every
+// axis, a filmic response, sensor noise, JPEG at quality 95), merged (the response recovered from
+// the photos) and stitched by the commands a user runs, against the HDRI.
+//
+// Two things no stitch can know are taken out. The merge fixes radiance only up to one scale per
+// capture (the median ratio over the texels is used). And photos fix their orientations only
+// relative to each other: the stitch puts the group where the rough orientations say it is on
+// average, so the whole map is turned by the mean of the views' errors (here up to about 1°, which
+// at 256² faces moves forest's texels, that differ from their neighbours by 38 %, by three texels).
+// The truth is turned by the same rotation, read from the capture's truth.json, and averaged over
+// 8 x 8 directions per texel.
+//
+// Measured (seed 5: the capture turned by 2.54° as a whole; 1536² photos, 2.4 MP, fewer than any
+// camera's): median relative error courtyard 1.79 %, forest 4.05 %, interior 1.18 %, sunset
+// 2.45 %; the comparison's own floor (the sampled truth against the exact cube) 0.03-0.53 %.
+// Without turning the truth: 7-41 %. With 768² photos forest is at 5.9 %: its detail is finer
+// than what a photo of 7.7 pixels a degree keeps after the lens' blur and JPEG.
+class StitchFromPhotos : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
+  const std::string name = GetParam();
+  if (!fs::exists(sample(name + ".exr"))) GTEST_FAIL() << "samples missing: run samples/fetch.sh";
+  TempDir dir;
+  RunResult r = run("capture-sim --env " + q(sample(name + ".exr")) + " --out " + q(dir / "shots") +
+                        " --views 6 --brackets 3 --ev-step 2 --fov 100 --jitter 3 --size 1536x1536 "
+                        "--seed 5 -q",
+                    dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run("merge --capture " + q(dir / "shots" / "capture.json") + " --out " + q(dir / "merged") +
+              "/ -q",
+          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::string views;
+  for (const char* v : {"px", "nx", "py", "ny", "pz", "nz"})
+    views += " " + q(dir / "merged" / (std::string(v) + ".exr"));
+  constexpr int kFace = 256;  // the HDRIs' resolution on the equator (1024 / 4)
+  r = run("stitch --calib " + q(dir / "shots" / "camera.json") + " --to cube --size " +
+              std::to_string(kFace) + " --out " + q(dir / "cube.exr") + views,
+          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+
+  // The capture's rotation as a whole: the one that best maps the true orientations onto the
+  // nominal ones, G = nearest rotation to Σ nominal truthᵀ. The stitched map at d shows the
+  // truth at Gᵀ d.
+  std::ifstream truthFile(dir / "shots" / "truth.json");
+  const nlohmann::json truthJson = nlohmann::json::parse(truthFile);
+  glm::dmat3 alignment(0.0);
+  for (const nlohmann::json& v : truthJson.at("views"))
+    alignment += matrixOf(v.at("nominalWorldFromCamera")) *
+                 glm::transpose(matrixOf(v.at("worldFromCamera")));
+  const glm::dmat3 g = nearestRotation(alignment);
+  const double turned =
+      std::acos(std::clamp(0.5 * (g[0][0] + g[1][1] + g[2][2] - 1.0), -1.0, 1.0)) * 180.0 /
+      std::numbers::pi;
+
+  // The truth in the stitched map's colour space (the one its header declares).
+  const cubemap::EnvironmentFile file = cubemap::readEnvironmentFile({dir / "cube.exr"});
+  const CubeMap stitched = cubemap::cubeMapOf(file);
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  Image truthImage = ingest::readImage(sample(name + ".exr")).image;
+  truthImage.colorSpace = "lin_rec709";
+  ASSERT_TRUE(file.info.chromaticities) << "the stitched map declares its primaries";
+  const std::string space = colors.spaceWithChromaticities(*file.info.chromaticities);
+  ASSERT_FALSE(space.empty());
+  colors.convert(truthImage, space);
+  const Environment truthMap = Environment::fromLatLong(truthImage);
+  // A texel of the turned truth: the mean of the HDRI's texels (nearest, no interpolation) at
+  // 8 x 8 directions over it, which approaches the box filter of an exact resampling.
+  constexpr int kSub = 8;
+  auto truthTexel = [&](int f, int x, int y, const glm::dmat3& rotation) {
+    glm::dvec3 sum(0.0);
+    for (int j = 0; j < kSub; ++j)
+      for (int i = 0; i < kSub; ++i) {
+        const double a = -1.0 + (2.0 * x + 2.0 * (i + 0.5) / kSub) / kFace;
+        const double b = -1.0 + (2.0 * y + 2.0 * (j + 0.5) / kSub) / kFace;
+        const glm::dvec3 d =
+            glm::normalize(glm::transpose(rotation) * lighting::faceImageDirection(f, a, b));
+        // Texel (x, y) covers φ ∈ π(1 - 2[x, x+1]/W), λ ∈ π(1/2 - [y, y+1]/H) (environment.h).
+        const double lat = std::asin(std::clamp(d.y, -1.0, 1.0)), lon = std::atan2(d.x, d.z);
+        const int w = truthMap.width(), h = truthMap.height();
+        const int tx =
+            std::clamp(int(std::floor((1.0 - lon / std::numbers::pi) * 0.5 * w)), 0, w - 1);
+        const int ty = std::clamp(int(std::floor((0.5 - lat / std::numbers::pi) * h)), 0, h - 1);
+        sum += glm::dvec3(truthMap.radiance(tx, ty));
+      }
+    return glm::vec3(sum / double(kSub * kSub));
+  };
+
+  // Median relative error after the best scale, against the truth turned by `rotation`.
+  auto medianError = [&](const glm::dmat3& rotation, const CubeMap& map) {
+    std::vector<glm::vec3> truth(size_t(kCubeFaces) * kFace * kFace);
+    std::vector<double> ratios, errors;
+    for (int f = 0; f < kCubeFaces; ++f)
+      for (int y = 0; y < kFace; ++y)
+        for (int x = 0; x < kFace; ++x) {
+          const glm::vec3 t = truthTexel(f, x, y, rotation), m = map.radiance(f, x, y);
+          truth[(size_t(f) * kFace + size_t(y)) * kFace + size_t(x)] = t;
+          const double st = t.x + t.y + t.z, sm = m.x + m.y + m.z;
+          if (st > 0.0 && sm > 0.0) ratios.push_back(st / sm);
+        }
+    std::nth_element(ratios.begin(), ratios.begin() + ptrdiff_t(ratios.size() / 2), ratios.end());
+    const float scale = float(ratios[ratios.size() / 2]);
+    for (int f = 0; f < kCubeFaces; ++f)
+      for (int y = 0; y < kFace; ++y)
+        for (int x = 0; x < kFace; ++x) {
+          const glm::vec3 t = truth[(size_t(f) * kFace + size_t(y)) * kFace + size_t(x)];
+          const glm::vec3 m = scale * map.radiance(f, x, y);
+          errors.push_back(double(glm::length(t - m) / std::max(glm::length(t), 1e-6f)));
+        }
+    std::nth_element(errors.begin(), errors.begin() + ptrdiff_t(errors.size() / 2), errors.end());
+    return errors[errors.size() / 2];
+  };
+  const double median = medianError(g, stitched);
+  // What the comparison itself costs: the sampled truth against the HDRI's exact cube map.
+  const double floor = medianError(glm::dmat3(1.0), lighting::cubeFromLatLong(truthMap, kFace));
+  const double unturned = medianError(glm::dmat3(1.0), stitched);
+  std::printf(
+      "[ figures ] %-9s stitched from capture-sim photos: median relative error %.2f %% "
+      "(%.2f %% without turning the truth by the capture's %.2f°; the comparison's own "
+      "floor %.2f %%)\n",
+      name.c_str(), 100.0 * median, 100.0 * unturned, turned, 100.0 * floor);
+  constexpr double kIssueMedian = 0.05;
+  EXPECT_LT(median, kIssueMedian) << name;
+}
+
+INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchFromPhotos,
+                         ::testing::Values("courtyard", "forest", "interior", "sunset"));
 
 TEST(ComposeWithCubeEnvironments, CrossesAndFaceFoldersLightTheObject) {
   if (!fs::exists(sample("forest.exr")) || !fs::exists(sample("bunny.obj")))
