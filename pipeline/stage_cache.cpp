@@ -74,7 +74,7 @@ bool StageCache::open() {
   if (!fs::is_regular_file(status)) return invalid("is not a regular file");
   // One descriptor for the whole entry: a writer replacing the file meanwhile (by rename) cannot
   // mix two entries' bytes.
-  const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) return invalid(std::string("cannot be read: ") + std::strerror(errno));
   struct Closer {
     int fd;

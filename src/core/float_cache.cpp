@@ -1,5 +1,7 @@
 #include "core/float_cache.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -10,11 +12,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <span>
 
 #include "core/checksum.h"
 #include "core/error.h"
 #include "core/hash.h"
+#include "core/parallel.h"
 
 namespace compose {
 
@@ -54,17 +58,34 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
     r.values.clear();
     return r;
   };
-  std::ifstream in(pathFor(key), std::ios::binary);
-  if (!in) return r;  // Missing (or unreadable: the next store replaces it)
-  // The whole file, then every field checked against the bytes actually present.
-  in.seekg(0, std::ios::end);
-  const std::streamoff end = in.tellg();
-  in.seekg(0);
-  if (end < 0) return invalid("cannot be read");
-  const uint64_t size = uint64_t(end);
+  // One descriptor for the whole entry: a writer replacing the file meanwhile (by rename) cannot
+  // mix two entries' bytes.
+  const int fd = ::open(pathFor(key).c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) return r;  // Missing (or unreadable: the next store replaces it)
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  // Reads exactly n bytes at `at`; false on an error or a short file.
+  const auto readAt = [&](void* to, size_t n, uint64_t at) {
+    char* p = static_cast<char*>(to);
+    while (n > 0) {
+      const ssize_t got = ::pread(fd, p, n, off_t(at));
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) return false;
+      p += got;
+      at += uint64_t(got);
+      n -= size_t(got);
+    }
+    return true;
+  };
+  // The size first; every field is then checked against the bytes actually present.
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) return invalid("cannot be read");
+  const uint64_t size = uint64_t(st.st_size);
   if (size == 0) return invalid("is empty (0 bytes)");
   char magic[8] = {};
-  if (size < kHeaderBytes || !in.read(magic, sizeof magic))
+  if (size < kHeaderBytes || !readAt(magic, sizeof magic, 0))
     return invalid("is truncated (" + std::to_string(size) + " bytes, shorter than its header)");
   if (std::memcmp(magic, magic_.data(), sizeof magic) != 0) {
     if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
@@ -76,13 +97,14 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
     return invalid("is not a compose cache file of this kind (unknown header)");
   }
   uint64_t length = 0, count = 0;
-  in.read(reinterpret_cast<char*>(&length), sizeof length);
+  if (!readAt(&length, sizeof length, sizeof magic)) return invalid("cannot be read to the end");
   if (length > kMaxDescription) return invalid("has a damaged header (description too long)");
   if (size < kHeaderBytes + length + 8)
     return invalid("is truncated (" + std::to_string(size) + " bytes)");
   std::string stored(length, '\0');
-  in.read(stored.data(), std::streamsize(length));
-  in.read(reinterpret_cast<char*>(&count), sizeof count);
+  if (!readAt(stored.data(), length, kHeaderBytes) ||
+      !readAt(&count, sizeof count, kHeaderBytes + length))
+    return invalid("cannot be read to the end");
   const uint64_t payload = size - (kHeaderBytes + length + 8);
   // Never trust the stored count further than the bytes present (and never multiply it first).
   if (count > payload / sizeof(float) || payload != count * sizeof(float) + kChecksumBytes) {
@@ -90,25 +112,33 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
                    std::to_string(count) + " values)");
   }
   if (stored != description) return invalid("holds other contents than its name says");
-  std::vector<float> values(count);
+  // The floats read and checksummed block by block on every core, into memory not zeroed first.
+  const uint64_t valuesAt = kHeaderBytes + length + 8;
+  FloatBuffer values(count);
+  const std::optional<Hash128> valuesSum = readChecksummedFloats(fd, valuesAt, values);
   uint64_t sum[2] = {0, 0};
-  if (!in.read(reinterpret_cast<char*>(values.data()), std::streamsize(count * sizeof(float))) ||
-      !in.read(reinterpret_cast<char*>(sum), sizeof sum)) {
+  if (!valuesSum || !readAt(sum, sizeof sum, valuesAt + count * sizeof(float)))
     return invalid("cannot be read to the end");
-  }
-  const auto expected = checksum(description, values);
-  if (sum[0] != expected[0] || sum[1] != expected[1])
-    return invalid("fails its checksum (damaged)");
-  for (float v : values) {
-    if (!(std::abs(v) <= kMaxMagnitude)) return invalid("holds a value that is not finite");
-  }
+  Hash128 expected;
+  expected.bytes(description);
+  expected.combine(*valuesSum);
+  if (sum[0] != expected.a || sum[1] != expected.b) return invalid("fails its checksum (damaged)");
+  constexpr int64_t kBlock = int64_t(1) << 18;
+  std::atomic<bool> finite{true};
+  parallelFor(0, (int64_t(count) + kBlock - 1) / kBlock, [&](int64_t b) {
+    const size_t first = size_t(b * kBlock), last = std::min(size_t(count), first + size_t(kBlock));
+    bool ok = true;
+    for (size_t i = first; i < last; ++i) ok = ok && std::abs(values[i]) <= kMaxMagnitude;
+    if (!ok) finite = false;
+  });
+  if (!finite) return invalid("holds a value that is not finite");
   r.status = Read::Status::Hit;
   r.values = std::move(values);
   return r;
 }
 
-std::optional<std::vector<float>> FloatCache::load(const std::string& key,
-                                                   const std::string& description) const {
+std::optional<FloatBuffer> FloatCache::load(const std::string& key,
+                                            const std::string& description) const {
   Read r = read(key, description);
   if (r.status != Read::Status::Hit) return std::nullopt;
   return std::move(r.values);

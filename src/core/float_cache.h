@@ -22,6 +22,8 @@
 #include <string>
 #include <vector>
 
+#include "core/buffer.h"
+
 namespace compose {
 
 class FloatCache {
@@ -34,14 +36,13 @@ class FloatCache {
 
   struct Read {
     enum class Status { Hit, Missing, Invalid } status = Status::Missing;
-    std::vector<float> values;  // Hit only
-    std::string problem;        // Invalid only: what is wrong with the file
+    FloatBuffer values;   // Hit only
+    std::string problem;  // Invalid only: what is wrong with the file
   };
   Read read(const std::string& key, const std::string& description) const;
 
   // The values on a hit; nullopt on a miss or an invalid file.
-  std::optional<std::vector<float>> load(const std::string& key,
-                                         const std::string& description) const;
+  std::optional<FloatBuffer> load(const std::string& key, const std::string& description) const;
   // Writes the entry atomically. On failure returns false and, when `problem` is given, sets it
   // to the reason ("No space left on device", "Permission denied").
   bool store(const std::string& key, const std::string& description,

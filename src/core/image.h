@@ -7,40 +7,17 @@
 #pragma once
 
 #include <cstddef>
-#include <memory>
 #include <span>
 #include <string>
-#include <type_traits>
 #include <utility>
 #include <vector>
 
+#include "core/buffer.h"
+
 namespace compose {
 
-// std::allocator, except that value-initialisation (vector(n), resize(n)) leaves floats as they
-// are instead of writing zeros: a frame that is about to be filled (read from a file, decoded) is
-// not zeroed first, and its pages are first touched by whichever threads fill it. Anything that
-// needs zeros asks for them (vector(n, 0.0f), Image(w, h, c)).
-template <class T>
-struct DefaultInitAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = DefaultInitAllocator<U>;
-  };
-  DefaultInitAllocator() = default;
-  template <class U>
-  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
-
-// An image's samples. Sized without zeros: see DefaultInitAllocator.
-using Pixels = std::vector<float, DefaultInitAllocator<float>>;
+// An image's samples (sized without zeros: core/buffer.h).
+using Pixels = FloatBuffer;
 
 struct Image {
   int width = 0;

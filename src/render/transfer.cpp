@@ -105,7 +105,7 @@ std::vector<float> VertexTransfer::exportState() const {
   return out;
 }
 
-bool VertexTransfer::importState(const TransferParams& p, size_t vertices, std::vector<float> in) {
+bool VertexTransfer::importState(const TransferParams& p, size_t vertices, FloatBuffer in) {
   const size_t kk = size_t(p.order) * size_t(p.order);
   const size_t nsh = size_t(lighting::shCount(p.shBands));
   if (in.size() != vertices * (kk + nsh + 1)) return false;

@@ -44,6 +44,7 @@
 #include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
 
+#include "core/buffer.h"
 #include "core/progress.h"
 #include "lighting/lighting.h"
 #include "lighting/sources.h"
@@ -95,16 +96,16 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 96.
 struct VertexTransfer {
   TransferParams params;
   size_t vertexCount = 0;
-  std::vector<float> cheb;  // k² per vertex: moments of V on the local grid
-  std::vector<float> sh;    // (shBands + 1)² per vertex: Sloan's transfer vector
-  std::vector<float> ao;    // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
+  FloatBuffer cheb;       // k² per vertex: moments of V on the local grid
+  std::vector<float> sh;  // (shBands + 1)² per vertex: Sloan's transfer vector
+  std::vector<float> ao;  // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
   int64_t rays = 0;
 
   size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
   // Plain floats for the on-disk cache, and back (taking `in`'s storage); false if `in` does not
   // fit these parameters.
   std::vector<float> exportState() const;
-  bool importState(const TransferParams& params, size_t vertexCount, std::vector<float> in);
+  bool importState(const TransferParams& params, size_t vertexCount, FloatBuffer in);
 };
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the

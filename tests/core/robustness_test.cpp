@@ -174,7 +174,7 @@ class FloatCacheFiles : public ::testing::Test {
 TEST_F(FloatCacheFiles, AStoredEntryReadsBackBitForBit) {
   const FloatCache::Read r = cache.read(key, description);
   ASSERT_EQ(r.status, FloatCache::Read::Status::Hit) << r.problem;
-  EXPECT_EQ(r.values, values);
+  EXPECT_EQ(std::vector<float>(r.values.begin(), r.values.end()), values);
   EXPECT_EQ(cache.read("other", description).status, FloatCache::Read::Status::Missing);
 }
 
