@@ -89,6 +89,15 @@ std::optional<SeparableTable> SeparableTable::build(const Matrix& matrix, const 
 int64_t SeparableTable::apply(Image& image, const Exact& exact) const {
   COMPOSE_CHECK(image.channels >= 3);
   const int channels = image.channels;
+  const float* values[2][3];
+  const uint8_t* marked[2][3];
+  for (size_t sign = 0; sign < 2; ++sign)
+    for (size_t c = 0; c < 3; ++c) {
+      values[sign][c] = values_[sign][c].data();
+      marked[sign][c] = exact_[sign][c].data();
+    }
+  const bool anyMarked = exactIntervals_ > 0;
+  const float* m = matrix_.data();
   std::vector<int64_t> exactRows(size_t(image.height), 0);
   parallelFor(0, image.height, [&](int64_t y) {
     float* p = image.row(int(y)).data();
@@ -97,9 +106,9 @@ int64_t SeparableTable::apply(Image& image, const Exact& exact) const {
       const float r = p[0], g = p[1], b = p[2];
       float out[3];
       bool tabled = true;
-      for (int c = 0; c < 3 && tabled; ++c) {
-        const float* m = &matrix_[size_t(4 * c)];
-        const float v = m[0] * r + m[1] * g + m[2] * b + m[3];
+      for (int c = 0; c < 3; ++c) {
+        const float* row = m + 4 * c;
+        const float v = row[0] * r + row[1] * g + row[2] * b + row[3];
         const float a = std::abs(v);
         if (!(a < kLimit)) {  // also NaN
           tabled = false;
@@ -108,12 +117,12 @@ int64_t SeparableTable::apply(Image& image, const Exact& exact) const {
         const size_t sign = std::signbit(v) ? 1 : 0;
         float f;
         const int i = gridInterval(a, f);
-        if (exact_[sign][size_t(c)][size_t(i)]) {
+        if (anyMarked && marked[sign][c][i]) {
           tabled = false;
           break;
         }
-        const std::vector<float>& table = values_[sign][size_t(c)];
-        out[c] = table[size_t(i)] + f * (table[size_t(i) + 1] - table[size_t(i)]);
+        const float* t = values[sign][c] + i;
+        out[c] = t[0] + f * (t[1] - t[0]);
       }
       if (tabled) {
         p[0] = out[0];
