@@ -743,6 +743,26 @@ int main(int argc, char** argv) {
       }
     }
 
+    // The object at its default size and place, rendered again at each run (a new --exposure:
+    // the visibility pass, the self-shadowing and the ground shadow come from the cache, the
+    // render is computed): issue 8's "visibility cached" with nothing of the render kept.
+    std::vector<double> rerendered;
+    if (!p.large) {
+      for (int i = 0; i <= std::max(repeat, 3); ++i) {
+        const Child c =
+            run(COMPOSE_EXECUTABLE,
+                {"--plate", p.file.string(), "--object", (samples / "bunny.obj").string(), "--env",
+                 env.string(), "--exposure", std::to_string(0.05 * i), "--cache", cache.string(),
+                 "--out", out.string(), "-q"},
+                work / "stderr.txt");
+        if (c.status != 0) {
+          std::fprintf(stderr, "compose executable failed:\n%s\n", c.err.c_str());
+          return 1;
+        }
+        if (i > 0) rerendered.push_back(c.seconds);  // the first run makes the ground shadow
+      }
+    }
+
     rep.both("\n## " + std::string(p.name) + " plate, " + std::to_string(p.width) + "x" +
              std::to_string(p.height) + "\n\n");
     rep.both(
@@ -765,6 +785,17 @@ int main(int argc, char** argv) {
           {"1080p whole compose with the visibility cached and the object moved (ground shadow "
            "and render computed), < 0.5 s (issue 8, the stricter reading)",
            median(moved) < 0.5, num("%.3f s", median(moved)) + " whole process"});
+      std::snprintf(line, sizeof line,
+                    "The compose executable with the bunny at its default size and place (0.3 of "
+                    "the plate high), rendered again at each run (a new --exposure: the visibility "
+                    "pass, the self-shadowing and the ground shadow from the cache, the render "
+                    "computed), whole process: %.3f s (median of %zu).\n\n",
+                    median(rerendered), rerendered.size());
+      rep.both(line);
+      goals.push_back(
+          {"1080p whole compose with the visibility cached and the render computed, bunny at its "
+           "default size, < 0.5 s (issue 8)",
+           median(rerendered) < 0.5, num("%.3f s", median(rerendered)) + " whole process"});
       goals.push_back({"1080p whole compose, caches warm, < 0.5 s (issue 8)",
                        warmProcess[p.name] < 0.5,
                        num("%.3f s", warmProcess[p.name]) + " whole process, " +
