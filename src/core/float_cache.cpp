@@ -81,7 +81,8 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
   };
   // The size first; every field is then checked against the bytes actually present.
   struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) return invalid("cannot be read");
+  if (::fstat(fd, &st) != 0) return invalid(std::string("cannot be read: ") + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) return invalid("is not a regular file");
   const uint64_t size = uint64_t(st.st_size);
   if (size == 0) return invalid("is empty (0 bytes)");
   char magic[8] = {};

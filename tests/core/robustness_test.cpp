@@ -217,6 +217,13 @@ TEST_F(FloatCacheFiles, OtherContentsAndNonFiniteValuesAreNotData) {
   expectInvalid("not finite");
 }
 
+// A FIFO where an entry should be: refused at once (opening it must not wait for a writer).
+TEST_F(FloatCacheFiles, AFifoInPlaceOfAnEntryIsRefusedWithoutWaiting) {
+  fs::remove(cache.pathFor(key));
+  ASSERT_EQ(::mkfifo(cache.pathFor(key).c_str(), 0600), 0);
+  expectInvalid("is not a regular file");
+}
+
 TEST_F(FloatCacheFiles, AFailedStoreSaysWhyAndLeavesNothing) {
   compose::testing::writeText(dir / "file", "a file where a folder should be");
   const FloatCache blocked(dir / "file" / "c", "COMPTST2", ".t");
@@ -267,6 +274,12 @@ TEST_F(StageCacheFiles, AWrittenEntryOpensWithItsArraysAndImages) {
   pipeline::StageCache missing(dir.path(), stage, "ffff");
   EXPECT_FALSE(missing.open());
   EXPECT_TRUE(missing.problem().empty()) << "a missing entry is a plain miss";
+}
+
+TEST_F(StageCacheFiles, AFifoInPlaceOfAnEntryIsRefusedWithoutWaiting) {
+  fs::remove(path());
+  ASSERT_EQ(::mkfifo(path().c_str(), 0600), 0);
+  expectInvalid("is not a regular file");
 }
 
 TEST_F(StageCacheFiles, TruncatedAtEveryLengthIsDetected) {

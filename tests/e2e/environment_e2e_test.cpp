@@ -247,8 +247,8 @@ glm::dmat3 matrixOf(const nlohmann::json& rows) {
 // Two things no stitch can know are taken out. The merge fixes radiance only up to one scale per
 // capture (the median ratio over the texels is used). And photos fix their orientations only
 // relative to each other: the stitch puts the group where the rough orientations say it is on
-// average, so the whole map is turned by the mean of the views' errors (here up to about 1°, which
-// at 256² faces moves forest's texels, that differ from their neighbours by 38 %, by three texels).
+// average, so the whole map is turned by the mean of the views' errors (here 2.54°: at 256² faces
+// that moves forest's texels, which differ from their neighbours by 38 %, by about seven texels).
 // The truth is turned by the same rotation, read from the capture's truth.json, and averaged over
 // 8 x 8 directions per texel.
 //
