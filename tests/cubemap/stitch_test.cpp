@@ -16,6 +16,7 @@
 #include "lighting/filtered_cube.h"
 #include "lighting/sphere_resample.h"
 #include "pipeline/compose_job.h"
+#include "seams.h"
 #include "test_util.h"
 
 namespace compose::cubemap {
@@ -86,49 +87,6 @@ Capture sixViews(const lighting::FilteredCube& env, int size, double fov, double
   return views(env, calib::Lens::fromFieldOfView(size, size, fov), nominal, offDegrees, seed);
 }
 
-// The texel `k` steps past the edge of face `face` beside edge texel (x, y), stepping off the face
-// by (dx, dy) (k = 1: the texel across the edge).
-void beyond(int n, int face, int x, int y, int dx, int dy, int k, int& g, int& gx, int& gy) {
-  const double past = 1.0 / n + (k - 1) * 2.0 / n + 1e-7;
-  const double a = -1.0 + (2.0 * x + 1.0) / n + dx * past;
-  const double b = -1.0 + (2.0 * y + 1.0) / n + dy * past;
-  double ga = 0, gb = 0;
-  lighting::faceImageCoordinates(lighting::faceImageDirection(face, a, b), g, ga, gb);
-  gx = std::clamp(int(std::floor((ga + 1.0) * 0.5 * n)), 0, n - 1);
-  gy = std::clamp(int(std::floor((gb + 1.0) * 0.5 * n)), 0, n - 1);
-}
-
-// Seams, per face edge: the mean step between the two texels facing each other across the edge
-// ("cross"), and the neighbouring texel-to-texel variation ("inner": the mean step from each edge
-// texel to the next texel inside its own face, on both faces, which also cancels the change of a
-// smooth gradient over two texels).
-struct EdgeSteps {
-  double cross = 0.0, inner = 0.0;
-};
-std::vector<EdgeSteps> edgeSteps(const CubeMap& cube) {
-  const int n = cube.size();
-  std::vector<EdgeSteps> out;
-  for (int f = 0; f < kCubeFaces; ++f) {
-    for (int e = 0; e < 4; ++e) {
-      const int dx = e == 0 ? -1 : e == 1 ? 1 : 0, dy = e == 2 ? -1 : e == 3 ? 1 : 0;
-      EdgeSteps s;
-      for (int i = 1; i + 1 < n; ++i) {  // corners excluded: three faces meet there
-        const int x = dx < 0 ? 0 : dx > 0 ? n - 1 : i, y = dy < 0 ? 0 : dy > 0 ? n - 1 : i;
-        int g1, x1, y1, g2, x2, y2;
-        beyond(n, f, x, y, dx, dy, 1, g1, x1, y1);
-        beyond(n, f, x, y, dx, dy, 2, g2, x2, y2);
-        const glm::vec3 here = cube.radiance(f, x, y), inside = cube.radiance(f, x - dx, y - dy);
-        const glm::vec3 there = cube.radiance(g1, x1, y1), further = cube.radiance(g2, x2, y2);
-        s.cross += double(glm::length(here - there)) / (n - 2);
-        s.inner +=
-            0.5 * double(glm::length(here - inside) + glm::length(there - further)) / (n - 2);
-      }
-      out.push_back(s);
-    }
-  }
-  return out;
-}
-
 double medianRelative(const CubeMap& truth, const CubeMap& x) {
   std::vector<double> rel;
   for (int f = 0; f < kCubeFaces; ++f)
@@ -189,13 +147,8 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
   // Seams, on 128² faces (the stitch and the truth reduced exactly), where a texel at a face edge
   // is as large as the HDRI's own texels: at every face edge, the step across the edge is no larger
   // than the neighbouring texel-to-texel variation, or than the step the scene itself has there.
-  const std::vector<EdgeSteps> stitched = edgeSteps(lighting::resizeCube(r.cube, 128));
-  const std::vector<EdgeSteps> scene128 = edgeSteps(lighting::resizeCube(truth, 128));
-  double worstSeam = 0.0;
-  for (size_t e = 0; e < stitched.size(); ++e) {
-    worstSeam =
-        std::max(worstSeam, stitched[e].cross / std::max(stitched[e].inner, scene128[e].cross));
-  }
+  const double worstSeam = compose::testing::worstSeam(lighting::resizeCube(r.cube, 128),
+                                                       lighting::resizeCube(truth, 128));
   // Measured at most 1.15 (sunset, whose sky view matched nothing and is 3° off).
   constexpr double kSeam = 1.25;
   EXPECT_LT(worstSeam, kSeam) << name;

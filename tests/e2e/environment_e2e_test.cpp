@@ -19,6 +19,7 @@
 #include "command_util.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/render_view.h"
+#include "cubemap/seams.h"
 #include "ingest/image_io.h"
 #include "lighting/filtered_cube.h"
 #include "lighting/sphere_resample.h"
@@ -256,7 +257,10 @@ glm::dmat3 matrixOf(const nlohmann::json& rows) {
 // camera's): median relative error courtyard 1.79 %, forest 4.05 %, interior 1.18 %, sunset
 // 2.45 %; the comparison's own floor (the sampled truth against the exact cube) 0.03-0.53 %.
 // Without turning the truth: 7-41 %. With 768² photos forest is at 5.9 %: its detail is finer
-// than what a photo of 7.7 pixels a degree keeps after the lens' blur and JPEG.
+// than what a photo of 7.7 pixels a degree keeps after the lens' blur and JPEG. The worst seam
+// (printed, not checked here; tests/cubemap checks it on rendered views) is 1.11, 0.95, 1.01 and
+// 1.82: sunset's sky view shares no features with the others and is aligned on its radiance, and
+// its sun is clipped in every exposure.
 class StitchFromPhotos : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
@@ -328,41 +332,63 @@ TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
     return glm::vec3(sum / double(kSub * kSub));
   };
 
-  // Median relative error after the best scale, against the truth turned by `rotation`.
-  auto medianError = [&](const glm::dmat3& rotation, const CubeMap& map) {
-    std::vector<glm::vec3> truth(size_t(kCubeFaces) * kFace * kFace);
+  auto turnedTruth = [&](const glm::dmat3& rotation) {
+    CubeMap cube(kFace);
+    for (int f = 0; f < kCubeFaces; ++f)
+      for (int y = 0; y < kFace; ++y)
+        for (int x = 0; x < kFace; ++x) {
+          const glm::vec3 t = truthTexel(f, x, y, rotation);
+          float* texel = cube.face(f).data() + 3 * (size_t(y) * kFace + size_t(x));
+          texel[0] = t.x, texel[1] = t.y, texel[2] = t.z;
+        }
+    return cube;
+  };
+  // The best scale of `map` to `truth` (median ratio), and the median relative error after it.
+  struct Fit {
+    float scale = 1.0f;
+    double median = 0.0;
+  };
+  auto compare = [&](const CubeMap& truth, const CubeMap& map) {
     std::vector<double> ratios, errors;
     for (int f = 0; f < kCubeFaces; ++f)
       for (int y = 0; y < kFace; ++y)
         for (int x = 0; x < kFace; ++x) {
-          const glm::vec3 t = truthTexel(f, x, y, rotation), m = map.radiance(f, x, y);
-          truth[(size_t(f) * kFace + size_t(y)) * kFace + size_t(x)] = t;
+          const glm::vec3 t = truth.radiance(f, x, y), m = map.radiance(f, x, y);
           const double st = t.x + t.y + t.z, sm = m.x + m.y + m.z;
           if (st > 0.0 && sm > 0.0) ratios.push_back(st / sm);
         }
     std::nth_element(ratios.begin(), ratios.begin() + ptrdiff_t(ratios.size() / 2), ratios.end());
-    const float scale = float(ratios[ratios.size() / 2]);
+    Fit fit;
+    fit.scale = float(ratios[ratios.size() / 2]);
     for (int f = 0; f < kCubeFaces; ++f)
       for (int y = 0; y < kFace; ++y)
         for (int x = 0; x < kFace; ++x) {
-          const glm::vec3 t = truth[(size_t(f) * kFace + size_t(y)) * kFace + size_t(x)];
-          const glm::vec3 m = scale * map.radiance(f, x, y);
+          const glm::vec3 t = truth.radiance(f, x, y), m = fit.scale * map.radiance(f, x, y);
           errors.push_back(double(glm::length(t - m) / std::max(glm::length(t), 1e-6f)));
         }
     std::nth_element(errors.begin(), errors.begin() + ptrdiff_t(errors.size() / 2), errors.end());
-    return errors[errors.size() / 2];
+    fit.median = errors[errors.size() / 2];
+    return fit;
   };
-  const double median = medianError(g, stitched);
+  const CubeMap truth = turnedTruth(g), unturnedTruth = turnedTruth(glm::dmat3(1.0));
+  const Fit fit = compare(truth, stitched);
+  const double unturned = compare(unturnedTruth, stitched).median;
   // What the comparison itself costs: the sampled truth against the HDRI's exact cube map.
-  const double floor = medianError(glm::dmat3(1.0), lighting::cubeFromLatLong(truthMap, kFace));
-  const double unturned = medianError(glm::dmat3(1.0), stitched);
+  const double floor = compare(unturnedTruth, lighting::cubeFromLatLong(truthMap, kFace)).median;
+  // Seams, as in tests/cubemap/stitch_test.cpp: on 128² faces, the step across every face edge
+  // against the neighbouring texel-to-texel steps and the step the scene itself has there.
+  CubeMap scaled = stitched;
+  for (int f = 0; f < kCubeFaces; ++f)
+    for (float& v : scaled.face(f)) v *= fit.scale;
+  const double seam = compose::testing::worstSeam(lighting::resizeCube(scaled, 128),
+                                                  lighting::resizeCube(truth, 128));
   std::printf(
       "[ figures ] %-9s stitched from capture-sim photos: median relative error %.2f %% "
       "(%.2f %% without turning the truth by the capture's %.2f°; the comparison's own "
-      "floor %.2f %%)\n",
-      name.c_str(), 100.0 * median, 100.0 * unturned, turned, 100.0 * floor);
+      "floor %.2f %%); worst seam %.2f\n",
+      name.c_str(), 100.0 * fit.median, 100.0 * unturned, turned, 100.0 * floor, seam);
   constexpr double kIssueMedian = 0.05;
-  EXPECT_LT(median, kIssueMedian) << name;
+  EXPECT_LT(fit.median, kIssueMedian) << name;
 }
 
 INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchFromPhotos,
