@@ -47,6 +47,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -705,20 +706,28 @@ int main(int argc, char** argv) {
               [](const ComposeRun& a, const ComposeRun& b) { return a.total < b.total; });
     const ComposeRun warm = warms[warms.size() / 2];
     warmRuns[p.name] = warm;
-    // The compose executable as a user runs it (warm cache).
-    std::vector<double> proc, procMb;
-    for (int i = 0; i < repeat; ++i) {
-      const Child c = run(COMPOSE_EXECUTABLE,
-                          {"--plate", p.file.string(), "--object", (samples / "bunny.obj").string(),
-                           "--env", env.string(), "--scale", "0.6", "--cache", cache.string(),
-                           "--out", out.string(), "-q", "--timings"},
-                          work / "stderr.txt");
+    // The compose executable as a user runs it, the bunny in the environment on this plate with
+    // the same cache, and `extra` options; empty (the error printed) when it fails.
+    auto composeProcess = [&](const std::vector<std::string>& extra) -> std::optional<Child> {
+      std::vector<std::string> args = {
+          "--plate", p.file.string(), "--object", (samples / "bunny.obj").string(),
+          "--env",   env.string(),    "--cache",  cache.string(),
+          "--out",   out.string(),    "-q"};
+      args.insert(args.end(), extra.begin(), extra.end());
+      Child c = run(COMPOSE_EXECUTABLE, args, work / "stderr.txt");
       if (c.status != 0) {
         std::fprintf(stderr, "compose executable failed:\n%s\n", c.err.c_str());
-        return 1;
+        return std::nullopt;
       }
-      proc.push_back(c.seconds);
-      procMb.push_back(std::max(c.peakMb, timingsPeakMb(c.err)));
+      return c;
+    };
+    // Warm cache.
+    std::vector<double> proc, procMb;
+    for (int i = 0; i < repeat; ++i) {
+      const std::optional<Child> c = composeProcess({"--scale", "0.6", "--timings"});
+      if (!c) return 1;
+      proc.push_back(c->seconds);
+      procMb.push_back(std::max(c->peakMb, timingsPeakMb(c->err)));
     }
     warmProcess[p.name] = median(proc);
     warmProcessMb[p.name] = median(procMb);
@@ -729,17 +738,10 @@ int main(int argc, char** argv) {
     if (!p.large) {
       for (int i = 0; i < std::max(repeat, 3); ++i) {
         const std::string place = "0.5," + std::to_string(0.80 + 0.01 * i);
-        const Child c =
-            run(COMPOSE_EXECUTABLE,
-                {"--plate", p.file.string(), "--object", (samples / "bunny.obj").string(), "--env",
-                 env.string(), "--scale", "0.6", "--place", place, "--cache", cache.string(),
-                 "--out", out.string(), "-q", "--timings"},
-                work / "stderr.txt");
-        if (c.status != 0) {
-          std::fprintf(stderr, "compose executable failed:\n%s\n", c.err.c_str());
-          return 1;
-        }
-        moved.push_back(c.seconds);
+        const std::optional<Child> c =
+            composeProcess({"--scale", "0.6", "--place", place, "--timings"});
+        if (!c) return 1;
+        moved.push_back(c->seconds);
       }
     }
 
@@ -749,17 +751,9 @@ int main(int argc, char** argv) {
     std::vector<double> rerendered;
     if (!p.large) {
       for (int i = 0; i <= std::max(repeat, 3); ++i) {
-        const Child c =
-            run(COMPOSE_EXECUTABLE,
-                {"--plate", p.file.string(), "--object", (samples / "bunny.obj").string(), "--env",
-                 env.string(), "--exposure", std::to_string(0.05 * i), "--cache", cache.string(),
-                 "--out", out.string(), "-q"},
-                work / "stderr.txt");
-        if (c.status != 0) {
-          std::fprintf(stderr, "compose executable failed:\n%s\n", c.err.c_str());
-          return 1;
-        }
-        if (i > 0) rerendered.push_back(c.seconds);  // the first run makes the ground shadow
+        const std::optional<Child> c = composeProcess({"--exposure", std::to_string(0.05 * i)});
+        if (!c) return 1;
+        if (i > 0) rerendered.push_back(c->seconds);  // the first run makes the ground shadow
       }
     }
 
