@@ -1,7 +1,5 @@
 #include "pipeline/stage_cache.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -16,6 +14,7 @@
 #include <optional>
 
 #include "core/checksum.h"
+#include "core/entry_file.h"
 #include "core/hash.h"
 #include "core/limits.h"
 
@@ -71,39 +70,18 @@ bool StageCache::open() {
   std::error_code ec;
   const fs::file_status status = fs::status(path_, ec);
   if (!fs::exists(status)) return false;  // a plain miss
-  if (!fs::is_regular_file(status)) return invalid("is not a regular file");
-  // One descriptor for the whole entry: a writer replacing the file meanwhile (by rename) cannot
-  // mix two entries' bytes.
-  const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) return invalid(std::string("cannot be read: ") + std::strerror(errno));
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
+  const EntryFile file(path_);            // one descriptor, non-blocking (core/entry_file.h)
+  if (!file.isOpen()) return invalid(std::string("cannot be read: ") + std::strerror(errno));
   const auto cannotRead = [&]() {
     return invalid(errno != 0 ? std::string("cannot be read: ") + std::strerror(errno)
                               : std::string("cannot be read to the end"));
   };
-  // Reads exactly n bytes at `at`; false on an error or a short file (errno 0).
-  const auto readAt = [&](void* to, size_t n, uint64_t at) {
-    char* p = static_cast<char*>(to);
-    while (n > 0) {
-      const ssize_t got = ::pread(fd, p, n, off_t(at));
-      if (got < 0 && errno == EINTR) continue;
-      if (got <= 0) {
-        if (got == 0) errno = 0;
-        return false;
-      }
-      p += got;
-      at += uint64_t(got);
-      n -= size_t(got);
-    }
-    return true;
-  };
+  const auto readAt = [&](void* to, size_t n, uint64_t at) { return file.readAt(to, n, at); };
   // The size first; every field is then checked against the bytes actually present.
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) return cannotRead();
-  const uint64_t size = uint64_t(st.st_size);
+  uint64_t size = 0;
+  bool regular = false;
+  if (!file.stat(size, regular)) return cannotRead();
+  if (!regular) return invalid("is not a regular file");
   if (size == 0) return invalid("is empty (0 bytes)");
   char magic[8] = {};
   if (size < sizeof magic + 8 || !readAt(magic, sizeof magic, 0))
@@ -160,7 +138,7 @@ bool StageCache::open() {
     const std::string name = a[0].get<std::string>();
     if (arrays.count(name)) return invalid("has a damaged header (an array named twice)");
     Pixels values(a[1].get<uint64_t>());  // not zeroed: the reading threads touch it first
-    const std::optional<Hash128> sum = readChecksummedFloats(fd, at, values);
+    const std::optional<Hash128> sum = readChecksummedFloats(file.fd(), at, values);
     if (!sum) return cannotRead();
     at += values.size() * sizeof(float);
     sums[name] = *sum;

@@ -1,13 +1,12 @@
 #include "core/checksum.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <vector>
 
+#include "core/entry_file.h"
 #include "core/parallel.h"
 
 namespace compose {
@@ -65,20 +64,11 @@ std::optional<Hash128> readChecksummedFloats(int fd, uint64_t offset, std::span<
   parallelFor(0, int64_t(blocks), [&](int64_t b) {
     if (failure.load(std::memory_order_relaxed) >= 0) return;
     const size_t first = size_t(b) * kBlock, n = std::min(kBlock, values.size() - first);
-    char* to = reinterpret_cast<char*>(values.data() + first);
-    size_t bytes = n * sizeof(float);
-    auto at = off_t(offset + first * sizeof(float));
-    while (bytes > 0) {
-      const ssize_t got = ::pread(fd, to, bytes, at);
-      if (got < 0 && errno == EINTR) continue;
-      if (got <= 0) {
-        int expected = -1;
-        failure.compare_exchange_strong(expected, got < 0 ? errno : 0);
-        return;
-      }
-      to += got;
-      at += got;
-      bytes -= size_t(got);
+    if (!readFullyAt(fd, values.data() + first, n * sizeof(float),
+                     offset + first * sizeof(float))) {
+      int expected = -1;
+      failure.compare_exchange_strong(expected, errno);
+      return;
     }
     sums[size_t(b)] = blockHash(values.data() + first, n);
   });

@@ -1,7 +1,5 @@
 #include "core/float_cache.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -16,6 +14,7 @@
 #include <span>
 
 #include "core/checksum.h"
+#include "core/entry_file.h"
 #include "core/error.h"
 #include "core/hash.h"
 #include "core/parallel.h"
@@ -58,32 +57,15 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
     r.values.clear();
     return r;
   };
-  // One descriptor for the whole entry: a writer replacing the file meanwhile (by rename) cannot
-  // mix two entries' bytes.
-  const int fd = ::open(pathFor(key).c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) return r;  // Missing (or unreadable: the next store replaces it)
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
-  // Reads exactly n bytes at `at`; false on an error or a short file.
-  const auto readAt = [&](void* to, size_t n, uint64_t at) {
-    char* p = static_cast<char*>(to);
-    while (n > 0) {
-      const ssize_t got = ::pread(fd, p, n, off_t(at));
-      if (got < 0 && errno == EINTR) continue;
-      if (got <= 0) return false;
-      p += got;
-      at += uint64_t(got);
-      n -= size_t(got);
-    }
-    return true;
-  };
+  const EntryFile file(pathFor(key));  // one descriptor, non-blocking (core/entry_file.h)
+  if (!file.isOpen()) return r;        // Missing (or unreadable: the next store replaces it)
+  const auto readAt = [&](void* to, size_t n, uint64_t at) { return file.readAt(to, n, at); };
   // The size first; every field is then checked against the bytes actually present.
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) return invalid(std::string("cannot be read: ") + std::strerror(errno));
-  if (!S_ISREG(st.st_mode)) return invalid("is not a regular file");
-  const uint64_t size = uint64_t(st.st_size);
+  uint64_t size = 0;
+  bool regular = false;
+  if (!file.stat(size, regular))
+    return invalid(std::string("cannot be read: ") + std::strerror(errno));
+  if (!regular) return invalid("is not a regular file");
   if (size == 0) return invalid("is empty (0 bytes)");
   char magic[8] = {};
   if (size < kHeaderBytes || !readAt(magic, sizeof magic, 0))
@@ -116,7 +98,7 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
   // The floats read and checksummed block by block on every core, into memory not zeroed first.
   const uint64_t valuesAt = kHeaderBytes + length + 8;
   FloatBuffer values(count);
-  const std::optional<Hash128> valuesSum = readChecksummedFloats(fd, valuesAt, values);
+  const std::optional<Hash128> valuesSum = readChecksummedFloats(file.fd(), valuesAt, values);
   uint64_t sum[2] = {0, 0};
   if (!valuesSum || !readAt(sum, sizeof sum, valuesAt + count * sizeof(float)))
     return invalid("cannot be read to the end");
