@@ -73,8 +73,10 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
   } catch (const Error& e) {
     throw UsageError(e.what(), "shadows");
   }
-  if (plan.sources < 0 || plan.sources > 64)
-    throw UsageError("sources must be in 0..64, got " + std::to_string(plan.sources), "shadows");
+  if (plan.sources < 0 || plan.sources > lighting::kMaxSources)
+    throw UsageError("sources must be in 0.." + std::to_string(lighting::kMaxSources) + ", got " +
+                         std::to_string(plan.sources),
+                     "shadows");
   if (plan.method == render::ShadowMethod::Harmonics) {
     if (plan.lightingOrder < 0 || plan.lightingOrder > lighting::kMaxShOrder)
       throw UsageError(
@@ -152,10 +154,12 @@ render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
                                      const render::VertexTransfer& transfer,
                                      const render::EmbreeScene& scene,
                                      const ShadowLighting& lighting, const glm::mat3& envFromObject,
-                                     const ShadowPlan& plan, int64_t& sourceRays) {
+                                     const ShadowPlan& plan, int raysPerSource,
+                                     int64_t& sourceRays) {
   render::SourceVisibility seen;
   if (!lighting.split.sources.empty()) {
-    seen = render::traceSources(points, scene, lighting.split.sources, envFromObject);
+    seen =
+        render::traceSources(points, scene, lighting.split.sources, envFromObject, raysPerSource);
     sourceRays = seen.rays;
   }
   render::ShadowInputs inputs;
@@ -223,10 +227,13 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     out.reason =
         "reused the visibility pass " + cache.pathFor(key).string() + " (same mesh and parameters)";
   }
+  // One ray per source per point: the renderer traces a source again from the hit wherever the
+  // points around it see it differently (its shadow's edge and penumbra).
   int64_t sourceRays = 0;
   out.irradiance =
-      shadePoints(out.points, transfer, scene, lighting, envFromObject, plan, sourceRays);
+      shadePoints(out.points, transfer, scene, lighting, envFromObject, plan, 1, sourceRays);
   out.occlusion = std::move(transfer.ao);
+  if (out.irradiance.sourceCount > 0) out.sources = lighting.split.sources;
   return out;
 }
 
@@ -252,7 +259,7 @@ GroundShadowResult computeGroundShadow(
       render::computeTransfer(mesh, out.grid.points, params, progress);
   int64_t sourceRays = 0, fineSourceRays = 0;
   const render::VertexIrradiance irradiance =
-      shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, sourceRays);
+      shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, 4, sourceRays);
   // Where the shadow has a sharp edge between grid nodes, a finer grid there.
   const size_t refined = render::refineGroundGrid(out.grid, irradiance, worldFromObject, camera);
   render::VertexIrradiance fine;
@@ -260,7 +267,7 @@ GroundShadowResult computeGroundShadow(
   if (out.grid.finePoints.count() > 0) {
     const render::VertexTransfer fineTransfer =
         render::computeTransfer(mesh, out.grid.finePoints, params);
-    fine = shadePoints(out.grid.finePoints, fineTransfer, scene, lighting, envFromObject, plan,
+    fine = shadePoints(out.grid.finePoints, fineTransfer, scene, lighting, envFromObject, plan, 4,
                        fineSourceRays);
     fineRays = fineTransfer.rays + fineSourceRays;
   }

@@ -317,7 +317,7 @@ class PrecomputeStage final : public Stage {
 
 class ShadowsStage final : public Stage {
  public:
-  static constexpr int kVersion = 1;
+  static constexpr int kVersion = 2;  // 2: the sources' visibility per point kept
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -372,6 +372,23 @@ class ShadowsStage final : public Stage {
     if (r.irradiance.shadowed.size() != n || r.irradiance.unshadowed.size() != n ||
         r.occlusion.size() != n)
       return false;
+    r.sources = sourcesFromFloats(cache.get("sources"));
+    if (r.sources.size() > size_t(lighting::kMaxSources)) return false;
+    for (const lighting::LightSource& l : r.sources) {
+      const bool ok = std::abs(glm::length(l.direction) - 1.0f) < 1e-3f &&
+                      glm::all(glm::greaterThanEqual(l.power, glm::vec3(0.0f))) &&
+                      std::isfinite(l.power.x + l.power.y + l.power.z) && l.halfLatitude >= 0.0f &&
+                      l.halfLatitude <= 4.0f && l.halfLongitude >= 0.0f && l.halfLongitude <= 4.0f;
+      if (!ok) return false;
+    }
+    const std::span<const float> seen = cache.get("sourceSeen");
+    if (seen.size() != n * r.sources.size()) return false;
+    r.irradiance.sourceCount = r.sources.size();
+    r.irradiance.sourceSeen.resize(seen.size());
+    for (size_t i = 0; i < seen.size(); ++i) {
+      if (!(seen[i] >= 0.0f && seen[i] <= 255.0f) || seen[i] != std::floor(seen[i])) return false;
+      r.irradiance.sourceSeen[i] = uint8_t(seen[i]);
+    }
     ctx.artefacts.selfShadowing = std::move(r);
     return true;
   }
@@ -380,6 +397,9 @@ class ShadowsStage final : public Stage {
     cache.put("shadowed", vec3sToFloats(r.irradiance.shadowed));
     cache.put("unshadowed", vec3sToFloats(r.irradiance.unshadowed));
     cache.put("occlusion", r.occlusion);
+    cache.put("sources", sourcesToFloats(r.sources));
+    cache.put("sourceSeen",
+              std::vector<float>(r.irradiance.sourceSeen.begin(), r.irradiance.sourceSeen.end()));
     cache.meta()["clamped"] = r.irradiance.clamped;
     return cache.write();
   }

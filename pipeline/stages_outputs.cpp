@@ -337,6 +337,7 @@ class RenderStage final : public Stage {
       settings.points = &s.points;
       settings.shadows = &s.irradiance;
       settings.occlusion = &s.occlusion;
+      settings.sources = &s.sources;
     }
     RenderedObject r;
     if (job.exposureStops) {

@@ -11,7 +11,7 @@
 namespace compose::lighting {
 
 SourceSplit splitBrightSources(const Environment& env, int count) {
-  COMPOSE_CHECK(count >= 0);
+  COMPOSE_CHECK(count >= 0 && count <= kMaxSources);
   SourceSplit out;
   out.residual = env;
   if (count == 0) return out;

@@ -34,6 +34,10 @@ struct SourceSplit {
   double sourceShare = 0.0;  // fraction of the map's power in the sources
 };
 
+// At most this many sources are split off (the renderer keeps per-hit state for each).
+inline constexpr int kMaxSources = 64;
+
+// `count` in 0..kMaxSources.
 SourceSplit splitBrightSources(const Environment& environment, int count);
 
 }  // namespace compose::lighting

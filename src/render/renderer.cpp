@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -61,6 +63,161 @@ void screenRectangle(const calib::PlateCamera& camera, const glm::dvec3& lo, con
   x1 = std::max(x0, x1);
   y1 = std::max(y0, y1);
 }
+
+float luminance(const glm::vec3& c) {
+  return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
+
+// The bright sources at a hit whose three surface points see them differently (a shadow edge
+// crosses the triangle): traced from the hit and shaded at its normal; the rest of the light keeps
+// the ratio interpolated between the points (renderer.h).
+class SourceEdges {
+ public:
+  SourceEdges(const RenderSettings& settings, const glm::dmat4& worldFromObject)
+      : vi_(*settings.shadows), points_(*settings.points), sources_(*settings.sources) {
+    glm::mat3 rotation(worldFromObject);
+    for (int c = 0; c < 3; ++c) rotation[c] = glm::normalize(rotation[c]);
+    envFromObject_ = settings.envFromWorld * rotation;
+    frames_ = sourceFrames(sources_, envFromObject_);
+    lift_ = 1e-4f * points_.size;
+    tnear_ = 1e-5f * points_.size;
+    const int n = settings.samplesPerAxis;
+    raysPerSample_ = std::max(1, 16 / (n * n));
+  }
+
+  static bool wanted(const RenderSettings& settings) {
+    return settings.shadows && settings.points && settings.sources && !settings.sources->empty() &&
+           settings.shadows->sourceCount == settings.sources->size() &&
+           settings.shadows->sourceSeen.size() ==
+               settings.points->count() * settings.sources->size();
+  }
+
+  // The sources whose shadow edge crosses the small triangle of these three points: those the
+  // points see differently, leaving out a point where the source is below its horizon (its answer
+  // does not matter there). One bit per source. Consecutive samples mostly hit the same small
+  // triangle: `memo` keeps the last answer.
+  struct Memo {
+    uint32_t near[3] = {~0u, ~0u, ~0u};
+    uint64_t mask = 0;
+  };
+  uint64_t edgeMask(const uint32_t near[3], Memo& memo) const {
+    if (near[0] == memo.near[0] && near[1] == memo.near[1] && near[2] == memo.near[2])
+      return memo.mask;
+    const size_t count = sources_.size();
+    const uint8_t* a = vi_.sourceSeen.data() + size_t(near[0]) * count;
+    const uint8_t* b = vi_.sourceSeen.data() + size_t(near[1]) * count;
+    const uint8_t* c = vi_.sourceSeen.data() + size_t(near[2]) * count;
+    uint64_t mask = 0;
+    if (!std::equal(a, a + count, b) || !std::equal(a, a + count, c)) {
+      for (size_t i = 0; i < count; ++i) {
+        // Below the horizon counts as agreeing with anything: full for the least, 0 for the most.
+        auto low = [](uint8_t v) { return v == kSourceBelowHorizon ? kSourceSeenFull : v; };
+        auto high = [](uint8_t v) { return v == kSourceBelowHorizon ? uint8_t(0) : v; };
+        const uint8_t lo = std::min({low(a[i]), low(b[i]), low(c[i])});
+        const uint8_t hi = std::max({high(a[i]), high(b[i]), high(c[i])});
+        mask |= uint64_t(hi > lo) << i;
+      }
+    }
+    std::copy_n(near, 3, memo.near);
+    memo.mask = mask;
+    return mask;
+  }
+
+  // The shadowed irradiance at a hit (object-space position `at`, shading normal `nObj` and its
+  // environment-frame twin `nEnv`, unshadowed irradiance `e` there), or false when no source's
+  // shadow edge that matters crosses the hit's small triangle (then the plain interpolated ratio
+  // applies). A source matters where the most its visibility could change the pixel is above
+  // 1/256 of the pixel's irradiance (less is below what an 8-bit display shows, and the
+  // interpolated ratio already holds it approximately).
+  bool shade(const EmbreeScene& scene, const uint32_t near[3], const float weight[3],
+             const glm::vec3& at, const glm::vec3& nObj, const glm::vec3& nEnv, const glm::vec3& e,
+             uint32_t seed, Memo& memo, glm::vec3& shadowed, int64_t& rays) const {
+    uint64_t mask = edgeMask(near, memo);
+    if (mask == 0) return false;
+    const size_t count = sources_.size();
+    const float floor = (1.0f / 256.0f) * luminance(e);
+    int edges = 0;
+    uint32_t edge[lighting::kMaxSources];
+    float cosine[lighting::kMaxSources];
+    for (; mask != 0; mask &= mask - 1) {
+      const uint32_t i = uint32_t(std::countr_zero(mask));
+      const lighting::LightSource& source = sources_[i];
+      const float c = std::max(0.0f, glm::dot(nEnv, source.direction));
+      if (c * luminance(source.power) <= floor) continue;
+      cosine[edges] = c;
+      edge[edges++] = i;
+    }
+    if (edges == 0) return false;
+
+    // Those sources taken out of the interpolated ratio ...
+    glm::vec3 sh(0.0f), un(0.0f);
+    for (int q = 0; q < 3; ++q) {
+      sh += weight[q] * vi_.shadowed[near[q]];
+      un += weight[q] * vi_.unshadowed[near[q]];
+    }
+    glm::vec3 rest = e;
+    for (int q = 0; q < 3; ++q) {
+      const glm::vec3 corner = envFromObject_ * points_.normals[near[q]];
+      const uint8_t* seen = vi_.sourceSeen.data() + size_t(near[q]) * count;
+      for (int k = 0; k < edges; ++k) {
+        const lighting::LightSource& source = sources_[edge[k]];
+        if (seen[edge[k]] == kSourceBelowHorizon) continue;
+        const float cq = std::max(0.0f, glm::dot(corner, source.direction));
+        sh -= weight[q] * (float(seen[edge[k]]) * (1.0f / kSourceSeenFull)) * cq * source.power;
+        un -= weight[q] * cq * source.power;
+      }
+    }
+    // ... and traced from the hit, across their extent.
+    const glm::vec3 origin = at + lift_ * nObj;
+    glm::vec3 batch[16];
+    int owner[16];
+    int m = 0;
+    float visible[lighting::kMaxSources] = {};
+    auto flush = [&] {
+      const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear_);
+      for (int b = 0; b < m; ++b)
+        if (!((hit >> b) & 1u)) visible[owner[b]] += 1.0f / float(raysPerSample_);
+      rays += m;
+      m = 0;
+    };
+    const int side = raysPerSample_ >= 16 ? 4 : raysPerSample_ >= 4 ? 2 : 1;
+    for (int k = 0; k < edges; ++k) {
+      const uint32_t i = edge[k];
+      for (int r = 0; r < raysPerSample_; ++r) {
+        const uint32_t h = (seed * 0x9E3779B1u) ^ (i * 0x85EBCA77u) ^ (uint32_t(r) * 0xC2B2AE3Du);
+        const float a = (float(r % side) + hash01(2 * h)) / float(side) - 0.5f;
+        const float b = (float((r / side) % side) + hash01(2 * h + 1)) / float(side) - 0.5f;
+        const glm::vec3 d = frames_[i].direction(a, b);
+        if (glm::dot(nObj, d) <= 0.0f) continue;  // below the horizon: no light anyway
+        batch[m] = d;
+        owner[m] = k;
+        if (++m == 16) flush();
+      }
+    }
+    if (m > 0) flush();
+    glm::vec3 traced(0.0f);
+    for (int k = 0; k < edges; ++k) {
+      const lighting::LightSource& source = sources_[edge[k]];
+      rest -= cosine[k] * source.power;
+      traced += visible[k] * cosine[k] * source.power;
+    }
+    rest = glm::max(rest, glm::vec3(0.0f));
+    for (int c = 0; c < 3; ++c) {
+      const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
+      shadowed[c] = rest[c] * ratio + traced[c];
+    }
+    return true;
+  }
+
+ private:
+  const VertexIrradiance& vi_;
+  const SurfacePoints& points_;
+  const std::vector<lighting::LightSource>& sources_;
+  glm::mat3 envFromObject_{1.0f};
+  std::vector<SourceFrame> frames_;
+  float lift_ = 0.0f, tnear_ = 0.0f;
+  int raysPerSample_ = 1;
+};
 
 }  // namespace
 
@@ -120,11 +277,17 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   const bool materials = mesh.hasMaterials() && !settings.overrideMaterials;
   const float reflect = settings.exposure * invPi;
   std::atomic<int> rowsDone{0};
-  std::atomic<int64_t> hitsTotal{0};
+  std::atomic<int64_t> hitsTotal{0}, sourceRays{0};
+  std::optional<SourceEdges> edges;
+  if (SourceEdges::wanted(settings)) {
+    COMPOSE_CHECK(settings.sources->size() <= size_t(lighting::kMaxSources));
+    edges.emplace(settings, worldFromObject);
+  }
 
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
-    int64_t rowHits = 0;
+    int64_t rowHits = 0, rowSourceRays = 0;
+    SourceEdges::Memo memo;
     for (int x = out.x0; x < out.x1; ++x) {
       glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
           albedoSum(0.0f);
@@ -171,7 +334,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           const glm::vec3 view = -glm::vec3(dir);
           // Shade the side the camera sees: a back face turns both normals round, and a shading
           // normal that still points away from the viewer is bent back to the tangent plane.
-          if (glm::dot(ng, view) < 0.0f) {
+          const bool backFace = glm::dot(ng, view) < 0.0f;
+          if (backFace) {
             ng = -ng;
             nrm = -nrm;
           }
@@ -184,7 +348,16 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           uint32_t near[3] = {0, 0, 0};
           float weight[3] = {0.0f, 0.0f, 0.0f};
           if (settings.points) settings.points->locate(mesh, hit.triangle, u, v, near, weight);
-          if (settings.shadows) {
+          const uint32_t sampleSeed =
+              (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
+              uint32_t(first + b);
+          if (edges && glm::dot(interpolated, interpolated) > 1e-12f &&
+              edges->shade(scene, near, weight, oObj[b] + dObj[b] * hit.distance,
+                           glm::normalize(backFace ? -interpolated : interpolated),
+                           settings.envFromWorld * nrm, e, sampleSeed, memo, shadowedE,
+                           rowSourceRays)) {
+            // A source's shadow edge crosses the triangle: traced from the hit.
+          } else if (settings.shadows) {
             const VertexIrradiance& vi = *settings.shadows;
             const glm::vec3 sh = weight[0] * vi.shadowed[near[0]] +
                                  weight[1] * vi.shadowed[near[1]] +
@@ -241,10 +414,11 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       a[kAo] = aoSum * inv;
     }
     hitsTotal += rowHits;
+    sourceRays += rowSourceRays;
     const int done = ++rowsDone;
     if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
   });
-  out.rays = int64_t(w) * h * n * n;
+  out.rays = int64_t(w) * h * n * n + sourceRays;
   out.coverage = double(hitsTotal) * double(invSamples);
   report(progress, "render", 1.0);
   return out;

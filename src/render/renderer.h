@@ -12,10 +12,12 @@
 // irradiance of the lighting (lighting.h) at the interpolated vertex normal. With self-shadowing,
 // E is the unshadowed irradiance at the pixel's normal times the ratio of the shadowed to the
 // unshadowed irradiance interpolated from the surface points around the hit, so that the
-// per-pixel normal keeps its detail and the visibility comes from the transfer. Negative irradiance
-// (SH ringing) is clamped to 0. The shading normal faces the viewer: a back face is shaded from the
-// side the camera sees, and an interpolated normal that points away from the viewer is bent back to
-// the tangent plane. `envFromWorld` rotates world directions into the environment's frame.
+// per-pixel normal keeps its detail and the visibility comes from the transfer; a bright source
+// whose shadow edge crosses the hit's triangle is traced from the hit (RenderSettings::sources).
+// Negative irradiance (SH ringing) is clamped to 0. The shading normal faces the viewer: a back
+// face is shaded from the side the camera sees, and an interpolated normal that points away from
+// the viewer is bent back to the tangent plane. `envFromWorld` rotates world directions into the
+// environment's frame.
 //
 // The mesh is traced in its own coordinates (one Embree scene serves the renderer and the
 // visibility precompute); camera rays are carried into it by the inverse of `worldFromObject`.
@@ -53,6 +55,13 @@ struct RenderSettings {
   const SurfacePoints* points = nullptr;
   const VertexIrradiance* shadows = nullptr;
   const std::vector<float>* occlusion = nullptr;
+  // The bright sources the shadows split off (environment frame), whose visibility per point
+  // `shadows` holds (null or empty: none). Where the three points around a hit see a source
+  // differently, its shadow's edge crosses the triangle: that source is then traced from the hit
+  // itself and shaded at the pixel's normal, and the rest of the light keeps the interpolated
+  // ratio. So a lamp's or the sun's shadow keeps its edge at the pixel, not at the triangles'
+  // scale; the extra rays go only where an edge passes.
+  const std::vector<lighting::LightSource>* sources = nullptr;
 };
 
 // The AOV channels, in order (Nuke's layer.channel names). All are the mean over the pixel's

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -536,23 +537,10 @@ const char* shadowMethodName(ShadowMethod method) {
   return "";
 }
 
-SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
-                              const std::vector<lighting::LightSource>& sources,
-                              const glm::mat3& envFromObject) {
-  SourceVisibility out;
-  const size_t count = points.count();
-  out.count = sources.size();
-  out.visible.assign(count * sources.size(), 0.0f);
-  if (sources.empty()) return out;
-  // Four directions per source: a 2 x 2 stratification of its latitude/longitude extent,
-  // jittered per point. The frame (east, north) of each source turns the offsets into directions.
-  constexpr int kPerSource = 4;
+std::vector<SourceFrame> sourceFrames(const std::vector<lighting::LightSource>& sources,
+                                      const glm::mat3& envFromObject) {
   const glm::mat3 objectFromEnv = glm::transpose(envFromObject);
-  struct Frame {
-    glm::vec3 centre, east, north;
-    float halfLat, halfLon;
-  };
-  std::vector<Frame> frames(sources.size());
+  std::vector<SourceFrame> frames(sources.size());
   for (size_t i = 0; i < sources.size(); ++i) {
     const glm::dvec3 d = glm::normalize(glm::dvec3(sources[i].direction));
     const double lat = std::asin(std::clamp(d.y, -1.0, 1.0)), lon = std::atan2(d.x, d.z);
@@ -563,6 +551,23 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
                  objectFromEnv * glm::vec3(north), sources[i].halfLatitude,
                  float(sources[i].halfLongitude * std::cos(lat))};
   }
+  return frames;
+}
+
+SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& scene,
+                              const std::vector<lighting::LightSource>& sources,
+                              const glm::mat3& envFromObject, int raysPerSource) {
+  SourceVisibility out;
+  const size_t count = points.count();
+  out.count = sources.size();
+  out.visible.assign(count * sources.size(), 0.0f);
+  if (sources.empty()) return out;
+  // Four directions per source: a 2 x 2 stratification of its latitude/longitude extent,
+  // jittered per point. The frame (east, north) of each source turns the offsets into directions.
+  COMPOSE_CHECK(raysPerSource == 1 || raysPerSource == 2 || raysPerSource == 4);
+  const int kPerSource = raysPerSource;
+  const int cols = kPerSource >= 2 ? 2 : 1, rows = kPerSource / cols;
+  const std::vector<SourceFrame> frames = sourceFrames(sources, envFromObject);
   // Sources near each other in the sky traced one after another: a packet of rays then holds
   // nearby directions, which Embree traverses faster.
   std::vector<glm::vec3> directions(sources.size());
@@ -584,7 +589,7 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         auto flush = [&] {
           const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear);
           for (int b = 0; b < m; ++b)
-            if (!((hit >> b) & 1u)) seen[index[b] / kPerSource] += 1.0f / kPerSource;
+            if (!((hit >> b) & 1u)) seen[index[b] / size_t(kPerSource)] += 1.0f / float(kPerSource);
           traced += m;
           m = 0;
         };
@@ -602,21 +607,20 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         const uint32_t firstSample =
             (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
         for (const uint32_t i : sourceOrder) {
-          const Frame& f = frames[i];
+          const SourceFrame& f = frames[i];
           for (int k = 0; k < kPerSource; ++k) {
             // The point's own sequence of draws, one per (source, direction).
-            const uint32_t sample = firstSample + i * kPerSource + uint32_t(k);
-            const float a = (float(k & 1) + float(hash01(2 * sample))) * 0.5f - 0.5f;
-            const float b = (float(k >> 1) + float(hash01(2 * sample + 1))) * 0.5f - 0.5f;
-            const glm::vec3 d = glm::normalize(f.centre + 2.0f * a * f.halfLat * f.north +
-                                               2.0f * b * f.halfLon * f.east);
+            const uint32_t sample = firstSample + i * uint32_t(kPerSource) + uint32_t(k);
+            const float a = (float(k % cols) + float(hash01(2 * sample))) / float(cols) - 0.5f;
+            const float b = (float(k / cols) + float(hash01(2 * sample + 1))) / float(rows) - 0.5f;
+            const glm::vec3 d = f.direction(a, b);
             if (glm::dot(n, d) <= 0.0f) continue;  // below the horizon: no light anyway
             if (outside && glm::dot(d, axis) < cosCone) {
-              seen[i] += 1.0f / kPerSource;  // cannot meet the object
+              seen[i] += 1.0f / float(kPerSource);  // cannot meet the object
               continue;
             }
             batch[m] = d;
-            index[m] = i * kPerSource + size_t(k);
+            index[m] = i * size_t(kPerSource) + size_t(k);
             if (++m == 16) flush();
           }
         }
@@ -672,6 +676,10 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
   VertexIrradiance out;
   out.shadowed.resize(count);
   out.unshadowed.resize(count);
+  if (withSources && method != ShadowMethod::AmbientOcclusion) {
+    out.sourceCount = in.sources.size();
+    out.sourceSeen.resize(count * in.sources.size());
+  }
   std::atomic<int> clamped{0};
   parallelFor(
       0, int64_t(count),
@@ -726,10 +734,14 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
         }
         if (withSources && method != ShadowMethod::AmbientOcclusion) {
           const float* seen = in.sourceVisibility->visible.data() + v * in.sources.size();
+          uint8_t* seen255 = out.sourceSeen.data() + v * in.sources.size();
           for (size_t i = 0; i < in.sources.size(); ++i) {
-            if (seen[i] <= 0.0f) continue;
             const float c = glm::dot(nEnv, in.sources[i].direction);
-            if (c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
+            seen255[i] =
+                c > 0.0f
+                    ? uint8_t(std::lround(std::clamp(seen[i], 0.0f, 1.0f) * float(kSourceSeenFull)))
+                    : kSourceBelowHorizon;
+            if (seen[i] > 0.0f && c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
           }
         }
         // Truncation can ring below 0 or above the unshadowed value: light is never negative and

@@ -134,9 +134,11 @@ enum class ShadowMethod {
 const char* shadowMethodName(ShadowMethod method);
 
 // How much of each bright source (lighting/sources.h) each point sees: visible[p·count + i] in
-// [0, 1] for source i. Rays go from the point, lifted as in computeTransfer, to 2 x 2 directions
-// across the source's extent (its block of texels, stratified and jittered per point), turned
-// into the object's frame, so that a source's shadow has a penumbra rather than one hard edge.
+// [0, 1] for source i. Rays go from the point, lifted as in computeTransfer, to `raysPerSource`
+// (1, 2 or 4: 1 x 1, 2 x 1 or 2 x 2) directions across the source's extent (its block of texels,
+// stratified and jittered per point), turned into the object's frame, so that a source's shadow
+// has a penumbra rather than one hard edge. (The object's own points take one: the renderer
+// traces the sources again wherever the points around a hit disagree, renderer.h.)
 // From a point outside the object's bounding sphere, a source outside the sphere's cone is seen
 // without a ray. Every other source is traced: the visibility pass' one ray per cell can miss a
 // thin occluder (a leg, a handle) that a small bright source's shadow must still show.
@@ -148,7 +150,19 @@ struct SourceVisibility {
 class EmbreeScene;
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& objectScene,
                               const std::vector<lighting::LightSource>& sources,
-                              const glm::mat3& envFromObject);
+                              const glm::mat3& envFromObject, int raysPerSource = 4);
+
+// A bright source's extent in the object's frame, for tracing its shadow across it: the
+// direction at (a, b) in [-1/2, 1/2]² of its latitude/longitude block.
+struct SourceFrame {
+  glm::vec3 centre, east, north;  // object space
+  float halfLat = 0.0f, halfLon = 0.0f;
+  glm::vec3 direction(float a, float b) const {
+    return glm::normalize(centre + 2.0f * a * halfLat * north + 2.0f * b * halfLon * east);
+  }
+};
+std::vector<SourceFrame> sourceFrames(const std::vector<lighting::LightSource>& sources,
+                                      const glm::mat3& envFromObject);
 
 // What shading with self-shadowing needs besides the mesh.
 struct ShadowInputs {
@@ -169,7 +183,14 @@ struct ShadowInputs {
 struct VertexIrradiance {
   std::vector<glm::vec3> shadowed, unshadowed;
   int clamped = 0;  // vertices whose shadowed irradiance left [0, unshadowed] by more than 0.1 %
+  // With bright sources (not for ambient occlusion): how much of each source each point sees,
+  // in kSourceSeenFull-ths, or kSourceBelowHorizon where the source is below the point's horizon
+  // (sourceSeen[p·sourceCount + i]), so that the renderer can tell where a source's shadow edge
+  // crosses a triangle and trace the source there (renderer.h).
+  size_t sourceCount = 0;
+  std::vector<uint8_t> sourceSeen;
 };
+inline constexpr uint8_t kSourceSeenFull = 254, kSourceBelowHorizon = 255;
 
 // `envFromObject` is the rotation from the mesh's coordinates to the environment's; it must be a
 // turn about +Y (placement yaw and environment yaw), so that the transfer's frames apply. Throws

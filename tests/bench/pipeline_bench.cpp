@@ -322,6 +322,7 @@ int childRender(const fs::path& cache, int repeat) {
       settings.points = &shadows.points;
       settings.shadows = &shadows.irradiance;
       settings.occlusion = &shadows.occlusion;
+      settings.sources = &shadows.sources;
       t = bench::Clock::now();
       out = render::renderDiffuse(mesh, scene, worldFromObject, camera, *lighting, settings);
       draw.push_back(bench::secondsSince(t));

@@ -12,6 +12,7 @@
 #include "lighting/sh.h"
 #include "lighting/sources.h"
 #include "render/embree_scene.h"
+#include "render/renderer.h"
 #include "test_util.h"
 
 namespace compose::render {
@@ -266,6 +267,116 @@ TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
       }
     }
   }
+}
+
+// A low sun's shadow crossing large triangles. The floor is two triangles with points at its four
+// corners only, so interpolating between points smears the wall's shadow over the whole floor;
+// the renderer must trace the sun from each hit where the corners disagree. The reference is the
+// same shading computed at surface points placed at the pixels themselves.
+TEST(SourceEdges, ASunShadowsEdgeIsTracedAtThePixelNotInterpolated) {
+  const Mesh mesh = floorAndWall(2);
+  const EmbreeScene scene(mesh.positions, mesh.indices);
+  const SurfacePoints points = surfacePoints(mesh, 10.0f);  // the corners only
+  ASSERT_EQ(points.count(), mesh.positions.size());
+  // A small sun in a dim sky: the sun's shadow is what is measured.
+  Image img(256, 128, 3);
+  const auto probe = lighting::Environment::constant(glm::vec3(0.0f), 256);
+  const glm::vec3 toSun = glm::normalize(glm::vec3(-1.0f, 0.5f, 0.3f));
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 256; ++x) {
+      const glm::vec3 d = probe.direction(x, y);
+      const float L = glm::dot(d, toSun) > 0.9995f ? 2000.0f : d.y > 0.0f ? 0.05f : 0.0f;
+      img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = L;
+    }
+  const lighting::Environment env = lighting::Environment::fromLatLong(img);
+  const lighting::SourceSplit split = lighting::splitBrightSources(env, 16);
+  ASSERT_GT(split.sourceShare, 0.9);
+  lighting::ChebParams cp;
+  cp.order = 8;
+  cp.samples = 16;
+  lighting::ChebLocalLighting residual(cp), whole(cp);
+  residual.project(split.residual);
+  whole.project(env);
+  TransferParams params;
+  params.grid = 16;
+  params.order = 8;
+  const glm::mat3 envFromObject(1.0f);  // the placement below turns nothing
+  auto shade = [&](const SurfacePoints& at, int raysPerSource) {
+    const VertexTransfer transfer = computeTransfer(mesh, at, params);
+    const SourceVisibility seen =
+        traceSources(at, scene, split.sources, envFromObject, raysPerSource);
+    ShadowInputs in;
+    in.transfer = &transfer;
+    in.shadowLighting = &residual;
+    in.sources = split.sources;
+    in.sourceVisibility = &seen;
+    return shadeVertices(at, envFromObject, in);
+  };
+  const VertexIrradiance atPoints = shade(points, 1);
+
+  calib::CameraOptions high;
+  high.height = 3.0;
+  high.pitchDegrees = 50.0;
+  const calib::PlateCamera camera = calib::plateCamera(160, 120, {}, high);
+  calib::Placement place;
+  place.imagePoint = {0.5, 0.5};
+  place.heightFraction = 0.25;
+  const glm::dmat4 worldFromObject = calib::placeOnGround(
+      camera, place, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+  RenderSettings settings;
+  settings.samplesPerAxis = 1;
+  settings.jitter = false;
+  settings.points = &points;
+  settings.shadows = &atPoints;
+  const RenderOutput interpolated =
+      renderDiffuse(mesh, scene, worldFromObject, camera, whole, settings);
+  settings.sources = &split.sources;
+  const RenderOutput traced = renderDiffuse(mesh, scene, worldFromObject, camera, whole, settings);
+  EXPECT_GT(traced.rays, interpolated.rays) << "the sun is traced where its shadow's edge passes";
+
+  // The floor's pixels, and the same shading at points placed where they are.
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  SurfacePoints atPixels;
+  atPixels.size = points.size;
+  atPixels.centre = points.centre;
+  atPixels.radius = points.radius;
+  std::vector<std::pair<int, int>> floorPixels;
+  for (int y = 0; y < traced.aovs.height; ++y)
+    for (int x = 0; x < traced.aovs.width; ++x) {
+      const float* a = traced.aovs.at(x, y);
+      if (traced.beauty.at(x, y)[3] < 1.0f || a[1] < 0.999f) continue;  // N.Y: the floor
+      const glm::dvec3 p(a[3], a[4], a[5]);
+      atPixels.positions.push_back(glm::vec3(objectFromWorld * glm::dvec4(p, 1.0)));
+      atPixels.normals.emplace_back(0.0f, 1.0f, 0.0f);
+      floorPixels.emplace_back(x, y);
+    }
+  ASSERT_GT(floorPixels.size(), 500u);
+  const VertexIrradiance reference = shade(atPixels, 4);
+  auto snr = [&](const RenderOutput& out, int& misjudged) {
+    double s = 0.0, e = 0.0;
+    misjudged = 0;
+    for (size_t i = 0; i < floorPixels.size(); ++i) {
+      const float* a = out.aovs.at(floorPixels[i].first, floorPixels[i].second);
+      const double got = a[14], want = reference.shadowed[i].y;  // irradianceShadowed.G
+      s += want * want;
+      e += (got - want) * (got - want);
+      // In the sun or in the wall's shadow, by more than half the difference between the two.
+      const double sun = reference.unshadowed[i].y - 0.5 * (reference.unshadowed[i].y - want);
+      misjudged += (got > sun) != (want > sun) && std::abs(got - want) > 0.25 * want;
+    }
+    return 10.0 * std::log10(s / e);
+  };
+  int wrongInterpolated = 0, wrongTraced = 0;
+  const double interpolatedDb = snr(interpolated, wrongInterpolated);
+  const double tracedDb = snr(traced, wrongTraced);
+  std::printf(
+      "floor pixels %zu: interpolated %.1f dB (%d misjudged), traced at edges %.1f dB "
+      "(%d misjudged)\n",
+      floorPixels.size(), interpolatedDb, wrongInterpolated, tracedDb, wrongTraced);
+  EXPECT_GT(tracedDb, interpolatedDb + 6.0);
+  EXPECT_GT(tracedDb, 25.0);
+  EXPECT_LT(wrongTraced, int(floorPixels.size() / 50));
+  EXPECT_GT(wrongInterpolated, 10 * wrongTraced + 10) << "the test can tell";
 }
 
 TEST(Transfer, ParametersAreValidated) {
