@@ -381,14 +381,19 @@ class ShadowsStage final : public Stage {
                       l.halfLatitude <= 4.0f && l.halfLongitude >= 0.0f && l.halfLongitude <= 4.0f;
       if (!ok) return false;
     }
+    // Each point's 64 bits of sources seen, in four 16-bit parts (exact in a float).
     const std::span<const float> seen = cache.get("sourceSeen");
-    if (seen.size() != n * r.sources.size()) return false;
+    if (seen.size() != (r.sources.empty() ? 0 : 4 * n)) return false;
     r.irradiance.sourceCount = r.sources.size();
-    r.irradiance.sourceSeen.resize(seen.size());
+    r.irradiance.sourceSeen.assign(r.sources.empty() ? 0 : n, 0);
     for (size_t i = 0; i < seen.size(); ++i) {
-      if (!(seen[i] >= 0.0f && seen[i] <= 255.0f) || seen[i] != std::floor(seen[i])) return false;
-      r.irradiance.sourceSeen[i] = uint8_t(seen[i]);
+      if (!(seen[i] >= 0.0f && seen[i] <= 65535.0f) || seen[i] != std::floor(seen[i])) return false;
+      r.irradiance.sourceSeen[i / 4] |= uint64_t(seen[i]) << (16 * (i % 4));
     }
+    const uint64_t known =
+        r.sources.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << r.sources.size()) - 1;
+    for (const uint64_t bits : r.irradiance.sourceSeen)
+      if (bits & ~known) return false;  // a source that is not there
     ctx.artefacts.selfShadowing = std::move(r);
     return true;
   }
@@ -398,8 +403,11 @@ class ShadowsStage final : public Stage {
     cache.put("unshadowed", vec3sToFloats(r.irradiance.unshadowed));
     cache.put("occlusion", r.occlusion);
     cache.put("sources", sourcesToFloats(r.sources));
-    cache.put("sourceSeen",
-              std::vector<float>(r.irradiance.sourceSeen.begin(), r.irradiance.sourceSeen.end()));
+    std::vector<float> seen;
+    seen.reserve(4 * r.irradiance.sourceSeen.size());
+    for (const uint64_t bits : r.irradiance.sourceSeen)
+      for (int part = 0; part < 4; ++part) seen.push_back(float((bits >> (16 * part)) & 0xFFFFu));
+    cache.put("sourceSeen", seen);
     cache.meta()["clamped"] = r.irradiance.clamped;
     return cache.write();
   }

@@ -88,66 +88,36 @@ class SourceEdges {
   static bool wanted(const RenderSettings& settings) {
     return settings.shadows && settings.points && settings.sources && !settings.sources->empty() &&
            settings.shadows->sourceCount == settings.sources->size() &&
-           settings.shadows->sourceSeen.size() ==
-               settings.points->count() * settings.sources->size();
-  }
-
-  // The sources whose shadow edge crosses the small triangle of these three points: those the
-  // points see differently, leaving out a point where the source is below its horizon (its answer
-  // does not matter there). One bit per source. Consecutive samples mostly hit the same small
-  // triangle: `memo` keeps the last answer.
-  struct Memo {
-    uint32_t near[3] = {~0u, ~0u, ~0u};
-    uint64_t mask = 0;
-  };
-  uint64_t edgeMask(const uint32_t near[3], Memo& memo) const {
-    if (near[0] == memo.near[0] && near[1] == memo.near[1] && near[2] == memo.near[2])
-      return memo.mask;
-    const size_t count = sources_.size();
-    const uint8_t* a = vi_.sourceSeen.data() + size_t(near[0]) * count;
-    const uint8_t* b = vi_.sourceSeen.data() + size_t(near[1]) * count;
-    const uint8_t* c = vi_.sourceSeen.data() + size_t(near[2]) * count;
-    uint64_t mask = 0;
-    if (!std::equal(a, a + count, b) || !std::equal(a, a + count, c)) {
-      for (size_t i = 0; i < count; ++i) {
-        // Below the horizon counts as agreeing with anything: full for the least, 0 for the most.
-        auto low = [](uint8_t v) { return v == kSourceBelowHorizon ? kSourceSeenFull : v; };
-        auto high = [](uint8_t v) { return v == kSourceBelowHorizon ? uint8_t(0) : v; };
-        const uint8_t lo = std::min({low(a[i]), low(b[i]), low(c[i])});
-        const uint8_t hi = std::max({high(a[i]), high(b[i]), high(c[i])});
-        mask |= uint64_t(hi > lo) << i;
-      }
-    }
-    std::copy_n(near, 3, memo.near);
-    memo.mask = mask;
-    return mask;
+           settings.shadows->sourceSeen.size() == settings.points->count();
   }
 
   // The shadowed irradiance at a hit (object-space position `at`, shading normal `nObj` and its
-  // environment-frame twin `nEnv`, unshadowed irradiance `e` there), or false when no source's
-  // shadow edge that matters crosses the hit's small triangle (then the plain interpolated ratio
-  // applies). A source matters where the most its visibility could change the pixel is above
-  // 1/256 of the pixel's irradiance (less is below what an 8-bit display shows, and the
-  // interpolated ratio already holds it approximately).
+  // environment-frame twin `nEnv`, unshadowed irradiance `e` there), or false when no source
+  // needs tracing (then the plain interpolated ratio applies). A source whose edge crosses the
+  // triangle is traced only where it could change the pixel by more than 1/256 of its irradiance
+  // (less is below what an 8-bit display shows, and the interpolated ratio already holds it
+  // approximately).
   bool shade(const EmbreeScene& scene, const uint32_t near[3], const float weight[3],
              const glm::vec3& at, const glm::vec3& nObj, const glm::vec3& nEnv, const glm::vec3& e,
-             uint32_t seed, Memo& memo, glm::vec3& shadowed, int64_t& rays) const {
-    uint64_t mask = edgeMask(near, memo);
+             uint32_t seed, glm::vec3& shadowed, int64_t& rays) const {
+    // The sources the three points see differently: their shadow's edge (or their terminator)
+    // crosses the triangle.
+    const uint64_t* seen = vi_.sourceSeen.data();
+    uint64_t mask = (seen[near[0]] ^ seen[near[1]]) | (seen[near[0]] ^ seen[near[2]]);
     if (mask == 0) return false;
-    const size_t count = sources_.size();
     const float floor = (1.0f / 256.0f) * luminance(e);
-    int edges = 0;
-    uint32_t edge[lighting::kMaxSources];
-    float cosine[lighting::kMaxSources];
+    struct Taken {
+      uint32_t source;
+      float cosine, visible;
+    };
+    Taken taken[64];
+    int n = 0;
     for (; mask != 0; mask &= mask - 1) {
       const uint32_t i = uint32_t(std::countr_zero(mask));
-      const lighting::LightSource& source = sources_[i];
-      const float c = std::max(0.0f, glm::dot(nEnv, source.direction));
-      if (c * luminance(source.power) <= floor) continue;
-      cosine[edges] = c;
-      edge[edges++] = i;
+      const float c = std::max(0.0f, glm::dot(nEnv, sources_[i].direction));
+      if (c * luminance(sources_[i].power) > floor) taken[n++] = {i, c, 0.0f};
     }
-    if (edges == 0) return false;
+    if (n == 0) return false;
 
     // Those sources taken out of the interpolated ratio ...
     glm::vec3 sh(0.0f), un(0.0f);
@@ -155,16 +125,14 @@ class SourceEdges {
       sh += weight[q] * vi_.shadowed[near[q]];
       un += weight[q] * vi_.unshadowed[near[q]];
     }
-    glm::vec3 rest = e;
     for (int q = 0; q < 3; ++q) {
       const glm::vec3 corner = envFromObject_ * points_.normals[near[q]];
-      const uint8_t* seen = vi_.sourceSeen.data() + size_t(near[q]) * count;
-      for (int k = 0; k < edges; ++k) {
-        const lighting::LightSource& source = sources_[edge[k]];
-        if (seen[edge[k]] == kSourceBelowHorizon) continue;
-        const float cq = std::max(0.0f, glm::dot(corner, source.direction));
-        sh -= weight[q] * (float(seen[edge[k]]) * (1.0f / kSourceSeenFull)) * cq * source.power;
-        un -= weight[q] * cq * source.power;
+      for (int k = 0; k < n; ++k) {
+        const lighting::LightSource& source = sources_[taken[k].source];
+        const glm::vec3 light =
+            (weight[q] * std::max(0.0f, glm::dot(corner, source.direction))) * source.power;
+        if ((seen[near[q]] >> taken[k].source) & 1u) sh -= light;
+        un -= light;
       }
     }
     // ... and traced from the hit, across their extent.
@@ -172,17 +140,16 @@ class SourceEdges {
     glm::vec3 batch[16];
     int owner[16];
     int m = 0;
-    float visible[lighting::kMaxSources] = {};
     auto flush = [&] {
       const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear_);
       for (int b = 0; b < m; ++b)
-        if (!((hit >> b) & 1u)) visible[owner[b]] += 1.0f / float(raysPerSample_);
+        if (!((hit >> b) & 1u)) taken[owner[b]].visible += 1.0f / float(raysPerSample_);
       rays += m;
       m = 0;
     };
     const int side = raysPerSample_ >= 16 ? 4 : raysPerSample_ >= 4 ? 2 : 1;
-    for (int k = 0; k < edges; ++k) {
-      const uint32_t i = edge[k];
+    for (int k = 0; k < n; ++k) {
+      const uint32_t i = taken[k].source;
       for (int r = 0; r < raysPerSample_; ++r) {
         const uint32_t h = (seed * 0x9E3779B1u) ^ (i * 0x85EBCA77u) ^ (uint32_t(r) * 0xC2B2AE3Du);
         const float a = (float(r % side) + hash01(2 * h)) / float(side) - 0.5f;
@@ -195,16 +162,16 @@ class SourceEdges {
       }
     }
     if (m > 0) flush();
-    glm::vec3 traced(0.0f);
-    for (int k = 0; k < edges; ++k) {
-      const lighting::LightSource& source = sources_[edge[k]];
-      rest -= cosine[k] * source.power;
-      traced += visible[k] * cosine[k] * source.power;
+    glm::vec3 rest = e, direct(0.0f);
+    for (int k = 0; k < n; ++k) {
+      const lighting::LightSource& source = sources_[taken[k].source];
+      rest -= taken[k].cosine * source.power;
+      direct += taken[k].visible * taken[k].cosine * source.power;
     }
     rest = glm::max(rest, glm::vec3(0.0f));
     for (int c = 0; c < 3; ++c) {
       const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
-      shadowed[c] = rest[c] * ratio + traced[c];
+      shadowed[c] = rest[c] * ratio + direct[c];
     }
     return true;
   }
@@ -280,14 +247,13 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   std::atomic<int64_t> hitsTotal{0}, sourceRays{0};
   std::optional<SourceEdges> edges;
   if (SourceEdges::wanted(settings)) {
-    COMPOSE_CHECK(settings.sources->size() <= size_t(lighting::kMaxSources));
+    COMPOSE_CHECK(settings.sources->size() <= 64);  // one bit each
     edges.emplace(settings, worldFromObject);
   }
 
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
     int64_t rowHits = 0, rowSourceRays = 0;
-    SourceEdges::Memo memo;
     for (int x = out.x0; x < out.x1; ++x) {
       glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
           albedoSum(0.0f);
@@ -354,8 +320,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           if (edges && glm::dot(interpolated, interpolated) > 1e-12f &&
               edges->shade(scene, near, weight, oObj[b] + dObj[b] * hit.distance,
                            glm::normalize(backFace ? -interpolated : interpolated),
-                           settings.envFromWorld * nrm, e, sampleSeed, memo, shadowedE,
-                           rowSourceRays)) {
+                           settings.envFromWorld * nrm, e, sampleSeed, shadowedE, rowSourceRays)) {
             // A source's shadow edge crosses the triangle: traced from the hit.
           } else if (settings.shadows) {
             const VertexIrradiance& vi = *settings.shadows;

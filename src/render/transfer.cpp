@@ -677,8 +677,9 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
   out.shadowed.resize(count);
   out.unshadowed.resize(count);
   if (withSources && method != ShadowMethod::AmbientOcclusion) {
+    COMPOSE_CHECK(in.sources.size() <= 64);
     out.sourceCount = in.sources.size();
-    out.sourceSeen.resize(count * in.sources.size());
+    out.sourceSeen.resize(count);
   }
   std::atomic<int> clamped{0};
   parallelFor(
@@ -734,15 +735,14 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
         }
         if (withSources && method != ShadowMethod::AmbientOcclusion) {
           const float* seen = in.sourceVisibility->visible.data() + v * in.sources.size();
-          uint8_t* seen255 = out.sourceSeen.data() + v * in.sources.size();
+          uint64_t bits = 0;
           for (size_t i = 0; i < in.sources.size(); ++i) {
+            bits |= uint64_t(seen[i] >= 0.5f) << i;
+            if (seen[i] <= 0.0f) continue;
             const float c = glm::dot(nEnv, in.sources[i].direction);
-            seen255[i] =
-                c > 0.0f
-                    ? uint8_t(std::lround(std::clamp(seen[i], 0.0f, 1.0f) * float(kSourceSeenFull)))
-                    : kSourceBelowHorizon;
-            if (seen[i] > 0.0f && c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
+            if (c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
           }
+          out.sourceSeen[v] = bits;
         }
         // Truncation can ring below 0 or above the unshadowed value: light is never negative and
         // visibility never adds light.

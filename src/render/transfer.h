@@ -183,14 +183,14 @@ struct ShadowInputs {
 struct VertexIrradiance {
   std::vector<glm::vec3> shadowed, unshadowed;
   int clamped = 0;  // vertices whose shadowed irradiance left [0, unshadowed] by more than 0.1 %
-  // With bright sources (not for ambient occlusion): how much of each source each point sees,
-  // in kSourceSeenFull-ths, or kSourceBelowHorizon where the source is below the point's horizon
-  // (sourceSeen[p·sourceCount + i]), so that the renderer can tell where a source's shadow edge
-  // crosses a triangle and trace the source there (renderer.h).
+  // With bright sources (not for ambient occlusion): which sources each point sees, bit i of
+  // sourceSeen[p] set when it sees at least half of source i (exactly what it sees when it
+  // traced one ray per source, as the object's points do), so that the renderer can tell where a
+  // source's shadow edge crosses a triangle and trace the source there (renderer.h). At most
+  // 64 sources (lighting::kMaxSources).
   size_t sourceCount = 0;
-  std::vector<uint8_t> sourceSeen;
+  std::vector<uint64_t> sourceSeen;
 };
-inline constexpr uint8_t kSourceSeenFull = 254, kSourceBelowHorizon = 255;
 
 // `envFromObject` is the rotation from the mesh's coordinates to the environment's; it must be a
 // turn about +Y (placement yaw and environment yaw), so that the transfer's frames apply. Throws

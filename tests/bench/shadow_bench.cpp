@@ -101,6 +101,7 @@ int main(int argc, char** argv) {
   int boundary = 2;
   float pointFraction = 1.0f / 96.0f;
   int grid = 16;
+  int sourceRays = 1;  // per point and source, as the pipeline traces them
   int normalRows = lighting::ChebParams{}.normalRows,
       normalCols = lighting::ChebParams{}.normalCols;
   for (int i = 1; i < argc; ++i) {
@@ -118,6 +119,8 @@ int main(int argc, char** argv) {
       boundary = std::atoi(argv[++i]);
     } else if (a == "--points" && i + 1 < argc) {
       pointFraction = float(std::atof(argv[++i]));
+    } else if (a == "--source-rays" && i + 1 < argc) {
+      sourceRays = std::atoi(argv[++i]);
     } else if (a == "--env" && i + 1 < argc) {
       onlyEnv = argv[++i];
     } else if (a == "--grid" && i + 1 < argc) {
@@ -179,7 +182,8 @@ int main(int argc, char** argv) {
       const lighting::Environment env = lighting::Environment::fromLatLong(img);
       lighting::ExactLighting exact;
       exact.project(env);
-      auto unshadowedLighting = lighting::createLighting("cheb-local");
+      auto unshadowedLighting = lighting::createLighting(
+          "cheb-local", ParamSet::parse(std::getenv("UNSH") ? std::getenv("UNSH") : "", "lighting"));
       unshadowedLighting->project(env);
       render::RenderSettings settings;
       settings.samplesPerAxis = 1;
@@ -295,7 +299,7 @@ int main(int argc, char** argv) {
       add("none", 0, false, 0, double(unshadowedLighting->floatsStored()), 0, 0, measure(plain));
 
       const render::SourceVisibility seen =
-          render::traceSources(points, scene, split.sources, envFromObject, 1);
+          render::traceSources(points, scene, split.sources, envFromObject, sourceRays);
       for (const bool withSources : {false, true}) {
         const lighting::Environment& shadowEnv = withSources ? split.residual : env;
         render::ShadowInputs in;
