@@ -4,7 +4,7 @@
 #
 #   samples/fetch.sh              fetch whatever is missing or corrupt
 #   samples/fetch.sh NAME|GROUP…  only these entries (names as in manifest.tsv,
-#                                 groups: hdr ocio models plates chessboard all)
+#                                 groups: hdr ocio models plates chessboard raw all)
 #   samples/fetch.sh --check      verify the cache only; non-zero if incomplete
 #   samples/fetch.sh --list       print the manifest names and groups
 #
@@ -31,6 +31,7 @@ group_of() {  # name -> group keyword
   case $1 in
     ocio/*)       echo ocio ;;
     chessboard/*) echo chessboard ;;
+    raw/*)        echo raw ;;
     *.exr)        echo hdr ;;
     *.obj|*.bez)  echo models ;;
     *)            echo plates ;;

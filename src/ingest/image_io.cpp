@@ -33,6 +33,18 @@ void useEveryCoreForExr() {
   OIIO::attribute("exr_threads", tbb::this_task_arena::max_concurrency());
 }
 
+// Opens an image for reading. A camera raw file is developed to linear light (OpenImageIO's raw
+// reader, LibRaw: the camera's white balance and colour matrix, no automatic brightening, Rec.709
+// primaries with a linear transfer), so that it comes back as scene-linear values, tagged
+// "linear": what merging brackets and compositing need, rather than a display rendering.
+std::unique_ptr<OIIO::ImageInput> openInput(const std::string& name,
+                                            OIIO::Filesystem::IOProxy* proxy = nullptr) {
+  OIIO::ImageSpec config;
+  config.attribute("raw:ColorSpace", "linear");
+  config.attribute("raw:auto_bright", 0);
+  return OIIO::ImageInput::open(name, &config, proxy);
+}
+
 std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* name) {
   const OIIO::ParamValue* p = spec.find_attribute(name);
   if (!p) return std::nullopt;
@@ -221,7 +233,7 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
   if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
   requireRegularFile(path, stage);
-  auto input = OIIO::ImageInput::open(path.string());
+  auto input = openInput(path.string());
   if (!input) {
     std::string why = OIIO::geterror();
     if (why.empty()) why = "unknown reason";
@@ -314,7 +326,7 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   requireRegularFile(path, stage);
 
   useEveryCoreForExr();
-  auto input = OIIO::ImageInput::open(path.string());
+  auto input = openInput(path.string());
   if (!input) {
     std::string why = OIIO::geterror();
     if (why.empty()) why = "unknown reason";
@@ -327,7 +339,7 @@ LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::
                                 const std::string& stage, const ReadOptions& options) {
   if (bytes.empty()) throw Error(stage, "image data is empty", name);
   OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
-  auto input = OIIO::ImageInput::open(name.string(), nullptr, &proxy);
+  auto input = openInput(name.string(), &proxy);
   if (!input) {
     std::string why = OIIO::geterror();
     if (why.empty()) why = "unknown reason";

@@ -1,7 +1,13 @@
 // compose-bench-shadows: self-shadowing accuracy against a ray-traced reference, with its cost,
 // for every transfer method, on real meshes in the sample environments (docs/design.md §10).
 //
-//   compose-bench-shadows [--out DIR] [--quick] [--pixels N] [--mesh bunny.obj]
+//   compose-bench-shadows [--out DIR] [--quick] [--pixels N] [--mesh bunny.obj] [--env forest]
+//                         [--boundary R] [--points FRACTION] [--grid S] [--normal-grid RxC]
+//                         [--source-rays 1|2|4]
+//
+// --grid sets s (the transfer's grid, and the largest k measured), --normal-grid the shadow
+// lighting's grid of normals, --source-rays the rays per surface point and bright source (the
+// renderer traces the sources again where the points around a hit disagree, as compose does).
 //
 // For each mesh (the Stanford bunny, Suzanne, the Newell teapot) the object is rendered alone at
 // 480x360, one sample per pixel at the pixel's centre, so that every pixel is shaded at one point
@@ -14,7 +20,9 @@
 // Methods: no shadows; ambient occlusion x irradiance; SH transfer (Sloan et al. 2002) with 9,
 // 16, 25, 49 and 81 coefficients; Chebyshev transfer with k = 1..16 on the 16x16 grid; both
 // transfers with and without the 64 brightest sources split off and shadowed by rays; and Monte
-// Carlo with visibility rays per pixel at several sample counts.
+// Carlo with visibility rays per pixel at several sample counts. Beside them, the default
+// Chebyshev transfer computed at the reference pixels themselves instead of interpolated between
+// surface points: what the points' spacing costs.
 //
 // Writes shadows.csv, shadows.md and one SVG plot per mesh (SNR against the floats stored per
 // vertex) into DIR (default out/bench), and prints the tables.
@@ -128,7 +136,11 @@ int main(int argc, char** argv) {
     } else if (a == "--normal-grid" && i + 1 < argc) {
       if (std::sscanf(argv[++i], "%dx%d", &normalRows, &normalCols) != 2) return 2;
     } else {
-      std::fprintf(stderr, "usage: %s [--out DIR] [--quick] [--pixels N] [--mesh FILE]\n", argv[0]);
+      std::fprintf(stderr,
+                   "usage: %s [--out DIR] [--quick] [--pixels N] [--mesh FILE] [--env NAME] "
+                   "[--boundary R] [--points FRACTION] [--grid S] [--normal-grid RxC] "
+                   "[--source-rays 1|2|4]\n",
+                   argv[0]);
       return 2;
     }
   }
@@ -182,8 +194,7 @@ int main(int argc, char** argv) {
       const lighting::Environment env = lighting::Environment::fromLatLong(img);
       lighting::ExactLighting exact;
       exact.project(env);
-      auto unshadowedLighting = lighting::createLighting(
-          "cheb-local", ParamSet::parse(std::getenv("UNSH") ? std::getenv("UNSH") : "", "lighting"));
+      auto unshadowedLighting = lighting::createLighting("cheb-local");
       unshadowedLighting->project(env);
       render::RenderSettings settings;
       settings.samplesPerAxis = 1;

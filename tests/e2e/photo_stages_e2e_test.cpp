@@ -3,9 +3,13 @@
 // status and no output.
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+
+#include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
 #include "ingest/image_io.h"
@@ -102,6 +106,62 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
     EXPECT_TRUE(fs::exists(dir / "one.exr"));
   }
+}
+
+// A real camera raw file (a Canon EOS 30D CR2 from Debian's rawtran-doc): its EXIF is read, and
+// it is developed to linear light, not to a display rendering.
+TEST_F(PhotoStages, ACameraRawFileIsReadWithItsExifAndDevelopedToLinearLight) {
+  const fs::path raw = pipeline::samplesDirectory() / "raw" / "IMG_5952.CR2";
+  ASSERT_TRUE(fs::exists(raw)) << "sample raw photo missing (samples/fetch.sh)";
+  const ingest::LoadedImage img = ingest::readImage(raw);
+  EXPECT_EQ(img.info.format, "raw");
+  EXPECT_EQ(img.info.camera(), "Canon EOS 30D");
+  ASSERT_TRUE(img.info.exposureTime && img.info.fNumber && img.info.iso);
+  EXPECT_NEAR(*img.info.exposureTime, 1.0 / 400.0, 1e-6);
+  EXPECT_NEAR(*img.info.fNumber, 22.0, 1e-4);
+  EXPECT_NEAR(*img.info.iso, 640.0, 1e-3);
+  EXPECT_EQ(img.image.width, 3522);
+  EXPECT_EQ(img.image.height, 2348);
+  ASSERT_EQ(img.image.channels, 3);
+  EXPECT_EQ(img.image.colorSpace, "linear");
+
+  // Linear light: the same file as OpenImageIO develops it by default (sRGB-encoded), decoded by
+  // the sRGB curve, gives the same values; the encoded values themselves do not.
+  auto plain = OIIO::ImageInput::open(raw.string());
+  ASSERT_TRUE(plain);
+  const OIIO::ImageSpec& spec = plain->spec();
+  std::vector<float> encoded(size_t(spec.width) * size_t(spec.height) * 3);
+  ASSERT_TRUE(plain->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, encoded.data()));
+  auto decode = [](double v) {
+    return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+  };
+  std::vector<double> decodedRatio, encodedRatio;
+  for (size_t i = 0; i < encoded.size(); i += 997) {
+    const double lin = img.image.pixels[i];
+    if (lin < 0.01 || encoded[i] > 0.98) continue;  // dark noise and clipped highlights
+    decodedRatio.push_back(decode(encoded[i]) / lin);
+    encodedRatio.push_back(encoded[i] / lin);
+  }
+  ASSERT_GT(decodedRatio.size(), 5000u);
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + ptrdiff_t(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  EXPECT_NEAR(median(decodedRatio), 1.0, 0.02);
+  EXPECT_GT(median(encodedRatio), 1.5) << "a display encoding would pass for linear";
+
+  // The commands take it as any photo: ingest prints its EXIF, color writes it in the working
+  // space.
+  TempDir dir;
+  const CommandRun r = compose("ingest " + q(raw), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("Canon EOS 30D"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1/400 s"), std::string::npos) << r.out;
+  const CommandRun c = compose("color " + q(raw) + " --out " + q(dir / "raw.exr"), dir);
+  ASSERT_EQ(c.status, 0) << c.err;
+  const ingest::LoadedImage exr = ingest::readImage(dir / "raw.exr");
+  EXPECT_EQ(exr.image.width, 3522);
+  EXPECT_EQ(exr.info.fileColorSpace, "ACEScg");
 }
 
 TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
