@@ -33,16 +33,15 @@ void useEveryCoreForExr() {
   OIIO::attribute("exr_threads", tbb::this_task_arena::max_concurrency());
 }
 
-// Opens an image for reading. A camera raw file is developed to linear light (OpenImageIO's raw
-// reader, LibRaw: the camera's white balance and colour matrix, no automatic brightening, Rec.709
-// primaries with a linear transfer), so that it comes back as scene-linear values, tagged
+// Opens an image file for reading. A camera raw file is developed to linear light (OpenImageIO's
+// raw reader, LibRaw: the camera's white balance and colour matrix, no automatic brightening,
+// Rec.709 primaries with a linear transfer), so that it comes back as scene-linear values, tagged
 // "linear": what merging brackets and compositing need, rather than a display rendering.
-std::unique_ptr<OIIO::ImageInput> openInput(const std::string& name,
-                                            OIIO::Filesystem::IOProxy* proxy = nullptr) {
+std::unique_ptr<OIIO::ImageInput> openInput(const std::string& name) {
   OIIO::ImageSpec config;
   config.attribute("raw:ColorSpace", "linear");
   config.attribute("raw:auto_bright", 0);
-  return OIIO::ImageInput::open(name, &config, proxy);
+  return OIIO::ImageInput::open(name, &config);
 }
 
 std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* name) {
@@ -339,7 +338,7 @@ LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::
                                 const std::string& stage, const ReadOptions& options) {
   if (bytes.empty()) throw Error(stage, "image data is empty", name);
   OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
-  auto input = openInput(name.string(), &proxy);
+  auto input = OIIO::ImageInput::open(name.string(), nullptr, &proxy);
   if (!input) {
     std::string why = OIIO::geterror();
     if (why.empty()) why = "unknown reason";
