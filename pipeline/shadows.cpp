@@ -1,6 +1,7 @@
 #include "pipeline/shadows.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include "core/error.h"
@@ -67,7 +68,11 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
     plan.lightingOrder = p.getInt("order", sh ? 4 : 16, "shadows");
     plan.transfer.boundaryRays = p.getInt("boundary", 2, "shadows");
     plan.sources = p.getInt("sources", 64, "shadows");
-    p.requireAllUsed("shadows", "--shadow-params (method, order, grid, boundary, sources)");
+    plan.refine.spread = float(p.getDouble("refine", plan.refine.spread, "shadows"));
+    plan.refine.budget = float(p.getDouble("refine-budget", plan.refine.budget, "shadows"));
+    p.requireAllUsed("shadows",
+                     "--shadow-params (method, order, grid, boundary, sources, refine, "
+                     "refine-budget)");
   } catch (const UsageError&) {
     throw;
   } catch (const Error& e) {
@@ -94,6 +99,7 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
         "shadows");
   }
   plan.transfer.validate();
+  plan.refine.validate();
   return plan;
 }
 
@@ -107,6 +113,13 @@ std::string ShadowPlan::describe() const {
   }
   if (sources > 0 && method != render::ShadowMethod::AmbientOcclusion)
     s += ", " + std::to_string(sources) + " bright sources by rays";
+  if (refine.spread > 0.0f) {
+    char line[120];
+    std::snprintf(line, sizeof line,
+                  ", points %dx finer where their ambient occlusion spans more than %.2g",
+                  refine.factor, double(refine.spread));
+    s += line;
+  }
   return s;
 }
 
@@ -179,25 +192,42 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
                                   const Progress& progress) {
   ShadowResult out;
   out.points = render::surfacePoints(mesh);
-  // The visibility pass, cached by the mesh's content and the parameters.
+  // The visibility pass, cached by the mesh's content and the parameters. The entry holds the
+  // transfer of every point, then the triangles' levels (the points refined where visibility
+  // changes fast, render/transfer.h).
   render::VertexTransfer transfer;
   const auto start = std::chrono::steady_clock::now();
   bool reused = false;
   Hash128 h;
   h.bytes(render::meshHash(mesh));
   h.bytes(plan.transfer.key());
+  h.bytes(plan.refine.key());
   h.word(uint32_t(out.points.count()));
   const std::string key = h.hex();
   const FloatCache cache(visibilityCacheFolder(cacheRoot), render::kTransferCacheMagic,
                          ".visibility");
-  const std::string description =
-      "transfer " + plan.transfer.key() + " points " + std::to_string(out.points.count());
+  const std::string description = "transfer " + plan.transfer.key() + " " + plan.refine.key() +
+                                  " points " + std::to_string(out.points.count());
+  const size_t triangles = mesh.triangleCount();
   if (!cacheRoot.empty()) {
     FloatCache::Read r = cache.read(key, description);
     std::string problem = r.problem;
     if (r.status == FloatCache::Read::Status::Hit) {
       const size_t values = r.values.size();
-      reused = transfer.importState(plan.transfer, out.points.count(), std::move(r.values));
+      std::vector<uint8_t> levels;
+      if (values >= triangles) {
+        levels.reserve(triangles);
+        for (size_t t = values - triangles; t < values; ++t) {
+          const float v = r.values[t];
+          levels.push_back(v >= 1.0f && v <= 32.0f && v == std::floor(v) ? uint8_t(v) : 0);
+        }
+      }
+      render::SurfacePoints refined = out.points;
+      if (levels.size() == triangles && render::restoreLevels(mesh, refined, levels)) {
+        r.values.resize(values - triangles);
+        reused = transfer.importState(plan.transfer, refined.count(), std::move(r.values));
+        if (reused) out.points = std::move(refined);
+      }
       if (!reused) problem = "does not fit the mesh (" + std::to_string(values) + " values)";
     }
     if (!problem.empty()) {
@@ -206,17 +236,22 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     }
   }
   if (!reused) {
-    transfer = render::computeTransfer(mesh, out.points, plan.transfer, progress);
-    char line[200];
+    const size_t base = out.points.count();
+    transfer =
+        render::computeRefinedTransfer(mesh, out.points, plan.transfer, plan.refine, progress);
+    char line[240];
     std::snprintf(line, sizeof line,
-                  "visibility pass at %zu points (%zu vertices): %lld rays (%.0f per point) in "
-                  "%.2f s",
-                  out.points.count(), mesh.positions.size(), static_cast<long long>(transfer.rays),
+                  "visibility pass at %zu points (%zu vertices, %zu more where visibility changes "
+                  "fast): %lld rays (%.0f per point) in %.2f s",
+                  out.points.count(), mesh.positions.size(), out.points.count() - base,
+                  static_cast<long long>(transfer.rays),
                   double(transfer.rays) / double(out.points.count()), seconds(start));
     out.reason = line;
     std::string problem;
     if (!cacheRoot.empty()) {
-      if (cache.store(key, description, transfer.exportState(), &problem)) {
+      std::vector<float> state = transfer.exportState();
+      for (const uint8_t level : out.points.level) state.push_back(float(level));
+      if (cache.store(key, description, state, &problem)) {
         out.reason += ", cached in " + cache.pathFor(key).string();
       } else {
         out.notes.push_back("the visibility pass was not cached (" + problem +

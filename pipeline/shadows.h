@@ -23,12 +23,15 @@ namespace compose::pipeline {
 
 // --shadow-params: method=cheb|sh|ao (cheb), order (cheb: k, 16; sh: bands, 4), grid (s, 16),
 // boundary (r, 2: r x r rays on the cells along a shadow's edge), sources (64: bright sources
-// split off and shadowed by exact rays, 0..64).
+// split off and shadowed by exact rays, 0..64), refine (0.35: triangles whose points' ambient
+// occlusion spans more get points 4x finer; 0: none) and refine-budget (1: at most as many new
+// points as there were).
 struct ShadowPlan {
   render::ShadowMethod method = render::ShadowMethod::Chebyshev;
   render::TransferParams transfer;
   int lightingOrder = 16;  // cheb: k; sh: bands
   int sources = 64;
+  render::RefineParams refine;  // refine (0.35: the spread), refine-budget (1: as many again)
 
   // Throws compose::UsageError (stage "shadows") naming the bad parameter; unknown ones list the
   // valid ones.

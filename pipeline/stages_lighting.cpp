@@ -317,7 +317,8 @@ class PrecomputeStage final : public Stage {
 
 class ShadowsStage final : public Stage {
  public:
-  static constexpr int kVersion = 2;  // 2: the sources' visibility per point kept
+  // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast.
+  static constexpr int kVersion = 3;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -363,6 +364,14 @@ class ShadowsStage final : public Stage {
   bool load(Context& ctx, StageCache& cache) const override {
     ShadowResult r;
     r.points = render::surfacePoints(ctx.mesh());
+    // The triangles' levels, as the visibility pass refined them.
+    const std::span<const float> stored = cache.get("levels");
+    std::vector<uint8_t> levels;
+    for (const float v : stored) {
+      if (!(v >= 1.0f && v <= 32.0f) || v != std::floor(v)) return false;
+      levels.push_back(uint8_t(v));
+    }
+    if (!render::restoreLevels(ctx.mesh(), r.points, levels)) return false;
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
     r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
     r.irradiance.clamped = int(wholeMember(cache.meta(), "clamped", 0).value_or(0));
@@ -402,6 +411,7 @@ class ShadowsStage final : public Stage {
     cache.put("shadowed", vec3sToFloats(r.irradiance.shadowed));
     cache.put("unshadowed", vec3sToFloats(r.irradiance.unshadowed));
     cache.put("occlusion", r.occlusion);
+    cache.put("levels", std::vector<float>(r.points.level.begin(), r.points.level.end()));
     cache.put("sources", sourcesToFloats(r.sources));
     std::vector<float> seen;
     seen.reserve(4 * r.irradiance.sourceSeen.size());

@@ -91,7 +91,7 @@ void ComposeOptions::addShadows(CLI::App& app, bool parameters) {
   if (parameters) {
     app.add_option("--shadow-params", job.shadowParams,
                    "Self-shadowing parameters as key=value,...: method=cheb|sh|ao, order, grid, "
-                   "boundary, sources");
+                   "boundary, sources, refine, refine-budget");
   }
   app.add_flag("--no-shadow", noShadow,
                "No shadow on the plate's ground (the object's own shadowing stays)");

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -75,6 +76,29 @@ void tangentFrame(const glm::dvec3& n, glm::dvec3& east, glm::dvec3& north) {
 
 double longitudeOf(const glm::dvec3& n) {
   return std::sqrt(n.x * n.x + n.z * n.z) > 1e-6 ? std::atan2(n.x, n.z) : 0.0;
+}
+
+// Gives triangle t a grid of L segments per edge (transfer.h): its own points (all but its
+// corners) appended, in rows of increasing j and, within a row, of increasing i.
+void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
+  out.level[t] = uint8_t(L);
+  out.first[t] = 0;
+  if (L == 1) return;
+  out.first[t] = uint32_t(out.positions.size());
+  const uint32_t* v = &mesh.indices[3 * t];
+  const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+  const glm::vec3 n[3] = {out.normals[v[0]], out.normals[v[1]], out.normals[v[2]]};
+  for (int j = 0; j <= L; ++j) {
+    for (int i = 0; i <= L - j; ++i) {
+      if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+      const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
+      out.positions.push_back(b0 * p[0] + b1 * p[1] + b2 * p[2]);
+      const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
+      const float len = glm::length(nn);
+      out.normals.push_back(len > 1e-12f ? nn / len
+                                         : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
+    }
+  }
 }
 
 }  // namespace
@@ -155,26 +179,102 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budg
   out.first.assign(triangles, 0);
   out.level.assign(triangles, 1);
   for (size_t t = 0; t < triangles; ++t) {
-    const uint32_t* v = &mesh.indices[3 * t];
-    const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
-    const int L = levelFor(longestEdge[t], maxEdge);
-    out.level[t] = uint8_t(L);
-    if (L == 1) continue;
-    out.first[t] = uint32_t(out.positions.size());
-    const glm::vec3 n[3] = {out.normals[v[0]], out.normals[v[1]], out.normals[v[2]]};
-    for (int j = 0; j <= L; ++j) {
-      for (int i = 0; i <= L - j; ++i) {
-        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
-        const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
-        out.positions.push_back(b0 * p[0] + b1 * p[1] + b2 * p[2]);
-        const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
-        const float len = glm::length(nn);
-        out.normals.push_back(len > 1e-12f ? nn / len
-                                           : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
-      }
-    }
+    appendGrid(mesh, out, t, levelFor(longestEdge[t], maxEdge));
   }
   return out;
+}
+
+void RefineParams::validate() const {
+  auto fail = [](const std::string& what) { throw UsageError(what, "shadows"); };
+  if (!(spread >= 0.0f && spread <= 1.0f))
+    fail("refine (the ambient occlusion spread that refines a triangle) must be in 0..1, got " +
+         std::to_string(spread));
+  if (!(budget >= 0.0f && budget <= 16.0f))
+    fail("refine budget must be in 0..16 (times the points), got " + std::to_string(budget));
+  if (factor < 2 || factor > 32)
+    fail("refine factor must be in 2..32, got " + std::to_string(factor));
+}
+
+std::string RefineParams::key() const {
+  if (spread <= 0.0f) return "refine=off";
+  char text[96];
+  std::snprintf(text, sizeof text, "refine=%.9g budget=%.9g factor=%d", double(spread),
+                double(budget), factor);
+  return text;
+}
+
+size_t refineSurfacePoints(const Mesh& mesh, SurfacePoints& points, const std::vector<float>& ao,
+                           const RefineParams& params) {
+  params.validate();
+  COMPOSE_CHECK(ao.size() == points.count());
+  const size_t first = points.count();
+  if (params.spread <= 0.0f) return first;
+  const size_t triangles = mesh.triangleCount();
+  std::vector<std::pair<float, uint32_t>> wide;  // (spread, triangle)
+  for (size_t t = 0; t < triangles; ++t) {
+    const int L = points.level[t];
+    if (L >= 32) continue;
+    float lo = 1.0f, hi = 0.0f;
+    auto take = [&](size_t p) {
+      lo = std::min(lo, ao[p]);
+      hi = std::max(hi, ao[p]);
+    };
+    for (int c = 0; c < 3; ++c) take(mesh.indices[3 * t + size_t(c)]);
+    if (L > 1) {
+      const size_t own = size_t((L + 1) * (L + 2) / 2 - 3);
+      for (size_t i = 0; i < own; ++i) take(points.first[t] + i);
+    }
+    if (hi - lo > params.spread) wide.push_back({hi - lo, uint32_t(t)});
+  }
+  // Those that span most first (ties by triangle, for a result that does not depend on sorting).
+  std::sort(wide.begin(), wide.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  const size_t budget = size_t(double(params.budget) * double(first));
+  size_t added = 0;
+  for (const auto& [spread, t] : wide) {
+    const int L = std::min(32, points.level[t] * params.factor);
+    const size_t more = size_t((L + 1) * (L + 2) / 2 - 3);
+    if (added + more > budget) continue;  // a smaller one may still fit
+    appendGrid(mesh, points, t, L);
+    added += more;
+  }
+  return first;
+}
+
+bool restoreLevels(const Mesh& mesh, SurfacePoints& points, const std::vector<uint8_t>& levels) {
+  const size_t triangles = mesh.triangleCount();
+  if (levels.size() != triangles) return false;
+  for (size_t t = 0; t < triangles; ++t)
+    if (levels[t] < points.level[t] || levels[t] > 32) return false;
+  for (size_t t = 0; t < triangles; ++t)
+    if (levels[t] != points.level[t]) appendGrid(mesh, points, t, levels[t]);
+  return true;
+}
+
+void VertexTransfer::append(const VertexTransfer& more) {
+  COMPOSE_CHECK(more.params.key() == params.key());
+  cheb.insert(cheb.end(), more.cheb.begin(), more.cheb.end());
+  sh.insert(sh.end(), more.sh.begin(), more.sh.end());
+  ao.insert(ao.end(), more.ao.begin(), more.ao.end());
+  vertexCount += more.vertexCount;
+  rays += more.rays;
+}
+
+VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
+                                      const TransferParams& params, const RefineParams& refine,
+                                      const Progress& progress) {
+  VertexTransfer transfer = computeTransfer(mesh, points, params, progress);
+  const size_t first = refineSurfacePoints(mesh, points, transfer.ao, refine);
+  if (first == points.count()) return transfer;
+  SurfacePoints extra;
+  extra.size = points.size;
+  extra.centre = points.centre;
+  extra.radius = points.radius;
+  extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
+  extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
+  transfer.append(computeTransfer(mesh, extra, params, progress));
+  return transfer;
 }
 
 void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],

@@ -92,6 +92,29 @@ struct SurfacePoints {
 SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 96.0f,
                             size_t budget = 80000);
 
+// Where the visibility changes fast across a triangle (the rim of an eye socket, where a handle
+// enters a body), interpolating linearly between its points blurs and facets the shadow. So
+// after a first visibility pass the triangles whose points' ambient occlusion spans more than
+// `spread` get a grid `factor` times finer (at most 32 segments per edge), those that span most
+// first, until the new points reach `budget` times the points there were.
+struct RefineParams {
+  float spread = 0.35f;  // 0: no refinement
+  float budget = 1.0f;
+  int factor = 4;
+  void validate() const;  // compose::UsageError (stage "shadows")
+  std::string key() const;
+};
+// Raises the levels of the triangles to refine (from each point's ambient occlusion `ao`, one per
+// point) and appends their new grid points; returns the index of the first new point (count()
+// when none). Their old grid points stay, unused.
+size_t refineSurfacePoints(const Mesh& mesh, SurfacePoints& points, const std::vector<float>& ao,
+                           const RefineParams& params);
+// Gives each triangle the level `levels` holds (one per triangle, as refineSurfacePoints left
+// them, read back from a cache), appending grid points in the same order; false (points
+// unchanged) if the levels do not fit: their count, a level outside 1..32, or one below the
+// triangle's own.
+bool restoreLevels(const Mesh& mesh, SurfacePoints& points, const std::vector<uint8_t>& levels);
+
 // Per-point transfer of a mesh, in the mesh's own (object) coordinates.
 struct VertexTransfer {
   TransferParams params;
@@ -102,6 +125,8 @@ struct VertexTransfer {
   int64_t rays = 0;
 
   size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
+  // Appends the transfer of more points (computed with the same parameters).
+  void append(const VertexTransfer& more);
   // Plain floats for the on-disk cache, and back (taking `in`'s storage); false if `in` does not
   // fit these parameters.
   std::vector<float> exportState() const;
@@ -110,12 +135,17 @@ struct VertexTransfer {
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS4";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS5";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal.
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress = {});
+// The visibility pass, then refineSurfacePoints() and the pass again at the new points: `points`
+// gets them, the transfer covers them all.
+VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
+                                      const TransferParams& params, const RefineParams& refine,
+                                      const Progress& progress = {});
 
 // True when the mesh is closed and convex: every edge joins exactly two triangles and no
 // triangle's far corner lies above its neighbour's plane. A convex solid cannot shadow itself,

@@ -108,6 +108,8 @@ int main(int argc, char** argv) {
   std::string onlyMesh, onlyEnv;
   int boundary = 2;
   float pointFraction = 1.0f / 96.0f;
+  size_t pointBudget = 80000;
+  render::RefineParams refine;
   int grid = 16;
   int sourceRays = 1;  // per point and source, as the pipeline traces them
   int normalRows = lighting::ChebParams{}.normalRows,
@@ -127,6 +129,12 @@ int main(int argc, char** argv) {
       boundary = std::atoi(argv[++i]);
     } else if (a == "--points" && i + 1 < argc) {
       pointFraction = float(std::atof(argv[++i]));
+    } else if (a == "--refine" && i + 1 < argc) {
+      refine.spread = float(std::atof(argv[++i]));
+    } else if (a == "--refine-budget" && i + 1 < argc) {
+      refine.budget = float(std::atof(argv[++i]));
+    } else if (a == "--point-budget" && i + 1 < argc) {
+      pointBudget = size_t(std::atoll(argv[++i]));
     } else if (a == "--source-rays" && i + 1 < argc) {
       sourceRays = std::atoi(argv[++i]);
     } else if (a == "--env" && i + 1 < argc) {
@@ -166,15 +174,18 @@ int main(int argc, char** argv) {
     tp.shBands = 8;
     tp.boundaryRays = boundary;
     const auto t0 = bench::Clock::now();
-    const render::SurfacePoints points = render::surfacePoints(mesh, pointFraction);
-    const render::VertexTransfer transfer = render::computeTransfer(mesh, points, tp);
+    render::SurfacePoints points = render::surfacePoints(mesh, pointFraction, pointBudget);
+    const size_t basePoints = points.count();
+    const render::VertexTransfer transfer =
+        render::computeRefinedTransfer(mesh, points, tp, refine);
     const double transferS = bench::secondsSince(t0);
-    notes.push_back(std::string(meshName) + ": " + std::to_string(mesh.positions.size()) +
-                    " vertices, " + std::to_string(mesh.triangleCount()) + " triangles, " +
-                    std::to_string(points.count()) + " surface points; visibility pass " +
-                    fmt("%.2f", transferS) + " s, " + std::to_string(transfer.rays) + " rays (" +
-                    fmt("%.0f", double(transfer.rays) / double(points.count())) +
-                    " per point, 2 cores)");
+    notes.push_back(
+        std::string(meshName) + ": " + std::to_string(mesh.positions.size()) + " vertices, " +
+        std::to_string(mesh.triangleCount()) + " triangles, " + std::to_string(basePoints) +
+        " surface points (" + std::to_string(points.count() - basePoints) + " more where " +
+        refine.key() + "); visibility pass " + fmt("%.2f", transferS) + " s, " +
+        std::to_string(transfer.rays) + " rays (" +
+        fmt("%.0f", double(transfer.rays) / double(points.count())) + " per point, 2 cores)");
     std::printf("%s\n", notes.back().c_str());
 
     // The object alone, large in a 480x360 frame, turned 30 degrees.

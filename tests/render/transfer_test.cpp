@@ -379,6 +379,89 @@ TEST(SourceEdges, ASunShadowsEdgeIsTracedAtThePixelNotInterpolated) {
   EXPECT_GT(wrongInterpolated, 10 * wrongTraced + 10) << "the test can tell";
 }
 
+// A coarse floor (two triangles, points at its corners) that a box goes through: one floor
+// corner is inside the box and sees nothing, the others see the sky. Interpolating between the
+// corners smears that darkness over the floor; refined, the floor's points follow the box.
+TEST(SurfacePoints, RefinedWhereVisibilityChangesAcrossATriangle) {
+  Mesh mesh;
+  mesh.positions = {{-1, 0, -1}, {1, 0, -1}, {-1, 0, 1}, {1, 0, 1}};
+  mesh.normals.assign(4, glm::vec3(0, 1, 0));
+  mesh.indices = {0, 2, 1, 1, 2, 3};
+  addBox(mesh, {0.7f, -0.5f, 0.7f}, {1.3f, 0.4f, 1.3f});  // around the corner (1, 0, 1)
+  mesh.normalsFromFile = true;
+  TransferParams params;
+  params.grid = 8;
+  params.order = 4;
+  params.shBands = 0;
+  SurfacePoints points = surfacePoints(mesh, 10.0f);  // the corners only
+  const size_t base = points.count();
+  const SurfacePoints unrefined = points;
+  RefineParams refine;
+  const VertexTransfer transfer = computeRefinedTransfer(mesh, points, params, refine);
+  ASSERT_EQ(transfer.vertexCount, points.count());
+  EXPECT_EQ(points.level[1], 4) << "the triangle with the corner in the box";
+  EXPECT_EQ(points.level[0], 1) << "the other one's corners all see the sky";
+  EXPECT_EQ(points.count(), base + size_t(5 * 6 / 2 - 3));
+  // The levels alone (as a cache keeps them) give the same points.
+  SurfacePoints restored = unrefined;
+  ASSERT_TRUE(restoreLevels(mesh, restored, points.level));
+  EXPECT_EQ(restored.positions, points.positions);
+  EXPECT_EQ(restored.normals, points.normals);
+  std::vector<uint8_t> bad = points.level;
+  bad[1] = 33;
+  SurfacePoints untouched = unrefined;
+  EXPECT_FALSE(restoreLevels(mesh, untouched, bad));
+  bad[1] = 0;
+  EXPECT_FALSE(restoreLevels(mesh, untouched, bad)) << "below the triangle's own level";
+  EXPECT_FALSE(restoreLevels(mesh, untouched, {1, 4})) << "one level per triangle";
+  EXPECT_EQ(untouched.count(), base);
+
+  // Ambient occlusion on the open floor of that triangle, interpolated between its points,
+  // against the same pass at those spots.
+  SurfacePoints spots;
+  spots.size = points.size, spots.centre = points.centre, spots.radius = points.radius;
+  std::vector<glm::vec3> bary;
+  for (float u = 0.05f; u < 1.0f; u += 0.1f)
+    for (float v = 0.05f; u + v < 1.0f; v += 0.1f) {
+      const glm::vec3 p =
+          (1 - u - v) * mesh.positions[1] + u * mesh.positions[2] + v * mesh.positions[3];
+      if (p.x > 0.69f && p.z > 0.69f) continue;  // inside the box
+      spots.positions.push_back(p);
+      spots.normals.emplace_back(0, 1, 0);
+      bary.emplace_back(1 - u - v, u, v);
+    }
+  ASSERT_GT(spots.count(), 30u);
+  const VertexTransfer truth = computeTransfer(mesh, spots, params);
+  const VertexTransfer coarse = computeTransfer(mesh, unrefined, params);
+  auto error = [&](const SurfacePoints& at, const std::vector<float>& ao) {
+    double sum = 0.0;
+    for (size_t i = 0; i < spots.count(); ++i) {
+      uint32_t idx[3];
+      float w[3];
+      at.locate(mesh, 1, bary[i].y, bary[i].z, idx, w);
+      const double got = w[0] * ao[idx[0]] + w[1] * ao[idx[1]] + w[2] * ao[idx[2]];
+      sum += std::abs(got - truth.ao[i]);
+    }
+    return sum / double(spots.count());
+  };
+  const double before = error(unrefined, coarse.ao), after = error(points, transfer.ao);
+  std::printf(
+      "mean ambient occlusion error on the floor: %.3f interpolated between corners, "
+      "%.3f refined\n",
+      before, after);
+  EXPECT_GT(before, 0.1);
+  EXPECT_LT(after, 0.5 * before);
+
+  // Off: nothing changes.
+  SurfacePoints same = unrefined;
+  refine.spread = 0.0f;
+  EXPECT_EQ(computeRefinedTransfer(mesh, same, params, refine).vertexCount, base);
+  EXPECT_EQ(same.count(), base);
+  RefineParams wrong;
+  wrong.spread = 2.0f;
+  COMPOSE_EXPECT_ERROR(wrong.validate(), "refine");
+}
+
 TEST(Transfer, ParametersAreValidated) {
   TransferParams p;
   p.order = 20;
