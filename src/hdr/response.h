@@ -71,7 +71,10 @@ struct RecoveryParams {
   int maxIterations = 30;   // Robertson
   double threshold = 0.01;  // Robertson: convergence threshold
   int maxPixels = 1 << 20;  // Robertson: views are subsampled (nearest) to about this many pixels
-  void validate() const;    // compose::Error (stage "merge")
+  // The ends of the range (codes up to 32, from 224) refitted by regressing the code on the light
+  // that the trusted middle of the next shot says the pixel got (response.cpp, refineEnds).
+  bool refineEnds = true;
+  void validate() const;  // compose::Error (stage "merge")
 };
 
 // 8-bit RGB codes of an image, interleaved, row-major: what an 8-bit file holds. The codes are
@@ -102,8 +105,10 @@ struct BracketCodes {
 // fix the curve up to a ripple that repeats with that ratio (any such ripple is absorbed by the
 // unknown radiances); Debevec's smoothness term chooses among them, and noise excites it.
 // Patch selection (see response.cpp) keeps that ripple near 1 % RMS on the virtual camera's
-// photos; the ends of the range (codes below 10, above 240), which few patches reach, can be off
-// by more. Merged radiance is much less sensitive: those codes carry little weight.
+// photos; the ends of the range (codes below 10, above 240), which few patches reach, are then
+// refitted from the adjacent shot (RecoveryParams::refineEnds): 2.9-12.4 % largest deviation
+// there, against 5-24 % from the fit alone. Merged radiance is much less sensitive: those codes
+// carry little weight.
 // `openCvSeconds`, when given, receives the time spent inside OpenCV's calibration.
 ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
                               const RecoveryParams& params, const Progress& progress = {},
