@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <array>
+#include <climits>
 #include <cmath>
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
-#include <map>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
@@ -162,67 +162,86 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
   for (const BracketCodes* b : used)
     pixels += size_t(b->images[0]->width) * size_t(b->images[0]->height);
   const size_t stride = std::max<size_t>(1, pixels * (n - 1) / (size_t(8) << 20));  // ~8 M pairs
-  for (int c = 0; c < 3; ++c) {
+  // The lights come from the curves as fitted; the six (channel, end) tasks write disjoint codes.
+  const std::array<std::vector<float>, 3> fits = curve.inverse;
+  parallelFor(0, 6, [&](int64_t task) {
+    const int c = int(task / 2);
+    const bool low = task % 2 == 0;
     std::vector<float>& inv = curve.inverse[size_t(c)];
-    const std::vector<float> fit = inv;  // the lights come from the curve as fitted
-    for (const bool low : {true, false}) {
-      // Bin of log light -> (sum of the end codes, pixels, clipped codes among them).
-      std::map<int, std::array<double, 3>> bins;
-      for (const BracketCodes* b : used) {
-        const size_t count = size_t(b->images[0]->width) * size_t(b->images[0]->height);
-        for (size_t j = 0; j + 1 < n; ++j) {
-          const uint8_t* shorter = b->images[j]->data();
-          const uint8_t* longer = b->images[j + 1]->data();
-          const double ratio = exposures[j + 1] / exposures[j];
-          for (size_t i = (j * 7919) % stride; i < count; i += stride) {
-            const int zs = shorter[3 * i + size_t(c)], zl = longer[3 * i + size_t(c)];
-            // The trusted code tells the light; the other shot's code is the observation.
-            const int trusted = low ? zl : zs, seen = low ? zs : zl;
-            if (trusted < kTrustedLow || trusted > kTrustedHigh) continue;
-            if (low ? seen > kLowEnd + kBlend : seen < kHighEnd - kBlend) continue;
-            const double light = low ? fit[size_t(trusted)] / ratio : fit[size_t(trusted)] * ratio;
-            if (!(light > 0.0)) continue;
-            auto& bin = bins[int(std::floor(std::log(light) / kBinWidth))];
-            bin[0] += seen;
-            bin[1] += 1.0;
-            bin[2] += (seen == 0 || seen == 255) ? 1.0 : 0.0;
-          }
-        }
-      }
-      struct Point {
-        double logLight, code, weight;
-      };
-      std::vector<Point> pooled;
-      for (const auto& [bin, sums] : bins) {
-        if (sums[1] < kMinCount || sums[2] > 0.01 * sums[1]) continue;
-        pooled.push_back({(bin + 0.5) * kBinWidth, sums[0] / sums[1], sums[1]});
-        while (pooled.size() >= 2 && pooled[pooled.size() - 2].code > pooled.back().code) {
-          const Point b = pooled.back();
-          pooled.pop_back();
-          Point& a = pooled.back();
-          const double w = a.weight + b.weight;
-          a = {(a.logLight * a.weight + b.logLight * b.weight) / w,
-               (a.code * a.weight + b.code * b.weight) / w, w};
-        }
-      }
-      if (pooled.size() < 2) continue;
-      // Invert: the light at which the mean code is z, for the end's codes the bins reach.
-      const int from = low ? 1 : kHighEnd - kBlend, to = low ? kLowEnd + kBlend : 254;
-      for (int z = from; z <= to; ++z) {
-        size_t k = 1;
-        while (k < pooled.size() && pooled[k].code < z) ++k;
-        if (k == pooled.size() || pooled[k - 1].code > z) continue;  // not reached
-        const Point& a = pooled[k - 1];
-        const Point& b = pooled[k];
-        const double t = b.code > a.code ? (z - a.code) / (b.code - a.code) : 0.5;
-        const double fitted = a.logLight + t * (b.logLight - a.logLight);
-        // All the fit's at the end, none of it kBlend codes into the trusted range.
-        const double w = low ? std::clamp(double(kLowEnd + kBlend - z) / kBlend, 0.0, 1.0)
-                             : std::clamp(double(z - (kHighEnd - kBlend)) / kBlend, 0.0, 1.0);
-        inv[size_t(z)] = float(std::exp(w * fitted + (1.0 - w) * std::log(fit[size_t(z)])));
+    const std::vector<float>& fit = fits[size_t(c)];
+    // Per pair of adjacent shots, the bin of log light each trusted code gives (kNone: none), and
+    // per bin (sum of the end codes, pixels, clipped codes among them).
+    constexpr int kNone = INT_MIN;
+    std::vector<std::array<int, 256>> binOf(n > 1 ? n - 1 : 0);
+    int firstBin = INT_MAX, lastBin = INT_MIN;
+    for (size_t j = 0; j + 1 < n; ++j) {
+      const double ratio = exposures[j + 1] / exposures[j];
+      binOf[j].fill(kNone);
+      for (int t = kTrustedLow; t <= kTrustedHigh; ++t) {
+        const double light = low ? fit[size_t(t)] / ratio : fit[size_t(t)] * ratio;
+        if (!(light > 0.0) || !std::isfinite(light)) continue;
+        binOf[j][size_t(t)] = int(std::floor(std::log(light) / kBinWidth));
+        firstBin = std::min(firstBin, binOf[j][size_t(t)]);
+        lastBin = std::max(lastBin, binOf[j][size_t(t)]);
       }
     }
-  }
+    if (firstBin > lastBin) return;
+    std::vector<std::array<double, 3>> sums(size_t(lastBin - firstBin + 1), {0.0, 0.0, 0.0});
+    for (const BracketCodes* b : used) {
+      const size_t count = size_t(b->images[0]->width) * size_t(b->images[0]->height);
+      for (size_t j = 0; j + 1 < n; ++j) {
+        const uint8_t* shorter = b->images[j]->data();
+        const uint8_t* longer = b->images[j + 1]->data();
+        const std::array<int, 256>& table = binOf[j];
+        for (size_t i = (j * 7919) % stride; i < count; i += stride) {
+          const int zs = shorter[3 * i + size_t(c)], zl = longer[3 * i + size_t(c)];
+          // The trusted code tells the light; the other shot's code is the observation.
+          const int trusted = low ? zl : zs, seen = low ? zs : zl;
+          if (trusted < kTrustedLow || trusted > kTrustedHigh) continue;
+          if (low ? seen > kLowEnd + kBlend : seen < kHighEnd - kBlend) continue;
+          const int bin = table[size_t(trusted)];
+          if (bin == kNone) continue;
+          std::array<double, 3>& sum = sums[size_t(bin - firstBin)];
+          sum[0] += seen;
+          sum[1] += 1.0;
+          sum[2] += (seen == 0 || seen == 255) ? 1.0 : 0.0;
+        }
+      }
+    }
+    struct Point {
+      double logLight, code, weight;
+    };
+    std::vector<Point> pooled;
+    for (size_t k = 0; k < sums.size(); ++k) {
+      const std::array<double, 3>& sum = sums[k];
+      if (sum[1] < kMinCount || sum[2] > 0.01 * sum[1]) continue;
+      pooled.push_back({(firstBin + int(k) + 0.5) * kBinWidth, sum[0] / sum[1], sum[1]});
+      while (pooled.size() >= 2 && pooled[pooled.size() - 2].code > pooled.back().code) {
+        const Point b = pooled.back();
+        pooled.pop_back();
+        Point& a = pooled.back();
+        const double w = a.weight + b.weight;
+        a = {(a.logLight * a.weight + b.logLight * b.weight) / w,
+             (a.code * a.weight + b.code * b.weight) / w, w};
+      }
+    }
+    if (pooled.size() < 2) return;
+    // Invert: the light at which the mean code is z, for the end's codes the bins reach.
+    const int from = low ? 1 : kHighEnd - kBlend, to = low ? kLowEnd + kBlend : 254;
+    for (int z = from; z <= to; ++z) {
+      size_t k = 1;
+      while (k < pooled.size() && pooled[k].code < z) ++k;
+      if (k == pooled.size() || pooled[k - 1].code > z) continue;  // not reached
+      const Point& a = pooled[k - 1];
+      const Point& b = pooled[k];
+      const double t = b.code > a.code ? (z - a.code) / (b.code - a.code) : 0.5;
+      const double fitted = a.logLight + t * (b.logLight - a.logLight);
+      // All the fit's at the end, none of it kBlend codes into the trusted range.
+      const double w = low ? std::clamp(double(kLowEnd + kBlend - z) / kBlend, 0.0, 1.0)
+                           : std::clamp(double(z - (kHighEnd - kBlend)) / kBlend, 0.0, 1.0);
+      inv[size_t(z)] = float(std::exp(w * fitted + (1.0 - w) * std::log(fit[size_t(z)])));
+    }
+  });
 }
 
 }  // namespace
