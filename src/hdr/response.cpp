@@ -161,7 +161,7 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
   size_t pixels = 0;
   for (const BracketCodes* b : used)
     pixels += size_t(b->images[0]->width) * size_t(b->images[0]->height);
-  const size_t stride = std::max<size_t>(1, pixels * (n - 1) / (size_t(8) << 20));  // ~8 M pairs
+  const size_t stride = std::max<size_t>(1, pixels * (n - 1) / (size_t(2) << 20));  // ~2 M pairs
   // The lights come from the curves as fitted; the six (channel, end) tasks write disjoint codes.
   const std::array<std::vector<float>, 3> fits = curve.inverse;
   parallelFor(0, 6, [&](int64_t task) {
