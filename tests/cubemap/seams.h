@@ -13,16 +13,26 @@
 namespace compose::testing {
 
 // The texel `k` steps past the edge of face `face` beside edge texel (x, y), stepping off the face
-// by (dx, dy) (k = 1: the texel across the edge).
+// by (dx, dy) (k = 1: the texel across the edge). The point aimed at lies on this face's plane
+// extended past the edge, at 1 + e, where it projects onto the centre of the neighbour's edge
+// texel, at 1 - 1/n: 1 / (1 + e) = 1 - 1/n. From there the k-th texel is k - 1 texels inwards on
+// the neighbour, along the axis that crosses its edge. (Stepping 2/n per texel on the extended
+// plane instead falls short: the projection compresses it, and at n = 128 the second step lands
+// in the first texel again.)
 inline void texelBeyondEdge(int n, int face, int x, int y, int dx, int dy, int k, int& g, int& gx,
                             int& gy) {
-  const double past = 1.0 / n + (k - 1) * 2.0 / n + 1e-7;
+  const double e = 1.0 / (1.0 - 1.0 / n) - 1.0;
+  const double past = 1.0 / n + e;  // from the edge texel's centre, at 1 - 1/n
   const double a = -1.0 + (2.0 * x + 1.0) / n + dx * past;
   const double b = -1.0 + (2.0 * y + 1.0) / n + dy * past;
   double ga = 0, gb = 0;
   lighting::faceImageCoordinates(lighting::faceImageDirection(face, a, b), g, ga, gb);
   gx = std::clamp(int(std::floor((ga + 1.0) * 0.5 * n)), 0, n - 1);
   gy = std::clamp(int(std::floor((gb + 1.0) * 0.5 * n)), 0, n - 1);
+  if (std::abs(ga) >= std::abs(gb))
+    gx += ga > 0.0 ? -(k - 1) : (k - 1);
+  else
+    gy += gb > 0.0 ? -(k - 1) : (k - 1);
 }
 
 // Per face edge (face-major, edges left, right, top, bottom): the mean step between the two

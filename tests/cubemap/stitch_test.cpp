@@ -99,6 +99,35 @@ double medianRelative(const CubeMap& truth, const CubeMap& x) {
   return rel[rel.size() / 2];
 }
 
+// The seam measure's own geometry: across every face edge, the first texel beyond is the
+// neighbouring face's edge texel and the second is the one next to it, one texel further from the
+// edge (the measure compares the step across the edge with those inner steps).
+TEST(SeamMeasure, StepsOffAFaceOneTexelAtATime) {
+  for (const int n : {16, 128, 256}) {
+    for (int f = 0; f < lighting::kCubeFaces; ++f) {
+      for (int e = 0; e < 4; ++e) {
+        const int dx = e == 0 ? -1 : e == 1 ? 1 : 0, dy = e == 2 ? -1 : e == 3 ? 1 : 0;
+        for (int i = 1; i + 1 < n; ++i) {
+          const int x = dx < 0 ? 0 : dx > 0 ? n - 1 : i, y = dy < 0 ? 0 : dy > 0 ? n - 1 : i;
+          int g1, x1, y1, g2, x2, y2;
+          compose::testing::texelBeyondEdge(n, f, x, y, dx, dy, 1, g1, x1, y1);
+          compose::testing::texelBeyondEdge(n, f, x, y, dx, dy, 2, g2, x2, y2);
+          ASSERT_NE(g1, f);
+          ASSERT_EQ(g2, g1) << "n " << n << " face " << f << " edge " << e << " at " << i;
+          const bool onEdge = x1 == 0 || x1 == n - 1 || y1 == 0 || y1 == n - 1;
+          EXPECT_TRUE(onEdge) << "n " << n << " face " << f << " edge " << e << " at " << i;
+          // One step inwards from the neighbour's edge, along one axis (corners left aside).
+          if (i >= 2 && i + 2 < n) {
+            EXPECT_EQ(std::abs(x2 - x1) + std::abs(y2 - y1), 1)
+                << "n " << n << " face " << f << " edge " << e << " at " << i << ": (" << x1 << ", "
+                << y1 << ") then (" << x2 << ", " << y2 << ")";
+          }
+        }
+      }
+    }
+  }
+}
+
 // The test: six views of each sample HDRI, 100° field of view, orientations off by up to
 // ±3° about each axis, stitched within 5 % median relative error of the ground truth, with no
 // seam at the face edges. The ground truth is the HDRI's exact cube map at the stitch's face size
@@ -149,8 +178,8 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
   // than the neighbouring texel-to-texel variation, or than the step the scene itself has there.
   const double worstSeam = compose::testing::worstSeam(lighting::resizeCube(r.cube, 128),
                                                        lighting::resizeCube(truth, 128));
-  // Measured at most 1.15 (sunset, whose sky view matched nothing and is 3° off).
-  constexpr double kSeam = 1.25;
+  // Measured 0.99 / 0.94 / 0.99 / 1.07 (sunset: its sky view matched nothing).
+  constexpr double kSeam = 1.15;
   EXPECT_LT(worstSeam, kSeam) << name;
   EXPECT_EQ(r.coverage.uncovered, 0.0) << "six 100° views cover the sphere";
   std::printf(

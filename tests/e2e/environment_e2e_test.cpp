@@ -254,13 +254,12 @@ glm::dmat3 matrixOf(const nlohmann::json& rows) {
 // 8 x 8 directions per texel.
 //
 // Measured (seed 5: the capture turned by 2.54° as a whole; 1536² photos, 2.4 MP, fewer than any
-// camera's): median relative error courtyard 1.79 %, forest 4.05 %, interior 1.18 %, sunset
-// 2.45 %; the comparison's own floor (the sampled truth against the exact cube) 0.03-0.53 %.
+// camera's): median relative error courtyard 1.60 %, forest 4.02 %, interior 1.01 %, sunset
+// 2.35 %; the comparison's own floor (the sampled truth against the exact cube) 0.03-0.53 %.
 // Without turning the truth: 7-41 %. With 768² photos forest is at 5.9 %: its detail is finer
-// than what a photo of 7.7 pixels a degree keeps after the lens' blur and JPEG. The worst seam
-// (printed, not checked here; tests/cubemap checks it on rendered views) is 1.11, 0.95, 1.01 and
-// 1.82: sunset's worst edges are the sky face's, whose photo shares no features with the others
-// and is aligned on its radiance.
+// than what a photo of 7.7 pixels a degree keeps after the lens' blur and JPEG. The worst seam is
+// 0.99, 0.94, 0.98 and 1.11: sunset's worst edge is the sky face's, whose photo shares no
+// features with the others and is aligned on its radiance.
 class StitchFromPhotos : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
@@ -389,6 +388,9 @@ TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
       name.c_str(), 100.0 * fit.median, 100.0 * unturned, turned, 100.0 * floor, seam);
   constexpr double kIssueMedian = 0.05;
   EXPECT_LT(fit.median, kIssueMedian) << name;
+  // No seam (at most 1) but on sunset's sky face, 1.11.
+  constexpr double kSeam = 1.2;
+  EXPECT_LT(seam, kSeam) << name;
 }
 
 INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchFromPhotos,
