@@ -64,6 +64,48 @@ void screenRectangle(const calib::PlateCamera& camera, const glm::dvec3& lo, con
   y1 = std::max(y0, y1);
 }
 
+// Camera rays for the render loop, in the object's coordinates. A rectilinear lens without
+// distortion maps a pixel to a direction linearly before normalising, so a ray is a few
+// multiply-adds: the rays of PlateCamera::ray up to rounding. Any other lens goes through
+// PlateCamera::ray. Every ray starts at the camera's centre.
+class CameraRays {
+ public:
+  CameraRays(const calib::PlateCamera& camera, const glm::dmat4& objectFromWorld)
+      : camera_(camera),
+        objectFromWorld_(objectFromWorld),
+        linear_(camera.lens.projection == calib::Projection::Rectilinear &&
+                !camera.lens.hasDistortion()) {
+    const glm::dmat3 r(camera.worldFromCamera);
+    const calib::Lens& lens = camera.lens;
+    // World direction ∝ r · ((px - cx) / fx, -(py - cy) / fy, -1).
+    perX_ = r[0] / lens.fx;
+    perY_ = -r[1] / lens.fy;
+    base_ = -r[0] * (lens.cx / lens.fx) + r[1] * (lens.cy / lens.fy) - r[2];
+    originObject_ = glm::vec3(objectFromWorld * glm::dvec4(camera.position(), 1.0));
+  }
+  // The ray through pixel position (px, py): world direction, and origin and direction in the
+  // object's coordinates (the same ray parameter on both sides).
+  bool ray(double px, double py, glm::dvec3& direction, glm::vec3& originObject,
+           glm::vec3& directionObject) const {
+    if (linear_) {
+      direction = glm::normalize(base_ + px * perX_ + py * perY_);
+    } else {
+      glm::dvec3 origin;
+      if (!camera_.ray(px, py, origin, direction)) return false;
+    }
+    originObject = originObject_;
+    directionObject = glm::vec3(glm::dmat3(objectFromWorld_) * direction);
+    return true;
+  }
+
+ private:
+  const calib::PlateCamera& camera_;
+  glm::dmat4 objectFromWorld_;
+  bool linear_;
+  glm::dvec3 perX_{0.0}, perY_{0.0}, base_{0.0};
+  glm::vec3 originObject_{0.0f};
+};
+
 float luminance(const glm::vec3& c) {
   return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
 }
@@ -250,6 +292,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     COMPOSE_CHECK(settings.sources->size() <= 64);  // one bit each
     edges.emplace(settings, worldFromObject);
   }
+  const CameraRays cameraRays(camera, objectFromWorld);
+  const glm::dvec3 origin = camera.position();
 
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
@@ -264,7 +308,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       // The pixel's samples, sixteen at a time: one coherent packet for Embree.
       for (int first = 0; first < n * n; first += 16) {
         const int count = std::min(16, n * n - first);
-        glm::dvec3 orgs[16], dirs[16];
+        glm::dvec3 dirs[16];
         glm::vec3 oObj[16], dObj[16];
         uint32_t active = 0;
         for (int b = 0; b < count; ++b) {
@@ -273,10 +317,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
               (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
           const double jx = settings.jitter ? double(hash01(2 * seed)) : 0.5;
           const double jy = settings.jitter ? double(hash01(2 * seed + 1)) : 0.5;
-          if (!camera.ray(x + (s % n + jx) / n, y + (s / n + jy) / n, orgs[b], dirs[b])) continue;
-          // Into the object's coordinates: the same ray parameter t on both sides.
-          oObj[b] = glm::vec3(objectFromWorld * glm::dvec4(orgs[b], 1.0));
-          dObj[b] = glm::vec3(objectFromWorld * glm::dvec4(dirs[b], 0.0));
+          if (!cameraRays.ray(x + (s % n + jx) / n, y + (s / n + jy) / n, dirs[b], oObj[b],
+                              dObj[b]))
+            continue;
           active |= 1u << b;
         }
         if (active == 0) continue;
@@ -285,7 +328,6 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         for (int b = 0; b < count; ++b) {
           const EmbreeScene::Hit& hit = found[b];
           if (!hit.found) continue;
-          const glm::dvec3& org = orgs[b];
           const glm::dvec3& dir = dirs[b];
           const uint32_t* tri = &mesh.indices[3 * size_t(hit.triangle)];
           const float u = hit.u, v = hit.v, t = 1.0f - u - v;
@@ -348,7 +390,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             aoSum += 1.0f;
           }
           normalSum += nrm;
-          const glm::dvec3 p = org + dir * double(hit.distance);
+          const glm::dvec3 p = origin + dir * double(hit.distance);
           positionSum += p;
           depthSum += -(cameraFromWorld * glm::dvec4(p, 1.0)).z;
           ++hits;
