@@ -239,7 +239,11 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
       // All the fit's at the end, none of it kBlend codes into the trusted range.
       const double w = low ? std::clamp(double(kLowEnd + kBlend - z) / kBlend, 0.0, 1.0)
                            : std::clamp(double(z - (kHighEnd - kBlend)) / kBlend, 0.0, 1.0);
-      inv[size_t(z)] = float(std::exp(w * fitted + (1.0 - w) * std::log(fit[size_t(z)])));
+      // (A fit that is not positive there is replaced outright: its logarithm is not a number.)
+      const double kept = double(fit[size_t(z)]);
+      inv[size_t(z)] =
+          float(w >= 1.0 || !(kept > 0.0) ? std::exp(fitted)
+                                          : std::exp(w * fitted + (1.0 - w) * std::log(kept)));
     }
   });
 }

@@ -94,13 +94,13 @@ class CameraRays {
       if (!camera_.ray(px, py, origin, direction)) return false;
     }
     originObject = originObject_;
-    directionObject = glm::vec3(glm::dmat3(objectFromWorld_) * direction);
+    directionObject = glm::vec3(objectFromWorld_ * direction);
     return true;
   }
 
  private:
   const calib::PlateCamera& camera_;
-  glm::dmat4 objectFromWorld_;
+  glm::dmat3 objectFromWorld_;  // directions only: the origin is transformed once
   bool linear_;
   glm::dvec3 perX_{0.0}, perY_{0.0}, base_{0.0};
   glm::vec3 originObject_{0.0f};
