@@ -16,7 +16,7 @@ PACKAGES=(
   build-essential cmake pkg-config ca-certificates
   libopencv-dev libopencv-contrib-dev libopenimageio-dev openimageio-tools
   libopencolorio-dev opencolorio-tools libopenexr-dev libglm-dev libtinygltf-dev
-  libtinyobjloader-dev libembree-dev libtbb-dev libcli11-dev nlohmann-json3-dev
+  libjpeg-dev libtinyobjloader-dev libembree-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev libfilament-tools openexr
 )
 # What `test` needs beyond the build: clang with its sanitizer and libFuzzer runtimes, and

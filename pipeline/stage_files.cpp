@@ -1,6 +1,6 @@
 #include "pipeline/stage_files.h"
 
-#include <OpenImageIO/imageio.h>
+#include <variant>
 
 #include <algorithm>
 #include <memory>
@@ -10,6 +10,7 @@
 #include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
+#include "ingest/exr_io.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
 #include "pipeline/stage_util.h"
@@ -237,9 +238,14 @@ StageInput objectLayerInput(const fs::path& file) {
   in.load = [file](Context& ctx) {
     std::error_code ec;
     if (!fs::is_regular_file(file, ec)) throw Error("composite", "object layer not found", file);
-    auto input = OIIO::ImageInput::open(file.string());
-    if (!input) throw Error("composite", "cannot read the object layer: " + OIIO::geterror(), file);
-    const std::string text = input->spec().get_string_attribute(kLayerAttribute);
+    const ingest::ExrReader input = [&] {
+      if (!ingest::hasExrMagic(file))
+        throw Error("composite", "cannot read the object layer: not an OpenEXR file", file);
+      return ingest::ExrReader(file, "composite");
+    }();
+    std::string text;
+    if (const ingest::ImageAttribute* a = input.header(0).find(kLayerAttribute))
+      if (const std::string* t = std::get_if<std::string>(&a->value)) text = *t;
     const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
     if (text.empty() || !header.is_object() || !header.contains("format") ||
         header["format"] != kLayerFormat)
@@ -261,28 +267,19 @@ StageInput objectLayerInput(const fs::path& file) {
     checkImageSize(frameWidth, frameHeight, 1, "composite", file);
     // Reads the part of that name, in float, with its data window, which must lie in the frame.
     auto readPart = [&](const std::string& name, int& x, int& y) {
-      for (int sub = 0; input->seek_subimage(sub, 0); ++sub) {
-        const OIIO::ImageSpec& spec = input->spec();
-        if (spec.get_string_attribute("name") != name) continue;
-        if (spec.x < 0 || spec.y < 0 || spec.width <= 0 || spec.height <= 0 ||
-            int64_t(spec.x) + spec.width > frameWidth ||
-            int64_t(spec.y) + spec.height > frameHeight)
+      for (int part = 0; part < input.parts(); ++part) {
+        const ingest::ExrPartHeader& h = input.header(part);
+        if (h.name != name) continue;
+        if (h.x < 0 || h.y < 0 || int64_t(h.x) + h.width > frameWidth ||
+            int64_t(h.y) + h.height > frameHeight)
           throw Error("composite",
                       format("part '%s' of the object layer (%dx%d at %d,%d) does not lie in its "
                              "%dx%d frame",
-                             name.c_str(), spec.width, spec.height, spec.x, spec.y, frameWidth,
-                             frameHeight),
+                             name.c_str(), h.width, h.height, h.x, h.y, frameWidth, frameHeight),
                       file);
-        checkImageSize(spec.width, spec.height, spec.nchannels, "composite", file);
-        Image image(spec.width, spec.height, spec.nchannels, spec.channelnames);
-        if (!input->read_image(sub, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT,
-                               image.pixels.data()))
-          throw Error("composite",
-                      "cannot read part '" + name + "' of the object layer: " + input->geterror(),
-                      file);
-        x = spec.x;
-        y = spec.y;
-        return image;
+        x = h.x;
+        y = h.y;
+        return input.read(part);
       }
       throw Error("composite", "the object layer has no part '" + name + "'", file);
     };

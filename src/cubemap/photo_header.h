@@ -11,11 +11,13 @@
 namespace compose::cubemap {
 
 struct PhotoHeader {
-  int width = 0, height = 0;              // after the EXIF orientation
-  std::optional<double> focalLength35mm;  // EXIF FocalLengthIn35mmFilm
-  std::optional<double> focalLengthMm;    // EXIF FocalLength
-  bool floatingPoint = false;             // float or half samples (HDR), else integer (LDR)
-  std::string format;                     // reader name, e.g. "jpeg", "openexr"
+  int width = 0, height = 0;  // after the EXIF orientation
+  // EXIF FocalLengthIn35mmFilm, or derived from FocalLength and the focal-plane resolution
+  // (ingest::CaptureInfo::focalLength35mm)
+  std::optional<double> focalLength35mm;
+  std::optional<double> focalLengthMm;  // EXIF FocalLength
+  bool floatingPoint = false;           // float or half samples (HDR), else integer (LDR)
+  std::string format;                   // reader name, e.g. "jpeg", "openexr"
 };
 
 // Throws compose::Error (stage "ingest", naming the file) if the file is missing or unreadable.

@@ -1,56 +1,52 @@
 #include "ingest/image_io.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <limits>
-#include <system_error>
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
-#include <OpenImageIO/imageio.h>
-#include <tbb/task_arena.h>
+#include <Imath/half.h>
 
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/parallel.h"
+#include "ingest/exr_io.h"
+#include "ingest/jpeg_io.h"
+#include "ingest/oiio_module.h"
+#include "ingest/pixel_util.h"
 
 namespace compose::ingest {
 
 namespace fs = std::filesystem;
 
+namespace detail {
+
+float largestFiniteMagnitude(const ChannelSources& sources) {
+  float largest = 0.0f;
+  for (float v : sources.constants)
+    if (std::isfinite(v)) largest = std::max(largest, std::abs(v));
+  for (const Image* image : sources.images) {
+    std::vector<float> rowLargest(size_t(image->height), 0.0f);
+    parallelFor(0, image->height, [&](int64_t y) {
+      // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
+      float m = 0.0f;
+      for (float v : image->row(int(y))) {
+        const float a = std::abs(v);
+        m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+      }
+      rowLargest[size_t(y)] = m;
+    });
+    for (float m : rowLargest) largest = std::max(largest, m);
+  }
+  return largest;
+}
+
+}  // namespace detail
+
 namespace {
-
-// OpenEXR compresses and decompresses blocks of scanlines on its own thread pool; it gets as many
-// threads as oneTBB may use (every core unless the process is limited), so that zlib runs on every
-// core. OpenImageIO hands the number to OpenEXR when a reader or writer is created.
-void useEveryCoreForExr() {
-  OIIO::attribute("exr_threads", tbb::this_task_arena::max_concurrency());
-}
-
-// Opens an image file for reading. A camera raw file is developed to linear light (OpenImageIO's
-// raw reader, LibRaw: the camera's white balance and colour matrix, no automatic brightening,
-// Rec.709 primaries with a linear transfer), so that it comes back as scene-linear values, tagged
-// "linear": what merging brackets and compositing need, rather than a display rendering.
-std::unique_ptr<OIIO::ImageInput> openInput(const std::string& name) {
-  OIIO::ImageSpec config;
-  config.attribute("raw:ColorSpace", "linear");
-  config.attribute("raw:auto_bright", 0);
-  return OIIO::ImageInput::open(name, &config);
-}
-
-std::optional<double> floatAttribute(const OIIO::ImageSpec& spec, const char* name) {
-  const OIIO::ParamValue* p = spec.find_attribute(name);
-  if (!p) return std::nullopt;
-  double v = double(spec.get_float_attribute(name, -1.0f));
-  if (!(v > 0.0) || !std::isfinite(v)) return std::nullopt;
-  return v;
-}
 
 std::string lowerExtension(const fs::path& path) {
   std::string ext = path.extension().string();
@@ -110,46 +106,88 @@ double unitMillimetres(int unit) {
   }
 }
 
-// Fills everything but the pixels from a file's header.
-void fillCaptureInfo(const OIIO::ImageSpec& spec, CaptureInfo& info) {
-  info.fileWidth = spec.width;
-  info.fileHeight = spec.height;
-  info.channels = spec.nchannels;
-  info.sampleType = spec.format.c_str();
-  info.bitsPerSample = spec.get_int_attribute("oiio:BitsPerSample", int(spec.format.size()) * 8);
-  info.orientation = spec.get_int_attribute("Orientation", 1);
-  if (info.orientation < 1 || info.orientation > 8) info.orientation = 1;  // not an EXIF value
-  info.exposureTime = floatAttribute(spec, "ExposureTime");
-  info.fNumber = floatAttribute(spec, "FNumber");
-  info.iso = floatAttribute(spec, "Exif:PhotographicSensitivity");
-  if (!info.iso) info.iso = floatAttribute(spec, "Exif:ISOSpeedRatings");
-  info.focalLengthMm = floatAttribute(spec, "Exif:FocalLength");
-  info.focalPlaneXResolution = floatAttribute(spec, "Exif:FocalPlaneXResolution");
-  info.focalPlaneYResolution = floatAttribute(spec, "Exif:FocalPlaneYResolution");
-  info.focalPlaneResolutionUnit = spec.get_int_attribute("Exif:FocalPlaneResolutionUnit", 2);
-  info.cameraMake = trimmed(spec.get_string_attribute("Make"));
-  info.cameraModel = trimmed(spec.get_string_attribute("Model"));
-  info.fileColorSpace = spec.get_string_attribute("oiio:ColorSpace");
-  if (const std::string named = spec.get_string_attribute("colorSpace"); !named.empty())
-    info.fileColorSpace = named;
-  if (const OIIO::ParamValue* c = spec.find_attribute("chromaticities");
-      c && c->type() == OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8)) {
-    std::array<double, 8> xy;
-    const float* v = static_cast<const float*>(c->data());
-    bool finite = true;
-    for (size_t i = 0; i < 8; ++i) {
-      xy[i] = v[i];
-      finite = finite && std::isfinite(v[i]);
-    }
-    if (finite) info.chromaticities = xy;
-  }
-  info.dateTimeOriginal = trimmed(spec.get_string_attribute("Exif:DateTimeOriginal"));
-  if (info.dateTimeOriginal.empty())
-    info.dateTimeOriginal = trimmed(spec.get_string_attribute("DateTime"));
-  info.captureSeconds =
-      exifSeconds(info.dateTimeOriginal, spec.get_string_attribute("Exif:SubsecTimeOriginal"));
+// What the readers tell of a file before its pixels: everything CaptureInfo is made from.
+struct FileHeader {
+  int width = 0, height = 0, channels = 0;
+  std::string format;      // "openexr", "jpeg", or OpenImageIO's name for the format
+  std::string sampleType;  // "uint8", "half", ...
+  int bitsPerSample = 0;
+  const std::vector<ImageAttribute>* attributes = nullptr;
 
-  info.focalLength35mm = floatAttribute(spec, "Exif:FocalLengthIn35mmFilm");
+  // Attribute lookups as OpenImageIO's ImageSpec does them: names are not case-sensitive, and
+  // numbers convert between int and float.
+  const ImageAttribute* find(const char* name) const {
+    for (const ImageAttribute& a : *attributes) {
+      if (a.name.size() == std::strlen(name) &&
+          std::equal(a.name.begin(), a.name.end(), name, [](char p, char q) {
+            return std::tolower(static_cast<unsigned char>(p)) ==
+                   std::tolower(static_cast<unsigned char>(q));
+          }))
+        return &a;
+    }
+    return nullptr;
+  }
+  std::optional<double> number(const char* name) const {
+    const ImageAttribute* a = find(name);
+    if (!a) return std::nullopt;
+    if (const int* i = std::get_if<int>(&a->value)) return double(*i);
+    if (const double* d = std::get_if<double>(&a->value)) return *d;
+    return std::nullopt;
+  }
+  // A positive, finite number, or empty.
+  std::optional<double> positive(const char* name) const {
+    const std::optional<double> v = number(name);
+    if (!v || !(*v > 0.0) || !std::isfinite(*v)) return std::nullopt;
+    return v;
+  }
+  int integer(const char* name, int fallback) const {
+    const std::optional<double> v = number(name);
+    if (!v || !std::isfinite(*v) || std::abs(*v) > 2e9) return fallback;
+    return int(*v);
+  }
+  std::string text(const char* name) const {
+    const ImageAttribute* a = find(name);
+    const std::string* t = a ? std::get_if<std::string>(&a->value) : nullptr;
+    return t ? *t : std::string();
+  }
+};
+
+// Fills everything but the pixels from a file's header.
+void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
+  info.format = h.format;
+  info.fileWidth = h.width;
+  info.fileHeight = h.height;
+  info.channels = h.channels;
+  info.sampleType = h.sampleType;
+  info.bitsPerSample = h.integer("oiio:BitsPerSample", h.bitsPerSample);
+  info.orientation = h.integer("Orientation", 1);
+  if (info.orientation < 1 || info.orientation > 8) info.orientation = 1;  // not an EXIF value
+  info.exposureTime = h.positive("ExposureTime");
+  info.fNumber = h.positive("FNumber");
+  info.iso = h.positive("Exif:PhotographicSensitivity");
+  if (!info.iso) info.iso = h.positive("Exif:ISOSpeedRatings");
+  info.focalLengthMm = h.positive("Exif:FocalLength");
+  info.focalPlaneXResolution = h.positive("Exif:FocalPlaneXResolution");
+  info.focalPlaneYResolution = h.positive("Exif:FocalPlaneYResolution");
+  info.focalPlaneResolutionUnit = h.integer("Exif:FocalPlaneResolutionUnit", 2);
+  info.cameraMake = trimmed(h.text("Make"));
+  info.cameraModel = trimmed(h.text("Model"));
+  info.fileColorSpace = h.text("oiio:ColorSpace");
+  if (const std::string named = h.text("colorSpace"); !named.empty()) info.fileColorSpace = named;
+  if (const ImageAttribute* c = h.find("chromaticities")) {
+    const auto* v = std::get_if<std::vector<float>>(&c->value);
+    if (v && v->size() == 8 &&
+        std::all_of(v->begin(), v->end(), [](float x) { return std::isfinite(x); })) {
+      std::array<double, 8> xy;
+      for (size_t i = 0; i < 8; ++i) xy[i] = (*v)[i];
+      info.chromaticities = xy;
+    }
+  }
+  info.dateTimeOriginal = trimmed(h.text("Exif:DateTimeOriginal"));
+  if (info.dateTimeOriginal.empty()) info.dateTimeOriginal = trimmed(h.text("DateTime"));
+  info.captureSeconds = exifSeconds(info.dateTimeOriginal, h.text("Exif:SubsecTimeOriginal"));
+
+  info.focalLength35mm = h.positive("Exif:FocalLengthIn35mmFilm");
   if (info.focalLength35mm) {
     info.focal35mmSource = "EXIF FocalLengthIn35mmFilm";
   } else if (info.focalLengthMm && info.focalPlaneXResolution && info.focalPlaneYResolution &&
@@ -157,46 +195,190 @@ void fillCaptureInfo(const OIIO::ImageSpec& spec, CaptureInfo& info) {
     // Sensor size = image size / (pixels per unit); the 35 mm equivalent scales the focal length
     // by the ratio of diagonals (43.27 mm for the 36 x 24 mm frame).
     const double unit = unitMillimetres(info.focalPlaneResolutionUnit);
-    const double w = spec.width / *info.focalPlaneXResolution * unit;
-    const double h = spec.height / *info.focalPlaneYResolution * unit;
-    const double diagonal = std::sqrt(w * w + h * h);
+    const double w = h.width / *info.focalPlaneXResolution * unit;
+    const double hgt = h.height / *info.focalPlaneYResolution * unit;
+    const double diagonal = std::sqrt(w * w + hgt * hgt);
     if (diagonal > 0.5 && diagonal < 500.0) {
       info.focalLength35mm = *info.focalLengthMm * 43.266615305567875 / diagonal;
       char text[160];
       std::snprintf(text, sizeof text,
                     "derived from FocalLength %.3g mm and the focal-plane resolution (sensor "
                     "%.1f x %.1f mm)",
-                    *info.focalLengthMm, w, h);
+                    *info.focalLengthMm, w, hgt);
       info.focal35mmSource = text;
     }
   }
 }
 
-// The reader's own error messages (not OpenImageIO's global ones, which may be stale).
-std::string readerError(OIIO::ImageInput& input) {
-  return input.geterror();
+FileHeader headerOf(const ExrPartHeader& part) {
+  FileHeader h;
+  h.width = part.width;
+  h.height = part.height;
+  h.channels = int(part.channelNames.size());
+  h.format = "openexr";
+  h.sampleType = part.sampleType;
+  h.bitsPerSample = part.sampleType == "half" ? 16 : 32;
+  h.attributes = &part.attributes;
+  return h;
+}
+
+FileHeader headerOf(const jpeg::Header& jpeg) {
+  FileHeader h;
+  h.width = jpeg.width;
+  h.height = jpeg.height;
+  h.channels = jpeg.channels;
+  h.format = "jpeg";
+  h.sampleType = "uint8";
+  h.bitsPerSample = 8;
+  h.attributes = &jpeg.attributes;
+  return h;
+}
+
+FileHeader headerOf(const oiio::Header& oiio) {
+  FileHeader h;
+  h.width = oiio.width;
+  h.height = oiio.height;
+  h.channels = oiio.channels;
+  h.format = oiio.format;
+  h.sampleType = oiio.sampleType;
+  h.bitsPerSample = oiio.bitsPerSample;
+  h.attributes = &oiio.attributes;
+  return h;
+}
+
+// Which reader a file goes to: by its first bytes, not its name.
+enum class Kind { Exr, Jpeg, Other };
+
+Kind kindOf(std::span<const unsigned char> first4) {
+  if (first4.size() >= 4 && first4[0] == 0x76 && first4[1] == 0x2f && first4[2] == 0x31 &&
+      first4[3] == 0x01)
+    return Kind::Exr;
+  if (jpeg::hasMagic(first4)) return Kind::Jpeg;
+  return Kind::Other;
+}
+
+Kind kindOf(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  unsigned char first[4] = {0, 0, 0, 0};
+  in.read(reinterpret_cast<char*>(first), 4);
+  return kindOf({first, size_t(in.gcount())});
+}
+
+void checkInputFile(const fs::path& path, const std::string& stage) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
+  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
+  requireRegularFile(path, stage);
+}
+
+// 8-bit codes to floats as OpenImageIO converts them: code · (1/255) in float (which differs from
+// code / 255 in the last bit for half the codes).
+const std::array<float, 256>& codeValues() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t;
+    for (int c = 0; c < 256; ++c) t[size_t(c)] = float(c) * (1.0f / 255.0f);
+    return t;
+  }();
+  return table;
+}
+
+// The loaded image of `codes` (width x height x channels, as stored), turned upright: the codes
+// themselves, or their float values.
+void fromCodes(std::vector<uint8_t>&& codes, int width, int height, int channels,
+               const ReadOptions& options, LoadedImage& out) {
+  detail::applyOrientation(codes, width, height, channels, out.info.orientation);
+  Image& img = out.image;
+  img.width = width;
+  img.height = height;
+  img.channels = channels;
+  if (options.codesForEightBit) {
+    out.codes = std::move(codes);
+    return;
+  }
+  img.pixels.resize(codes.size());
+  const std::array<float, 256>& value = codeValues();
+  const size_t rowValues = size_t(width) * size_t(channels);
+  parallelFor(0, height, [&](int64_t y) {
+    const uint8_t* from = codes.data() + size_t(y) * rowValues;
+    float* to = img.pixels.data() + size_t(y) * rowValues;
+    for (size_t i = 0; i < rowValues; ++i) to[i] = value[from[i]];
+  });
+}
+
+LoadedImage readExr(const fs::path& path, const std::string& stage) {
+  ExrReader reader(path, stage);
+  const ExrPartHeader& part = reader.header(0);
+  LoadedImage out;
+  fillCaptureInfo(headerOf(part), out.info);
+  checkImageSize(part.width, part.height, int(part.channelNames.size()), stage, path);
+  out.image = reader.read(0);
+  if (out.info.orientation != 1) {
+    detail::applyOrientation(out.image.pixels, out.image.width, out.image.height,
+                             out.image.channels, out.info.orientation);
+  }
+  out.image.colorSpace = out.info.fileColorSpace;
+  return out;
+}
+
+LoadedImage fromJpeg(jpeg::Decoded&& decoded, const ReadOptions& options) {
+  LoadedImage out;
+  fillCaptureInfo(headerOf(decoded.header), out.info);
+  const int channels = decoded.header.channels;
+  fromCodes(std::move(decoded.codes), decoded.header.width, decoded.header.height, channels,
+            options, out);
+  out.image.channelNames = defaultChannelNames(channels);
+  out.image.colorSpace = out.info.fileColorSpace;
+  return out;
+}
+
+// Everything readImage() does with a file OpenImageIO opened; `path` names it in errors.
+LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::string& stage,
+                         const ReadOptions& options) {
+  const oiio::Header& h = reader.header();
+  if (h.width <= 0 || h.height <= 0 || h.channels <= 0)
+    throw Error(stage, "image has no pixels", path);
+  // What the header claims, checked before a pixel buffer is allocated (core/limits.h).
+  checkImageSize(h.width, h.height, h.channels, stage, path);
+  LoadedImage out;
+  fillCaptureInfo(headerOf(h), out.info);
+  std::string why;
+  bool truncated = false;
+  const size_t values = size_t(h.width) * size_t(h.height) * size_t(h.channels);
+  if (options.codesForEightBit && h.eightBit) {
+    std::vector<uint8_t> codes(values);
+    if (!reader.read(true, codes.data(), why, truncated))
+      throw Error(
+          stage, std::string(truncated ? "truncated file: " : "cannot decode image: ") + why, path);
+    fromCodes(std::move(codes), h.width, h.height, h.channels, options, out);
+  } else {
+    Image& img = out.image;
+    img.pixels.resize(values);
+    if (!reader.read(false, img.pixels.data(), why, truncated))
+      throw Error(
+          stage, std::string(truncated ? "truncated file: " : "cannot decode image: ") + why, path);
+    img.width = h.width;
+    img.height = h.height;
+    img.channels = h.channels;
+    detail::applyOrientation(img.pixels, img.width, img.height, img.channels, out.info.orientation);
+  }
+  out.image.channelNames = h.channelNames;
+  out.image.colorSpace = out.info.fileColorSpace;
+  return out;
 }
 
 }  // namespace
 
 CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
                                       const std::vector<ImageAttribute>& attributes) {
-  OIIO::ImageSpec spec(width, height, channels, OIIO::TypeDesc::UINT8);
-  for (const ImageAttribute& a : attributes) {
-    if (const int* i = std::get_if<int>(&a.value)) {
-      spec.attribute(a.name, *i);
-    } else if (const double* d = std::get_if<double>(&a.value)) {
-      spec.attribute(a.name, float(*d));
-    } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
-      spec.attribute(a.name, *t);
-    } else {
-      const auto& v = std::get<std::vector<float>>(a.value);
-      if (v.empty()) continue;
-      spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, int(v.size())), v.data());
-    }
-  }
+  FileHeader h;
+  h.width = width;
+  h.height = height;
+  h.channels = channels;
+  h.sampleType = "uint8";
+  h.bitsPerSample = 8;
+  h.attributes = &attributes;
   CaptureInfo info;
-  fillCaptureInfo(spec, info);
+  fillCaptureInfo(h, info);
   return info;
 }
 
@@ -228,123 +410,63 @@ bool looksLikeImageFile(const fs::path& path) {
 }
 
 CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
-  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
-  requireRegularFile(path, stage);
-  auto input = openInput(path.string());
-  if (!input) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "unknown reason";
-    throw Error(stage, "cannot read image: " + why, path);
-  }
+  checkInputFile(path, stage);
   CaptureInfo info;
-  info.format = input->format_name();
-  const OIIO::ImageSpec& spec = input->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+  switch (kindOf(path)) {
+    case Kind::Exr: {
+      ExrReader reader(path, stage);
+      fillCaptureInfo(headerOf(reader.header(0)), info);
+      return info;
+    }
+    case Kind::Jpeg: {
+      const jpeg::Decoded header = jpeg::readFile(path, true, stage);
+      fillCaptureInfo(headerOf(header.header), info);
+      return info;
+    }
+    case Kind::Other:
+      break;
+  }
+  std::string why;
+  auto reader = oiio::module(stage, path).open(path.string(), why);
+  if (!reader) throw Error(stage, "cannot read image: " + why, path);
+  const oiio::Header& h = reader->header();
+  if (h.width <= 0 || h.height <= 0 || h.channels <= 0)
     throw Error(stage, "image has no pixels", path);
-  fillCaptureInfo(spec, info);
+  fillCaptureInfo(headerOf(h), info);
   return info;
 }
 
-namespace {
-
-// Decodes every pixel of `input` as `type` into `pixels`, orientation applied; returns the upright
-// spec. Decoded with ImageInput rather than ImageBuf: the JPEG reader reports a truncated file
-// only as an error message after a "successful" read, which ImageBuf drops.
-template <class Vector>
-OIIO::ImageSpec decode(OIIO::ImageInput& input, const OIIO::ImageSpec& spec, int orientation,
-                       OIIO::TypeDesc type, Vector& pixels, const fs::path& path,
-                       const std::string& stage) {
-  pixels.resize(size_t(spec.width) * size_t(spec.height) * size_t(spec.nchannels));
-  const bool ok = input.read_image(0, 0, 0, spec.nchannels, type, pixels.data());
-  const std::string why = readerError(input);
-  input.close();
-  if (!ok)
-    throw Error(stage, "cannot decode image: " + (why.empty() ? "unknown reason" : why), path);
-  if (!why.empty()) {
-    const bool truncated = why.find("Premature end") != std::string::npos;
-    throw Error(stage, std::string(truncated ? "truncated file: " : "corrupt image data: ") + why,
-                path);
-  }
-  if (orientation == 1) return spec;
-  OIIO::ImageSpec stored = spec;  // keeps the Orientation attribute for reorient()
-  stored.set_format(type);
-  OIIO::ImageBuf buffer(stored, pixels.data());
-  OIIO::ImageBuf upright = OIIO::ImageBufAlgo::reorient(buffer);
-  if (upright.has_error())
-    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
-  const OIIO::ImageSpec& s = upright.spec();
-  Vector turned(pixels.size());
-  OIIO::ROI roi(s.x, s.x + s.width, s.y, s.y + s.height, 0, 1, 0, s.nchannels);
-  if (!upright.get_pixels(roi, type, turned.data()))
-    throw Error(stage, "cannot apply EXIF orientation: " + upright.geterror(), path);
-  pixels = std::move(turned);
-  return s;
-}
-
-}  // namespace
-
-namespace {
-
-// Everything readImage() does once the file is open; `path` names the file in errors.
-LoadedImage readOpened(OIIO::ImageInput& input, const fs::path& path, const std::string& stage,
-                       const ReadOptions& options) {
-  LoadedImage out;
-  CaptureInfo& info = out.info;
-  info.format = input.format_name();
-  const OIIO::ImageSpec spec = input.spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
-    throw Error(stage, "image has no pixels", path);
-  }
-  // What the header claims, checked before a pixel buffer is allocated (core/limits.h).
-  checkImageSize(spec.width, spec.height, spec.nchannels, stage, path);
-  fillCaptureInfo(spec, info);
-
-  Image& img = out.image;
-  OIIO::ImageSpec upright;
-  if (options.codesForEightBit && spec.format == OIIO::TypeDesc::UINT8) {
-    upright = decode(input, spec, info.orientation, OIIO::TypeDesc::UINT8, out.codes, path, stage);
-  } else {
-    upright = decode(input, spec, info.orientation, OIIO::TypeDesc::FLOAT, img.pixels, path, stage);
-  }
-  img.width = upright.width;
-  img.height = upright.height;
-  img.channels = upright.nchannels;
-  for (int c = 0; c < spec.nchannels; ++c) img.channelNames.push_back(spec.channel_name(c));
-  img.colorSpace = info.fileColorSpace;
-  return out;
-}
-
-}  // namespace
-
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
-  if (fs::is_directory(path, ec)) throw Error(stage, "is a folder, expected an image file", path);
-  requireRegularFile(path, stage);
-
-  useEveryCoreForExr();
-  auto input = openInput(path.string());
-  if (!input) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "unknown reason";
-    throw Error(stage, "cannot read image: " + why, path);
+  checkInputFile(path, stage);
+  switch (kindOf(path)) {
+    case Kind::Exr:
+      return readExr(path, stage);
+    case Kind::Jpeg: {
+      jpeg::Decoded decoded = jpeg::readFile(path, false, stage);
+      if (decoded.header.native) return fromJpeg(std::move(decoded), options);
+      break;  // CMYK: OpenImageIO converts it
+    }
+    case Kind::Other:
+      break;
   }
-  return readOpened(*input, path, stage, options);
+  std::string why;
+  auto reader = oiio::module(stage, path).open(path.string(), why);
+  if (!reader) throw Error(stage, "cannot read image: " + why, path);
+  return readWithOiio(*reader, path, stage, options);
 }
 
 LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::path& name,
                                 const std::string& stage, const ReadOptions& options) {
   if (bytes.empty()) throw Error(stage, "image data is empty", name);
-  OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
-  auto input = OIIO::ImageInput::open(name.string(), nullptr, &proxy);
-  if (!input) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "unknown reason";
-    throw Error(stage, "cannot read image: " + why, name);
+  if (kindOf(bytes.first(std::min<size_t>(4, bytes.size()))) == Kind::Jpeg) {
+    jpeg::Decoded decoded = jpeg::readMemory(bytes, name, false, stage);
+    if (decoded.header.native) return fromJpeg(std::move(decoded), options);
   }
-  return readOpened(*input, name, stage, options);
+  std::string why;
+  auto reader =
+      oiio::module(stage, name).openMemory(bytes.data(), bytes.size(), name.string(), why);
+  if (!reader) throw Error(stage, "cannot read image: " + why, name);
+  return readWithOiio(*reader, name, stage, options);
 }
 
 std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
@@ -374,140 +496,69 @@ std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
 
 namespace {
 
-// The channels of one output file or part: images of one size whose channels follow one another,
-// then channels of one value.
-struct ChannelSources {
-  std::vector<const Image*> images;
-  std::vector<float> constants;
-
-  int width() const { return images.front()->width; }
-  int height() const { return images.front()->height; }
-  int channels() const {
-    int n = int(constants.size());
-    for (const Image* image : images) n += image->channels;
-    return n;
-  }
-};
-
-// The largest finite magnitude among the sources' values, rows on every core.
-float largestFiniteMagnitude(const ChannelSources& sources) {
-  float largest = 0.0f;
-  for (float v : sources.constants)
-    if (std::isfinite(v)) largest = std::max(largest, std::abs(v));
-  for (const Image* image : sources.images) {
-    std::vector<float> rowLargest(size_t(image->height), 0.0f);
-    parallelFor(0, image->height, [&](int64_t y) {
-      // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
-      float m = 0.0f;
-      for (float v : image->row(int(y))) {
-        const float a = std::abs(v);
-        m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
-      }
-      rowLargest[size_t(y)] = m;
-    });
-    for (float m : rowLargest) largest = std::max(largest, m);
-  }
-  return largest;
+bool isJpegName(const std::string& ext) {
+  return ext == ".jpg" || ext == ".jpeg";
 }
 
-// The pixel format for `sources` under `options`, and whether a half request became float.
-OIIO::TypeDesc pixelFormat(const ChannelSources& sources, const WriteOptions& options, bool isExr,
-                           WriteReport& report) {
-  OIIO::TypeDesc format = OIIO::TypeDesc::UINT8;
-  switch (options.depth) {
-    case WriteOptions::Depth::Auto:
-      format = isExr ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::UINT8;
-      break;
-    case WriteOptions::Depth::UInt8:
-      format = OIIO::TypeDesc::UINT8;
-      break;
-    case WriteOptions::Depth::UInt16:
-      format = OIIO::TypeDesc::UINT16;
-      break;
-    case WriteOptions::Depth::Half:
-      format = OIIO::TypeDesc::HALF;
-      break;
-    case WriteOptions::Depth::Float:
-      format = OIIO::TypeDesc::FLOAT;
-      break;
-  }
-  if (format == OIIO::TypeDesc::HALF) {
-    report.largestMagnitude = largestFiniteMagnitude(sources);
-    if (report.largestMagnitude > kHalfMax) {
-      format = OIIO::TypeDesc::FLOAT;
-      report.promotedToFloat = true;
+// Fills `values` with rows [y0, y0 + rows) of `image` as `sample`s: integers as OpenImageIO
+// converts floats to them, halves as Imath rounds them. Rows on every core.
+void convertRows(const Image& image, int y0, int rows, oiio::Sample sample, void* values) {
+  const size_t rowValues = size_t(image.width) * size_t(image.channels);
+  parallelFor(0, rows, [&](int64_t r) {
+    const float* from = image.row(y0 + int(r)).data();
+    const size_t first = size_t(r) * rowValues;
+    switch (sample) {
+      case oiio::Sample::UInt8: {
+        uint8_t* to = static_cast<uint8_t*>(values) + first;
+        for (size_t i = 0; i < rowValues; ++i) to[i] = uint8_t(detail::toCode(from[i], 255.0f));
+        break;
+      }
+      case oiio::Sample::UInt16: {
+        uint16_t* to = static_cast<uint16_t*>(values) + first;
+        for (size_t i = 0; i < rowValues; ++i) to[i] = uint16_t(detail::toCode(from[i], 65535.0f));
+        break;
+      }
+      case oiio::Sample::Half: {
+        Imath::half* to = static_cast<Imath::half*>(values) + first;
+        for (size_t i = 0; i < rowValues; ++i) to[i] = Imath::half(from[i]);
+        break;
+      }
+      case oiio::Sample::Float:
+        std::copy_n(from, rowValues, static_cast<float*>(values) + first);
+        break;
     }
-  }
-  return format;
+  });
 }
 
-// Writes the rows of `sources` into the current image (or part) of `output`, whose data window
-// starts at row `y0`, in the pixel type the opened writer stores (which is not always the one
-// asked for: Radiance HDR is always float). The conversion from float is OpenImageIO's own (so the
-// values are those write_image() would store), done a band of rows at a time on every core; each
-// band is then handed over in the file's format, and OpenEXR compresses its blocks of scanlines on
-// its thread pool. Only one band is held converted: no full-size copy of the image is made.
-bool writeRows(OIIO::ImageOutput& output, int y0, const ChannelSources& sources) {
-  const OIIO::TypeDesc format = output.spec().format;
-  const int width = sources.width(), height = sources.height();
-  const int channels = sources.channels();
-  const size_t valueBytes = format.size();
-  const size_t pixelBytes = size_t(channels) * valueBytes;
-  const size_t rowBytes = pixelBytes * size_t(width);
-  // Bands of about 8 MB, in whole blocks of 16 scanlines (OpenEXR's ZIP block), so that every
-  // band gives the compressor several blocks to work on at once.
-  constexpr size_t kBandBytes = size_t(8) << 20;
-  constexpr int kBlockRows = 16;
-  const int bandRows = std::max(kBlockRows, int(kBandBytes / rowBytes) / kBlockRows * kBlockRows);
-  std::vector<unsigned char> band(size_t(std::min(bandRows, height)) * rowBytes);
-  std::vector<unsigned char> constantBytes(sources.constants.size() * valueBytes);
-  if (!sources.constants.empty()) {
-    OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, sources.constants.data(), format,
-                               constantBytes.data(), int(sources.constants.size()));
-  }
-  // One source written straight into the band; several are converted row by row and interleaved.
-  const bool direct = sources.images.size() == 1 && sources.constants.empty();
-  for (int r0 = 0; r0 < height; r0 += bandRows) {
-    const int rows = std::min(bandRows, height - r0);
-    parallelFor(0, rows, [&](int64_t r) {
-      unsigned char* dst = band.data() + size_t(r) * rowBytes;
-      if (direct) {
-        const Image& image = *sources.images.front();
-        OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, image.row(r0 + int(r)).data(), format,
-                                   dst, width * channels);
-        return;
-      }
-      std::vector<unsigned char> converted;
-      size_t offset = 0;  // of the source's first channel in a pixel, in bytes
-      for (const Image* image : sources.images) {
-        const size_t sourceBytes = size_t(image->channels) * valueBytes;
-        converted.resize(sourceBytes * size_t(width));
-        OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, image->row(r0 + int(r)).data(), format,
-                                   converted.data(), width * image->channels);
-        for (int x = 0; x < width; ++x) {
-          std::memcpy(dst + size_t(x) * pixelBytes + offset,
-                      converted.data() + size_t(x) * sourceBytes, sourceBytes);
-        }
-        offset += sourceBytes;
-      }
-      for (int x = 0; x < width && !constantBytes.empty(); ++x)
-        std::memcpy(dst + size_t(x) * pixelBytes + offset, constantBytes.data(),
-                    constantBytes.size());
-    });
-    if (!output.write_scanlines(y0 + r0, y0 + r0 + rows, 0, format, band.data())) return false;
-  }
-  return true;
-}
-
-void describeExr(OIIO::ImageSpec& spec, const std::string& colorSpace,
-                 const WriteOptions& options) {
-  spec.attribute("compression", options.exrCompression);
-  if (!colorSpace.empty()) spec.attribute("colorSpace", colorSpace);
-  if (options.chromaticities) {
-    float c[8];
-    for (int i = 0; i < 8; ++i) c[i] = float((*options.chromaticities)[size_t(i)]);
-    spec.attribute("chromaticities", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8), c);
-  }
+// A JPEG holds one or three channels, as OpenImageIO writes them: the first three of three or
+// more, a two-channel image as luminance when its first channel is Y (else RGB with a black
+// third), one as grayscale.
+void writeJpeg(const fs::path& file, const fs::path& shown, const Image& image,
+               const WriteOptions& options) {
+  const bool gray = image.channels == 1 || (image.channels == 2 && !image.channelNames.empty() &&
+                                            image.channelNames[0] == "Y");
+  const int channels = gray ? 1 : 3;
+  std::vector<ImageAttribute> attributes = options.attributes;
+  attributes.push_back({"Software", std::string("compose")});
+  std::string space = image.colorSpace;
+  std::transform(space.begin(), space.end(), space.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  if (space == "srgb") attributes.push_back({"Exif:ColorSpace", 1});
+  jpeg::write(file, shown, image.width, image.height, channels, options.jpegQuality, attributes,
+              [&](int y0, int rows, uint8_t* codes) {
+                parallelFor(0, rows, [&](int64_t r) {
+                  const float* from = image.row(y0 + int(r)).data();
+                  uint8_t* to = codes + size_t(r) * size_t(image.width) * size_t(channels);
+                  for (int x = 0; x < image.width; ++x) {
+                    const float* p = from + size_t(x) * size_t(image.channels);
+                    for (int c = 0; c < channels; ++c) {
+                      const float v = c < image.channels ? p[c] : 0.0f;
+                      to[size_t(x) * size_t(channels) + size_t(c)] =
+                          uint8_t(detail::toCode(v, 255.0f));
+                    }
+                  }
+                });
+              });
 }
 
 // Writes into `file` (a temporary); errors name `shown`, the destination the user asked for.
@@ -515,55 +566,52 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
                       const WriteOptions& options) {
   COMPOSE_CHECK(image.width > 0 && image.height > 0 && image.channels > 0);
   COMPOSE_CHECK(image.pixels.size() == image.pixelCount() * size_t(image.channels));
-
   const std::string ext = lowerExtension(shown);
-  const bool isExr = ext == ".exr";
-  if (isExr) useEveryCoreForExr();
-  auto output = OIIO::ImageOutput::create(shown.string());
-  if (!output) throw Error("output", "no image writer for this file extension", shown);
-
+  if (ext == ".exr")
+    return writeExrFile(file, shown, {ExrPart("", &image, 0, 0, 0, 0, options)}).front();
   WriteReport report;
-  const ChannelSources sources{{&image}, {}};
-  const OIIO::TypeDesc format = pixelFormat(sources, options, isExr, report);
-  OIIO::ImageSpec spec(image.width, image.height, image.channels, format);
-  if (!image.channelNames.empty()) {
-    COMPOSE_CHECK(int(image.channelNames.size()) == image.channels);
-    spec.channelnames = image.channelNames;
+  if (isJpegName(ext)) {
+    writeJpeg(file, shown, image, options);
+    return report;
   }
-  spec.alpha_channel = options.alphaChannel;
-  if (!image.colorSpace.empty()) spec.attribute("oiio:ColorSpace", image.colorSpace);
-  spec.attribute("Software", "compose");
-  if (isExr) describeExr(spec, image.colorSpace, options);
-  const bool isJpeg = ext == ".jpg" || ext == ".jpeg";
-  if (isJpeg) {
-    spec.attribute("Compression", std::string("jpeg:").append(std::to_string(options.jpegQuality)));
+  oiio::WriteSpec spec;
+  spec.width = image.width;
+  spec.height = image.height;
+  spec.channels = image.channels;
+  spec.channelNames = image.channelNames;
+  spec.alphaChannel = options.alphaChannel;
+  spec.colorSpace = image.colorSpace;
+  spec.jpegQuality = options.jpegQuality;
+  spec.attributes = options.attributes;
+  switch (options.depth) {
+    case WriteOptions::Depth::Auto:
+    case WriteOptions::Depth::UInt8:
+      spec.sample = oiio::Sample::UInt8;
+      break;
+    case WriteOptions::Depth::UInt16:
+      spec.sample = oiio::Sample::UInt16;
+      break;
+    case WriteOptions::Depth::Half:
+    case WriteOptions::Depth::Float:
+      spec.sample = oiio::Sample::Float;
+      break;
   }
-  for (const ImageAttribute& a : options.attributes) {
-    if (const int* i = std::get_if<int>(&a.value)) {
-      spec.attribute(a.name, *i);
-    } else if (const double* d = std::get_if<double>(&a.value)) {
-      float f = float(*d);
-      // OpenImageIO 2.4's JPEG EXIF writer turns exact binary fractions (1/4, 1/64 s) into an
-      // infinite rational; one step up in float avoids that and reads back as the same value.
-      if (isJpeg) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-      spec.attribute(a.name, f);
-    } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
-      spec.attribute(a.name, *t);
-    } else {
-      const auto& v = std::get<std::vector<float>>(a.value);
-      spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, int(v.size())), v.data());
-    }
+  if (options.depth == WriteOptions::Depth::Half) {
+    report.largestMagnitude = detail::largestFiniteMagnitude({{&image}, {}});
+    if (report.largestMagnitude > kHalfMax)
+      report.promotedToFloat = true;
+    else
+      spec.sample = oiio::Sample::Half;
   }
-  auto fail = [&](const std::string& what) {
-    std::string why = output->geterror();
-    if (why.empty() && errno != 0) why = std::strerror(errno);
-    output.reset();
-    throw Error("output", what + (why.empty() ? "" : ": " + why), shown);
-  };
-  errno = 0;
-  if (!output->open(file.string(), spec)) fail("cannot open for writing");
-  if (!writeRows(*output, 0, sources)) fail("cannot write image");
-  if (!output->close()) fail("cannot finish writing");
+  std::string why;
+  if (!oiio::module("output", shown)
+           .write(
+               file.string(), shown.string(), spec,
+               [&](int y0, int rows, oiio::Sample sample, void* values) {
+                 convertRows(image, y0, rows, sample, values);
+               },
+               why))
+    throw Error("output", why, shown);
   return report;
 }
 
@@ -571,84 +619,15 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
 
 WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& image,
                        const WriteOptions& options) {
-  if (!OIIO::ImageOutput::create(path.string()))
+  const std::string ext = lowerExtension(path);
+  if (ext != ".exr" && !isJpegName(ext) && !oiio::module("output", path).canWrite(path.string()))
     throw Error("output", "no image writer for this file extension", path);
   return writeInto(outputs.add(path), path, image, options);
 }
 
 std::vector<WriteReport> writeExrParts(OutputFiles& outputs, const fs::path& path,
                                        const std::vector<ExrPart>& parts, const ExrHeader& header) {
-  COMPOSE_CHECK(!parts.empty());
-  std::vector<WriteReport> reports(parts.size());
-  std::vector<ChannelSources> sources(parts.size());
-  std::vector<OIIO::TypeDesc> formats(parts.size());
-  std::vector<OIIO::ImageSpec> specs;
-  for (size_t i = 0; i < parts.size(); ++i) {
-    const ExrPart& part = parts[i];
-    COMPOSE_CHECK(part.image != nullptr);
-    const Image& image = *part.image;
-    ChannelSources& s = sources[i];
-    s.images.push_back(&image);
-    for (const Image* more : part.moreImages) {
-      COMPOSE_CHECK(more != nullptr && more->width == image.width && more->height == image.height);
-      s.images.push_back(more);
-    }
-    // The channels' names: the part's own, else the images' (when every image has them).
-    std::vector<std::string> names = part.channelNames;
-    for (const Image* source : s.images) {
-      COMPOSE_CHECK(source->width > 0 && source->height > 0 && source->channels > 0);
-      COMPOSE_CHECK(source->pixels.size() == source->pixelCount() * size_t(source->channels));
-      if (!part.channelNames.empty()) continue;
-      if (source->channelNames.empty()) {
-        names.clear();
-        break;
-      }
-      COMPOSE_CHECK(int(source->channelNames.size()) == source->channels);
-      names.insert(names.end(), source->channelNames.begin(), source->channelNames.end());
-    }
-    COMPOSE_CHECK(names.empty() || int(names.size()) == s.channels());
-    for (const auto& [name, value] : part.constantChannels) {
-      s.constants.push_back(value);
-      if (!names.empty()) names.push_back(name);
-    }
-    formats[i] = pixelFormat(s, part.options, true, reports[i]);
-    OIIO::ImageSpec spec(image.width, image.height, s.channels(), formats[i]);
-    spec.x = part.x;
-    spec.y = part.y;
-    spec.full_x = 0;
-    spec.full_y = 0;
-    spec.full_width = part.fullWidth > 0 ? part.fullWidth : image.width;
-    spec.full_height = part.fullHeight > 0 ? part.fullHeight : image.height;
-    if (!names.empty()) spec.channelnames = names;
-    spec.alpha_channel = part.options.alphaChannel;
-    spec.attribute("name", part.name);
-    spec.attribute("Software", "compose");
-    describeExr(spec, part.colorSpace.empty() ? image.colorSpace : part.colorSpace, part.options);
-    for (const auto& [name, m] : header.matrices) spec.attribute(name, OIIO::TypeMatrix, m.data());
-    for (const auto& [name, value] : header.strings) spec.attribute(name, value);
-    specs.push_back(std::move(spec));
-  }
-  const fs::path file = outputs.add(path);
-  useEveryCoreForExr();
-  auto output = OIIO::ImageOutput::create(path.string());
-  if (!output) throw Error("output", "no image writer for this file extension", path);
-  auto fail = [&](const std::string& what) {
-    std::string why = output->geterror();
-    if (why.empty() && errno != 0) why = std::strerror(errno);
-    output.reset();
-    throw Error("output", what + (why.empty() ? "" : ": " + why), path);
-  };
-  errno = 0;
-  if (!output->open(file.string(), int(specs.size()), specs.data()))
-    fail("cannot open for writing");
-  for (size_t i = 0; i < parts.size(); ++i) {
-    if (i > 0 && !output->open(file.string(), specs[i], OIIO::ImageOutput::AppendSubimage))
-      fail("cannot start part '" + parts[i].name + "'");
-    if (!writeRows(*output, specs[i].y, sources[i]))
-      fail("cannot write part '" + parts[i].name + "'");
-  }
-  if (!output->close()) fail("cannot finish writing");
-  return reports;
+  return writeExrFile(outputs.add(path), path, parts, header);
 }
 
 WriteReport writeImage(const fs::path& path, const Image& image, const WriteOptions& options) {

@@ -1,10 +1,18 @@
-// Image input and output over OpenImageIO.
+// Image input and output.
+//
+// OpenEXR files go through the OpenEXR library (exr_io.h) and JPEGs through libjpeg-turbo
+// (jpeg_io.h, EXIF by exif.h); every other format through OpenImageIO, loaded as a module when a
+// file needs it (oiio_module.h), so that a run on OpenEXR and JPEG files does not pay for loading
+// it. A file goes to a reader by its first bytes, not its name. Each reader gives what OpenImageIO
+// gives for the same file: the same pixels, channels in the same order, the same metadata under
+// the same names; and each writer writes files OpenImageIO reads as its own.
 //
 // readImage() decodes any format OpenImageIO can read (JPEG, PNG, TIFF, EXR, HDR, camera RAW where
 // the plugin is present) to float, applies the EXIF orientation so that pixel (0, 0) is the top
 // left of the picture as a person sees it, and returns the capture metadata that later stages need
 // (exposure for merging, focal length for the camera). Values are returned as stored: an 8-bit
-// sRGB JPEG comes back as encoded values in [0, 1] (code / 255 exactly), a 16-bit TIFF as
+// sRGB JPEG comes back as encoded values in [0, 1] (code · (1/255) in float, as OpenImageIO
+// converts them), a 16-bit TIFF as
 // code / 65535, tagged with the colour space the file declares. A file the decoder had to give up
 // on part-way (a truncated JPEG) is an error, not a picture with a grey bottom.
 //
@@ -20,10 +28,10 @@
 // the write reports it.
 //
 // Threads and memory: OpenEXR compresses and decompresses blocks of scanlines on its own thread
-// pool, sized to every core oneTBB may use (OpenImageIO's "exr_threads"). Writers convert the
-// float pixels to the file's type a band of rows at a time on every core and hand the bands over
-// in that type, so that a write holds no full-size converted copy of the image; the values are
-// those OpenImageIO's own conversion gives.
+// pool, sized to every core oneTBB may use. Writers convert the float pixels to the file's type a
+// band of rows at a time on every core and hand the bands over in that type, so that a write
+// holds no full-size converted copy of the image; the values are those OpenImageIO's own
+// conversion gives (integers rounded half away from zero and clamped, halves as Imath rounds).
 //
 // Errors (missing file, undecodable data, unwritable folder) throw compose::Error with stage
 // "ingest" (or "output" for writes) and the file name.

@@ -1,0 +1,41 @@
+// EXIF metadata as a JPEG's APP1 segment holds it: a TIFF structure (byte order mark, IFD0, the
+// Exif sub-IFD), read into and written from ImageAttributes named as OpenImageIO names them, so
+// that the capture metadata (image_io.h, CaptureInfo) comes out the same whichever library read
+// the file.
+//
+// Read: every entry of IFD0 and of the Exif sub-IFD whose tag is listed below, in either byte
+// order; ASCII as text (trailing NULs and spaces removed), SHORT and LONG as int, RATIONAL and
+// SRATIONAL as double (a zero denominator makes the entry absent). Unknown tags, maker notes,
+// GPS and thumbnails are skipped. The block is untrusted: offsets and counts are checked against
+// its size, a loop of IFDs is not followed, and a damaged block yields the entries read before
+// the damage (never a crash or an exception).
+//
+// Written: the same tags from attributes of the matching names and types (numbers as the tag's
+// own type; exposure times and other rationals as exact fractions where the value is one: 1/64 s
+// stays 1/64), IFD0 first with a pointer to the Exif sub-IFD; big-endian ("MM"), as cameras
+// commonly write it. Attributes with other names are not written.
+//
+//   IFD0:  Make, Model, Orientation, XResolution, YResolution, ResolutionUnit, Software,
+//          DateTime
+//   Exif:  ExposureTime, FNumber, Exif:PhotographicSensitivity (ISOSpeedRatings),
+//          Exif:DateTimeOriginal, Exif:SubsecTimeOriginal, Exif:FocalLength,
+//          Exif:FocalPlaneXResolution, Exif:FocalPlaneYResolution,
+//          Exif:FocalPlaneResolutionUnit, Exif:FocalLengthIn35mmFilm, Exif:ColorSpace
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "ingest/image_io.h"
+
+namespace compose::ingest::exif {
+
+// The entries of a TIFF-structured EXIF block (what follows "Exif\0\0" in APP1).
+std::vector<ImageAttribute> decode(std::span<const unsigned char> tiff);
+
+// The TIFF-structured block for `attributes` (without the "Exif\0\0" prefix); empty when none of
+// them is an EXIF tag.
+std::vector<unsigned char> encode(const std::vector<ImageAttribute>& attributes);
+
+}  // namespace compose::ingest::exif

@@ -1,0 +1,584 @@
+#include "ingest/exr_io.h"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <optional>
+
+#include <OpenEXR/ImfBoxAttribute.h>
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfChromaticitiesAttribute.h>
+#include <OpenEXR/ImfDoubleAttribute.h>
+#include <OpenEXR/ImfFloatAttribute.h>
+#include <OpenEXR/ImfFloatVectorAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputPart.h>
+#include <OpenEXR/ImfIntAttribute.h>
+#include <OpenEXR/ImfMatrixAttribute.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
+#include <OpenEXR/ImfMultiPartOutputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfOutputPart.h>
+#include <OpenEXR/ImfPartType.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfStringVectorAttribute.h>
+#include <OpenEXR/ImfThreading.h>
+#include <OpenEXR/ImfVecAttribute.h>
+#include <tbb/task_arena.h>
+
+#include "core/error.h"
+#include "core/limits.h"
+#include "core/parallel.h"
+#include "ingest/pixel_util.h"
+
+namespace compose::ingest {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// OpenEXR's thread pool gets every core oneTBB may use, once.
+void useEveryCoreForExr() {
+  static std::once_flag once;
+  std::call_once(once, [] { Imf::setGlobalThreadCount(tbb::this_task_arena::max_concurrency()); });
+}
+
+bool equalsIgnoringCase(const std::string& a, const std::string& b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char p, char q) {
+           return std::tolower(static_cast<unsigned char>(p)) ==
+                  std::tolower(static_cast<unsigned char>(q));
+         });
+}
+
+// OpenEXR's standard attribute names and OpenImageIO's for the same thing (both ways), as
+// OpenImageIO 2.4 translates them.
+struct NamePair {
+  const char* exr;
+  const char* oiio;
+};
+constexpr NamePair kRenamed[] = {{"capDate", "DateTime"},
+                                 {"comments", "ImageDescription"},
+                                 {"owner", "Copyright"},
+                                 {"pixelAspectRatio", "PixelAspectRatio"},
+                                 {"xDensity", "XResolution"},
+                                 {"expTime", "ExposureTime"},
+                                 {"aperture", "FNumber"},
+                                 {"chunkCount", "openexr:chunkCount"},
+                                 {"dwaCompressionLevel", "openexr:dwaCompressionLevel"},
+                                 {"maxSamplesPerPixel", "openexr:maxSamplesPerPixel"}};
+// Header fields that are part of the image's layout, not metadata.
+constexpr const char* kLayout[] = {"channels",      "compression", "dataWindow",
+                                   "displayWindow", "envmap",      "tiles",
+                                   "type",          "lineOrder",   "version"};
+
+std::string oiioName(const std::string& exrName) {
+  if (exrName == "cameraTransform") return "worldtocamera";
+  for (const NamePair& p : kRenamed)
+    if (exrName == p.exr) return p.oiio;
+  return exrName;
+}
+
+// The OpenEXR name an attribute is written under; empty: not written.
+std::string exrName(const std::string& name) {
+  for (const NamePair& p : kRenamed)
+    if (equalsIgnoringCase(name, p.oiio) || equalsIgnoringCase(name, p.exr)) return p.exr;
+  if (equalsIgnoringCase(name, "worldtocamera")) return "worldToCamera";
+  if (equalsIgnoringCase(name, "worldtoNDC")) return "worldToNDC";
+  if (equalsIgnoringCase(name, "worldtoscreen")) return "worldToScreen";
+  if (equalsIgnoringCase(name, "YResolution") || name.rfind("oiio:", 0) == 0) return {};
+  for (const char* layout : kLayout)
+    if (equalsIgnoringCase(name, layout)) return {};
+  // Metadata meant for another format ("jpeg:subsampling", "tiff:Compression") is not written.
+  for (const char* other : {"jpeg:", "tiff:", "png:", "raw:", "openexr:"})
+    if (name.size() > std::strlen(other) &&
+        equalsIgnoringCase(name.substr(0, std::strlen(other)), other))
+      return {};
+  return name;
+}
+
+template <class V>
+std::vector<float> floats(const V* values, size_t n) {
+  std::vector<float> out(n);
+  for (size_t i = 0; i < n; ++i) out[i] = float(values[i]);
+  return out;
+}
+
+// The header's metadata as OpenImageIO names and types it (see exr_io.h).
+std::vector<ImageAttribute> attributesOf(const Imf::Header& header) {
+  std::vector<ImageAttribute> out;
+  for (auto it = header.begin(); it != header.end(); ++it) {
+    const std::string name = it.name();
+    if (std::find_if(std::begin(kLayout), std::end(kLayout),
+                     [&](const char* l) { return name == l; }) != std::end(kLayout))
+      continue;
+    const std::string as = oiioName(name);
+    const Imf::Attribute& a = it.attribute();
+    if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&a)) {
+      if (!s->value().empty()) out.push_back({as, s->value()});
+    } else if (const auto* i = dynamic_cast<const Imf::IntAttribute*>(&a)) {
+      out.push_back({as, i->value()});
+    } else if (const auto* f = dynamic_cast<const Imf::FloatAttribute*>(&a)) {
+      out.push_back({as, double(f->value())});
+    } else if (const auto* d = dynamic_cast<const Imf::DoubleAttribute*>(&a)) {
+      out.push_back({as, d->value()});
+    } else if (const auto* c = dynamic_cast<const Imf::ChromaticitiesAttribute*>(&a)) {
+      const Imf::Chromaticities& v = c->value();
+      out.push_back({as, std::vector<float>{v.red.x, v.red.y, v.green.x, v.green.y, v.blue.x,
+                                            v.blue.y, v.white.x, v.white.y}});
+    } else if (const auto* m = dynamic_cast<const Imf::M44fAttribute*>(&a)) {
+      out.push_back({as, floats(&m->value()[0][0], 16)});
+    } else if (const auto* m3 = dynamic_cast<const Imf::M33fAttribute*>(&a)) {
+      out.push_back({as, floats(&m3->value()[0][0], 9)});
+    } else if (const auto* md = dynamic_cast<const Imf::M44dAttribute*>(&a)) {
+      out.push_back({as, floats(&md->value()[0][0], 16)});
+    } else if (const auto* v2 = dynamic_cast<const Imf::V2fAttribute*>(&a)) {
+      out.push_back({as, std::vector<float>{v2->value().x, v2->value().y}});
+    } else if (const auto* v3 = dynamic_cast<const Imf::V3fAttribute*>(&a)) {
+      out.push_back({as, std::vector<float>{v3->value().x, v3->value().y, v3->value().z}});
+    } else if (const auto* v2i = dynamic_cast<const Imf::V2iAttribute*>(&a)) {
+      out.push_back({as, std::vector<float>{float(v2i->value().x), float(v2i->value().y)}});
+    } else if (const auto* fv = dynamic_cast<const Imf::FloatVectorAttribute*>(&a)) {
+      out.push_back({as, fv->value()});
+    } else if (const auto* b = dynamic_cast<const Imf::Box2iAttribute*>(&a)) {
+      const auto& box = b->value();
+      out.push_back({as, std::vector<float>{float(box.min.x), float(box.min.y), float(box.max.x),
+                                            float(box.max.y)}});
+    }
+    // Other types (preview images, key and time codes, opaque attributes) are not metadata the
+    // pipeline reads.
+  }
+  out.push_back({"oiio:ColorSpace", std::string("Linear")});
+  return out;
+}
+
+// OpenImageIO's channel order (exr_io.h): by layer, then the special names first.
+std::vector<std::string> channelOrder(const Imf::ChannelList& channels) {
+  struct Named {
+    std::string full, layer, suffix;
+    int special = 10000;
+  };
+  std::vector<Named> all;
+  for (auto it = channels.begin(); it != channels.end(); ++it) {
+    Named n;
+    n.full = it.name();
+    const size_t dot = n.full.rfind('.');
+    n.layer = dot == std::string::npos ? std::string() : n.full.substr(0, dot);
+    n.suffix = dot == std::string::npos ? n.full : n.full.substr(dot + 1);
+    all.push_back(std::move(n));
+  }
+  std::stable_sort(all.begin(), all.end(),
+                   [](const Named& a, const Named& b) { return a.layer < b.layer; });
+  static const char* const kSpecial[] = {"R",    "Red",  "G",  "Green", "B",     "Blue", "Y",
+                                         "real", "imag", "A",  "Alpha", "AR",    "RA",   "AG",
+                                         "GA",   "AB",   "BA", "Z",     "Depth", "Zback"};
+  static const char* const kSpecialXyz[] = {"R",  "Red", "G",    "Green", "B",  "Blue",  "X",
+                                            "Y",  "Z",   "real", "imag",  "A",  "Alpha", "AR",
+                                            "RA", "AG",  "GA",   "AB",    "BA", "Depth", "Zback"};
+  for (size_t begin = 0; begin < all.size();) {
+    size_t end = begin + 1;
+    while (end < all.size() && all[end].layer == all[begin].layer) ++end;
+    auto has = [&](const char* suffix) {
+      for (size_t i = begin; i < end; ++i)
+        if (equalsIgnoringCase(all[i].suffix, suffix)) return true;
+      return false;
+    };
+    const bool xyz = has("X") && (has("Y") || has("Z"));
+    for (size_t i = begin; i < end; ++i) {
+      const auto& list =
+          xyz ? std::vector<const char*>(std::begin(kSpecialXyz), std::end(kSpecialXyz))
+              : std::vector<const char*>(std::begin(kSpecial), std::end(kSpecial));
+      for (size_t k = 0; k < list.size(); ++k) {
+        if (equalsIgnoringCase(all[i].suffix, list[k])) {
+          all[i].special = int(k);
+          break;
+        }
+      }
+    }
+    std::sort(all.begin() + std::ptrdiff_t(begin), all.begin() + std::ptrdiff_t(end),
+              [](const Named& a, const Named& b) {
+                if (a.special != b.special) return a.special < b.special;
+                return a.suffix < b.suffix;
+              });
+    begin = end;
+  }
+  std::vector<std::string> names;
+  for (Named& n : all) names.push_back(std::move(n.full));
+  return names;
+}
+
+const char* typeName(Imf::PixelType type) {
+  switch (type) {
+    case Imf::HALF:
+      return "half";
+    case Imf::FLOAT:
+      return "float";
+    case Imf::UINT:
+      return "uint";
+    default:
+      return "unknown";
+  }
+}
+
+}  // namespace
+
+std::vector<std::string> defaultChannelNames(int channels) {
+  if (channels == 1) return {"Y"};
+  std::vector<std::string> names;
+  for (int c = 0; c < channels; ++c)
+    names.push_back(c < 4 ? std::string(1, "RGBA"[c]) : "channel" + std::to_string(c));
+  return names;
+}
+
+bool hasExrMagic(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  unsigned char magic[4] = {0, 0, 0, 0};
+  if (!in.read(reinterpret_cast<char*>(magic), 4)) return false;
+  return magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 && magic[3] == 0x01;
+}
+
+const ImageAttribute* ExrPartHeader::find(const std::string& attributeName) const {
+  for (const ImageAttribute& a : attributes)
+    if (equalsIgnoringCase(a.name, attributeName)) return &a;
+  return nullptr;
+}
+
+struct ExrReader::Impl {
+  fs::path file;
+  std::string stage;
+  std::unique_ptr<Imf::MultiPartInputFile> input;
+  std::vector<ExrPartHeader> headers;
+};
+
+ExrReader::ExrReader(const fs::path& file, const std::string& stage)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->file = file;
+  impl_->stage = stage;
+  useEveryCoreForExr();
+  try {
+    // The chunk table is taken as the file has it: a damaged table is an error when the pixels
+    // are read, not a picture with missing rows filled in.
+    impl_->input =
+        std::make_unique<Imf::MultiPartInputFile>(file.c_str(), Imf::globalThreadCount(), false);
+    for (int p = 0; p < impl_->input->parts(); ++p) {
+      const Imf::Header& h = impl_->input->header(p);
+      ExrPartHeader out;
+      if (h.hasName()) out.name = h.name();
+      const Imath::Box2i& dw = h.dataWindow();
+      const Imath::Box2i& display = h.displayWindow();
+      const int64_t w = int64_t(dw.max.x) - dw.min.x + 1, hgt = int64_t(dw.max.y) - dw.min.y + 1;
+      const int64_t fw = int64_t(display.max.x) - display.min.x + 1;
+      const int64_t fh = int64_t(display.max.y) - display.min.y + 1;
+      if (w <= 0 || hgt <= 0 || w > INT32_MAX || hgt > INT32_MAX || fw <= 0 || fh <= 0 ||
+          fw > INT32_MAX || fh > INT32_MAX)
+        throw Error(stage, "image has no pixels (its data or display window is empty)", file);
+      out.x = dw.min.x - display.min.x;
+      out.y = dw.min.y - display.min.y;
+      out.width = int(w);
+      out.height = int(hgt);
+      out.fullWidth = int(fw);
+      out.fullHeight = int(fh);
+      out.channelNames = channelOrder(h.channels());
+      if (out.channelNames.empty()) throw Error(stage, "image has no channels", file);
+      Imf::PixelType widest = Imf::HALF;
+      for (auto it = h.channels().begin(); it != h.channels().end(); ++it)
+        if (it.channel().type != Imf::HALF) widest = it.channel().type;
+      out.sampleType = typeName(widest);
+      out.tiled = h.hasTileDescription();
+      out.attributes = attributesOf(h);
+      impl_->headers.push_back(std::move(out));
+    }
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error(stage, std::string("cannot read image: ") + e.what(), file);
+  }
+  if (impl_->headers.empty()) throw Error(stage, "image has no parts", file);
+}
+
+ExrReader::~ExrReader() = default;
+
+int ExrReader::parts() const {
+  return int(impl_->headers.size());
+}
+
+const ExrPartHeader& ExrReader::header(int part) const {
+  COMPOSE_CHECK(part >= 0 && part < parts());
+  return impl_->headers[size_t(part)];
+}
+
+Image ExrReader::read(int part) const {
+  const ExrPartHeader& h = header(part);
+  const fs::path& file = impl_->file;
+  const std::string& stage = impl_->stage;
+  const int channels = int(h.channelNames.size());
+  checkImageSize(h.width, h.height, channels, stage, file);
+  Image image = Image::unfilled(h.width, h.height, channels, h.channelNames);
+  try {
+    const Imf::Header& header = impl_->input->header(part);
+    if (Imf::isDeepData(header.type()))
+      throw Error(stage, "deep OpenEXR images are not supported", file);
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it) {
+      if (it.channel().xSampling != 1 || it.channel().ySampling != 1)
+        throw Error(
+            stage,
+            std::string("subsampled channels are not supported (channel \"") + it.name() + "\")",
+            file);
+    }
+    Imf::InputPart input(*impl_->input, part);
+    Imf::FrameBuffer frame;
+    const size_t xStride = sizeof(float) * size_t(channels);
+    for (int c = 0; c < channels; ++c) {
+      frame.insert(h.channelNames[size_t(c)],
+                   Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + c, header.dataWindow(),
+                                    xStride, xStride * size_t(h.width)));
+    }
+    input.setFrameBuffer(frame);
+    input.readPixels(header.dataWindow().min.y, header.dataWindow().max.y);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error(stage, std::string("cannot decode image: ") + e.what(), file);
+  }
+  return image;
+}
+
+namespace {
+
+Imf::Compression compressionOf(const std::string& text, const fs::path& shown, int* zipLevel,
+                               float* dwaLevel) {
+  const size_t colon = text.find(':');
+  const std::string name = text.substr(0, colon);
+  const std::string level = colon == std::string::npos ? std::string() : text.substr(colon + 1);
+  static const std::map<std::string, Imf::Compression> kNames = {
+      {"none", Imf::NO_COMPRESSION},   {"rle", Imf::RLE_COMPRESSION},
+      {"zips", Imf::ZIPS_COMPRESSION}, {"zip", Imf::ZIP_COMPRESSION},
+      {"piz", Imf::PIZ_COMPRESSION},   {"pxr24", Imf::PXR24_COMPRESSION},
+      {"b44", Imf::B44_COMPRESSION},   {"b44a", Imf::B44A_COMPRESSION},
+      {"dwaa", Imf::DWAA_COMPRESSION}, {"dwab", Imf::DWAB_COMPRESSION}};
+  auto it = kNames.find(name);
+  if (it == kNames.end())
+    throw Error("output", "unknown OpenEXR compression '" + text + "'", shown);
+  if (!level.empty()) {
+    try {
+      if (name == "zip" || name == "zips") *zipLevel = std::stoi(level);
+      if (name == "dwaa" || name == "dwab") *dwaLevel = std::stof(level);
+    } catch (const std::exception&) {
+      throw Error("output", "bad OpenEXR compression level in '" + text + "'", shown);
+    }
+  }
+  return it->second;
+}
+
+// The header of one part: size, windows, channels of `type` in the file's order, and metadata.
+Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
+                     const std::vector<std::string>& names, Imf::PixelType type,
+                     const ExrHeader& shared, bool multiPart, const fs::path& shown) {
+  const Image& image = *part.image;
+  const int fullWidth = part.fullWidth > 0 ? part.fullWidth : image.width;
+  const int fullHeight = part.fullHeight > 0 ? part.fullHeight : image.height;
+  Imf::Header header(
+      Imath::Box2i({0, 0}, {fullWidth - 1, fullHeight - 1}),
+      Imath::Box2i({part.x, part.y}, {part.x + image.width - 1, part.y + image.height - 1}));
+  int zipLevel = -1;
+  float dwaLevel = -1.0f;
+  header.compression() = compressionOf(part.options.exrCompression, shown, &zipLevel, &dwaLevel);
+  if (zipLevel >= 0) header.zipCompressionLevel() = zipLevel;
+  if (dwaLevel >= 0.0f) header.dwaCompressionLevel() = dwaLevel;
+  COMPOSE_CHECK(int(names.size()) == sources.channels());
+  for (const std::string& name : names) header.channels().insert(name, Imf::Channel(type));
+  if (multiPart || !part.name.empty()) {
+    header.setName(part.name);
+    header.setType(Imf::SCANLINEIMAGE);
+  }
+  header.insert("Software", Imf::StringAttribute("compose"));
+  const std::string colorSpace = part.colorSpace.empty() ? image.colorSpace : part.colorSpace;
+  if (!colorSpace.empty()) header.insert("colorSpace", Imf::StringAttribute(colorSpace));
+  if (part.options.chromaticities) {
+    const auto& c = *part.options.chromaticities;
+    auto xy = [&](int i) {
+      return Imath::V2f(float(c[size_t(2 * i)]), float(c[size_t(2 * i + 1)]));
+    };
+    header.insert("chromaticities",
+                  Imf::ChromaticitiesAttribute(Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3))));
+  }
+  for (const auto& [name, m] : shared.matrices) {
+    const std::string as = exrName(name);
+    if (as.empty()) continue;
+    Imath::M44f matrix;
+    std::memcpy(&matrix[0][0], m.data(), sizeof(float) * 16);
+    header.insert(as, Imf::M44fAttribute(matrix));
+  }
+  for (const auto& [name, value] : shared.strings) {
+    const std::string as = exrName(name);
+    if (!as.empty()) header.insert(as, Imf::StringAttribute(value));
+  }
+  for (const ImageAttribute& a : part.options.attributes) {
+    const std::string as = exrName(a.name);
+    if (as.empty()) continue;
+    // OpenEXR's standard attributes have fixed types: expTime and aperture are floats.
+    const bool floatOnly = as == "expTime" || as == "aperture" || as == "pixelAspectRatio" ||
+                           as == "xDensity" || as == "dwaCompressionLevel";
+    if (const int* i = std::get_if<int>(&a.value)) {
+      if (floatOnly)
+        header.insert(as, Imf::FloatAttribute(float(*i)));
+      else
+        header.insert(as, Imf::IntAttribute(*i));
+    } else if (const double* d = std::get_if<double>(&a.value)) {
+      header.insert(as, Imf::FloatAttribute(float(*d)));
+    } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
+      if (!floatOnly) header.insert(as, Imf::StringAttribute(*t));
+    } else {
+      const auto& v = std::get<std::vector<float>>(a.value);
+      if (v.size() == 16) {
+        Imath::M44f matrix;
+        std::memcpy(&matrix[0][0], v.data(), sizeof(float) * 16);
+        header.insert(as, Imf::M44fAttribute(matrix));
+      } else if (!v.empty()) {
+        header.insert(as, Imf::FloatVectorAttribute(v));
+      }
+    }
+  }
+  return header;
+}
+
+// Writes the rows of `sources` through `write(firstRow, rows)` after pointing `frame` at a band
+// of converted rows: bands of about 8 MB in whole blocks of 16 scanlines (OpenEXR's ZIP block;
+// PIZ's is 32), converted on every core, so that no full-size converted copy is held and the
+// compressor gets several blocks at once.
+template <class SetFrame, class Write>
+void writeBands(const detail::ChannelSources& sources, const std::vector<std::string>& names,
+                Imf::PixelType type, int x0, int y0, SetFrame&& setFrame, Write&& write) {
+  const int width = sources.width(), height = sources.height();
+  const int channels = sources.channels();
+  const size_t valueBytes = type == Imf::HALF ? sizeof(Imath::half) : sizeof(float);
+  const size_t pixelBytes = size_t(channels) * valueBytes;
+  const size_t rowBytes = pixelBytes * size_t(width);
+  constexpr size_t kBandBytes = size_t(8) << 20;
+  constexpr int kBlockRows = 32;
+  const int bandRows = std::max(kBlockRows, int(kBandBytes / rowBytes) / kBlockRows * kBlockRows);
+  std::vector<unsigned char> band(size_t(std::min(bandRows, height)) * rowBytes);
+  for (int r0 = 0; r0 < height; r0 += bandRows) {
+    const int rows = std::min(bandRows, height - r0);
+    parallelFor(0, rows, [&](int64_t r) {
+      unsigned char* dst = band.data() + size_t(r) * rowBytes;
+      int channel = 0;
+      auto put = [&](int x, float v) {
+        unsigned char* at = dst + size_t(x) * pixelBytes + size_t(channel) * valueBytes;
+        if (type == Imf::HALF) {
+          const Imath::half h(v);
+          std::memcpy(at, &h, sizeof h);
+        } else {
+          std::memcpy(at, &v, sizeof v);
+        }
+      };
+      for (const Image* image : sources.images) {
+        const float* row = image->row(r0 + int(r)).data();
+        for (int c = 0; c < image->channels; ++c, ++channel)
+          for (int x = 0; x < width; ++x)
+            put(x, row[size_t(x) * size_t(image->channels) + size_t(c)]);
+      }
+      for (const float v : sources.constants) {
+        for (int x = 0; x < width; ++x) put(x, v);
+        ++channel;
+      }
+    });
+    Imf::FrameBuffer frame;
+    // The band holds rows y0 + r0 ... of the data window, whose left edge is x0: its base
+    // pointer is placed so that OpenEXR's absolute coordinates land in it.
+    const Imath::Box2i bandWindow({x0, y0 + r0}, {x0 + width - 1, y0 + r0 + rows - 1});
+    for (size_t c = 0; c < names.size(); ++c) {
+      frame.insert(names[c], Imf::Slice::Make(type, band.data() + c * valueBytes, bandWindow,
+                                              pixelBytes, rowBytes));
+    }
+    setFrame(frame, r0);
+    write(y0 + r0, rows);
+  }
+}
+
+}  // namespace
+
+std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& shown,
+                                      const std::vector<ExrPart>& parts, const ExrHeader& shared) {
+  COMPOSE_CHECK(!parts.empty());
+  useEveryCoreForExr();
+  std::vector<WriteReport> reports(parts.size());
+  std::vector<detail::ChannelSources> sources(parts.size());
+  std::vector<std::vector<std::string>> names(parts.size());
+  std::vector<Imf::PixelType> types(parts.size());
+  std::vector<Imf::Header> headers;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const ExrPart& part = parts[i];
+    COMPOSE_CHECK(part.image != nullptr);
+    const Image& image = *part.image;
+    detail::ChannelSources& s = sources[i];
+    s.images.push_back(&image);
+    for (const Image* more : part.moreImages) {
+      COMPOSE_CHECK(more != nullptr && more->width == image.width && more->height == image.height);
+      s.images.push_back(more);
+    }
+    // The channels' names: the part's own, else the images' (when every image has them), else
+    // OpenImageIO's defaults.
+    std::vector<std::string>& n = names[i];
+    n = part.channelNames;
+    for (const Image* source : s.images) {
+      COMPOSE_CHECK(source->width > 0 && source->height > 0 && source->channels > 0);
+      COMPOSE_CHECK(source->pixels.size() == source->pixelCount() * size_t(source->channels));
+      if (!part.channelNames.empty()) continue;
+      if (source->channelNames.empty()) {
+        n.clear();
+        break;
+      }
+      COMPOSE_CHECK(int(source->channelNames.size()) == source->channels);
+      n.insert(n.end(), source->channelNames.begin(), source->channelNames.end());
+    }
+    for (const auto& [name, value] : part.constantChannels) {
+      s.constants.push_back(value);
+      if (!n.empty()) n.push_back(name);
+    }
+    if (n.empty()) n = defaultChannelNames(s.channels());
+    COMPOSE_CHECK(int(n.size()) == s.channels());
+    types[i] = part.options.depth == WriteOptions::Depth::Float ? Imf::FLOAT : Imf::HALF;
+    if (types[i] == Imf::HALF) {
+      reports[i].largestMagnitude = detail::largestFiniteMagnitude(s);
+      if (reports[i].largestMagnitude > kHalfMax) {
+        types[i] = Imf::FLOAT;
+        reports[i].promotedToFloat = true;
+      }
+    }
+    headers.push_back(headerOf(part, s, n, types[i], shared, parts.size() > 1, shown));
+  }
+  errno = 0;
+  try {
+    if (parts.size() == 1) {
+      Imf::OutputFile out(file.c_str(), headers[0], Imf::globalThreadCount());
+      writeBands(
+          sources[0], names[0], types[0], parts[0].x, parts[0].y,
+          [&](const Imf::FrameBuffer& frame, int) { out.setFrameBuffer(frame); },
+          [&](int, int rows) { out.writePixels(rows); });
+    } else {
+      Imf::MultiPartOutputFile out(file.c_str(), headers.data(), int(headers.size()), false,
+                                   Imf::globalThreadCount());
+      for (size_t i = 0; i < parts.size(); ++i) {
+        Imf::OutputPart part(out, int(i));
+        writeBands(
+            sources[i], names[i], types[i], parts[i].x, parts[i].y,
+            [&](const Imf::FrameBuffer& frame, int) { part.setFrameBuffer(frame); },
+            [&](int, int rows) { part.writePixels(rows); });
+      }
+    }
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    std::string why = e.what();
+    if (errno != 0) why += std::string(" (") + std::strerror(errno) + ")";
+    throw Error("output", "cannot write image: " + why, shown);
+  }
+  return reports;
+}
+
+}  // namespace compose::ingest
