@@ -174,7 +174,7 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 
 class RenderStage final : public Stage {
  public:
-  static constexpr int kVersion = 2;
+  static constexpr int kVersion = 3;  // 3: samples in one surface cell shaded once
 
   std::string name() const override { return "render"; }
   std::string summary() const override {

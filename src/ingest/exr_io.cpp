@@ -466,25 +466,47 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
     const int rows = std::min(bandRows, height - r0);
     parallelFor(0, rows, [&](int64_t r) {
       unsigned char* dst = band.data() + size_t(r) * rowBytes;
-      int channel = 0;
-      auto put = [&](int x, float v) {
-        unsigned char* at = dst + size_t(x) * pixelBytes + size_t(channel) * valueBytes;
+      const int y = r0 + int(r);
+      if (sources.images.size() == 1 && sources.constants.empty()) {
+        // One image: its rows are already laid out as the file's pixels.
+        const float* row = sources.images.front()->row(y).data();
+        const size_t values = size_t(width) * size_t(channels);
         if (type == Imf::HALF) {
-          const Imath::half h(v);
-          std::memcpy(at, &h, sizeof h);
+          detail::toHalf(row, reinterpret_cast<uint16_t*>(dst), values);
         } else {
-          std::memcpy(at, &v, sizeof v);
+          std::memcpy(dst, row, values * sizeof(float));
         }
-      };
+        return;
+      }
+      // Several: each image's row converted, then its channels put in place pixel by pixel.
+      std::vector<unsigned char> converted;
+      size_t offset = 0;  // of the image's first channel in a pixel, in bytes
       for (const Image* image : sources.images) {
-        const float* row = image->row(r0 + int(r)).data();
-        for (int c = 0; c < image->channels; ++c, ++channel)
-          for (int x = 0; x < width; ++x)
-            put(x, row[size_t(x) * size_t(image->channels) + size_t(c)]);
+        const float* row = image->row(y).data();
+        const size_t values = size_t(width) * size_t(image->channels);
+        const size_t bytes = size_t(image->channels) * valueBytes;
+        converted.resize(values * valueBytes);
+        if (type == Imf::HALF) {
+          detail::toHalf(row, reinterpret_cast<uint16_t*>(converted.data()), values);
+        } else {
+          std::memcpy(converted.data(), row, values * sizeof(float));
+        }
+        for (int x = 0; x < width; ++x)
+          std::memcpy(dst + size_t(x) * pixelBytes + offset, converted.data() + size_t(x) * bytes,
+                      bytes);
+        offset += bytes;
       }
       for (const float v : sources.constants) {
-        for (int x = 0; x < width; ++x) put(x, v);
-        ++channel;
+        unsigned char value[sizeof(float)];
+        if (type == Imf::HALF) {
+          const uint16_t h = Imath::half(v).bits();
+          std::memcpy(value, &h, sizeof h);
+        } else {
+          std::memcpy(value, &v, sizeof v);
+        }
+        for (int x = 0; x < width; ++x)
+          std::memcpy(dst + size_t(x) * pixelBytes + offset, value, valueBytes);
+        offset += valueBytes;
       }
     });
     Imf::FrameBuffer frame;

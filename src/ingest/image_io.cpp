@@ -549,6 +549,12 @@ void writeJpeg(const fs::path& file, const fs::path& shown, const Image& image,
                 parallelFor(0, rows, [&](int64_t r) {
                   const float* from = image.row(y0 + int(r)).data();
                   uint8_t* to = codes + size_t(r) * size_t(image.width) * size_t(channels);
+                  if (image.channels == channels) {  // the file's layout already
+                    const size_t values = size_t(image.width) * size_t(channels);
+                    for (size_t i = 0; i < values; ++i)
+                      to[i] = uint8_t(detail::toCode(from[i], 255.0f));
+                    return;
+                  }
                   for (int x = 0; x < image.width; ++x) {
                     const float* p = from + size_t(x) * size_t(image.channels);
                     for (int c = 0; c < channels; ++c) {

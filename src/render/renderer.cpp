@@ -295,16 +295,88 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   const CameraRays cameraRays(camera, objectFromWorld);
   const glm::dvec3 origin = camera.position();
 
+  // Shading one hit: the irradiance with and without self-shadowing, the shading normal and the
+  // ambient occlusion, at barycentrics (u, v) of `triangle`, seen along world direction `dir`.
+  // `at` is the hit in object space and `seed` the sample's, for the rays a source's shadow edge
+  // needs (none when `traceEdges` is false).
+  struct Shaded {
+    glm::vec3 e{0.0f}, shadowed{0.0f}, normal{0.0f};
+    float ao = 1.0f;
+  };
+  auto shade = [&](uint32_t triangle, float u, float v, const uint32_t near[3],
+                   const float weight[3], const glm::dvec3& dir, const glm::vec3& at,
+                   const glm::vec3& geometricNormal, uint32_t seed, bool traceEdges,
+                   int64_t& rays) {
+    Shaded r;
+    const uint32_t* tri = &mesh.indices[3 * size_t(triangle)];
+    const float t = 1.0f - u - v;
+    const glm::vec3 interpolated =
+        t * mesh.normals[tri[0]] + u * mesh.normals[tri[1]] + v * mesh.normals[tri[2]];
+    glm::vec3 ng = glm::vec3(glm::normalize(normalFromObject * glm::dvec3(geometricNormal)));
+    glm::vec3 nrm = glm::dot(interpolated, interpolated) > 1e-12f
+                        ? glm::vec3(glm::normalize(normalFromObject * glm::dvec3(interpolated)))
+                        : ng;  // a zero interpolated normal: the face's own
+    const glm::vec3 view = -glm::vec3(dir);
+    // Shade the side the camera sees: a back face turns both normals round, and a shading
+    // normal that still points away from the viewer is bent back to the tangent plane.
+    const bool backFace = glm::dot(ng, view) < 0.0f;
+    if (backFace) {
+      ng = -ng;
+      nrm = -nrm;
+    }
+    const float away = glm::dot(nrm, view);
+    if (away < 0.0f) nrm = glm::normalize(nrm - (away - 1e-3f) * view);
+    r.normal = nrm;
+    r.e = glm::max(lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view),
+                   glm::vec3(0.0f));
+    r.shadowed = r.e;
+    if (traceEdges && edges && glm::dot(interpolated, interpolated) > 1e-12f &&
+        edges->shade(scene, near, weight, at,
+                     glm::normalize(backFace ? -interpolated : interpolated),
+                     settings.envFromWorld * nrm, r.e, seed, r.shadowed, rays)) {
+      // A source's shadow edge crosses the triangle: traced from the hit.
+    } else if (settings.shadows) {
+      const VertexIrradiance& vi = *settings.shadows;
+      const glm::vec3 sh = weight[0] * vi.shadowed[near[0]] + weight[1] * vi.shadowed[near[1]] +
+                           weight[2] * vi.shadowed[near[2]];
+      const glm::vec3 un = weight[0] * vi.unshadowed[near[0]] + weight[1] * vi.unshadowed[near[1]] +
+                           weight[2] * vi.unshadowed[near[2]];
+      for (int c = 0; c < 3; ++c) {
+        // Where the vertices get (almost) no light there is nothing to shadow.
+        const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
+        r.shadowed[c] = r.e[c] * ratio;
+      }
+    }
+    if (settings.occlusion) {
+      const std::vector<float>& ao = *settings.occlusion;
+      r.ao = weight[0] * ao[near[0]] + weight[1] * ao[near[1]] + weight[2] * ao[near[2]];
+    }
+    return r;
+  };
+
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
     int64_t rowHits = 0, rowSourceRays = 0;
+    // A pixel's hits, then grouped by the surface cell they landed in (triangle and the three
+    // surface points around them).
+    struct SampleHit {
+      uint32_t triangle;
+      float u, v, distance;
+      uint32_t near[3];
+      float weight[3];
+      glm::dvec3 dir;
+      glm::vec3 at, geometricNormal;
+      uint32_t seed;
+      int group;
+    };
+    std::vector<SampleHit> samples;
+    samples.reserve(size_t(n) * size_t(n));
     for (int x = out.x0; x < out.x1; ++x) {
       glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
           albedoSum(0.0f);
       glm::dvec3 positionSum(0.0);
-      double depthSum = 0.0;
       float aoSum = 0.0f;
-      int hits = 0;
+      samples.clear();
       // The pixel's samples, sixteen at a time: one coherent packet for Embree.
       for (int first = 0; first < n * n; first += 16) {
         const int count = std::min(16, n * n - first);
@@ -328,74 +400,93 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         for (int b = 0; b < count; ++b) {
           const EmbreeScene::Hit& hit = found[b];
           if (!hit.found) continue;
-          const glm::dvec3& dir = dirs[b];
-          const uint32_t* tri = &mesh.indices[3 * size_t(hit.triangle)];
-          const float u = hit.u, v = hit.v, t = 1.0f - u - v;
-          const glm::vec3 interpolated =
-              t * mesh.normals[tri[0]] + u * mesh.normals[tri[1]] + v * mesh.normals[tri[2]];
-          glm::vec3 ng =
-              glm::vec3(glm::normalize(normalFromObject * glm::dvec3(hit.geometricNormal)));
-          glm::vec3 nrm =
-              glm::dot(interpolated, interpolated) > 1e-12f
-                  ? glm::vec3(glm::normalize(normalFromObject * glm::dvec3(interpolated)))
-                  : ng;  // a zero interpolated normal: the face's own
-          const glm::vec3 view = -glm::vec3(dir);
-          // Shade the side the camera sees: a back face turns both normals round, and a shading
-          // normal that still points away from the viewer is bent back to the tangent plane.
-          const bool backFace = glm::dot(ng, view) < 0.0f;
-          if (backFace) {
-            ng = -ng;
-            nrm = -nrm;
-          }
-          const float away = glm::dot(nrm, view);
-          if (away < 0.0f) nrm = glm::normalize(nrm - (away - 1e-3f) * view);
-          glm::vec3 e = glm::max(
-              lighting.irradiance(settings.envFromWorld * nrm, settings.envFromWorld * view),
-              glm::vec3(0.0f));
-          glm::vec3 shadowedE = e;
-          uint32_t near[3] = {0, 0, 0};
-          float weight[3] = {0.0f, 0.0f, 0.0f};
-          if (settings.points) settings.points->locate(mesh, hit.triangle, u, v, near, weight);
-          const uint32_t sampleSeed =
-              (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
-              uint32_t(first + b);
-          if (edges && glm::dot(interpolated, interpolated) > 1e-12f &&
-              edges->shade(scene, near, weight, oObj[b] + dObj[b] * hit.distance,
-                           glm::normalize(backFace ? -interpolated : interpolated),
-                           settings.envFromWorld * nrm, e, sampleSeed, shadowedE, rowSourceRays)) {
-            // A source's shadow edge crosses the triangle: traced from the hit.
-          } else if (settings.shadows) {
-            const VertexIrradiance& vi = *settings.shadows;
-            const glm::vec3 sh = weight[0] * vi.shadowed[near[0]] +
-                                 weight[1] * vi.shadowed[near[1]] +
-                                 weight[2] * vi.shadowed[near[2]];
-            const glm::vec3 un = weight[0] * vi.unshadowed[near[0]] +
-                                 weight[1] * vi.unshadowed[near[1]] +
-                                 weight[2] * vi.unshadowed[near[2]];
-            for (int c = 0; c < 3; ++c) {
-              // Where the vertices get (almost) no light there is nothing to shadow.
-              const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
-              shadowedE[c] = e[c] * ratio;
-            }
-          }
-          const glm::vec3 albedo = materials ? mesh.albedoAt(hit.triangle, u, v) : settings.albedo;
-          colour += reflect * albedo * shadowedE;
-          albedoSum += albedo;
-          irradianceSum += e;
-          shadowedSum += shadowedE;
-          if (settings.occlusion) {
-            const std::vector<float>& ao = *settings.occlusion;
-            aoSum += weight[0] * ao[near[0]] + weight[1] * ao[near[1]] + weight[2] * ao[near[2]];
-          } else {
-            aoSum += 1.0f;
-          }
-          normalSum += nrm;
-          const glm::dvec3 p = origin + dir * double(hit.distance);
-          positionSum += p;
-          depthSum += -(cameraFromWorld * glm::dvec4(p, 1.0)).z;
-          ++hits;
+          SampleHit sample;
+          sample.triangle = hit.triangle;
+          sample.u = hit.u;
+          sample.v = hit.v;
+          sample.distance = hit.distance;
+          sample.near[0] = sample.near[1] = sample.near[2] = 0;
+          sample.weight[0] = sample.weight[1] = sample.weight[2] = 0.0f;
+          if (settings.points)
+            settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
+          sample.dir = dirs[b];
+          sample.at = oObj[b] + dObj[b] * hit.distance;
+          sample.geometricNormal = hit.geometricNormal;
+          sample.seed = (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
+                        uint32_t(first + b);
+          sample.group = -1;
+          samples.push_back(sample);
         }
       }
+      const int hits = int(samples.size());
+      // Samples in one cell are shaded once, at their mean barycentrics and direction: the
+      // shading varies smoothly inside a cell (normals, irradiance and the shadow ratio are
+      // interpolated linearly there), so the mean of the samples' shading and the shading at
+      // their mean differ in the second order only. A cell whose points see a bright source
+      // differently has a shadow edge crossing it: its samples are shaded one by one, each
+      // tracing the source from its own hit, so that the edge keeps its antialiasing. Albedo is
+      // looked up per sample (a texture keeps its detail within the pixel).
+      const uint64_t* seen =
+          edges ? settings.shadows->sourceSeen.data() : nullptr;  // one bit per bright source
+      for (int i = 0; i < hits; ++i) {
+        SampleHit& a = samples[size_t(i)];
+        if (a.group >= 0) continue;
+        a.group = i;
+        int members = 1;
+        glm::dvec3 dirSum = a.dir;
+        double uSum = a.u, vSum = a.v;
+        for (int j = i + 1; j < hits; ++j) {
+          SampleHit& b = samples[size_t(j)];
+          if (b.group >= 0 || b.triangle != a.triangle || b.near[0] != a.near[0] ||
+              b.near[1] != a.near[1] || b.near[2] != a.near[2])
+            continue;
+          b.group = i;
+          ++members;
+          dirSum += b.dir;
+          uSum += b.u;
+          vSum += b.v;
+        }
+        const bool edge = seen && ((seen[a.near[0]] ^ seen[a.near[1]]) |
+                                   (seen[a.near[0]] ^ seen[a.near[2]])) != 0;
+        // Adds shading `r` for `count` samples whose albedos sum to `albedo`.
+        auto accumulate = [&](const Shaded& r, const glm::vec3& albedo, float count) {
+          colour += reflect * albedo * r.shadowed;
+          irradianceSum += count * r.e;
+          shadowedSum += count * r.shadowed;
+          normalSum += count * r.normal;
+          aoSum += count * r.ao;
+        };
+        if (members == 1 || edge) {
+          for (int j = i; j < hits; ++j) {
+            const SampleHit& b = samples[size_t(j)];
+            if (b.group != i) continue;
+            const Shaded r = shade(b.triangle, b.u, b.v, b.near, b.weight, b.dir, b.at,
+                                   b.geometricNormal, b.seed, true, rowSourceRays);
+            const glm::vec3 albedo =
+                materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo;
+            albedoSum += albedo;
+            accumulate(r, albedo, 1.0f);
+          }
+          continue;
+        }
+        const float mu = float(uSum / members), mv = float(vSum / members);
+        uint32_t near[3];
+        float weight[3] = {a.weight[0], a.weight[1], a.weight[2]};
+        std::copy_n(a.near, 3, near);
+        if (settings.points) settings.points->locate(mesh, a.triangle, mu, mv, near, weight);
+        const Shaded r = shade(a.triangle, mu, mv, near, weight, glm::normalize(dirSum), a.at,
+                               a.geometricNormal, a.seed, false, rowSourceRays);
+        glm::vec3 albedo(0.0f);
+        for (int j = i; j < hits; ++j) {
+          const SampleHit& b = samples[size_t(j)];
+          if (b.group != i) continue;
+          albedo += materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo;
+        }
+        albedoSum += albedo;
+        accumulate(r, albedo, float(members));
+      }
+      for (const SampleHit& sample : samples)
+        positionSum += origin + sample.dir * double(sample.distance);
       if (hits == 0) continue;
       rowHits += hits;
       float* b = out.beauty.at(x - out.x0, y - out.y0);
@@ -417,7 +508,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         a[kIrradiance + c] = irradianceSum[c] * inv * settings.exposure;
         a[kShadowed + c] = shadowedSum[c] * inv * settings.exposure;
       }
-      a[kDepth] = float(depthSum / hits);
+      // Depth is linear in the position: the mean position's depth is the samples' mean depth.
+      a[kDepth] = float(-(cameraFromWorld * glm::dvec4(positionSum / double(hits), 1.0)).z);
       a[kAo] = aoSum * inv;
     }
     hitsTotal += rowHits;
