@@ -65,10 +65,13 @@ const Geometry& Context::geometry() {
                                            glm::dvec3(mesh.boundsMax));
   const double envYaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
   g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));
-  // The rotation part of the placement (a yaw and a uniform scale), normalised.
-  glm::mat3 rotation = glm::mat3(g.worldFromObject);
+  // The rotation part of the placement (a yaw and a uniform scale), normalised in double before
+  // it is rounded to float: the rotation then does not depend on the scale to the last bit, and
+  // what is made from it alone (the self-shadowing, keyed by the yaw) is the same wherever and
+  // however large the object stands.
+  glm::dmat3 rotation = glm::dmat3(g.worldFromObject);
   for (int c = 0; c < 3; ++c) rotation[c] = glm::normalize(rotation[c]);
-  g.envFromObject = g.envFromWorld * rotation;
+  g.envFromObject = g.envFromWorld * glm::mat3(rotation);
   geometry_ = g;
   return *geometry_;
 }

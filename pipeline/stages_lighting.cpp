@@ -317,8 +317,10 @@ class PrecomputeStage final : public Stage {
 
 class ShadowsStage final : public Stage {
  public:
-  // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast.
-  static constexpr int kVersion = 3;
+  // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast;
+  // 4: refined points in the order of their triangles (entries of 3 held their values in another
+  // order than the points read back).
+  static constexpr int kVersion = 4;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -489,8 +491,9 @@ void cropToShadow(GroundShadowResult& r) {
 
 class GroundStage final : public Stage {
  public:
-  // 2: the ratio cut to where it is below 1.
-  static constexpr int kVersion = 3;  // 3: refined across sharp shadow edges
+  // 2: the ratio cut to where it is below 1; 3: refined across sharp shadow edges; 4: the
+  // object's rotation normalised in double (pipeline/context.cpp).
+  static constexpr int kVersion = 4;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

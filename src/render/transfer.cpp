@@ -232,13 +232,18 @@ size_t refineSurfacePoints(const Mesh& mesh, SurfacePoints& points, const std::v
   });
   const size_t budget = size_t(double(params.budget) * double(first));
   size_t added = 0;
+  std::vector<std::pair<uint32_t, int>> chosen;  // (triangle, level)
   for (const auto& [spread, t] : wide) {
     const int L = std::min(32, points.level[t] * params.factor);
     const size_t more = size_t((L + 1) * (L + 2) / 2 - 3);
     if (added + more > budget) continue;  // a smaller one may still fit
-    appendGrid(mesh, points, t, L);
+    chosen.push_back({t, L});
     added += more;
   }
+  // The grids are appended in the order of the triangles, as restoreLevels appends them from
+  // the levels alone: a cache entry's per-point values then belong to the same points.
+  std::sort(chosen.begin(), chosen.end());
+  for (const auto& [t, L] : chosen) appendGrid(mesh, points, t, L);
   return first;
 }
 

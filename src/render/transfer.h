@@ -110,7 +110,8 @@ struct RefineParams {
 size_t refineSurfacePoints(const Mesh& mesh, SurfacePoints& points, const std::vector<float>& ao,
                            const RefineParams& params);
 // Gives each triangle the level `levels` holds (one per triangle, as refineSurfacePoints left
-// them, read back from a cache), appending grid points in the same order; false (points
+// them, read back from a cache), appending grid points in the same order (the order of the
+// triangles, in which refineSurfacePoints appends them too); false (points
 // unchanged) if the levels do not fit: their count, a level outside 1..32, or one below the
 // triangle's own.
 bool restoreLevels(const Mesh& mesh, SurfacePoints& points, const std::vector<uint8_t>& levels);
@@ -135,7 +136,7 @@ struct VertexTransfer {
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS5";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS6";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal.
