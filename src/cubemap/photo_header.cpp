@@ -15,6 +15,8 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   if (info.orientation >= 5 && info.orientation <= 8)
     std::swap(h.width, h.height);  // turned by 90°
   h.focalLength35mm = info.focalLength35mm;
+  h.focalLength35mmDerived =
+      info.focalLength35mm && info.focal35mmSource != "EXIF FocalLengthIn35mmFilm";
   h.focalLengthMm = info.focalLengthMm;
   h.floatingPoint =
       info.sampleType == "float" || info.sampleType == "half" || info.sampleType == "double";
@@ -48,7 +50,11 @@ calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
     constexpr double kDiagonalMm = 43.266615305567875;
     calib::Lens lens = calib::Lens::fromFieldOfView(h.width, h.height, 90.0);
     lens.fx = lens.fy = *h.focalLength35mm / kDiagonalMm * std::hypot(h.width, h.height);
-    lens.source = "EXIF 35 mm focal length " + std::to_string(int(*h.focalLength35mm)) + " mm";
+    lens.source = (h.focalLength35mmDerived
+                       ? "35 mm focal length derived from EXIF FocalLength and the focal-plane "
+                         "resolution: "
+                       : "EXIF 35 mm focal length ") +
+                  std::to_string(int(std::lround(*h.focalLength35mm))) + " mm";
     return lens;
   }
   throw Error(

@@ -13,8 +13,11 @@ namespace compose::cubemap {
 struct PhotoHeader {
   int width = 0, height = 0;  // after the EXIF orientation
   // EXIF FocalLengthIn35mmFilm, or derived from FocalLength and the focal-plane resolution
-  // (ingest::CaptureInfo::focalLength35mm)
+  // (ingest::CaptureInfo::focalLength35mm; a resized photo's focal-plane tags still describe the
+  // sensor's pixels, which makes the derived value wrong by the resize factor: the lens says which
+  // it is, and --fov or --calib override it)
   std::optional<double> focalLength35mm;
+  bool focalLength35mmDerived = false;
   std::optional<double> focalLengthMm;  // EXIF FocalLength
   bool floatingPoint = false;           // float or half samples (HDR), else integer (LDR)
   std::string format;                   // reader name, e.g. "jpeg", "openexr"

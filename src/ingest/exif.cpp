@@ -19,7 +19,8 @@ enum Type : uint16_t {
   kRational = 5,
   kUndefined = 7,
   kSLong = 9,
-  kSRational = 10
+  kSRational = 10,
+  kIfd = 13
 };
 
 enum class Ifd { Zero, Exif };
@@ -55,9 +56,11 @@ constexpr Tag kTags[] = {
 };
 constexpr uint16_t kExifPointer = 0x8769;
 
-const Tag* tagOf(uint16_t id, Ifd ifd) {
+// The tag of this number, in whichever IFD it is found (some writers put Exif tags in IFD0, as
+// OpenImageIO's reader allows).
+const Tag* tagOf(uint16_t id) {
   for (const Tag& t : kTags)
-    if (t.id == id && t.ifd == ifd) return &t;
+    if (t.id == id) return &t;
   return nullptr;
 }
 
@@ -125,11 +128,11 @@ class Reader {
       if (which == Ifd::Zero && id == kExifPointer && exifOffset) {
         uint32_t at = 0;
         uint16_t shortAt = 0;
-        if (n == 1 && type == kLong && u32(entry + 8, at)) *exifOffset = at;
+        if (n == 1 && (type == kLong || type == kIfd) && u32(entry + 8, at)) *exifOffset = at;
         if (n == 1 && type == kShort && u16(entry + 8, shortAt)) *exifOffset = shortAt;
         continue;
       }
-      const Tag* tag = tagOf(id, which);
+      const Tag* tag = tagOf(id);
       const size_t size = typeSize(type);
       if (!tag || size == 0 || n == 0) continue;
       const uint64_t bytes = uint64_t(size) * n;
@@ -140,6 +143,11 @@ class Reader {
         at = valueOffset;
       }
       if (at > data_.size() || data_.size() - at < bytes) continue;
+      // A tag seen once already (a damaged pointer that leads back into an IFD read) is not
+      // read twice: the first one stands.
+      if (std::any_of(out.begin(), out.end(),
+                      [&](const ImageAttribute& a) { return a.name == tag->name; }))
+        continue;
       if (std::optional<ImageAttribute> a = value(*tag, type, n, at)) out.push_back(std::move(*a));
     }
   }

@@ -3,12 +3,12 @@
 // that the capture metadata (image_io.h, CaptureInfo) comes out the same whichever library read
 // the file.
 //
-// Read: every entry of IFD0 and of the Exif sub-IFD whose tag is listed below, in either byte
-// order; ASCII as text (trailing NULs and spaces removed), SHORT and LONG as int, RATIONAL and
-// SRATIONAL as double (a zero denominator makes the entry absent). Unknown tags, maker notes,
-// GPS and thumbnails are skipped. The block is untrusted: offsets and counts are checked against
-// its size, a loop of IFDs is not followed, and a damaged block yields the entries read before
-// the damage (never a crash or an exception).
+// Read: every entry of IFD0 and of the Exif sub-IFD whose tag is listed below (in either IFD),
+// in either byte order; ASCII as text (trailing NULs and spaces removed), SHORT and LONG as int,
+// RATIONAL and SRATIONAL as double (a zero denominator makes the entry absent). Unknown tags, maker
+// notes, GPS and thumbnails are skipped. The block is untrusted: offsets and counts are checked
+// against its size, a loop of IFDs is not followed, and a damaged block yields the entries read
+// before the damage (never a crash or an exception).
 //
 // Written: the same tags from attributes of the matching names and types (numbers as the tag's
 // own type; exposure times and other rationals as exact fractions where the value is one: 1/64 s

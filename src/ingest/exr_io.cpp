@@ -85,6 +85,8 @@ std::string oiioName(const std::string& exrName) {
 
 // The OpenEXR name an attribute is written under; empty: not written.
 std::string exrName(const std::string& name) {
+  // OpenImageIO's report of a file's layout ("openexr:chunkCount") is not metadata to write back.
+  if (name.size() > 8 && equalsIgnoringCase(name.substr(0, 8), "openexr:")) return {};
   for (const NamePair& p : kRenamed)
     if (equalsIgnoringCase(name, p.oiio) || equalsIgnoringCase(name, p.exr)) return p.exr;
   if (equalsIgnoringCase(name, "worldtocamera")) return "worldToCamera";
@@ -284,10 +286,13 @@ ExrReader::ExrReader(const fs::path& file, const std::string& stage)
       out.fullHeight = int(fh);
       out.channelNames = channelOrder(h.channels());
       if (out.channelNames.empty()) throw Error(stage, "image has no channels", file);
-      Imf::PixelType widest = Imf::HALF;
-      for (auto it = h.channels().begin(); it != h.channels().end(); ++it)
-        if (it.channel().type != Imf::HALF) widest = it.channel().type;
-      out.sampleType = typeName(widest);
+      // As OpenImageIO merges the channels' types: one type if they share it, else float.
+      bool allHalf = true, allUint = true;
+      for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
+        allHalf = allHalf && it.channel().type == Imf::HALF;
+        allUint = allUint && it.channel().type == Imf::UINT;
+      }
+      out.sampleType = typeName(allHalf ? Imf::HALF : allUint ? Imf::UINT : Imf::FLOAT);
       out.tiled = h.hasTileDescription();
       out.attributes = attributesOf(h);
       impl_->headers.push_back(std::move(out));
@@ -339,6 +344,15 @@ Image ExrReader::read(int part) const {
     }
     input.setFrameBuffer(frame);
     input.readPixels(header.dataWindow().min.y, header.dataWindow().max.y);
+    // OpenImageIO converts integer channels to float normalised to their range (a uint of
+    // 2^32 - 1 is 1.0); OpenEXR gives the integer's value.
+    for (int c = 0; c < channels; ++c) {
+      const Imf::Channel* channel = header.channels().findChannel(h.channelNames[size_t(c)]);
+      if (!channel || channel->type != Imf::UINT) continue;
+      const float scale = float(1.0 / 4294967295.0);
+      for (size_t i = size_t(c); i < image.pixels.size(); i += size_t(channels))
+        image.pixels[i] *= scale;
+    }
   } catch (const Error&) {
     throw;
   } catch (const std::exception& e) {
@@ -572,10 +586,12 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
         reports[i].promotedToFloat = true;
       }
     }
-    headers.push_back(headerOf(part, s, n, types[i], shared, parts.size() > 1, shown));
   }
   errno = 0;
   try {
+    for (size_t i = 0; i < parts.size(); ++i)
+      headers.push_back(
+          headerOf(parts[i], sources[i], names[i], types[i], shared, parts.size() > 1, shown));
     if (parts.size() == 1) {
       Imf::OutputFile out(file.c_str(), headers[0], Imf::globalThreadCount());
       writeBands(

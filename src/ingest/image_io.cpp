@@ -257,11 +257,18 @@ Kind kindOf(std::span<const unsigned char> first4) {
   return Kind::Other;
 }
 
-Kind kindOf(const fs::path& file) {
+Kind kindOf(const fs::path& file, const std::string& stage) {
+  errno = 0;
   std::ifstream in(file, std::ios::binary);
+  if (!in)
+    throw Error(stage,
+                std::string("cannot read image: ") + (errno ? std::strerror(errno) : "cannot open"),
+                file);
   unsigned char first[4] = {0, 0, 0, 0};
   in.read(reinterpret_cast<char*>(first), 4);
-  return kindOf({first, size_t(in.gcount())});
+  if (in.gcount() < 4)
+    throw Error(stage, "not an image file (" + std::to_string(in.gcount()) + " bytes)", file);
+  return kindOf({first, 4});
 }
 
 void checkInputFile(const fs::path& path, const std::string& stage) {
@@ -412,7 +419,7 @@ bool looksLikeImageFile(const fs::path& path) {
 CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   checkInputFile(path, stage);
   CaptureInfo info;
-  switch (kindOf(path)) {
+  switch (kindOf(path, stage)) {
     case Kind::Exr: {
       ExrReader reader(path, stage);
       fillCaptureInfo(headerOf(reader.header(0)), info);
@@ -438,7 +445,7 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
 
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   checkInputFile(path, stage);
-  switch (kindOf(path)) {
+  switch (kindOf(path, stage)) {
     case Kind::Exr:
       return readExr(path, stage);
     case Kind::Jpeg: {

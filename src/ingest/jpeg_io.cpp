@@ -227,7 +227,8 @@ void write(const fs::path& file, const fs::path& shown, int width, int height, i
   }
   std::FILE* f = c.file;
   c.file = nullptr;
-  if (std::ferror(f) != 0 || std::fclose(f) != 0)
+  const bool failed = std::ferror(f) != 0;
+  if (std::fclose(f) != 0 || failed)
     throw Error("output", std::string("cannot finish writing: ") + std::strerror(errno), shown);
 }
 

@@ -117,9 +117,9 @@ class SourceEdges {
  public:
   SourceEdges(const RenderSettings& settings, const glm::dmat4& worldFromObject)
       : vi_(*settings.shadows), points_(*settings.points), sources_(*settings.sources) {
-    glm::mat3 rotation(worldFromObject);
+    glm::dmat3 rotation(worldFromObject);
     for (int c = 0; c < 3; ++c) rotation[c] = glm::normalize(rotation[c]);
-    envFromObject_ = settings.envFromWorld * rotation;
+    envFromObject_ = settings.envFromWorld * glm::mat3(rotation);
     frames_ = sourceFrames(sources_, envFromObject_);
     lift_ = 1e-4f * points_.size;
     tnear_ = 1e-5f * points_.size;

@@ -284,6 +284,70 @@ TEST(Exif, DamagedBlocksYieldWhatCameBeforeTheDamage) {
   EXPECT_EQ(once.size(), 3u);  // Make, Model, Orientation
 }
 
+// Other writers: the Exif pointer typed IFD (13) rather than LONG, and an Exif tag in IFD0.
+TEST(Exif, ReadsWhatOtherWritersLayOutDifferently) {
+  std::vector<unsigned char> block =
+      exif::encode({{"Make", std::string("M")}, {"ExposureTime", 0.5}});
+  const size_t entries = size_t(block[8]) << 8 | block[9];
+  for (size_t e = 0; e < entries; ++e) {
+    unsigned char* entry = block.data() + 10 + 12 * e;
+    if (entry[0] == 0x87 && entry[1] == 0x69) entry[3] = 13;  // type IFD
+  }
+  std::vector<ImageAttribute> got = exif::decode(block);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[1].name, "ExposureTime");
+  // "MM", 42, IFD0 at 8: one entry (ExposureTime, RATIONAL, 1, value at 26), no next IFD, 1/250.
+  const std::vector<unsigned char> inZero = {'M', 'M', 0, 42, 0, 0, 0, 8, 0, 1,  0x82, 0x9A,
+                                             0,   5,   0, 0,  0, 1, 0, 0, 0, 26, 0,    0,
+                                             0,   0,   0, 0,  0, 1, 0, 0, 0, 250};
+  got = exif::decode(inZero);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].name, "ExposureTime");
+  EXPECT_DOUBLE_EQ(std::get<double>(got[0].value), 1.0 / 250.0);
+}
+
+TEST(NativeExr, IntegerChannelsAndTypesAsOpenImageIOReadsThem) {
+  TempDir dir;
+  const auto file = dir / "ids.exr";
+  {
+    auto out = OIIO::ImageOutput::create(file.string());
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(3, 2, 4, OIIO::TypeDesc::HALF);
+    spec.channelnames = {"R", "G", "B", "id"};
+    spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
+                           OIIO::TypeDesc::UINT};
+    ASSERT_TRUE(out->open(file.string(), spec));
+    std::vector<unsigned char> native;
+    for (int p = 0; p < 6; ++p) {
+      for (int c = 0; c < 3; ++c) {
+        const Imath::half h(0.25f * float(p + c));
+        const auto* b = reinterpret_cast<const unsigned char*>(&h);
+        native.insert(native.end(), b, b + 2);
+      }
+      const uint32_t id = p == 5 ? 4294967295u : uint32_t(p * 1000);
+      const auto* b = reinterpret_cast<const unsigned char*>(&id);
+      native.insert(native.end(), b, b + 4);
+    }
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UNKNOWN, native.data()));
+    ASSERT_TRUE(out->close());
+  }
+  OIIO::ImageSpec spec;
+  const std::vector<float> want = oiioRead(file, &spec);
+  const LoadedImage ours = readImage(file);
+  EXPECT_EQ(ours.info.sampleType, "float");  // half and uint merge to float, as in OpenImageIO
+  EXPECT_EQ(ours.info.sampleType, spec.format.c_str());
+  ASSERT_EQ(ours.image.pixels.size(), want.size());
+  for (size_t i = 0; i < want.size(); ++i)
+    EXPECT_NEAR(ours.image.pixels[i], want[i], 1e-6f * std::max(1.0f, std::abs(want[i]))) << i;
+  EXPECT_EQ(ours.image.pixels[5 * 4 + 3], 1.0f);  // the largest id is 1.0
+}
+
+TEST(NativeIo, TooShortOrUnreadableFilesAreNamedErrors) {
+  TempDir dir;
+  compose::testing::writeText(dir / "two.jpg", "\xff\xd8");
+  COMPOSE_EXPECT_ERROR(readImage(dir / "two.jpg"), "not an image file (2 bytes)");
+}
+
 // Writes a multi-part OpenEXR with OpenImageIO: channel names out of order, a layer with X Y Z,
 // a data window inside the display window, and metadata under OpenImageIO's names.
 void writeOiioMultiPart(const std::filesystem::path& file) {
