@@ -1,8 +1,7 @@
 #include "ingest/pixel_util.h"
 
+#include <cpuid.h>
 #include <immintrin.h>
-
-#include <cstring>
 
 #include <Imath/half.h>
 
@@ -23,10 +22,20 @@ void toHalfPlain(const float* from, uint16_t* to, size_t n) {
   for (size_t i = 0; i < n; ++i) to[i] = Imath::half(from[i]).bits();
 }
 
+// Whether the processor converts with F16C (and AVX, whose registers the system must save).
+bool hasF16c() {
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  if (!__get_cpuid(1, &a, &b, &c, &d)) return false;
+  if (!(c & bit_AVX) || !(c & bit_F16C) || !(c & bit_OSXSAVE)) return false;
+  unsigned low = 0, high = 0;
+  __asm__("xgetbv" : "=a"(low), "=d"(high) : "c"(0));
+  return (low & 6u) == 6u;  // XMM and YMM state enabled
+}
+
 }  // namespace
 
 void toHalf(const float* from, uint16_t* to, size_t n) {
-  static const bool f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+  static const bool f16c = hasF16c();
   if (f16c) {
     toHalfF16c(from, to, n);
   } else {
