@@ -211,39 +211,18 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
 }
 
 FileHeader headerOf(const ExrPartHeader& part) {
-  FileHeader h;
-  h.width = part.width;
-  h.height = part.height;
-  h.channels = int(part.channelNames.size());
-  h.format = "openexr";
-  h.sampleType = part.sampleType;
-  h.bitsPerSample = part.sampleType == "half" ? 16 : 32;
-  h.attributes = &part.attributes;
-  return h;
+  return {part.width,      part.height,     int(part.channelNames.size()),
+          "openexr",       part.sampleType, part.sampleType == "half" ? 16 : 32,
+          &part.attributes};
 }
 
 FileHeader headerOf(const jpeg::Header& jpeg) {
-  FileHeader h;
-  h.width = jpeg.width;
-  h.height = jpeg.height;
-  h.channels = jpeg.channels;
-  h.format = "jpeg";
-  h.sampleType = "uint8";
-  h.bitsPerSample = 8;
-  h.attributes = &jpeg.attributes;
-  return h;
+  return {jpeg.width, jpeg.height, jpeg.channels, "jpeg", "uint8", 8, &jpeg.attributes};
 }
 
 FileHeader headerOf(const oiio::Header& oiio) {
-  FileHeader h;
-  h.width = oiio.width;
-  h.height = oiio.height;
-  h.channels = oiio.channels;
-  h.format = oiio.format;
-  h.sampleType = oiio.sampleType;
-  h.bitsPerSample = oiio.bitsPerSample;
-  h.attributes = &oiio.attributes;
-  return h;
+  return {oiio.width,      oiio.height,        oiio.channels,   oiio.format,
+          oiio.sampleType, oiio.bitsPerSample, &oiio.attributes};
 }
 
 // Which reader a file goes to: by its first bytes, not its name.
@@ -377,15 +356,8 @@ LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::
 
 CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
                                       const std::vector<ImageAttribute>& attributes) {
-  FileHeader h;
-  h.width = width;
-  h.height = height;
-  h.channels = channels;
-  h.sampleType = "uint8";
-  h.bitsPerSample = 8;
-  h.attributes = &attributes;
   CaptureInfo info;
-  fillCaptureInfo(h, info);
+  fillCaptureInfo({width, height, channels, "", "uint8", 8, &attributes}, info);
   return info;
 }
 
