@@ -319,8 +319,9 @@ class ShadowsStage final : public Stage {
  public:
   // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast;
   // 4: refined points in the order of their triangles (entries of 3 held their values in another
-  // order than the points read back).
-  static constexpr int kVersion = 4;
+  // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its
+  // strata.
+  static constexpr int kVersion = 5;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -492,8 +493,9 @@ void cropToShadow(GroundShadowResult& r) {
 class GroundStage final : public Stage {
  public:
   // 2: the ratio cut to where it is below 1; 3: refined across sharp shadow edges; 4: the
-  // object's rotation normalised in double (pipeline/context.cpp).
-  static constexpr int kVersion = 4;
+  // object's rotation normalised in double (pipeline/context.cpp); 5: a shadow edge's cell keeps
+  // its first ray as one of its strata.
+  static constexpr int kVersion = 5;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

@@ -39,6 +39,9 @@ double hash01(uint32_t x) {
   x ^= x >> 16;
   return double(x >> 8) * (1.0 / 16777216.0);
 }
+float hash01f(uint32_t x) {
+  return float(hash01(x));
+}  // exact: 24 bits
 
 // The tangent frame of a normal (transfer.h): east along increasing longitude.
 // The indices of `points` along a Morton (Z-order) curve through their bounding box, so that
@@ -340,6 +343,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
 
   const lighting::TchebichefBasis basis(s, k);
+  const std::vector<float>& basisRows = basis.matrixF();  // k x s, row-major
+  std::vector<float> basisColumns(basisRows.size());      // the same transposed, s x k
+  for (int m = 0; m < k; ++m)
+    for (int j = 0; j < s; ++j) basisColumns[size_t(j * k + m)] = basisRows[size_t(m * s + j)];
   double y00 = 0.0;  // the constant SH basis function
   lighting::evalSh(0, glm::dvec3(0.0, 1.0, 0.0), &y00);
   // Cell boundaries: altitude θ_i = iπ/(2s) (as the cheb-local grid), azimuth φ_j = 2πj/s.
@@ -351,6 +358,14 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
     omega[size_t(i)] = 2.0 * kPi / s * (a - b);     // the cell's solid angle
     cosine[size_t(i)] = kPi / s * (a * a - b * b);  // ∫_cell cos θ dω
   }
+  // The same in float for the rays' directions, and each column's first azimuth.
+  const std::vector<float> cosBoundF(cosBound.begin(), cosBound.end());
+  std::vector<float> colStartCos(static_cast<size_t>(s)), colStartSin(static_cast<size_t>(s));
+  for (int j = 0; j < s; ++j) {
+    colStartCos[size_t(j)] = float(std::cos(2.0 * kPi * j / s));
+    colStartSin[size_t(j)] = float(std::sin(2.0 * kPi * j / s));
+  }
+  const float cellWidth = float(2.0 * kPi / s);
   // Every direction of cell row i lies within cellRadius[i] of its centre direction (along the
   // meridian, then along the parallel), for the bounding-cone test below.
   std::vector<double> cellRadius(static_cast<size_t>(s)), rowSin(static_cast<size_t>(s)),
@@ -364,6 +379,18 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
     colSin[size_t(i)] = std::sin(phi);
     colCos[size_t(i)] = std::cos(phi);
   }
+  // The first pass visits the cells in blocks of 4 x 4 neighbours: a batch of 16 rays then holds
+  // nearby directions.
+  std::vector<int> firstPassOrder;
+  firstPassOrder.reserve(cells);
+  const int blocksPerRow = (s + 3) / 4;
+  for (int cell = 0; cell < 16 * blocksPerRow * blocksPerRow; ++cell) {
+    const int block = cell / 16, within = cell % 16;
+    const int i = 4 * (block / blocksPerRow) + within / 4;
+    const int j = 4 * (block % blocksPerRow) + within % 4;
+    if (i < s && j < s) firstPassOrder.push_back(i * s + j);
+  }
+  const uint64_t fullRow = s == 64 ? ~uint64_t(0) : (uint64_t(1) << s) - 1u;
   // The object's bounding sphere, in its own coordinates.
   const glm::dvec3 centre = 0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax()));
   const double radius =
@@ -373,14 +400,17 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
 
   // Per-thread scratch, so that no point allocates.
   struct Scratch {
-    std::vector<double> visible, y, shSum;
-    std::vector<glm::vec3> dirs;   // the first pass' direction per cell (where needed)
-    std::vector<double> cosines;   // the first pass' cos θ per cell
-    std::vector<double> coneCos;   // per row: cos of the cone's half angle plus the cell's radius
-    std::vector<char> occluded;    // the first pass' answer per cell
-    std::vector<char> wrapped;     // the same, each row padded with its wrapped-around neighbours
-    std::vector<glm::vec3> batch;  // rays of one trace call
+    std::vector<float> visible;      // per cell: the visible fraction
+    std::vector<double> y, shSum;    // SH basis values of a ray; the SH integral
+    std::vector<glm::vec3> dirs;     // the first pass' direction per cell
+    std::vector<float> cosines;      // the first pass' cos θ per cell
+    std::vector<uint8_t> stratum;    // the first pass' ray's stratum a·r + b within its cell
+    std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
+    std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
+    std::vector<float> projected;    // s x k: the visible fractions projected on the columns
+    std::vector<glm::vec3> batch;    // rays of one trace call
     std::vector<int> batchCell;
+    std::vector<float> batchCos;
   };
   tbb::enumerable_thread_specific<Scratch> scratch([&] {
     Scratch sc;
@@ -389,9 +419,14 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
     sc.shSum.resize(size_t(nsh));
     sc.dirs.resize(cells);
     sc.cosines.resize(cells);
+    sc.stratum.resize(cells);
     sc.coneCos.resize(size_t(s));
-    sc.occluded.resize(cells);
-    sc.wrapped.resize(size_t(s) * size_t(s + 2));
+    sc.occluded.resize(size_t(s));
+    sc.projected.resize(size_t(s) * size_t(k));
+    const size_t most = cells * size_t(r) * size_t(r);
+    sc.batch.reserve(most);
+    sc.batchCell.reserve(most);
+    sc.batchCos.reserve(most);
     return sc;
   });
 
@@ -403,8 +438,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         const glm::dvec3 n = glm::normalize(glm::dvec3(points.normals[v]));
         glm::dvec3 east, north;
         tangentFrame(n, east, north);
-        const glm::vec3 origin = points.positions[v] + lift * glm::vec3(n);
-        std::fill(sc.visible.begin(), sc.visible.end(), 0.0);
+        const glm::vec3 nf(n), eastF(east), northF(north);
+        const glm::vec3 origin = points.positions[v] + lift * nf;
+        std::fill(sc.visible.begin(), sc.visible.end(), 0.0f);
         std::fill(sc.shSum.begin(), sc.shSum.end(), 0.0);
         int64_t traced = 0;
         // The jitter depends on where the point is, not on its index: a point shared by two
@@ -415,29 +451,29 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                           (bits[2] * 0xC2B2AE3Du) ^ (params.seed * 0x27D4EB2Fu);
 
         // A direction in cell (i, j) at fractional position (u, w), uniform in solid angle: its
-        // cos θ, then the direction itself.
-        auto cosineAt = [&](int i, double u) {
-          return cosBound[size_t(i)] - u * (cosBound[size_t(i)] - cosBound[size_t(i) + 1]);
+        // cos θ, then the direction itself (float: the rays are traced in float).
+        auto cosineAt = [&](int i, float u) {
+          return cosBoundF[size_t(i)] - u * (cosBoundF[size_t(i)] - cosBoundF[size_t(i) + 1]);
         };
-        auto direction = [&](int i, int j, double u, double w) {
-          const double cosT = cosineAt(i, u);
-          const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
-          const double phi = 2.0 * kPi * (j + w) / s;
-          return glm::vec3(sinT * std::cos(phi) * east + sinT * std::sin(phi) * north + cosT * n);
+        auto direction = [&](int j, float cosT, float w) {
+          const float sinT = std::sqrt(std::max(0.0f, 1.0f - cosT * cosT));
+          const float delta = w * cellWidth;
+          const float cd = std::cos(delta), sd = std::sin(delta);
+          const float c = colStartCos[size_t(j)] * cd - colStartSin[size_t(j)] * sd;
+          const float sn = colStartSin[size_t(j)] * cd + colStartCos[size_t(j)] * sd;
+          return (sinT * c) * eastF + (sinT * sn) * northF + cosT * nf;
         };
-        // A ray that reaches the environment: its share of the cell and of the SH integral. Band
-        // 0 alone (the ground's transfer) needs only the ray's cos θ.
-        auto seen = [&](int cell, const glm::vec3& d, double share) {
+        // A ray that reaches the environment: its share of the cell and of the SH integral
+        // (band 0 alone, the ground's transfer, needs only the ray's cos θ).
+        auto seen = [&](int cell, const glm::vec3& d, float cosT, float share) {
           sc.visible[size_t(cell)] += share;
-          const glm::dvec3 dd(d);
-          lighting::evalSh(params.shBands, dd, sc.y.data());
-          const double weight = glm::dot(dd, n) * share * omega[size_t(cell / s)];
+          const double weight = double(cosT) * double(share) * omega[size_t(cell / s)];
+          if (nsh == 1) {
+            sc.shSum[0] += y00 * weight;
+            return;
+          }
+          lighting::evalSh(params.shBands, glm::dvec3(d), sc.y.data());
           for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
-        };
-        auto seenFirst = [&](int cell) {
-          if (nsh > 1) return seen(cell, sc.dirs[size_t(cell)], 1.0);
-          sc.visible[size_t(cell)] += 1.0;
-          sc.shSum[0] += y00 * sc.cosines[size_t(cell)] * omega[size_t(cell / s)];
         };
         // Traces sc.batch (any length) in groups of 16; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
@@ -468,92 +504,113 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         // Pass 1: one jittered ray per cell.
         sc.batch.clear();
         sc.batchCell.clear();
-        // In blocks of 4 x 4 neighbouring cells: a batch of 16 then holds nearby directions.
         const uint32_t firstSample = sample;
         sample += uint32_t(s * s);
-        const int blocksPerRow = (s + 3) / 4;
-        for (int cell = 0; cell < 16 * blocksPerRow * blocksPerRow; ++cell) {
-          const int block = cell / 16, within = cell % 16;
-          const int i = 4 * (block / blocksPerRow) + within / 4;
-          const int j = 4 * (block % blocksPerRow) + within % 4;
-          if (i >= s || j >= s) continue;
-          {
-            const uint32_t at = firstSample + uint32_t(i * s + j);
-            const double u = hash01(2 * at), w = hash01(2 * at + 1);
-            sc.occluded[size_t(i * s + j)] = 0;
-            sc.cosines[size_t(i * s + j)] = cosineAt(i, u);
-            if (outside) {
-              const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
-                                 rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
-              // Wholly outside the cone: cannot see the object; its direction is needed only
-              // for the SH integral above band 0.
-              if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) {
-                if (nsh > 1) sc.dirs[size_t(i * s + j)] = direction(i, j, u, w);
-                continue;
-              }
-            }
-            const glm::vec3 d = direction(i, j, u, w);
-            sc.dirs[size_t(i * s + j)] = d;
-            sc.batch.push_back(d);
-            sc.batchCell.push_back(i * s + j);
+        std::fill(sc.occluded.begin(), sc.occluded.end(), uint64_t(0));
+        for (const int cell : firstPassOrder) {
+          const int i = cell / s, j = cell % s;
+          const uint32_t at = firstSample + uint32_t(cell);
+          const float u = hash01f(2 * at), w = hash01f(2 * at + 1);
+          const float cosT = cosineAt(i, u);
+          sc.cosines[size_t(cell)] = cosT;
+          sc.stratum[size_t(cell)] =
+              uint8_t(std::min(r - 1, int(u * float(r))) * r + std::min(r - 1, int(w * float(r))));
+          const glm::vec3 d = direction(j, cosT, w);
+          sc.dirs[size_t(cell)] = d;
+          // Wholly outside the cone: cannot see the object.
+          if (outside) {
+            const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
+                               rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
+            if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) continue;
           }
+          sc.batch.push_back(d);
+          sc.batchCell.push_back(cell);
         }
         traceBatch([&](size_t index, bool occluded) {
-          sc.occluded[size_t(sc.batchCell[index])] = occluded ? 1 : 0;
+          const int cell = sc.batchCell[index];
+          if (occluded) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
         });
 
-        // Cells whose ray disagrees with a neighbour's lie on a shadow's edge: they get r x r
-        // stratified rays; every other cell keeps its one ray.
-        // Each row with its neighbours across the azimuth's wrap-around, so that the edge test
-        // below indexes without a modulo: wrapped[i][j + 1] for j in -1..s.
-        const int ws = s + 2;
-        for (int i = 0; i < s; ++i) {
-          char* row = sc.wrapped.data() + size_t(i * ws);
-          std::copy_n(sc.occluded.data() + size_t(i * s), size_t(s), row + 1);
-          row[0] = row[s];
-          row[s + 1] = row[1];
-        }
-        auto at = [&](int i, int j) { return sc.wrapped[size_t(i * ws + j + 1)]; };
-        bool poleMixed = false;
-        for (int j = 1; j < s; ++j) poleMixed = poleMixed || at(0, j) != at(0, 0);
+        // Cells whose ray disagrees with one of its eight neighbours' (the azimuth wraps around)
+        // lie on a shadow's edge: they get r x r stratified rays, the first ray standing for its
+        // own stratum; every other cell keeps its one ray. Per row, bit j of `edge` is set for
+        // such a cell; around the pole (row 0) every cell is a neighbour of every other.
+        auto rotateUp = [&](uint64_t x) {  // bit j to j + 1, bit s - 1 to 0
+          return ((x << 1) | (x >> (s - 1))) & fullRow;
+        };
+        auto rotateDown = [&](uint64_t x) {  // bit j to j - 1, bit 0 to s - 1
+          return ((x >> 1) | (x << (s - 1))) & fullRow;
+        };
         sc.batch.clear();
         sc.batchCell.clear();
+        sc.batchCos.clear();
+        const float share = 1.0f / float(r * r);
         for (int i = 0; i < s; ++i) {
+          const uint64_t row = sc.occluded[size_t(i)];
+          uint64_t edge = 0;
+          for (int ii = std::max(0, i - 1); ii <= std::min(s - 1, i + 1); ++ii) {
+            const uint64_t other = sc.occluded[size_t(ii)];
+            edge |= (row ^ other) | (row ^ rotateUp(other)) | (row ^ rotateDown(other));
+          }
+          if (i == 0 && row != 0 && row != fullRow) edge = fullRow;
+          if (r == 1) edge = 0;
           for (int j = 0; j < s; ++j) {
-            const char c = at(i, j);
-            // A shadow's edge may cross the cell (whatever the rays spent on it below).
-            bool edge = i == 0 && poleMixed;
-            for (int di = -1; di <= 1 && !edge; ++di) {
-              const int ii = i + di;
-              if (ii < 0 || ii >= s) continue;
-              for (int dj = -1; dj <= 1; ++dj) edge = edge || at(ii, j + dj) != c;
-            }
-            if (r == 1 || !edge) {
-              if (!c) seenFirst(i * s + j);
+            const int cell = i * s + j;
+            const bool blocked = ((row >> j) & 1u) != 0;
+            if (!((edge >> j) & 1u)) {
+              if (!blocked) seen(cell, sc.dirs[size_t(cell)], sc.cosines[size_t(cell)], 1.0f);
               continue;
             }
+            if (!blocked) seen(cell, sc.dirs[size_t(cell)], sc.cosines[size_t(cell)], share);
+            const int own = sc.stratum[size_t(cell)];
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
-                sc.batch.push_back(direction(i, j, (a + hash01(2 * sample)) / r,
-                                             (b + hash01(2 * sample + 1)) / r));
-                sc.batchCell.push_back(i * s + j);
+                if (a * r + b == own) continue;
+                const float cosT = cosineAt(i, (float(a) + hash01f(2 * sample)) / float(r));
+                sc.batch.push_back(
+                    direction(j, cosT, (float(b) + hash01f(2 * sample + 1)) / float(r)));
+                sc.batchCell.push_back(cell);
+                sc.batchCos.push_back(cosT);
               }
             }
           }
         }
-        const double share = 1.0 / double(r * r);
         traceBatch([&](size_t index, bool occluded) {
-          if (!occluded) seen(sc.batchCell[index], sc.batch[index], share);
+          if (!occluded) seen(sc.batchCell[index], sc.batch[index], sc.batchCos[index], share);
         });
 
         // AO from the visible fractions and each cell's exact cosine integral, so that a fully
         // visible point has AO 1.
         double ao = 0.0;
-        for (int i = 0; i < s; ++i)
-          for (int j = 0; j < s; ++j) ao += sc.visible[size_t(i * s + j)] * cosine[size_t(i)];
-        const std::vector<double> m = lighting::moments2d(basis, basis, sc.visible, k);
-        std::transform(m.begin(), m.end(), out.cheb.begin() + ptrdiff_t(v * kk),
-                       [](double x) { return float(x); });
+        for (int i = 0; i < s; ++i) {
+          double rowVisible = 0.0;
+          for (int j = 0; j < s; ++j) rowVisible += double(sc.visible[size_t(i * s + j)]);
+          ao += rowVisible * cosine[size_t(i)];
+        }
+        // The k x k moments (tchebichef.h's moments2d, in float without allocating): first
+        // along the azimuth, then along the altitude.
+        float* projected = sc.projected.data();
+        std::fill(sc.projected.begin(), sc.projected.end(), 0.0f);
+        for (int i = 0; i < s; ++i) {
+          const float* f = sc.visible.data() + size_t(i * s);
+          float* gi = projected + size_t(i * k);
+          for (int j = 0; j < s; ++j) {
+            const float fj = f[j];
+            const float* q = basisColumns.data() + size_t(j * k);
+            for (int m = 0; m < k; ++m) gi[m] += fj * q[m];
+          }
+        }
+        float* moments = out.cheb.data() + v * kk;
+        for (int m = 0; m < k; ++m) {
+          const float* p = basisRows.data() + size_t(m * s);
+          float* tm = moments + size_t(m * k);
+          std::fill(tm, tm + k, 0.0f);
+          for (int i = 0; i < s; ++i) {
+            const float pi = p[i];
+            const float* gi = projected + size_t(i * k);
+            for (int c = 0; c < k; ++c) tm[c] += pi * gi[c];
+          }
+        }
         for (int c = 0; c < nsh; ++c)
           out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
         out.ao[v] = float(ao / kPi);

@@ -8,8 +8,8 @@
 // On the local altitude/azimuth grid of the cheb-local lighting basis (s x s cells around the
 // normal: altitude θ in s equal steps of π/2s from the normal, azimuth φ in s equal steps from
 // the tangent `east`), with ℓ_ij = ∫_cell L cos θ dω (what the lighting tabulates per normal) and
-// V_ij the visible fraction of the cell seen from the point (one ray per cell, then r x r on the
-// cells where the shadow's edge passes),
+// V_ij the visible fraction of the cell seen from the point (one ray per cell, then r x r strata on
+// the cells where the shadow's edge passes, the first ray standing for its own stratum),
 //
 //     E ≈ Σ_ij V_ij ℓ_ij = Σ_mn a_mn b_mn,
 //
@@ -56,7 +56,8 @@ struct TransferParams {
   int grid = 16;  // s: s x s cells on the hemisphere around the normal
   int order = 8;  // k: k x k Chebyshev moments kept per vertex (k <= s)
   // One ray per cell first; then the cells on a shadow boundary (whose ray disagrees with a
-  // neighbour's) are sampled again with r x r stratified rays.
+  // neighbour's) get r x r stratified rays: r² - 1 more, the first ray standing for the stratum
+  // it fell in (uniform within the cell, it is uniform within that stratum too).
   int boundaryRays = 3;
   int shBands = 4;  // SH transfer up to band 4: 25 coefficients per vertex
   uint32_t seed = 1;
@@ -136,7 +137,7 @@ struct VertexTransfer {
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS6";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS7";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal.
