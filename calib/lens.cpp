@@ -11,6 +11,7 @@
 #include "calib/lens_json.h"
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 
 namespace compose::calib {
@@ -18,8 +19,6 @@ namespace compose::calib {
 namespace fs = std::filesystem;
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 double coefficient(const std::vector<double>& d, size_t i) {
   return i < d.size() ? d[i] : 0.0;

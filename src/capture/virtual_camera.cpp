@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/capture.h"
@@ -22,7 +23,6 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kStage = "capture-sim";
-constexpr double kPi = std::numbers::pi;
 constexpr double kFullFrameDiagonalMm = 43.266615305567875;
 
 double srgbEncode(double x) {

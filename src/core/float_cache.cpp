@@ -106,10 +106,11 @@ FloatCache::Read FloatCache::read(const std::string& key, const std::string& des
   expected.bytes(description);
   expected.combine(*valuesSum);
   if (sum[0] != expected.a || sum[1] != expected.b) return invalid("fails its checksum (damaged)");
-  constexpr int64_t kBlock = int64_t(1) << 18;
+  constexpr int64_t kCheckBlock = int64_t(1) << 18;
   std::atomic<bool> finite{true};
-  parallelFor(0, (int64_t(count) + kBlock - 1) / kBlock, [&](int64_t b) {
-    const size_t first = size_t(b * kBlock), last = std::min(size_t(count), first + size_t(kBlock));
+  parallelFor(0, (int64_t(count) + kCheckBlock - 1) / kCheckBlock, [&](int64_t b) {
+    const size_t first = size_t(b * kCheckBlock),
+                 last = std::min(size_t(count), first + size_t(kCheckBlock));
     bool ok = true;
     for (size_t i = first; i < last; ++i) ok = ok && std::abs(values[i]) <= kMaxMagnitude;
     if (!ok) finite = false;

@@ -66,4 +66,15 @@ struct Hash128 {
   }
 };
 
+// Deterministic jitter in [0, 1) from a 32-bit integer (the lowbias32 hash): 24 bits, so exact
+// in float.
+inline float hash01(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352dU;
+  x ^= x >> 15;
+  x *= 0x846ca68bU;
+  x ^= x >> 16;
+  return float(x >> 8) * (1.0f / 16777216.0f);
+}
+
 }  // namespace compose

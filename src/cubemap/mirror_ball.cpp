@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::cubemap {
@@ -14,8 +15,6 @@ namespace compose::cubemap {
 using lighting::kCubeFaces;
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Bilinear sample of an image at continuous pixel coordinates (origin at the top-left corner),
 // clamped at the borders.

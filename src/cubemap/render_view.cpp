@@ -6,13 +6,10 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::cubemap {
-
-namespace {
-constexpr double kDegrees = std::numbers::pi / 180.0;
-}
 
 glm::dmat3 cameraRotation(double yaw, double pitch, double roll) {
   const double cy = std::cos(yaw * kDegrees), sy = std::sin(yaw * kDegrees);

@@ -17,6 +17,7 @@
 #include <opencv2/stitching/detail/motion_estimators.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::cubemap {
@@ -25,8 +26,6 @@ using lighting::kCubeFaces;
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr double kDegrees = kPi / 180.0;
 // Verified matches a pair needs. The rotation model has two degrees of freedom per match and the
 // rough orientations already bound it, so a handful of agreeing matches is not chance.
 constexpr size_t kMinInliers = 8;

@@ -5,14 +5,13 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "hdr/opencv_util.h"
 
 namespace compose::hdr {
 
 namespace fs = std::filesystem;
 
 namespace {
-
-constexpr const char* kStage = "merge";
 
 bool isEightBit(const ingest::CaptureInfo& info) {
   return info.sampleType == "uint8";

@@ -16,8 +16,6 @@ namespace compose::hdr {
 
 namespace {
 
-constexpr const char* kStage = "merge";
-
 // OpenCV's triangle weights (photo/src/hdr_common.cpp): w(z) = z + 1 below 128, 256 - z above.
 inline float triangle(int z) {
   return z < kCodes / 2 ? float(z + 1) : float(kCodes - z);

@@ -12,6 +12,9 @@
 
 namespace compose::hdr {
 
+// The stage these files' errors name.
+inline constexpr const char* kStage = "merge";
+
 // A matrix over the codes, without copying (OpenCV only reads it).
 inline cv::Mat wrap(const Codes8& codes) {
   return cv::Mat(codes.height, codes.width, CV_8UC3, const_cast<uint8_t*>(codes.data()));

@@ -25,8 +25,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr const char* kStage = "merge";
-
 std::string utcNow() {
   const std::time_t now = std::time(nullptr);
   std::tm tm{};

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/fast_math.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 #include "lighting/cubemap.h"
 #include "lighting/radiance_cells.h"
@@ -18,8 +19,6 @@
 namespace compose::lighting {
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Cells of 8 x 8 texels on the horizon are integrated as uniform patches (RadianceCells): on the
 // sample maps this moves E by ~2e-5 relative (~90 dB), far below the normal-grid interpolation

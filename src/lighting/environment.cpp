@@ -6,12 +6,9 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/numbers.h"
 
 namespace compose::lighting {
-
-namespace {
-constexpr double kPi = std::numbers::pi;
-}
 
 void Environment::buildTables() {
   rowSolidAngle_.resize(size_t(height_));

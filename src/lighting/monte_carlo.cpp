@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::lighting {
@@ -62,7 +63,6 @@ namespace compose::lighting {
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
 constexpr float kPiF = std::numbers::pi_v<float>;
 constexpr double kBelowOne = 0x1.fffffffffffffp-1;  // largest double < 1
 constexpr float kBelowOneF = 0x1.fffffep-1f;

@@ -7,13 +7,10 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::lighting {
-
-namespace {
-constexpr double kPi = std::numbers::pi;
-}
 
 RadianceCells::RadianceCells(const Environment& env, int topFactor)
     : width_(env.width()), height_(env.height()) {

@@ -7,13 +7,12 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::lighting {
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Normalisation K_lm = sqrt((2l+1)/(4π) (l-m)!/(l+m)!), with the √2 of the real basis folded in
 // for m > 0. Computed once.

@@ -9,6 +9,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::lighting {
@@ -43,7 +44,6 @@ namespace compose::lighting {
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
 // Contributions of boundary pieces to one cell: `direct` for the cell the piece runs through,

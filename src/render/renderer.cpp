@@ -12,21 +12,12 @@
 #include <glm/matrix.hpp>
 
 #include "core/error.h"
+#include "core/hash.h"
 #include "core/parallel.h"
 
 namespace compose::render {
 
 namespace {
-
-// Deterministic per-sample jitter in [0, 1): a 32-bit integer hash (lowbias32).
-float hash01(uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352dU;
-  x ^= x >> 15;
-  x *= 0x846ca68bU;
-  x ^= x >> 16;
-  return float(x >> 8) * (1.0f / 16777216.0f);
-}
 
 // Channel offsets in the AOV image.
 enum Aov { kN = 0, kP = 3, kDepth = 6, kAlbedo = 7, kIrradiance = 10, kShadowed = 13, kAo = 16 };

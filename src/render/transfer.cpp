@@ -19,6 +19,7 @@
 #include "core/parallel.h"
 
 #include <tbb/enumerable_thread_specific.h>
+#include "core/numbers.h"
 #include "lighting/chebyshev.h"
 #include "lighting/sh.h"
 #include "lighting/tchebichef.h"
@@ -27,21 +28,6 @@
 namespace compose::render {
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
-
-// Deterministic jitter in [0, 1) from a 32-bit integer hash (lowbias32).
-double hash01(uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352dU;
-  x ^= x >> 15;
-  x *= 0x846ca68bU;
-  x ^= x >> 16;
-  return double(x >> 8) * (1.0 / 16777216.0);
-}
-float hash01f(uint32_t x) {
-  return float(hash01(x));
-}  // exact: 24 bits
 
 // The tangent frame of a normal (transfer.h): east along increasing longitude.
 // The indices of `points` along a Morton (Z-order) curve through their bounding box, so that
@@ -510,7 +496,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
         for (const int cell : firstPassOrder) {
           const int i = cell / s, j = cell % s;
           const uint32_t at = firstSample + uint32_t(cell);
-          const float u = hash01f(2 * at), w = hash01f(2 * at + 1);
+          const float u = hash01(2 * at), w = hash01(2 * at + 1);
           const float cosT = cosineAt(i, u);
           sc.cosines[size_t(cell)] = cosT;
           sc.stratum[size_t(cell)] =
@@ -566,9 +552,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
                 if (a * r + b == own) continue;
-                const float cosT = cosineAt(i, (float(a) + hash01f(2 * sample)) / float(r));
+                const float cosT = cosineAt(i, (float(a) + hash01(2 * sample)) / float(r));
                 sc.batch.push_back(
-                    direction(j, cosT, (float(b) + hash01f(2 * sample + 1)) / float(r)));
+                    direction(j, cosT, (float(b) + hash01(2 * sample + 1)) / float(r)));
                 sc.batchCell.push_back(cell);
                 sc.batchCos.push_back(cosT);
               }
@@ -773,8 +759,8 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
           for (int k = 0; k < kPerSource; ++k) {
             // The point's own sequence of draws, one per (source, direction).
             const uint32_t sample = firstSample + i * uint32_t(kPerSource) + uint32_t(k);
-            const float a = (float(k % cols) + float(hash01(2 * sample))) / float(cols) - 0.5f;
-            const float b = (float(k / cols) + float(hash01(2 * sample + 1))) / float(rows) - 0.5f;
+            const float a = (float(k % cols) + hash01(2 * sample)) / float(cols) - 0.5f;
+            const float b = (float(k / cols) + hash01(2 * sample + 1)) / float(rows) - 0.5f;
             const glm::vec3 d = f.direction(a, b);
             if (glm::dot(n, d) <= 0.0f) continue;  // below the horizon: no light anyway
             if (outside && glm::dot(d, axis) < cosCone) {

@@ -25,7 +25,7 @@ glm::vec3 toAp1(const glm::vec3& c) {
 }
 
 // The sRGB decoding (IEC 61966-2-1).
-float srgbToLinear(float v) {
+float srgbDecodeFloat(float v) {
   return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
 }
 
@@ -61,7 +61,8 @@ TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
     const glm::vec3 expected = toAp1(twoMaterials().materials[size_t(m)].baseColor);
     EXPECT_LT(glm::length(mesh.materials[size_t(m)].baseColor - expected), kTolerance) << m;
   }
-  const glm::vec3 texel = toAp1({srgbToLinear(0.5f), srgbToLinear(0.25f), srgbToLinear(1.0f)});
+  const glm::vec3 texel =
+      toAp1({srgbDecodeFloat(0.5f), srgbDecodeFloat(0.25f), srgbDecodeFloat(1.0f)});
   const float* p = mesh.textures[0].image.pixels.data();
   EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
   EXPECT_EQ(mesh.textures[0].image.colorSpace, "ACEScg");
@@ -101,7 +102,7 @@ TEST(MaterialColour, BlendersConfigWorksInLinearRec709) {
       << line;
   const float* p = mesh.textures[0].image.pixels.data();
   EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) -
-                        glm::vec3(srgbToLinear(0.5f), srgbToLinear(0.25f), 1.0f)),
+                        glm::vec3(srgbDecodeFloat(0.5f), srgbDecodeFloat(0.25f), 1.0f)),
             kTolerance)
       << line;
 }

@@ -8,6 +8,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "cubemap/layouts.h"
 #include "lighting/sphere_resample.h"
 #include "pipeline/compose_job.h"
@@ -22,7 +23,6 @@ using lighting::Environment;
 using lighting::kCubeFaces;
 using testing::TempDir;
 
-constexpr double kPi = std::numbers::pi;
 constexpr float kSun = 1000.0f;
 
 // A black lat-long map with one bright texel; returns the texel's centre direction.

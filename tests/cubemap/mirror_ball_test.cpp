@@ -6,10 +6,12 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "cubemap/render_view.h"
 #include "ingest/image_io.h"
 #include "lighting/environment_util.h"
 #include "lighting/filtered_cube.h"
+#include "lighting/sample_environment.h"
 #include "lighting/sphere_resample.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -21,8 +23,6 @@ namespace fs = std::filesystem;
 using lighting::CubeMap;
 using lighting::Environment;
 using lighting::kCubeFaces;
-
-constexpr double kPi = std::numbers::pi;
 
 // A photo of a chrome ball lit by `env`, cropped to the ball (DESIGN.md §4.4, written
 // independently of the unwrapper: forward from pixels to directions), 4 x 4 samples per pixel.
@@ -48,12 +48,6 @@ Image photographBall(const Environment& env, int size) {
     }
   }
   return img;
-}
-
-Environment loadSample(const std::string& name) {
-  const fs::path path = pipeline::samplesDirectory() / (name + ".exr");
-  if (!fs::exists(path)) return {};
-  return Environment::fromLatLong(ingest::readImage(path).image, path);
 }
 
 TEST(MirrorBall, BrightSpotUnwrapsToItsDirection) {
@@ -85,7 +79,7 @@ TEST(MirrorBall, BrightSpotUnwrapsToItsDirection) {
 // The unwrapped sample HDRIs match the ground truth outside the blind spot and its blend ring.
 TEST(MirrorBall, UnwrapsTheSampleHdris) {
   for (const char* name : {"sunset", "forest"}) {
-    const Environment env = loadSample(name);
+    const Environment env = testing::loadSampleEnvironment(name);
     if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
     MirrorBallOptions options;
     const MirrorBallResult r = unwrapMirrorBall(photographBall(env, 500), options);

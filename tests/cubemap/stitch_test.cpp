@@ -11,9 +11,11 @@
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 
+#include "core/numbers.h"
 #include "cubemap/render_view.h"
 #include "ingest/image_io.h"
 #include "lighting/filtered_cube.h"
+#include "lighting/sample_environment.h"
 #include "lighting/sphere_resample.h"
 #include "pipeline/compose_job.h"
 #include "seams.h"
@@ -26,14 +28,6 @@ namespace fs = std::filesystem;
 using lighting::CubeMap;
 using lighting::Environment;
 using lighting::kCubeFaces;
-
-constexpr double kPi = std::numbers::pi;
-
-Environment loadSample(const std::string& name) {
-  const fs::path path = pipeline::samplesDirectory() / (name + ".exr");
-  if (!fs::exists(path)) return {};
-  return Environment::fromLatLong(ingest::readImage(path).image, path);
-}
 
 double rotationDegrees(const glm::dmat3& a, const glm::dmat3& b) {
   const glm::dmat3 r = glm::transpose(a) * b;
@@ -137,7 +131,7 @@ class StitchSample : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
   const char* name = GetParam();
-  const Environment env = loadSample(name);
+  const Environment env = testing::loadSampleEnvironment(name);
   if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   const int n = 256;
   const CubeMap truth = lighting::cubeFromLatLong(env, n);
@@ -193,7 +187,7 @@ INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchSample,
 
 // One photo taken a stop and a half brighter: its gain brings it back.
 TEST(Stitch, GainsRecoverAnExposureDifference) {
-  const Environment env = loadSample("forest");
+  const Environment env = testing::loadSampleEnvironment("forest");
   if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
   Capture capture = sixViews(scene, 384, 100.0, 1.0, 3);
@@ -214,7 +208,7 @@ TEST(Stitch, GainsRecoverAnExposureDifference) {
 // Fisheye photos: six 140° equidistant views (each reaching 70° from its axis, well past the
 // cube face), with a little barrel distortion in the lens model.
 TEST(Stitch, FisheyeViews) {
-  const Environment env = loadSample("forest");
+  const Environment env = testing::loadSampleEnvironment("forest");
   if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   const CubeMap truth = lighting::cubeFromLatLong(env, 64);
   const lighting::FilteredCube scene(truth);
@@ -247,7 +241,7 @@ TEST(Stitch, FisheyeViews) {
 // More photos with a narrower lens: a ring of six 75° views and straight up and down. The bands
 // between the ring and the poles are seen by no photo: filled, and reported.
 TEST(Stitch, NarrowLensRingWithHolesFilledAndReported) {
-  const Environment env = loadSample("courtyard");
+  const Environment env = testing::loadSampleEnvironment("courtyard");
   if (env.width() == 0) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
   const calib::Lens lens = calib::Lens::fromFieldOfView(320, 320, 75.0);

@@ -12,6 +12,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
+#include "core/numbers.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -25,8 +26,6 @@ using RunResult = compose::testing::CommandResult;
 using compose::testing::quote;
 using compose::testing::runCompose;
 using compose::testing::slurp;
-
-constexpr double kPi = std::numbers::pi;
 
 struct Raster {
   int width = 0, height = 0, channels = 0;

@@ -28,6 +28,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
+#include "core/numbers.h"
 #include "hdr/response.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -37,8 +38,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
-
-constexpr double kPi = std::numbers::pi;
 
 // --- running the executable ---
 

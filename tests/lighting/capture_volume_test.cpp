@@ -5,6 +5,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "lighting/environment_util.h"
 #include "lighting/exact.h"
 #include "lighting/volume.h"
@@ -12,8 +13,6 @@
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 CaptureProxy room() {
   CaptureProxy p;

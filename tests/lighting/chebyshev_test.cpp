@@ -7,6 +7,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "lighting/exact.h"
 #include "lighting/lighting_cache.h"
 #include "lighting/monte_carlo.h"
@@ -15,8 +16,6 @@
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 using compose::testing::randomNormals;
 

@@ -63,6 +63,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 #include "lighting/sh.h"
@@ -75,7 +76,6 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 
-constexpr double kPi = std::numbers::pi;
 constexpr int kCoefficients = 9;
 using Coefficients = std::array<glm::dvec3, kCoefficients>;
 

@@ -4,13 +4,12 @@
 #include <limits>
 #include <numbers>
 
+#include "core/numbers.h"
 #include "lighting/exact.h"
 #include "test_util.h"
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 Image blackLatLong(int width) {
   Image img(width, width / 2, 3, {"R", "G", "B"});

@@ -1,6 +1,11 @@
 // Synthetic environments for the lighting tests.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+
+#include <glm/vec3.hpp>
+
 #include "lighting/environment.h"
 
 namespace compose::testing {
@@ -26,6 +31,13 @@ lighting::Environment makeEnvironment(int width, F radiance, G edit) {
 template <class F>
 lighting::Environment analyticEnvironment(int width, F radiance) {
   return makeEnvironment(width, radiance, [](Image&) {});
+}
+
+// The largest relative difference of a channel of a from b's.
+inline double worstRelative(const glm::dvec3& a, const glm::dvec3& b) {
+  double worst = 0.0;
+  for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(a[c] - b[c]) / std::abs(b[c]));
+  return worst;
 }
 
 }  // namespace compose::testing

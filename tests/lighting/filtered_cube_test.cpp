@@ -30,12 +30,6 @@ CubeMap testCube(int n) {
   return cube;
 }
 
-double relative(const glm::dvec3& a, const glm::dvec3& b) {
-  double worst = 0.0;
-  for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(a[c] - b[c]) / std::abs(b[c]));
-  return worst;
-}
-
 TEST(FilteredCube, EveryLevelKeepsTheEnergy) {
   for (int n : {64, 45}) {  // a power of two, and odd sizes with partial overlaps on the way down
     const FilteredCube filtered{testCube(n)};
@@ -44,7 +38,8 @@ TEST(FilteredCube, EveryLevelKeepsTheEnergy) {
     for (int l = 1; l < filtered.levels(); ++l) {
       // Exact solid-angle weights, texels stored in float: float rounding only.
       constexpr double kFloat = 1e-6;
-      EXPECT_LT(relative(filtered.integral(l), base), kFloat) << "size " << n << " level " << l;
+      EXPECT_LT(testing::worstRelative(filtered.integral(l), base), kFloat)
+          << "size " << n << " level " << l;
     }
   }
 }

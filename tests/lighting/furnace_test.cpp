@@ -5,13 +5,12 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "lighting/lighting.h"
 #include "test_util.h"
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 struct FurnaceCase {
   std::string basis;

@@ -9,6 +9,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "core/parallel.h"
 #include "environment_util.h"
 #include "lighting/exact.h"
@@ -16,8 +17,6 @@
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 using compose::testing::randomNormals;
 

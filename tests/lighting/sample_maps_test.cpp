@@ -6,6 +6,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "ingest/image_io.h"
 #include "lighting/exact.h"
 #include "lighting/lighting.h"
@@ -15,7 +16,6 @@
 namespace compose::lighting {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
 const char* const kMaps[] = {"courtyard", "forest", "interior", "sunset"};
 
 Image loadSample(const std::string& name) {

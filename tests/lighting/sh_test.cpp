@@ -6,14 +6,13 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "environment_util.h"
 #include "lighting/exact.h"
 #include "test_util.h"
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 using compose::testing::randomNormals;
 

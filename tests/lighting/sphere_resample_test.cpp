@@ -10,6 +10,7 @@
 #include <OpenEXR/ImfEnvmap.h>
 #include <glm/geometric.hpp>
 
+#include "core/numbers.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 #include "lighting/environment_util.h"
@@ -18,8 +19,6 @@
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 TEST(CubeGeometry, FaceFramesAgreeWithOpenExr) {
   // OpenEXR maps a face's "position in face" to the stacked image with pixelPosition; with its own
@@ -208,12 +207,6 @@ Environment loadSample(const std::string& name) {
   return Environment::fromLatLong(ingest::readImage(path).image, path);
 }
 
-double relative(const glm::dvec3& a, const glm::dvec3& b) {
-  double worst = 0.0;
-  for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(a[c] - b[c]) / std::abs(b[c]));
-  return worst;
-}
-
 // The issue's energy check: ∫ L dω agrees between layouts within 1e-4 (relative, per channel).
 // The conversions are exact up to rounding, so the measured agreement is far tighter.
 TEST(SphereResample, PreservesEnergyOnTheSampleHdris) {
@@ -226,9 +219,9 @@ TEST(SphereResample, PreservesEnergyOnTheSampleHdris) {
     for (int size : {256, 97}) {
       if (size == 97 && std::string(name) != "interior") continue;
       const CubeMap cube = cubeFromLatLong(env, size);
-      const double cubeError = relative(cube.integral(), reference);
+      const double cubeError = testing::worstRelative(cube.integral(), reference);
       const Environment back = latLongFromCube(cube, env.width());
-      const double backError = relative(integral(back), reference);
+      const double backError = testing::worstRelative(integral(back), reference);
       constexpr double kIssueEnergy = 1e-4;
       EXPECT_LT(cubeError, kIssueEnergy) << name << " cube " << size;
       EXPECT_LT(backError, kIssueEnergy) << name << " back from cube " << size;

@@ -3,13 +3,12 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/numbers.h"
 #include "lighting/sh.h"
 #include "test_util.h"
 
 namespace compose::lighting {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 TEST(LightingVolume, DistantSourceIsProjectedOnceAndEqualEverywhere) {
   Image img(64, 32, 3);

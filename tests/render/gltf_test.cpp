@@ -42,7 +42,8 @@ bool hasPosition(const Mesh& m, const glm::vec3& p) {
   return false;
 }
 
-glm::vec3 faceNormal(const Mesh& m, size_t t) {
+// Triangle t's face normal times twice its area.
+glm::vec3 faceCross(const Mesh& m, size_t t) {
   const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
                   c = m.positions[m.indices[3 * t + 2]];
   return glm::cross(b - a, c - a);
@@ -130,8 +131,8 @@ TEST(Gltf, StripsAndFansBecomeOutwardTriangles) {
     ASSERT_EQ(m.triangleCount(), 2u) << "mode " << mode;
     float area = 0.0f;
     for (size_t t = 0; t < 2; ++t) {
-      EXPECT_GT(faceNormal(m, t).z, 0.0f) << "mode " << mode << " triangle " << t;
-      area += 0.5f * glm::length(faceNormal(m, t));
+      EXPECT_GT(faceCross(m, t).z, 0.0f) << "mode " << mode << " triangle " << t;
+      area += 0.5f * glm::length(faceCross(m, t));
     }
     EXPECT_NEAR(area, 1.0f, 1e-6f) << "mode " << mode;
   }
@@ -215,7 +216,7 @@ TEST(Gltf, AMirroringNodeKeepsTrianglesWoundOutwards) {
     EXPECT_TRUE(m.normalsFromFile);
     double volume = 0.0;
     for (size_t t = 0; t < 4; ++t) {
-      const glm::vec3 fn = faceNormal(m, t);
+      const glm::vec3 fn = faceCross(m, t);
       for (int k = 0; k < 3; ++k)
         EXPECT_GT(glm::dot(fn, m.normals[m.indices[3 * t + size_t(k)]]), 0.0f) << "scale " << sx;
       volume += glm::dot(m.positions[m.indices[3 * t]], fn) / 6.0;

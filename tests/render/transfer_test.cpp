@@ -6,6 +6,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "core/numbers.h"
 #include "lighting/chebyshev.h"
 #include "lighting/exact.h"
 #include "lighting/monte_carlo.h"
@@ -17,8 +18,6 @@
 
 namespace compose::render {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Appends an axis-aligned box [lo, hi] with outward flat normals (4 vertices per face).
 void addBox(Mesh& m, glm::vec3 lo, glm::vec3 hi) {
