@@ -501,14 +501,18 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
           sc.cosines[size_t(cell)] = cosT;
           sc.stratum[size_t(cell)] =
               uint8_t(std::min(r - 1, int(u * float(r))) * r + std::min(r - 1, int(w * float(r))));
-          const glm::vec3 d = direction(j, cosT, w);
-          sc.dirs[size_t(cell)] = d;
-          // Wholly outside the cone: cannot see the object.
+          // Wholly outside the cone: cannot see the object; its direction is needed only for
+          // the SH integral above band 0.
           if (outside) {
             const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
                                rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
-            if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) continue;
+            if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) {
+              if (nsh > 1) sc.dirs[size_t(cell)] = direction(j, cosT, w);
+              continue;
+            }
           }
+          const glm::vec3 d = direction(j, cosT, w);
+          sc.dirs[size_t(cell)] = d;
           sc.batch.push_back(d);
           sc.batchCell.push_back(cell);
         }
