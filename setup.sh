@@ -6,7 +6,8 @@
 #                      again on a clang build with AddressSanitizer + UndefinedBehaviorSanitizer
 #                      (build-sanitize/, -O1; the full-size sample-data tests left out, see
 #                      SANITIZE_EXCLUDE), which also holds the libFuzzer targets, then a fuzz
-#                      smoke pass of COMPOSE_FUZZ_SECONDS (20) seconds per target
+#                      smoke pass of COMPOSE_FUZZ_SECONDS (20) seconds per target, one target
+#                      per core at a time
 #   ./setup.sh build   stops after building
 # Installing needs root: run as root, or with sudo available.
 set -euo pipefail

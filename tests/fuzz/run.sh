@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Fuzzes every libFuzzer target of tests/fuzz for SECONDS each, one after the other.
+# Fuzzes every libFuzzer target of tests/fuzz for SECONDS each, $COMPOSE_FUZZ_JOBS (default: the
+# number of cores) targets at a time.
 #
 #   tests/fuzz/run.sh SECONDS [TARGET...]
 #
@@ -39,25 +40,26 @@ if [ ${#targets[@]} -eq 0 ]; then
   exit 2
 fi
 
-failed=()
-printf '%-12s %12s %10s %8s %8s %8s  %s\n' target executions exec/s cov ft corpus result
-for t in "${targets[@]}"; do
-  exe=$fuzzdir/fuzz_$t
+jobs=${COMPOSE_FUZZ_JOBS:-$(nproc)}
+[[ $jobs =~ ^[1-9][0-9]*$ ]] || jobs=1
+
+# Fuzzes one target; its report line goes to <work>/<target>/result, "ok" or the failure last.
+fuzz_one() {
+  local t=$1 exe=$fuzzdir/fuzz_$1
+  mkdir -p "$work/$t/corpus"
+  local corpus=$work/$t/corpus log=$work/$t/log.txt result=$work/$t/result
+  rm -f "$result"
   if [ ! -x "$exe" ]; then
-    echo "fuzz: no target $exe" >&2
-    failed+=("$t")
-    continue
+    printf '%-12s %12s %10s %8s %8s %8s  %s\n' "$t" - - - - - "FAILED: no target $exe" >"$result"
+    return
   fi
-  mkdir -p "$work/$t"
-  corpus=$work/$t/corpus
-  mkdir -p "$corpus"
-  log=$work/$t/log.txt
   # The working corpus first: libFuzzer adds what it finds to the first folder only.
   ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} \
     "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$work/$t/" "$corpus" "tests/fuzz/corpus/$t" "tests/fuzz/regressions/$t" \
     >"$log" 2>&1
-  status=$?
+  local status=$?
+  local runs speed last cov ft files outcome
   runs=$(grep -Eo 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -Eo '[0-9]+$' | tail -n 1)
   speed=$(grep -Eo 'stat::average_exec_per_sec: *[0-9]+' "$log" | grep -Eo '[0-9]+$' | tail -n 1)
   last=$(grep -E '^#[0-9]+' "$log" | grep -E 'cov: ' | tail -n 1)
@@ -65,14 +67,36 @@ for t in "${targets[@]}"; do
   ft=$(sed -nE 's/.*ft: ([0-9]+).*/\1/p' <<<"$last")
   files=$(find "$corpus" -type f | wc -l)
   if [ $status -eq 0 ]; then
-    result=ok
+    outcome=ok
   else
-    result="FAILED (status $status): $(grep -Eo '(crash|leak|timeout|oom|slow-unit)-[0-9a-f]+' "$log" |
-      head -n 1) in $work/$t; log $log"
-    failed+=("$t")
+    outcome="FAILED (status $status): $(grep -Eo '(crash|leak|timeout|oom|slow-unit)-[0-9a-f]+' \
+      "$log" | head -n 1) in $work/$t; log $log"
   fi
   printf '%-12s %12s %10s %8s %8s %8s  %s\n' "$t" "${runs:-?}" "${speed:-?}" "${cov:-?}" \
-    "${ft:-?}" "$files" "$result"
+    "${ft:-?}" "$files" "$outcome" >"$result"
+}
+
+printf '%-12s %12s %10s %8s %8s %8s  %s\n' target executions exec/s cov ft corpus result
+running=0
+for t in "${targets[@]}"; do
+  if [ $running -ge "$jobs" ]; then
+    wait -n
+    running=$((running - 1))
+  fi
+  fuzz_one "$t" &
+  running=$((running + 1))
+done
+wait
+
+failed=()
+for t in "${targets[@]}"; do
+  if [ -f "$work/$t/result" ]; then
+    cat "$work/$t/result"
+    grep -q '  ok$' "$work/$t/result" || failed+=("$t")
+  else
+    printf '%-12s  FAILED: no result\n' "$t"
+    failed+=("$t")
+  fi
 done
 
 if [ ${#failed[@]} -gt 0 ]; then
