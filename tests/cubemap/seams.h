@@ -42,6 +42,12 @@ inline void texelBeyondEdge(int n, int face, int x, int y, int dx, int dy, int k
 // left out: three faces meet there.
 struct EdgeSteps {
   double cross = 0.0, inner = 0.0;
+  // The level step: the mean, along the edge, of the signed step across it less the mean of the
+  // signed steps just before and just after it (inside → edge texel → across → further), per
+  // channel. A gradient steps as much across the edge as beside it and leaves nothing; a gain or
+  // an offset between the two sides, or content displaced from one to the other, remains; noise,
+  // JPEG blocks and quantisation contours average out along the edge.
+  glm::dvec3 jump{0.0};
 };
 inline std::vector<EdgeSteps> edgeSteps(const lighting::CubeMap& cube) {
   const int n = cube.size();
@@ -58,6 +64,9 @@ inline std::vector<EdgeSteps> edgeSteps(const lighting::CubeMap& cube) {
         const glm::vec3 here = cube.radiance(f, x, y), inside = cube.radiance(f, x - dx, y - dy);
         const glm::vec3 there = cube.radiance(g1, x1, y1), further = cube.radiance(g2, x2, y2);
         s.cross += double(glm::length(here - there)) / (n - 2);
+        s.jump +=
+            (glm::dvec3(there - here) - 0.5 * glm::dvec3((here - inside) + (further - there))) /
+            double(n - 2);
         s.inner +=
             0.5 * double(glm::length(here - inside) + glm::length(there - further)) / (n - 2);
       }
@@ -75,6 +84,20 @@ inline double worstSeam(const lighting::CubeMap& stitched, const lighting::CubeM
   double worst = 0.0;
   for (size_t e = 0; e < s.size(); ++e)
     worst = std::max(worst, s[e].cross / std::max(s[e].inner, t[e].cross));
+  return worst;
+}
+
+// The worst, over the face edges, of the level step (EdgeSteps::jump) against the larger of the
+// neighbouring texel-to-texel variation and the level step the scene itself has there (`scene`:
+// the truth at the same size; a bright lamp cut by an edge curves sharply there): at most 1, the
+// map is as continuous across its edges as beside them.
+inline double worstLevelStep(const lighting::CubeMap& stitched, const lighting::CubeMap& scene) {
+  const std::vector<EdgeSteps> s = edgeSteps(stitched), t = edgeSteps(scene);
+  double worst = 0.0;
+  for (size_t e = 0; e < s.size(); ++e) {
+    const double scale = std::max(s[e].inner, glm::length(t[e].jump));
+    if (scale > 0.0) worst = std::max(worst, glm::length(s[e].jump) / scale);
+  }
   return worst;
 }
 

@@ -379,18 +379,27 @@ TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
   CubeMap scaled = stitched;
   for (int f = 0; f < kCubeFaces; ++f)
     for (float& v : scaled.face(f)) v *= fit.scale;
-  const double seam = compose::testing::worstSeam(lighting::resizeCube(scaled, 128),
-                                                  lighting::resizeCube(truth, 128));
+  const CubeMap stitched128 = lighting::resizeCube(scaled, 128);
+  const CubeMap truth128 = lighting::resizeCube(truth, 128);
+  const double seam = compose::testing::worstSeam(stitched128, truth128);
+  const double levelStep = compose::testing::worstLevelStep(stitched128, truth128);
   std::printf(
       "[ figures ] %-9s stitched from capture-sim photos: median relative error %.2f %% "
       "(%.2f %% without turning the truth by the capture's %.2f°; the comparison's own "
-      "floor %.2f %%); worst seam %.2f\n",
-      name.c_str(), 100.0 * fit.median, 100.0 * unturned, turned, 100.0 * floor, seam);
+      "floor %.2f %%); worst seam %.2f, worst level step %.3f\n",
+      name.c_str(), 100.0 * fit.median, 100.0 * unturned, turned, 100.0 * floor, seam, levelStep);
   constexpr double kIssueMedian = 0.05;
   EXPECT_LT(fit.median, kIssueMedian) << name;
-  // No seam (at most 1) but on sunset's sky face, 1.11.
+  // No seam (at most 1) but on sunset's sky face, 1.11: there the photos' 8-bit quantisation
+  // contours and JPEG blocks (1.08 without sensor noise) double the stitched sky's texel-to-texel
+  // variation against the scene's, and two texels across an edge differ by more than two beside
+  // it; the level step across those edges is 0.24 of that variation at most. The level steps
+  // (tests/cubemap/seams.h), measured 0.30 / 0.83 / 0.75 / 0.81; sunset's worst is the edge
+  // between its +X and -Z faces.
   constexpr double kSeam = 1.2;
   EXPECT_LT(seam, kSeam) << name;
+  constexpr double kLevelStep = 1.0;
+  EXPECT_LT(levelStep, kLevelStep) << name;
 }
 
 INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchFromPhotos,
