@@ -577,25 +577,43 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
     const size_t d = ++done;
     if (d % 256 == 0) report(progress, "lighting", double(d) / double(grid_.size()));
   });
+  tabulateIrradiance();
   report(progress, "lighting", 1.0);
 }
 
+bool ChebLocalLighting::importState(std::span<const float> in) {
+  if (!ChebBase::importState(in)) return false;
+  tabulateIrradiance();
+  return true;
+}
+
+void ChebLocalLighting::tabulateIrradiance() {
+  const size_t kk = stride_ / 3;
+  nodeIrradiance_.assign(grid_.size() * 3, 0.0f);
+  parallelFor(
+      0, int64_t(grid_.size()),
+      [&](int64_t node) {
+        const float* tl = table_.data() + size_t(node) * stride_;
+        for (size_t c = 0; c < 3; ++c) {
+          double sum = 0.0;
+          for (size_t i = 0; i < kk; ++i) sum += double(tl[c * kk + i]) * double(global_[i]);
+          nodeIrradiance_[3 * size_t(node) + c] = float(sum);
+        }
+      },
+      64);
+}
+
 glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
-  // Σ_mn T^L_mn(n) T^f_mn, with T^L(n) interpolated between grid normals: Σ_q w_q (T^L_q · T^f).
+  // Σ_mn T^L_mn(n) T^f_mn, with T^L(n) interpolated between grid normals: Σ_q w_q (T^L_q · T^f),
+  // each node's product tabulated.
+  COMPOSE_CHECK(!nodeIrradiance_.empty());
   size_t nodes[4];
   float w[4];
   grid_.interpolation(n, nodes, w);
-  const size_t kk = stride_ / 3;
   glm::vec3 e(0.0f);
   for (int q = 0; q < 4; ++q) {
-    const float* tl = table_.data() + nodes[q] * stride_;
-    glm::vec3 dot(0.0f);
-    for (size_t i = 0; i < kk; ++i) {
-      dot.x += tl[i] * global_[i];
-      dot.y += tl[kk + i] * global_[i];
-      dot.z += tl[2 * kk + i] * global_[i];
-    }
-    e += w[q] * dot;
+    const float* node = nodeIrradiance_.data() + 3 * nodes[q];
+    e += w[q] * glm::vec3(node[0], node[1], node[2]);
   }
   return e;
 }

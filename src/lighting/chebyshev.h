@@ -132,6 +132,7 @@ class ChebLocalLighting final : public ChebBase {
   glm::vec3 irradiance(const glm::vec3& n) const override;
   glm::vec3 irradiance(const glm::vec3& n, const glm::vec3& view) const override;
   size_t floatsStored() const override;
+  bool importState(std::span<const float> in) override;
 
   int order() const { return params_.order; }
   int samples() const { return params_.samples; }
@@ -150,7 +151,12 @@ class ChebLocalLighting final : public ChebBase {
   static constexpr int kViewThetas = 17, kViewPhis = 32;
 
  private:
-  std::vector<float> viewTable_;  // BRDF moments per view direction (Oren–Nayar only)
+  // The Lambertian irradiance at every grid node, Σ_mn T^L_mn T^f_mn per channel (node-major RGB),
+  // summed once when the moments are set, so that irradiance(n) interpolates four of them.
+  void tabulateIrradiance();
+
+  std::vector<float> viewTable_;       // BRDF moments per view direction (Oren–Nayar only)
+  std::vector<float> nodeIrradiance_;  // 3 per grid node
 
  protected:
   double truncatedProduct(size_t node, int channel, int k) const override;
