@@ -21,7 +21,9 @@
 //    the accuracy comes from integrating L cos exactly per cell, not from k.
 //
 // Per-normal tables live on a NormalGrid (lat-long lattice of normals including the poles) and
-// are interpolated bilinearly. Storage is reported honestly: floatsStored() counts every table.
+// are interpolated bilinearly. Storage is reported honestly: floatsStored() counts every table
+// that is projected and stored (exportState); cheb-local's per-node irradiance, 3 floats per node
+// derived from those tables whenever they are set, is a lookup aid and not counted.
 #pragma once
 
 #include <memory>

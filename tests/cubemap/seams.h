@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include <glm/geometric.hpp>
@@ -96,7 +97,13 @@ inline double worstLevelStep(const lighting::CubeMap& stitched, const lighting::
   double worst = 0.0;
   for (size_t e = 0; e < s.size(); ++e) {
     const double scale = std::max(s[e].inner, glm::length(t[e].jump));
-    if (scale > 0.0) worst = std::max(worst, glm::length(s[e].jump) / scale);
+    const double jump = glm::length(s[e].jump);
+    // Flat on both sides: any step at all is a seam.
+    if (!(scale > 0.0)) {
+      if (jump > 0.0) return std::numeric_limits<double>::infinity();
+      continue;
+    }
+    worst = std::max(worst, jump / scale);
   }
   return worst;
 }

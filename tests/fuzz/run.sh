@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fuzzes every libFuzzer target of tests/fuzz for SECONDS each, $COMPOSE_FUZZ_JOBS (default: the
-# number of cores) targets at a time.
+# number of cores) targets at a time (each may use up to 2 GB and its sanitizers' overhead); the
+# report is printed when all have finished. Needs bash 4.3 or later (wait -n).
 #
 #   tests/fuzz/run.sh SECONDS [TARGET...]
 #
@@ -48,7 +49,7 @@ fuzz_one() {
   local t=$1 exe=$fuzzdir/fuzz_$1
   mkdir -p "$work/$t/corpus"
   local corpus=$work/$t/corpus log=$work/$t/log.txt result=$work/$t/result
-  rm -f "$result"
+  rm -f "$result" "$log"
   if [ ! -x "$exe" ]; then
     printf '%-12s %12s %10s %8s %8s %8s  %s\n' "$t" - - - - - "FAILED: no target $exe" >"$result"
     return
