@@ -725,6 +725,17 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
   std::vector<glm::vec3> directions(sources.size());
   for (size_t i = 0; i < sources.size(); ++i) directions[i] = sources[i].direction;
   const std::vector<uint32_t> sourceOrder = spatialOrder(directions);
+  // Each source's angular radius bounds its directions' angle from its centre (the offsets
+  // across its extent are tangent to the sphere at the centre: the angle is at most their
+  // length), as its cosine and sine, widened by a margin for rounding. A source wider than a
+  // quarter turn gets values for which the test below never holds.
+  std::vector<float> cosRadius(sources.size(), -2.0f), sinRadius(sources.size(), 2.0f);
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const double r = std::hypot(double(frames[i].halfLat), double(frames[i].halfLon)) + 1e-4;
+    if (r >= 0.5 * kPi) continue;
+    cosRadius[i] = float(std::cos(r));
+    sinRadius[i] = float(std::sin(r));
+  }
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
   std::atomic<int64_t> rays{0};
   parallelFor(
@@ -754,12 +765,22 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
                           0.0f, 1.0f - (points.radius * points.radius) / (distance * distance)))
                     : -2.0f;
         const glm::vec3 axis = outside ? toCentre / distance : glm::vec3(0.0f);
+        const float sinCone = std::sqrt(std::max(0.0f, 1.0f - cosCone * cosCone));
         uint32_t bits[3];
         std::memcpy(bits, &points.positions[v], sizeof bits);
         const uint32_t firstSample =
             (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
         for (const uint32_t i : sourceOrder) {
           const SourceFrame& f = frames[i];
+          // A source wholly outside the cone (its centre further from the axis than the cone's
+          // half-angle plus its radius) and wholly above the horizon (its centre higher than its
+          // radius) is seen whole, as each of its rays would say, without making them.
+          if (outside &&
+              glm::dot(f.centre, axis) < cosCone * cosRadius[i] - sinCone * sinRadius[i] &&
+              glm::dot(n, f.centre) > sinRadius[i]) {
+            seen[i] = 1.0f;
+            continue;
+          }
           for (int k = 0; k < kPerSource; ++k) {
             // The point's own sequence of draws, one per (source, direction).
             const uint32_t sample = firstSample + i * uint32_t(kPerSource) + uint32_t(k);
