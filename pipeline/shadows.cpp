@@ -291,7 +291,7 @@ GroundShadowResult computeGroundShadow(
   render::TransferParams params = plan.transfer;
   params.shBands = plan.method == render::ShadowMethod::Harmonics ? plan.transfer.shBands : 0;
   const render::VertexTransfer transfer =
-      render::computeTransfer(mesh, out.grid.points, params, progress);
+      render::computeTransfer(mesh, scene, out.grid.points, params, progress);
   int64_t sourceRays = 0, fineSourceRays = 0;
   const render::VertexIrradiance irradiance =
       shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, 4, sourceRays);
@@ -301,7 +301,7 @@ GroundShadowResult computeGroundShadow(
   int64_t fineRays = 0;
   if (out.grid.finePoints.count() > 0) {
     const render::VertexTransfer fineTransfer =
-        render::computeTransfer(mesh, out.grid.finePoints, params);
+        render::computeTransfer(mesh, scene, out.grid.finePoints, params);
     fine = shadePoints(out.grid.finePoints, fineTransfer, scene, lighting, envFromObject, plan, 4,
                        fineSourceRays);
     fineRays = fineTransfer.rays + fineSourceRays;

@@ -258,7 +258,8 @@ void VertexTransfer::append(const VertexTransfer& more) {
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress) {
-  VertexTransfer transfer = computeTransfer(mesh, points, params, progress);
+  const EmbreeScene scene(mesh.positions, mesh.indices);
+  VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress);
   const size_t first = refineSurfacePoints(mesh, points, transfer.ao, refine);
   if (first == points.count()) return transfer;
   SurfacePoints extra;
@@ -267,7 +268,7 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   extra.radius = points.radius;
   extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
   extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
-  transfer.append(computeTransfer(mesh, extra, params, progress));
+  transfer.append(computeTransfer(mesh, scene, extra, params, progress));
   return transfer;
 }
 
@@ -308,6 +309,13 @@ void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint3
 
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress) {
+  const EmbreeScene scene(mesh.positions, mesh.indices);
+  return computeTransfer(mesh, scene, points, params, progress);
+}
+
+VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
+                               const SurfacePoints& points, const TransferParams& params,
+                               const Progress& progress) {
   params.validate();
   COMPOSE_CHECK(mesh.normals.size() == mesh.positions.size());
   const int s = params.grid, k = params.order, r = params.boundaryRays;
@@ -323,7 +331,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
   out.sh.assign(count * size_t(nsh), 0.0f);
   out.ao.assign(count, 0.0f);
 
-  const EmbreeScene scene(mesh.positions, mesh.indices);
   // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
   // closer than that: enough for float positions, far below any feature that casts a shadow.
   const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;

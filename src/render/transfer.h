@@ -140,7 +140,12 @@ struct VertexTransfer {
 inline constexpr char kTransferCacheMagic[] = "COMPVIS7";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
-// from a spot lifted by 1e-4 of the mesh's size along its normal.
+// from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own
+// (EmbreeScene(mesh.positions, mesh.indices)); without it one is built.
+class EmbreeScene;
+VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
+                               const SurfacePoints& points, const TransferParams& params,
+                               const Progress& progress = {});
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress = {});
 // The visibility pass, then refineSurfacePoints() and the pass again at the new points: `points`
@@ -179,7 +184,6 @@ struct SourceVisibility {
   std::vector<float> visible;
   int64_t rays = 0;
 };
-class EmbreeScene;
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& objectScene,
                               const std::vector<lighting::LightSource>& sources,
                               const glm::mat3& envFromObject, int raysPerSource = 4);
