@@ -19,7 +19,7 @@ struct MergeOptions {
   std::filesystem::path out, capture, responseDir;
   std::string exposures, response = "auto", recovery = "debevec", method = "debevec";
   std::string inputSpace, linearSpace;
-  bool align = false, deghost = false;
+  bool align = false, deghost = false, noRefit = false;
   hdr::CaptureMergeOptions merge;
 };
 
@@ -85,6 +85,13 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       ->capture_default_str();
   command.add_option("--lambda", o->merge.recovery.lambda, "Debevec: smoothness")
       ->capture_default_str();
+  command.add_flag("--no-refit", o->noRefit,
+                   "Debevec: keep OpenCV's fit from --samples patches instead of solving it again "
+                   "over every smooth patch");
+  command
+      .add_option("--refit-smoothness", o->merge.recovery.refitSmoothness,
+                  "Debevec: smoothness of the fit over every patch, relative to the data")
+      ->capture_default_str();
   command.add_option("--merge-method", o->method, "8-bit merge: debevec or robertson (OpenCV)")
       ->capture_default_str();
   command.add_option("--response-dir", o->responseDir,
@@ -139,6 +146,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       throw UsageError("--merge-method must be debevec or robertson, got '" + o->method + "'");
     }
     m.merge.align = o->align;
+    m.recovery.refit = !o->noRefit;
     m.merge.deghost = o->deghost;
     if (!o->responseDir.empty()) m.responseFolder = o->responseDir;
     asUsage([&] { m.validate(); });

@@ -1,7 +1,10 @@
 #include "hdr/capture_merge.h"
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -192,6 +195,24 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       result.response.make = capture.cameraMake;
       result.response.model = capture.cameraModel;
       result.responseRecovered = true;
+      // Codes no smooth, unclipped patch showed are the fit's extrapolation: say so when the
+      // photos leave out more than the extremes.
+      const auto& seen = result.response.observed;
+      if (std::any_of(seen.begin(), seen.end(),
+                      [](const std::array<int, 2>& r) { return r[0] > 5 || r[1] < 250; })) {
+        char text[160];
+        std::snprintf(text, sizeof text,
+                      "the photos show codes %d-%d (red), %d-%d (green), %d-%d (blue) in smooth, "
+                      "unclipped patches; the response outside them is extrapolated",
+                      seen[0][0], seen[0][1], seen[1][0], seen[1][1], seen[2][0], seen[2][1]);
+        const bool dark = seen[0][0] > 5 || seen[1][0] > 5 || seen[2][0] > 5;
+        const bool bright = seen[0][1] < 250 || seen[1][1] < 250 || seen[2][1] < 250;
+        result.notes.push_back(std::string(text) + " (" +
+                               (dark ? "a shorter exposure would measure the low codes" : "") +
+                               (dark && bright ? "; " : "") +
+                               (bright ? "a longer exposure would measure the high codes" : "") +
+                               ")");
+      }
       result.responseCacheFile =
           responseFileFor(options.responseFolder, capture.cameraMake, capture.cameraModel);
       if (result.responseCacheFile.empty()) {

@@ -154,10 +154,12 @@ TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   ResponseCurve c = ResponseCurve::srgb();
   c.make = "Acme";
   c.model = "X 1";
+  c.observed[2] = {7, 241};
   writeResponse(dir / "r.json", c);
   const ResponseCurve back = readResponse(dir / "r.json");
   EXPECT_EQ(back.inverse[1], c.inverse[1]);
   EXPECT_EQ(back.model, "X 1");
+  EXPECT_EQ(back.observed, c.observed);
   EXPECT_EQ(responseFileFor(dir.path(), "Acme Corp.", "X/1 (mk II)").filename(),
             "acme_corp._x_1_mk_ii.json");
   EXPECT_TRUE(responseFileFor(dir.path(), "", "").empty());
@@ -166,6 +168,17 @@ TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   compose::testing::writeText(dir / "bad.json", R"({"format": "compose-response", "version": 1,
       "inverse": [[1, 2], [1, 2], [1, 2]]})");
   COMPOSE_EXPECT_ERROR(readResponse(dir / "bad.json"), "three arrays of 256 numbers");
+  // The observed codes are optional (older files), but must make sense when present.
+  std::string text = responseText(ResponseCurve::srgb());
+  const size_t at = text.find("\"observed\"");
+  ASSERT_NE(at, std::string::npos);
+  compose::testing::writeText(dir / "bad.json", text.substr(0, at) +
+                                                    "\"observed\": [[9, 3], [0, 255], [0, 255]], " +
+                                                    text.substr(text.find("\"inverse\"")));
+  COMPOSE_EXPECT_ERROR(readResponse(dir / "bad.json"), "first <= last");
+  compose::testing::writeText(dir / "bad.json",
+                              text.substr(0, at) + text.substr(text.find("\"inverse\"")));
+  EXPECT_EQ(readResponse(dir / "bad.json").observed[0], (std::array<int, 2>{0, 255}));
 }
 
 TEST(Response, RecoveredOnceThenReusedFromThePerCameraStore) {
