@@ -29,6 +29,9 @@ namespace {
 // Verified matches a pair needs. The rotation model has two degrees of freedom per match and the
 // rough orientations already bound it, so a handful of agreeing matches is not chance.
 constexpr size_t kMinInliers = 8;
+// A pair's matched rotation is refused when the log luminance of its overlap disagrees more than
+// this many times as much (variance) as under the rough orientations (see matchPair).
+constexpr double kMatchedOverRough = 1.5;
 // Photo pixels a sub-texel ray may span before the texel is cut into more rays.
 constexpr double kSubTexelPixels = 2.0;
 
@@ -179,7 +182,48 @@ struct PairMatches {
   int i = 0, j = 0;
   std::vector<std::pair<int, int>> inliers;  // keypoint indices in i and j
   glm::dmat3 relative{1.0};                  // cam i → cam j
+  double rejected = 0.0;  // > 0: matched, but the overlap's light said no (this cost ratio)
 };
+
+// How well photo j, turned by `jFromI` relative to photo i, agrees with i where they overlap: the
+// variance of log(L_i / L_j) over a grid of i's feature image (blurred by 1.5 pixels), per
+// sample; the mean is the exposure offset. -1 when fewer than 100 samples overlap.
+double overlapLogVariance(int i, int j, const glm::dmat3& jFromI,
+                          const std::vector<StitchPhoto>& photos,
+                          const std::vector<Features>& features) {
+  const Features& fi = features[size_t(i)];
+  const Features& fj = features[size_t(j)];
+  cv::Mat li, lj;
+  cv::GaussianBlur(fi.luminance, li, cv::Size(0, 0), 1.5);
+  cv::GaussianBlur(fj.luminance, lj, cv::Size(0, 0), 1.5);
+  double sum = 0.0, sum2 = 0.0;
+  size_t count = 0;
+  for (int y = 2; y < li.rows - 2; y += 3) {
+    for (int x = 2; x < li.cols - 2; x += 3) {
+      const float a = li.at<float>(y, x);
+      glm::dvec3 ray;
+      if (!(a > 0.0f) ||
+          !photos[size_t(i)].lens.direction((x + 0.5) * fi.scale, (y + 0.5) * fi.scale, ray))
+        continue;
+      glm::dvec2 p;
+      if (!photos[size_t(j)].lens.project(jFromI * ray, p)) continue;
+      const double u = p.x / fj.scale - 0.5, v = p.y / fj.scale - 0.5;
+      if (!(u >= 0.0 && v >= 0.0 && u < lj.cols - 1 && v < lj.rows - 1)) continue;
+      const int x0 = int(u), y0 = int(v);
+      const float tx = float(u - x0), ty = float(v - y0);
+      const float b =
+          (lj.at<float>(y0, x0) * (1 - tx) + lj.at<float>(y0, x0 + 1) * tx) * (1 - ty) +
+          (lj.at<float>(y0 + 1, x0) * (1 - tx) + lj.at<float>(y0 + 1, x0 + 1) * tx) * ty;
+      if (!(b > 0.0f)) continue;
+      const double r = std::log(double(a) / double(b));
+      sum += r;
+      sum2 += r * r;
+      ++count;
+    }
+  }
+  if (count < 100) return -1.0;
+  return (sum2 - sum * sum / double(count)) / double(count);
+}
 
 // Putative matches between photos i and j, then RANSAC on their relative rotation.
 PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
@@ -263,7 +307,19 @@ PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
         threshold)
       out.inliers.push_back(m);
   }
-  if (out.inliers.size() < kMinInliers) out.inliers.clear();
+  if (out.inliers.size() < kMinInliers) {
+    out.inliers.clear();
+    return out;
+  }
+  // The matches must explain the overlap's light better than the rough orientations do: a few
+  // matches bunched in a small patch of a narrow overlap hardly fix the roll about their own
+  // direction, and can agree within their threshold on a rotation degrees off.
+  const double matched = overlapLogVariance(i, j, out.relative, photos, features);
+  const double rough = overlapLogVariance(i, j, roughIj, photos, features);
+  if (matched > 0.0 && rough > 0.0 && matched > kMatchedOverRough * rough) {
+    out.rejected = matched / rough;
+    out.inliers.clear();
+  }
   return out;
 }
 
@@ -692,6 +748,12 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     int verified = 0;
     for (const PairMatches& pm : pairs) {
       if (!pm.inliers.empty()) ++verified;
+      if (pm.rejected > 0.0)
+        result.notes.push_back("photos " + photos[size_t(pm.i)].name + " and " +
+                               photos[size_t(pm.j)].name +
+                               fmt(": their matches turn them so that the light of their overlap "
+                                   "agrees %.1f times worse than as roughly placed; not used",
+                                   pm.rejected));
     }
     result.notes.push_back(std::to_string(verified) + " of " + std::to_string(candidates.size()) +
                            " overlapping photo pairs matched");

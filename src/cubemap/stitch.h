@@ -15,7 +15,11 @@
 //     float radiance.
 //  2. Matching. Only pairs whose rough frusta overlap are matched: descriptors with Lowe's ratio
 //     test, kept if the rough orientations put the two rays within the orientation tolerance, then
-//     verified by RANSAC on the pair's relative rotation (two rays fix a rotation).
+//     verified by RANSAC on the pair's relative rotation (two rays fix a rotation). A few matches
+//     bunched in a small patch of a narrow overlap hardly fix the roll about their direction and
+//     can agree, within RANSAC's threshold, on a rotation degrees off: a pair whose matched
+//     rotation makes the log luminance of its overlap disagree more (variance, over 1.5 times)
+//     than the rough orientations do is not used, and a note says so.
 //  3. Orientation. OpenCV's rotation-only bundle adjustment (cv::detail::BundleAdjusterReproj with
 //     every intrinsic fixed: focal, principal point and aspect are known) refines all orientations
 //     of each connected group of photos on the verified matches, on ideal pinhole coordinates of
