@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <random>
@@ -316,7 +317,11 @@ PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
   // direction, and can agree within their threshold on a rotation degrees off.
   const double matched = overlapLogVariance(i, j, out.relative, photos, features);
   const double rough = overlapLogVariance(i, j, roughIj, photos, features);
-  if (matched > 0.0 && rough > 0.0 && matched > kMatchedOverRough * rough) {
+  if (rough > 0.0 && matched < 0.0) {
+    // The matched rotation turns the overlap away altogether: certainly wrong.
+    out.rejected = std::numeric_limits<double>::infinity();
+    out.inliers.clear();
+  } else if (matched > 0.0 && rough > 0.0 && matched > kMatchedOverRough * rough) {
     out.rejected = matched / rough;
     out.inliers.clear();
   }
@@ -749,11 +754,14 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     for (const PairMatches& pm : pairs) {
       if (!pm.inliers.empty()) ++verified;
       if (pm.rejected > 0.0)
-        result.notes.push_back("photos " + photos[size_t(pm.i)].name + " and " +
-                               photos[size_t(pm.j)].name +
-                               fmt(": their matches turn them so that the light of their overlap "
-                                   "agrees %.1f times worse than as roughly placed; not used",
-                                   pm.rejected));
+        result.notes.push_back(
+            "photos " + photos[size_t(pm.i)].name + " and " + photos[size_t(pm.j)].name +
+            (std::isinf(pm.rejected) ? std::string(": their matches turn them apart so that they "
+                                                   "no longer overlap; not used")
+                                     : fmt(": their matches turn them so that the light of their "
+                                           "overlap agrees %.1f times worse than as roughly "
+                                           "placed; not used",
+                                           pm.rejected)));
     }
     result.notes.push_back(std::to_string(verified) + " of " + std::to_string(candidates.size()) +
                            " overlapping photo pairs matched");

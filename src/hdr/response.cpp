@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
@@ -222,10 +223,12 @@ std::array<int, 2> observedCodes(const Patches& patches) {
   return range;
 }
 
-// Debevec & Malik's least squares, solved over every smooth patch of every view instead of the
-// few hundred samples OpenCV's dense SVD can take. Every patch i asks, for each shot j,
+// Debevec & Malik's model, fitted over every smooth patch of every view instead of the few
+// hundred samples OpenCV's dense SVD can take. Every patch i asks, for each shot j,
 //   g(m_ij) = ln E_i + ln t_j      (g = ln of the inverse response, linear between codes),
-// weighted by Debevec's hat w(m_ij), and the curve's smoothness λ Σ_z w(z) g''(z)² is added.
+// its squared residual weighted by Debevec's hat w(m_ij), and the curve's smoothness
+// λ Σ_z w(z) g''(z)² is added. (OpenCV weights each residual itself by the hat, which squares
+// it in the sum: the ends of the range weigh less there.)
 // The unknown ln E_i of every patch is eliminated in closed form (it is the weighted mean of
 // g(m_ij) - ln t_j), which leaves 256 normal equations whatever the number of patches: a patch
 // adds A^T (D - w w^T / Σw) A to them, A its shots' interpolation rows and D their weights.
@@ -585,7 +588,7 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     for (float& v : ch) v /= mid;
   }
   // Every smooth patch: the codes the photos measure, and Debevec's fit solved over all of them.
-  size_t refitted = 0;
+  std::array<size_t, 3> refitted{};  // per channel, the patches of its refit (0: none)
   parallelFor(0, 3, [&](int64_t c) {
     const Patches patches = smoothPatches(used, n, int(c));
     curve.observed[size_t(c)] = observedCodes(patches);
@@ -596,7 +599,7 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     auto& ch = curve.inverse[size_t(c)];
     for (int z = 0; z < kCodes; ++z) ch[size_t(z)] = float(std::exp(g[size_t(z)]));
     makeMonotone(ch);
-    if (c == 1) refitted = patches.count();
+    refitted[size_t(c)] = patches.count();
   });
   if (params.refineEnds) {
     refineEnds(curve, used, first.exposures);
@@ -608,8 +611,19 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
   for (const BracketCodes* b : used) photos += b->images.size();
   curve.source = "recovered (" + std::string(curve.method) + ") from " + std::to_string(photos) +
                  " photos in " + std::to_string(used.size()) +
-                 (used.size() == 1 ? " view" : " views") +
-                 (refitted ? ", fitted over " + std::to_string(refitted) + " smooth patches" : "");
+                 (used.size() == 1 ? " view" : " views");
+  if (params.method == RecoveryMethod::Debevec && params.refit) {
+    std::string kept;
+    size_t most = 0;
+    for (int c = 0; c < 3; ++c) {
+      if (!refitted[size_t(c)]) kept += std::string(kept.empty() ? "" : ", ") + "RGB"[c];
+      most = std::max(most, refitted[size_t(c)]);
+    }
+    if (most > 0) curve.source += ", fitted over up to " + std::to_string(most) + " smooth patches";
+    if (!kept.empty())
+      curve.source += " (" + kept + ": too few patches, OpenCV's fit from " +
+                      std::to_string(params.samples) + " samples kept)";
+  }
   curve.validate();
   return curve;
 }
@@ -675,16 +689,17 @@ ResponseCurve readResponse(const fs::path& file) try {
     const auto& o = j["observed"];
     const bool shaped = o.is_array() && o.size() == 3 &&
                         std::all_of(o.begin(), o.end(), [](const nlohmann::json& r) {
-                          return r.is_array() && r.size() == 2 && r[0].is_number_integer() &&
-                                 r[1].is_number_integer();
+                          return r.is_array() && r.size() == 2;
                         });
     if (!shaped)
       throw Error(kStage, "\"observed\" must be three [first, last] pairs of codes", file);
     for (size_t c = 0; c < 3; ++c) {
-      const int first = o[c][0].get<int>(), last = o[c][1].get<int>();
-      if (first < 0 || last >= kCodes || first > last)
-        throw Error(kStage, "\"observed\" codes must satisfy 0 <= first <= last <= 255", file);
-      curve.observed[c] = {first, last};
+      const std::optional<int64_t> first = wholeNumber(o[c][0], 0, kCodes - 1),
+                                   last = wholeNumber(o[c][1], 0, kCodes - 1);
+      if (!first || !last || *first > *last)
+        throw Error(kStage, "\"observed\" codes must be whole numbers 0 <= first <= last <= 255",
+                    file);
+      curve.observed[c] = {int(*first), int(*last)};
     }
   }
   curve.validate(file);

@@ -72,7 +72,7 @@ struct RecoveryParams {
   // with samples × shots rows by SVD, so the cost grows quickly with `samples`.
   int samples = 150;
   double lambda = 20.0;
-  // Debevec: the same least squares solved again over every smooth patch of every view (reduced
+  // Debevec: Debevec & Malik's model fitted again over every smooth patch of every view (reduced
   // to 256 normal equations per channel, response.cpp refitFromPatches), with this smoothness
   // relative to the data's total weight per code. Off: OpenCV's fit from `samples` patches alone.
   bool refit = true;
@@ -110,8 +110,8 @@ struct BracketCodes {
 // differ from the first one's are left out. Needs at least two exposures. The result is made
 // non-decreasing and normalised as described above.
 //
-// Debevec: OpenCV's CalibrateDebevec fits the curve from `samples` patches; the same least squares
-// is then solved over every smooth, unclipped patch (RecoveryParams::refit), and the ends of the
+// Debevec: OpenCV's CalibrateDebevec fits the curve from `samples` patches; Debevec & Malik's model
+// is then fitted again over every smooth, unclipped patch (RecoveryParams::refit), and the ends of the
 // range are refitted from the adjacent shot (RecoveryParams::refineEnds). `observed` receives the
 // codes the patches show.
 //

@@ -272,7 +272,7 @@ INSTANTIATE_TEST_SUITE_P(SampleHdris, MergeAccuracy,
                          });
 
 // OpenCV's CalibrateDebevec takes a few hundred samples (a dense SVD over samples x shots rows);
-// the same least squares solved over every smooth patch (response.cpp, refitFromPatches) must
+// Debevec & Malik's model fitted over every smooth patch (response.cpp, refitFromPatches) must
 // lower the RMS, hold codes 16..224 closer (over both captures: measured 3.36 -> 2.13 % on
 // sunset, 1.90 -> 2.02 % on courtyard), and not cost radiance.
 TEST(MergeAccuracyRefit, EveryPatchHoldsTheMiddleOfTheRangeCloserThanOpenCvsSamples) {

@@ -177,6 +177,11 @@ TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
                                                     text.substr(text.find("\"inverse\"")));
   COMPOSE_EXPECT_ERROR(readResponse(dir / "bad.json"), "first <= last");
   compose::testing::writeText(dir / "bad.json",
+                              text.substr(0, at) +
+                                  "\"observed\": [[4294967296, 4294967551], [0, 255], [0, 255]], " +
+                                  text.substr(text.find("\"inverse\"")));
+  COMPOSE_EXPECT_ERROR(readResponse(dir / "bad.json"), "whole numbers");
+  compose::testing::writeText(dir / "bad.json",
                               text.substr(0, at) + text.substr(text.find("\"inverse\"")));
   EXPECT_EQ(readResponse(dir / "bad.json").observed[0], (std::array<int, 2>{0, 255}));
 }
