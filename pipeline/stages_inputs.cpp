@@ -333,12 +333,25 @@ class StitchStage final : public Stage {
         return rgb;
       }
       const ingest::Shot& shot = capture.views[size_t(i)].shots.front();
-      ingest::LoadedImage img = ingest::readImage(shot.file, "stitch");
-      Image rgb = toRgb(img.image);
-      rgb.colorSpace = shot.colorSpace.empty()
-                           ? ctx.colors.inputSpaceFor(shot.file, img.info.fileColorSpace)
-                           : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
-      ctx.colors.convert(rgb, working);
+      ingest::LoadedImage img = ingest::readImage(shot.file, "stitch", {.codesForEightBit = true});
+      const std::string space =
+          shot.colorSpace.empty() ? ctx.colors.inputSpaceFor(shot.file, img.info.fileColorSpace)
+                                  : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
+      Image rgb;
+      if (!img.hasPixels() && img.image.channels >= 3) {
+        // An 8-bit photo: linearised from its codes (a table of the 256 codes per channel).
+        rgb = ctx.colors.convertCodes(img.codes, img.image.width, img.image.height,
+                                      img.image.channels, space, working);
+      } else {
+        if (!img.hasPixels()) {
+          img.image.pixels.resize(img.codes.size());
+          for (size_t k = 0; k < img.codes.size(); ++k)
+            img.image.pixels[k] = float(img.codes[k]) / 255.0f;
+        }
+        rgb = toRgb(img.image);
+        rgb.colorSpace = space;
+        ctx.colors.convert(rgb, working);
+      }
       // Scaled by the shot's exposure, so that views of unequal exposure agree.
       const float scale = shot.exposure ? float(1.0 / *shot.exposure) : 1.0f;
       for (float& v : rgb.pixels) v *= scale;

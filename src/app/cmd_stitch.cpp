@@ -227,7 +227,23 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         o->photoSpace.empty() ? std::string() : colors.resolve(o->photoSpace, "--photo-space");
     std::vector<std::string> spaces(photos.size());
     auto load = [&](int i) {
-      ingest::LoadedImage img = ingest::readImage(args[size_t(i)].file, "ingest");
+      ingest::LoadedImage img =
+          ingest::readImage(args[size_t(i)].file, "ingest", {.codesForEightBit = true});
+      const std::string space =
+          forced.empty() ? colors.inputSpaceFor(args[size_t(i)].file, img.info.fileColorSpace)
+                         : forced;
+      spaces[size_t(i)] = space;
+      const int channels = img.image.channels;
+      if (!img.hasPixels() && channels >= 3) {
+        // An 8-bit photo: linearised from its codes (a table of the 256 codes per channel).
+        return colors.convertCodes(img.codes, img.image.width, img.image.height, channels, space,
+                                   target);
+      }
+      if (!img.hasPixels()) {
+        img.image.pixels.resize(img.codes.size());
+        for (size_t k = 0; k < img.codes.size(); ++k)
+          img.image.pixels[k] = float(img.codes[k]) / 255.0f;
+      }
       Image rgb;
       if (img.image.channels == 3) {
         rgb = std::move(img.image);
@@ -239,10 +255,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
             rgb.pixels[3 * k + size_t(c)] = s[img.image.channels >= 3 ? c : 0];
         }
       }
-      rgb.colorSpace = forced.empty()
-                           ? colors.inputSpaceFor(args[size_t(i)].file, img.info.fileColorSpace)
-                           : forced;
-      spaces[size_t(i)] = rgb.colorSpace;
+      rgb.colorSpace = space;
       colors.convert(rgb, target);
       return rgb;
     };

@@ -15,8 +15,10 @@
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfThreading.h>
 
 #include "core/error.h"
+#include "ingest/exr_io.h"
 #include "lighting/sphere_resample.h"
 
 namespace compose::cubemap {
@@ -429,7 +431,8 @@ void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optiona
       };
       Imf::addChromaticities(header, Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3)));
     }
-    Imf::OutputFile out(path.c_str(), header);
+    ingest::useEveryCoreForExr();
+    Imf::OutputFile out(path.c_str(), header, Imf::globalThreadCount());
     Imf::FrameBuffer frame;
     std::vector<Imath::half> halves;
     const size_t w = size_t(rgb.width);
