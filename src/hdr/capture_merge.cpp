@@ -200,18 +200,21 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       const auto& seen = result.response.observed;
       if (std::any_of(seen.begin(), seen.end(),
                       [](const std::array<int, 2>& r) { return r[0] > 5 || r[1] < 250; })) {
-        char text[160];
-        std::snprintf(text, sizeof text,
-                      "the photos show codes %d-%d (red), %d-%d (green), %d-%d (blue) in smooth, "
-                      "unclipped patches; the response outside them is extrapolated",
-                      seen[0][0], seen[0][1], seen[1][0], seen[1][1], seen[2][0], seen[2][1]);
+        // (A channel whose patches are too few to reach either side of code 128 shows none.)
+        auto range = [](const std::array<int, 2>& r) {
+          return r[0] == r[1] ? std::string("no")
+                              : std::to_string(r[0]) + "-" + std::to_string(r[1]);
+        };
+        const std::string text = "the photos show codes " + range(seen[0]) + " (red), " +
+                                 range(seen[1]) + " (green), " + range(seen[2]) +
+                                 " (blue) in smooth, unclipped patches; the response outside them "
+                                 "is extrapolated";
         const bool dark = seen[0][0] > 5 || seen[1][0] > 5 || seen[2][0] > 5;
         const bool bright = seen[0][1] < 250 || seen[1][1] < 250 || seen[2][1] < 250;
-        result.notes.push_back(std::string(text) + " (" +
-                               (dark ? "a shorter exposure would measure the low codes" : "") +
-                               (dark && bright ? "; " : "") +
-                               (bright ? "a longer exposure would measure the high codes" : "") +
-                               ")");
+        result.notes.push_back(
+            text + " (" + (dark ? "a shorter exposure would measure the low codes" : "") +
+            (dark && bright ? "; " : "") +
+            (bright ? "a longer exposure would measure the high codes" : "") + ")");
       }
       result.responseCacheFile =
           responseFileFor(options.responseFolder, capture.cameraMake, capture.cameraModel);

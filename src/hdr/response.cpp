@@ -203,7 +203,7 @@ Patches smoothPatches(const std::vector<const BracketCodes*>& used, size_t shots
 }
 
 // The codes the patches measure: from the kMinSeen-th lowest patch mean (over every shot) to
-// the kMinSeen-th highest.
+// the kMinSeen-th highest, each side at most up to code 128 ({128, 128}: too few patches).
 std::array<int, 2> observedCodes(const Patches& patches) {
   constexpr double kMinSeen = 20.0;
   std::array<double, kCodes> seen{};
