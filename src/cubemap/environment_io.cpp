@@ -15,10 +15,8 @@
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
-#include <OpenEXR/ImfThreading.h>
 
 #include "core/error.h"
-#include "ingest/exr_io.h"
 #include "lighting/sphere_resample.h"
 
 namespace compose::cubemap {
@@ -415,7 +413,7 @@ void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optiona
   COMPOSE_CHECK(rgb.channels == 3 && rgb.width > 0 && rgb.height > 0);
   try {
     Imf::Header header(rgb.width, rgb.height);
-    header.compression() = Imf::ZIP_COMPRESSION;
+    header.compression() = Imf::PIZ_COMPRESSION;
     const Imf::PixelType type = useHalf ? Imf::HALF : Imf::FLOAT;
     for (const char* name : {"R", "G", "B"}) header.channels().insert(name, Imf::Channel(type));
     if (envmap) {
@@ -431,8 +429,7 @@ void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optiona
       };
       Imf::addChromaticities(header, Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3)));
     }
-    ingest::useEveryCoreForExr();
-    Imf::OutputFile out(path.c_str(), header, Imf::globalThreadCount());
+    Imf::OutputFile out(path.c_str(), header);
     Imf::FrameBuffer frame;
     std::vector<Imath::half> halves;
     const size_t w = size_t(rgb.width);

@@ -40,12 +40,13 @@ namespace compose::ingest {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// OpenEXR's thread pool gets every core oneTBB may use, once.
 void useEveryCoreForExr() {
   static std::once_flag once;
   std::call_once(once, [] { Imf::setGlobalThreadCount(tbb::this_task_arena::max_concurrency()); });
 }
-
-namespace {
 
 bool equalsIgnoringCase(const std::string& a, const std::string& b) {
   return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char p, char q) {

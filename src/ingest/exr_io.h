@@ -74,10 +74,6 @@ class ExrReader {
   std::unique_ptr<Impl> impl_;
 };
 
-// OpenEXR's thread pool gets every core oneTBB may use (once per process); files opened after
-// this compress and decompress their blocks in parallel.
-void useEveryCoreForExr();
-
 // OpenImageIO's names for the channels of an image that has none: Y for one channel, else R G B A,
 // then channel4, channel5 ...
 std::vector<std::string> defaultChannelNames(int channels);
