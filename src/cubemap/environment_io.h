@@ -108,7 +108,7 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const std::filesyste
 std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::filesystem::path& path,
                                                                   int faceNaming);
 
-// Writes RGB float data as an EXR through OpenEXR (ZIP, scanlines), with an optional envmap
+// Writes RGB float data as an EXR through OpenEXR (PIZ, lossless, scanlines), with an optional envmap
 // attribute, the image's colour-space name and optional chromaticities. Used by the writers above;
 // exposed for tests and other stages.
 void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
