@@ -65,17 +65,6 @@ void prepareEnvironment(Context& ctx) {
   }
 }
 
-// The float pixels of an image read as its 8-bit codes (code / 255, as OpenImageIO converts).
-void floatsFromCodes(ingest::LoadedImage& loaded) {
-  Image& image = loaded.image;
-  image.pixels.resize(loaded.codes.size());
-  parallelFor(0, image.height, [&](int64_t y) {
-    const size_t n = size_t(image.width) * size_t(image.channels), first = size_t(y) * n;
-    for (size_t i = first; i < first + n; ++i) image.pixels[i] = float(loaded.codes[i]) / 255.0f;
-  });
-  loaded.codes = {};
-}
-
 // ---------------------------------------------------------------------------------------------
 
 class IngestStage final : public Stage {
@@ -343,11 +332,7 @@ class StitchStage final : public Stage {
         rgb = ctx.colors.convertCodes(img.codes, img.image.width, img.image.height,
                                       img.image.channels, space, working);
       } else {
-        if (!img.hasPixels()) {
-          img.image.pixels.resize(img.codes.size());
-          for (size_t k = 0; k < img.codes.size(); ++k)
-            img.image.pixels[k] = float(img.codes[k]) / 255.0f;
-        }
+        if (!img.hasPixels()) ingest::floatsFromCodes(img);
         rgb = toRgb(img.image);
         rgb.colorSpace = space;
         ctx.colors.convert(rgb, working);
@@ -488,7 +473,7 @@ class ColorStage final : public Stage {
         reason = "plate read as '" + space + "'" + (named ? " (--plate-space)" : "");
       } else {
         if (!plate.codes.empty()) {
-          floatsFromCodes(plate);
+          ingest::floatsFromCodes(plate);
         }
         if (plate.image.channels == 3) {
           linear = std::move(plate.image);

@@ -239,11 +239,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         return colors.convertCodes(img.codes, img.image.width, img.image.height, channels, space,
                                    target);
       }
-      if (!img.hasPixels()) {
-        img.image.pixels.resize(img.codes.size());
-        for (size_t k = 0; k < img.codes.size(); ++k)
-          img.image.pixels[k] = float(img.codes[k]) / 255.0f;
-      }
+      if (!img.hasPixels()) ingest::floatsFromCodes(img);
       Image rgb;
       if (img.image.channels == 3) {
         rgb = std::move(img.image);

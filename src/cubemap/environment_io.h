@@ -108,9 +108,9 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const std::filesyste
 std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::filesystem::path& path,
                                                                   int faceNaming);
 
-// Writes RGB float data as an EXR through OpenEXR (PIZ, lossless, scanlines), with an optional envmap
-// attribute, the image's colour-space name and optional chromaticities. Used by the writers above;
-// exposed for tests and other stages.
+// Writes RGB float data as an EXR through OpenEXR (PIZ, lossless, scanlines), with an optional
+// envmap attribute, the image's colour-space name and optional chromaticities. Used by the writers
+// above; exposed for tests and other stages.
 void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
               std::optional<Layout> envmap,
               const std::optional<std::array<double, 8>>& chromaticities = std::nullopt);

@@ -187,16 +187,14 @@ struct PairMatches {
 };
 
 // How well photo j, turned by `jFromI` relative to photo i, agrees with i where they overlap: the
-// variance of log(L_i / L_j) over a grid of i's feature image (blurred by 1.5 pixels), per
-// sample; the mean is the exposure offset. -1 when fewer than 100 samples overlap.
-double overlapLogVariance(int i, int j, const glm::dmat3& jFromI,
-                          const std::vector<StitchPhoto>& photos,
+// variance of log(L_i / L_j) over a grid of i's feature image, per sample, with `li` and `lj`
+// their feature images' luminance blurred by 1.5 pixels; the mean is the exposure offset. -1 when
+// fewer than 100 samples overlap.
+double overlapLogVariance(int i, int j, const glm::dmat3& jFromI, const cv::Mat& li,
+                          const cv::Mat& lj, const std::vector<StitchPhoto>& photos,
                           const std::vector<Features>& features) {
   const Features& fi = features[size_t(i)];
   const Features& fj = features[size_t(j)];
-  cv::Mat li, lj;
-  cv::GaussianBlur(fi.luminance, li, cv::Size(0, 0), 1.5);
-  cv::GaussianBlur(fj.luminance, lj, cv::Size(0, 0), 1.5);
   double sum = 0.0, sum2 = 0.0;
   size_t count = 0;
   for (int y = 2; y < li.rows - 2; y += 3) {
@@ -315,8 +313,11 @@ PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
   // The matches must explain the overlap's light better than the rough orientations do: a few
   // matches bunched in a small patch of a narrow overlap hardly fix the roll about their own
   // direction, and can agree within their threshold on a rotation degrees off.
-  const double matched = overlapLogVariance(i, j, out.relative, photos, features);
-  const double rough = overlapLogVariance(i, j, roughIj, photos, features);
+  cv::Mat li, lj;
+  cv::GaussianBlur(fi.luminance, li, cv::Size(0, 0), 1.5);
+  cv::GaussianBlur(fj.luminance, lj, cv::Size(0, 0), 1.5);
+  const double matched = overlapLogVariance(i, j, out.relative, li, lj, photos, features);
+  const double rough = overlapLogVariance(i, j, roughIj, li, lj, photos, features);
   if (rough > 0.0 && matched < 0.0) {
     // The matched rotation turns the overlap away altogether: certainly wrong.
     out.rejected = std::numeric_limits<double>::infinity();

@@ -111,9 +111,9 @@ struct BracketCodes {
 // non-decreasing and normalised as described above.
 //
 // Debevec: OpenCV's CalibrateDebevec fits the curve from `samples` patches; Debevec & Malik's model
-// is then fitted again over every smooth, unclipped patch (RecoveryParams::refit), and the ends of the
-// range are refitted from the adjacent shot (RecoveryParams::refineEnds). `observed` receives the
-// codes the patches show.
+// is then fitted again over every smooth, unclipped patch (RecoveryParams::refit), and the ends of
+// the range are refitted from the adjacent shot (RecoveryParams::refineEnds). `observed` receives
+// the codes the patches show.
 //
 // Accuracy, and its limit: with exposures a fixed ratio apart (2 EV brackets), the data only
 // fix the curve up to a ripple that repeats with that ratio (any such ripple is absorbed by the

@@ -415,6 +415,16 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   return info;
 }
 
+void floatsFromCodes(LoadedImage& loaded) {
+  Image& image = loaded.image;
+  image.pixels.resize(loaded.codes.size());
+  parallelFor(0, image.height, [&](int64_t y) {
+    const size_t n = size_t(image.width) * size_t(image.channels), first = size_t(y) * n;
+    for (size_t i = first; i < first + n; ++i) image.pixels[i] = float(loaded.codes[i]) / 255.0f;
+  });
+  loaded.codes = {};
+}
+
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   checkInputFile(path, stage);
   switch (kindOf(path, stage)) {

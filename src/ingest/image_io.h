@@ -112,6 +112,10 @@ struct LoadedImage {
   bool hasPixels() const { return !image.pixels.empty(); }
 };
 
+// Gives an image read as its 8-bit codes its float pixels (code / 255, as OpenImageIO converts)
+// and drops the codes. Multi-threaded.
+void floatsFromCodes(LoadedImage& loaded);
+
 struct ReadOptions {
   // An 8-bit file is returned as its codes (LoadedImage::codes) instead of floats: a quarter of
   // the memory, and no conversion for stages that work on codes (exposure merging).
