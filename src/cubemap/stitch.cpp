@@ -820,6 +820,7 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         if (j != i && find(j) == find(i)) aligned[size_t(i)] = true;
     }
     std::vector<std::pair<std::pair<int, int>, double>> photometricRatios;
+    std::vector<int> photometricGroup(size_t(count), -1);  // the group a photo was aligned to
     for (int i = 0; i < count; ++i) {
       if (aligned[size_t(i)]) continue;
       std::vector<int> neighbours;
@@ -834,12 +835,35 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
       orientation[size_t(i)] = pm.worldFromCamera;
       for (const auto& [j, logRatio] : pm.logRatios)
         photometricRatios.push_back({{i, j}, logRatio});
+      photometricGroup[size_t(i)] = find(neighbours.front());
       const double turned = rotationAngle(pm.worldFromCamera, photos[size_t(i)].worldFromCamera);
       result.notes.push_back("photo " + photos[size_t(i)].name +
                              " shares no features with its neighbours: aligned on the radiance of "
                              "its overlaps instead" +
                              fmt(" (log-luminance residual %.3f from %.3f), turned by %.2f degrees",
                                  std::sqrt(pm.cost), std::sqrt(pm.initialCost), turned / kDegrees));
+    }
+    // A group was put where its own photos' rough orientations say it is; the photos aligned to
+    // it on radiance hold rough orientations too, and as a whole their errors are as likely as
+    // the group's. Put the group and the photos aligned to it where all their rough orientations
+    // say, so that leaving a photo out of the feature matching does not turn the map.
+    for (int root = 0; root < count; ++root) {
+      std::vector<int> members;
+      bool joined = false;
+      for (int i = 0; i < count; ++i) {
+        if (photometricGroup[size_t(i)] >= 0 && find(photometricGroup[size_t(i)]) == root) {
+          members.push_back(i);
+          joined = true;
+        } else if (aligned[size_t(i)] && find(i) == root) {
+          members.push_back(i);
+        }
+      }
+      if (!joined) continue;
+      glm::dmat3 m(0.0);
+      for (int i : members)
+        m += photos[size_t(i)].worldFromCamera * glm::transpose(orientation[size_t(i)]);
+      const glm::dmat3 g = nearestRotation(m);
+      for (int i : members) orientation[size_t(i)] = g * orientation[size_t(i)];
     }
     for (int i = 0; i < count; ++i) {
       result.correctionDegrees[size_t(i)] =

@@ -171,8 +171,8 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   const double median = medianRelative(truth, r.cube);
-  // Measured 0.9 % (interior) to 4.0 % (forest, whose texels differ from their neighbours by
-  // 38 % on average, so that any resampling shows).
+  // Measured 1.1 / 4.0 / 0.8 / 0.2 % (forest's texels differ from their neighbours by 38 % on
+  // average, so that any resampling shows).
   constexpr double kIssueMedian = 0.05;
   EXPECT_LT(median, kIssueMedian) << name;
 
@@ -187,9 +187,10 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
         worstRefined, rotationDegrees(r.worldFromCamera[size_t(i)], capture.truth[size_t(i)]));
   }
   EXPECT_GE(refined, 5) << name;
-  // A photo left out shifts the average the group is aligned to: sunset's featureless sky view
-  // moves the others by up to 0.7°.
-  constexpr double kRefinedDegrees = 0.75;
+  // Measured within 0.046 / 0.043 / 0.073 / 0.045°. Sunset's featureless sky view matches no
+  // other photo and is aligned on the radiance of its overlaps; the group is then put where all
+  // six rough orientations say (with five, the sky view's rough error moved the map by 0.65°).
+  constexpr double kRefinedDegrees = 0.15;
   EXPECT_LT(worstRefined, kRefinedDegrees) << name;
 
   // Seams, on 128² faces (the stitch and the truth reduced exactly), where a texel at a face edge
@@ -199,11 +200,12 @@ TEST_P(StitchSample, SixViewsWithinFivePercentAndSeamless) {
   const CubeMap truth128 = lighting::resizeCube(truth, 128);
   const double worstSeam = compose::testing::worstSeam(stitched128, truth128);
   const double levelStep = compose::testing::worstLevelStep(stitched128, truth128);
-  // Measured 0.99 / 0.94 / 0.99 / 1.07 (sunset: its sky view matched nothing).
-  constexpr double kSeam = 1.15;
+  // Measured 0.99 / 0.94 / 0.99 / 0.996 (sunset was at 1.07 while its map was turned by 0.65°:
+  // the scene's own step at an edge is measured on the truth as it lies).
+  constexpr double kSeam = 1.0;
   EXPECT_LT(worstSeam, kSeam) << name;
   // The level step across the edges (seams.h: continuity across an edge against beside it, which
-  // texture and noise do not sway), measured 0.44 / 0.47 / 0.998 / 0.83; interior's is where an
+  // texture and noise do not sway), measured 0.44 / 0.47 / 0.998 / 0.52; interior's is where an
   // edge cuts its lamp and the scene itself steps as much.
   constexpr double kLevelStep = 1.1;
   EXPECT_LT(levelStep, kLevelStep) << name;
