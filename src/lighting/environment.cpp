@@ -118,8 +118,12 @@ glm::vec3 Environment::lookup(const glm::vec3& d) const {
   const double v = (0.5 - lat / kPi) * height_ - 0.5;
   const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
   const float fx = float(u - x0), fy = float(v - y0);
+  // Longitude wraps around; x is within one width of the map (lon ∈ [-π, π]), so a compare
+  // does what a modulo would, without the division.
   auto texel = [&](int x, int y) {
-    x = ((x % width_) + width_) % width_;
+    if (x < 0) x += width_;
+    if (x >= width_) x -= width_;
+    if (x < 0 || x >= width_) x = ((x % width_) + width_) % width_;
     y = std::clamp(y, 0, height_ - 1);
     return radiance(x, y);
   };
