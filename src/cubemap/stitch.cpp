@@ -786,7 +786,7 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
       if (group.size() < 2) {
         if (group.size() == 1)
           result.notes.push_back("photo " + photos[size_t(group[0])].name +
-                                 " matched no other photo: its rough orientation is kept");
+                                 " matched no other photo by its features");
         continue;
       }
       std::vector<glm::dmat3> trial = orientation;
@@ -828,10 +828,18 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         const int other = a == i ? b : b == i ? a : -1;
         if (other >= 0 && aligned[size_t(other)]) neighbours.push_back(other);
       }
-      if (neighbours.empty()) continue;
-      const Photometric pm = alignPhotometric(i, neighbours, photos, features, orientation,
-                                              options.maxCorrectionDegrees * kDegrees);
-      if (!pm.ok) continue;
+      const Photometric pm = neighbours.empty()
+                                 ? Photometric{}
+                                 : alignPhotometric(i, neighbours, photos, features, orientation,
+                                                    options.maxCorrectionDegrees * kDegrees);
+      if (!pm.ok) {
+        result.notes.push_back("photo " + photos[size_t(i)].name +
+                               (neighbours.empty()
+                                    ? " overlaps no aligned photo"
+                                    : " could not be aligned on the radiance of its overlaps") +
+                               ": its rough orientation is kept");
+        continue;
+      }
       orientation[size_t(i)] = pm.worldFromCamera;
       for (const auto& [j, logRatio] : pm.logRatios)
         photometricRatios.push_back({{i, j}, logRatio});
@@ -864,6 +872,10 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         m += photos[size_t(i)].worldFromCamera * glm::transpose(orientation[size_t(i)]);
       const glm::dmat3 g = nearestRotation(m);
       for (int i : members) orientation[size_t(i)] = g * orientation[size_t(i)];
+      result.notes.push_back(
+          fmt("%.0f photos, those aligned on radiance included, put where their "
+              "rough orientations say on average: turned by %.2f degrees",
+              double(members.size()), rotationAngle(g, glm::dmat3(1.0)) / kDegrees));
     }
     for (int i = 0; i < count; ++i) {
       result.correctionDegrees[size_t(i)] =
