@@ -868,10 +868,10 @@ TEST_F(FromPhotos, FromBrackets) {
     // orientations say on average; one-shot, every view keeps its rough orientation, which is
     // exact here). Measured: object PSNR 56.5 dB (median 0.20 %), plate 89.7 dB (59.8 dB and
     // 88.5 dB when the pair alone set where the four lie; 63.2 and 89.3 dB with OpenCV's response
-    // fit alone): bounds 1.5-10 dB below.
+    // fit alone): bounds 6.5-10 dB below (50 dB: 0.3 % of the brightest object value, rms).
     const Agreement same = compare(oneShot, hand);
     printAgreement("one-shot vs by hand", same);
-    constexpr double kOneShotVsHandObjectPsnrDb = 55.0;
+    constexpr double kOneShotVsHandObjectPsnrDb = 50.0;
     constexpr double kOneShotVsHandPlatePsnrDb = 80.0;
     EXPECT_GT(same.objectPsnr, kOneShotVsHandObjectPsnrDb) << "one-shot vs by hand";
     EXPECT_GT(same.platePsnr, kOneShotVsHandPlatePsnrDb) << "one-shot vs by hand";
