@@ -290,15 +290,36 @@ int main(int argc, char** argv) {
         const double phi = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
         sphereNormals.emplace_back(r * std::cos(phi), y, r * std::sin(phi));
       }
+      // And over the normals of a sphere standing where the object stands, as this camera sees
+      // it: the hemisphere facing the camera, each normal weighted by the area it covers in the
+      // image (a Fibonacci lattice on the sphere's disc, seen from afar).
+      std::vector<glm::vec3> seenSphereNormals;
+      {
+        const glm::dvec3 centre = glm::dvec3(
+            worldFromObject *
+            glm::dvec4(0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax())), 1.0));
+        const glm::dvec3 toCamera = glm::normalize(camera.position() - centre);
+        const glm::dvec3 right = glm::normalize(glm::cross(glm::dvec3(0.0, 1.0, 0.0), toCamera));
+        const glm::dvec3 up = glm::cross(toCamera, right);
+        for (int i = 0; i < kSphere; ++i) {
+          const double r = std::sqrt((i + 0.5) / kSphere);
+          const double phi = i * std::numbers::pi * (3.0 - std::sqrt(5.0));
+          const double x = r * std::cos(phi), y = r * std::sin(phi);
+          seenSphereNormals.emplace_back(glm::normalize(
+              x * right + y * up + std::sqrt(std::max(0.0, 1.0 - r * r)) * toCamera));
+        }
+      }
       const Measure atPixelNormals = direct(pixelNormals), overSphere = direct(sphereNormals);
-      char line[500];
+      const Measure overSeenSphere = direct(seenSphereNormals);
+      char line[600];
       std::snprintf(line, sizeof line,
                     "%s / %s: %zu pixels; reference %d samples in %.1f s, two seeds agree to "
                     "%.1f dB; unshadowed cheb-local vs exact unshadowed %.1f dB (image space), "
                     "%.1f dB evaluated at the same normals without rendering, %.1f dB over the "
-                    "sphere's normals",
+                    "sphere's normals, %.1f dB over a sphere's normals as this camera sees them",
                     meshName, envName, px.size(), kReferenceSamples, referenceS, converged.snrDb,
-                    lightingOnly.snrDb, atPixelNormals.snrDb, overSphere.snrDb);
+                    lightingOnly.snrDb, atPixelNormals.snrDb, overSphere.snrDb,
+                    overSeenSphere.snrDb);
       notes.push_back(line);
       std::printf("%s\n", line);
 
