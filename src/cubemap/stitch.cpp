@@ -66,6 +66,16 @@ glm::dmat3 nearestRotation(const glm::dmat3& m) {
   return out;
 }
 
+// The rotation that turns orientations fixed only relative to each other (`refined`) as a whole to
+// where the photos' rough orientations (`rough`, the same photos in the same order) say they are:
+// the one nearest to Σ rough_k refined_kᵀ.
+glm::dmat3 towardsRough(const std::vector<glm::dmat3>& rough,
+                        const std::vector<glm::dmat3>& refined) {
+  glm::dmat3 m(0.0);
+  for (size_t k = 0; k < rough.size(); ++k) m += rough[k] * glm::transpose(refined[k]);
+  return nearestRotation(m);
+}
+
 // Rotation q minimising Σ |q a_k - b_k|² (Kabsch).
 glm::dmat3 kabsch(const std::vector<glm::dvec3>& a, const std::vector<glm::dvec3>& b) {
   glm::dmat3 m(0.0);  // Σ b a^T
@@ -423,10 +433,9 @@ bool adjust(const std::vector<int>& group, const std::vector<PairMatches>& pairs
   rms = count ? std::sqrt(sum / count) : 0.0;
   // The adjustment fixes its gauge on one camera; put the group back where the rough
   // orientations say it is, as a whole.
-  glm::dmat3 m(0.0);
-  for (int k = 0; k < n; ++k)
-    m += orientation[size_t(group[size_t(k)])] * glm::transpose(refined[size_t(k)]);
-  const glm::dmat3 g = nearestRotation(m);
+  std::vector<glm::dmat3> rough;
+  for (int k = 0; k < n; ++k) rough.push_back(orientation[size_t(group[size_t(k)])]);
+  const glm::dmat3 g = towardsRough(rough, refined);
   for (int k = 0; k < n; ++k) orientation[size_t(group[size_t(k)])] = g * refined[size_t(k)];
   return true;
 }
@@ -867,10 +876,12 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
         }
       }
       if (!joined) continue;
-      glm::dmat3 m(0.0);
-      for (int i : members)
-        m += photos[size_t(i)].worldFromCamera * glm::transpose(orientation[size_t(i)]);
-      const glm::dmat3 g = nearestRotation(m);
+      std::vector<glm::dmat3> rough, refined;
+      for (int i : members) {
+        rough.push_back(photos[size_t(i)].worldFromCamera);
+        refined.push_back(orientation[size_t(i)]);
+      }
+      const glm::dmat3 g = towardsRough(rough, refined);
       for (int i : members) orientation[size_t(i)] = g * orientation[size_t(i)];
       result.notes.push_back(
           fmt("%.0f photos, those aligned on radiance included, put where their "
