@@ -317,6 +317,8 @@ GroundShadowResult computeGroundShadow(
                 out.grid.finePoints.count(),
                 static_cast<long long>(transfer.rays + sourceRays + fineRays), seconds(start));
   out.reason = line;
+  out.points = out.grid.points.count() + out.grid.finePoints.count();
+  out.rays = transfer.rays + sourceRays + fineRays;
   return out;
 }
 

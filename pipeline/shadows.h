@@ -2,6 +2,7 @@
 // (cached on disk), the lighting it needs, and the per-vertex irradiance the renderer uses.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -83,6 +84,8 @@ struct GroundShadowResult {
   render::GroundGrid grid;
   Image ratio;  // RGB over [grid.x0, grid.x1) x [grid.y0, grid.y1) of the plate; 1 = no shadow
   std::string reason;
+  size_t points = 0;  // ground points shaded
+  int64_t rays = 0;   // rays traced for them
 };
 GroundShadowResult computeGroundShadow(
     const render::Mesh& mesh, const render::EmbreeScene& scene, const glm::dmat4& worldFromObject,
