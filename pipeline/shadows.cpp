@@ -285,40 +285,38 @@ GroundShadowResult computeGroundShadow(
   out.grid = render::groundGrid(mesh, worldFromObject, camera, worldSources);
   if (out.grid.empty()) {
     out.reason = "no ground around the object is in view";
-    out.ratio = render::groundRatio(out.grid, {});
+    out.ratio = render::groundRatio(out.grid);
     return out;
   }
   render::TransferParams params = plan.transfer;
   params.shBands = plan.method == render::ShadowMethod::Harmonics ? plan.transfer.shBands : 0;
-  const render::VertexTransfer transfer =
-      render::computeTransfer(mesh, scene, out.grid.points, params, progress);
-  int64_t sourceRays = 0, fineSourceRays = 0;
-  const render::VertexIrradiance irradiance =
-      shadePoints(out.grid.points, transfer, scene, lighting, envFromObject, plan, 4, sourceRays);
-  // Where the shadow has a sharp edge between grid nodes, a finer grid there.
-  const size_t refined = render::refineGroundGrid(out.grid, irradiance, worldFromObject, camera);
-  render::VertexIrradiance fine;
-  int64_t fineRays = 0;
-  if (out.grid.finePoints.count() > 0) {
-    const render::VertexTransfer fineTransfer =
-        render::computeTransfer(mesh, scene, out.grid.finePoints, params);
-    fine = shadePoints(out.grid.finePoints, fineTransfer, scene, lighting, envFromObject, plan, 4,
-                       fineSourceRays);
-    fineRays = fineTransfer.rays + fineSourceRays;
-  }
-  out.ratio = render::groundRatio(out.grid, irradiance, fine);
-  char line[320];
+  // Coarse to fine: the points of each level shaded, then the cells that need it split.
+  int64_t rays = 0;
+  do {
+    const render::SurfacePoints batch = out.grid.pending();
+    if (batch.count() == 0) continue;
+    const render::VertexTransfer transfer = render::computeTransfer(
+        mesh, scene, batch, params, out.grid.shaded == 0 ? progress : Progress{});
+    int64_t sourceRays = 0;
+    render::shadeGroundPoints(out.grid, shadePoints(batch, transfer, scene, lighting, envFromObject,
+                                                    plan, 4, sourceRays));
+    rays += transfer.rays + sourceRays;
+  } while (render::refineGroundGrid(out.grid, scene, worldFromObject, camera));
+  out.ratio = render::groundRatio(out.grid);
+  out.points = out.grid.points.count();
+  out.rays = rays;
+  std::string levels;
+  for (size_t l = 0; l < out.grid.splitCount.size(); ++l)
+    levels += (l ? "/" : "") + std::to_string(out.grid.splitCount[l]);
+  char line[400];
   std::snprintf(line, sizeof line,
-                "ground shadow over %dx%d plate pixels from %zu ground points (every %d pixels; "
-                "%zu cells across sharp shadow edges refined %d x %d, %zu more points): %lld rays "
-                "in %.2f s",
+                "ground shadow over %dx%d plate pixels from %zu ground points (every %d pixels, "
+                "cells split where the shadow changes down to %d pixels and across sharp edges "
+                "to %.3g: %s cells split per level): %lld rays in %.2f s",
                 out.grid.x1 - out.grid.x0, out.grid.y1 - out.grid.y0, out.grid.points.count(),
-                out.grid.stride, refined, out.grid.steps, out.grid.steps,
-                out.grid.finePoints.count(),
-                static_cast<long long>(transfer.rays + sourceRays + fineRays), seconds(start));
+                out.grid.firstStride(), out.grid.stride, out.grid.unit, levels.c_str(),
+                static_cast<long long>(rays), seconds(start));
   out.reason = line;
-  out.points = out.grid.points.count() + out.grid.finePoints.count();
-  out.rays = transfer.rays + sourceRays + fineRays;
   return out;
 }
 

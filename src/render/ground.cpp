@@ -36,12 +36,27 @@ glm::vec3 ratioAt(const VertexIrradiance& irradiance, size_t p) {
   return r;
 }
 
-std::vector<glm::vec3> nodeRatios(const std::vector<int>& node,
-                                  const VertexIrradiance& irradiance) {
-  std::vector<glm::vec3> out(node.size(), glm::vec3(1.0f));
-  for (size_t n = 0; n < node.size(); ++n)
-    if (node[n] >= 0) out[n] = ratioAt(irradiance, size_t(node[n]));
-  return out;
+// Samples lattice node (a, b) if it has not been: its ground point as a new (pending) point, or
+// -1 where the pixel shows no ground of the region.
+void makeNode(GroundGrid& grid, const glm::dmat4& objectFromWorld, const calib::PlateCamera& camera,
+              int a, int b) {
+  const size_t n = size_t(b) * size_t(grid.columns) + size_t(a);
+  if (grid.node[n] != -2) return;
+  glm::vec3 g;
+  if (!groundPoint(grid, objectFromWorld, camera, grid.x0 + a * grid.unit + 0.5,
+                   grid.y0 + b * grid.unit + 0.5, g)) {
+    grid.node[n] = -1;
+    return;
+  }
+  grid.node[n] = int(grid.points.count());
+  grid.points.positions.push_back(g);
+  grid.points.normals.emplace_back(0.0f, 1.0f, 0.0f);
+  grid.pointNode.push_back(uint32_t(n));
+}
+
+// The largest of the three channels.
+float largest(const glm::vec3& v) {
+  return std::max({v.x, v.y, v.z});
 }
 
 }  // namespace
@@ -129,169 +144,252 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
   const int w = std::max(0, grid.x1 - grid.x0), h = std::max(0, grid.y1 - grid.y0);
   if (w == 0 || h == 0) return grid;
   grid.stride = std::max(1, int(std::ceil(std::sqrt(double(w) * h / double(settings.maxPoints)))));
-  grid.columns = (w + grid.stride - 1) / grid.stride + 1;
-  grid.rows = (h + grid.stride - 1) / grid.stride + 1;
-  grid.node.assign(size_t(grid.columns) * size_t(grid.rows), -1);
+  // Below the base stride, halvings down to about fineStride pixels (at most 3: the lattice stays
+  // within 64 times the base grid's nodes).
+  grid.fine = 0;
+  while (grid.fine < 3 && (grid.stride >> grid.fine) > std::max(1, settings.fineStride) &&
+         double(grid.stride) / double(1 << (grid.fine + 1)) >= 1.0)
+    ++grid.fine;
+  grid.coarse = std::clamp(settings.coarseLevels, 0, 6);
+  grid.unit = double(grid.stride) / double(1 << grid.fine);
+  const int first = grid.firstStride(), cells = 1 << grid.levels();
+  const int firstColumns = (w + first - 1) / first + 1, firstRows = (h + first - 1) / first + 1;
+  grid.columns = (firstColumns - 1) * cells + 1;
+  grid.rows = (firstRows - 1) * cells + 1;
+  const size_t lattice = size_t(grid.columns) * size_t(grid.rows);
+  grid.node.assign(lattice, -2);
+  grid.ratio.assign(lattice, glm::vec3(1.0f));
+  grid.split.resize(size_t(grid.levels()));
+  grid.splitCount.assign(size_t(grid.levels()), 0);
+  for (int l = 0; l < grid.levels(); ++l) {
+    const size_t side = size_t(1) << l;
+    grid.split[size_t(l)].assign(size_t(firstColumns - 1) * side * size_t(firstRows - 1) * side, 0);
+  }
 
-  // Ground points of the grid's pixels, in the object's own coordinates; the ground's normal
-  // there is +Y (the placement only turns the object about +Y and scales it).
+  // What the refinement asks about: the region, the object's bounding sphere, the sources.
   grid.regionX0 = x0, grid.regionX1 = x1, grid.regionZ0 = z0, grid.regionZ1 = z1;
-  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  const glm::dvec3 centre = 0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax()));
+  grid.sphereCentre = glm::dvec3(worldFromObject * glm::dvec4(centre, 1.0));
+  const double objectRadius =
+      0.5 * glm::length(glm::dvec3(mesh.boundsMax()) - glm::dvec3(mesh.boundsMin()));
+  grid.sphereRadius = objectRadius * glm::length(glm::dvec3(worldFromObject[0]));
+  grid.sources = sources;
+
+  // The first points: every `first` pixels. Ground points are in the object's own coordinates;
+  // the ground's normal there is +Y (the placement only turns the object about +Y and scales it).
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   grid.points.size = std::max({extent.x, extent.y, extent.z});
   grid.points.centre = 0.5f * (mesh.boundsMin() + mesh.boundsMax());
   grid.points.radius = 0.5f * glm::length(extent);
-  for (int j = 0; j < grid.rows; ++j) {
-    for (int i = 0; i < grid.columns; ++i) {
-      glm::vec3 g;
-      if (!groundPoint(grid, objectFromWorld, camera, grid.x0 + i * grid.stride + 0.5,
-                       grid.y0 + j * grid.stride + 0.5, g))
-        continue;
-      grid.node[size_t(j) * size_t(grid.columns) + size_t(i)] = int(grid.points.positions.size());
-      grid.points.positions.push_back(g);
-      grid.points.normals.emplace_back(0.0f, 1.0f, 0.0f);
-    }
-  }
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  for (int b = 0; b < grid.rows; b += cells)
+    for (int a = 0; a < grid.columns; a += cells) makeNode(grid, objectFromWorld, camera, a, b);
   return grid;
 }
 
-size_t refineGroundGrid(GroundGrid& grid, const VertexIrradiance& irradiance,
-                        const glm::dmat4& worldFromObject, const calib::PlateCamera& camera,
-                        const GroundSettings& settings) {
-  COMPOSE_CHECK(irradiance.shadowed.size() == grid.points.count());
-  grid.steps = 0;
-  grid.refinedCell.clear();
-  grid.fineNode.clear();
-  grid.finePoints = SurfacePoints{};
-  grid.finePoints.size = grid.points.size;
-  grid.finePoints.centre = grid.points.centre;
-  grid.finePoints.radius = grid.points.radius;
-  const int steps =
-      std::clamp((grid.stride + settings.fineStride - 1) / std::max(1, settings.fineStride), 1, 16);
-  const int cols = grid.columns, rows = grid.rows;
-  if (steps < 2 || cols < 2 || rows < 2 || grid.empty()) return 0;
-  const std::vector<glm::vec3> ratio = nodeRatios(grid.node, irradiance);
-  auto at = [&](int i, int j) { return ratio[size_t(j) * size_t(cols) + size_t(i)]; };
-  // How sharply the ratio bends at each node: its distance from the mean of its neighbours.
-  std::vector<float> bend(ratio.size(), 0.0f);
-  for (int j = 0; j < rows; ++j) {
-    for (int i = 0; i < cols; ++i) {
-      glm::vec3 b(0.0f);
-      if (i > 0 && i + 1 < cols)
-        b = glm::max(b, glm::abs(at(i, j) - 0.5f * (at(i - 1, j) + at(i + 1, j))));
-      if (j > 0 && j + 1 < rows)
-        b = glm::max(b, glm::abs(at(i, j) - 0.5f * (at(i, j - 1) + at(i, j + 1))));
-      bend[size_t(j) * size_t(cols) + size_t(i)] = std::max({b.x, b.y, b.z});
-    }
-  }
-  // The cells to refine, sharpest first, within the budget of new points.
-  std::vector<std::pair<float, int>> sharp;
-  for (int j = 0; j + 1 < rows; ++j) {
-    for (int i = 0; i + 1 < cols; ++i) {
-      const size_t n = size_t(j) * size_t(cols) + size_t(i);
-      const float b =
-          std::max({bend[n], bend[n + 1], bend[n + size_t(cols)], bend[n + size_t(cols) + 1]});
-      if (b > settings.bend) sharp.emplace_back(b, j * (cols - 1) + i);
-    }
-  }
-  std::sort(sharp.begin(), sharp.end(), [](const auto& a, const auto& b) {
-    return a.first != b.first ? a.first > b.first : a.second < b.second;
-  });
-  const size_t perCell = size_t(steps + 1) * size_t(steps + 1) - 4;
-  const size_t cells = std::min(sharp.size(), settings.maxRefinedPoints / perCell);
-  sharp.resize(cells);
-  std::sort(sharp.begin(), sharp.end(),
-            [](const auto& a, const auto& b) { return a.second < b.second; });
-  grid.steps = steps;
-  grid.refinedCell.assign(size_t(cols - 1) * size_t(rows - 1), -1);
-  // Fine nodes shared by two refined cells are made once: keyed by their place on the fine
-  // lattice.
-  std::unordered_map<uint64_t, int> made;
-  const int first = int(grid.points.count());
-  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
-  for (const auto& [b, cell] : sharp) {
-    const int i = cell % (cols - 1), j = cell / (cols - 1);
-    grid.refinedCell[size_t(cell)] = int(grid.fineNode.size() / size_t((steps + 1) * (steps + 1)));
-    for (int fb = 0; fb <= steps; ++fb) {
-      for (int fa = 0; fa <= steps; ++fa) {
-        if ((fa == 0 || fa == steps) && (fb == 0 || fb == steps)) {
-          // A corner: the grid's own node.
-          grid.fineNode.push_back(
-              grid.node[size_t(j + fb / steps) * size_t(cols) + size_t(i + fa / steps)]);
-          continue;
-        }
-        const uint64_t key = (uint64_t(uint32_t(j * steps + fb)) << 32) | uint32_t(i * steps + fa);
-        auto [it, inserted] = made.try_emplace(key, -1);
-        if (inserted) {
-          glm::vec3 g;
-          const double x = grid.x0 + (i + double(fa) / steps) * grid.stride + 0.5;
-          const double y = grid.y0 + (j + double(fb) / steps) * grid.stride + 0.5;
-          if (groundPoint(grid, objectFromWorld, camera, x, y, g)) {
-            it->second = first + int(grid.finePoints.positions.size());
-            grid.finePoints.positions.push_back(g);
-            grid.finePoints.normals.emplace_back(0.0f, 1.0f, 0.0f);
-          }
-        }
-        grid.fineNode.push_back(it->second);
-      }
-    }
-  }
-  return cells;
+SurfacePoints GroundGrid::pending() const {
+  SurfacePoints out;
+  out.size = points.size, out.centre = points.centre, out.radius = points.radius;
+  out.positions.assign(points.positions.begin() + std::ptrdiff_t(shaded), points.positions.end());
+  out.normals.assign(points.normals.begin() + std::ptrdiff_t(shaded), points.normals.end());
+  return out;
 }
 
-Image groundRatio(const GroundGrid& grid, const VertexIrradiance& irradiance,
-                  const VertexIrradiance& fine) {
-  COMPOSE_CHECK(irradiance.shadowed.size() == grid.points.count());
-  COMPOSE_CHECK(fine.shadowed.size() == grid.finePoints.count());
+void shadeGroundPoints(GroundGrid& grid, const VertexIrradiance& irradiance) {
+  const size_t count = grid.points.count() - grid.shaded;
+  COMPOSE_CHECK(irradiance.shadowed.size() == count && irradiance.unshadowed.size() == count);
+  const bool bits = irradiance.sourceSeen.size() == count;
+  grid.seen.resize(grid.points.count(), ~uint64_t(0));
+  for (size_t k = 0; k < count; ++k) {
+    const size_t p = grid.shaded + k;
+    grid.ratio[grid.pointNode[p]] = ratioAt(irradiance, k);
+    if (bits) grid.seen[p] = irradiance.sourceSeen[k];
+    if (p == 0) grid.open = irradiance.unshadowed[k];
+  }
+  grid.shaded = grid.points.count();
+}
+
+bool refineGroundGrid(GroundGrid& grid, const EmbreeScene& scene, const glm::dmat4& worldFromObject,
+                      const calib::PlateCamera& camera, const GroundSettings& settings) {
+  COMPOSE_CHECK(grid.shaded == grid.points.count());
+  if (grid.level >= grid.levels() || grid.empty()) return false;
+  const int l = grid.level++;
+  const bool coarse = l < grid.coarse;
+  const float threshold = coarse ? settings.spread : settings.sharp;
+  const int size = 1 << (grid.levels() - l), half = size / 2;
+  const int across = (grid.columns - 1) / size, down = (grid.rows - 1) / size;
+  // The sources that alone can change the ratio by more than the threshold: their irradiance on
+  // the ground over the ground's, and their mask in the points' `seen` bits.
+  uint64_t strong = 0;
+  std::vector<glm::dvec3> strongDirections;
+  for (size_t i = 0; i < grid.sources.size() && i < 64; ++i) {
+    const lighting::LightSource& s = grid.sources[i];
+    const glm::dvec3 d = glm::normalize(glm::dvec3(s.direction));
+    if (d.y <= 0.0) continue;
+    float weight = 0.0f;
+    for (int c = 0; c < 3; ++c)
+      if (grid.open[c] > 1e-20f) weight = std::max(weight, float(s.power[c] * d.y) / grid.open[c]);
+    if (weight <= threshold) continue;
+    strong |= uint64_t(1) << i;
+    strongDirections.push_back(d);
+  }
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  auto nodeAt = [&](int a, int b) { return size_t(b) * size_t(grid.columns) + size_t(a); };
+  auto seenAt = [&](int a, int b) {
+    const int p = grid.node[nodeAt(a, b)];
+    return p >= 0 ? grid.seen[size_t(p)] : ~uint64_t(0);
+  };
+  // The ground point (world) a lattice position shows, if any.
+  auto worldPoint = [&](double a, double b, glm::dvec3& g) {
+    glm::dvec3 origin, dir;
+    if (!camera.ray(grid.x0 + a * grid.unit + 0.5, grid.y0 + b * grid.unit + 0.5, origin, dir) ||
+        !(dir.y < -1e-9))
+      return false;
+    g = origin + dir * (-origin.y / dir.y);
+    return true;
+  };
+  // Whether a strong source may cast the object's shadow into the cell: the bounding sphere's
+  // shadow comes within the cell's reach of its centre.
+  auto mayHoldShadow = [&](int a, int b) {
+    glm::dvec3 c;
+    if (strongDirections.empty() || !worldPoint(a + 0.5 * size, b + 0.5 * size, c)) return false;
+    double reach = 0.0;
+    for (const auto& [da, db] : {std::pair{0, 0}, {size, 0}, {0, size}, {size, size}}) {
+      glm::dvec3 g;
+      if (!worldPoint(a + da, b + db, g)) return true;  // reaching the horizon: take no risk
+      reach = std::max(reach, glm::length(g - c));
+    }
+    for (const glm::dvec3& d : strongDirections) {
+      const double t = std::max(0.0, glm::dot(grid.sphereCentre - c, d));
+      if (glm::length(grid.sphereCentre - (c + t * d)) <= grid.sphereRadius + reach) return true;
+    }
+    return false;
+  };
+  // Whether the object hides the plate pixel of lattice position (a, b) from the camera.
+  grid.hidden.resize(grid.node.size(), -1);
+  auto hiddenAt = [&](int a, int b) {
+    int8_t& h = grid.hidden[nodeAt(a, b)];
+    if (h < 0) {
+      glm::dvec3 origin, dir;
+      h = 0;
+      if (camera.ray(grid.x0 + a * grid.unit + 0.5, grid.y0 + b * grid.unit + 0.5, origin, dir)) {
+        const glm::dvec3 o = glm::dvec3(objectFromWorld * glm::dvec4(origin, 1.0));
+        const glm::dvec3 d = glm::dvec3(objectFromWorld * glm::dvec4(dir, 0.0));
+        h = scene.occluded(glm::vec3(o), glm::vec3(glm::normalize(d))) ? 1 : 0;
+      }
+    }
+    return h == 1;
+  };
+  // A cell hidden at its corners, edges' midpoints and centre shows no ground.
+  auto cellHidden = [&](int a, int b) {
+    for (int db = 0; db <= size; db += half)
+      for (int da = 0; da <= size; da += half)
+        if (!hiddenAt(a + da, b + db)) return false;
+    return true;
+  };
+  std::vector<uint8_t>& split = grid.split[size_t(l)];
+  // The cells of this level that exist (their parent was split) and need splitting, with how
+  // much the ratio may change inside them.
+  std::vector<std::pair<float, int>> wanted;
+  for (int j = 0; j < down; ++j) {
+    for (int i = 0; i < across; ++i) {
+      if (l > 0 && !grid.split[size_t(l - 1)][size_t(j / 2) * size_t(across / 2) + size_t(i / 2)])
+        continue;
+      const int a = i * size, b = j * size;
+      const glm::vec3 r[4] = {grid.ratio[nodeAt(a, b)], grid.ratio[nodeAt(a + size, b)],
+                              grid.ratio[nodeAt(a, b + size)],
+                              grid.ratio[nodeAt(a + size, b + size)]};
+      float change = largest(glm::max(glm::max(r[0], r[1]), glm::max(r[2], r[3])) -
+                             glm::min(glm::min(r[0], r[1]), glm::min(r[2], r[3])));
+      const uint64_t s0 = seenAt(a, b), s1 = seenAt(a + size, b), s2 = seenAt(a, b + size),
+                     s3 = seenAt(a + size, b + size);
+      if (((s0 ^ s1) | (s0 ^ s2) | (s0 ^ s3)) & strong) change = std::max(change, 1.0f);
+      if (change <= threshold && coarse && mayHoldShadow(a, b)) change = threshold * 1.0001f;
+      if (change > threshold && !cellHidden(a, b)) wanted.emplace_back(change, j * across + i);
+    }
+  }
+  if (!coarse) {
+    // Within the budget of points below the base stride, the sharpest first.
+    std::sort(wanted.begin(), wanted.end(), [](const auto& x, const auto& y) {
+      return x.first != y.first ? x.first > y.first : x.second < y.second;
+    });
+    size_t made = 0;
+    for (int f = grid.coarse; f < l; ++f) made += grid.splitCount[size_t(f)] * 5;
+    const size_t room = settings.maxRefinedPoints > made ? settings.maxRefinedPoints - made : 0;
+    wanted.resize(std::min(wanted.size(), room / 5));
+    std::sort(wanted.begin(), wanted.end(),
+              [](const auto& x, const auto& y) { return x.second < y.second; });
+  }
+  for (const auto& [change, cell] : wanted) {
+    split[size_t(cell)] = 1;
+    const int a = (cell % across) * size, b = (cell / across) * size;
+    makeNode(grid, objectFromWorld, camera, a + half, b);
+    makeNode(grid, objectFromWorld, camera, a, b + half);
+    makeNode(grid, objectFromWorld, camera, a + half, b + half);
+    makeNode(grid, objectFromWorld, camera, a + size, b + half);
+    makeNode(grid, objectFromWorld, camera, a + half, b + size);
+  }
+  grid.splitCount[size_t(l)] = wanted.size();
+  return true;
+}
+
+Image groundRatio(const GroundGrid& grid) {
   const int w = grid.x1 - grid.x0, h = grid.y1 - grid.y0;
   Image out(std::max(w, 0), std::max(h, 0), 3, {"shadow.R", "shadow.G", "shadow.B"});
   out.colorSpace = "Raw";
   std::fill(out.pixels.begin(), out.pixels.end(), 1.0f);
   if (grid.empty()) return out;
-  // The ratio at each grid node and at each refined cell's fine node (1 where there is no
-  // ground point).
-  const std::vector<glm::vec3> nodeRatio = nodeRatios(grid.node, irradiance);
-  std::vector<glm::vec3> fineRatio(grid.fineNode.size(), glm::vec3(1.0f));
-  const int first = int(grid.points.count());
-  for (size_t n = 0; n < grid.fineNode.size(); ++n) {
-    const int p = grid.fineNode[n];
-    if (p >= first)
-      fineRatio[n] = ratioAt(fine, size_t(p - first));
-    else if (p >= 0)
-      fineRatio[n] = ratioAt(irradiance, size_t(p));
-  }
-  const int steps = grid.steps, side = steps + 1;
-  const float inv = 1.0f / float(grid.stride);
-  parallelFor(0, h, [&](int64_t yy) {
-    const int y = int(yy);
-    const float gy = float(y) * inv;
-    const int j = std::min(int(gy), grid.rows - 2);
-    const float fy = std::clamp(gy - float(j), 0.0f, 1.0f);
-    for (int x = 0; x < w; ++x) {
-      const float gx = float(x) * inv;
-      const int i = std::min(int(gx), grid.columns - 2);
-      const float fx = std::clamp(gx - float(i), 0.0f, 1.0f);
-      const int block = grid.refinedCell.empty()
-                            ? -1
-                            : grid.refinedCell[size_t(j) * size_t(grid.columns - 1) + size_t(i)];
-      glm::vec3 r;
-      if (block < 0) {
-        auto at = [&](int ii, int jj) {
-          return nodeRatio[size_t(jj) * size_t(grid.columns) + size_t(ii)];
+  const int levels = grid.levels(), top = 1 << levels;
+  const int across0 = (grid.columns - 1) / top, down0 = (grid.rows - 1) / top;
+  auto nodeAt = [&](int a, int b) { return size_t(b) * size_t(grid.columns) + size_t(a); };
+  // Continuity where a cell meets finer ones: the nodes inside its edges take the edge's
+  // interpolation, coarse cells first (their corners may lie on a coarser cell's edge).
+  std::vector<glm::vec3> ratio = grid.ratio;
+  for (int l = 0; l < levels; ++l) {
+    const int size = 1 << (levels - l);
+    const int across = across0 << l, down = down0 << l;
+    for (int j = 0; j < down; ++j) {
+      for (int i = 0; i < across; ++i) {
+        if (l > 0 && !grid.split[size_t(l - 1)][size_t(j / 2) * size_t(across / 2) + size_t(i / 2)])
+          continue;  // not a cell of this level
+        if (grid.split[size_t(l)][size_t(j) * size_t(across) + size_t(i)]) continue;  // not a leaf
+        const int a = i * size, b = j * size;
+        auto edge = [&](int a0, int b0, int da, int db) {
+          const glm::vec3 r0 = ratio[nodeAt(a0, b0)],
+                          r1 = ratio[nodeAt(a0 + da * size, b0 + db * size)];
+          for (int t = 1; t < size; ++t) {
+            const size_t n = nodeAt(a0 + da * t, b0 + db * t);
+            if (grid.node[n] >= 0) ratio[n] = r0 + (r1 - r0) * (float(t) / float(size));
+          }
         };
-        r = (at(i, j) * (1 - fx) + at(i + 1, j) * fx) * (1 - fy) +
-            (at(i, j + 1) * (1 - fx) + at(i + 1, j + 1) * fx) * fy;
-      } else {
-        // Within a refined cell: the same on its fine grid.
-        const float sx = fx * float(steps), sy = fy * float(steps);
-        const int a = std::min(int(sx), steps - 1), b = std::min(int(sy), steps - 1);
-        const float gx2 = sx - float(a), gy2 = sy - float(b);
-        const glm::vec3* f = fineRatio.data() + size_t(block) * size_t(side * side);
-        auto at = [&](int aa, int bb) { return f[size_t(bb) * size_t(side) + size_t(aa)]; };
-        r = (at(a, b) * (1 - gx2) + at(a + 1, b) * gx2) * (1 - gy2) +
-            (at(a, b + 1) * (1 - gx2) + at(a + 1, b + 1) * gx2) * gy2;
+        edge(a, b, 1, 0);
+        edge(a, b + size, 1, 0);
+        edge(a, b, 0, 1);
+        edge(a + size, b, 0, 1);
       }
-      float* o = out.at(x, y);
+    }
+  }
+  const double inv = 1.0 / grid.unit;
+  parallelFor(0, h, [&](int64_t yy) {
+    const double v = double(yy) * inv;
+    for (int x = 0; x < w; ++x) {
+      const double u = double(x) * inv;
+      // The leaf cell that holds (u, v): down the levels while the cell is split.
+      int l = 0, size = top;
+      int i = std::min(int(u / size), across0 - 1), j = std::min(int(v / size), down0 - 1);
+      while (l < levels && grid.split[size_t(l)][size_t(j) * size_t(across0 << l) + size_t(i)]) {
+        ++l;
+        size >>= 1;
+        i = std::clamp(int(u / size), 2 * i, 2 * i + 1);
+        j = std::clamp(int(v / size), 2 * j, 2 * j + 1);
+      }
+      const int a = i * size, b = j * size;
+      const float fx = float(std::clamp((u - a) / size, 0.0, 1.0));
+      const float fy = float(std::clamp((v - b) / size, 0.0, 1.0));
+      const glm::vec3 r =
+          (ratio[nodeAt(a, b)] * (1 - fx) + ratio[nodeAt(a + size, b)] * fx) * (1 - fy) +
+          (ratio[nodeAt(a, b + size)] * (1 - fx) + ratio[nodeAt(a + size, b + size)] * fx) * fy;
+      float* o = out.at(x, int(yy));
       o[0] = r.x, o[1] = r.y, o[2] = r.z;
     }
   });
