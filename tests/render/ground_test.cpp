@@ -267,7 +267,7 @@ TEST(GroundShadow, AShadowBetweenTheFirstNodesIsFound) {
   // Over the pixels each pixel's own point puts in the post's shadow.
   size_t pixels = 0;
   const std::vector<double> err = againstEachPixel(grid, shot.camera, shot.worldFromObject, shade,
-                                                   {&first, &last}, 2, pixels, 0.5);
+                                                   {&first, &last}, 3, pixels, 0.5);
   ASSERT_GT(pixels, 100u);
   std::printf(
       "the post's shadow (%zu pixels; first nodes every %d pixels): mean |ratio - "
