@@ -244,8 +244,9 @@ TEST(GroundShadow, SharpEdgesAreFollowedCoarseToFine) {
 }
 
 // A thin post in the sun: its shadow is narrower than the first grid's cells (wider than the base
-// stride) and can fall between their corners, which then all see the sun. The cells the post's shadow may reach are
-// split all the same, and the shadow is drawn where each pixel's own point says.
+// stride) and can fall between their corners, which then all see the sun. The cells the post's
+// shadow may reach are split all the same, and the shadow is drawn where each pixel's own point
+// says.
 TEST(GroundShadow, AShadowBetweenTheFirstNodesIsFound) {
   Mesh post = cube();
   for (glm::vec3& p : post.positions) p = glm::vec3(p.x * 0.12f, p.y, p.z * 0.12f);
