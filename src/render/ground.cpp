@@ -345,6 +345,36 @@ Image groundRatio(const GroundGrid& grid) {
   // Continuity where a cell meets finer ones: the nodes inside its edges take the edge's
   // interpolation, coarse cells first (their corners may lie on a coarser cell's edge).
   std::vector<glm::vec3> ratio = grid.ratio;
+  // Where the first cells are not split (the ratio changes little there), each first node's ratio
+  // is the mean of its own and its neighbours' on the first lattice (3 x 3): a point's ratio is a
+  // noisy estimate (the object's outline is sampled by a few rays per cell), and spread over
+  // whole first cells that noise would show as blotches; averaged, it is three times smaller.
+  if (levels > 0) {
+    const std::vector<uint8_t>& split0 = grid.split[0];
+    auto leaf = [&](int i, int j) {  // first cell (i, j), or none outside the lattice: not split
+      return i < 0 || j < 0 || i >= across0 || j >= down0 ||
+             !split0[size_t(j) * size_t(across0) + size_t(i)];
+    };
+    const std::vector<glm::vec3> first = ratio;
+    for (int j = 0; j <= down0; ++j) {
+      for (int i = 0; i <= across0; ++i) {
+        const size_t n = nodeAt(i * top, j * top);
+        if (grid.node[n] < 0) continue;
+        if (!leaf(i - 1, j - 1) || !leaf(i, j - 1) || !leaf(i - 1, j) || !leaf(i, j)) continue;
+        glm::vec3 sum(0.0f);
+        int count = 0;
+        for (int jj = std::max(0, j - 1); jj <= std::min(down0, j + 1); ++jj) {
+          for (int ii = std::max(0, i - 1); ii <= std::min(across0, i + 1); ++ii) {
+            const size_t m = nodeAt(ii * top, jj * top);
+            if (grid.node[m] < 0) continue;
+            sum += first[m];
+            ++count;
+          }
+        }
+        ratio[n] = sum / float(count);
+      }
+    }
+  }
   for (int l = 0; l < levels; ++l) {
     const int size = 1 << (levels - l);
     const int across = across0 << l, down = down0 << l;

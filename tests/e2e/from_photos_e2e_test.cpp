@@ -740,18 +740,23 @@ class FromPhotos : public ::testing::Test {
 
 // Agreement of a composite from photos with the one from the HDRI. Measured (gcc Release, this
 // scene, the response fitted over every smooth patch): by hand, on the object PSNR 35.0 dB, median
-// 1.84 %, p95 2.5 %, mean signed -1.8 %; on the plate PSNR 71.6 dB, the shadow's ratio off by 0.001
-// on average and 0.017 at worst; the one-shot command 35.5 dB. (With OpenCV's fit alone: 33.4 dB,
-// median 2.1 %.) What differs: the merge's scale (the HDRI times 1.768 instead of 1.819: -2.8 % on
-// the whole object), the sun clipped in every exposure (its light a lower bound)
+// 1.84 %, p95 2.5 %, mean signed -1.8 %; on the plate PSNR 69.7 dB, the shadow's ratio off by
+// 0.0014 on average and 0.040 at worst; the one-shot command 35.5 dB. (With OpenCV's fit alone:
+// 33.4 dB, median 2.1 %.) What differs: the merge's scale (the HDRI times 1.768 instead of 1.819:
+// -2.8 % on the whole object), the sun clipped in every exposure (its light a lower bound)
 // and the 4-5 % of the sphere no photo saw, filled from around it, with the blur of 128-pixel
-// faces; the shadow follows the light, so its ratio differs most at its edges. The bounds leave
-// about twice the measured error (5 dB of PSNR, 1.8x).
+// faces; the shadow follows the light, so its ratio differs most at its edges. The ratio at a
+// ground point is itself an estimate (the object's outline sampled by a few rays per cell of the
+// hemisphere), 0.96-1.0 at neighbouring points of this plate's soft shadow; the two runs place
+// their points coarse to fine where their own shadows need them (render/ground.h), so that this
+// noise differs between them. (With a full grid, both sampled the same points with the same rays
+// and their noise cancelled: 0.001 on average, 0.017 at worst, PSNR 71.6 dB.) The bounds leave
+// about twice the measured error (5 dB of PSNR, 1.8x; 2x for the ratio).
 constexpr double kPhotosObjectPsnrDb = 30.0;
 constexpr double kPhotosObjectMedian = 0.04;
 constexpr double kPhotosObjectBias = 0.03;
 constexpr double kPhotosPlatePsnrDb = 65.0;
-constexpr double kPhotosShadowWorst = 0.04;
+constexpr double kPhotosShadowWorst = 0.08;
 
 // Capture, merge and stitch, against the exact irradiance of the HDRI the virtual camera
 // photographed, the stitched map's scale taken out. Measured: median 1.6 %, p95 2.3 %, worst
