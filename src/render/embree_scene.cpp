@@ -160,4 +160,30 @@ uint32_t EmbreeScene::occluded16(const glm::vec3& o, const glm::vec3* d, uint32_
   return hits;
 }
 
+void EmbreeScene::occludedStream(const glm::vec3& o, const glm::vec3* d, size_t count, float tnear,
+                                 uint8_t* occluded, float tfar) const {
+  if (count == 0) return;
+  thread_local std::vector<RTCRay> rays;  // per thread, so that no call allocates once warm
+  rays.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    RTCRay& ray = rays[i];
+    ray.org_x = o.x;
+    ray.org_y = o.y;
+    ray.org_z = o.z;
+    ray.tnear = tnear;
+    ray.dir_x = d[i].x;
+    ray.dir_y = d[i].y;
+    ray.dir_z = d[i].z;
+    ray.time = 0.0f;
+    ray.tfar = tfar;
+    ray.mask = 0xFFFFFFFFu;
+    ray.id = 0;
+    ray.flags = 0;
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  rtcOccluded1M(impl_->scene, &context, rays.data(), unsigned(count), sizeof(RTCRay));
+  for (size_t i = 0; i < count; ++i) occluded[i] = rays[i].tfar < 0.0f ? 1 : 0;
+}
+
 }  // namespace compose::render

@@ -43,6 +43,11 @@ class EmbreeScene {
   // mask of the occluded ones.
   uint32_t occluded16(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
                       float tnear, float tfar = 1e30f) const;
+  // Whether anything lies along each of `count` rays from one origin, traced as one stream:
+  // sets occluded[i] to 1 or 0. For many rays in scattered directions (a point's hemisphere),
+  // which Embree sorts into coherent groups itself, faster than fixed packets of 16.
+  void occludedStream(const glm::vec3& origin, const glm::vec3* directions, size_t count,
+                      float tnear, uint8_t* occluded, float tfar = 1e30f) const;
 
  private:
   struct Impl;

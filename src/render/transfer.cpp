@@ -402,6 +402,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
     std::vector<float> projected;    // s x k: the visible fractions projected on the columns
     std::vector<glm::vec3> batch;    // rays of one trace call
+    std::vector<uint8_t> hits;       // their answers
     std::vector<int> batchCell;
     std::vector<float> batchCos;
   };
@@ -418,6 +419,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.projected.resize(size_t(s) * size_t(k));
     const size_t most = cells * size_t(r) * size_t(r);
     sc.batch.reserve(most);
+    sc.hits.reserve(most);
     sc.batchCell.reserve(most);
     sc.batchCos.reserve(most);
     return sc;
@@ -468,14 +470,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           lighting::evalSh(params.shBands, glm::dvec3(d), sc.y.data());
           for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
         };
-        // Traces sc.batch (any length) in groups of 16; calls answer(index, occluded).
+        // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
-          for (size_t first = 0; first < sc.batch.size(); first += 16) {
-            const int m = int(std::min<size_t>(16, sc.batch.size() - first));
-            const uint32_t hit =
-                scene.occluded16(origin, sc.batch.data() + first, (1u << m) - 1u, tnear);
-            for (int b = 0; b < m; ++b) answer(first + size_t(b), ((hit >> b) & 1u) != 0);
-          }
+          sc.hits.resize(sc.batch.size());
+          scene.occludedStream(origin, sc.batch.data(), sc.batch.size(), tnear, sc.hits.data());
+          for (size_t b = 0; b < sc.batch.size(); ++b) answer(b, sc.hits[b] != 0);
           traced += int64_t(sc.batch.size());
         };
 
@@ -727,8 +726,8 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
   const int kPerSource = raysPerSource;
   const int cols = kPerSource >= 2 ? 2 : 1, rows = kPerSource / cols;
   const std::vector<SourceFrame> frames = sourceFrames(sources, envFromObject);
-  // Sources near each other in the sky traced one after another: a packet of rays then holds
-  // nearby directions, which Embree traverses faster.
+  // Sources near each other in the sky traced one after another: neighbouring rays of a point's
+  // stream then hold nearby directions.
   std::vector<glm::vec3> directions(sources.size());
   for (size_t i = 0; i < sources.size(); ++i) directions[i] = sources[i].direction;
   const std::vector<uint32_t> sourceOrder = spatialOrder(directions);
@@ -751,18 +750,13 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         const size_t v = size_t(vi);
         const glm::vec3 n = points.normals[v];
         const glm::vec3 origin = points.positions[v] + lift * n;
-        glm::vec3 batch[16];
-        size_t index[16];
-        int m = 0;
-        int64_t traced = 0;
+        // The point's rays, traced together as one stream at the end.
+        thread_local std::vector<glm::vec3> batch;
+        thread_local std::vector<uint32_t> index;
+        thread_local std::vector<uint8_t> hit;
+        batch.clear();
+        index.clear();
         float* seen = out.visible.data() + v * sources.size();
-        auto flush = [&] {
-          const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear);
-          for (int b = 0; b < m; ++b)
-            if (!((hit >> b) & 1u)) seen[index[b] / size_t(kPerSource)] += 1.0f / float(kPerSource);
-          traced += m;
-          m = 0;
-        };
         // Outside the bounding sphere, only directions within its cone can be blocked.
         const glm::vec3 toCentre = points.centre - points.positions[v];
         const float distance = glm::length(toCentre);
@@ -799,13 +793,15 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
               seen[i] += 1.0f / float(kPerSource);  // cannot meet the object
               continue;
             }
-            batch[m] = d;
-            index[m] = i * size_t(kPerSource) + size_t(k);
-            if (++m == 16) flush();
+            batch.push_back(d);
+            index.push_back(i);
           }
         }
-        if (m > 0) flush();
-        rays += traced;
+        hit.resize(batch.size());
+        scene.occludedStream(origin, batch.data(), batch.size(), tnear, hit.data());
+        for (size_t b = 0; b < batch.size(); ++b)
+          if (!hit[b]) seen[index[b]] += 1.0f / float(kPerSource);
+        rays += int64_t(batch.size());
       },
       256);
   out.rays = rays;

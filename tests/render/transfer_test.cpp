@@ -111,6 +111,39 @@ double snrDb(const std::vector<glm::vec3>& got, const std::vector<glm::dvec3>& r
   return 10.0 * std::log10(s / e);
 }
 
+TEST(EmbreeScene, AStreamOfRaysAnswersAsEachRayAlone) {
+  // The floor, its wall and a box in the air: from a point on the floor, directions all round
+  // the sphere (through the floor, grazing the wall, into the open) and distance limits that
+  // stop some rays before what they would meet.
+  Mesh m = floorAndWall(9);
+  addBox(m, {0.3f, 0.5f, -0.4f}, {0.7f, 0.9f, 0.4f});
+  const EmbreeScene scene(m.positions, m.indices);
+  const glm::vec3 origin(0.5f, 0.01f, 0.1f);
+  std::vector<glm::vec3> dirs;
+  for (int i = 0; i < 700; ++i) {
+    const float z = 1.0f - 2.0f * (float(i) + 0.5f) / 700.0f, phi = 2.39996323f * float(i);
+    const float r = std::sqrt(1.0f - z * z);
+    dirs.emplace_back(r * std::cos(phi), z, r * std::sin(phi));
+  }
+  for (const float tfar : {1e30f, 0.7f}) {
+    std::vector<uint8_t> stream(dirs.size(), 7);
+    scene.occludedStream(origin, dirs.data(), dirs.size(), 1e-4f, stream.data(), tfar);
+    int blocked = 0;
+    for (size_t i = 0; i < dirs.size(); ++i) {
+      ASSERT_EQ(stream[i] != 0, scene.occluded(origin, dirs[i], 1e-4f, tfar)) << i;
+      ASSERT_LE(stream[i], 1);
+      blocked += stream[i];
+    }
+    // Neither all nor none: the answers are not vacuous.
+    EXPECT_GT(blocked, 350);  // the floor hides the lower half
+    EXPECT_LT(blocked, 700);
+  }
+  // An empty stream writes nothing.
+  uint8_t untouched = 7;
+  scene.occludedStream(origin, dirs.data(), 0, 1e-4f, &untouched);
+  EXPECT_EQ(untouched, 7);
+}
+
 TEST(Transfer, ConvexOnlyForClosedConvexSolids) {
   Mesh box;
   addBox(box, {0, 0, 0}, {1, 2, 3});
