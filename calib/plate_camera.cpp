@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
+#include <string>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
@@ -10,6 +12,17 @@
 #include "core/error.h"
 
 namespace compose::calib {
+
+namespace {
+
+// A number as the user would type it ("0.5", not std::to_string's "0.500000").
+std::string shown(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", v);
+  return text;
+}
+
+}  // namespace
 
 bool PlateCamera::ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const {
   glm::dvec3 camDir;
@@ -32,14 +45,14 @@ bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
 void CameraOptions::validate() const {
   if (!(height > 0.0 && height <= 1e4)) {
     throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
-                     std::to_string(height));
+                     shown(height));
   }
   if (!(std::abs(pitchDegrees) < 89.0)) {
-    throw UsageError("--pitch must be within ±89 degrees, got " + std::to_string(pitchDegrees));
+    throw UsageError("--pitch must be within ±89 degrees, got " + shown(pitchDegrees));
   }
   if (focal35mm && !(*focal35mm > 0.0 && *focal35mm <= 1e4)) {
     throw UsageError("--focal35 must be a positive focal length in mm, got " +
-                     std::to_string(*focal35mm));
+                     shown(*focal35mm));
   }
 }
 
@@ -47,10 +60,10 @@ void Placement::validate() const {
   const glm::dvec2 p = imagePoint;
   if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
     throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " +
-                     std::to_string(p.x) + "," + std::to_string(p.y));
+                     shown(p.x) + "," + shown(p.y));
   }
   if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
-    throw UsageError("--scale must be in (0, 10], got " + std::to_string(heightFraction));
+    throw UsageError("--scale must be in (0, 10], got " + shown(heightFraction));
   }
   if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
 }
@@ -114,7 +127,7 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   if (!(dir.y < -1e-6)) {
     throw Error(
         "camera",
-        "--place " + std::to_string(p.x) + "," + std::to_string(p.y) +
+        "--place " + shown(p.x) + "," + shown(p.y) +
             " is at or above the horizon, so it does not see the ground; choose a lower point"
             " or pitch the camera down");
   }
