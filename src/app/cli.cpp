@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "cubemap/layouts.h"
 
 namespace compose::app {
 
@@ -131,6 +132,23 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
   std::string s;
   for (const auto& i : items) s += (s.empty() ? "" : separator) + i;
   return s;
+}
+
+cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
+                                              const std::string& faceNames) {
+  cubemap::WriteOptions write;
+  if (depth == "auto")
+    write.depth = cubemap::WriteOptions::Depth::Auto;
+  else if (depth == "half")
+    write.depth = cubemap::WriteOptions::Depth::Half;
+  else if (depth == "float")
+    write.depth = cubemap::WriteOptions::Depth::Float;
+  else
+    throw UsageError("--depth must be auto, half or float; got '" + depth + "'");
+  const auto naming = cubemap::parseFaceNaming(faceNames);
+  if (!naming) throw UsageError("--face-names must be one of " + join(cubemap::faceNamingNames()));
+  write.faceNaming = *naming;
+  return write;
 }
 
 }  // namespace compose::app

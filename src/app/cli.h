@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/progress.h"
+#include "cubemap/environment_io.h"
 
 namespace compose::app {
 
@@ -85,6 +86,11 @@ double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
 // "a,b,c" → numbers; throws UsageError naming `option`.
 std::vector<double> parseList(const std::string& text, const std::string& option);
+
+// How convert and stitch write an environment: --depth (auto, half or float) and --face-names
+// (layouts.h); throws UsageError for a value that is neither.
+cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
+                                              const std::string& faceNames);
 
 // Runs `check` (a parameter validation that throws compose::Error) and reports a failure as a
 // bad command line (UsageError, exit 2), so that bad values are refused before any file is read.

@@ -140,19 +140,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     if (o->size != 0 && (o->size < 8 || o->size > 8192)) throw UsageError("--size must be 8..8192");
     if (o->width < 0 || o->width % 2 != 0 || o->width > 65536)
       throw UsageError("--width must be an even number of texels up to 65536");
-    cubemap::WriteOptions write;
-    if (o->depth == "auto")
-      write.depth = cubemap::WriteOptions::Depth::Auto;
-    else if (o->depth == "half")
-      write.depth = cubemap::WriteOptions::Depth::Half;
-    else if (o->depth == "float")
-      write.depth = cubemap::WriteOptions::Depth::Float;
-    else
-      throw UsageError("--depth must be float, half or auto; got '" + o->depth + "'");
-    const auto naming = cubemap::parseFaceNaming(o->faceNames);
-    if (!naming)
-      throw UsageError("--face-names must be one of " + join(cubemap::faceNamingNames()));
-    write.faceNaming = *naming;
+    cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
     cubemap::StitchOptions options;
     options.faceSize = o->size > 0 ? o->size : 1024;
     options.refine = !o->noRefine;

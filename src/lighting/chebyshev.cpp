@@ -226,6 +226,40 @@ std::vector<double> ChebBase::truncationSnrDb() const {
   return out;
 }
 
+namespace {
+
+// The environment's mean radiance per cell (RGB, 3 values a cell): Σ L_t Ω_t / Σ Ω_t over the
+// texels whose centre lies in the cell, `cellOf(x, y)`. A cell finer than the map's texels may
+// hold no texel centre: it takes the radiance in the direction of its own centre, `centreOf(cell)`.
+template <class CellOf, class CentreOf>
+std::vector<double> meanRadianceByCell(const Environment& env, size_t cells, CellOf&& cellOf,
+                                       CentreOf&& centreOf) {
+  std::vector<double> lin(cells * 3, 0.0), area(cells, 0.0);
+  for (int y = 0; y < env.height(); ++y) {
+    const double omega = env.rowSolidAngle(y);
+    for (int x = 0; x < env.width(); ++x) {
+      const size_t idx = cellOf(x, y);
+      const glm::vec3 L = env.radiance(x, y);
+      double* cell = lin.data() + 3 * idx;
+      cell[0] += L.x * omega;
+      cell[1] += L.y * omega;
+      cell[2] += L.z * omega;
+      area[idx] += omega;
+    }
+  }
+  for (size_t idx = 0; idx < cells; ++idx) {
+    if (area[idx] > 0.0) {
+      for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
+    } else {
+      const glm::vec3 L = env.lookup(centreOf(idx));
+      lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
+    }
+  }
+  return lin;
+}
+
+}  // namespace
+
 // --- cheb-latlong -----------------------------------------------------------------------------
 
 ChebLatLongLighting::ChebLatLongLighting(ChebParams params) : ChebBase("cheb-latlong", params) {
@@ -238,35 +272,19 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
   // Lighting: L_in(i, j) = mean radiance over the cell, Σ L_t Ω_t / Σ Ω_t over the texels whose
   // centre lies in it. The solid angle and the cosine both go to the BRDF side, so a constant
   // environment has only a T_00 moment and the white furnace holds at every order.
-  std::vector<double> lin(size_t(s) * size_t(s) * 3, 0.0), area(size_t(s) * size_t(s), 0.0);
-  for (int y = 0; y < env.height(); ++y) {
-    const int i = std::min(s - 1, int((y + 0.5) * s / env.height()));
-    const double omega = env.rowSolidAngle(y);
-    for (int x = 0; x < env.width(); ++x) {
-      const int j = std::min(s - 1, int((x + 0.5) * s / env.width()));
-      const glm::vec3 L = env.radiance(x, y);
-      const size_t idx = size_t(i) * size_t(s) + size_t(j);
-      double* cell = lin.data() + 3 * idx;
-      cell[0] += L.x * omega;
-      cell[1] += L.y * omega;
-      cell[2] += L.z * omega;
-      area[idx] += omega;
-    }
-  }
-  // A cell finer than the map's texels may hold no texel centre: it takes the radiance in the
-  // direction of its own centre.
-  for (size_t idx = 0; idx < area.size(); ++idx) {
-    if (area[idx] > 0.0) {
-      for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
-    } else {
-      const int i = int(idx / size_t(s)), j = int(idx % size_t(s));
-      const double lat = latitudeOfRow(i + 0.5, s), lon = kPi * (1.0 - 2.0 * (j + 0.5) / s);
-      const glm::vec3 L =
-          env.lookup(glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)),
-                               float(std::cos(lon) * std::cos(lat))));
-      lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
-    }
-  }
+  const std::vector<double> lin = meanRadianceByCell(
+      env, size_t(s) * size_t(s),
+      [&](int x, int y) {
+        const int i = std::min(s - 1, int((y + 0.5) * s / env.height()));
+        const int j = std::min(s - 1, int((x + 0.5) * s / env.width()));
+        return size_t(i) * size_t(s) + size_t(j);
+      },
+      [&](size_t idx) {
+        const int i = int(idx / size_t(s)), j = int(idx % size_t(s));
+        const double lat = latitudeOfRow(i + 0.5, s), lon = kPi * (1.0 - 2.0 * (j + 0.5) / s);
+        return glm::vec3(float(std::sin(lon) * std::cos(lat)), float(std::sin(lat)),
+                         float(std::cos(lon) * std::cos(lat)));
+      });
   global_.assign(size_t(3 * k * k), 0.0f);
   rgbMoments(basis, basis, lin, k, global_.data());
 
@@ -354,37 +372,21 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
   const size_t faceTexels = size_t(s) * size_t(s);
   // Lighting: mean radiance over each cube texel, from the environment texels whose centre
   // direction falls in it (solid angle and cosine on the BRDF side, as for cheb-latlong).
-  std::vector<double> lin(kCubeFaces * faceTexels * 3, 0.0), area(kCubeFaces * faceTexels, 0.0);
-  for (int y = 0; y < env.height(); ++y) {
-    const double omega = env.rowSolidAngle(y);
-    for (int x = 0; x < env.width(); ++x) {
-      int face = 0;
-      double u = 0, v = 0;
-      cubeFaceCoordinates(env.direction(x, y), face, u, v);
-      const int i = std::clamp(int((v + 1.0) * 0.5 * s), 0, s - 1);  // row from v
-      const int j = std::clamp(int((u + 1.0) * 0.5 * s), 0, s - 1);  // column from u
-      const glm::vec3 L = env.radiance(x, y);
-      const size_t idx = size_t(face) * faceTexels + size_t(i) * size_t(s) + size_t(j);
-      double* cell = lin.data() + 3 * idx;
-      cell[0] += L.x * omega;
-      cell[1] += L.y * omega;
-      cell[2] += L.z * omega;
-      area[idx] += omega;
-    }
-  }
-  // A cube texel smaller than the environment's texels may receive no centre at all: it takes
-  // the radiance in its own direction instead.
-  for (size_t idx = 0; idx < area.size(); ++idx) {
-    if (area[idx] > 0.0) {
-      for (int c = 0; c < 3; ++c) lin[3 * idx + size_t(c)] /= area[idx];
-    } else {
-      const int f = int(idx / faceTexels), i = int((idx % faceTexels) / size_t(s)),
-                j = int(idx % size_t(s));
-      const glm::vec3 L =
-          env.lookup(cubeDirection(f, -1.0 + (2.0 * j + 1.0) / s, -1.0 + (2.0 * i + 1.0) / s));
-      lin[3 * idx] = L.x, lin[3 * idx + 1] = L.y, lin[3 * idx + 2] = L.z;
-    }
-  }
+  const std::vector<double> lin = meanRadianceByCell(
+      env, kCubeFaces * faceTexels,
+      [&](int x, int y) {
+        int face = 0;
+        double u = 0, v = 0;
+        cubeFaceCoordinates(env.direction(x, y), face, u, v);
+        const int i = std::clamp(int((v + 1.0) * 0.5 * s), 0, s - 1);  // row from v
+        const int j = std::clamp(int((u + 1.0) * 0.5 * s), 0, s - 1);  // column from u
+        return size_t(face) * faceTexels + size_t(i) * size_t(s) + size_t(j);
+      },
+      [&](size_t idx) {
+        const int f = int(idx / faceTexels), i = int((idx % faceTexels) / size_t(s)),
+                  j = int(idx % size_t(s));
+        return cubeDirection(f, -1.0 + (2.0 * j + 1.0) / s, -1.0 + (2.0 * i + 1.0) / s);
+      });
   const size_t kk = size_t(k) * size_t(k);
   global_.assign(kCubeFaces * 3 * kk, 0.0f);
   for (int f = 0; f < kCubeFaces; ++f) {
