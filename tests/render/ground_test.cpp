@@ -159,6 +159,24 @@ struct GroundShading {
     in.sourceVisibility = &seen;
     return shadeVertices(points, envFromObject, in);
   }
+
+  // The ground pass as the pipeline runs it: the grid's first points shaded, then its cells split
+  // a level at a time and the new points shaded. The ratio of the first points alone, their
+  // count, and the final ratio.
+  struct Passes {
+    Image first, last;
+    size_t firstPoints = 0;
+  };
+  Passes coarseToFine(GroundGrid& grid, const Shot& shot, const GroundSettings& settings) const {
+    Passes out;
+    shadeGroundPoints(grid, (*this)(grid.pending()));
+    out.first = groundRatio(grid);
+    out.firstPoints = grid.points.count();
+    while (refineGroundGrid(grid, scene, shot.worldFromObject, shot.camera, settings))
+      shadeGroundPoints(grid, (*this)(grid.pending()));
+    out.last = groundRatio(grid);
+    return out;
+  }
 };
 
 // The ratio at the ground point of every `step`-th pixel of the grid's rectangle that shows the
@@ -221,24 +239,20 @@ TEST(GroundShadow, SharpEdgesAreFollowedCoarseToFine) {
   ASSERT_GE(grid.stride, 8);
   ASSERT_EQ(grid.coarse, 2);
   ASSERT_GE(grid.fine, 1);
-  shadeGroundPoints(grid, shade(grid.pending()));
-  const Image first = groundRatio(grid);
-  const size_t firstPoints = grid.points.count();
-  while (refineGroundGrid(grid, scene, shot.worldFromObject, shot.camera, settings))
-    shadeGroundPoints(grid, shade(grid.pending()));
-  const Image last = groundRatio(grid);
+  const GroundShading::Passes passes = shade.coarseToFine(grid, shot, settings);
   for (int l = 0; l < grid.levels(); ++l) EXPECT_GT(grid.splitCount[size_t(l)], 0u) << l;
   // Far fewer points than the finest lattice holds.
   EXPECT_LT(grid.points.count(), grid.node.size() / 8);
 
   size_t pixels = 0;
-  const std::vector<double> err =
-      againstEachPixel(grid, shot.camera, shot.worldFromObject, shade, {&first, &last}, 3, pixels);
+  const std::vector<double> err = againstEachPixel(grid, shot.camera, shot.worldFromObject, shade,
+                                                   {&passes.first, &passes.last}, 3, pixels);
   ASSERT_GT(pixels, 5000u);
   std::printf(
       "%zu points first (every %d pixels), %zu in all (down to %.3g pixels): mean "
       "|ratio - per-pixel ratio| %.4f -> %.4f over %zu pixels\n",
-      firstPoints, grid.firstStride(), grid.points.count(), grid.unit, err[0], err[1], pixels);
+      passes.firstPoints, grid.firstStride(), grid.points.count(), grid.unit, err[0], err[1],
+      pixels);
   EXPECT_LT(err[1], 0.3 * err[0]);
   EXPECT_LT(err[1], 0.01);
 }
@@ -260,15 +274,11 @@ TEST(GroundShadow, AShadowBetweenTheFirstNodesIsFound) {
   settings.maxPoints = 6000;
   GroundGrid grid =
       groundGrid(post, shot.worldFromObject, shot.camera, lighting.split.sources, settings);
-  shadeGroundPoints(grid, shade(grid.pending()));
-  const Image first = groundRatio(grid);
-  while (refineGroundGrid(grid, scene, shot.worldFromObject, shot.camera, settings))
-    shadeGroundPoints(grid, shade(grid.pending()));
-  const Image last = groundRatio(grid);
+  const GroundShading::Passes passes = shade.coarseToFine(grid, shot, settings);
   // Over the pixels each pixel's own point puts in the post's shadow.
   size_t pixels = 0;
   const std::vector<double> err = againstEachPixel(grid, shot.camera, shot.worldFromObject, shade,
-                                                   {&first, &last}, 3, pixels, 0.5);
+                                                   {&passes.first, &passes.last}, 3, pixels, 0.5);
   ASSERT_GT(pixels, 100u);
   std::printf(
       "the post's shadow (%zu pixels; first nodes every %d pixels): mean |ratio - "
