@@ -61,21 +61,6 @@ fs::path outputBase(const ComposeJob& job) {
   return base;
 }
 
-// The proxy of the surroundings the job describes (distant when it describes none).
-lighting::CaptureProxy captureProxy(const ComposeJob& job) {
-  lighting::CaptureProxy proxy;
-  proxy.capturePoint = job.captureAt ? *job.captureAt : glm::dvec3(0.0, job.camera.height, 0.0);
-  if (job.room) {
-    proxy.shape = lighting::CaptureProxy::Shape::Box;
-    proxy.boxMin = glm::dvec3(-0.5 * job.room->x, 0.0, -0.5 * job.room->z);
-    proxy.boxMax = glm::dvec3(0.5 * job.room->x, job.room->y, 0.5 * job.room->z);
-  } else if (job.environmentRadius) {
-    proxy.shape = lighting::CaptureProxy::Shape::Sphere;
-    proxy.radius = *job.environmentRadius;
-  }
-  return proxy;
-}
-
 }  // namespace
 
 fs::path environmentPathFor(const ComposeJob& job) {
@@ -94,6 +79,20 @@ fs::path displayPathFor(const ComposeJob& job) {
   fs::path p = outputBase(job);
   p += (ext == ".png") ? ".png" : ".jpg";
   return p;
+}
+
+lighting::CaptureProxy captureProxy(const ComposeJob& job) {
+  lighting::CaptureProxy proxy;
+  proxy.capturePoint = job.captureAt ? *job.captureAt : glm::dvec3(0.0, job.camera.height, 0.0);
+  if (job.room) {
+    proxy.shape = lighting::CaptureProxy::Shape::Box;
+    proxy.boxMin = glm::dvec3(-0.5 * job.room->x, 0.0, -0.5 * job.room->z);
+    proxy.boxMax = glm::dvec3(0.5 * job.room->x, job.room->y, 0.5 * job.room->z);
+  } else if (job.environmentRadius) {
+    proxy.shape = lighting::CaptureProxy::Shape::Sphere;
+    proxy.radius = *job.environmentRadius;
+  }
+  return proxy;
 }
 
 void validate(const ComposeJob& job) {

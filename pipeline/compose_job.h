@@ -28,6 +28,7 @@
 #include "calib/plate_camera.h"
 #include "color/color.h"
 #include "core/progress.h"
+#include "lighting/capture_volume.h"
 #include "render/renderer.h"
 
 namespace compose::pipeline {
@@ -132,6 +133,10 @@ std::filesystem::path environmentPathFor(const ComposeJob& job);
 // Output paths for a job.
 std::filesystem::path exrPathFor(const ComposeJob& job);
 std::filesystem::path displayPathFor(const ComposeJob& job);
+
+// The proxy of the surroundings the job describes (--room, --env-radius, --capture-at; distant
+// when it describes none).
+lighting::CaptureProxy captureProxy(const ComposeJob& job);
 
 // Checks every option of the job without reading any file; throws compose::UsageError (exit
 // status 2) naming the option. runCompose() calls it first.

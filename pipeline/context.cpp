@@ -90,17 +90,7 @@ const render::EmbreeScene& Context::objectScene() {
 }
 
 lighting::CaptureProxy Context::captureProxy() const {
-  lighting::CaptureProxy proxy;
-  proxy.capturePoint = job.captureAt ? *job.captureAt : glm::dvec3(0.0, job.camera.height, 0.0);
-  if (job.room) {
-    proxy.shape = lighting::CaptureProxy::Shape::Box;
-    proxy.boxMin = glm::dvec3(-0.5 * job.room->x, 0.0, -0.5 * job.room->z);
-    proxy.boxMax = glm::dvec3(0.5 * job.room->x, job.room->y, 0.5 * job.room->z);
-  } else if (job.environmentRadius) {
-    proxy.shape = lighting::CaptureProxy::Shape::Sphere;
-    proxy.radius = *job.environmentRadius;
-  }
-  return proxy;
+  return pipeline::captureProxy(job);
 }
 
 }  // namespace compose::pipeline
