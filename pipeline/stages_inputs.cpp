@@ -242,16 +242,10 @@ class MergeStage final : public Stage {
 
   std::string run(Context& ctx) const override {
     const ingest::Capture& capture = *ctx.artefacts.capture;
-    std::vector<std::vector<ingest::LoadedImage>> photos;
-    size_t total = 0, done = 0;
+    const std::vector<std::vector<ingest::LoadedImage>> photos =
+        hdr::readCapturePhotos(capture, ctx.progress);
+    size_t total = 0;
     for (const auto& v : capture.views) total += v.shots.size();
-    for (const auto& v : capture.views) {
-      photos.emplace_back();
-      for (const auto& s : v.shots) {
-        photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
-        report(ctx.progress, "read", double(++done) / double(total));
-      }
-    }
     hdr::CaptureMergeOptions options;
     hdr::CaptureMergeResult merged =
         hdr::mergeCapture(capture, photos, options, ctx.colors, ctx.progress);

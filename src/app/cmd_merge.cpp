@@ -176,16 +176,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     }
     ingest::resolveExposures(capture);
     ProgressPrinter printer(globals);
-    std::vector<std::vector<ingest::LoadedImage>> photos;
-    size_t total = 0, done = 0;
-    for (const auto& v : capture.views) total += v.shots.size();
-    for (const auto& v : capture.views) {
-      photos.emplace_back();
-      for (const auto& s : v.shots) {
-        photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
-        printer("read", double(++done) / double(total));
-      }
-    }
+    std::vector<std::vector<ingest::LoadedImage>> photos =
+        hdr::readCapturePhotos(capture, printer.callback());
 
     const hdr::CaptureMergeResult result =
         hdr::mergeCapture(capture, photos, m, colors, printer.callback());

@@ -82,6 +82,21 @@ ResponseCurve curveFromColorSpace(const color::ColorConfig& colors, const std::s
   return curve;
 }
 
+std::vector<std::vector<ingest::LoadedImage>> readCapturePhotos(const ingest::Capture& capture,
+                                                                const Progress& progress) {
+  std::vector<std::vector<ingest::LoadedImage>> photos;
+  size_t total = 0, done = 0;
+  for (const auto& v : capture.views) total += v.shots.size();
+  for (const auto& v : capture.views) {
+    photos.emplace_back();
+    for (const auto& s : v.shots) {
+      photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
+      report(progress, "read", double(++done) / double(total));
+    }
+  }
+  return photos;
+}
+
 CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                                 const std::vector<std::vector<ingest::LoadedImage>>& photos,
                                 const CaptureMergeOptions& options,

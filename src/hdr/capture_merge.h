@@ -77,6 +77,11 @@ struct CaptureMergeResult {
   double recoverySeconds = 0.0;  // response recovery alone (0 when a stored curve was used)
 };
 
+// Every photo of the capture decoded as mergeCapture() wants it (8-bit photos as codes),
+// `photos[v][s]` for capture.views[v].shots[s]; progress is reported as "read".
+std::vector<std::vector<ingest::LoadedImage>> readCapturePhotos(const ingest::Capture& capture,
+                                                                const Progress& progress = {});
+
 // `photos[v][s]` is the decoded image of capture.views[v].shots[s] (ingest::readImage; 8-bit
 // photos preferably read as codes, ReadOptions::codesForEightBit), with every shot's exposure
 // resolved (ingest::resolveExposures).
