@@ -123,32 +123,16 @@ CubeMap CubeMap::fromFaces(const std::array<const Image*, kCubeFaces>& faces,
     for (int y = 0; y < n; ++y) {
       for (int x = 0; x < n; ++x) {
         const float* src = img.at(x, y);
-        float* dst = cube.texel(f, x, y);
-        bool negative = false;
-        for (int c = 0; c < 3; ++c) {
-          float v = src[img.channels == 1 ? 0 : c];
-          if (!std::isfinite(v)) {
-            throw Error("ingest",
-                        std::string(std::isnan(v) ? "NaN" : "infinite") +
-                            " radiance in cube face " + faceName(f) + " at texel (" +
-                            std::to_string(x) + ", " + std::to_string(y) + ")",
-                        where(f));
-          }
-          if (v > kMaxRadiance) {
-            throw Error("ingest",
-                        "radiance " + std::to_string(v) + " in cube face " + faceName(f) +
-                            " at texel (" + std::to_string(x) + ", " + std::to_string(y) +
-                            ") is beyond any light (more than 1e32): a damaged file?",
-                        where(f));
-          }
-          if (v < 0.0f) {
-            local.mostNegative = std::min(local.mostNegative, v);
-            negative = true;
-            v = 0.0f;
-          }
-          dst[c] = v;
+        const int step = img.channels == 1 ? 0 : 1;  // a grey face: its one channel thrice
+        const float rgb[3] = {src[0], src[step], src[2 * step]};
+        float bad = 0.0f;
+        if (!local.take(rgb, cube.texel(f, x, y), bad)) {
+          throw Error("ingest",
+                      SanitizeReport::badRadiance(bad, std::string(" in cube face ") + faceName(f) +
+                                                           " at texel (" + std::to_string(x) +
+                                                           ", " + std::to_string(y) + ")"),
+                      where(f));
         }
-        if (negative) ++local.negativeTexels;
       }
     }
   }

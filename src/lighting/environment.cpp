@@ -37,6 +37,32 @@ glm::vec3 Environment::direction(int x, int y) const {
   return {sinLon_[size_t(x)] * cl, sinLat_[size_t(y)], cosLon_[size_t(x)] * cl};
 }
 
+bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
+  bool negative = false;
+  for (int c = 0; c < 3; ++c) {
+    float v = src[c];
+    if (!std::isfinite(v) || v > kMaxRadiance) {
+      bad = v;
+      return false;
+    }
+    if (v < 0.0f) {
+      mostNegative = std::min(mostNegative, v);
+      negative = true;
+      v = 0.0f;
+    }
+    dst[c] = v;
+  }
+  if (negative) ++negativeTexels;
+  return true;
+}
+
+std::string SanitizeReport::badRadiance(float value, const std::string& where) {
+  if (std::isnan(value)) return "NaN radiance" + where;
+  if (std::isinf(value)) return "infinite radiance" + where;
+  return "radiance " + std::to_string(value) + where +
+         " is beyond any light (more than 1e32): a damaged file?";
+}
+
 Environment Environment::fromLatLong(const Image& image, const std::filesystem::path& file,
                                      SanitizeReport* report) {
   if (image.channels < 3) {
@@ -61,31 +87,13 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
     for (int x = 0; x < image.width; ++x) {
       const float* src = image.at(x, y);
       float* dst = env.texels_.data() + (size_t(y) * size_t(image.width) + size_t(x)) * 3;
-      bool negative = false;
-      for (int c = 0; c < 3; ++c) {
-        float v = src[c];
-        if (!std::isfinite(v)) {
-          throw Error("lighting",
-                      std::string(std::isnan(v) ? "NaN" : "infinite") + " radiance at texel (" +
-                          std::to_string(x) + ", " + std::to_string(y) + ")",
-                      file);
-        }
-        if (v > kMaxRadiance) {
-          throw Error("lighting",
-                      "radiance " + std::to_string(v) + " at texel (" + std::to_string(x) + ", " +
-                          std::to_string(y) +
-                          ") is beyond any light (more than 1e32): a damaged "
-                          "file?",
-                      file);
-        }
-        if (v < 0.0f) {
-          local.mostNegative = std::min(local.mostNegative, v);
-          negative = true;
-          v = 0.0f;
-        }
-        dst[c] = v;
+      float bad = 0.0f;
+      if (!local.take(src, dst, bad)) {
+        throw Error("lighting",
+                    SanitizeReport::badRadiance(
+                        bad, " at texel (" + std::to_string(x) + ", " + std::to_string(y) + ")"),
+                    file);
       }
-      if (negative) ++local.negativeTexels;
     }
   }
   if (report) *report = local;

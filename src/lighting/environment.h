@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -35,6 +36,13 @@ inline constexpr float kMaxRadiance = 1e32f;
 struct SanitizeReport {
   int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
   float mostNegative = 0.0f;
+
+  // Copies one texel's RGB `src` to `dst`, a negative value clamped to 0 and counted. False,
+  // with the value in `bad`, when a value cannot be radiance (NaN, infinite, beyond
+  // kMaxRadiance): the caller throws badRadiance() naming the texel.
+  bool take(const float src[3], float dst[3], float& bad);
+  // What is wrong with `value`, placing `where` (" at texel (3, 4)") in the sentence.
+  static std::string badRadiance(float value, const std::string& where);
 };
 
 class Environment {

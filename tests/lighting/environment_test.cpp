@@ -70,6 +70,12 @@ TEST(Environment, RejectsNonFiniteRadianceNamingTheTexel) {
   img.at(3, 2)[1] = std::numeric_limits<float>::infinity();
   COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"),
                        "infinite radiance at texel (3, 2)");
+  // Finite but beyond any light: damage, not radiance.
+  img.at(3, 2)[1] = 3e38f;
+  COMPOSE_EXPECT_ERROR(Environment::fromLatLong(img, "sky.exr"),
+                       "at texel (3, 2) is beyond any light (more than 1e32)");
+  img.at(3, 2)[1] = 1e30f;
+  EXPECT_NO_THROW(Environment::fromLatLong(img, "sky.exr"));
 }
 
 TEST(Environment, ClampsAndCountsNegativeRadiance) {
