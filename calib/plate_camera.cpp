@@ -51,16 +51,15 @@ void CameraOptions::validate() const {
     throw UsageError("--pitch must be within ±89 degrees, got " + shown(pitchDegrees));
   }
   if (focal35mm && !(*focal35mm > 0.0 && *focal35mm <= 1e4)) {
-    throw UsageError("--focal35 must be a positive focal length in mm, got " +
-                     shown(*focal35mm));
+    throw UsageError("--focal35 must be a positive focal length in mm, got " + shown(*focal35mm));
   }
 }
 
 void Placement::validate() const {
   const glm::dvec2 p = imagePoint;
   if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
-    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " +
-                     shown(p.x) + "," + shown(p.y));
+    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + shown(p.x) + "," +
+                     shown(p.y));
   }
   if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
     throw UsageError("--scale must be in (0, 10], got " + shown(heightFraction));
@@ -141,7 +140,8 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   COMPOSE_CHECK(meshSize > 0.0);
   const double scale = worldHeight / (meshHeight > 1e-6 * meshSize ? meshHeight : meshSize);
   const glm::dvec3 base(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
-  const double yaw = placement.yawDegrees * std::numbers::pi / 180.0;
+  // Reduced to a turn first: a finite angle of any size (1e308 degrees) is still an angle.
+  const double yaw = std::fmod(placement.yawDegrees, 360.0) * std::numbers::pi / 180.0;
   return glm::translate(glm::dmat4(1.0), ground) *
          glm::rotate(glm::dmat4(1.0), yaw, glm::dvec3(0, 1, 0)) *
          glm::scale(glm::dmat4(1.0), glm::dvec3(scale)) * glm::translate(glm::dmat4(1.0), -base);

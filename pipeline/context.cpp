@@ -63,7 +63,8 @@ const Geometry& Context::geometry() {
   Geometry g{calib::plateCamera(plate.image.width, plate.image.height, plate.info, options)};
   g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
                                            glm::dvec3(mesh.boundsMax));
-  const double envYaw = -job.environmentYawDegrees * std::numbers::pi / 180.0;
+  // Reduced to a turn first, as the object's yaw: any finite angle is an angle.
+  const double envYaw = -std::fmod(job.environmentYawDegrees, 360.0) * std::numbers::pi / 180.0;
   g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));
   // The rotation part of the placement (a yaw and a uniform scale), normalised in double before
   // it is rounded to float: the rotation then does not depend on the scale to the last bit, and

@@ -50,7 +50,8 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
   scene["compose"] = "scene";
   scene["version"] = kSceneVersion;
   nlohmann::ordered_json all = nlohmann::ordered_json::object();
-  const fs::path base = fs::absolute(folder).lexically_normal();
+  // A scene file named without a folder ("x.json") lies in the working folder.
+  const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : folder).lexically_normal();
   for (const auto& stage : stages()) {
     nlohmann::ordered_json values = nlohmann::ordered_json::object();
     for (const StageParameter& p : stage->parameters()) {

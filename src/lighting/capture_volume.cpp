@@ -25,7 +25,20 @@ constexpr double kInset = 1e-6;
 }  // namespace
 
 void CaptureProxy::validate() const {
-  if (!finite(capturePoint)) throw Error("lighting", "the capture point must be finite");
+  // Surroundings a thousand kilometres away show no parallax: they are distant. Beyond that the
+  // projections onto the proxy lose their precision (and at 1e308 overflow).
+  constexpr double kLargest = 1e6;
+  auto within = [](const glm::dvec3& v) {
+    return std::abs(v.x) <= kLargest && std::abs(v.y) <= kLargest && std::abs(v.z) <= kLargest;
+  };
+  if (!finite(capturePoint) || !within(capturePoint))
+    throw Error("lighting", "the capture point must be finite, within 1000 km of the camera");
+  if ((shape == Shape::Box && (!within(boxMin) || !within(boxMax))) ||
+      (shape == Shape::Sphere && radius > kLargest)) {
+    throw Error("lighting",
+                "surroundings more than 1000 km across: use a distant environment (no --room, "
+                "no --env-radius)");
+  }
   switch (shape) {
     case Shape::Distant:
       return;

@@ -264,6 +264,11 @@ TEST_F(StageCommands, BareFileNamesAreWrittenInTheWorkingFolder) {
   ASSERT_EQ(status, 0) << err;
   EXPECT_TRUE(fs::is_regular_file(work / "c.exr"));
   EXPECT_TRUE(fs::is_regular_file(work / "c.jpg"));
+  // A scene file too (its paths are then relative to the working folder).
+  std::tie(status, err) = shell(compose + " -q --plate " + quote(plate_) + " " + objectOptions() +
+                                " --save-scene s.json");
+  ASSERT_EQ(status, 0) << err;
+  EXPECT_TRUE(fs::is_regular_file(work / "s.json"));
 }
 
 TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
