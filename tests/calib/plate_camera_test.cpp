@@ -68,6 +68,25 @@ TEST(PlateCamera, PlacementStandsOnTheGroundPointAtTheRequestedSize) {
   EXPECT_NEAR((top.y - base.y) * cam.lens.fy / depth, 0.25 * 800, 1e-6);
 }
 
+// A yaw is an angle whatever its size: 1e308 degrees turns the object as 1e308 mod 360 does (it
+// overflowed to NaN before, and Embree aborted on the NaN rays).
+TEST(PlateCamera, AYawOfAnySizeIsReducedToATurn) {
+  const PlateCamera cam = plateCamera(1000, 800, {}, {});
+  Placement place;
+  place.imagePoint = {0.5, 0.8};
+  for (const double yaw : {400.0, 1e308, -1e300}) {
+    place.yawDegrees = yaw;
+    const glm::dmat4 huge = placeOnGround(cam, place, {-1, 0, -1}, {1, 2, 1});
+    place.yawDegrees = std::fmod(yaw, 360.0);
+    const glm::dmat4 reduced = placeOnGround(cam, place, {-1, 0, -1}, {1, 2, 1});
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) {
+        ASSERT_TRUE(std::isfinite(huge[c][r])) << yaw;
+        EXPECT_EQ(huge[c][r], reduced[c][r]) << yaw;
+      }
+  }
+}
+
 TEST(PlateCamera, RejectsImpossiblePlacements) {
   const PlateCamera cam = plateCamera(1000, 800, {}, {});
   Placement sky;

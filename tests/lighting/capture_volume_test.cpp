@@ -141,6 +141,17 @@ TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   CaptureProxy s;
   s.shape = CaptureProxy::Shape::Sphere;
   COMPOSE_EXPECT_ERROR(s.validate(), "radius must be a positive number");
+  // Beyond 1000 km the surroundings are distant (and at 1e308 the projections overflowed).
+  s.radius = 1e308;
+  COMPOSE_EXPECT_ERROR(s.validate(), "more than 1000 km across");
+  s.radius = 5e5;
+  EXPECT_NO_THROW(s.validate());
+  p = room();
+  p.boxMax.x = 1e308;
+  COMPOSE_EXPECT_ERROR(p.validate(), "more than 1000 km across");
+  p = room();
+  p.capturePoint.x = -1e300;
+  COMPOSE_EXPECT_ERROR(p.validate(), "within 1000 km");
 }
 
 }  // namespace
