@@ -466,9 +466,10 @@ class ColorStage final : public Stage {
         plate.codes = {};
         reason = "plate read as '" + space + "'" + (named ? " (--plate-space)" : "");
       } else {
-        if (!plate.codes.empty()) {
+        if (!plate.codes.empty())
           ingest::floatsFromCodes(plate);
-        }
+        else
+          ingest::requireFinite(plate.image, ctx.job.plate, "ingest", "the plate");
         if (plate.image.channels == 3) {
           linear = std::move(plate.image);
           plate.image.pixels = {};

@@ -227,7 +227,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         return colors.convertCodes(img.codes, img.image.width, img.image.height, channels, space,
                                    target);
       }
-      if (!img.hasPixels()) ingest::floatsFromCodes(img);
+      if (!img.hasPixels())
+        ingest::floatsFromCodes(img);
+      else
+        ingest::requireFinite(img.image, args[size_t(i)].file, "ingest", "the photo");
       Image rgb;
       if (img.image.channels == 3) {
         rgb = std::move(img.image);

@@ -444,6 +444,20 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   return readWithOiio(*reader, path, stage, options);
 }
 
+void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,
+                   const std::string& what) {
+  const auto bad = std::find_if(image.pixels.begin(), image.pixels.end(),
+                                [](float v) { return !std::isfinite(v); });
+  if (bad == image.pixels.end()) return;
+  const size_t at = size_t(bad - image.pixels.begin()) / size_t(std::max(1, image.channels));
+  const size_t width = size_t(std::max(1, image.width));
+  throw Error(stage,
+              std::string(std::isnan(*bad) ? "NaN" : "infinity") + " in " + what + " at pixel (" +
+                  std::to_string(at % width) + ", " + std::to_string(at / width) +
+                  "): its values must be finite",
+              file);
+}
+
 LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::path& name,
                                 const std::string& stage, const ReadOptions& options) {
   if (bytes.empty()) throw Error(stage, "image data is empty", name);

@@ -128,6 +128,12 @@ struct ReadOptions {
 LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
                       const ReadOptions& options = {});
 
+// Throws compose::Error (`stage`, naming `file`) when a value of `image` is NaN or infinite,
+// saying where: "NaN in the plate at pixel (12, 7)" for what = "the plate". Float files can hold
+// them; every stage downstream needs light, which is finite.
+void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,
+                   const std::string& what);
+
 // Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
 // stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).
 // Otherwise as readImage(); `bytes` need only live for the call.

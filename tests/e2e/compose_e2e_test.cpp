@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -419,6 +420,31 @@ TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
       << r.err;
   EXPECT_EQ(slurp(dir_ / "x.exr"), "previous result");
   EXPECT_FALSE(fs::exists(dir_ / "x.jpg"));
+}
+
+// A float plate with NaN or infinity: an error naming the pixel (they went through to the output,
+// and an infinite pixel made the automatic exposure +inf stops).
+TEST_F(ComposeErrors, NonFinitePlateIsRejectedAndOldOutputKept) {
+  const fs::path plate = dir_ / "plate-bad.exr";
+  compose::testing::writeText(dir_ / "x.exr", "previous result");
+  for (const float bad : {std::nanf(""), std::numeric_limits<float>::infinity()}) {
+    std::vector<float> px(64 * 48 * 3, 0.4f);
+    px[(7 * 64 + 12) * 3 + 1] = bad;
+    auto out = OIIO::ImageOutput::create(plate.string());
+    ASSERT_TRUE(out->open(plate.string(), OIIO::ImageSpec(64, 48, 3, OIIO::TypeDesc::FLOAT)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+    const auto r = runCompose(
+        base(plate.string(), (samples_ / "monkey.obj").string()) + " --shadows off", dir_.path());
+    EXPECT_EQ(r.status, 1);
+    EXPECT_NE(r.err.find(std::string("ingest: ") + (std::isnan(bad) ? "NaN" : "infinity") +
+                         " in the plate at pixel (12, 7): its values must be finite (" +
+                         plate.string() + ")"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(slurp(dir_ / "x.exr"), "previous result");
+    EXPECT_FALSE(fs::exists(dir_ / "x.jpg"));
+  }
 }
 
 }  // namespace

@@ -182,6 +182,27 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
   EXPECT_LT(rel[rel.size() / 2], 0.10);
 }
 
+// A float photo holding NaN is an error naming it and the pixel, and nothing is written (the NaN
+// used to spread into thousands of texels of the stitched map).
+TEST(StitchCommand, ANonFinitePhotoIsANamedError) {
+  TempDir dir;
+  Image photo(48, 32, 3);
+  std::fill(photo.pixels.begin(), photo.pixels.end(), 0.25f);
+  photo.at(9, 4)[2] = std::nanf("");
+  ingest::WriteOptions w;
+  w.depth = ingest::WriteOptions::Depth::Float;
+  const fs::path bad = dir / "bad.exr";
+  ingest::writeImage(bad, photo, w);
+  const RunResult r =
+      run("stitch --fov 100 --out " + q(dir / "env.exr") + " " + q(bad) + "@0,0", dir);
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("NaN in the photo at pixel (9, 4): its values must be finite (" +
+                       bad.string() + ")"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir / "env.exr"));
+}
+
 // JPEG photos, each exposed for itself as a camera in automatic mode would: the exposure gains
 // bring them to one scale, so the faces keep the brightness ratios of the scene.
 TEST(StitchCommand, AutoExposedJpegsAreBroughtToOneScale) {
