@@ -221,6 +221,7 @@ nlohmann::ordered_json lensToJson(const Lens& lens) {
 }
 
 Lens readLens(const fs::path& file) {
+  protectInput(file);
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
   requireRegularFile(file, "calib");

@@ -112,6 +112,7 @@ void applyScene(const nlohmann::json& scene, const fs::path& folder, ComposeJob&
 }
 
 ComposeJob loadScene(const fs::path& file) {
+  protectInput(file);
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) throw Error("scene", "scene file not found", file);
   std::ifstream in(file, std::ios::binary);

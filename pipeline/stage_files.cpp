@@ -114,6 +114,7 @@ void savePrecompute(const Context& ctx, const fs::path& file) {
 }
 
 StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
+  protectInput(file);
   auto entry = std::make_shared<StageCache>(StageCache::atFile(file, "precompute"));
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) throw Error("render", "lighting file not found", file);
@@ -232,6 +233,7 @@ void saveObjectLayer(Context& ctx, const fs::path& file) {
 }
 
 StageInput objectLayerInput(const fs::path& file) {
+  protectInput(file);
   StageInput in;
   in.stages = {"shadows", "ground", "render"};
   in.file = file;

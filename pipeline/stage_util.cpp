@@ -7,11 +7,13 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/output_files.h"
 #include "pipeline/stage.h"
 
 namespace compose::pipeline {
 
 void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage) {
+  protectInput(file);
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw Error(stage, "file not found", file);
   if (std::filesystem::is_directory(file, ec)) throw Error(stage, "is a folder, not a file", file);

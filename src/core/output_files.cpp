@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 
 #include "core/error.h"
 
@@ -61,7 +62,29 @@ class FolderLocks {
   std::vector<int> fds_;
 };
 
+std::mutex protectedMutex;
+std::vector<fs::path> protectedInputs;
+
+// The protected input that `destination` is, if any.
+std::optional<fs::path> protectedInputAt(const fs::path& destination) {
+  std::error_code ec;
+  if (!fs::exists(destination, ec)) return std::nullopt;  // a new file replaces nothing
+  const std::lock_guard<std::mutex> lock(protectedMutex);
+  for (const fs::path& input : protectedInputs) {
+    std::error_code same;
+    if (fs::equivalent(destination, input, same) && !same) return input;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
+
+void protectInput(const fs::path& file) {
+  if (file.empty()) return;
+  const std::lock_guard<std::mutex> lock(protectedMutex);
+  if (std::find(protectedInputs.begin(), protectedInputs.end(), file) == protectedInputs.end())
+    protectedInputs.push_back(file);
+}
 
 std::string withSystemReason(const std::string& what, int error) {
   return what + ": " + std::strerror(error);
@@ -86,6 +109,12 @@ fs::path OutputFiles::add(const fs::path& destination) {
   }
   if (!dir.empty() && !fs::is_directory(dir, ec))
     throw Error(stage_, "cannot write into the output folder: it is a file, not a folder", dir);
+  if (const std::optional<fs::path> input = protectedInputAt(destination)) {
+    throw Error(stage_,
+                "the output would replace an input (" + input->string() +
+                    "): choose another output path",
+                destination);
+  }
   Entry e{temporaryNear(destination, "partial"), destination};
   const std::lock_guard<std::mutex> lock(mutex_);
   entries_.push_back(e);

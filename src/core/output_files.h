@@ -45,6 +45,12 @@ class OutputFiles {
   bool committed_ = false;
 };
 
+// A file this process reads, which no output may replace: OutputFiles::add() refuses a
+// destination that is the same file (by any name or link) as a protected input. The image, mesh
+// and JSON readers protect what they read; a command protects its inputs before it writes
+// anything that precedes reading them (a scene file saved from the command line).
+void protectInput(const std::filesystem::path& file);
+
 // Writes `text` to `file` atomically (temporary + rename). Throws compose::Error (stage `stage`).
 void writeTextFile(const std::filesystem::path& file, const std::string& text,
                    const std::string& stage);

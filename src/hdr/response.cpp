@@ -651,6 +651,7 @@ void writeResponse(const fs::path& file, const ResponseCurve& curve) {
 }
 
 ResponseCurve readResponse(const fs::path& file) try {
+  protectInput(file);
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "response file not found", file);
   requireRegularFile(file, kStage);

@@ -210,6 +210,7 @@ Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
 }
 
 Capture readCaptureDescription(const fs::path& file) try {
+  protectInput(file);
   std::error_code ec;
   if (!fs::exists(file, ec)) throw Error(kStage, "capture description not found", file);
   requireRegularFile(file, kStage);

@@ -33,6 +33,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/pixel_util.h"
 
@@ -258,6 +259,7 @@ struct ExrReader::Impl {
 
 ExrReader::ExrReader(const fs::path& file, const std::string& stage)
     : impl_(std::make_unique<Impl>()) {
+  protectInput(file);
   impl_->file = file;
   impl_->stage = stage;
   useEveryCoreForExr();

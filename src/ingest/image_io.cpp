@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/exr_io.h"
 #include "ingest/jpeg_io.h"
@@ -427,6 +428,7 @@ void floatsFromCodes(LoadedImage& loaded) {
 
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   checkInputFile(path, stage);
+  protectInput(path);
   switch (kindOf(path, stage)) {
     case Kind::Exr:
       return readExr(path, stage);

@@ -751,6 +751,7 @@ int orientConsistently(Mesh& mesh) {
 
 Mesh loadMesh(const fs::path& path, const MeshOptions& options) {
   COMPOSE_CHECK(options.creaseDegrees >= 0.0 && options.creaseDegrees <= 180.0);
+  protectInput(path);
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error("mesh", "file not found", path);
   if (fs::is_directory(path, ec)) throw Error("mesh", "is a folder, expected a mesh file", path);

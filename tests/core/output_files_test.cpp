@@ -40,6 +40,27 @@ TEST(OutputFiles, CommitMovesEveryFileIntoPlace) {
   EXPECT_EQ(fileCount(dir.path()), 2u) << "no temporaries or backups left";
 }
 
+// An output that would replace a file this process read is refused, by any name of that file
+// (a plate written over by its own composite was lost).
+TEST(OutputFiles, AnInputIsNeverReplaced) {
+  TempDir dir;
+  writeText(dir / "plate.jpg", "the photo");
+  fs::create_hard_link(dir / "plate.jpg", dir / "link.jpg");
+  protectInput(dir / "plate.jpg");
+  for (const fs::path& name : {dir / "plate.jpg", dir / "." / "link.jpg"}) {
+    OutputFiles out;
+    COMPOSE_EXPECT_ERROR(out.add(name), "the output would replace an input");
+  }
+  EXPECT_EQ(slurp(dir / "plate.jpg"), "the photo");
+  // Other files, and new ones, are written as before.
+  writeText(dir / "other.jpg", "old");
+  OutputFiles out;
+  writeText(out.add(dir / "other.jpg"), "new");
+  writeText(out.add(dir / "new.jpg"), "new");
+  out.commit();
+  EXPECT_EQ(slurp(dir / "other.jpg"), "new");
+}
+
 TEST(OutputFiles, AFailedMoveRestoresThePreviousFiles) {
   TempDir dir;
   writeText(dir / "a.exr", "old a");
