@@ -7,6 +7,7 @@
 #include "app/compose_options.h"
 #include "color/color.h"
 #include "core/error.h"
+#include "core/output_files.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/scene.h"
@@ -235,6 +236,10 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     o->apply(app);
     if (!saveScene->empty()) {
       pipeline::validate(o->job);
+      // The scene is written before any input is read: it must not replace one of them.
+      for (const std::filesystem::path& input : {o->job.plate, o->job.object, o->job.environment,
+                                                 o->job.holdout, o->job.lensFile, o->job.poseFile})
+        protectInput(input);
       pipeline::saveScene(o->job, *saveScene);
       std::printf("%s\n", saveScene->c_str());
       return 0;
