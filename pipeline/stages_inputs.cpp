@@ -524,9 +524,10 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
                            const std::string& option, const color::ColorConfig& colors) {
   const std::string working = colors.workingSpace();
   if (!explicitSpace.empty()) {
-    image.colorSpace = colors.resolve(explicitSpace, option);
-    colors.convert(image, working);
-    return "'" + image.colorSpace + "' (" + option + ")";
+    const std::string space = colors.resolve(explicitSpace, option);
+    image.colorSpace = space;
+    colors.convert(image, working);  // the image's space is then the working space
+    return "'" + space + "' (" + option + ")";
   }
   if (info.chromaticities) {
     const std::string named = colors.spaceWithChromaticities(*info.chromaticities);

@@ -164,6 +164,20 @@ TEST_F(PhotoStages, ACameraRawFileIsReadWithItsExifAndDevelopedToLinearLight) {
   EXPECT_EQ(exr.info.fileColorSpace, "ACEScg");
 }
 
+// `color --from` says which space the input was read as (it named the working space instead).
+TEST(ColorCommand, SaysTheSpaceGivenWithFrom) {
+  TempDir dir;
+  Image img(8, 6, 3);
+  std::fill(img.pixels.begin(), img.pixels.end(), 0.5f);
+  ingest::writeImage(dir / "in.png", img, {});
+  const CommandRun c =
+      compose("color " + q(dir / "in.png") + " --from \"sRGB - Texture\" --to Raw --out " +
+                  q(dir / "out.exr"),
+              dir);
+  ASSERT_EQ(c.status, 0) << c.err;
+  EXPECT_NE(c.err.find("as 'sRGB - Texture' (--from), wrote 'Raw'"), std::string::npos) << c.err;
+}
+
 TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
   makeCapture();
   // Brackets of different sizes.
