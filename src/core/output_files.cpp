@@ -110,10 +110,10 @@ fs::path OutputFiles::add(const fs::path& destination) {
   if (!dir.empty() && !fs::is_directory(dir, ec))
     throw Error(stage_, "cannot write into the output folder: it is a file, not a folder", dir);
   if (const std::optional<fs::path> input = protectedInputAt(destination)) {
-    throw Error(stage_,
-                "the output would replace an input (" + input->string() +
-                    "): choose another output path",
-                destination);
+    throw Error(
+        stage_,
+        "the output would replace an input (" + input->string() + "): choose another output path",
+        destination);
   }
   Entry e{temporaryNear(destination, "partial"), destination};
   const std::lock_guard<std::mutex> lock(mutex_);
