@@ -86,6 +86,25 @@ void protectInput(const fs::path& file) {
     protectedInputs.push_back(file);
 }
 
+void forgetProtectedInputs() {
+  const std::lock_guard<std::mutex> lock(protectedMutex);
+  protectedInputs.clear();
+}
+
+std::string nameTheDestination(std::string text, const fs::path& temporary,
+                               const fs::path& destination) {
+  // The whole path first, then the bare name (a message may quote either).
+  const std::pair<std::string, std::string> names[] = {
+      {temporary.string(), destination.string()},
+      {temporary.filename().string(), destination.filename().string()}};
+  for (const auto& [from, to] : names) {
+    if (from.empty()) continue;
+    for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
+      text.replace(at, from.size(), to);
+  }
+  return text;
+}
+
 std::string withSystemReason(const std::string& what, int error) {
   return what + ": " + std::strerror(error);
 }

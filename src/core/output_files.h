@@ -51,9 +51,18 @@ class OutputFiles {
 // anything that precedes reading them (a scene file saved from the command line).
 void protectInput(const std::filesystem::path& file);
 
+// Forgets every protected input: for a process that runs one job after another (a fuzz target
+// writes a file, reads it, and writes it again for the next input).
+void forgetProtectedInputs();
+
 // Writes `text` to `file` atomically (temporary + rename). Throws compose::Error (stage `stage`).
 void writeTextFile(const std::filesystem::path& file, const std::string& text,
                    const std::string& stage);
+
+// `text` (a library's error message about writing `temporary`) with the temporary's path and
+// name replaced by those of `destination`, the file the user asked for: the temporary is ours.
+std::string nameTheDestination(std::string text, const std::filesystem::path& temporary,
+                               const std::filesystem::path& destination);
 
 // "<what>: <strerror(errno)>" for error messages that keep the operating system's reason.
 std::string withSystemReason(const std::string& what, int error);

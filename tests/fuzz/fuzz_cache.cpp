@@ -10,6 +10,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/float_cache.h"
+#include "core/output_files.h"
 #include "core/params.h"
 #include "fuzz_util.h"
 #include "lighting/lighting.h"
@@ -38,6 +39,7 @@ void checkIrradiance(const lighting::DiffuseLighting& basis) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  forgetProtectedInputs();  // each input is a job of its own
   if (size == 0) return 0;
   const std::filesystem::path folder = fuzz::scratch() / "cache";
   const lighting::LightingCache lightingCache(folder / "lighting");

@@ -5,6 +5,7 @@
 // Input: the bytes of a file. The JPEG seeds are small real JPEGs with EXIF (corpus/image).
 #include <span>
 
+#include "core/output_files.h"
 #include "fuzz_util.h"
 #include "ingest/exif.h"
 #include "ingest/jpeg_io.h"
@@ -12,6 +13,7 @@
 using namespace compose;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  forgetProtectedInputs();  // each input is a job of its own
   const std::span<const unsigned char> bytes(data, size);
   for (const ingest::ImageAttribute& a : ingest::exif::decode(bytes)) {
     FUZZ_CHECK(!a.name.empty());

@@ -8,6 +8,7 @@
 
 #include "calib/chessboard.h"
 #include "calib/lens.h"
+#include "core/output_files.h"
 #include "fuzz_util.h"
 #include "hdr/response.h"
 #include "ingest/capture.h"
@@ -26,6 +27,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  forgetProtectedInputs();  // each input is a job of its own
   const std::string kind = COMPOSE_FUZZ_JSON;
   const auto file = fuzz::writeInput(kind + ".json", data, size);
   try {

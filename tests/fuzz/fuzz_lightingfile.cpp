@@ -11,6 +11,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/output_files.h"
 #include "fuzz_util.h"
 #include "ingest/image_io.h"
 #include "lighting/lighting.h"
@@ -51,6 +52,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  forgetProtectedInputs();  // each input is a job of its own
   if (size < 1) return 0;
   const nlohmann::json meta = nlohmann::json::parse(data + 1, data + size, nullptr, false);
   if (meta.is_discarded()) return 0;  // not JSON: the checksum would have refused it

@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/limits.h"
+#include "core/output_files.h"
 #include "fuzz_util.h"
 #include "render/mesh.h"
 
@@ -22,6 +23,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  forgetProtectedInputs();  // each input is a job of its own
   const auto file = fuzz::writeInput("input" COMPOSE_FUZZ_MESH_EXT, data, size);
   try {
     const render::Mesh mesh = render::loadMesh(file);
