@@ -111,6 +111,12 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
   board.validate();
   params.validate();
   if (photos.empty()) throw Error(kStage, "no photos to calibrate from");
+  if (int(photos.size()) < params.minPhotos) {
+    throw Error(kStage, std::to_string(photos.size()) + " photo" +
+                            (photos.size() == 1 ? " was" : "s were") +
+                            " given, and the calibration asks for at least " +
+                            std::to_string(params.minPhotos) + " with the board (--min-photos)");
+  }
   const Image& first = *photos.front().image;
   for (const CalibrationPhoto& p : photos) {
     if (p.image->width != first.width || p.image->height != first.height) {
@@ -145,8 +151,8 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
                   "); check --board: count the inner corners"
             : "a " + board.name() + " chessboard was found in only " +
                   std::to_string(out.used.size()) + " of " + std::to_string(photos.size()) +
-                  " photos; at least " + std::to_string(params.minPhotos) +
-                  " are needed (not found in: " + names + ")";
+                  " photos; at least " + std::to_string(params.minPhotos) + " are needed" +
+                  (names.empty() ? std::string() : " (not found in: " + names + ")");
     throw Error(kStage, what, photos.front().file);
   }
   const std::vector<std::vector<cv::Point3f>> objectPoints(imagePoints.size(), boardPoints(board));

@@ -50,8 +50,10 @@ void CameraOptions::validate() const {
   if (!(std::abs(pitchDegrees) < 89.0)) {
     throw UsageError("--pitch must be within ±89 degrees, got " + shown(pitchDegrees));
   }
-  if (focal35mm && !(*focal35mm > 0.0 && *focal35mm <= 1e4)) {
-    throw UsageError("--focal35 must be a positive focal length in mm, got " + shown(*focal35mm));
+  // Below 1 mm a rectilinear view is wider than 172 degrees: no camera's plate.
+  if (focal35mm && !(*focal35mm >= 1.0 && *focal35mm <= 1e4)) {
+    throw UsageError("--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm, got " +
+                     shown(*focal35mm));
   }
 }
 

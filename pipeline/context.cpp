@@ -53,14 +53,31 @@ const Geometry& Context::geometry() {
   const ingest::LoadedImage& plate = *artefacts.plate;
   const MeshSummary& mesh = *meshSummary;
   calib::CameraOptions options = job.camera;
-  if (!job.lensFile.empty()) options.lens = calib::readLens(job.lensFile);
+  std::filesystem::path lensFrom;  // the file the lens comes from, for errors about it
+  if (!job.lensFile.empty()) {
+    options.lens = calib::readLens(job.lensFile);
+    lensFrom = job.lensFile;
+  }
   if (!job.poseFile.empty()) {
     // The board's plane is the ground; the pose's lens is the plate's unless --calib says else.
     const calib::PlatePose pose = calib::readPose(job.poseFile);
-    if (!options.lens) options.lens = pose.lens;
+    if (!options.lens) {
+      options.lens = pose.lens;
+      lensFrom = job.poseFile;
+    }
     options.worldFromCamera = pose.worldFromCamera;
   }
-  Geometry g{calib::plateCamera(plate.image.width, plate.image.height, plate.info, options)};
+  const calib::PlateCamera camera = [&] {
+    try {
+      return calib::plateCamera(plate.image.width, plate.image.height, plate.info, options);
+    } catch (const UsageError&) {
+      throw;
+    } catch (const Error& e) {
+      if (!e.file().empty() || lensFrom.empty()) throw;
+      throw Error(e.stage(), e.what(), lensFrom);  // a plate that does not fit the lens
+    }
+  }();
+  Geometry g{camera};
   g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
                                            glm::dvec3(mesh.boundsMax));
   // Reduced to a turn first, as the object's yaw: any finite angle is an angle.

@@ -92,6 +92,10 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
     plan.transfer.shBands = 0;
     plan.transfer.order = plan.method == render::ShadowMethod::Chebyshev ? plan.lightingOrder : 1;
   }
+  if (plan.transfer.grid < 2 || plan.transfer.grid > 64) {
+    throw UsageError("grid (s) must be in 2..64, got " + std::to_string(plan.transfer.grid),
+                     "shadows");
+  }
   if (plan.method == render::ShadowMethod::Chebyshev &&
       (plan.lightingOrder < 1 || plan.lightingOrder > std::min(plan.transfer.grid, 32))) {
     throw UsageError(

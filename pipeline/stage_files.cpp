@@ -116,8 +116,7 @@ void savePrecompute(const Context& ctx, const fs::path& file) {
 StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   protectInput(file);
   auto entry = std::make_shared<StageCache>(StageCache::atFile(file, "precompute"));
-  std::error_code ec;
-  if (!fs::is_regular_file(file, ec)) throw Error("render", "lighting file not found", file);
+  requireInputFile(file, "render", "lighting file");
   if (!entry->open())
     throw Error("render",
                 "not a lighting file of compose precompute (or a damaged one" +
@@ -238,8 +237,7 @@ StageInput objectLayerInput(const fs::path& file) {
   in.stages = {"shadows", "ground", "render"};
   in.file = file;
   in.load = [file](Context& ctx) {
-    std::error_code ec;
-    if (!fs::is_regular_file(file, ec)) throw Error("composite", "object layer not found", file);
+    requireInputFile(file, "composite", "object layer");
     const ingest::ExrReader input = [&] {
       if (!ingest::hasExrMagic(file))
         throw Error("composite", "cannot read the object layer: not an OpenEXR file", file);

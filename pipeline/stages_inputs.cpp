@@ -145,6 +145,21 @@ class IngestStage final : public Stage {
       ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest", {.codesForEightBit = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
+      if (!ctx.job.holdout.empty()) {
+        // The holdout is read at the end, by the composite: its header is checked now, so that
+        // a missing mask or one of the wrong size stops the job before the long work.
+        const ingest::CaptureInfo mask = ingest::readCaptureInfo(ctx.job.holdout, "composite");
+        const bool turned = mask.orientation >= 5;  // EXIF orientations 5-8 swap the sides
+        const int w = turned ? mask.fileHeight : mask.fileWidth,
+                  h = turned ? mask.fileWidth : mask.fileHeight;
+        if (w != p.image.width || h != p.image.height) {
+          throw Error("composite",
+                      format("the holdout mask is %dx%d, the plate %dx%d: it must be the plate's "
+                             "size",
+                             w, h, p.image.width, p.image.height),
+                      ctx.job.holdout);
+        }
+      }
     }
     if (ctx.meshSummary) {
       const size_t triangles = ctx.meshSummary->triangles;
@@ -465,6 +480,12 @@ class ColorStage final : public Stage {
                                          plate.image.channels, space, working);
         plate.codes = {};
         reason = "plate read as '" + space + "'" + (named ? " (--plate-space)" : "");
+        if (!named && !plate.info.fileColorSpace.empty() &&
+            !ctx.colors.has(plate.info.fileColorSpace)) {
+          reason += " (the file says '" + plate.info.fileColorSpace +
+                    "', which the colour config does not know; give --plate-space to say which "
+                    "it is)";
+        }
       } else {
         if (!plate.codes.empty())
           ingest::floatsFromCodes(plate);
@@ -542,6 +563,11 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
   image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
   const std::string read = image.colorSpace;
   colors.convert(image, working);
+  if (!info.fileColorSpace.empty() && !colors.has(info.fileColorSpace)) {
+    // The header names a space the config does not have: say what was assumed instead.
+    return "'" + read + "' (the file says '" + info.fileColorSpace +
+           "', which the colour config does not know; give " + option + " to say which it is)";
+  }
   return "'" + read + "'";
 }
 

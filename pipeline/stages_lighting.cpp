@@ -267,9 +267,20 @@ class PrecomputeStage final : public Stage {
         *ctx.artefacts.environment, ctx.environmentInput.path, &sanitized);
     ctx.artefacts.environment.reset();  // nothing after this stage reads the pixels
     if (sanitized.negativeTexels > 0) {
-      ctx.note(std::to_string(sanitized.negativeTexels) +
-               " environment texels had negative values (as low as " +
-               std::to_string(sanitized.mostNegative) + "): clamped to 0");
+      ctx.note(format("%lld environment texel%s had negative values (as low as %g): clamped to 0",
+                      static_cast<long long>(sanitized.negativeTexels),
+                      sanitized.negativeTexels == 1 ? "" : "s", double(sanitized.mostNegative)));
+    }
+    // An environment without light lights nothing: the object would render black and the auto
+    // exposure would have nothing to match.
+    const std::vector<float>& texels = environment.texels();
+    if (std::none_of(texels.begin(), texels.end(), [](float v) { return v > 0.0f; })) {
+      throw Error(
+          "lighting",
+          std::string("the environment holds no light: every texel is 0") +
+              (sanitized.negativeTexels > 0 ? " once its negative values are clamped" : "") +
+              "; nothing would light the object",
+          ctx.environmentInput.path);
     }
     if (const lighting::CaptureProxy proxy = ctx.captureProxy();
         proxy.shape != lighting::CaptureProxy::Shape::Distant) {

@@ -134,6 +134,12 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
   return s;
 }
 
+std::string shownNumber(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", value);
+  return text;
+}
+
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
                                               const std::string& faceNames) {
   cubemap::WriteOptions write;

@@ -25,6 +25,7 @@ struct CalibOptions {
   std::string poseBoard = "9x6";
   double square = 0.0;
   double focal35 = 0.0;
+  CLI::Option *squareOption = nullptr, *focal35Option = nullptr;
 };
 
 }  // namespace
@@ -52,11 +53,13 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
       "pose", "The plate camera's pose from a chessboard lying in the scene, as a pose file");
   pose->add_option("plate", o->plate, "The plate photo")->required();
   pose->add_option("--board", o->poseBoard, "Inner corners, columns x rows")->capture_default_str();
-  pose->add_option("--square", o->square,
-                   "Side of one square, metres (the pose file's unit) [default: 1 = squares]");
+  o->squareOption =
+      pose->add_option("--square", o->square,
+                       "Side of one square, metres (the pose file's unit) [default: 1 = squares]");
   pose->add_option("--lens", o->lensFile, "Lens file of the plate's camera (compose calib lens)");
-  pose->add_option("--focal35", o->focal35,
-                   "Without --lens: 35 mm equivalent focal length [default: EXIF, else 50]");
+  o->focal35Option =
+      pose->add_option("--focal35", o->focal35,
+                       "Without --lens: 35 mm equivalent focal length [default: EXIF, else 50]");
   pose->add_option("--out", o->poseOut, "Pose file (JSON)")->required();
 
   return [o, lens, &globals]() -> int {
@@ -112,18 +115,28 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
     }
 
     // pose
+    // Zero is a value given, not the default: it is refused like any other size that is not one.
+    const bool squareGiven = o->squareOption->count() > 0,
+               focal35Given = o->focal35Option->count() > 0;
     calib::Board board;
-    asUsage([&] {
-      board = calib::Board::parse(o->poseBoard);
-      if (o->square != 0.0) board.square = o->square;
-      board.validate();
-    });
-    if (!o->lensFile.empty() && o->focal35 != 0.0)
+    asUsage([&] { board = calib::Board::parse(o->poseBoard); });
+    if (squareGiven) {
+      if (!(o->square > 0.0 && o->square < 1000.0)) {
+        throw UsageError(
+            "--square must be the side of one square in metres, more than 0 and "
+            "less than 1000; got " +
+            shownNumber(o->square));
+      }
+      board.square = o->square;
+    }
+    asUsage([&] { board.validate(); });
+    if (!o->lensFile.empty() && focal35Given)
       throw UsageError("give either --lens or --focal35, not both");
-    if (o->focal35 != 0.0 && !(o->focal35 > 0.0 && std::isfinite(o->focal35)))
-      throw UsageError("--focal35 must be a positive number of millimetres");
+    calib::CameraOptions camera;
+    if (focal35Given) camera.focal35mm = o->focal35;
+    camera.validate();
     std::vector<std::string> notes;
-    if (o->square == 0.0)
+    if (!squareGiven)
       notes.push_back("no --square: lengths in the pose file are in chessboard squares");
     const ingest::LoadedImage plate = ingest::readImage(o->plate, "calib");
     calib::Lens lensModel;
@@ -131,8 +144,6 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
       lensModel = calib::readLens(o->lensFile);
     } else {
       // A pinhole from the 35 mm equivalent focal length, as the plate camera uses.
-      calib::CameraOptions camera;
-      if (o->focal35 != 0.0) camera.focal35mm = o->focal35;
       const calib::PlateCamera pin =
           calib::plateCamera(plate.image.width, plate.image.height, plate.info, camera);
       lensModel = pin.lens;

@@ -6,6 +6,7 @@
 #include "app/cli.h"
 #include "color/color.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/mirror_ball.h"
@@ -18,8 +19,9 @@ namespace {
 struct ConvertOptions {
   std::vector<std::string> inputs;
   std::string to, from, out, depth = "float", faceNames = "pxnx", photoSpace, outSpace;
-  int size = 0, width = 0;
+  int size = 0, width = 0;  // 0: not given
   double blindSpot = 10.0;
+  CLI::Option *sizeOption = nullptr, *widthOption = nullptr, *blindSpotOption = nullptr;
 };
 
 std::string fraction(double f) {
@@ -64,10 +66,10 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--from,--layout", o->from,
                  "Input layout when it cannot be detected: latlong, cube, hcross, vcross, faces, "
                  "mirrorball");
-  cmd.add_option("--size", o->size,
-                 "Cube face size in texels [default: lat-long width / 4, or as read]");
-  cmd.add_option("--width", o->width,
-                 "Lat-long width in texels, even [default: 4 x face size, or as read]");
+  o->sizeOption = cmd.add_option(
+      "--size", o->size, "Cube face size in texels [default: lat-long width / 4, or as read]");
+  o->widthOption = cmd.add_option(
+      "--width", o->width, "Lat-long width in texels, even [default: 4 x face size, or as read]");
   cmd.add_option("--depth", o->depth,
                  "EXR sample type: float, half, or auto (half unless values exceed its range)")
       ->capture_default_str();
@@ -80,10 +82,12 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--out-space", o->outSpace,
                  "Mirror ball: colour space of the result [default: what the config's file rules "
                  "say for --out]");
-  cmd.add_option("--blind-spot", o->blindSpot,
-                 "Mirror ball: degrees around the direction behind the ball that are filled from "
-                 "their surroundings instead of read")
-      ->capture_default_str();
+  o->blindSpotOption =
+      cmd.add_option(
+             "--blind-spot", o->blindSpot,
+             "Mirror ball: degrees around the direction behind the ball that are filled from "
+             "their surroundings instead of read")
+          ->capture_default_str();
 
   return [o, &globals]() -> int {
     using cubemap::Layout;
@@ -101,15 +105,44 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                          o->from + "'");
       }
     }
-    if (o->size < 0 || o->size > 16384) throw UsageError("--size must be 1..16384 texels");
-    if (o->width < 0 || o->width > 65536 || o->width % 2 != 0)
-      throw UsageError("--width must be an even number of texels up to 65536");
+    const bool sizeGiven = o->sizeOption->count() > 0, widthGiven = o->widthOption->count() > 0;
+    if (sizeGiven && (o->size < 1 || o->size > 16384))
+      throw UsageError("--size must be 1..16384 texels; got " + std::to_string(o->size));
+    if (widthGiven && (o->width < 2 || o->width > 65536 || o->width % 2 != 0)) {
+      throw UsageError("--width must be an even number of texels, 2..65536; got " +
+                       std::to_string(o->width));
+    }
+    // The size asked for is held to the pixel limit like an input's (a 40000-wide lat-long is
+    // 800 megapixels, 13 GB of float RGBA with its working copies).
+    const int64_t limit = resourceLimits().maxPixels;
+    const auto tooLarge = [&](const std::string& option, int value, int64_t pixels) {
+      return UsageError(option + " " + std::to_string(value) + " makes a map of " +
+                        std::to_string((pixels + 500000) / 1000000) +
+                        " megapixels, more than the limit of " + std::to_string(limit / 1000000) +
+                        " (raise it with --max-pixels)");
+    };
+    if (sizeGiven && 6 * int64_t(o->size) * o->size > limit)
+      throw tooLarge("--size", o->size, 6 * int64_t(o->size) * o->size);
+    if (widthGiven && int64_t(o->width) * (o->width / 2) > limit)
+      throw tooLarge("--width", o->width, int64_t(o->width) * (o->width / 2));
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
     cubemap::MirrorBallOptions ball;
     ball.blindSpotDegrees = o->blindSpot;
     ball.validate();
     if (from == Layout::MirrorBall && o->inputs.size() != 1)
       throw UsageError("--from mirrorball takes one photo");
+    if (from != Layout::MirrorBall) {
+      // Options of the unwrapping only: given for another layout they would be ignored.
+      const char* given = !o->photoSpace.empty()            ? "--photo-space"
+                          : !o->outSpace.empty()            ? "--out-space"
+                          : o->blindSpotOption->count() > 0 ? "--blind-spot"
+                                                            : nullptr;
+      if (given) {
+        throw UsageError(std::string(given) +
+                         " applies to a mirror-ball photo only (with --from mirrorball); an "
+                         "environment map keeps the colour space it was written in");
+      }
+    }
 
     ProgressPrinter printer(globals);
     std::vector<std::string> notes;

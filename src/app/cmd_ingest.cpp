@@ -59,7 +59,11 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                   "EXIF grouping: a pause longer than this (seconds) "
                   "starts a new view")
       ->capture_default_str();
-  command.add_option("--brackets", o->brackets, "EXIF grouping: photos per view, when known");
+  command
+      .add_option("--brackets", o->brackets,
+                  "EXIF grouping: photos per view, when known (views are then runs of exactly "
+                  "this many photos in capture order)")
+      ->check(CLI::PositiveNumber);
   command.add_option("--exposures", o->exposures,
                      "Relative exposures t1,t2,... overriding EXIF (one view only)");
   command.add_option("--json", o->json, "Write the grouping as a JSON capture description");

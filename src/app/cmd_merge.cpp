@@ -117,8 +117,10 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
         if (!(e > 0.0) || !std::isfinite(e))
           throw UsageError("--exposures must be positive numbers");
       if (exposures.size() != o->images.size()) {
-        throw UsageError("--exposures has " + std::to_string(exposures.size()) + " values for " +
-                         std::to_string(o->images.size()) + " photos");
+        throw UsageError("--exposures has " + std::to_string(exposures.size()) +
+                         (exposures.size() == 1 ? " value" : " values") + " for " +
+                         std::to_string(o->images.size()) +
+                         (o->images.size() == 1 ? " photo" : " photos"));
       }
     }
     if (o->response == "auto") {

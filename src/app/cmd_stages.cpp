@@ -41,9 +41,14 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
   return [o, &globals]() -> int {
     if (o->depth != "half" && o->depth != "float")
       throw UsageError("--depth must be half or float, got '" + o->depth + "'");
+    if (o->out.empty()) throw UsageError("--out is empty: give the EXR to write");
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
-    const std::string target =
-        o->to.empty() ? colors.workingSpace() : colors.resolve(o->to, "--to");
+    // The spaces named on the command line are checked before the image is read.
+    std::string target;
+    asUsage([&] {
+      target = o->to.empty() ? colors.workingSpace() : colors.resolve(o->to, "--to");
+      if (!o->from.empty()) colors.resolve(o->from, "--from");
+    });
     ingest::LoadedImage loaded = ingest::readImage(o->in, "color");
     Image& image = loaded.image;
     if (image.channels < 3) {

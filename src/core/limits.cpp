@@ -103,4 +103,13 @@ void requireRegularFile(const std::filesystem::path& file, const std::string& st
       stage, std::string("is ") + kind + ", not a regular file (inputs are read from files)", file);
 }
 
+void requireInputFile(const std::filesystem::path& file, const std::string& stage,
+                      const std::string& what) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw Error(stage, what + " not found", file);
+  if (fs::is_directory(file, ec)) throw Error(stage, what + " is a folder, not a file", file);
+  requireRegularFile(file, stage);
+}
+
 }  // namespace compose

@@ -50,5 +50,9 @@ void checkTriangleCount(int64_t triangles, const std::filesystem::path& file);
 // exists and is one of those ("is a character device, not a regular file"); a missing file or a
 // folder is left to the caller, which has its own message for them. Symbolic links are followed.
 void requireRegularFile(const std::filesystem::path& file, const std::string& stage);
+// The same, with a missing file and a folder refused as well: "<what> not found", "<what> is a
+// folder, not a file".
+void requireInputFile(const std::filesystem::path& file, const std::string& stage,
+                      const std::string& what);
 
 }  // namespace compose

@@ -1,4 +1,5 @@
 #include "cubemap/environment_io.h"
+#include <cstdio>
 
 #include <algorithm>
 #include <cctype>
@@ -224,10 +225,16 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
 
 void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
               bool useHalf, std::optional<Layout> envmap, const WriteOptions& options) {
-  if (lowerExtension(destination) == ".exr") {
-    writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);
-  } else {
-    ingest::writeImage(temporary, rgb, {});
+  try {
+    if (lowerExtension(destination) == ".exr") {
+      writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);
+    } else {
+      ingest::writeImage(temporary, rgb, {});
+    }
+  } catch (const Error& e) {
+    // The temporary is ours: the user knows the file by the name they gave.
+    if (e.file() != temporary) throw;
+    throw Error(e.stage(), nameTheDestination(e.what(), temporary, destination), destination);
   }
 }
 
@@ -251,6 +258,18 @@ std::optional<Layout> exrEnvmapLayout(const fs::path& file) {
     return std::nullopt;  // unreadable: the image reader reports it properly
   }
 }
+
+namespace {
+
+// How to give a layout that cannot be detected (ReadOptions::adviseConvert).
+std::string layoutAdvice(const ReadOptions& options, const fs::path& path,
+                         const std::string& choices) {
+  if (!options.adviseConvert) return "say which with --layout (" + choices + ")";
+  return "convert it first, saying which: compose convert " + path.filename().string() +
+         " --layout " + choices + " --to latlong --out ENV.exr";
+}
+
+}  // namespace
 
 EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                                     const ReadOptions& options) {
@@ -325,15 +344,16 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                         "six face files beside " + path.filename().string());
   } else if (w == h) {
     throw Error("ingest",
-                "a square image could be a mirror ball or a single cube face: say which with "
-                "--layout (mirrorball, faces)",
+                "a square image could be a mirror ball or a single cube face: " +
+                    layoutAdvice(options, path, "mirrorball|faces"),
                 path);
   } else {
     throw Error("ingest",
                 "cannot tell the environment's layout from a " + std::to_string(w) + "x" +
                     std::to_string(h) +
                     " image: expected 2:1 (lat-long), 1:6 (OpenEXR cube), 4:3 (horizontal "
-                    "cross) or 3:4 (vertical cross), or give --layout",
+                    "cross) or 3:4 (vertical cross); " +
+                    layoutAdvice(options, path, "LAYOUT"),
                 path);
   }
   checkShape(out.layout, w, h, path);
@@ -376,7 +396,9 @@ lighting::CubeMap cubeMapOf(const EnvironmentFile& file, lighting::SanitizeRepor
 
 LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& options,
                                   const Progress& progress) {
-  EnvironmentFile file = readEnvironmentFile({path}, options);
+  ReadOptions read = options;
+  read.adviseConvert = true;  // the one-shot command has no --layout
+  EnvironmentFile file = readEnvironmentFile({path}, read);
   LoadedEnvironment out;
   out.info = file.info;
   out.file = file.files.front();
@@ -394,9 +416,12 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
   lighting::SanitizeReport sanitized;
   lighting::CubeMap cube = cubeMapOf(file, &sanitized);
   if (sanitized.negativeTexels > 0) {
-    out.notes.push_back(std::to_string(sanitized.negativeTexels) +
-                        " cube texels had negative values (as low as " +
-                        std::to_string(sanitized.mostNegative) + "): clamped to 0");
+    char note[160];
+    std::snprintf(note, sizeof note,
+                  "%lld cube texel%s had negative values (as low as %g): clamped to 0",
+                  static_cast<long long>(sanitized.negativeTexels),
+                  sanitized.negativeTexels == 1 ? "" : "s", double(sanitized.mostNegative));
+    out.notes.push_back(note);
   }
   const lighting::Environment env = lighting::latLongFromCube(cube, 4 * cube.size(), progress);
   out.image = Image(env.width(), env.height(), 3, {"R", "G", "B"});

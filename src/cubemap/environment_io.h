@@ -35,6 +35,9 @@ namespace compose::cubemap {
 
 struct ReadOptions {
   std::optional<Layout> layout;  // forced layout (--layout); nullopt: detect
+  // When the layout cannot be detected, the error tells how to give it: with --layout (false), or
+  // by converting the file first with compose convert (true: a command without --layout).
+  bool adviseConvert = false;
 };
 
 struct EnvironmentFile {

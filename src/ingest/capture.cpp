@@ -105,7 +105,7 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
 void ExifGrouping::validate() const {
   if (!(maxGapSeconds > 0.0) || !std::isfinite(maxGapSeconds))
     throw Error(kStage, "the time gap between views must be a positive number of seconds");
-  if (bracketSize < 0) throw Error(kStage, "the bracket size must be positive");
+  if (bracketSize < 0) throw Error(kStage, "the bracket size must be a positive number of photos");
   if (!(sameExposureStops > 0.0 && sameExposureStops < 1.0))
     throw Error(kStage, "the same-exposure tolerance must be between 0 and 1 stop");
 }
@@ -127,13 +127,31 @@ Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options) {
   } else {
     capture.method = "file names and exposure sequences (not every photo has an EXIF capture time)";
   }
+  if (options.bracketSize > 0) {
+    // A known bracket size is the grouping: consecutive runs of exactly that many photos.
+    const size_t n = size_t(options.bracketSize);
+    if (shots.size() % n != 0) {
+      throw Error(kStage, std::to_string(shots.size()) + " photos do not make brackets of " +
+                              std::to_string(n) + " (the bracket size given): " +
+                              std::to_string(shots.size() % n) + " left over");
+    }
+    capture.method = std::string(timed ? "EXIF capture times" : "file names") + ", " +
+                     std::to_string(n) + " photos per view (the bracket size given)";
+  }
   View* current = nullptr;
   double previousTime = 0.0;
   for (Shot& s : shots) {
     bool startNew = current == nullptr;
+    if (options.bracketSize > 0) {
+      if (!startNew && int(current->shots.size()) >= options.bracketSize) startNew = true;
+      if (startNew) {
+        capture.views.push_back(View{});
+        current = &capture.views.back();
+      }
+      current->shots.push_back(std::move(s));
+      continue;
+    }
     if (!startNew && timed && *s.info.captureSeconds - previousTime > options.maxGapSeconds)
-      startNew = true;
-    if (!startNew && options.bracketSize > 0 && int(current->shots.size()) >= options.bracketSize)
       startNew = true;
     const auto e = s.info.relativeExposure();
     if (!startNew && e) {
@@ -373,8 +391,10 @@ void writeCaptureDescription(const fs::path& file, const Capture& capture) {
 
 void setExposures(View& view, const std::vector<double>& exposures, const std::string& source) {
   if (exposures.size() != view.shots.size()) {
-    throw Error(kStage, std::to_string(exposures.size()) + " exposures given for " +
-                            std::to_string(view.shots.size()) + " photos");
+    throw Error(kStage, std::to_string(exposures.size()) +
+                            (exposures.size() == 1 ? " exposure" : " exposures") + " given for " +
+                            std::to_string(view.shots.size()) +
+                            (view.shots.size() == 1 ? " photo" : " photos"));
   }
   for (size_t i = 0; i < exposures.size(); ++i) {
     if (!(exposures[i] > 0.0) || !std::isfinite(exposures[i]))

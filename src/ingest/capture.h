@@ -76,7 +76,7 @@ std::vector<Shot> scanShots(const std::vector<std::filesystem::path>& paths,
 
 struct ExifGrouping {
   double maxGapSeconds = 3.0;  // a longer pause between shots starts a new view
-  int bracketSize = 0;         // > 0: a view holds exactly this many shots
+  int bracketSize = 0;  // > 0: views are runs of exactly this many shots (pauses not looked at)
   // Two exposures within this ratio (in stops) count as the same exposure.
   double sameExposureStops = 1.0 / 6.0;
   void validate() const;  // compose::Error (stage "ingest")

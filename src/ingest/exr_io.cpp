@@ -614,7 +614,7 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
   } catch (const Error&) {
     throw;
   } catch (const std::exception& e) {
-    std::string why = e.what();
+    std::string why = nameTheDestination(e.what(), file, shown);
     if (errno != 0) why += std::string(" (") + std::strerror(errno) + ")";
     throw Error("output", "cannot write image: " + why, shown);
   }

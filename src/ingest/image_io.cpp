@@ -622,7 +622,7 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
                  convertRows(image, y0, rows, sample, values);
                },
                why))
-    throw Error("output", why, shown);
+    throw Error("output", nameTheDestination(why, file, shown), shown);
   return report;
 }
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 #include <OpenImageIO/filesystem.h>
@@ -12,6 +13,24 @@
 namespace compose::ingest::oiio {
 
 namespace {
+
+// OpenImageIO's error text on one line: its readers stack a message per layer ("Read error: hit
+// end of file\nPNG read error: ...\nPNG library error"); they are joined with "; ", and a
+// line repeated is kept once.
+std::string oneLine(const std::string& text) {
+  std::string out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(start, end - start);
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    if (!line.empty() && out.find(line) == std::string::npos)
+      out += (out.empty() ? "" : "; ") + line;
+    start = end + 1;
+  }
+  return out;
+}
 
 // An attribute as plain data: text, a number (int or double), or an array of floats.
 void addAttribute(const OIIO::ParamValue& p, std::vector<ImageAttribute>& out) {
@@ -72,9 +91,11 @@ class OiioReader final : public Reader {
         0, 0, 0, spec.nchannels, eightBit ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT, pixels);
     // The JPEG reader reports a truncated file only as an error message after a "successful"
     // read: the message decides.
-    error = input_->geterror();
+    error = oneLine(input_->geterror());
     input_->close();
-    truncated = error.find("Premature end") != std::string::npos;
+    // libjpeg says "Premature end", libpng "hit end of file", libtiff "Read error ... end".
+    truncated = error.find("Premature end") != std::string::npos ||
+                error.find("hit end of file") != std::string::npos;
     if (!ok && error.empty()) error = "unknown reason";
     return ok && error.empty();
   }
@@ -109,7 +130,7 @@ class OiioModule final : public Module {
     config.attribute("raw:auto_bright", 0);
     auto input = OIIO::ImageInput::open(path, &config);
     if (!input) {
-      error = OIIO::geterror();
+      error = oneLine(OIIO::geterror());
       if (error.empty()) error = "unknown reason";
       return nullptr;
     }
@@ -121,7 +142,7 @@ class OiioModule final : public Module {
     auto proxy = std::make_unique<OIIO::Filesystem::IOMemReader>(bytes, size);
     auto input = OIIO::ImageInput::open(name, nullptr, proxy.get());
     if (!input) {
-      error = OIIO::geterror();
+      error = oneLine(OIIO::geterror());
       if (error.empty()) error = "unknown reason";
       return nullptr;
     }
@@ -161,11 +182,20 @@ class OiioModule final : public Module {
       }
     }
     auto fail = [&](const std::string& what) {
-      const std::string why = output->geterror();
+      const std::string why = oneLine(output->geterror());
       error = what + (why.empty() ? "" : ": " + why);
       if (why.empty() && errno != 0) error += std::string(": ") + std::strerror(errno);
       return false;
     };
+    // Some of OpenImageIO's writers (PNG among them) do not check their writes: a full disk left
+    // a truncated file and "success". Where the writer takes an IOProxy, the file is encoded in
+    // memory and written here, every write checked; the others are checked by errno afterwards.
+    const size_t rawBytes =
+        typeOf(w.sample).size() * size_t(w.channels) * size_t(w.width) * size_t(w.height);
+    std::vector<unsigned char> encoded;
+    OIIO::Filesystem::IOVecOutput inMemory(encoded);
+    const bool viaMemory = output->supports("ioproxy") && rawBytes <= (size_t(1) << 30) &&
+                           output->set_ioproxy(&inMemory);
     errno = 0;
     if (!output->open(file, spec)) return fail("cannot open for writing");
     // The type the writer stores, which is not always the one asked for.
@@ -185,6 +215,29 @@ class OiioModule final : public Module {
         return fail("cannot write image");
     }
     if (!output->close()) return fail("cannot finish writing");
+    if (!viaMemory) {
+      // Errors only a write gives: set by a failed write that the writer did not report.
+      if (errno == ENOSPC || errno == EFBIG || errno == EDQUOT || errno == EIO) {
+        error = std::string("cannot write image: ") + std::strerror(errno);
+        return false;
+      }
+      return true;
+    }
+    errno = 0;
+    std::FILE* f = std::fopen(file.c_str(), "wb");
+    if (!f) {
+      error = std::string("cannot open for writing: ") + std::strerror(errno);
+      return false;
+    }
+    const bool written =
+        std::fwrite(encoded.data(), 1, encoded.size(), f) == encoded.size() && std::fflush(f) == 0;
+    const int writeError = errno;
+    const bool closed = std::fclose(f) == 0;
+    if (!written || !closed) {
+      error = std::string("cannot write image: ") +
+              std::strerror(written ? errno : (writeError ? writeError : EIO));
+      return false;
+    }
     return true;
   }
 };

@@ -355,16 +355,19 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
   }
   if (nonFinite == total) {
     throw Error("mesh",
-                "nothing renderable: all " +
-                    detail::count(total, "triangle has", "triangles have") +
-                    " a corner with a non-finite coordinate",
+                std::string("nothing renderable: ") +
+                    (total == 1 ? "the one triangle has"
+                                : "all " + std::to_string(total) + " triangles have") +
+                    " a corner whose coordinates are not finite numbers (NaN, infinite, or beyond "
+                    "single precision's 3.4e38)",
                 path);
   }
   if (nonFinite) {
     keepTriangles(loaded, keep);
     mesh.warnings.push_back("dropped " + std::to_string(nonFinite) + " of " +
                             std::to_string(total) +
-                            " triangles with a corner whose coordinates are not finite numbers");
+                            " triangles with a corner whose coordinates are not finite numbers "
+                            "(NaN, infinite, or beyond single precision's 3.4e38)");
   }
   dropUnusedVertices(loaded);
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
@@ -402,10 +405,13 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
     }
   }
   if (degenerate + duplicate == remaining) {
-    throw Error("mesh",
-                "nothing renderable: all " + std::to_string(remaining) +
-                    " triangles are degenerate" + (duplicate ? " or duplicates" : ""),
-                path);
+    throw Error(
+        "mesh",
+        std::string("nothing renderable: ") +
+            (remaining == 1 ? "the one triangle is degenerate"
+                            : "all " + std::to_string(remaining) + " triangles are degenerate" +
+                                  (duplicate ? " or duplicates" : "")),
+        path);
   }
   if (degenerate) {
     mesh.warnings.push_back("dropped " + std::to_string(degenerate) + " of " +

@@ -757,6 +757,11 @@ LoadedMesh loadGltf(const fs::path& path) {
       std::string line = text.substr(start, end - start);
       while (!line.empty() && (line.back() == '\r' || line.back() == '.' || line.back() == ' '))
         line.pop_back();
+      // tinygltf quotes what it could not read, a whole data: URI of megabytes included.
+      constexpr size_t kLongest = 240;
+      if (line.size() > kLongest)
+        line =
+            line.substr(0, kLongest - 40) + "... (" + std::to_string(line.size()) + " characters)";
       if (!line.empty()) out.push_back(line);
       start = end + 1;
     }

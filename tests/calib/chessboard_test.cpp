@@ -82,6 +82,13 @@ TEST(Chessboard, WrongBoardSizeNamesTheBoardAndThePhotos) {
                        "no 8x5 chessboard");
   COMPOSE_EXPECT_ERROR(calibrateLens(photosOf(files, images), Board::parse("8x5"), {}),
                        "left01.jpg");
+  // More photos asked for than given: said before any board is looked for (it was "found in
+  // only 3 of 3 photos ... (not found in: )").
+  CalibrationParams many;
+  many.minPhotos = 100;
+  COMPOSE_EXPECT_ERROR(
+      calibrateLens(photosOf(files, images), Board::parse("9x6"), many),
+      "3 photos were given, and the calibration asks for at least 100 with the board");
 }
 
 TEST(Chessboard, PhotosWithoutABoardAreListedNotFatal) {

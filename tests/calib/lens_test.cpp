@@ -106,6 +106,17 @@ TEST(Lens, BadFilesNameTheProblem) {
   compose::testing::writeText(dir / "d.json",
                               R"({"width":640,"height":480,"fx":-5,"fy":500,"cx":320,"cy":240})");
   COMPOSE_EXPECT_ERROR(readLens(dir / "d.json"), "focal lengths fx, fy must be positive");
+  // Finite but no lens's: fx = 1e308 overflowed the camera and was blamed on --place.
+  compose::testing::writeText(
+      dir / "e.json", R"({"width":640,"height":480,"fx":1e308,"fy":500,"cx":320,"cy":240})");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "e.json"),
+                       "focal length 1e+308 px is not one of a 640x480 image's lens");
+  compose::testing::writeText(dir / "f.json",
+                              R"({"width":640,"height":480,"fx":500,"fy":2,"cx":320,"cy":240})");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "f.json"), "focal length 2 px");
+  compose::testing::writeText(dir / "g.json",
+                              R"({"width":640,"height":480,"fx":500,"fy":500,"cx":1e9,"cy":240})");
+  COMPOSE_EXPECT_ERROR(readLens(dir / "g.json"), "lies far outside the image");
 }
 
 }  // namespace

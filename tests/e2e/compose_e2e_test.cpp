@@ -422,6 +422,79 @@ TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
   EXPECT_FALSE(fs::exists(dir_ / "x.jpg"));
 }
 
+// An environment without light (all zero, or all negative and clamped) lit the object black and
+// the automatic exposure "matched" a ball of radiance 0 with exit 0: now a named error.
+TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
+  for (const float value : {0.0f, -0.5f}) {
+    const fs::path env = dir_ / "input-dark.exr";
+    {
+      std::vector<float> px(16 * 8 * 3, value);
+      auto out = OIIO::ImageOutput::create(env.string());
+      ASSERT_TRUE(out->open(env.string(), OIIO::ImageSpec(16, 8, 3, OIIO::TypeDesc::FLOAT)));
+      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+      out->close();
+    }
+    const auto r =
+        runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
+                       " --env " + quote(env.string()),
+                   dir_.path());
+    EXPECT_EQ(r.status, 1);
+    EXPECT_NE(r.err.find("lighting: the environment holds no light: every texel is 0"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(r.err.find(" once its negative values are clamped") != std::string::npos,
+              value < 0.0f)
+        << r.err;
+    EXPECT_NE(r.err.find(env.string()), std::string::npos) << r.err;
+    expectNothingWritten();
+  }
+}
+
+// A holdout of the wrong size was found by the composite, after the whole render: its header is
+// checked when the plate is read.
+TEST_F(ComposeErrors, AHoldoutOfTheWrongSizeStopsTheJobBeforeTheRender) {
+  {
+    const std::string file = (dir_ / "input-mask.png").string();
+    std::vector<float> px(40 * 30, 1.0f);
+    auto out = OIIO::ImageOutput::create(file);
+    ASSERT_TRUE(out->open(file, OIIO::ImageSpec(40, 30, 1, OIIO::TypeDesc::UINT8)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  const auto r =
+      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
+                     " --holdout " + quote((dir_ / "input-mask.png").string()),
+                 dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("composite: the holdout mask is 40x30, the plate "), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("input-mask.png"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("compose: render "), std::string::npos) << "rendered first: " << r.err;
+  expectNothingWritten();
+}
+
+// A plate whose header names a colour space the config does not have was read as the default
+// space without a word: the stage line says what it assumed and how to say otherwise.
+TEST_F(ComposeErrors, APlateInAnUnknownSpaceSaysWhatWasAssumed) {
+  const fs::path plate = dir_ / "input-plate.exr";
+  {
+    std::vector<float> px(64 * 48 * 3, 0.3f);
+    OIIO::ImageSpec spec(64, 48, 3, OIIO::TypeDesc::HALF);
+    spec.attribute("colorSpace", "NoSuchSpace");
+    auto out = OIIO::ImageOutput::create(plate.string());
+    ASSERT_TRUE(out->open(plate.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  const auto r = runCompose(
+      base(plate.string(), (samples_ / "monkey.obj").string()) + " --shadows off", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("(the file says 'NoSuchSpace', which the colour config does not know; "
+                       "give --plate-space to say which it is)"),
+            std::string::npos)
+      << r.err;
+}
+
 // A float plate with NaN or infinity: an error naming the pixel (they went through to the output,
 // and an infinite pixel made the automatic exposure +inf stops).
 TEST_F(ComposeErrors, NonFinitePlateIsRejectedAndOldOutputKept) {
@@ -612,7 +685,8 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
       {"--exposure bright", "--exposure expects a number"},
       {"--pitch 95", "--pitch must be within"},
       {"--camera-height -1", "--camera-height must be a positive"},
-      {"--focal35 0", "--focal35 must be a positive"},
+      {"--focal35 0", "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm"},
+      {"--focal35 1e-300", "got 1e-300"},
       {"--env-yaw inf", "--env-yaw must be a finite"},
       {"--lighting wavelets", "unknown lighting basis 'wavelets'"},
       {"--lighting-params order=99", "order k must be in"},

@@ -504,6 +504,13 @@ TEST_F(BadEnvironmentInput, CrossOfTheWrongAspect) {
   expectRefused("--plate " + q(dir_ / "odd.exr") + " --object " + q(sample("bunny.obj")) +
                     " --env " + q(dir_ / "odd.exr") + " --out " + q(dir_ / "out"),
                 1, "cannot tell the environment's layout from a 50x20 image", "odd.exr");
+  // The one-shot command has no --layout: its message says how to convert the file instead.
+  expectRefused("--plate " + q(dir_ / "odd.exr") + " --object " + q(sample("bunny.obj")) +
+                    " --env " + q(dir_ / "odd.exr") + " --out " + q(dir_ / "out"),
+                1, "convert it first, saying which: compose convert odd.exr --layout LAYOUT",
+                "odd.exr");
+  expectRefused("convert " + q(dir_ / "odd.exr") + " --to cube --out " + q(dir_ / "x.exr"), 1,
+                "or 3:4 (vertical cross); say which with --layout (LAYOUT)", "odd.exr");
 }
 
 TEST_F(BadEnvironmentInput, MissingFace) {
@@ -547,6 +554,24 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
   expectRefused(
       "--plate p.jpg --object o.obj --room 4,3,4 --capture-at 9,1,0 --out " + q(dir_ / "out"), 2,
       "is not inside the room", "(9, 1, 0)");
+  // Sizes: zero is not a default, and what is asked for is held to the pixel limit (a
+  // 40000-wide lat-long asked for 18.9 GB and ended in bad_alloc).
+  expectRefused("convert missing.exr --to cube --size 0 --out " + q(dir_ / "x.exr"), 2,
+                "--size must be 1..16384 texels; got 0", "--size");
+  expectRefused("convert missing.exr --to latlong --width 0 --out " + q(dir_ / "x.exr"), 2,
+                "--width must be an even number of texels, 2..65536; got 0", "--width");
+  expectRefused("convert missing.exr --to latlong --width 40000 --out " + q(dir_ / "x.exr"), 2,
+                "--width 40000 makes a map of 800 megapixels, more than the limit of 268",
+                "--max-pixels");
+  expectRefused(
+      "--max-pixels 1000000 convert missing.exr --to cube --size 1000 --out " + q(dir_ / "x.exr"),
+      2, "--size 1000 makes a map of 6 megapixels, more than the limit of 1", "--size");
+  // Options of the mirror-ball unwrapping were ignored for other layouts.
+  expectRefused("convert missing.exr --to cube --photo-space sRGB --out " + q(dir_ / "x.exr"), 2,
+                "--photo-space applies to a mirror-ball photo only (with --from mirrorball)",
+                "--photo-space");
+  expectRefused("convert missing.exr --to cube --blind-spot 5 --out " + q(dir_ / "x.exr"), 2,
+                "--blind-spot applies to a mirror-ball photo only", "--blind-spot");
 }
 
 }  // namespace

@@ -176,6 +176,17 @@ TEST(ColorCommand, SaysTheSpaceGivenWithFrom) {
               dir);
   ASSERT_EQ(c.status, 0) << c.err;
   EXPECT_NE(c.err.find("as 'sRGB - Texture' (--from), wrote 'Raw'"), std::string::npos) << c.err;
+  // A space the config does not know, and an empty output, are command-line errors (exit 2, as
+  // the one-shot command's --plate-space), found before the image is read: the input may be
+  // missing.
+  for (const std::string& args :
+       {std::string(" --from nonesuch --out ") + q(dir / "o.exr"),
+        std::string(" --to nonesuch --out ") + q(dir / "o.exr"), std::string(" --out ''")}) {
+    const CommandRun bad = compose("color " + q(dir / "missing.png") + args, dir);
+    EXPECT_EQ(bad.status, 2) << args << ": " << bad.err;
+    EXPECT_EQ(bad.err.find("file not found"), std::string::npos) << bad.err;
+    EXPECT_FALSE(fs::exists(dir / "o.exr"));
+  }
 }
 
 TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
@@ -280,7 +291,7 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   EXPECT_FAILS_WITH(
       compose("merge --exposures 1,2 --out " + q(dir / "h.exr") + " " + q(shot("yaw000_1.jpg")),
               dir),
-      2, "--exposures has 2 values for 1 photos");
+      2, "--exposures has 2 values for 1 photo");
   EXPECT_FAILS_WITH(compose("merge --exposures 1,x --out h.exr a.jpg b.jpg", dir), 2,
                     "--exposures expects a number");
   EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --brackets 0", dir), 2, "brackets");

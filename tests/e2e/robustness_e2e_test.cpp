@@ -312,6 +312,26 @@ TEST_F(Robustness, AFullDiskIsANamedErrorAndThePreviousOutputsStay) {
   EXPECT_EQ(slurp(dir / "out.jpg"), jpg) << "the previous JPEG was changed";
   for (const auto& e : fs::directory_iterator(dir.path()))
     EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  EXPECT_EQ(r.err.find(".partial-"), std::string::npos) << "names a temporary: " << r.err;
+
+  // The same for an environment written by convert, in each kind of file: the error names the
+  // file asked for, not the temporary the writer fills. (OpenImageIO's PNG writer does not check
+  // its writes: the faces were left cut short with exit 0.)
+  for (const std::string out : {"cube.exr", "faces_%.png"}) {
+    const RunResult c =
+        runShell("ulimit -f 4; " + kCompose + " convert " + quote((dir / "env.exr").string()) +
+                     " --to " + (out == "cube.exr" ? "cube" : "faces") + " --size 256 --out " +
+                     quote((dir / out).string()),
+                 dir.path(), "convert");
+    EXPECT_EQ(c.status, 1) << c.err;
+    EXPECT_NE(c.err.find("File too large"), std::string::npos) << c.err;
+    EXPECT_NE(c.err.find((dir / (out == "cube.exr" ? "cube.exr" : "faces_")).string()),
+              std::string::npos)
+        << c.err;
+    EXPECT_EQ(c.err.find(".partial-"), std::string::npos) << "names a temporary: " << c.err;
+    for (const auto& e : fs::directory_iterator(dir.path()))
+      EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  }
 }
 
 TEST_F(Robustness, AnOutputFolderThatDoesNotExistIsCreated) {

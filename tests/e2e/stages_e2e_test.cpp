@@ -237,6 +237,27 @@ TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("not an object layer"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
+
+  // A folder, a device and a missing file are each called what they are (all were "not found").
+  fs::create_directories(dir_ / "folder.exr");
+  for (const auto& [layer, message] : std::vector<std::pair<std::string, std::string>>{
+           {(dir_ / "folder.exr").string(), "composite: object layer is a folder, not a file"},
+           {"/dev/zero", "composite: is a character device, not a regular file"},
+           {(dir_ / "missing.exr").string(), "composite: object layer not found"}}) {
+    r = run("composite --plate " + quote(plate_) + " --layer " + quote(layer) + " --out " +
+                quote(dir_ / "c"),
+            dir_.path());
+    EXPECT_EQ(r.status, 1) << layer;
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(layer), std::string::npos) << r.err;
+  }
+  r = run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(dir_ / "folder.exr") + " --out " + quote(dir_ / "o.exr"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("render: lighting file is a folder, not a file"), std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
 }
 
 // Bare file names, as one types them in the folder one works in: written there.
@@ -342,6 +363,37 @@ TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
                                  " --pose " + quote(poseFile) + " --pitch 10",
                              dir_.path());
   EXPECT_EQ(both.status, 2) << both.err;
+
+  // A plate of another shape than the pose's: the error names the pose file the lens came from.
+  Image square(100, 100, 3, {"R", "G", "B"});
+  std::fill(square.pixels.begin(), square.pixels.end(), 0.4f);
+  ingest::writeImage(dir_ / "square.png", square);
+  const RunResult other = run("--plate " + quote(dir_ / "square.png") + " --object " +
+                                  quote(dir_ / "box.obj") + " --pose " + quote(poseFile) +
+                                  " --no-cache --out " + quote(dir_ / "other" / "compose"),
+                              dir_.path());
+  EXPECT_EQ(other.status, 1) << other.err;
+  EXPECT_NE(other.err.find("camera: the calibration is for 320x213 images, the plate is 100x100"),
+            std::string::npos)
+      << other.err;
+  EXPECT_NE(other.err.find(poseFile.string()), std::string::npos) << other.err;
+}
+
+// Zero is a value, not the default: calib pose took --square 0 and --focal35 0 as "not given".
+TEST_F(StageCommands, CalibPoseRefusesSizesThatAreNot) {
+  const std::string out = " --out " + quote(dir_ / "pose.json") + " " + quote(plate_);
+  for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
+           {"--square 0", "--square must be the side of one square in metres"},
+           {"--square -0.02", "got -0.02"},
+           {"--focal35 0",
+            "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm, "
+            "got 0"},
+           {"--focal35 1e-300", "got 1e-300"}}) {
+    const RunResult r = run("calib pose " + args + out, dir_.path());
+    EXPECT_EQ(r.status, 2) << args << ": " << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << args << ": " << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "pose.json")) << args;
+  }
 }
 
 }  // namespace

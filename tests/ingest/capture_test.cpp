@@ -117,7 +117,8 @@ TEST(Capture, NoExposureAnywhereNamesTheFile) {
   resolveExposures(c);
   EXPECT_EQ(c.views[0].shots[0].file.filename(), "b.jpg");
   EXPECT_EQ(*c.views[0].shots[1].exposure, 4.0);
-  COMPOSE_EXPECT_ERROR(setExposures(c.views[0], {1.0}, "--exposures"), "1 exposures given for 2");
+  COMPOSE_EXPECT_ERROR(setExposures(c.views[0], {1.0}, "--exposures"),
+                       "1 exposure given for 2 photos");
 }
 
 TEST(Capture, AllEqualExposuresAreRefused) {
@@ -159,6 +160,17 @@ TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
   g.bracketSize = 3;
   g.maxGapSeconds = 1000.0;
   EXPECT_EQ(groupByExif(scanShots({dir.path()}), g).views.size(), 3u);
+  // It is the grouping: runs of exactly that many photos, whatever the pauses and exposures say
+  // (the exposure sequence of 3 was taken over a size of 9 given), and a count it does not divide
+  // is an error.
+  g.maxGapSeconds = 3.0;
+  g.bracketSize = 9;
+  const Capture one = groupByExif(scanShots({dir.path()}), g);
+  ASSERT_EQ(one.views.size(), 1u);
+  EXPECT_EQ(one.views[0].shots.size(), 9u);
+  g.bracketSize = 4;
+  COMPOSE_EXPECT_ERROR(groupByExif(scanShots({dir.path()}), g),
+                       "9 photos do not make brackets of 4 (the bracket size given): 1 left over");
 }
 
 TEST(Capture, GroupsByFileNamePattern) {
@@ -238,6 +250,18 @@ TEST(ImageIoTruncation, TruncatedJpegIsAnErrorNotAGreyPicture) {
   }
   COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "truncated file");
   COMPOSE_EXPECT_ERROR(readImage(dir / "cut.jpg"), "cut.jpg)");
+  // A PNG cut short (read through OpenImageIO): called truncated too, on one line.
+  writeImage(dir / "full.png", img);
+  std::ifstream png(dir / "full.png", std::ios::binary);
+  std::string pngBytes((std::istreambuf_iterator<char>(png)), std::istreambuf_iterator<char>());
+  compose::testing::writeText(dir / "cut.png", pngBytes.substr(0, pngBytes.size() / 2));
+  try {
+    readImage(dir / "cut.png");
+    ADD_FAILURE() << "a PNG cut in half was read";
+  } catch (const Error& e) {
+    EXPECT_NE(e.describe().find("ingest: truncated file: "), std::string::npos) << e.describe();
+    EXPECT_EQ(e.describe().find('\n'), std::string::npos) << e.describe();
+  }
 }
 
 }  // namespace

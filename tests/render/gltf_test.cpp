@@ -405,7 +405,8 @@ TEST(Gltf, BadIndicesNonFiniteCoordinatesAndDuplicatesAreDroppedWithCounts) {
   EXPECT_EQ(m.positions.size(), 4u) << "the NaN vertex is gone, so bounds stay finite";
   const std::vector<std::string> expected = {
       "dropped 1 of 6 triangles whose indices refer to vertices the primitive does not have",
-      "dropped 1 of 5 triangles with a corner whose coordinates are not finite numbers",
+      "dropped 1 of 5 triangles with a corner whose coordinates are not finite numbers (NaN, "
+      "infinite, or beyond single precision's 3.4e38)",
       "dropped 1 of 5 triangles with no area", "dropped 1 of 5 triangles that repeat another one"};
   EXPECT_EQ(m.warnings, expected);
 }
@@ -428,6 +429,23 @@ TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   external["buffers"][0]["uri"] = "geometry.bin";
   writeText(dir / "external.gltf", external.dump());
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "external.gltf"), "cannot parse glTF: ");
+  // A data URI that does not decode to the buffer's length: the message quotes the start of the
+  // URI, not its 40,000 characters.
+  json longUri = json::parse(b.gltf());
+  longUri["buffers"][0]["uri"] =
+      "data:application/octet-stream;base64," + base64(std::vector<uint8_t>(30000, 7));
+  writeText(dir / "long.gltf", longUri.dump());
+  try {
+    loadMesh(dir / "long.gltf");
+    ADD_FAILURE() << "a data URI of the wrong length was read";
+  } catch (const Error& e) {
+    const std::string said = e.describe();
+    EXPECT_NE(said.find("Failed to decode 'uri' : data:application/octet-stream;base64,"),
+              std::string::npos)
+        << said.substr(0, 400);
+    EXPECT_NE(said.find("... (40"), std::string::npos) << said.substr(0, 400);
+    EXPECT_LT(said.size(), 600u) << said.substr(0, 400);
+  }
   // An accessor that reads past its buffer view.
   b.json["accessors"][size_t(pos)]["count"] = 4;
   writeText(dir / "short.gltf", b.gltf());

@@ -326,5 +326,14 @@ TEST(GroundShadow, ARegionReachingBehindTheCameraCoversOnlyWhatTheFrameShows) {
   EXPECT_EQ(outsideShowingRegion, 0);
 }
 
+// A grid out of range is named as the grid (grid=0 was reported as an order out of 1..0).
+TEST(ShadowPlan, TheGridIsCheckedBeforeTheOrderItBounds) {
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("grid=0"), "grid (s) must be in 2..64, got 0");
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("grid=65"), "grid (s) must be in 2..64");
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("grid=8,order=9"),
+                       "order (k) must be in 1..min(grid, 32), got 9");
+  EXPECT_EQ(pipeline::ShadowPlan::parse("grid=8,order=8").transfer.grid, 8);
+}
+
 }  // namespace
 }  // namespace compose::render

@@ -185,6 +185,14 @@ TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
   writeText(dir / "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "flat.obj"),
                        "nothing renderable: all 2 triangles are degenerate");
+  writeText(dir / "one.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "one.obj"),
+                       "nothing renderable: the one triangle is degenerate");
+  // A coordinate beyond single precision reads as infinity: said so, not only "not finite".
+  writeText(dir / "huge.obj", "v 0 0 0\nv 1e308 0 0\nv 0 1 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
+                       "nothing renderable: the one triangle has a corner whose coordinates are "
+                       "not finite numbers (NaN, infinite, or beyond single precision's 3.4e38)");
 }
 
 TEST(Mesh, TrianglesWoundAgainstTheirNeighboursAreTurnedOutwards) {
