@@ -6,7 +6,7 @@
 #                      again on a clang build with AddressSanitizer + UndefinedBehaviorSanitizer
 #                      (build-sanitize/, -O1; the full-size sample-data tests left out, see
 #                      SANITIZE_EXCLUDE), which also holds the libFuzzer targets, then a fuzz
-#                      smoke pass of COMPOSE_FUZZ_SECONDS (20) seconds per target, one target
+#                      smoke pass of COMPOSE_FUZZ_SECONDS (10) seconds per target, one target
 #                      per core at a time
 #   ./setup.sh build   stops after building
 # Installing needs root: run as root, or with sudo available.
@@ -96,8 +96,8 @@ case "${1:-demo}" in
     ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0} \
       UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1} \
       ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)" "${exclude[@]}"
-    phase "fuzz smoke pass (${COMPOSE_FUZZ_SECONDS:-20} s per target)"
-    COMPOSE_FUZZ_BUILD_DIR=$SANITIZE_DIR tests/fuzz/run.sh "${COMPOSE_FUZZ_SECONDS:-20}"
+    phase "fuzz smoke pass (${COMPOSE_FUZZ_SECONDS:-10} s per target)"
+    COMPOSE_FUZZ_BUILD_DIR=$SANITIZE_DIR tests/fuzz/run.sh "${COMPOSE_FUZZ_SECONDS:-10}"
     phase "done"
     ;;
   build)
