@@ -338,9 +338,7 @@ void writePose(const fs::path& file, const PlatePose& pose) {
 
 PlatePose readPose(const fs::path& file) try {
   protectInput(file);
-  std::error_code ec;
-  if (!fs::exists(file, ec)) throw Error(kStage, "pose file not found", file);
-  requireRegularFile(file, kStage);
+  requireInputFile(file, kStage, "pose file");
   std::ifstream in(file);
   nlohmann::json j;
   try {

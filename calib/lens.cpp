@@ -240,9 +240,7 @@ nlohmann::ordered_json lensToJson(const Lens& lens) {
 
 Lens readLens(const fs::path& file) {
   protectInput(file);
-  std::error_code ec;
-  if (!fs::exists(file, ec)) throw Error("calib", "lens file not found", file);
-  requireRegularFile(file, "calib");
+  requireInputFile(file, "calib", "lens file");
   std::ifstream in(file);
   if (!in) throw Error("calib", "cannot open the lens file", file);
   nlohmann::json j;

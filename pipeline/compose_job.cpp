@@ -135,7 +135,7 @@ void validate(const ComposeJob& job) {
   // The lighting basis and its parameters: a misspelt name fails before any pixel is read.
   try {
     ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
-    if (params.has("order") && params.getString("order", "") == "auto") {
+    if (params.is("order", "auto")) {
       params.getDouble("target", 45.0, "lighting");
       params.erase("order");
       params.erase("target");

@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "pipeline/stage.h"
 
@@ -113,8 +114,7 @@ void applyScene(const nlohmann::json& scene, const fs::path& folder, ComposeJob&
 
 ComposeJob loadScene(const fs::path& file) {
   protectInput(file);
-  std::error_code ec;
-  if (!fs::is_regular_file(file, ec)) throw Error("scene", "scene file not found", file);
+  requireInputFile(file, "scene", "scene file");
   std::ifstream in(file, std::ios::binary);
   std::stringstream text;
   text << in.rdbuf();

@@ -64,6 +64,10 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
       throw UsageError("method must be cheb, sh or ao, got '" + method + "'", "shadows");
     }
     const bool sh = plan.method == render::ShadowMethod::Harmonics;
+    if (plan.method == render::ShadowMethod::AmbientOcclusion && p.has("order")) {
+      throw UsageError("order does not apply to method=ao: ambient occlusion projects nothing",
+                       "shadows");
+    }
     plan.transfer.grid = p.getInt("grid", 16, "shadows");
     plan.lightingOrder = p.getInt("order", sh ? 4 : 16, "shadows");
     plan.transfer.boundaryRays = p.getInt("boundary", 2, "shadows");

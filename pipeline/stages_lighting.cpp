@@ -43,7 +43,7 @@ struct BasisChoice {
 BasisChoice createBasis(const ComposeJob& job, const lighting::Environment* environment,
                         int cachedOrder = 0) {
   ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
-  const bool autoOrder = params.has("order") && params.getString("order", "") == "auto";
+  const bool autoOrder = params.is("order", "auto");
   BasisChoice out;
   if (!autoOrder) {
     out.basis = lighting::createLighting(job.lighting, params);

@@ -1,5 +1,6 @@
 // compose capture-sim: the virtual camera. Bracketed photos of an HDR environment through a
 // documented camera model, with the ground truth written next to them.
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 
@@ -18,7 +19,7 @@ struct SimOptions {
   capture::VirtualCameraParams params;
   std::filesystem::path env, out;
   std::string size = "1024x768", lens = "rectilinear", curve = "filmic", whiteBalance, envSpace;
-  std::string exposure;
+  std::string exposure, seed = "1";
   bool noNoise = false, noJpeg = false, omit35 = false, truthImages = false;
 };
 
@@ -45,7 +46,10 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       ->capture_default_str();
   command.add_option("--brackets", params.brackets, "Exposures per view")->capture_default_str();
   command.add_option("--ev-step", params.evStep, "Stops between exposures")->capture_default_str();
-  command.add_option("--seed", params.seed, "Seed of everything random (noise, shake, jitter)")
+  command
+      .add_option("--seed", o->seed,
+                  "Seed of everything random (noise, shake, jitter): a whole number, "
+                  "0..18446744073709551615")
       ->capture_default_str();
   command.add_option("--size", o->size, "Image size WxH")->capture_default_str();
   command.add_option("--lens", o->lens, "rectilinear or fisheye (equidistant)")
@@ -93,6 +97,16 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
 
   return [o, &globals]() -> int {
     capture::VirtualCameraParams& p = o->params;
+    {
+      // Parsed here: as an unsigned option, -1 wrapped to 2^64 - 1 and 2^64 was clamped.
+      uint64_t seed = 0;
+      const char* end = o->seed.data() + o->seed.size();
+      const auto [ptr, ec] = std::from_chars(o->seed.data(), end, seed);
+      if (ec != std::errc() || ptr != end || o->seed.empty())
+        throw UsageError("--seed must be a whole number from 0 to 18446744073709551615, got '" +
+                         o->seed + "'");
+      p.seed = seed;
+    }
     int w = 0, h = 0;
     char x = 0, extra = 0;
     if (std::sscanf(o->size.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || x != 'x')

@@ -54,7 +54,7 @@ void ComposeOptions::addPlate(CLI::App& app) {
                  "Colour space of the plate [default: from the file]");
 }
 
-void ComposeOptions::addEnvironment(CLI::App& app) {
+void ComposeOptions::addEnvironment(CLI::App& app, bool parallax) {
   app.add_option(
       "--env", job.environment,
       "HDR environment: a lat-long map, an OpenEXR cube map, a cross, six face files (a folder, a "
@@ -65,6 +65,7 @@ void ComposeOptions::addEnvironment(CLI::App& app) {
   app.add_option("--env-yaw", job.environmentYawDegrees,
                  "Turn the environment about the vertical axis, degrees")
       ->capture_default_str();
+  if (!parallax) return;
   app.add_option(
       "--room", room,
       "Parallax: the environment is a room of W,H,D metres (floor on the ground, centred "
@@ -185,18 +186,22 @@ void ComposeOptions::apply(const CLI::App& app) {
   if (exposure != "auto") j.exposureStops = parseNumber(exposure, "--exposure");
 }
 
-int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunRequest& request,
-           bool printOutputs) {
-  const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+void validateJob(const pipeline::ComposeJob& j, const color::ColorConfig& colors) {
+  pipeline::validate(j);
   // Names the colour config must know are command-line values like any other: a misspelt one is
   // a usage error, reported before any file is read.
-  const pipeline::ComposeJob& j = o.job;
   asUsage([&] {
     if (!j.plateSpace.empty()) colors.resolve(j.plateSpace, "--plate-space");
     if (!j.environmentSpace.empty()) colors.resolve(j.environmentSpace, "--env-space");
     const std::string display = j.display.empty() ? colors.defaultDisplay() : j.display;
     colors.checkDisplayView(display, j.view.empty() ? colors.defaultView(display) : j.view);
   });
+}
+
+int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunRequest& request,
+           bool printOutputs) {
+  const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+  validateJob(o.job, colors);
   if (o.explain) {
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),

@@ -88,7 +88,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     std::vector<double> exposures;
     if (!o->exposures.empty()) exposures = parseList(o->exposures, "--exposures");
     for (double e : exposures)
-      if (!(e > 0.0) || !std::isfinite(e)) throw UsageError("--exposures must be positive numbers");
+      if (!(e >= ingest::kMinExposure && e <= ingest::kMaxExposure))
+        throw UsageError("--exposures must be relative exposures between 1e-12 and 1e12");
 
     ingest::Capture capture;
     if (group == "json") {

@@ -102,8 +102,24 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
   command.add_option("--linear-space", o->linearSpace,
                      "The camera's linear RGB for 8-bit photos [default: linear Rec.709]");
 
-  return [o, &globals]() -> int {
+  return [o, &command, &globals]() -> int {
     hdr::CaptureMergeOptions& m = o->merge;
+    // Options of a step that does not run are refused, not ignored.
+    if (command.count("--max-shift") && !o->align)
+      throw UsageError("--max-shift is the alignment's range: it goes with --align");
+    if (command.count("--ghost-stops") && !o->deghost)
+      throw UsageError(
+          "--ghost-stops is the ghost suppression's threshold: it goes with --deghost");
+    if (o->response != "auto" && o->response != "recover") {
+      for (const char* option :
+           {"--recovery", "--samples", "--lambda", "--no-refit", "--refit-smoothness"}) {
+        if (command.count(option)) {
+          throw UsageError(std::string(option) +
+                           " is for recovering a response, which --response " + o->response +
+                           " does not do");
+        }
+      }
+    }
     // The command line first: nothing is read until it is known to be sound.
     if (o->capture.empty() && o->images.empty())
       throw UsageError("give the photos of a bracket, or --capture FILE");
@@ -114,8 +130,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       if (!o->capture.empty()) throw UsageError("--exposures applies to photos given directly");
       exposures = parseList(o->exposures, "--exposures");
       for (double e : exposures)
-        if (!(e > 0.0) || !std::isfinite(e))
-          throw UsageError("--exposures must be positive numbers");
+        if (!(e >= ingest::kMinExposure && e <= ingest::kMaxExposure))
+          throw UsageError("--exposures must be relative exposures between 1e-12 and 1e12");
       if (exposures.size() != o->images.size()) {
         throw UsageError("--exposures has " + std::to_string(exposures.size()) +
                          (exposures.size() == 1 ? " value" : " values") + " for " +

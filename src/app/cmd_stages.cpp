@@ -98,17 +98,15 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
       "  compose render --plate plate.jpg --object bunny.obj --lighting-file forest.lighting "
       "--out bunny.exr\n"
       "  compose composite --plate plate.jpg --layer bunny.exr --out final");
-  o->addEnvironment(cmd);
+  // Parallax (--room, --env-radius) is resolved at the object's position, which precompute does
+  // not know: the one-shot command and compose run take it.
+  o->addEnvironment(cmd, false);
   o->addLighting(cmd);
   o->addShadows(cmd, true);
   o->addRun(cmd);
   cmd.add_option("--out", *out, "Lighting file to write")->required();
   return [o, out, &cmd, &globals]() -> int {
     o->apply(cmd);
-    if (o->job.room || o->job.environmentRadius)
-      throw UsageError(
-          "parallax (--room, --env-radius) is resolved at the object's position: use the "
-          "one-shot command or compose run");
     pipeline::RunRequest request;
     request.targets = {pipeline::artefact::kLighting};
     if (o->job.shadows || o->job.groundShadow)
@@ -204,7 +202,22 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     o->job = pipeline::loadScene(*scene);
     o->job.cache = o->noCache ? fs::path() : cache;
     o->job.threads = threads;
+    const pipeline::ComposeJob fromScene = o->job;
     for (const std::string& s : *sets) pipeline::setParameter(o->job, s);
+    // A value out of range is the scene file's fault when the scene alone has it (exit 1, naming
+    // the file), the command line's when a --set brought it (exit 2).
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    try {
+      validateJob(o->job, colors);
+    } catch (const UsageError& e) {
+      try {
+        validateJob(fromScene, colors);
+      } catch (const UsageError& alone) {
+        if (std::string(alone.what()) == e.what())
+          throw Error("scene", std::string(e.what()) + " (the value in the scene file)", *scene);
+      }
+      throw;
+    }
     return runJob(*o, globals);
   };
 }

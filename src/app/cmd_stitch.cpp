@@ -1,16 +1,20 @@
 // compose stitch: photos from one point in roughly known directions to a cube-map environment.
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <sstream>
 
 #include "app/cli.h"
 #include "calib/lens.h"
 #include "color/color.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
+#include "cubemap/layouts.h"
 #include "cubemap/photo_header.h"
 #include "cubemap/render_view.h"
 #include "cubemap/stitch.h"
@@ -19,6 +23,18 @@
 namespace compose::app {
 
 namespace {
+
+// The cube face a photo's name points it at: a face token at the end of the name (room_px.jpg),
+// or before a bracket number (px_2.jpg, room-nz-3.jpg, as compose capture-sim names them).
+std::optional<cubemap::FaceToken> photoFace(const std::filesystem::path& file) {
+  const std::string stem = file.stem().string();
+  if (auto token = cubemap::faceFromName(stem)) return token;
+  size_t end = stem.size();
+  while (end > 0 && std::isdigit(static_cast<unsigned char>(stem[end - 1]))) --end;
+  if (end == stem.size() || end < 2 || std::string("_-. ").find(stem[end - 1]) == std::string::npos)
+    return std::nullopt;
+  return cubemap::faceFromName(stem.substr(0, end - 1));
+}
 
 namespace fs = std::filesystem;
 
@@ -137,9 +153,26 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       throw UsageError(
           "--fov must be a field of view in degrees within (1, 179) (360 for --fisheye)");
     if (o->fisheye && !cmd.count("--fov")) throw UsageError("--fisheye goes with --fov");
-    if (o->size != 0 && (o->size < 8 || o->size > 8192)) throw UsageError("--size must be 8..8192");
-    if (o->width < 0 || o->width % 2 != 0 || o->width > 65536)
-      throw UsageError("--width must be an even number of texels up to 65536");
+    // Zero is a value given, not the default; options of another layout are refused, not ignored.
+    if (cmd.count("--size") && (o->size < 8 || o->size > 8192))
+      throw UsageError("--size must be 8..8192; got " + std::to_string(o->size));
+    if (cmd.count("--width") && (o->width < 2 || o->width % 2 != 0 || o->width > 65536)) {
+      throw UsageError("--width must be an even number of texels, 2..65536; got " +
+                       std::to_string(o->width));
+    }
+    if (cmd.count("--width") && *to != Layout::LatLong)
+      throw UsageError("--width is the width of a lat-long map: it goes with --to latlong");
+    if (cmd.count("--face-names") && *to != Layout::Faces)
+      throw UsageError("--face-names names face files: it goes with --to faces");
+    if (cmd.count("--max-correction") && o->noRefine)
+      throw UsageError("--max-correction bounds the refinement, which --no-refine turns off");
+    const int64_t limit = resourceLimits().maxPixels;
+    if ((cmd.count("--size") && 6 * int64_t(o->size) * o->size > limit) ||
+        (cmd.count("--width") && int64_t(o->width) * (o->width / 2) > limit)) {
+      throw UsageError("the map asked for (--size, --width) is more pixels than the limit of " +
+                       std::to_string(limit / 1000000) +
+                       " megapixels (raise it with --max-pixels)");
+    }
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
     cubemap::StitchOptions options;
     options.faceSize = o->size > 0 ? o->size : 1024;
@@ -161,7 +194,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       if (args[i].angles) {
         rough[i] = cubemap::cameraRotation(args[i].angles->x, args[i].angles->y, args[i].angles->z);
         noneNamed = false;
-      } else if (const auto token = cubemap::faceFromName(args[i].file.stem().string())) {
+      } else if (const auto token = photoFace(args[i].file)) {
         rough[i] = cubemap::faceCameraRotation(token->face);
         noneNamed = false;
       } else {
@@ -174,7 +207,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         notes.push_back("no directions in the photo names: taken in the order +X -X +Y -Y +Z -Z");
       } else {
         for (const auto& a : args) {
-          if (!a.angles && !cubemap::faceFromName(a.file.stem().string()))
+          if (!a.angles && !photoFace(a.file))
             throw UsageError("cannot tell where " + a.file.string() +
                              " points: name it for a cube face (_px, _nx, ...) or add "
                              "@YAW,PITCH[,ROLL]");

@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include "app/cli.h"
+#include "color/color.h"
 #include "pipeline/compose_job.h"
 
 namespace compose::app {
@@ -20,8 +21,9 @@ struct ComposeOptions {
   bool explain = false, noCache = false, noShadow = false, timings = false;
 
   // Option groups.
-  void addPlate(CLI::App& app);                     // --plate, --plate-space
-  void addEnvironment(CLI::App& app);               // --env, --env-space, --env-yaw, parallax
+  void addPlate(CLI::App& app);  // --plate, --plate-space
+  // --env, --env-space, --env-yaw, and with `parallax` --room, --env-radius, --capture-at.
+  void addEnvironment(CLI::App& app, bool parallax = true);
   void addLighting(CLI::App& app);                  // --lighting, --lighting-params
   void addShadows(CLI::App& app, bool parameters);  // --shadows, --no-shadow [, --shadow-params]
   void addObject(CLI::App& app);  // --object, --crease, placement, camera, shading
@@ -34,6 +36,10 @@ struct ComposeOptions {
 
 // Runs the job through the pipeline for `request`: with --explain prints the plan and returns;
 // otherwise prints the stages (and --timings) on stderr. Returns the exit status.
+// Checks the job's values and the colour names it gives (pipeline::validate, then the config):
+// throws UsageError naming the option.
+void validateJob(const pipeline::ComposeJob& job, const color::ColorConfig& colors);
+
 int runJob(const ComposeOptions& o, const Globals& globals,
            const pipeline::RunRequest& request = {}, bool printOutputs = true);
 

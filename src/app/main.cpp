@@ -11,6 +11,22 @@
 #include "app/cli.h"
 #include "core/error.h"
 
+namespace {
+
+// An option given an empty value (--yaw "", --env "") is a mistake, never "the default": CLI11
+// reads "" as 0 for numbers and keeps it as an empty path. Throws UsageError naming the option.
+void requireValues(const CLI::App& app) {
+  for (const CLI::Option* option : app.get_options()) {
+    if (option->count() == 0 || option->get_expected_min() == 0) continue;  // absent, or a flag
+    for (const std::string& value : option->results()) {
+      if (value.empty()) throw compose::UsageError(option->get_name() + " is given an empty value");
+    }
+  }
+  for (const CLI::App* sub : app.get_subcommands()) requireValues(*sub);
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace compose::app;
   CLI::App app{
@@ -56,6 +72,7 @@ int main(int argc, char** argv) {
   // the process: the failed write is then reported, and the outputs stay as they were.
   std::signal(SIGXFSZ, SIG_IGN);
   try {
+    requireValues(app);
     compose::setResourceLimits(globals.limits);
     for (auto& [sub, run] : runners) {
       if (sub->parsed()) return run();

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/numbers.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
@@ -232,14 +233,21 @@ void VirtualCameraParams::validate() const {
   if (width < 16 || height < 16 || width > 20000 || height > 20000)
     fail("image size must be between 16 and 20000 pixels per side");
   const double maxFov = projection == calib::Projection::Rectilinear ? 170.0 : 360.0;
-  if (!(fovDegrees > 1.0 && fovDegrees < maxFov))
+  // A rectilinear view of 180 degrees is infinitely wide; a fisheye's may reach a full turn.
+  if (!(fovDegrees >= 1.0 && fovDegrees <= maxFov))
     fail("field of view must be between 1 and " + std::to_string(int(maxFov)) +
-         " degrees for this lens");
+         " degrees for this lens (inclusive)");
+  if (int64_t(width) * height > resourceLimits().maxPixels) {
+    fail("image size " + std::to_string(width) + "x" + std::to_string(height) +
+         " is more pixels than the limit of " +
+         std::to_string(resourceLimits().maxPixels / 1000000) +
+         " megapixels (raise it with --max-pixels)");
+  }
   if (views < 1 || views > 360) fail("views must be between 1 and 360");
   if (brackets < 1 || brackets > 15) fail("brackets must be between 1 and 15");
   if (!(evStep > 0.0 && evStep <= 6.0)) fail("--ev-step must be in (0, 6] stops");
-  if (exposureTime && !(*exposureTime > 0.0 && *exposureTime < 3600.0))
-    fail("exposure time must be positive (seconds)");
+  if (exposureTime && !(*exposureTime >= 1e-9 && *exposureTime <= 3600.0))
+    fail("exposure time must be between 1 ns and 3600 s");
   if (!(fNumber >= 0.5 && fNumber <= 128.0)) fail("f-number must be between 0.5 and 128");
   if (!(iso >= 1.0 && iso <= 409600.0)) fail("ISO must be between 1 and 409600");
   if (!(calibration > 0.0) || !std::isfinite(calibration)) fail("calibration must be positive");

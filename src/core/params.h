@@ -41,6 +41,12 @@ class ParamSet {
 
   void set(const std::string& key, const std::string& value) { values_[key] = Entry{value, false}; }
   bool has(const std::string& key) const { return values_.count(key) != 0; }
+  // Whether `key` is given as exactly `value`, without reading it: a parameter looked at this way
+  // still counts as unused for requireAllUsed().
+  bool is(const std::string& key, const std::string& value) const {
+    const auto it = values_.find(key);
+    return it != values_.end() && it->second.value == value;
+  }
   void erase(const std::string& key) { values_.erase(key); }
 
   int getInt(const std::string& key, int fallback, const std::string& stage) {

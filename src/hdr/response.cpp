@@ -530,6 +530,13 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     }
     const std::vector<Sample> samples = selectSamples(views, params.samples);
     views.clear();
+    if (samples.empty()) {
+      // All black or all clipped (a solid photo, or a bracket far too dark or bright).
+      throw Error(kStage,
+                  "the response recovery failed: no pixel is between black and clipped in every "
+                  "exposure, so the photos say nothing about the response (too dark, too bright, "
+                  "or of a uniform scene)");
+    }
     const int k = std::max(4, int(std::floor(std::sqrt(double(samples.size())))));
     constexpr int B = 4;
     std::vector<cv::Mat> mosaic(n);
@@ -652,9 +659,7 @@ void writeResponse(const fs::path& file, const ResponseCurve& curve) {
 
 ResponseCurve readResponse(const fs::path& file) try {
   protectInput(file);
-  std::error_code ec;
-  if (!fs::exists(file, ec)) throw Error(kStage, "response file not found", file);
-  requireRegularFile(file, kStage);
+  requireInputFile(file, kStage, "response file");
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the response file", file);
   nlohmann::json j;

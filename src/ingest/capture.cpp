@@ -229,9 +229,7 @@ Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
 
 Capture readCaptureDescription(const fs::path& file) try {
   protectInput(file);
-  std::error_code ec;
-  if (!fs::exists(file, ec)) throw Error(kStage, "capture description not found", file);
-  requireRegularFile(file, kStage);
+  requireInputFile(file, kStage, "capture description");
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the capture description", file);
   nlohmann::json j;
@@ -397,8 +395,14 @@ void setExposures(View& view, const std::vector<double>& exposures, const std::s
                             (view.shots.size() == 1 ? " photo" : " photos"));
   }
   for (size_t i = 0; i < exposures.size(); ++i) {
-    if (!(exposures[i] > 0.0) || !std::isfinite(exposures[i]))
-      throw Error(kStage, "exposures must be positive numbers");
+    if (!(exposures[i] >= kMinExposure && exposures[i] <= kMaxExposure)) {
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "exposure %g (of %s) is not a relative exposure: they are between 1e-12 and "
+                    "1e12",
+                    exposures[i], view.shots[i].file.filename().string().c_str());
+      throw Error(kStage, text);
+    }
     view.shots[i].exposure = exposures[i];
     view.shots[i].exposureSource = source;
   }
@@ -416,6 +420,15 @@ void resolveExposures(Capture& capture) {
                     s.file);
       }
       s.exposureSource = "EXIF";
+    }
+    for (const Shot& s : v.shots) {
+      if (!(*s.exposure >= kMinExposure && *s.exposure <= kMaxExposure)) {
+        char text[160];
+        std::snprintf(text, sizeof text,
+                      "relative exposure %g (from the %s) is outside 1e-12..1e12: no camera's",
+                      *s.exposure, s.exposureSource.c_str());
+        throw Error(kStage, text, s.file);
+      }
     }
     std::stable_sort(v.shots.begin(), v.shots.end(),
                      [](const Shot& a, const Shot& b) { return *a.exposure < *b.exposure; });

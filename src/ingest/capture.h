@@ -103,6 +103,11 @@ std::string captureDescriptionText(const std::filesystem::path& file, const Capt
 // exposures (error naming the view's files).
 void resolveExposures(Capture& capture);
 
+// The range of relative exposures (t·ISO/N², or the values of --exposures) the merge accepts:
+// beyond it radiance overflows single precision (1e-300 gave infinities in the EXR) or
+// vanishes below it.
+inline constexpr double kMinExposure = 1e-12, kMaxExposure = 1e12;
+
 // Overrides the exposures of a single view from a list (e.g. --exposures): the list must have
 // one value per shot, in the order the shots were given.
 void setExposures(View& view, const std::vector<double>& exposures, const std::string& source);

@@ -187,14 +187,17 @@ class OiioModule final : public Module {
       if (why.empty() && errno != 0) error += std::string(": ") + std::strerror(errno);
       return false;
     };
-    // Some of OpenImageIO's writers (PNG among them) do not check their writes: a full disk left
-    // a truncated file and "success". Where the writer takes an IOProxy, the file is encoded in
-    // memory and written here, every write checked; the others are checked by errno afterwards.
+    // OpenImageIO's PNG writer does not check its writes: a full disk left a truncated file and
+    // "success". A PNG is encoded in memory and written here, every write checked; the other
+    // formats are checked by errno afterwards as well.
     const size_t rawBytes =
         typeOf(w.sample).size() * size_t(w.channels) * size_t(w.width) * size_t(w.height);
     std::vector<unsigned char> encoded;
     OIIO::Filesystem::IOVecOutput inMemory(encoded);
-    const bool viaMemory = output->supports("ioproxy") && rawBytes <= (size_t(1) << 30) &&
+    // Only PNG goes through memory: OpenImageIO 2.4's TIFF writer leaves a TIFF without its
+    // ImageLength tag when written to an IOProxy; libtiff checks its own writes.
+    const bool viaMemory = std::string(output->format_name()) == "png" &&
+                           output->supports("ioproxy") && rawBytes <= (size_t(1) << 30) &&
                            output->set_ioproxy(&inMemory);
     errno = 0;
     if (!output->open(file, spec)) return fail("cannot open for writing");

@@ -441,6 +441,34 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
 
   dropUnrenderableTriangles(loaded, path);
 
+  // Base colours are albedos, 0..1: more reflects more light than arrives, less is not light. A
+  // value outside is clamped, a non-finite one replaced by the default, and both are said.
+  {
+    std::string first;
+    size_t outside = 0;
+    for (Material& m : mesh.materials) {
+      const glm::vec3 given = m.baseColor;
+      for (int c = 0; c < 3; ++c) {
+        float& v = m.baseColor[c];
+        v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : kDefaultAlbedo;
+      }
+      if (m.baseColor != given) {
+        if (outside++ == 0) {
+          char text[160];
+          std::snprintf(text, sizeof text, " ('%s': %g %g %g)", m.name.c_str(), double(given.x),
+                        double(given.y), double(given.z));
+          first = text;
+        }
+      }
+    }
+    if (outside) {
+      mesh.warnings.push_back(detail::count(outside, "material has", "materials have") +
+                              " a base colour outside 0..1" + first +
+                              ": clamped to 0..1 (a value that is not a number: the default "
+                              "albedo)");
+    }
+  }
+
   // Normals from the file: normalised; a zero or non-finite one is computed instead.
   size_t badNormals = 0, fileNormals = 0;
   for (size_t i = 0; i < mesh.positions.size(); ++i) {

@@ -689,7 +689,14 @@ void GltfReader::read() {
       why += "the scene has no meshes";
     } else {
       why += "no triangles in " + count(primitives_, "primitive", "primitives");
-      if (!skipped.empty()) why += " (" + skipped.front() + ")";
+      if (!skipped.empty()) {
+        why += " (" + skipped.front() + ")";
+      } else if (!mesh_.warnings.empty()) {
+        // Lines or points only, or every triangle's indices out of range: the warnings say which.
+        std::string reasons;
+        for (const std::string& w : mesh_.warnings) reasons += (reasons.empty() ? "" : "; ") + w;
+        why += ": " + reasons;
+      }
     }
     throw Error("mesh", why, path_);
   }

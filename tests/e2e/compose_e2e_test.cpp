@@ -397,6 +397,16 @@ TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
                        "cheb-face, sh, mc, exact"),
             std::string::npos)
       << r.err;
+  // A parameter the basis does not take is refused: order=... looked at for "auto" counted as
+  // read, so exact took order=abc without a word.
+  const auto exact =
+      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +
+                     " --lighting exact --lighting-params order=abc",
+                 dir_.path());
+  EXPECT_EQ(exact.status, 2) << exact.err;
+  EXPECT_NE(exact.err.find("lighting basis 'exact' does not take parameter(s): order"),
+            std::string::npos)
+      << exact.err;
 }
 
 TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {

@@ -157,9 +157,12 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
     const glm::dmat3 r = cubemap::faceCameraRotation(f) * cubemap::cameraRotation(yaw, pitch, roll);
     ingest::WriteOptions w;
     w.depth = ingest::WriteOptions::Depth::Float;
-    const fs::path p = dir / (std::string("yard_") + names[f] + ".exr");
-    ingest::writeImage(p, cubemap::renderView(scene, lens, r, 2), w);
-    photos += " " + q(p);
+    // Named as a user names them (yard_px) or as capture-sim does (nx_2: a face, then the
+    // bracket), and given in reverse order: the names say where each points.
+    const fs::path p =
+        dir / (f % 2 == 0 ? std::string("yard_") + names[f] : std::string(names[f]) + "_2");
+    ingest::writeImage(p.string() + ".exr", cubemap::renderView(scene, lens, r, 2), w);
+    photos = " " + q(p.string() + ".exr") + photos;
   }
   const RunResult r = run("stitch --fov 100 --size 128 --out " + q(dir / "env.exr") + photos, dir);
   ASSERT_EQ(r.status, 0) << r.err;
@@ -572,6 +575,14 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
                 "--photo-space");
   expectRefused("convert missing.exr --to cube --blind-spot 5 --out " + q(dir_ / "x.exr"), 2,
                 "--blind-spot applies to a mirror-ball photo only", "--blind-spot");
+  // The same in stitch.
+  expectRefused("stitch --fov 90 --size 0 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
+                "--size must be 8..8192; got 0", "--size");
+  expectRefused("stitch --fov 90 --width 256 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
+                "--width is the width of a lat-long map: it goes with --to latlong", "--width");
+  expectRefused(
+      "stitch --fov 90 --no-refine --max-correction 5 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
+      "--max-correction bounds the refinement", "--no-refine");
 }
 
 }  // namespace

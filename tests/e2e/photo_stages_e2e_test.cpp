@@ -297,6 +297,20 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --brackets 0", dir), 2, "brackets");
   EXPECT_FAILS_WITH(compose("calib lens --board 9by6 --out c.json a.jpg", dir), 2, "9by6");
   EXPECT_FAILS_WITH(compose("ingest --max-gap -1 a.jpg", dir), 2, "time gap");
+  // Zero is not "not given"; extremes are named; options of a step that does not run are refused.
+  EXPECT_FAILS_WITH(compose("ingest --brackets 0 a.jpg", dir), 2, "--brackets");
+  EXPECT_FAILS_WITH(compose("merge --exposures 1e-300,1 --out h.exr a.jpg b.jpg", dir), 2,
+                    "--exposures must be relative exposures between 1e-12 and 1e12");
+  EXPECT_FAILS_WITH(compose("merge --max-shift 5 --out h.exr a.jpg b.jpg", dir), 2,
+                    "--max-shift is the alignment's range: it goes with --align");
+  EXPECT_FAILS_WITH(compose("merge --ghost-stops 1 --out h.exr a.jpg b.jpg", dir), 2,
+                    "it goes with --deghost");
+  EXPECT_FAILS_WITH(
+      compose("merge --response colorspace --recovery robertson --out h.exr a.jpg b.jpg", dir), 2,
+      "--recovery is for recovering a response, which --response colorspace does not do");
+  EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --size 20000x20000", dir), 2,
+                    "image size 20000x20000 is more pixels than the limit of 268 megapixels");
+  EXPECT_FAILS_WITH(compose("merge --out '' a.jpg b.jpg", dir), 2, "--out is given an empty value");
 }
 
 }  // namespace

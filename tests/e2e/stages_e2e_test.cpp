@@ -214,6 +214,28 @@ TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
 
   r = run("run " + quote(scene) + " --set render.scale", dir_.path());
   EXPECT_EQ(r.status, 2) << r.err;
+
+  // A value out of range in the scene file is the file's error (exit 1, naming it); one a --set
+  // brings is the command line's (exit 2). Both were "cli:" errors with exit 2.
+  const fs::path saved = dir_ / "saved.json";
+  r = run("--plate " + quote(plate_) + " " + objectOptions() + " --out " + quote(dir_ / "o") +
+              " --save-scene " + quote(saved),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::string text = slurp(saved);
+  const size_t at = text.find("\"samples\": 2");
+  ASSERT_NE(at, std::string::npos) << text;
+  compose::testing::writeText(scene, text.replace(at, 12, "\"samples\": 0"));
+  r = run("run " + quote(scene), dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("scene: --samples must be in 1..64, got 0 (the value in the scene file)"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("bad.json"), std::string::npos) << r.err;
+  r = run("run " + quote(saved) + " --set render.samples=65", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("--samples must be in 1..64, got 65"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "o.exr"));
 }
 
 TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {

@@ -149,6 +149,23 @@ TEST(Merge, BadBracketsAreNamedErrors) {
   COMPOSE_EXPECT_ERROR(mergeBracket(inputOf(b, &srgb), bad), "clipping thresholds");
 }
 
+// Photos with no pixel between black and clipped (a solid frame, or a bracket far too dark): the
+// recovery sampled nothing and divided by the count of samples (SIGFPE), with either photo solid.
+TEST(Response, PhotosWithoutMidTonesAreANamedErrorNotACrash) {
+  Codes8 black, grey;
+  black.width = grey.width = 64;
+  black.height = grey.height = 48;
+  black.rgb.assign(64 * 48 * 3, 0);
+  grey.rgb.assign(64 * 48 * 3, 128);
+  for (const Codes8* second : {&black, &grey}) {
+    BracketCodes bracket;
+    bracket.images = {&black, second};
+    bracket.exposures = {1.0, 4.0};
+    COMPOSE_EXPECT_ERROR(recoverResponse({bracket}, {}),
+                         "the response recovery failed: no pixel is between black and clipped");
+  }
+}
+
 TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   TempDir dir;
   ResponseCurve c = ResponseCurve::srgb();

@@ -160,7 +160,8 @@ TEST(Gltf, PointsAndLinesAreSkippedWithAWarning) {
       {lines.node({{"mesh", lines.mesh({{"attributes", {{"POSITION", p}}}, {"mode", 1}})}})});
   writeText(dir / "lines.gltf", lines.gltf());
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "lines.gltf"),
-                       "mesh: nothing renderable: no triangles in 1 primitive (");
+                       "mesh: nothing renderable: no triangles in 1 primitive: skipped 1 primitive "
+                       "of points or lines (only triangles render) (");
 }
 
 TEST(Gltf, TheNodeHierarchyIsFlattenedIntoObjectSpace) {

@@ -333,6 +333,9 @@ TEST(ShadowPlan, TheGridIsCheckedBeforeTheOrderItBounds) {
   COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("grid=8,order=9"),
                        "order (k) must be in 1..min(grid, 32), got 9");
   EXPECT_EQ(pipeline::ShadowPlan::parse("grid=8,order=8").transfer.grid, 8);
+  // A parameter the method does not take is refused, not ignored.
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("method=ao,order=99"),
+                       "order does not apply to method=ao");
 }
 
 }  // namespace

@@ -322,6 +322,32 @@ TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
   EXPECT_FALSE(m.normalsFromFile);
 }
 
+// A base colour is an albedo: outside 0..1 (Kd 5 -1 0) it rendered as given without a word (and
+// --albedo 1.5 is refused). (tinyobjloader reads Kd nan as 0.)
+TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
+  TempDir dir;
+  writeText(dir / "k.mtl",
+            "newmtl hot\nKd 5 -1 0.5\nnewmtl bad\nKd nan 0.2 0.3\nnewmtl ok\nKd 0.1 "
+            "0.2 0.3\n");
+  writeText(dir / "k.obj",
+            "mtllib k.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 1 0\nusemtl hot\nf 1 2 3\n"
+            "usemtl bad\nf 2 4 3\nusemtl ok\nf 2 5 4\n");
+  const Mesh m = loadMesh(dir / "k.obj");
+  ASSERT_EQ(m.warnings.size(), 1u) << m.warnings[0];
+  EXPECT_EQ(m.warnings[0],
+            "1 material has a base colour outside 0..1 ('hot': 5 -1 0.5): clamped to 0..1 (a "
+            "value that is not a number: the default albedo)");
+  for (const Material& material : m.materials) {
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_GE(material.baseColor[c], 0.0f) << material.name;
+      EXPECT_LE(material.baseColor[c], 1.0f) << material.name;
+    }
+    if (material.name == "ok") {
+      EXPECT_TRUE(near(material.baseColor, {0.1f, 0.2f, 0.3f}));
+    }
+  }
+}
+
 TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
   TempDir dir;
   writeText(dir / "m.obj", "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
