@@ -155,20 +155,16 @@ void Lens::validate(const fs::path& file) const {
   // Beyond these no lens made the photo: a view wider than 178 degrees through a rectilinear
   // lens, or narrower than a 0.06 degree telescope. fx = 1e308 overflowed the camera's matrices.
   const double side = std::max(width, height);
-  auto shown = [](double v) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%g", v);
-    return std::string(text);
-  };
   for (const double f : {fx, fy}) {
     if (f < 0.01 * side || f > 1000.0 * side) {
-      fail("focal length " + shown(f) + " px is not one of a " + std::to_string(width) + "x" +
+      fail("focal length " + numberText(f) + " px is not one of a " + std::to_string(width) + "x" +
            std::to_string(height) + " image's lens (0.01 to 1000 times its longer side)");
     }
   }
   if (!std::isfinite(cx) || !std::isfinite(cy)) fail("principal point cx, cy must be finite");
   if (std::abs(cx - 0.5 * width) > 10.0 * side || std::abs(cy - 0.5 * height) > 10.0 * side)
-    fail("principal point (" + shown(cx) + ", " + shown(cy) + ") lies far outside the image");
+    fail("principal point (" + numberText(cx) + ", " + numberText(cy) +
+         ") lies far outside the image");
   const size_t maxCoefficients = projection == Projection::Rectilinear ? 5 : 4;
   if (distortion.size() > maxCoefficients) {
     fail(std::string(projection == Projection::Rectilinear ? "rectilinear" : "equidistant") +

@@ -10,19 +10,11 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 
 namespace compose::calib {
 
-namespace {
-
-// A number as the user would type it ("0.5", not std::to_string's "0.500000").
-std::string shown(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%g", v);
-  return text;
-}
-
-}  // namespace
+namespace {}  // namespace
 
 bool PlateCamera::ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const {
   glm::dvec3 camDir;
@@ -45,26 +37,26 @@ bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
 void CameraOptions::validate() const {
   if (!(height > 0.0 && height <= 1e4)) {
     throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
-                     shown(height));
+                     numberText(height));
   }
   if (!(std::abs(pitchDegrees) < 89.0)) {
-    throw UsageError("--pitch must be within ±89 degrees, got " + shown(pitchDegrees));
+    throw UsageError("--pitch must be within ±89 degrees, got " + numberText(pitchDegrees));
   }
   // Below 1 mm a rectilinear view is wider than 172 degrees: no camera's plate.
   if (focal35mm && !(*focal35mm >= 1.0 && *focal35mm <= 1e4)) {
     throw UsageError("--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm, got " +
-                     shown(*focal35mm));
+                     numberText(*focal35mm));
   }
 }
 
 void Placement::validate() const {
   const glm::dvec2 p = imagePoint;
   if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
-    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + shown(p.x) + "," +
-                     shown(p.y));
+    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + numberText(p.x) +
+                     "," + numberText(p.y));
   }
   if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
-    throw UsageError("--scale must be in (0, 10], got " + shown(heightFraction));
+    throw UsageError("--scale must be in (0, 10], got " + numberText(heightFraction));
   }
   if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
 }
@@ -128,7 +120,7 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   if (!(dir.y < -1e-6)) {
     throw Error(
         "camera",
-        "--place " + shown(p.x) + "," + shown(p.y) +
+        "--place " + numberText(p.x) + "," + numberText(p.y) +
             " is at or above the horizon, so it does not see the ground; choose a lower point"
             " or pitch the camera down");
   }

@@ -17,7 +17,7 @@ namespace {
 std::string namesOf(const std::vector<StageParameter>& parameters) {
   std::string s;
   for (const auto& p : parameters) s += (s.empty() ? "" : ", ") + p.name;
-  return s.empty() ? "none" : s;
+  return s;
 }
 
 const StageParameter& findParameter(const Stage& stage,
@@ -25,8 +25,9 @@ const StageParameter& findParameter(const Stage& stage,
                                     const std::string& name) {
   for (const auto& p : parameters)
     if (p.name == name) return p;
-  throw UsageError("the stage " + stage.name() + " has no parameter '" + name +
-                   "'; its parameters are " + namesOf(parameters));
+  throw UsageError("the stage " + stage.name() + " has no parameter '" + name + "'" +
+                   (parameters.empty() ? std::string(": it has none")
+                                       : "; its parameters are " + namesOf(parameters)));
 }
 
 void setOne(ComposeJob& job, const Stage& stage, const std::string& name, nlohmann::json value,

@@ -89,13 +89,14 @@ glm::vec3 parseColour(const std::string& text, const std::string& option) {
   return {r, g, b};
 }
 
-glm::dvec3 parseTriple(const std::string& text, const std::string& option) {
+glm::dvec3 parseTriple(const std::string& text, const std::string& option,
+                       const std::string& form) {
   std::istringstream in(text);
   double x = 0, y = 0, z = 0;
   char c1 = 0, c2 = 0;
   if (!(in >> x >> c1 >> y >> c2 >> z) || c1 != ',' || c2 != ',' || !in.eof() ||
       !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
-    throw UsageError(option + " expects three numbers as X,Y,Z, got '" + text + "'");
+    throw UsageError(option + " expects three numbers as " + form + ", got '" + text + "'");
   }
   return {x, y, z};
 }
@@ -132,12 +133,6 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
   std::string s;
   for (const auto& i : items) s += (s.empty() ? "" : separator) + i;
   return s;
-}
-
-std::string shownNumber(double value) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%g", value);
-  return text;
 }
 
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,

@@ -80,12 +80,11 @@ glm::dvec2 parsePair(const std::string& text, const std::string& option);
 // "V" or "R,G,B" → three numbers; throws UsageError naming `option`.
 glm::vec3 parseColour(const std::string& text, const std::string& option);
 // "X,Y,Z" → three finite numbers; throws UsageError naming `option`.
-glm::dvec3 parseTriple(const std::string& text, const std::string& option);
+glm::dvec3 parseTriple(const std::string& text, const std::string& option,
+                       const std::string& form = "X,Y,Z");
 // A number, or throws UsageError naming `option`.
 double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
-// A number as the user would type it ("0.5", not std::to_string's "0.500000").
-std::string shownNumber(double value);
 // "a,b,c" → numbers; throws UsageError naming `option`.
 std::vector<double> parseList(const std::string& text, const std::string& option);
 

@@ -6,6 +6,7 @@
 #include "app/cli.h"
 #include "calib/chessboard.h"
 #include "calib/plate_camera.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "ingest/capture.h"
 #include "ingest/image_io.h"
@@ -125,7 +126,7 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
         throw UsageError(
             "--square must be the side of one square in metres, more than 0 and "
             "less than 1000; got " +
-            shownNumber(o->square));
+            numberText(o->square));
       }
       board.square = o->square;
     }

@@ -157,9 +157,10 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
 
     if (!globals.quiet) {
       std::fprintf(stderr,
-                   "compose: %zu views x %d exposures, %dx%d, %s lens %.0f degrees (f = %.1f px); "
+                   "compose: %zu view%s x %d exposure%s, %dx%d, %s lens %g degrees (f = %.1f px); "
                    "middle exposure %g s at f/%g ISO %g, %g EV apart\n",
-                   sim.views.size(), p.brackets, p.width, p.height,
+                   sim.views.size(), sim.views.size() == 1 ? "" : "s", p.brackets,
+                   p.brackets == 1 ? "" : "s", p.width, p.height,
                    p.projection == calib::Projection::Rectilinear ? "rectilinear" : "fisheye",
                    p.fovDegrees, sim.lens.fx, sim.middleExposureTime, p.fNumber, p.iso, p.evStep);
       std::fprintf(stderr, "compose: response %s; noise %s; seed %llu\n",

@@ -169,7 +169,7 @@ void ComposeOptions::apply(const CLI::App& app) {
   if (!place.empty()) j.placement.imagePoint = parsePair(place, "--place");
   if (!albedo.empty()) j.albedo = parseColour(albedo, "--albedo");
   if (given("--focal35")) j.camera.focal35mm = focal35;
-  if (!room.empty()) j.room = parseTriple(room, "--room");
+  if (!room.empty()) j.room = parseTriple(room, "--room", "W,H,D");
   if (given("--env-radius")) j.environmentRadius = envRadius;
   if (!captureAt.empty()) j.captureAt = parseTriple(captureAt, "--capture-at");
   if (!lightingParams.empty()) j.lightingParams = lightingParams;
@@ -183,7 +183,13 @@ void ComposeOptions::apply(const CLI::App& app) {
   if (!j.poseFile.empty() && (given("--camera-height") || given("--pitch")))
     throw UsageError(
         "--pose sets the camera's height and tilt: leave out --camera-height and --pitch");
-  if (exposure != "auto") j.exposureStops = parseNumber(exposure, "--exposure");
+  if (exposure != "auto") {
+    try {
+      j.exposureStops = parseNumber(exposure, "--exposure");
+    } catch (const UsageError&) {
+      throw UsageError("--exposure expects a number of stops or auto, got '" + exposure + "'");
+    }
+  }
 }
 
 void validateJob(const pipeline::ComposeJob& j, const color::ColorConfig& colors) {

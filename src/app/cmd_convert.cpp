@@ -7,6 +7,7 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/mirror_ball.h"
@@ -202,8 +203,9 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     }
     if (sanitized.negativeTexels > 0) {
       notes.push_back(std::to_string(sanitized.negativeTexels) +
-                      " texels had negative values (as low as " +
-                      std::to_string(sanitized.mostNegative) + "): clamped to 0");
+                      (sanitized.negativeTexels == 1 ? " texel" : " texels") +
+                      " had negative values (as low as " + numberText(sanitized.mostNegative) +
+                      "): clamped to 0");
     }
 
     // Convert.

@@ -1,5 +1,6 @@
 // compose merge: bracketed exposures → scene-linear OpenEXR. One bracket from the command line,
 // or every view of a capture description.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -132,6 +133,9 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       for (double e : exposures)
         if (!(e >= ingest::kMinExposure && e <= ingest::kMaxExposure))
           throw UsageError("--exposures must be relative exposures between 1e-12 and 1e12");
+      const auto [lo, hi] = std::minmax_element(exposures.begin(), exposures.end());
+      if (exposures.size() > 1 && std::log2(*hi / *lo) < 1.0 / 6.0)
+        throw UsageError("--exposures are all equal: a bracket needs different exposures");
       if (exposures.size() != o->images.size()) {
         throw UsageError("--exposures has " + std::to_string(exposures.size()) +
                          (exposures.size() == 1 ? " value" : " values") + " for " +
@@ -234,9 +238,9 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                         std::log2(e / view.exposures.front()));
           stops += text;
         }
-        std::fprintf(stderr, "compose: %-8s %zu photos (EV %s), %lld clipped pixels\n",
-                     view.name.c_str(), view.files.size(), stops.c_str(),
-                     static_cast<long long>(view.stats.saturated + view.stats.dark));
+        std::fprintf(stderr, "compose: %-8s %zu photo%s (EV %s), %lld clipped pixels\n",
+                     view.name.c_str(), view.files.size(), view.files.size() == 1 ? "" : "s",
+                     stops.c_str(), static_cast<long long>(view.stats.saturated + view.stats.dark));
       }
       std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n", result.seconds,
                    result.openCvSeconds);

@@ -195,7 +195,14 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     {
       // A malformed --set is a bad command line: refused before the scene is read.
       pipeline::ComposeJob scratch;
-      for (const std::string& s : *sets) pipeline::setParameter(scratch, s);
+      std::vector<std::string> names;
+      for (const std::string& s : *sets) {
+        pipeline::setParameter(scratch, s);
+        const std::string name = s.substr(0, s.find('='));
+        if (std::find(names.begin(), names.end(), name) != names.end())
+          throw UsageError("--set " + name + " is given twice");
+        names.push_back(name);
+      }
     }
     const fs::path cache = o->job.cache;
     const int threads = o->job.threads;

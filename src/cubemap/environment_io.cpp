@@ -18,6 +18,7 @@
 #include <OpenEXR/ImfStringAttribute.h>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "lighting/sphere_resample.h"
 
 namespace compose::cubemap {
@@ -216,7 +217,7 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
   if (depth == WriteOptions::Depth::Float) return false;
   constexpr float kHalfMax = 65504.0f;
   if (maximum > kHalfMax) {
-    notes.push_back("values up to " + std::to_string(maximum) + " exceed half float's range: " +
+    notes.push_back("values up to " + numberText(maximum) + " exceed half float's range: " +
                     path.filename().string() + " is written as 32-bit float");
     return false;
   }
@@ -225,6 +226,11 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
 
 void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
               bool useHalf, std::optional<Layout> envmap, const WriteOptions& options) {
+  if (lowerExtension(destination).empty()) {
+    throw Error("output",
+                "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
+                destination);
+  }
   try {
     if (lowerExtension(destination) == ".exr") {
       writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);

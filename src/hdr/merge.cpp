@@ -9,6 +9,7 @@
 #include <opencv2/photo.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 #include "hdr/opencv_util.h"
 
@@ -69,9 +70,13 @@ const char* mergeMethodName(MergeMethod method) {
 
 void MergeParams::validate() const {
   if (maxShift < 1 || maxShift > 1024)
-    throw Error(kStage, "the alignment range must be between 1 and 1024 pixels");
+    throw Error(kStage,
+                "the alignment range (--max-shift) must be between 1 and 1024 pixels, got " +
+                    std::to_string(maxShift));
   if (!(ghostStops > 0.0) || !std::isfinite(ghostStops))
-    throw Error(kStage, "the ghost threshold must be a positive number of stops");
+    throw Error(kStage,
+                "the ghost threshold (--ghost-stops) must be a positive number of stops, got " +
+                    numberText(ghostStops));
   if (!(clipLow >= 0.0 && clipLow < clipHigh && clipHigh <= 1.0))
     throw Error(kStage, "clipping thresholds must satisfy 0 <= low < high <= 1");
 }

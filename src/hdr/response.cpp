@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/json_number.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "hdr/opencv_util.h"
@@ -473,11 +474,15 @@ ResponseCurve ResponseCurve::srgb() {
 
 void RecoveryParams::validate() const {
   if (samples < 10 || samples > 100000)
-    throw Error(kStage, "response samples must be between 10 and 100000");
+    throw Error(kStage, "response samples (--samples) must be between 10 and 100000, got " +
+                            std::to_string(samples));
   if (!(lambda > 0.0) || !std::isfinite(lambda))
-    throw Error(kStage, "the response smoothness must be a positive number");
+    throw Error(kStage, "the response smoothness (--lambda) must be a positive number, got " +
+                            numberText(lambda));
   if (!(refitSmoothness > 0.0) || !std::isfinite(refitSmoothness))
-    throw Error(kStage, "the refit's smoothness must be a positive number");
+    throw Error(kStage,
+                "the refit's smoothness (--refit-smoothness) must be a positive number, got " +
+                    numberText(refitSmoothness));
   if (maxIterations < 1) throw Error(kStage, "Robertson iterations must be at least 1");
   if (!(threshold > 0.0)) throw Error(kStage, "Robertson threshold must be positive");
   if (maxPixels < 1024) throw Error(kStage, "Robertson needs at least 1024 pixels");

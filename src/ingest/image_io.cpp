@@ -631,8 +631,13 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
 WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& image,
                        const WriteOptions& options) {
   const std::string ext = lowerExtension(path);
+  if (ext.empty()) {
+    throw Error("output",
+                "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
+                path);
+  }
   if (ext != ".exr" && !isJpegName(ext) && !oiio::module("output", path).canWrite(path.string()))
-    throw Error("output", "no image writer for this file extension", path);
+    throw Error("output", "no image writer for the extension '" + ext + "'", path);
   return writeInto(outputs.add(path), path, image, options);
 }
 

@@ -9,6 +9,7 @@
 #include <glm/matrix.hpp>
 
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace compose::lighting {
@@ -59,7 +60,10 @@ void CaptureProxy::validate() const {
       return;
     case Shape::Sphere:
       if (!(radius > 0.0) || !std::isfinite(radius))
-        throw Error("lighting", "the environment's radius must be a positive number of metres");
+        throw Error("lighting",
+                    "the environment's radius (--env-radius) must be a positive number of metres, "
+                    "got " +
+                        numberText(radius));
       return;
   }
 }

@@ -59,7 +59,7 @@ bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
 std::string SanitizeReport::badRadiance(float value, const std::string& where) {
   if (std::isnan(value)) return "NaN radiance" + where;
   if (std::isinf(value)) return "infinite radiance" + where;
-  return "radiance " + std::to_string(value) + where +
+  return "radiance " + numberText(value) + where +
          " is beyond any light (more than 1e32): a damaged file?";
 }
 

@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
@@ -373,6 +374,15 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   const float size = std::max({extent.x, extent.y, extent.z});
   if (!(size > 0.0f)) throw Error("mesh", "mesh has zero size (all vertices coincide)", path);
+  // Areas and normals are products of two coordinates: beyond 1e18 they overflow single
+  // precision, and every triangle would look degenerate.
+  if (!(size < 1e18f)) {
+    throw Error("mesh",
+                "mesh spans " + numberText(size) +
+                    " units: coordinates this large overflow single precision; scale the file "
+                    "down (--scale sets the size in the plate)",
+                path);
+  }
 
   // Area below (1e-7 of the object's size)² is rounding noise in float coordinates.
   const float minDoubleArea = 1e-14f * size * size;
@@ -508,7 +518,8 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
     mesh.normalsSource =
         std::string(fileNormals ? "from the file for " + std::to_string(fileNormals) + " of " +
                                       std::to_string(vertices) + " vertices; the others "
-                                : "not in the file: ") +
+                    : badNormals ? "in the file but none usable: "
+                                 : "not in the file: ") +
         "computed as smooth angle-weighted normals with a crease angle of " + crease;
     if (stats.added > 0) {
       mesh.normalsSource += " (" + detail::count(stats.added, "vertex", "vertices") +

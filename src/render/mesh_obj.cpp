@@ -276,13 +276,15 @@ LoadedMesh loadObj(const fs::path& path) {
     }
   }
   if (outOfRange) {
-    const std::string what = "dropped " + std::to_string(outOfRange) + " of " +
-                             std::to_string(faces) +
-                             " faces that refer to vertices, texture coordinates or normals the "
-                             "file does not have (it has " +
-                             count(vertexCount, "vertex", "vertices") + ", " +
-                             count(texcoordCount, "texture coordinate", "texture coordinates") +
-                             ", " + count(normalCount, "normal", "normals") + ")";
+    const std::string what =
+        "dropped " +
+        (faces == 1 ? std::string("the one face")
+                    : std::to_string(outOfRange) + " of " + std::to_string(faces) + " faces") +
+        " referring to vertices, texture coordinates or normals the "
+        "file does not have (it has " +
+        count(vertexCount, "vertex", "vertices") + ", " +
+        count(texcoordCount, "texture coordinate", "texture coordinates") + ", " +
+        count(normalCount, "normal", "normals") + ")";
     if (outOfRange == faces) throw Error("mesh", "nothing renderable: " + what, path);
     mesh.warnings.push_back(what);
   }

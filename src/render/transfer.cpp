@@ -177,9 +177,9 @@ void RefineParams::validate() const {
   auto fail = [](const std::string& what) { throw UsageError(what, "shadows"); };
   if (!(spread >= 0.0f && spread <= 1.0f))
     fail("refine (the ambient occlusion spread that refines a triangle) must be in 0..1, got " +
-         std::to_string(spread));
+         numberText(spread));
   if (!(budget >= 0.0f && budget <= 16.0f))
-    fail("refine budget must be in 0..16 (times the points), got " + std::to_string(budget));
+    fail("refine budget must be in 0..16 (times the points), got " + numberText(budget));
   if (factor < 2 || factor > 32)
     fail("refine factor must be in 2..32, got " + std::to_string(factor));
 }

@@ -514,6 +514,10 @@ TEST_F(BadEnvironmentInput, CrossOfTheWrongAspect) {
                 "odd.exr");
   expectRefused("convert " + q(dir_ / "odd.exr") + " --to cube --out " + q(dir_ / "x.exr"), 1,
                 "or 3:4 (vertical cross); say which with --layout (LAYOUT)", "odd.exr");
+  // An output without an extension: said so, naming the file asked for.
+  write("ok.exr", 64, 32);
+  expectRefused("convert " + q(dir_ / "ok.exr") + " --to cube --out " + q(dir_ / "cube"), 1,
+                "the file name has no extension to say its format", (dir_ / "cube").string() + ")");
 }
 
 TEST_F(BadEnvironmentInput, MissingFace) {

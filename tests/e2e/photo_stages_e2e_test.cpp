@@ -214,11 +214,20 @@ TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
   // A bracket whose exposures are all equal.
   {
     TempDir dir;
-    const CommandRun r = compose("merge --exposures 1,1,1 --out " + q(dir / "hdr.exr") + " " +
-                                     q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) + " " +
-                                     q(shot("yaw000_3.jpg")),
+    // From the files' EXIF: three copies of one shot (exit 1, the files' fault).
+    for (const char* name : {"a.jpg", "b.jpg", "c.jpg"})
+      fs::copy_file(shot("yaw000_2.jpg"), dir / name);
+    const CommandRun r = compose("merge --out " + q(dir / "hdr.exr") + " " + q(dir / "a.jpg") +
+                                     " " + q(dir / "b.jpg") + " " + q(dir / "c.jpg"),
                                  dir);
     EXPECT_FAILS_WITH(r, 1, "ingest: the exposures of view 'hdr' are all equal");
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+    // From the command line (exit 2, the command line's fault).
+    const CommandRun given = compose("merge --exposures 1,1,1 --out " + q(dir / "hdr.exr") + " " +
+                                         q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) +
+                                         " " + q(shot("yaw000_3.jpg")),
+                                     dir);
+    EXPECT_FAILS_WITH(given, 2, "--exposures are all equal");
     EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
   }
   // No EXIF and no exposure list.
@@ -301,6 +310,8 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   EXPECT_FAILS_WITH(compose("ingest --brackets 0 a.jpg", dir), 2, "--brackets");
   EXPECT_FAILS_WITH(compose("merge --exposures 1e-300,1 --out h.exr a.jpg b.jpg", dir), 2,
                     "--exposures must be relative exposures between 1e-12 and 1e12");
+  EXPECT_FAILS_WITH(compose("merge --exposures 4,4 --out h.exr a.jpg b.jpg", dir), 2,
+                    "--exposures are all equal");
   EXPECT_FAILS_WITH(compose("merge --max-shift 5 --out h.exr a.jpg b.jpg", dir), 2,
                     "--max-shift is the alignment's range: it goes with --align");
   EXPECT_FAILS_WITH(compose("merge --ghost-stops 1 --out h.exr a.jpg b.jpg", dir), 2,

@@ -214,6 +214,9 @@ TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
 
   r = run("run " + quote(scene) + " --set render.scale", dir_.path());
   EXPECT_EQ(r.status, 2) << r.err;
+  r = run("run " + quote(scene) + " --set render.scale=0.2 --set render.scale=0.4", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("--set render.scale is given twice"), std::string::npos) << r.err;
 
   // A value out of range in the scene file is the file's error (exit 1, naming it); one a --set
   // brings is the command line's (exit 2). Both were "cli:" errors with exit 2.

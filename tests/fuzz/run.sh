@@ -56,6 +56,7 @@ fuzz_one() {
   fi
   # The working corpus first: libFuzzer adds what it finds to the first folder only.
   ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} \
+    LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/tests/lsan.supp} \
     "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$work/$t/" "$corpus" "tests/fuzz/corpus/$t" "tests/fuzz/regressions/$t" \
     >"$log" 2>&1

@@ -140,7 +140,7 @@ TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   COMPOSE_EXPECT_ERROR(p.validate(), "positive width, height and depth");
   CaptureProxy s;
   s.shape = CaptureProxy::Shape::Sphere;
-  COMPOSE_EXPECT_ERROR(s.validate(), "radius must be a positive number");
+  COMPOSE_EXPECT_ERROR(s.validate(), "radius (--env-radius) must be a positive number");
   // Beyond 1000 km the surroundings are distant (and at 1e308 the projections overflowed).
   s.radius = 1e308;
   COMPOSE_EXPECT_ERROR(s.validate(), "more than 1000 km across");

@@ -146,6 +146,14 @@ TEST(Mesh, ZeroNormalsInTheFileAreComputedWithAWarning) {
   EXPECT_FALSE(m.normalsFromFile);
   for (const glm::vec3& n : m.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
   EXPECT_NE(m.normalsSource.find("from the file for 2 of 3 vertices"), std::string::npos);
+  // Every normal zero: the source does not say "not in the file" beside the warning that they
+  // were.
+  writeText(dir / "allzero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nf 1//1 2//1 3//1\n");
+  const Mesh z = loadMesh(dir / "allzero.obj");
+  ASSERT_EQ(z.warnings.size(), 1u);
+  EXPECT_EQ(z.normalsSource.find("not in the file"), std::string::npos) << z.normalsSource;
+  EXPECT_NE(z.normalsSource.find("in the file but none usable: computed"), std::string::npos)
+      << z.normalsSource;
 }
 
 TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
@@ -189,6 +197,9 @@ TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "one.obj"),
                        "nothing renderable: the one triangle is degenerate");
   // A coordinate beyond single precision reads as infinity: said so, not only "not finite".
+  writeText(dir / "wide.obj", "v -1e38 0 0\nv 1e38 0 0\nv 0 1e38 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "wide.obj"),
+                       "mesh spans 2e+38 units: coordinates this large overflow single precision");
   writeText(dir / "huge.obj", "v 0 0 0\nv 1e308 0 0\nv 0 1 0\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
                        "nothing renderable: the one triangle has a corner whose coordinates are "
@@ -393,11 +404,11 @@ TEST(Mesh, FacesReferringToMissingVerticesAreDroppedWithCounts) {
   EXPECT_EQ(m.triangleCount(), 1u);
   ASSERT_GE(m.warnings.size(), 1u);
   EXPECT_EQ(m.warnings[0],
-            "dropped 4 of 5 faces that refer to vertices, texture coordinates or normals the file "
+            "dropped 4 of 5 faces referring to vertices, texture coordinates or normals the file "
             "does not have (it has 3 vertices, 1 texture coordinate, 1 normal)");
   writeText(dir / "none.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "none.obj"),
-                       "nothing renderable: dropped 1 of 1 faces that refer to vertices");
+                       "nothing renderable: dropped the one face referring to vertices");
   writeText(dir / "huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4294967299\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
                        "line 4: face corner '4294967299' is not a valid vertex reference");
