@@ -266,11 +266,7 @@ class PrecomputeStage final : public Stage {
     lighting::Environment environment = lighting::Environment::fromLatLong(
         *ctx.artefacts.environment, ctx.environmentInput.path, &sanitized);
     ctx.artefacts.environment.reset();  // nothing after this stage reads the pixels
-    if (sanitized.negativeTexels > 0) {
-      ctx.note(format("%lld environment texel%s had negative values (as low as %g): clamped to 0",
-                      static_cast<long long>(sanitized.negativeTexels),
-                      sanitized.negativeTexels == 1 ? "" : "s", double(sanitized.mostNegative)));
-    }
+    if (sanitized.negativeTexels > 0) ctx.note(sanitized.negativeNote("environment "));
     // An environment without light lights nothing: the object would render black and the auto
     // exposure would have nothing to match.
     const std::vector<float>& texels = environment.texels();

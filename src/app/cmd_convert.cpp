@@ -7,7 +7,6 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/limits.h"
-#include "core/numbers.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/mirror_ball.h"
@@ -201,12 +200,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         energyIn = lighting::integral(latLong);
       }
     }
-    if (sanitized.negativeTexels > 0) {
-      notes.push_back(std::to_string(sanitized.negativeTexels) +
-                      (sanitized.negativeTexels == 1 ? " texel" : " texels") +
-                      " had negative values (as low as " + numberText(sanitized.mostNegative) +
-                      "): clamped to 0");
-    }
+    if (sanitized.negativeTexels > 0) notes.push_back(sanitized.negativeNote(""));
 
     // Convert.
     OutputFiles outputs("output");

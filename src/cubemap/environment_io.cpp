@@ -1,5 +1,4 @@
 #include "cubemap/environment_io.h"
-#include <cstdio>
 
 #include <algorithm>
 #include <cctype>
@@ -421,14 +420,7 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
   }
   lighting::SanitizeReport sanitized;
   lighting::CubeMap cube = cubeMapOf(file, &sanitized);
-  if (sanitized.negativeTexels > 0) {
-    char note[160];
-    std::snprintf(note, sizeof note,
-                  "%lld cube texel%s had negative values (as low as %g): clamped to 0",
-                  static_cast<long long>(sanitized.negativeTexels),
-                  sanitized.negativeTexels == 1 ? "" : "s", double(sanitized.mostNegative));
-    out.notes.push_back(note);
-  }
+  if (sanitized.negativeTexels > 0) out.notes.push_back(sanitized.negativeNote("cube "));
   const lighting::Environment env = lighting::latLongFromCube(cube, 4 * cube.size(), progress);
   out.image = Image(env.width(), env.height(), 3, {"R", "G", "B"});
   out.image.colorSpace = file.info.fileColorSpace;

@@ -56,6 +56,12 @@ bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
   return true;
 }
 
+std::string SanitizeReport::negativeNote(const std::string& kind) const {
+  if (negativeTexels == 0) return {};
+  return std::to_string(negativeTexels) + " " + kind + (negativeTexels == 1 ? "texel" : "texels") +
+         " had negative values (as low as " + numberText(mostNegative) + "): clamped to 0";
+}
+
 std::string SanitizeReport::badRadiance(float value, const std::string& where) {
   if (std::isnan(value)) return "NaN radiance" + where;
   if (std::isinf(value)) return "infinite radiance" + where;

@@ -41,6 +41,9 @@ struct SanitizeReport {
   // with the value in `bad`, when a value cannot be radiance (NaN, infinite, beyond
   // kMaxRadiance): the caller throws badRadiance() naming the texel.
   bool take(const float src[3], float dst[3], float& bad);
+  // The note for the user about the clamped texels, "<n> <kind> texel(s) had negative values (as
+  // low as <v>): clamped to 0" (kind: "environment ", "cube ", or ""); empty when there were none.
+  std::string negativeNote(const std::string& kind) const;
   // What is wrong with `value`, placing `where` (" at texel (3, 4)") in the sentence.
   static std::string badRadiance(float value, const std::string& where);
 };
