@@ -68,8 +68,9 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       ->capture_default_str();
   command.add_option("--read-noise", params.readNoiseElectrons, "Read noise, electrons")
       ->capture_default_str();
-  command.add_option("--supersample", params.supersample, "S x S rays per pixel (anti-aliasing)")
-      ->capture_default_str();
+  command.add_option("--supersample", params.supersample,
+                     "S x S rays per pixel (anti-aliasing) [default: automatic, the fewest "
+                     "whose spacing is at most one texel of the environment, 1-8]");
   command.add_option("--blur", params.blurPixels, "Optics: Gaussian point-spread sigma, pixels")
       ->capture_default_str();
   command.add_option("--jpeg-quality", params.jpegQuality, "JPEG quality")->capture_default_str();

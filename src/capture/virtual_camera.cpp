@@ -1,6 +1,7 @@
 #include "capture/virtual_camera.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -45,6 +46,30 @@ inline double normalFromKey(uint64_t key) {
   const double u1 = (double(a >> 11) + 0.5) * 0x1.0p-53, u2 = double(b >> 11) * 0x1.0p-53;
   return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);
 }
+
+// The 8-bit code round(255 · f(s)) of a response f by search among the signals where f crosses
+// the code boundaries (f is increasing): a handful of comparisons instead of a pow per sample.
+class CodeThresholds {
+ public:
+  explicit CodeThresholds(const CameraCurve& curve) {
+    for (int k = 0; k < 255; ++k) {
+      // The first signal with code k + 1, found by bisection on f itself so that the code is
+      // exactly what rounding f would give.
+      double lo = 0.0, hi = 1.0;
+      for (int i = 0; i < 60; ++i) {
+        const double m = 0.5 * (lo + hi);
+        (std::round(255.0 * curve.encode(m)) >= k + 1 ? hi : lo) = m;
+      }
+      bounds_[size_t(k)] = hi;
+    }
+  }
+  int operator()(double s) const {
+    return int(std::upper_bound(bounds_.begin(), bounds_.end(), s) - bounds_.begin());
+  }
+
+ private:
+  std::array<double, 255> bounds_{};
+};
 
 glm::dmat3 rotationAbout(const glm::dvec3& axis, double radians) {
   const glm::dvec3 a = glm::normalize(axis);
@@ -107,9 +132,8 @@ void blur(Image& img, double sigma) {
 // principal point, with S × S rays per pixel.
 Image render(const lighting::Environment& env, const calib::Lens& lens,
              const glm::dmat3& worldFromCamera, glm::dvec2 shift, double roll,
-             const VirtualCameraParams& p) {
+             const VirtualCameraParams& p, int s) {
   Image out(lens.width, lens.height, 3, {"R", "G", "B"});
-  const int s = p.supersample;
   const double cr = std::cos(roll), sr = std::sin(roll);
   const glm::dvec3 gain = p.calibration * p.whiteBalance;
   // A fisheye's image circle: rays up to half the field of view from the axis.
@@ -258,7 +282,8 @@ void VirtualCameraParams::validate() const {
   if (!(curve.shoulder > 0.0 && curve.shoulder < 1e6)) fail("response shoulder must be positive");
   if (!(fullWellElectrons >= 100.0) || !(readNoiseElectrons >= 0.0))
     fail("noise: full well must be at least 100 electrons and read noise non-negative");
-  if (supersample < 1 || supersample > 16) fail("supersampling must be between 1 and 16");
+  if (supersample && (*supersample < 1 || *supersample > 16))
+    fail("supersampling must be between 1 and 16");
   if (!(blurPixels >= 0.0 && blurPixels <= 10.0)) fail("optical blur must be 0-10 pixels");
   if (jpegQuality < 1 || jpegQuality > 100) fail("JPEG quality must be between 1 and 100");
   if (!writeJpeg && !writeTiff16) fail("nothing to write: neither JPEG nor TIFF");
@@ -302,6 +327,11 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
   cap.params = p;
   cap.lens = calib::Lens::fromFieldOfView(p.width, p.height, p.fovDegrees, p.projection);
   cap.lens.source = "virtual camera";
+  // A pixel at the centre spans 1/f radians (either projection); a texel of the lat-long map
+  // 2π/W on its equator.
+  cap.supersample = p.supersample.value_or(std::clamp(
+      int(std::ceil((1.0 / std::min(cap.lens.fx, cap.lens.fy)) / (2.0 * kPi / env.width()) - 1e-9)),
+      1, 8));
 
   std::mt19937_64 rng(p.seed);
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
@@ -336,7 +366,8 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
       s.rollDegrees = p.shakeRollDegrees * unit(rng);
     }
     const SimulatedShot& ref = v.shots[size_t(mid)];
-    v.truth = render(env, cap.lens, v.worldFromCamera, ref.shift, ref.rollDegrees * kPi / 180.0, p);
+    v.truth = render(env, cap.lens, v.worldFromCamera, ref.shift, ref.rollDegrees * kPi / 180.0, p,
+                     cap.supersample);
     v.truth.colorSpace = env.colorSpace();
     step();
     cap.views.push_back(std::move(v));
@@ -385,8 +416,8 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
       s.relativeExposure = s.exposureTime * p.iso / (p.fNumber * p.fNumber);
       Image radiance;
       if (shaken) {
-        radiance =
-            render(env, cap.lens, v.worldFromCamera, s.shift, s.rollDegrees * kPi / 180.0, p);
+        radiance = render(env, cap.lens, v.worldFromCamera, s.shift, s.rollDegrees * kPi / 180.0, p,
+                          cap.supersample);
         step();
       }
       const Image& seen = shaken ? radiance : v.truth;
@@ -394,6 +425,7 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
       s.codes.colorSpace = "sRGB";
       if (p.writeTiff16) s.linear16 = Image(p.width, p.height, 3, {"R", "G", "B"});
       const uint64_t shotKey = mix(mix(p.seed) ^ (uint64_t(vi) << 40) ^ (uint64_t(b) << 32));
+      const CodeThresholds codeOf(p.curve);
       parallelFor(0, p.height, [&](int64_t yy) {
         const int y = int(yy);
         for (int x = 0; x < p.width; ++x) {
@@ -408,7 +440,7 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
               signal += std::sqrt(e + read2) / fullWell * normalFromKey(key);
             }
             signal = std::clamp(signal, 0.0, 1.0);
-            code[c] = float(std::round(255.0 * p.curve.encode(signal)) / 255.0);
+            code[c] = float(codeOf(signal)) / 255.0f;
             if (p.writeTiff16)
               s.linear16.at(x, y)[c] = float(std::round(signal * 65535.0) / 65535.0);
           }
@@ -540,7 +572,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
   truth["iso"] = p.iso;
   truth["middleExposureTime"] = cap.middleExposureTime;
   truth["evStep"] = p.evStep;
-  truth["supersample"] = p.supersample;
+  truth["supersample"] = cap.supersample;
   truth["blurPixels"] = p.blurPixels;
   truth["jpegQuality"] = p.jpegQuality;
   truth["lens"] = files.lens.filename().string();

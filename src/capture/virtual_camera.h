@@ -103,7 +103,10 @@ struct VirtualCameraParams {
   double fullWellElectrons = 40000.0;  // at ISO 100
   double readNoiseElectrons = 3.0;
   uint64_t seed = 1;
-  int supersample = 4;      // S: S × S rays per pixel
+  // S: S × S rays per pixel. Empty: as many as the environment needs, the fewest rays whose
+  // spacing at the image centre (the widest pixel) is at most one of its texels: 1 when the
+  // photo is finer than the map (its bilinear lookups are smooth already), up to 8.
+  std::optional<int> supersample;
   double blurPixels = 0.6;  // σ of the optics' Gaussian point-spread function, pixels
   int jpegQuality = 95;
   bool writeJpeg = true;
@@ -142,6 +145,7 @@ struct SimulatedCapture {
   calib::Lens lens;
   std::vector<SimulatedView> views;
   double middleExposureTime = 0.0;
+  int supersample = 1;          // the S rendered with (params.supersample, or the automatic choice)
   std::string environmentName;  // for the ground-truth file
 };
 

@@ -3,6 +3,8 @@
 #include "capture/virtual_camera.h"
 
 #include <cmath>
+#include <cstdio>
+#include <optional>
 
 #include <glm/geometric.hpp>
 
@@ -117,6 +119,52 @@ TEST(VirtualCamera, FisheyeSeesNothingOutsideItsImageCircle) {
   const SimulatedCapture c = simulateCapture(env, p);
   EXPECT_EQ(c.views[0].truth.at(0, 0)[0], 0.0f);  // the corner is beyond 90 degrees
   EXPECT_GT(c.views[0].truth.at(48, 36)[0], 0.0f);
+}
+
+// Without --supersample the camera takes as many rays per pixel as the environment's detail
+// needs: several when a pixel spans more than a texel (one ray would alias the map's detail), one
+// when the photo is finer than the map (its bilinear lookups are smooth already).
+TEST(VirtualCamera, AutomaticSupersamplingFollowsTheEnvironmentsDetail) {
+  // Stripes one texel wide: the finest detail a map holds.
+  auto stripes = [](int width) {
+    Image img(width, width / 2, 3);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) std::fill_n(img.at(x, y), 3, x % 2 ? 1.0f : 0.02f);
+    return lighting::Environment::fromLatLong(img);
+  };
+  auto truthOf = [](const lighting::Environment& env, int size, std::optional<int> s) {
+    VirtualCameraParams p = tiny();
+    p.width = p.height = size;
+    p.views = 1;
+    p.brackets = 1;
+    p.noise = false;
+    p.blurPixels = 0.0;
+    p.supersample = s;
+    return simulateCapture(env, p);
+  };
+  auto rms = [](const Image& a, const Image& b) {
+    double sum = 0.0;
+    for (size_t i = 0; i < a.pixels.size(); ++i) sum += std::pow(a.pixels[i] - b.pixels[i], 2.0);
+    return std::sqrt(sum / double(a.pixels.size()));
+  };
+  // A 32-pixel photo across 100° of a 256-texel map: a pixel spans about three texels.
+  const lighting::Environment fine = stripes(256);
+  const SimulatedCapture chosen = truthOf(fine, 32, std::nullopt);
+  const SimulatedCapture one = truthOf(fine, 32, 1), many = truthOf(fine, 32, 16);
+  EXPECT_GE(chosen.supersample, 3);
+  EXPECT_LE(chosen.supersample, 8);
+  const double chosenError = rms(chosen.views[0].truth, many.views[0].truth);
+  const double oneError = rms(one.views[0].truth, many.views[0].truth);
+  EXPECT_LT(chosenError, 0.25 * oneError) << "S = " << chosen.supersample;
+  // A 256-pixel photo of a 64-texel map: one ray, and it agrees with many.
+  const lighting::Environment coarse = stripes(64);
+  const SimulatedCapture single = truthOf(coarse, 256, std::nullopt);
+  EXPECT_EQ(single.supersample, 1);
+  EXPECT_LT(rms(single.views[0].truth, truthOf(coarse, 256, 16).views[0].truth), 0.02);
+  std::printf(
+      "[ figures ] 32-pixel photo of 1-texel stripes: RMS error vs 16x16 rays %.4f with "
+      "S = %d (automatic), %.4f with S = 1\n",
+      chosenError, chosen.supersample, oneError);
 }
 
 TEST(VirtualCamera, CurvesInvertAndParse) {
