@@ -160,7 +160,10 @@ Image render(const lighting::Environment& env, const calib::Lens& lens,
       for (int c = 0; c < 3; ++c) o[c] = float(sum[c] / (s * s) * gain[c]);
     }
   });
-  blur(out, p.blurPixels);
+  // A pixel integrates the light over its area: a box of variance 1/12 pixel² per axis, which
+  // S × S rays hold but 1/(12 S²) of. The rest joins the optics' blur (as a Gaussian of the same
+  // variance), so that the photo's sharpness does not depend on the rays taken.
+  blur(out, std::sqrt(p.blurPixels * p.blurPixels + 1.0 / (12.0 * s * s)));
   return out;
 }
 

@@ -5,9 +5,11 @@
 // The camera model, per pixel and channel, in this order:
 //  1. Optics. The lens (calib/lens.h: rectilinear, or equidistant fisheye) maps the pixel to a
 //     ray; the environment's radiance L is looked up (bilinear) along it. Each pixel averages
-//     S × S rays on a regular sub-pixel grid (anti-aliasing: the sensor integrates light), and
-//     the image is blurred by a Gaussian of σ = blurPixels (lens, anti-aliasing filter and
-//     demosaicing together; real cameras do not resolve single pixels). A fisheye's image circle
+//     S × S rays on a regular sub-pixel grid (the sensor integrates light over the pixel: S as
+//     the map's detail needs unless given, see `supersample`), and the image is blurred by a
+//     Gaussian of σ = blurPixels (lens, anti-aliasing filter and demosaicing together; real
+//     cameras do not resolve single pixels) widened by the part of the pixel's area the S × S
+//     rays do not integrate (variance 1/(12 S²) pixel²). A fisheye's image circle
 //     holds the rays up to half the field of view from the axis (the field of view is measured
 //     across the width); pixels outside it see nothing (0).
 //  2. Exposure. Sensor signal s = K · wb_c · L_c · e, with e = t · ISO / N² the relative exposure

@@ -22,21 +22,29 @@ class ParamSet {
   // key given twice (which of the two was meant cannot be known).
   static ParamSet parse(const std::string& text, const std::string& stage) {
     ParamSet p;
+    if (text.empty()) return p;
+    // Every piece between commas is a parameter: "order=2," holds an empty one after the comma.
     size_t start = 0;
-    while (start < text.size()) {
+    for (;;) {
       size_t end = text.find(',', start);
       if (end == std::string::npos) end = text.size();
       const std::string item = text.substr(start, end - start);
       const size_t eq = item.find('=');
+      if (item.empty()) {
+        throw Error(stage, "malformed parameters '" + text + "': an empty one " +
+                               (end == text.size() ? "after the last comma"
+                                : start == 0       ? "before the first comma"
+                                                   : "between commas"));
+      }
       if (eq == std::string::npos || eq == 0) {
         throw Error(stage, "malformed parameter '" + item + "', expected key=value");
       }
       const std::string key = item.substr(0, eq);
       if (p.has(key)) throw Error(stage, "parameter '" + key + "' is given twice");
       p.set(key, item.substr(eq + 1));
+      if (end == text.size()) return p;
       start = end + 1;
     }
-    return p;
   }
 
   void set(const std::string& key, const std::string& value) { values_[key] = Entry{value, false}; }

@@ -45,6 +45,8 @@ std::unique_ptr<DiffuseLighting> createLighting(const std::string& name, ParamSe
   } else if (name == "mc") {
     const int samples = params.getInt("samples", 1024, "lighting");
     const int seed = params.getInt("seed", 1, "lighting");
+    if (seed < 0)
+      throw Error("lighting", "parameter seed=" + std::to_string(seed) + " must be 0 or more");
     basis = std::make_unique<MonteCarloLighting>(samples, uint64_t(uint32_t(seed)));
   } else if (name == "exact") {
     basis = std::make_unique<ExactLighting>();

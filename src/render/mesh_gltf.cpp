@@ -501,7 +501,12 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
       throw PrimitiveError{"NORMAL and POSITION have different counts"};
   }
   const uint32_t materialIndex = material(primitive.material);
-  (primitive.material >= 0 ? someMaterial_ : noMaterial_) = true;
+  // A primitive naming a material the file lacks is counted by material() and said once: it is
+  // neither a primitive with a material nor one without.
+  if (primitive.material < 0)
+    noMaterial_ = true;
+  else if (size_t(primitive.material) < model_.materials.size())
+    someMaterial_ = true;
   std::vector<double> texcoords;
   if (mesh_.materials[materialIndex].texture >= 0) {
     const std::string set = "TEXCOORD_" + std::to_string(texCoordSet_[materialIndex]);

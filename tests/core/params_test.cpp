@@ -24,6 +24,14 @@ TEST(ParamSet, ReportsUnusedParameters) {
 
 TEST(ParamSet, RejectsMalformedText) {
   COMPOSE_EXPECT_ERROR(ParamSet::parse("order", "lighting"), "malformed parameter 'order'");
+  // An empty piece is a slip (a value lost, or a comma too many), not nothing.
+  COMPOSE_EXPECT_ERROR(ParamSet::parse("order=2,", "lighting"),
+                       "malformed parameters 'order=2,': an empty one after the last comma");
+  COMPOSE_EXPECT_ERROR(ParamSet::parse("order=2,,rows=3", "lighting"),
+                       "an empty one between commas");
+  COMPOSE_EXPECT_ERROR(ParamSet::parse(",order=2", "lighting"),
+                       "an empty one before the first comma");
+  EXPECT_TRUE(ParamSet::parse("", "lighting").unusedNames().empty());
   ParamSet p = ParamSet::parse("order=two,x=1.5e", "lighting");
   COMPOSE_EXPECT_ERROR(p.getInt("order", 0, "lighting"), "order='two' is not an integer");
   COMPOSE_EXPECT_ERROR(p.getDouble("x", 0, "lighting"), "x='1.5e' is not a number");

@@ -138,6 +138,9 @@ TEST(Lighting, CreatesByNameAndReportsMistakes) {
                        "does not take parameter(s): ordr");
   COMPOSE_EXPECT_ERROR(createLighting("sh", ParamSet::parse("order=9", "t")),
                        "sh order must be in 0..8");
+  // A negative seed would wrap to 2^32 - 1 and stand for a seed nobody asked for.
+  COMPOSE_EXPECT_ERROR(createLighting("mc", ParamSet::parse("seed=-1", "t")),
+                       "parameter seed=-1 must be 0 or more");
 }
 
 }  // namespace

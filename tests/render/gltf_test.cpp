@@ -524,5 +524,33 @@ TEST(Gltf, NormalsVertexColoursAndPrimitivesWithoutMaterial) {
   for (const glm::vec3& n : mesh.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
 }
 
+// A primitive naming a material the file lacks is said once, as such: not also as a primitive
+// without a material. When it is the only one, nothing has a material and --albedo applies.
+TEST(Gltf, AMissingMaterialIsSaidOnce) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}}}, {"material", 3}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "missing.gltf", b.gltf());
+  const Mesh alone = loadMesh(dir / "missing.gltf");
+  EXPECT_EQ(alone.warnings, std::vector<std::string>{"1 primitive refers to a material the file "
+                                                     "does not have: rendered with the default "
+                                                     "albedo"});
+  EXPECT_TRUE(alone.materials.empty());
+  // Beside a primitive with a material: the default material for it, one warning still.
+  b.json["materials"] =
+      json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 0, 0, 1}}}}}});
+  const int pos2 = b.vec3({0, 0, 1, 1, 0, 1, 0, 1, 1});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos2}}}, {"material", 0}});
+  writeText(dir / "both.gltf", b.gltf());
+  const Mesh both = loadMesh(dir / "both.gltf");
+  EXPECT_EQ(both.warnings, alone.warnings);
+  ASSERT_EQ(both.materials.size(), 2u);
+  EXPECT_EQ(both.materials[0].baseColor, glm::vec3(kDefaultAlbedo));
+  EXPECT_EQ(both.materials[1].baseColor, glm::vec3(1, 0, 0));
+}
+
 }  // namespace
 }  // namespace compose::render
