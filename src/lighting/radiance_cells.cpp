@@ -20,6 +20,8 @@ RadianceCells::RadianceCells(const Environment& env, int topFactor)
   largeTexels_ =
       kPi / h > kMaxPieceExtent * (1.0 + 1e-9) || 2.0 * kPi / w > kMaxPieceExtent * (1.0 + 1e-9);
   radiance_ = env.texels();
+  for (int y = 0; y <= h; ++y) latBounds_.push_back(Angle::of(kPi * (0.5 - double(y) / h)));
+  for (int x = 0; x <= w; ++x) lonBounds_.push_back(Angle::of(kPi * (1.0 - 2.0 * x / w)));
 
   // Per column and per row, the closed forms of the texel's vector moment m_t = ∫_texel ω dω:
   // with dω = cos λ dλ dφ, m = (∫sin φ dφ ∫cos²λ dλ, ∫dφ ∫sin λ cos λ dλ, ∫cos φ dφ ∫cos²λ dλ).

@@ -155,12 +155,8 @@ class RadianceCells {
     const glm::vec3 radiance(L[0], L[1], L[2]);
     if (largeTexels_ || 2.0f * std::max(row.halfHeight, row.halfWidth) > walk.maxExtent) {
       // Texels larger than a clipped-model piece: exact sub-rectangles (see the header comment).
-      constexpr double kPi = std::numbers::pi;
-      const double top = kPi * (0.5 - double(y) / height_);
-      const double bottom = kPi * (0.5 - double(y + 1) / height_);
-      const double left = kPi * (1.0 - 2.0 * (x + 1) / width_);
-      const double right = kPi * (1.0 - 2.0 * x / width_);
-      visitPiece(bottom, top, left, right, glm::dvec3(radiance), glm::dvec3(n), visit,
+      visitPiece(latBounds_[size_t(y + 1)], latBounds_[size_t(y)], lonBounds_[size_t(x + 1)],
+                 lonBounds_[size_t(x)], glm::dvec3(radiance), glm::dvec3(n), visit,
                  std::min(double(walk.maxExtent), 1e3));
       return;
     }
@@ -179,52 +175,67 @@ class RadianceCells {
     }
   }
 
+  // An angle with its sine and cosine, so that the split pieces below need no trigonometry: the
+  // midpoint of two angles less than π apart is the direction of the sum of their unit vectors
+  // (used up to one radian apart, where that sum is long; wider, as in a map two texels wide,
+  // the midpoint's sine and cosine are computed).
+  struct Angle {
+    double a, s, c;
+    static Angle of(double a) { return {a, std::sin(a), std::cos(a)}; }
+    static Angle mid(const Angle& x, const Angle& y) {
+      if (y.a - x.a > 1.0) return of(0.5 * (x.a + y.a));
+      const double c = x.c + y.c, s = x.s + y.s, r = std::sqrt(c * c + s * s);
+      return {0.5 * (x.a + y.a), s / r, c / r};
+    }
+  };
+
   // The lat-long rectangle [lat0, lat1] x [lon0, lon1] of uniform `radiance`: whole above or
   // below n's horizon by its enclosing cone, by the clipped linear model once it is at most
   // kMaxPieceExtent across, else split.
   template <class Visit>
-  void visitPiece(double lat0, double lat1, double lon0, double lon1, const glm::dvec3& radiance,
-                  const glm::dvec3& n, Visit& visit, double maxExtent) const {
-    const double latMid = 0.5 * (lat0 + lat1), lonMid = 0.5 * (lon0 + lon1);
-    const glm::dvec3 centre(std::sin(lonMid) * std::cos(latMid), std::sin(latMid),
-                            std::cos(lonMid) * std::cos(latMid));
+  void visitPiece(const Angle& lat0, const Angle& lat1, const Angle& lon0, const Angle& lon1,
+                  const glm::dvec3& radiance, const glm::dvec3& n, Visit& visit,
+                  double maxExtent) const {
+    const Angle latMid = Angle::mid(lat0, lat1), lonMid = Angle::mid(lon0, lon1);
+    const glm::dvec3 centre(lonMid.s * latMid.c, latMid.s, lonMid.c * latMid.c);
     // Every point is within (half the latitude extent) + (half the longitude extent times the
     // largest cos latitude) of the centre: along the meridian, then along the parallel.
-    const double maxCos =
-        (lat0 <= 0.0 && lat1 >= 0.0) ? 1.0 : std::max(std::cos(lat0), std::cos(lat1));
-    const double radius = 0.5 * (lat1 - lat0) + 0.5 * (lon1 - lon0) * maxCos + 1e-9;
+    const double maxCos = (lat0.a <= 0.0 && lat1.a >= 0.0) ? 1.0 : std::max(lat0.c, lat1.c);
+    const double height = lat1.a - lat0.a, lonExtent = lon1.a - lon0.a;
+    const double radius = 0.5 * height + 0.5 * lonExtent * maxCos + 1e-9;
     const double d = glm::dot(n, centre);
-    const double c2 = 0.5 * (lat1 - lat0) + 0.25 * (std::sin(2.0 * lat1) - std::sin(2.0 * lat0));
-    const glm::dvec3 moment(
-        (std::cos(lon0) - std::cos(lon1)) * c2,
-        (lon1 - lon0) * 0.5 * (std::sin(lat1) * std::sin(lat1) - std::sin(lat0) * std::sin(lat0)),
-        (std::sin(lon1) - std::sin(lon0)) * c2);
+    // ∫cos²λ dλ = (λ + sin λ cos λ) / 2 over [lat0, lat1].
+    const double c2 = 0.5 * height + 0.5 * (lat1.s * lat1.c - lat0.s * lat0.c);
+    const glm::dvec3 moment((lon0.c - lon1.c) * c2,
+                            lonExtent * 0.5 * (lat1.s * lat1.s - lat0.s * lat0.s),
+                            (lon1.s - lon0.s) * c2);
     constexpr double kHalfPi = 0.5 * std::numbers::pi;
-    const double height = lat1 - lat0, width = (lon1 - lon0) * maxCos;
+    const double width = lonExtent * maxCos;
     const bool small = height <= maxExtent && width <= maxExtent;
-    if (radius < kHalfPi && d >= std::sin(radius) && small) {
+    const bool cone = radius < kHalfPi;
+    const double sinRadius = cone ? std::sin(radius) : 1.0;
+    if (cone && d >= sinRadius && small) {
       visit(glm::vec3(centre), glm::vec3(radiance * glm::dot(n, moment)));
       return;
     }
-    if (radius < kHalfPi && d <= -std::sin(radius)) return;
+    if (cone && d <= -sinRadius) return;
     const double limit = std::min(maxExtent, kMaxPieceExtent);
     if (height <= limit && width <= limit) {
-      const double omega = (lon1 - lon0) * (std::sin(lat1) - std::sin(lat0));
-      const glm::dvec3 north(-std::sin(lonMid) * std::sin(latMid), std::cos(latMid),
-                             -std::cos(lonMid) * std::sin(latMid));
-      const glm::dvec3 east(std::cos(lonMid), 0.0, -std::sin(lonMid));
+      const double omega = lonExtent * (lat1.s - lat0.s);
+      const glm::dvec3 north(-lonMid.s * latMid.s, latMid.c, -lonMid.c * latMid.s);
+      const glm::dvec3 east(lonMid.c, 0.0, -lonMid.s);
       const float alpha = float(0.5 * height * glm::dot(n, north));
-      const float beta = float(0.5 * (lon1 - lon0) * std::cos(latMid) * glm::dot(n, east));
+      const float beta = float(0.5 * lonExtent * latMid.c * glm::dot(n, east));
       const float mean = float(glm::dot(n, moment) / omega);
       visit(glm::vec3(centre), glm::vec3(radiance * (omega * clippedMean(mean, alpha, beta))));
       return;
     }
     // Split what is too wide for the clipped model (on the horizon) or for the caller's bins.
-    const bool above = radius < kHalfPi && d >= std::sin(radius);
+    const bool above = cone && d >= sinRadius;
     const double target = above ? maxExtent : limit;
     const bool splitLat = height > target, splitLon = width > target;
-    const double lat[3] = {lat0, splitLat ? latMid : lat1, lat1};
-    const double lon[3] = {lon0, splitLon ? lonMid : lon1, lon1};
+    const Angle lat[3] = {lat0, splitLat ? latMid : lat1, lat1};
+    const Angle lon[3] = {lon0, splitLon ? lonMid : lon1, lon1};
     for (int i = 0; i < (splitLat ? 2 : 1); ++i)
       for (int j = 0; j < (splitLon ? 2 : 1); ++j)
         visitPiece(lat[i], lat[i + 1], lon[j], lon[j + 1], radiance, n, visit, maxExtent);
@@ -248,6 +259,8 @@ class RadianceCells {
   std::vector<float> radiance_;  // RGB per texel, row-major
   std::vector<Row> rows_;
   std::vector<Column> columns_;
+  std::vector<Angle> latBounds_;  // the latitude of the top of row y (y = height: the bottom)
+  std::vector<Angle> lonBounds_;  // the longitude of the right of column x (x = width: the left)
 };
 
 }  // namespace compose::lighting
