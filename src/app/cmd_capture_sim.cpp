@@ -69,9 +69,12 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
   command.add_option("--read-noise", params.readNoiseElectrons, "Read noise, electrons")
       ->capture_default_str();
   command.add_option("--supersample", params.supersample,
-                     "S x S rays per pixel (anti-aliasing) [default: automatic, the fewest "
-                     "whose spacing is at most one texel of the environment, 1-8]");
-  command.add_option("--blur", params.blurPixels, "Optics: Gaussian point-spread sigma, pixels")
+                     "S x S rays per pixel, 1-16 (anti-aliasing) [default: automatic, the "
+                     "fewest, up to 8, whose spacing is at most one texel of the environment]");
+  command
+      .add_option("--blur", params.blurPixels,
+                  "Optics: Gaussian point-spread sigma, pixels (the part of a pixel's area its "
+                  "rays do not integrate is added to it)")
       ->capture_default_str();
   command.add_option("--jpeg-quality", params.jpegQuality, "JPEG quality")->capture_default_str();
   command.add_flag("--tiff", params.writeTiff16,
@@ -164,9 +167,13 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
                    p.brackets == 1 ? "" : "s", p.width, p.height,
                    p.projection == calib::Projection::Rectilinear ? "rectilinear" : "fisheye",
                    p.fovDegrees, sim.lens.fx, sim.middleExposureTime, p.fNumber, p.iso, p.evStep);
-      std::fprintf(stderr, "compose: response %s; noise %s; seed %llu\n",
+      std::fprintf(stderr,
+                   "compose: response %s; noise %s; seed %llu; %d x %d rays per pixel%s, blur "
+                   "sigma %.3g px\n",
                    p.curve.describe().c_str(), p.noise ? "on" : "off",
-                   static_cast<unsigned long long>(p.seed));
+                   static_cast<unsigned long long>(p.seed), sim.supersample, sim.supersample,
+                   p.supersample ? "" : " (automatic)",
+                   capture::appliedBlur(p.blurPixels, sim.supersample));
       if (sanitize.negativeTexels > 0)
         std::fprintf(stderr, "compose: note: %lld negative texels of the environment set to 0\n",
                      static_cast<long long>(sanitize.negativeTexels));

@@ -47,30 +47,6 @@ inline double normalFromKey(uint64_t key) {
   return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);
 }
 
-// The 8-bit code round(255 · f(s)) of a response f by search among the signals where f crosses
-// the code boundaries (f is increasing): a handful of comparisons instead of a pow per sample.
-class CodeThresholds {
- public:
-  explicit CodeThresholds(const CameraCurve& curve) {
-    for (int k = 0; k < 255; ++k) {
-      // The first signal with code k + 1, found by bisection on f itself so that the code is
-      // exactly what rounding f would give.
-      double lo = 0.0, hi = 1.0;
-      for (int i = 0; i < 60; ++i) {
-        const double m = 0.5 * (lo + hi);
-        (std::round(255.0 * curve.encode(m)) >= k + 1 ? hi : lo) = m;
-      }
-      bounds_[size_t(k)] = hi;
-    }
-  }
-  int operator()(double s) const {
-    return int(std::upper_bound(bounds_.begin(), bounds_.end(), s) - bounds_.begin());
-  }
-
- private:
-  std::array<double, 255> bounds_{};
-};
-
 glm::dmat3 rotationAbout(const glm::dvec3& axis, double radians) {
   const glm::dvec3 a = glm::normalize(axis);
   const double c = std::cos(radians), s = std::sin(radians), t = 1.0 - c;
@@ -93,14 +69,23 @@ nlohmann::ordered_json rows(const glm::dmat3& m) {
 }
 
 // Separable Gaussian blur of an RGB image (the optics' point-spread function), edges clamped.
+// Below half a pixel the Gaussian sampled at whole pixels is far narrower than σ (at σ 0.3 its
+// variance is a third of σ²): there the kernel is [a, 1 - 2a, a] with a = σ²/2, of variance σ².
 void blur(Image& img, double sigma) {
   if (!(sigma > 0.0)) return;
-  const int radius = std::max(1, int(std::ceil(3.0 * sigma)));
-  std::vector<float> kernel(size_t(2 * radius + 1));
-  float sum = 0.0f;
-  for (int i = -radius; i <= radius; ++i)
-    sum += kernel[size_t(i + radius)] = float(std::exp(-0.5 * i * i / (sigma * sigma)));
-  for (float& k : kernel) k /= sum;
+  int radius = 1;
+  std::vector<float> kernel;
+  if (sigma < 0.5) {
+    const float a = float(0.5 * sigma * sigma);
+    kernel = {a, 1.0f - 2.0f * a, a};
+  } else {
+    radius = int(std::ceil(3.0 * sigma));
+    kernel.resize(size_t(2 * radius + 1));
+    float sum = 0.0f;
+    for (int i = -radius; i <= radius; ++i)
+      sum += kernel[size_t(i + radius)] = float(std::exp(-0.5 * i * i / (sigma * sigma)));
+    for (float& k : kernel) k /= sum;
+  }
   Image tmp = img;
   const int w = img.width, h = img.height;
   parallelFor(0, h, [&](int64_t yy) {
@@ -163,11 +148,37 @@ Image render(const lighting::Environment& env, const calib::Lens& lens,
   // A pixel integrates the light over its area: a box of variance 1/12 pixel² per axis, which
   // S × S rays hold but 1/(12 S²) of. The rest joins the optics' blur (as a Gaussian of the same
   // variance), so that the photo's sharpness does not depend on the rays taken.
-  blur(out, std::sqrt(p.blurPixels * p.blurPixels + 1.0 / (12.0 * s * s)));
+  blur(out, appliedBlur(p.blurPixels, s));
   return out;
 }
 
 }  // namespace
+
+CodeThresholds::CodeThresholds(const CameraCurve& curve) {
+  for (int k = 0; k < 255; ++k) {
+    // The first signal with code k + 1, bisected down to adjacent doubles on f itself.
+    auto above = [&](double s) { return std::round(255.0 * curve.encode(s)) >= k + 1; };
+    double lo = 0.0, hi = 1.0;
+    if (above(lo)) {
+      bounds_[size_t(k)] = 0.0;
+      continue;
+    }
+    for (;;) {
+      const double m = lo + 0.5 * (hi - lo);
+      if (m <= lo || m >= hi) break;
+      (above(m) ? hi : lo) = m;
+    }
+    bounds_[size_t(k)] = hi;
+  }
+}
+
+int CodeThresholds::operator()(double s) const {
+  return int(std::upper_bound(bounds_.begin(), bounds_.end(), s) - bounds_.begin());
+}
+
+double appliedBlur(double blurPixels, int supersample) {
+  return std::sqrt(blurPixels * blurPixels + 1.0 / (12.0 * supersample * supersample));
+}
 
 double CameraCurve::encode(double s) const {
   s = std::clamp(s, 0.0, 1.0);
@@ -410,6 +421,7 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
   const double fullWell = p.fullWellElectrons * 100.0 / p.iso;
   const double read2 = p.readNoiseElectrons * p.readNoiseElectrons;
 
+  const CodeThresholds codeOf(p.curve);
   for (size_t vi = 0; vi < cap.views.size(); ++vi) {
     SimulatedView& v = cap.views[vi];
     for (int b = 0; b < p.brackets; ++b) {
@@ -428,7 +440,6 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
       s.codes.colorSpace = "sRGB";
       if (p.writeTiff16) s.linear16 = Image(p.width, p.height, 3, {"R", "G", "B"});
       const uint64_t shotKey = mix(mix(p.seed) ^ (uint64_t(vi) << 40) ^ (uint64_t(b) << 32));
-      const CodeThresholds codeOf(p.curve);
       parallelFor(0, p.height, [&](int64_t yy) {
         const int y = int(yy);
         for (int x = 0; x < p.width; ++x) {
@@ -577,6 +588,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
   truth["evStep"] = p.evStep;
   truth["supersample"] = cap.supersample;
   truth["blurPixels"] = p.blurPixels;
+  truth["blurAppliedPixels"] = appliedBlur(p.blurPixels, cap.supersample);
   truth["jpegQuality"] = p.jpegQuality;
   truth["lens"] = files.lens.filename().string();
   truth["views"] = truthViews;

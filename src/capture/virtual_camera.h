@@ -106,8 +106,10 @@ struct VirtualCameraParams {
   double readNoiseElectrons = 3.0;
   uint64_t seed = 1;
   // S: S × S rays per pixel. Empty: as many as the environment needs, the fewest rays whose
-  // spacing at the image centre (the widest pixel) is at most one of its texels: 1 when the
-  // photo is finer than the map (its bilinear lookups are smooth already), up to 8.
+  // spacing at the image centre (the widest pixel) is at most one of its texels on the equator
+  // (2π/W; towards the poles a lat-long map's texels narrow in longitude only, stretching the
+  // detail of the equator's spacing): 1 when the photo is finer than the map (its bilinear
+  // lookups are smooth already), up to 8.
   std::optional<int> supersample;
   double blurPixels = 0.6;  // σ of the optics' Gaussian point-spread function, pixels
   int jpegQuality = 95;
@@ -150,6 +152,23 @@ struct SimulatedCapture {
   int supersample = 1;          // the S rendered with (params.supersample, or the automatic choice)
   std::string environmentName;  // for the ground-truth file
 };
+
+// The 8-bit code round(255 · f(s)) of a response f, for s in [0, 1], by search among the signals
+// where f crosses the code boundaries (f is increasing): a handful of comparisons instead of a
+// pow per sample, and the same code as rounding f (but within a few units of the last place of a
+// boundary, where f evaluated in floating point is not monotone and either code is as right).
+class CodeThresholds {
+ public:
+  explicit CodeThresholds(const CameraCurve& curve);
+  int operator()(double s) const;
+
+ private:
+  std::array<double, 255> bounds_{};  // bounds_[k]: the least signal of code k + 1
+};
+
+// The σ, in pixels, of the Gaussian blur applied after S × S rays per pixel: the optics' blur
+// and the part of the pixel's area the rays do not integrate (variance 1/(12 S²)).
+double appliedBlur(double blurPixels, int supersample);
 
 // The environment's radiance is taken as linear Rec.709 (the camera's RGB); convert it first if
 // it is in another space. Reports progress per rendered image (stage "capture-sim").

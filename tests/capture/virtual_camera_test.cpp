@@ -167,6 +167,42 @@ TEST(VirtualCamera, AutomaticSupersamplingFollowsTheEnvironmentsDetail) {
       chosenError, chosen.supersample, oneError);
 }
 
+// The codes by search among the boundaries are the codes of rounding the curve: on both sides of
+// every boundary, and over the range (linearly and logarithmically spaced), for every kind of
+// curve. At a boundary itself, within a few units of the last place, the curve evaluated in
+// floating point is not monotone (filmic:0.5 crosses code 167 at two adjacent doubles), and
+// either code is as right.
+TEST(VirtualCamera, CodesBySearchAreTheRoundedCurve) {
+  for (const char* text :
+       {"filmic", "filmic:0.5", "filmic:1e-4", "srgb", "gamma:2.2", "gamma:0.5"}) {
+    const CameraCurve curve = CameraCurve::parse(text);
+    const CodeThresholds codeOf(curve);
+    auto rounded = [&](double s) { return int(std::round(255.0 * curve.encode(s))); };
+    int checked = 0;
+    for (int k = 1; k <= 255; ++k) {
+      // Where the rounded curve reaches code k, by bisection (the test's own), then a millionth
+      // of a percent to either side.
+      double lo = 0.0, hi = 1.0;
+      if (rounded(0.0) >= k) continue;
+      while (std::nextafter(lo, hi) < hi) {
+        const double m = lo + 0.5 * (hi - lo);
+        (rounded(m) >= k ? hi : lo) = m;
+      }
+      for (double s : {hi * (1.0 + 1e-8), lo * (1.0 - 1e-8)}) {
+        EXPECT_EQ(codeOf(s), rounded(s)) << text << " at s = " << s << " (code " << k << ")";
+        ++checked;
+      }
+      EXPECT_LE(std::abs(codeOf(hi) - rounded(hi)), 1) << text;
+    }
+    for (int i = 0; i <= 100000; ++i) {
+      const double linear = i / 100000.0, logarithmic = std::exp2(-30.0 * i / 100000.0);
+      EXPECT_EQ(codeOf(linear), rounded(linear)) << text << " at s = " << linear;
+      EXPECT_EQ(codeOf(logarithmic), rounded(logarithmic)) << text << " at s = " << logarithmic;
+    }
+    EXPECT_GT(checked, 2 * 200) << text;
+  }
+}
+
 TEST(VirtualCamera, CurvesInvertAndParse) {
   for (const char* text : {"filmic", "filmic:0.5", "srgb", "gamma:2.4"}) {
     const CameraCurve c = CameraCurve::parse(text);
