@@ -6,6 +6,7 @@
 #include "core/error.h"
 #include "core/numbers.h"
 #include "core/params.h"
+#include "ingest/exr_io.h"
 #include "lighting/capture_volume.h"
 #include "lighting/lighting.h"
 #include "pipeline/shadows.h"
@@ -113,6 +114,11 @@ void validate(const ComposeJob& job) {
   if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
     throw UsageError("--exposure must be a number of stops within ±64");
   }
+  std::string why;
+  if (!ingest::parseExrCompression(job.exrCompression, &why))
+    throw UsageError("--compression: " + why);
+  if (job.jpegQuality < 1 || job.jpegQuality > 100)
+    throw UsageError("--jpeg-quality must be in 1..100, got " + std::to_string(job.jpegQuality));
   if (job.threads < 0 || job.threads > 4096)
     throw UsageError("--threads must be 0 (every core) or a number of threads up to 4096");
   job.camera.validate();

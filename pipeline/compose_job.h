@@ -54,6 +54,11 @@ struct ComposeJob {
   std::string plateSpace;        // empty: from the file (see ColorConfig::inputSpaceFor)
   std::string environmentSpace;  // empty: from the file
   std::string display, view;     // empty: the config's defaults
+  // The EXR's compression, as OpenImageIO names it (ingest::parseExrCompression): lossless PIZ by
+  // default, of OpenImageIO's codecs the cheapest on these images (a photograph's noise in half
+  // floats: about half ZIP's time, files about a fifth larger; compose-bench-pipeline, README).
+  std::string exrCompression = "piz";
+  int jpegQuality = 95;  // of the display image when it is a JPEG, 1-100
 
   std::string lighting = "cheb-local";
   std::string lightingParams;  // "key=value,..." for the basis

@@ -13,6 +13,7 @@
 #include "core/json_number.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
+#include "ingest/exr_io.h"
 #include "pipeline/context.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
@@ -128,11 +129,6 @@ Image loadHoldout(const fs::path& file, int width, int height) {
   }
   return std::move(m.image);
 }
-
-// The EXR's compression: lossless, and of OpenImageIO's codecs the cheapest on these images (a
-// photograph's noise in half floats): PIZ writes in about half ZIP's time, files about a fifth
-// larger (compose-bench-pipeline, README).
-const char* const kExrCompression = "piz";
 
 // A warning when the display image shows more than 2 % of the object's pixels as clipped white
 // (their shading is lost).
@@ -477,7 +473,18 @@ class OutputStage final : public Stage {
             textParameter("display", "OpenColorIO display for the JPEG/PNG (empty: the config's)",
                           &ComposeJob::display),
             textParameter("view", "OpenColorIO view for the JPEG/PNG (empty: the config's)",
-                          &ComposeJob::view)};
+                          &ComposeJob::view),
+            textParameter("compression",
+                          std::string("the EXR's compression: ") + ingest::kExrCompressionNames,
+                          &ComposeJob::exrCompression),
+            {"jpeg-quality", "quality of the display image when it is a JPEG, 1-100",
+             [](const ComposeJob& j) { return nlohmann::json(j.jpegQuality); },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               const std::optional<int64_t> n = wholeNumber(v);
+               if (!n || *n < 1 || *n > 100)
+                 throw UsageError("jpeg-quality must be a whole number in 1..100");
+               j.jpegQuality = int(*n);
+             }}};
   }
   void keys(Context& ctx) const override {
     Hash128 h;
@@ -524,7 +531,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   compositePart.options.depth = ingest::WriteOptions::Depth::Half;
   compositePart.options.alphaChannel = 3;
   compositePart.options.chromaticities = colors.chromaticities(working);
-  compositePart.options.exrCompression = kExrCompression;
+  compositePart.options.exrCompression = job.exrCompression;
   ingest::ExrPart objectPart{"object",        &rendered.beauty, rendered.x0,          rendered.y0,
                              composite.width, composite.height, compositePart.options};
   const std::vector<std::string>& aovNames = render::aovChannelNames();
@@ -590,7 +597,9 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     const Image shown = colors.toDisplay(composite, display, view);
     if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
       displayNotes.push_back(*n);
-    ingest::writeImage(outputs, displayPath, shown, {});
+    ingest::WriteOptions displayOptions;
+    displayOptions.jpegQuality = job.jpegQuality;
+    ingest::writeImage(outputs, displayPath, shown, displayOptions);
     return displayNotes;
   });
   std::vector<ingest::WriteReport> written;

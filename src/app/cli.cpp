@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "cubemap/layouts.h"
+#include "ingest/exr_io.h"
 
 namespace compose::app {
 
@@ -150,6 +151,20 @@ cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
   if (!naming) throw UsageError("--face-names must be one of " + join(cubemap::faceNamingNames()));
   write.faceNaming = *naming;
   return write;
+}
+
+CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
+  return command
+      .add_option("--compression", compression,
+                  std::string("OpenEXR compression: ") + ingest::kExrCompressionNames +
+                      "; lossless but for pxr24 (float), b44, b44a, dwaa, dwab")
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            std::string why;
+            return ingest::parseExrCompression(text, &why) ? std::string() : why;
+          },
+          "CODEC[:LEVEL]", "EXR compression"))
+      ->capture_default_str();
 }
 
 }  // namespace compose::app

@@ -93,6 +93,10 @@ std::vector<double> parseList(const std::string& text, const std::string& option
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
                                               const std::string& faceNames);
 
+// --compression: the OpenEXR compression of the EXRs a command writes, as OpenImageIO and oiiotool
+// name it ("piz", "zip:4", "dwaa:45", "none"); a name it does not know is a bad command line.
+CLI::Option* addCompressionOption(CLI::App& command, std::string& compression);
+
 // Runs `check` (a parameter validation that throws compose::Error) and reports a failure as a
 // bad command line (UsageError, exit 2), so that bad values are refused before any file is read.
 template <class Check>

@@ -143,6 +143,10 @@ void ComposeOptions::addOutput(CLI::App& app) {
   app.add_option("--display", job.display,
                  "OpenColorIO display for the JPEG/PNG [default: the config's]");
   app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
+  addCompressionOption(app, job.exrCompression);
+  app.add_option("--jpeg-quality", job.jpegQuality, "Quality of the JPEG display image, 1-100")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str();
   app.add_option("--holdout", job.holdout,
                  "Holdout mask, the plate's size: white where the plate is in front of the object");
 }

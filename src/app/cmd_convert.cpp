@@ -18,7 +18,8 @@ namespace {
 
 struct ConvertOptions {
   std::vector<std::string> inputs;
-  std::string to, from, out, depth = "float", faceNames = "pxnx", photoSpace, outSpace;
+  std::string to, from, out, depth = "float", faceNames = "pxnx", photoSpace, outSpace,
+                             compression = "piz";
   int size = 0, width = 0;  // 0: not given
   double blindSpot = 10.0;
   CLI::Option *sizeOption = nullptr, *widthOption = nullptr, *blindSpotOption = nullptr;
@@ -76,6 +77,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--face-names", o->faceNames,
                  "Names of face files: pxnx, posneg, exr (+X ...), words")
       ->capture_default_str();
+  addCompressionOption(cmd, o->compression);
   cmd.add_option("--photo-space", o->photoSpace,
                  "Mirror ball: colour space of the photo [default: from the file]; it is "
                  "linearised before unwrapping");
@@ -126,6 +128,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     if (widthGiven && int64_t(o->width) * (o->width / 2) > limit)
       throw tooLarge("--width", o->width, int64_t(o->width) * (o->width / 2));
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
+    write.exrCompression = o->compression;
     cubemap::MirrorBallOptions ball;
     ball.blindSpotDegrees = o->blindSpot;
     ball.validate();

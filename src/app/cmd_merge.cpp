@@ -20,6 +20,8 @@ struct MergeOptions {
   std::filesystem::path out, capture, responseDir;
   std::string exposures, response = "auto", recovery = "debevec", method = "debevec";
   std::string inputSpace, linearSpace;
+  // Float radiance: ZIP is smaller than PIZ on it and as fast to write.
+  std::string compression = "zip";
   bool align = false, deghost = false, noRefit = false;
   hdr::CaptureMergeOptions merge;
 };
@@ -62,6 +64,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       .add_option("--out", o->out,
                   "Output EXR (one bracket) or folder (with --capture: <folder>/<view>.exr)")
       ->required();
+  addCompressionOption(command, o->compression);
   command.add_option("--capture", o->capture,
                      "JSON capture description (compose ingest --json, compose capture-sim)");
   command.add_option("--exposures", o->exposures,
@@ -214,6 +217,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       w.depth = ingest::WriteOptions::Depth::Float;
       w.attributes = exrAttributes(result, view, capture);
       w.chromaticities = colors.chromaticities(view.radiance.colorSpace);
+      w.exrCompression = o->compression;
       ingest::writeImage(outputs, dst, view.radiance, w);
       written.push_back(dst);
     }

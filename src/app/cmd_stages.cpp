@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 
 Runner setupColor(CLI::App& cmd, const Globals& globals) {
   struct Options {
-    std::string in, out, from, to, depth = "half";
+    std::string in, out, from, to, depth = "half", compression = "zip";
   };
   auto o = std::make_shared<Options>();
   cmd.description(
@@ -38,6 +38,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--from", o->from, "Colour space of the input [default: from the file]");
   cmd.add_option("--to", o->to, "Colour space to write [default: the working space]");
   cmd.add_option("--depth", o->depth, "half or float")->capture_default_str();
+  addCompressionOption(cmd, o->compression);
   return [o, &globals]() -> int {
     if (o->depth != "half" && o->depth != "float")
       throw UsageError("--depth must be half or float, got '" + o->depth + "'");
@@ -67,6 +68,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
                                         : ingest::WriteOptions::Depth::Half;
     if (image.channels >= 4) options.alphaChannel = 3;
     options.chromaticities = colors.chromaticities(target);
+    options.exrCompression = o->compression;
     const ingest::WriteReport report = ingest::writeImage(o->out, image, options);
     if (!globals.quiet) {
       std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", o->in.c_str(), read.c_str(),

@@ -40,7 +40,8 @@ namespace fs = std::filesystem;
 
 struct StitchCommandOptions {
   std::vector<std::string> photos;
-  std::string out, calib, to = "cube", photoSpace, outSpace, depth = "auto", faceNames = "pxnx";
+  std::string out, calib, to = "cube", photoSpace, outSpace, depth = "auto", faceNames = "pxnx",
+                          compression = "piz";
   double fov = 0.0, maxCorrection = 10.0;
   int size = 0, width = 0, featureSize = 800;
   std::string gains = "auto";
@@ -137,6 +138,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--depth", o->depth,
                  "EXR sample type: auto (half float unless a value exceeds its range), half, float")
       ->capture_default_str();
+  addCompressionOption(cmd, o->compression);
   cmd.add_option("--face-names", o->faceNames, "For --to faces: pxnx, posneg, exr, words")
       ->capture_default_str();
 
@@ -174,6 +176,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
                        " megapixels (raise it with --max-pixels)");
     }
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
+    write.exrCompression = o->compression;
     cubemap::StitchOptions options;
     options.faceSize = o->size > 0 ? o->size : 1024;
     options.refine = !o->noRefine;

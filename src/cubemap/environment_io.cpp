@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/numbers.h"
+#include "ingest/exr_io.h"
 #include "lighting/sphere_resample.h"
 
 namespace compose::cubemap {
@@ -232,7 +233,7 @@ void writeAny(const fs::path& temporary, const fs::path& destination, const Imag
   }
   try {
     if (lowerExtension(destination) == ".exr") {
-      writeExr(temporary, rgb, useHalf, envmap, options.chromaticities);
+      writeExr(temporary, rgb, useHalf, envmap, options.chromaticities, options.exrCompression);
     } else {
       ingest::writeImage(temporary, rgb, {});
     }
@@ -432,11 +433,16 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
 }
 
 void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optional<Layout> envmap,
-              const std::optional<std::array<double, 8>>& chromaticities) {
+              const std::optional<std::array<double, 8>>& chromaticities,
+              const std::string& compression) {
   COMPOSE_CHECK(rgb.channels == 3 && rgb.width > 0 && rgb.height > 0);
+  std::string why;
+  const std::optional<ingest::ExrCompression> codec =
+      ingest::parseExrCompression(compression, &why);
+  if (!codec) throw Error("output", why, path);
   try {
     Imf::Header header(rgb.width, rgb.height);
-    header.compression() = Imf::PIZ_COMPRESSION;
+    codec->apply(header);
     const Imf::PixelType type = useHalf ? Imf::HALF : Imf::FLOAT;
     for (const char* name : {"R", "G", "B"}) header.channels().insert(name, Imf::Channel(type));
     if (envmap) {

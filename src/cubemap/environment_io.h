@@ -94,6 +94,8 @@ struct WriteOptions {
   // with the colour-space name (the image's, as the string attribute `colorSpace`), as
   // ingest::writeImage does.
   std::optional<std::array<double, 8>> chromaticities;
+  // OpenEXR only: the compression, as OpenImageIO names it (ingest::parseExrCompression).
+  std::string exrCompression = "piz";
 };
 
 // Writes a lat-long environment to `path` (EXR gets envmap=latlong). Returns a note when the depth
@@ -111,11 +113,12 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const std::filesyste
 std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::filesystem::path& path,
                                                                   int faceNaming);
 
-// Writes RGB float data as an EXR through OpenEXR (PIZ, lossless, scanlines), with an optional
-// envmap attribute, the image's colour-space name and optional chromaticities. Used by the writers
-// above; exposed for tests and other stages.
+// Writes RGB float data as an EXR through OpenEXR (scanlines; `compression` as OpenImageIO names
+// it, PIZ by default), with an optional envmap attribute, the image's colour-space name and
+// optional chromaticities. Used by the writers above; exposed for tests and other stages.
 void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
               std::optional<Layout> envmap,
-              const std::optional<std::array<double, 8>>& chromaticities = std::nullopt);
+              const std::optional<std::array<double, 8>>& chromaticities = std::nullopt,
+              const std::string& compression = "piz");
 
 }  // namespace compose::cubemap

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -363,32 +365,78 @@ Image ExrReader::read(int part) const {
   return image;
 }
 
+const char* const kExrCompressionNames =
+    "none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa, dwab (zip:0..9, dwaa:LEVEL)";
+
 namespace {
 
-Imf::Compression compressionOf(const std::string& text, const fs::path& shown, int* zipLevel,
-                               float* dwaLevel) {
-  const size_t colon = text.find(':');
-  const std::string name = text.substr(0, colon);
-  const std::string level = colon == std::string::npos ? std::string() : text.substr(colon + 1);
-  static const std::map<std::string, Imf::Compression> kNames = {
+const std::map<std::string, Imf::Compression>& compressionsByName() {
+  static const std::map<std::string, Imf::Compression> names = {
       {"none", Imf::NO_COMPRESSION},   {"rle", Imf::RLE_COMPRESSION},
       {"zips", Imf::ZIPS_COMPRESSION}, {"zip", Imf::ZIP_COMPRESSION},
       {"piz", Imf::PIZ_COMPRESSION},   {"pxr24", Imf::PXR24_COMPRESSION},
       {"b44", Imf::B44_COMPRESSION},   {"b44a", Imf::B44A_COMPRESSION},
       {"dwaa", Imf::DWAA_COMPRESSION}, {"dwab", Imf::DWAB_COMPRESSION}};
-  auto it = kNames.find(name);
-  if (it == kNames.end())
-    throw Error("output", "unknown OpenEXR compression '" + text + "'", shown);
-  if (!level.empty()) {
-    try {
-      if (name == "zip" || name == "zips") *zipLevel = std::stoi(level);
-      if (name == "dwaa" || name == "dwab") *dwaLevel = std::stof(level);
-    } catch (const std::exception&) {
-      throw Error("output", "bad OpenEXR compression level in '" + text + "'", shown);
-    }
-  }
-  return it->second;
+  return names;
 }
+
+// A whole decimal number, or nothing ("4x", "", " 4" are nothing).
+std::optional<double> strictNumber(const std::string& text) {
+  if (text.empty() || std::isspace(static_cast<unsigned char>(text.front()))) return std::nullopt;
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used != text.size() || !std::isfinite(v)) return std::nullopt;
+    return v;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+}  // namespace
+
+bool ExrCompression::lossy() const {
+  return name == "pxr24" || name == "b44" || name == "b44a" || name == "dwaa" || name == "dwab";
+}
+
+void ExrCompression::apply(Imf::Header& header) const {
+  header.compression() = compressionsByName().at(name);
+  if (zipLevel >= 0) header.zipCompressionLevel() = zipLevel;
+  if (dwaLevel > 0.0f) header.dwaCompressionLevel() = dwaLevel;
+}
+
+std::optional<ExrCompression> parseExrCompression(const std::string& text, std::string* why) {
+  const size_t colon = text.find(':');
+  ExrCompression out;
+  out.name = text.substr(0, colon);
+  for (char& c : out.name) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (compressionsByName().count(out.name) == 0) {
+    *why = "unknown OpenEXR compression '" + text + "' (known: " + kExrCompressionNames + ")";
+    return std::nullopt;
+  }
+  if (colon == std::string::npos) return out;
+  const std::string level = text.substr(colon + 1);
+  const bool zip = out.name == "zip" || out.name == "zips";
+  const bool dwa = out.name == "dwaa" || out.name == "dwab";
+  if (!zip && !dwa) {
+    *why = "the OpenEXR compression '" + out.name + "' takes no level, got '" + text + "'";
+    return std::nullopt;
+  }
+  const std::optional<double> value = strictNumber(level);
+  if (zip && !(value && *value >= 0.0 && *value <= 9.0 && *value == std::floor(*value))) {
+    *why = "the level of '" + out.name + "' must be a whole number 0-9, got '" + level + "'";
+    return std::nullopt;
+  }
+  if (dwa && !(value && *value > 0.0 && *value <= 1e6)) {
+    *why = "the level of '" + out.name + "' must be a positive number, got '" + level + "'";
+    return std::nullopt;
+  }
+  if (zip) out.zipLevel = int(*value);
+  if (dwa) out.dwaLevel = float(*value);
+  return out;
+}
+
+namespace {
 
 // The header of one part: size, windows, channels of `type` in the file's order, and metadata.
 Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
@@ -400,11 +448,11 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
   Imf::Header header(
       Imath::Box2i({0, 0}, {fullWidth - 1, fullHeight - 1}),
       Imath::Box2i({part.x, part.y}, {part.x + image.width - 1, part.y + image.height - 1}));
-  int zipLevel = -1;
-  float dwaLevel = -1.0f;
-  header.compression() = compressionOf(part.options.exrCompression, shown, &zipLevel, &dwaLevel);
-  if (zipLevel >= 0) header.zipCompressionLevel() = zipLevel;
-  if (dwaLevel >= 0.0f) header.dwaCompressionLevel() = dwaLevel;
+  std::string why;
+  const std::optional<ExrCompression> compression =
+      parseExrCompression(part.options.exrCompression, &why);
+  if (!compression) throw Error("output", why, shown);
+  compression->apply(header);
   COMPOSE_CHECK(int(names.size()) == sources.channels());
   for (const std::string& name : names) header.channels().insert(name, Imf::Channel(type));
   if (multiPart || !part.name.empty()) {

@@ -26,8 +26,11 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include <OpenEXR/ImfForward.h>
 
 #include "core/image.h"
 #include "ingest/image_io.h"
@@ -77,6 +80,25 @@ class ExrReader {
 // OpenImageIO's names for the channels of an image that has none: Y for one channel, else R G B A,
 // then channel4, channel5 ...
 std::vector<std::string> defaultChannelNames(int channels);
+
+// An OpenEXR compression, from OpenImageIO's (and oiiotool's) name for it: none, rle, zips, zip,
+// piz, pxr24, b44, b44a, dwaa, dwab, with a level after a colon for zip and zips (0-9, "zip:1")
+// and for dwaa and dwab (a positive number, "dwaa:45"); the name in either case.
+struct ExrCompression {
+  std::string name;        // in lower case, without the level
+  int zipLevel = -1;       // -1: OpenEXR's default
+  float dwaLevel = -1.0f;  // -1: OpenEXR's default (45)
+  // Whether decoding gives other values than were written: b44, b44a, dwaa and dwab, and pxr24
+  // for float channels (it keeps 24 of their 32 bits).
+  bool lossy() const;
+  // Sets it on an OpenEXR header.
+  void apply(Imf::Header& header) const;
+};
+
+// The compression `text` names, or nothing, with what is wrong in `why`.
+std::optional<ExrCompression> parseExrCompression(const std::string& text, std::string* why);
+// The names parseExrCompression() takes, for help texts.
+extern const char* const kExrCompressionNames;
 
 // Writes `parts` (see ExrPart in image_io.h) into `file` as OpenEXR: a single-part file for one
 // part, a multi-part file otherwise. Returns a report per part. Errors name `shown`.

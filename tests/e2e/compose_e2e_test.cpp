@@ -387,6 +387,23 @@ TEST_F(ComposeErrors, UnknownOption) {
   expectNothingWritten();
 }
 
+TEST_F(ComposeErrors, AnOutputCodecOrQualityItDoesNotKnowIsAUsageError) {
+  const std::string args =
+      base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string());
+  for (const char* bad : {"--compression lzw", "--compression zip:10", "--compression piz:2",
+                          "--compression dwaa:0", "--jpeg-quality 0", "--jpeg-quality 101"}) {
+    const auto r = runCompose(args + " " + bad, dir_.path());
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.err;
+    EXPECT_NE(r.err.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos)
+        << r.err;
+    expectNothingWritten();
+  }
+  const auto unknown = runCompose(args + " --compression lzw", dir_.path());
+  EXPECT_NE(unknown.err.find("unknown OpenEXR compression 'lzw' (known: none, rle, zips, zip, piz"),
+            std::string::npos)
+      << unknown.err;
+}
+
 TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
   const auto r =
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +

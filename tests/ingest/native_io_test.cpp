@@ -465,6 +465,65 @@ TEST(NativeExr, WritesFilesOpenImageIOReadsAsWritten) {
   EXPECT_EQ(second_, (std::vector<float>{1.0f, 70000.0f, 2.0f, 3.0f}));
 }
 
+TEST(NativeExr, EveryCompressionIsWrittenAsNamedAndTheLosslessOnesKeepEveryValue) {
+  TempDir dir;
+  // A smooth ramp with noise, in half's range: what every codec meets in a composite.
+  Image image(67, 41, 3, {"R", "G", "B"});
+  uint32_t state = 12345u;
+  for (size_t i = 0; i < image.pixels.size(); ++i) {
+    state = state * 1664525u + 1013904223u;
+    image.pixels[i] = 0.05f + 2.0f * float(i % 67) / 67.0f + float(state >> 8) * 1e-8f;
+  }
+  const std::vector<std::pair<std::string, std::string>> codecs = {
+      {"none", "none"}, {"rle", "rle"},   {"zips", "zips"},    {"zip", "zip"},
+      {"zip:1", "zip"}, {"zip:9", "zip"}, {"piz", "piz"},      {"pxr24", "pxr24"},
+      {"b44", "b44"},   {"b44a", "b44a"}, {"dwaa:45", "dwaa"}, {"DWAB", "dwab"}};
+  for (const auto& [given, stored] : codecs) {
+    SCOPED_TRACE(given);
+    std::string why;
+    const std::optional<ExrCompression> codec = parseExrCompression(given, &why);
+    ASSERT_TRUE(codec) << why;
+    const std::filesystem::path file = dir / ("c_" + stored + ".exr");
+    WriteOptions options;
+    options.depth = WriteOptions::Depth::Half;
+    options.exrCompression = given;
+    writeImage(file, image, options);
+    OIIO::ImageSpec spec;
+    const std::vector<float> got = oiioRead(file, &spec, 0);
+    EXPECT_EQ(spec.get_string_attribute("compression"), stored);
+    ASSERT_EQ(got.size(), image.pixels.size());
+    double worst = 0.0;
+    for (size_t i = 0; i < got.size(); ++i) {
+      const float written = float(Imath::half(image.pixels[i]));
+      worst = std::max(worst, double(std::abs(got[i] - written)) / double(written));
+    }
+    // pxr24 keeps half channels whole (it rounds float ones to 24 bits).
+    if (!codec->lossy() || stored == "pxr24")
+      EXPECT_EQ(worst, 0.0);
+    else
+      EXPECT_LT(worst, 0.25);  // lossy, but a picture of the same thing
+  }
+  // Names and levels it does not know are refused with what is wrong.
+  for (const char* bad : {"lzw", "", "zip:10", "zip:-1", "zip:1.5", "zip:", "zip:4x", "piz:2",
+                          "dwaa:0", "dwaa:-3", "dwaa:abc", "pi z"}) {
+    std::string why;
+    EXPECT_FALSE(parseExrCompression(bad, &why)) << bad;
+    EXPECT_FALSE(why.empty()) << bad;
+  }
+  Image rgb(4, 4, 3, {"R", "G", "B"});
+  WriteOptions options;
+  options.exrCompression = "lzw";
+  const std::filesystem::path refused = dir / "refused.exr";
+  try {
+    writeImage(refused, rgb, options);
+    ADD_FAILURE() << "an unknown compression was written";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown OpenEXR compression 'lzw'"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(refused));
+}
+
 TEST(NativeExr, DamagedFilesAreErrorsNotPartialPictures) {
   TempDir dir;
   Image img(64, 64, 3, {"R", "G", "B"});
