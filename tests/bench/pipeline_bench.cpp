@@ -746,6 +746,18 @@ int main(int argc, char** argv) {
       }
     }
 
+    // The same at the object's default size (0.3 of the plate high): issue 8's whole-process goal
+    // as a user placing the bunny by hand meets it.
+    std::vector<double> movedDefault;
+    if (!p.large) {
+      for (int i = 0; i < std::max(repeat, 3); ++i) {
+        const std::string place = "0.5," + std::to_string(0.70 + 0.01 * i);
+        const std::optional<Child> c = composeProcess({"--place", place, "--timings"});
+        if (!c) return 1;
+        movedDefault.push_back(c->seconds);
+      }
+    }
+
     // The object at its default size and place, rendered again at each run (a new --exposure:
     // the visibility pass, the self-shadowing and the ground shadow come from the cache, the
     // render is computed): issue 8's "visibility cached" with nothing of the render kept.
@@ -780,6 +792,15 @@ int main(int argc, char** argv) {
           {"1080p whole compose with the visibility cached and the object moved (ground shadow "
            "and render computed), < 0.5 s (issue 8, the stricter reading)",
            median(moved) < 0.5, num("%.3f s", median(moved)) + " whole process"});
+      std::snprintf(line, sizeof line,
+                    "The same with the bunny at its default size (0.3 of the plate high), moved "
+                    "at each run: %.3f s (median of %zu).\n\n",
+                    median(movedDefault), movedDefault.size());
+      rep.both(line);
+      goals.push_back(
+          {"1080p whole compose with the visibility cached and the object moved (ground shadow "
+           "and render computed), bunny at its default size, < 0.5 s (issue 8)",
+           median(movedDefault) < 0.5, num("%.3f s", median(movedDefault)) + " whole process"});
       std::snprintf(line, sizeof line,
                     "The compose executable with the bunny at its default size and place (0.3 of "
                     "the plate high), rendered again at each run (a new --exposure: the visibility "
