@@ -11,6 +11,8 @@
 #include <random>
 #include <sstream>
 
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 #include <nlohmann/json.hpp>
@@ -590,6 +592,36 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
   expectRefused(
       "stitch --fov 90 --no-refine --max-correction 5 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
       "--max-correction bounds the refinement", "--no-refine");
+  // An EXR codec it does not know, in every command that writes EXRs.
+  expectRefused("convert missing.exr --to cube --compression lzw --out " + q(dir_ / "x.exr"), 2,
+                "unknown OpenEXR compression 'lzw'", "--compression");
+  expectRefused("stitch --fov 90 --compression zip:11 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
+                "the level of 'zip' must be a whole number 0-9, got '11'", "--compression");
+  expectRefused("merge --compression piz:1 --out " + q(dir_ / "x.exr") + " a.jpg b.jpg", 2,
+                "the OpenEXR compression 'piz' takes no level", "--compression");
+}
+
+TEST(ConvertCommand, WritesTheCompressionAskedFor) {
+  if (!fs::exists(sample("sunset.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+  TempDir dir;
+  Pixels first;
+  for (const char* codec : {"none", "zip:1", "piz"}) {
+    SCOPED_TRACE(codec);
+    const fs::path out =
+        dir / (std::string("latlong_") + (codec[0] == 'z' ? "zip" : codec) + ".exr");
+    const RunResult r = run(std::string("convert ") + q(sample("sunset.exr")) +
+                                " --to latlong --compression " + codec + " --out " + q(out),
+                            dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    const ingest::LoadedImage back = ingest::readImage(out);
+    const Imf::Compression stored = codec[0] == 'z'   ? Imf::ZIP_COMPRESSION
+                                    : codec[0] == 'n' ? Imf::NO_COMPRESSION
+                                                      : Imf::PIZ_COMPRESSION;
+    EXPECT_EQ(Imf::InputFile(out.c_str()).header().compression(), stored);
+    // Lossless: the same numbers whatever the codec.
+    if (first.empty()) first = back.image.pixels;
+    EXPECT_EQ(back.image.pixels, first);
+  }
 }
 
 }  // namespace
