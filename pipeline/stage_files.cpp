@@ -167,7 +167,7 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   return in;
 }
 
-void saveObjectLayer(Context& ctx, const fs::path& file) {
+void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& compression) {
   const RenderedObject& object = *ctx.artefacts.object;
   const render::RenderOutput& r = object.output;
   const Geometry& g = ctx.geometry();
@@ -186,6 +186,7 @@ void saveObjectLayer(Context& ctx, const fs::path& file) {
   options.depth = ingest::WriteOptions::Depth::Float;  // the composite reads these numbers back
   options.alphaChannel = 3;
   options.chromaticities = ctx.colors.chromaticities(ctx.colors.workingSpace());
+  options.exrCompression = compression;
   std::vector<ingest::ExrPart> parts = {
       {"object", &layer, r.x0, r.y0, g.camera.width, g.camera.height, options}};
 

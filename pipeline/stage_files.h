@@ -34,8 +34,10 @@ StageInput precomputeInput(const std::filesystem::path& file, ComposeJob& job);
 // Writes the object's layer of a run (render and ground): a float OpenEXR with the display window
 // of the plate, part "object" (R, G, B, A premultiplied, then the AOVs) in the traced rectangle,
 // part "shadow" (the ground shadow's ratio) where the shadow falls, and the camera, placement and
-// exposure in the header attribute compose:layer (JSON).
-void saveObjectLayer(Context& ctx, const std::filesystem::path& file);
+// exposure in the header attribute compose:layer (JSON). `compression` is a lossless OpenEXR codec
+// (ingest::parseExrCompression): compose composite reads these numbers back.
+void saveObjectLayer(Context& ctx, const std::filesystem::path& file,
+                     const std::string& compression = "zip");
 
 // Reads a layer saveObjectLayer() wrote, for the render and ground stages' outputs and the
 // geometry. Throws compose::Error naming the file when it is not one.

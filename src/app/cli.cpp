@@ -157,7 +157,8 @@ CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
   return command
       .add_option("--compression", compression,
                   std::string("OpenEXR compression: ") + ingest::kExrCompressionNames +
-                      "; lossless but for pxr24 (float), b44, b44a, dwaa, dwab")
+                      "; lossless but for b44, b44a, dwaa, dwab on half channels and pxr24 on "
+                      "float channels")
       ->check(CLI::Validator(
           [](std::string& text) {
             std::string why;

@@ -11,6 +11,7 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/output_files.h"
+#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/scene.h"
@@ -23,7 +24,7 @@ namespace fs = std::filesystem;
 
 Runner setupColor(CLI::App& cmd, const Globals& globals) {
   struct Options {
-    std::string in, out, from, to, depth = "half", compression = "zip";
+    std::string in, out, from, to, depth = "half", compression = "piz";
   };
   auto o = std::make_shared<Options>();
   cmd.description(
@@ -125,6 +126,7 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
   auto o = std::make_shared<ComposeOptions>();
   auto out = std::make_shared<std::string>();
   auto lightingFile = std::make_shared<std::string>();
+  auto compression = std::make_shared<std::string>("zip");
   cmd.description(
       "Render the object as the plate's camera sees it (the pipeline's shadows, ground and render "
       "stages), lit by a lighting file of compose precompute, into the object's layer: a float "
@@ -140,14 +142,22 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--lighting-file", *lightingFile, "Lighting file (compose precompute)")
       ->required();
   cmd.add_option("--out", *out, "Object layer to write (OpenEXR)")->required();
-  return [o, out, lightingFile, &cmd, &globals]() -> int {
+  addCompressionOption(cmd, *compression);
+  return [o, out, lightingFile, compression, &cmd, &globals]() -> int {
     o->apply(cmd);
+    std::string why;
+    if (ingest::parseExrCompression(*compression, &why)->lossy())
+      throw UsageError("--compression " + *compression +
+                       " loses information: compose composite reads the layer's numbers back; "
+                       "give a lossless codec (none, rle, zips, zip, piz)");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
     request.targets = {pipeline::artefact::kObject};
     if (o->job.groundShadow) request.targets.push_back(pipeline::artefact::kGroundShadow);
     const fs::path file = *out;
-    request.finish = [file](pipeline::Context& ctx) { pipeline::saveObjectLayer(ctx, file); };
+    request.finish = [file, compression](pipeline::Context& ctx) {
+      pipeline::saveObjectLayer(ctx, file, *compression);
+    };
     const int status = runJob(*o, globals, request, false);
     if (!o->explain) std::printf("%s\n", file.c_str());
     return status;

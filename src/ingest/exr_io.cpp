@@ -4,6 +4,7 @@
 #include <array>
 #include <cctype>
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -366,7 +367,8 @@ Image ExrReader::read(int part) const {
 }
 
 const char* const kExrCompressionNames =
-    "none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa, dwab (zip:0..9, dwaa:LEVEL)";
+    "none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa, dwab (zip:0..9, zips:0..9, dwaa:LEVEL, "
+    "dwab:LEVEL)";
 
 namespace {
 
@@ -380,17 +382,14 @@ const std::map<std::string, Imf::Compression>& compressionsByName() {
   return names;
 }
 
-// A whole decimal number, or nothing ("4x", "", " 4" are nothing).
+// A finite decimal number written plainly ("45", "4.5", "1e2"), or nothing: "4x", "", " 4",
+// "+4", "0x2D", "nan" are nothing. Independent of the locale.
 std::optional<double> strictNumber(const std::string& text) {
-  if (text.empty() || std::isspace(static_cast<unsigned char>(text.front()))) return std::nullopt;
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used != text.size() || !std::isfinite(v)) return std::nullopt;
-    return v;
-  } catch (const std::exception&) {
-    return std::nullopt;
-  }
+  double v = 0.0;
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, v);
+  if (text.empty() || ec != std::errc() || ptr != end || !std::isfinite(v)) return std::nullopt;
+  return v;
 }
 
 }  // namespace
@@ -427,8 +426,10 @@ std::optional<ExrCompression> parseExrCompression(const std::string& text, std::
     *why = "the level of '" + out.name + "' must be a whole number 0-9, got '" + level + "'";
     return std::nullopt;
   }
-  if (dwa && !(value && *value > 0.0 && *value <= 1e6)) {
-    *why = "the level of '" + out.name + "' must be a positive number, got '" + level + "'";
+  // As OpenEXR holds it (a float); 45 is its default, larger loses more.
+  if (dwa && !(value && float(*value) >= 1e-3f && *value <= 1e6)) {
+    *why = "the level of '" + out.name + "' must be a number from 0.001 to 1000000, got '" + level +
+           "'";
     return std::nullopt;
   }
   if (zip) out.zipLevel = int(*value);

@@ -88,8 +88,9 @@ struct ExrCompression {
   std::string name;        // in lower case, without the level
   int zipLevel = -1;       // -1: OpenEXR's default
   float dwaLevel = -1.0f;  // -1: OpenEXR's default (45)
-  // Whether decoding gives other values than were written: b44, b44a, dwaa and dwab, and pxr24
-  // for float channels (it keeps 24 of their 32 bits).
+  // Whether decoding may give other values than were written: b44, b44a, dwaa and dwab on half
+  // channels (they keep float channels whole), pxr24 on float channels (it keeps 24 of their 32
+  // bits; half channels whole).
   bool lossy() const;
   // Sets it on an OpenEXR header.
   void apply(Imf::Header& header) const;

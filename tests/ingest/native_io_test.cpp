@@ -503,9 +503,21 @@ TEST(NativeExr, EveryCompressionIsWrittenAsNamedAndTheLosslessOnesKeepEveryValue
     else
       EXPECT_LT(worst, 0.25);  // lossy, but a picture of the same thing
   }
+  // The levels reach the codec: zip:0 stores, zip:9 deflates; DWA at 500 keeps less than at 5.
+  auto sizeWith = [&](const std::string& codec) {
+    WriteOptions options;
+    options.depth = WriteOptions::Depth::Half;
+    options.exrCompression = codec;
+    const std::filesystem::path file = dir / "level.exr";
+    writeImage(file, image, options);
+    return std::filesystem::file_size(file);
+  };
+  EXPECT_LT(sizeWith("zip:9"), sizeWith("zip:0"));
+  EXPECT_LT(sizeWith("dwaa:500"), sizeWith("dwaa:5"));
   // Names and levels it does not know are refused with what is wrong.
-  for (const char* bad : {"lzw", "", "zip:10", "zip:-1", "zip:1.5", "zip:", "zip:4x", "piz:2",
-                          "dwaa:0", "dwaa:-3", "dwaa:abc", "pi z"}) {
+  for (const char* bad :
+       {"lzw", "", "zip:10", "zip:-1", "zip:1.5", "zip:", "zip:4x", "piz:2", "dwaa:0", "dwaa:-3",
+        "dwaa:abc", "pi z", "zip:+4", "zip:0x9", "dwaa:1e-50", "dwaa:nan", "dwaa:1e7"}) {
     std::string why;
     EXPECT_FALSE(parseExrCompression(bad, &why)) << bad;
     EXPECT_FALSE(why.empty()) << bad;

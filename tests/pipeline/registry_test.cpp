@@ -54,6 +54,27 @@ TEST(Registry, AnUnknownStageIsAnErrorListingTheValidOnes) {
   EXPECT_EQ(findStage("render").name(), "render");
 }
 
+TEST(Registry, AnOutputCodecOrQualityFromASceneIsCheckedBeforeAnythingRuns) {
+  ComposeJob job;
+  setParameter(job, "output.compression=dwab:60");
+  EXPECT_NO_THROW(validate(job));
+  for (const char* bad : {"output.compression=lzw", "output.compression=zip:12",
+                          "output.compression=dwaa:0x2D", "output.compression=dwaa:1e-50"}) {
+    ComposeJob j;
+    setParameter(j, bad);
+    try {
+      validate(j);
+      ADD_FAILURE() << bad << " was taken";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find("compression"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(setParameter(job, "output.jpeg-quality=0"), UsageError);
+  EXPECT_THROW(setParameter(job, "output.jpeg-quality=101"), UsageError);
+  setParameter(job, "output.jpeg-quality=70");
+  EXPECT_EQ(job.jpegQuality, 70);
+}
+
 TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
   ComposeJob job;
   job.placement.heightFraction = 0.42;
@@ -62,6 +83,8 @@ TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
   job.room = glm::dvec3(4, 3, 5);
   job.exposureStops = -1.5;
   job.groundShadow = false;
+  job.exrCompression = "dwaa:30";
+  job.jpegQuality = 80;
   const auto scene = sceneFromJob(job, "/nowhere");
   ComposeJob copy;
   applyScene(scene, "/nowhere", copy);
@@ -69,6 +92,8 @@ TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
   EXPECT_EQ(copy.placement.heightFraction, 0.42);
   EXPECT_EQ(copy.lighting, "sh");
   EXPECT_FALSE(copy.groundShadow);
+  EXPECT_EQ(copy.exrCompression, "dwaa:30");
+  EXPECT_EQ(copy.jpegQuality, 80);
   ASSERT_TRUE(copy.exposureStops);
   EXPECT_EQ(*copy.exposureStops, -1.5);
 
