@@ -22,6 +22,7 @@ struct MergeOptions {
   std::string inputSpace, linearSpace;
   // Float radiance: ZIP is smaller than PIZ on it and as fast to write.
   std::string compression = "zip";
+  std::string depth = "float";
   bool align = false, deghost = false, noRefit = false;
   hdr::CaptureMergeOptions merge;
 };
@@ -65,6 +66,11 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                   "Output EXR (one bracket) or folder (with --capture: <folder>/<view>.exr)")
       ->required();
   addCompressionOption(command, o->compression);
+  command
+      .add_option("--depth", o->depth,
+                  "EXR sample type: float, or half (half the size; a view with values beyond "
+                  "half's range, 65504, is written as float and a note says so)")
+      ->capture_default_str();
   command.add_option("--capture", o->capture,
                      "JSON capture description (compose ingest --json, compose capture-sim)");
   command.add_option("--exposures", o->exposures,
@@ -125,6 +131,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       }
     }
     // The command line first: nothing is read until it is known to be sound.
+    if (o->depth != "float" && o->depth != "half")
+      throw UsageError("--depth must be float or half, got '" + o->depth + "'");
     if (o->capture.empty() && o->images.empty())
       throw UsageError("give the photos of a bracket, or --capture FILE");
     if (!o->capture.empty() && !o->images.empty())
@@ -211,14 +219,22 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     // Write every output together: the EXRs and, when recovered here, the camera's response.
     OutputFiles outputs("merge");
     std::vector<std::filesystem::path> written;
+    std::vector<std::string> promoted;
     for (const auto& view : result.views) {
       const std::filesystem::path dst = o->capture.empty() ? o->out : o->out / (view.name + ".exr");
       ingest::WriteOptions w;
-      w.depth = ingest::WriteOptions::Depth::Float;
+      w.depth = o->depth == "half" ? ingest::WriteOptions::Depth::Half
+                                   : ingest::WriteOptions::Depth::Float;
       w.attributes = exrAttributes(result, view, capture);
       w.chromaticities = colors.chromaticities(view.radiance.colorSpace);
       w.exrCompression = o->compression;
-      ingest::writeImage(outputs, dst, view.radiance, w);
+      const ingest::WriteReport report = ingest::writeImage(outputs, dst, view.radiance, w);
+      if (report.promotedToFloat) {
+        char text[64];
+        std::snprintf(text, sizeof text, "%g", double(report.largestMagnitude));
+        promoted.push_back(dst.string() + ": values up to " + text +
+                           " exceed half float's range (65504): written as 32-bit float");
+      }
       written.push_back(dst);
     }
     if (result.responseRecovered && !result.responseCacheFile.empty()) {
@@ -226,6 +242,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                     "merge");
     }
     outputs.commit();
+    printNotes(globals, promoted);
 
     if (!globals.quiet) {
       if (!result.linearisation.empty())

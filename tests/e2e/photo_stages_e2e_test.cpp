@@ -105,6 +105,25 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     ASSERT_EQ(again.status, 0) << again.err;
     EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
     EXPECT_TRUE(fs::exists(dir / "one.exr"));
+
+    // Half floats, PIZ, on request: the same radiance within half's precision.
+    const CommandRun half = compose("merge --depth half --compression piz --out " +
+                                        q(dir / "half.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                                        q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg")),
+                                    dir);
+    ASSERT_EQ(half.status, 0) << half.err;
+    const auto full = ingest::readImage(dir / "one.exr"),
+               small = ingest::readImage(dir / "half.exr");
+    EXPECT_EQ(full.info.sampleType, "float");
+    EXPECT_EQ(small.info.sampleType, "half");
+    ASSERT_EQ(small.image.pixels.size(), full.image.pixels.size());
+    double worst = 0.0;
+    for (size_t i = 0; i < full.image.pixels.size(); ++i) {
+      const double f = full.image.pixels[i], h = small.image.pixels[i];
+      if (f > 1e-3) worst = std::max(worst, std::abs(h - f) / f);
+    }
+    EXPECT_LT(worst, 1.0 / 1024.0);  // half keeps 11 significant bits
+    EXPECT_LT(fs::file_size(dir / "half.exr"), fs::file_size(dir / "one.exr"));
   }
 }
 
