@@ -1,6 +1,7 @@
 // Every key=value and command-line value parser: --lighting-params (ParamSet and each basis'
 // creator, order=auto included, through the job's validate()), --shadow-params, the CLI's number
-// lists, pairs, triples and colours, chessboard sizes, camera curves, layout and face-naming names.
+// lists, pairs, triples and colours, chessboard sizes, camera curves, layout and face-naming names,
+// OpenEXR codecs.
 // The input is one line per parser; all of them see every input.
 #include "app/cli.h"
 #include "calib/chessboard.h"
@@ -9,6 +10,7 @@
 #include "core/params.h"
 #include "cubemap/layouts.h"
 #include "fuzz_util.h"
+#include "ingest/exr_io.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/shadows.h"
@@ -57,5 +59,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   named([&] { capture::CameraCurve::parse(text); });
   cubemap::parseLayout(text);
   cubemap::parseFaceNaming(text);
+  {
+    // An OpenEXR codec: refused with a reason, or one OpenEXR takes, at a level it takes.
+    std::string why;
+    const std::optional<ingest::ExrCompression> codec = ingest::parseExrCompression(text, &why);
+    FUZZ_CHECK(codec.has_value() == why.empty());
+    if (codec) {
+      FUZZ_CHECK(codec->zipLevel >= -1 && codec->zipLevel <= 9);
+      FUZZ_CHECK(codec->dwaLevel == -1.0f || (codec->dwaLevel >= 1e-3f && codec->dwaLevel <= 1e6f));
+    }
+    pipeline::ComposeJob job;
+    job.exrCompression = text;
+    named([&] { pipeline::validate(job); });
+  }
   return 0;
 }
