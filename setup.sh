@@ -66,6 +66,49 @@ build_sanitize() {
   cmake --build "$SANITIZE_DIR" -j"$(nproc)"
 }
 
+# LeakSanitizer's own stop-the-world tracer sometimes crashes as a process exits ("Tracer caught
+# signal 11 ... LeakSanitizer has encountered a fatal error", google/sanitizers#1353, about one
+# test in a thousand here): it reports no leak, and the test's own checks have passed. Succeeds
+# when every failed test in the ctest log $1 failed that way and nothing else: no failed check, no
+# sanitizer report.
+only_tracer_crashes() {
+  awk '
+    function close_block() {
+      if (inblock && tracer && !other) crashes++
+      inblock = 0
+    }
+    /^ *[0-9]+\/[0-9]+ +Test +#[0-9]+: / {
+      close_block()
+      if ($0 ~ /\*\*\*(Failed|Exception|Timeout)|Subprocess aborted|SEGFAULT/) {
+        failed++; inblock = 1; tracer = 0; other = 0
+      }
+      next
+    }
+    /^ *Start +[0-9]+: / || /^[0-9]+% tests passed/ { close_block(); next }
+    inblock && /LeakSanitizer has encountered a fatal error/ { tracer = 1 }
+    inblock && (/\[  FAILED  \]/ || /ERROR: (Address|Leak)Sanitizer/ || /runtime error:/) { other = 1 }
+    END { close_block(); exit !(failed > 0 && crashes == failed) }
+  ' "$1"
+}
+
+sanitizer_suite() {
+  local exclude=() log status=0
+  [ -n "$SANITIZE_EXCLUDE" ] && exclude=(-E "$SANITIZE_EXCLUDE")
+  local options=(ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0}"
+                 UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}")
+  log=$(mktemp)
+  env "${options[@]}" ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)" \
+    "${exclude[@]}" 2>&1 | tee "$log" || status=$?
+  if [ "$status" -ne 0 ] && only_tracer_crashes "$log"; then
+    say "every failure above is LeakSanitizer's tracer crashing at exit, not a finding: those tests once more"
+    status=0
+    env "${options[@]}" ctest --test-dir "$SANITIZE_DIR" --output-on-failure --rerun-failed ||
+      status=$?
+  fi
+  rm -f "$log"
+  return "$status"
+}
+
 # Seconds since the start of the script, for the phase lines.
 phase() { say "$(printf '%4d:%02d' $((SECONDS / 60)) $((SECONDS % 60))) $*"; }
 
@@ -91,11 +134,7 @@ case "${1:-demo}" in
     phase "sanitizer build (clang, AddressSanitizer + UndefinedBehaviorSanitizer, fuzz targets)"
     build_sanitize
     phase "sanitizer suite (with the fuzz targets' corpora and regressions)"
-    exclude=()
-    [ -n "$SANITIZE_EXCLUDE" ] && exclude=(-E "$SANITIZE_EXCLUDE")
-    ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0} \
-      UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1} \
-      ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)" "${exclude[@]}"
+    sanitizer_suite
     phase "fuzz smoke pass (${COMPOSE_FUZZ_SECONDS:-10} s per target)"
     COMPOSE_FUZZ_BUILD_DIR=$SANITIZE_DIR tests/fuzz/run.sh "${COMPOSE_FUZZ_SECONDS:-10}"
     phase "done"
