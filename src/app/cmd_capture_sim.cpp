@@ -8,6 +8,7 @@
 #include "capture/virtual_camera.h"
 #include "color/color.h"
 #include "hdr/capture_merge.h"
+#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 
@@ -21,6 +22,7 @@ struct SimOptions {
   std::string size = "1024x768", lens = "rectilinear", curve = "filmic", whiteBalance, envSpace;
   std::string exposure, seed = "1";
   bool noNoise = false, noJpeg = false, omit35 = false, truthImages = false;
+  std::string compression = "zip";
 };
 
 }  // namespace
@@ -96,10 +98,13 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
   command.add_option("--model", params.model, "EXIF Model")->capture_default_str();
   command.add_flag("--truth-images", o->truthImages,
                    "Also write <view>_truth.exr, the radiance each view saw");
+  addCompressionOption(command, o->compression)
+      ->description(
+          "OpenEXR compression of the truth images (lossless: none, rle, zips, zip, piz)");
   command.add_option("--env-space", o->envSpace,
                      "Colour space of the environment [default: from the file]");
 
-  return [o, &globals]() -> int {
+  return [o, &command, &globals]() -> int {
     capture::VirtualCameraParams& p = o->params;
     {
       // Parsed here: as an unsigned option, -1 wrapped to 2^64 - 1 and 2^64 was clamped.
@@ -110,6 +115,15 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
         throw UsageError("--seed must be a whole number from 0 to 18446744073709551615, got '" +
                          o->seed + "'");
       p.seed = seed;
+    }
+    {
+      std::string why;
+      if (ingest::parseExrCompression(o->compression, &why)->lossy())
+        throw UsageError("--compression " + o->compression +
+                         " loses information: the truth images are the ground truth; give a "
+                         "lossless codec (none, rle, zips, zip, piz)");
+      if (command.count("--compression") && !o->truthImages)
+        throw UsageError("--compression is for the truth images: it goes with --truth-images");
     }
     int w = 0, h = 0;
     char x = 0, extra = 0;
@@ -154,6 +168,7 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     sim.environmentName = o->env.string();
     capture::WriteCaptureOptions write;
     write.truthImages = o->truthImages;
+    write.truthCompression = o->compression;
     write.linearSpace = cameraSpace;
     write.jpegSpace = colors.has("sRGB") ? "sRGB" : colors.inputSpaceFor("x.jpg", "");
     const capture::CaptureFiles files =

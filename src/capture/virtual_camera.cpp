@@ -544,6 +544,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
       Image truth = v.truth;
       truth.colorSpace = options.linearSpace;
       w.chromaticities = options.linearChromaticities;
+      w.exrCompression = options.truthCompression;
       ingest::writeImage(outputs, dst, truth, w);
       files.truthImages.push_back(dst);
       tvj["radiance"] = dst.filename().string();

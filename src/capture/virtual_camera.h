@@ -187,6 +187,8 @@ struct CaptureFiles {
 
 struct WriteCaptureOptions {
   bool truthImages = false;  // also write <view>_truth.exr (float, linear Rec.709)
+  // Their OpenEXR compression (ingest::parseExrCompression): a lossless codec, they are the truth.
+  std::string truthCompression = "zip";
   // Colour-space names written into the descriptions, as the colour config in use spells them.
   std::string jpegSpace = "sRGB";
   std::string linearSpace = "lin_rec709";

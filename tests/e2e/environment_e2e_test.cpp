@@ -599,6 +599,11 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
                 "the level of 'zip' must be a whole number 0-9, got '11'", "--compression");
   expectRefused("merge --compression piz:1 --out " + q(dir_ / "x.exr") + " a.jpg b.jpg", 2,
                 "the OpenEXR compression 'piz' takes no level", "--compression");
+  // The virtual camera's truth images are the ground truth: lossless only.
+  expectRefused("capture-sim --env missing.exr --out " + q(dir_ / "shots") +
+                    " --truth-images --compression b44",
+                2, "--compression b44 loses information: the truth images are the ground truth",
+                "--compression");
 }
 
 TEST(ConvertCommand, WritesTheCompressionAskedFor) {
