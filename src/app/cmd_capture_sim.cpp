@@ -117,13 +117,13 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       p.seed = seed;
     }
     {
+      if (command.count("--compression") && !o->truthImages)
+        throw UsageError("--compression is for the truth images: it goes with --truth-images");
       std::string why;
       if (ingest::parseExrCompression(o->compression, &why)->lossy())
         throw UsageError("--compression " + o->compression +
                          " loses information: the truth images are the ground truth; give a "
                          "lossless codec (none, rle, zips, zip, piz)");
-      if (command.count("--compression") && !o->truthImages)
-        throw UsageError("--compression is for the truth images: it goes with --truth-images");
     }
     int w = 0, h = 0;
     char x = 0, extra = 0;
