@@ -1,6 +1,7 @@
 // The stages that make the picture: render (the object and its AOVs), composite (the plate
 // darkened by the ground shadow, the object over it, the holdout in front), output (the files).
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <future>
 #include <numbers>
@@ -505,7 +506,12 @@ class OutputStage final : public Stage {
                           ground, object.meshFile, exrPath, displayPath);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
-    return "wrote " + exrPath.string() + " and " + displayPath.string();
+    std::string ext = displayPath.extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    const bool jpeg = ext == ".jpg" || ext == ".jpeg";
+    return "wrote " + exrPath.string() + " (" + job.exrCompression + ") and " +
+           displayPath.string() +
+           (jpeg ? " (JPEG quality " + std::to_string(job.jpegQuality) + ")" : std::string());
   }
 };
 
