@@ -168,4 +168,14 @@ CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
       ->capture_default_str();
 }
 
+void requireLosslessCompression(const std::string& compression, const std::string& why) {
+  std::string problem;
+  const std::optional<ingest::ExrCompression> codec =
+      ingest::parseExrCompression(compression, &problem);
+  if (!codec) throw UsageError("--compression: " + problem);
+  if (codec->lossy())
+    throw UsageError("--compression " + compression + " loses information: " + why +
+                     "; give a lossless codec (none, rle, zips, zip, piz)");
+}
+
 }  // namespace compose::app

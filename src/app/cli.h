@@ -96,6 +96,9 @@ cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
 // --compression: the OpenEXR compression of the EXRs a command writes, as OpenImageIO and oiiotool
 // name it ("piz", "zip:4", "dwaa:45", "none"); a name it does not know is a bad command line.
 CLI::Option* addCompressionOption(CLI::App& command, std::string& compression);
+// Throws UsageError when `compression` (already checked by that option) loses information; `why`
+// says why the output must keep every value.
+void requireLosslessCompression(const std::string& compression, const std::string& why);
 
 // Runs `check` (a parameter validation that throws compose::Error) and reports a failure as a
 // bad command line (UsageError, exit 2), so that bad values are refused before any file is read.

@@ -8,7 +8,6 @@
 #include "capture/virtual_camera.h"
 #include "color/color.h"
 #include "hdr/capture_merge.h"
-#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
 
@@ -119,11 +118,7 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     {
       if (command.count("--compression") && !o->truthImages)
         throw UsageError("--compression is for the truth images: it goes with --truth-images");
-      std::string why;
-      if (ingest::parseExrCompression(o->compression, &why)->lossy())
-        throw UsageError("--compression " + o->compression +
-                         " loses information: the truth images are the ground truth; give a "
-                         "lossless codec (none, rle, zips, zip, piz)");
+      requireLosslessCompression(o->compression, "the truth images are the ground truth");
     }
     int w = 0, h = 0;
     char x = 0, extra = 0;

@@ -11,7 +11,6 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/output_files.h"
-#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/scene.h"
@@ -145,11 +144,7 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
   addCompressionOption(cmd, *compression);
   return [o, out, lightingFile, compression, &cmd, &globals]() -> int {
     o->apply(cmd);
-    std::string why;
-    if (ingest::parseExrCompression(*compression, &why)->lossy())
-      throw UsageError("--compression " + *compression +
-                       " loses information: compose composite reads the layer's numbers back; "
-                       "give a lossless codec (none, rle, zips, zip, piz)");
+    requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
     request.targets = {pipeline::artefact::kObject};
