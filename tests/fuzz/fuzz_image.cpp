@@ -5,12 +5,23 @@
 // Input: the bytes of a file. The JPEG seeds are small real JPEGs with EXIF (corpus/image).
 #include <span>
 
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "fuzz_util.h"
 #include "ingest/exif.h"
 #include "ingest/jpeg_io.h"
 
 using namespace compose;
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  // Pictures of a few megapixels at most, so that one input stays within the fuzzer's memory: a
+  // 689-byte progressive JPEG claiming 10256 x 25360 pixels (under the default limit) made
+  // libjpeg allocate 780 MB of coefficients, and the decoded codes would take as much again.
+  ResourceLimits limits;
+  limits.maxPixels = int64_t(1) << 22;
+  setResourceLimits(limits);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   forgetProtectedInputs();  // each input is a job of its own
