@@ -97,6 +97,82 @@ class CameraRays {
   glm::vec3 originObject_{0.0f};
 };
 
+// The pixels of the traced rectangle [x0, x0 + w) x [y0, y0 + h) that a triangle's projection
+// may overlap (row-major, 1 where a camera ray may hit the object): a small triangle marks its
+// bounding box, a larger one is clipped to each pixel row it crosses and marks the row's pixels
+// under its extent there, both widened by a twentieth of a pixel for rounding in the rays and in
+// Embree's test. A pixel no triangle reaches cannot be hit, so its rays need not be traced.
+// Empty (trace every pixel) when the lens bends straight edges or a corner is not in front of the
+// camera: a projected triangle is then not the triangle of its projected corners.
+std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFromObject,
+                                     const calib::PlateCamera& camera, int x0, int y0, int w,
+                                     int h) {
+  if (camera.lens.projection != calib::Projection::Rectilinear || camera.lens.hasDistortion() ||
+      w <= 0 || h <= 0)
+    return {};
+  const glm::dmat4 cameraFromObject = camera.cameraFromWorld() * worldFromObject;
+  const calib::Lens& lens = camera.lens;
+  // The corners projected as CameraRays inverts it: direction ∝ ((px - cx) / fx,
+  // -(py - cy) / fy, -1).
+  std::vector<glm::dvec2> projected(mesh.positions.size());
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    const glm::dvec3 c =
+        glm::dvec3(cameraFromObject * glm::dvec4(glm::dvec3(mesh.positions[v]), 1.0));
+    if (!(c.z < -1e-9)) return {};
+    projected[v] = {lens.cx + lens.fx * c.x / -c.z, lens.cy - lens.fy * c.y / -c.z};
+  }
+  constexpr double kPad = 0.05;
+  constexpr int kSmall = 8;  // a triangle whose box is narrower and lower is marked by its box
+  std::vector<uint8_t> mask(size_t(w) * size_t(h), 0);
+  auto mark = [&](int y, int first, int last) {
+    uint8_t* row = mask.data() + size_t(y - y0) * size_t(w) - x0;
+    for (int x = first; x <= last; ++x) row[x] = 1;
+  };
+  // The first and last pixel (row or column) of [from, from + size) that [lo - pad, hi + pad]
+  // reaches.
+  auto first = [](double lo, int from, int size) {
+    return int(std::clamp(std::floor(lo - kPad), double(from), double(from + size)));
+  };
+  auto last = [](double hi, int from, int size) {
+    return int(std::clamp(std::floor(hi + kPad), double(from - 1), double(from + size - 1)));
+  };
+  for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+    const glm::dvec2 p[3] = {projected[mesh.indices[t]], projected[mesh.indices[t + 1]],
+                             projected[mesh.indices[t + 2]]};
+    const glm::dvec2 lo = glm::min(glm::min(p[0], p[1]), p[2]);
+    const glm::dvec2 hi = glm::max(glm::max(p[0], p[1]), p[2]);
+    const int left = first(lo.x, x0, w), right = last(hi.x, x0, w);
+    const int top = first(lo.y, y0, h), bottom = last(hi.y, y0, h);
+    if (left > right || top > bottom) continue;  // outside the rectangle
+    if (right - left < kSmall && bottom - top < kSmall) {
+      // A small triangle: its bounding box (a few pixels more than it covers, at most).
+      for (int y = top; y <= bottom; ++y) mark(y, left, right);
+      continue;
+    }
+    for (int y = top; y <= bottom; ++y) {
+      // The triangle's extent in x within the row's slab [y - pad, y + 1 + pad]: its corners in
+      // the slab and its edges' crossings of the slab's two lines.
+      const double ya = double(y) - kPad, yb = double(y) + 1.0 + kPad;
+      double from = std::numeric_limits<double>::max(), to = -from;
+      for (int e = 0; e < 3; ++e) {
+        const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
+        if (a.y >= ya && a.y <= yb) from = std::min(from, a.x), to = std::max(to, a.x);
+        if (a.y == b.y) continue;
+        for (const double line : {ya, yb}) {
+          const double f = (line - a.y) / (b.y - a.y);
+          if (f < 0.0 || f > 1.0) continue;
+          const double x = a.x + f * (b.x - a.x);
+          from = std::min(from, x), to = std::max(to, x);
+        }
+      }
+      if (from > to) continue;
+      const int x1 = std::max(left, first(from, x0, w)), x2 = std::min(right, last(to, x0, w));
+      if (x1 <= x2) mark(y, x1, x2);
+    }
+  }
+  return mask;
+}
+
 float luminance(const glm::vec3& c) {
   return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
 }
@@ -345,9 +421,17 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     return r;
   };
 
+  // Pixels no triangle reaches are not traced (they would be left empty all the same).
+  const std::vector<uint8_t> coverable =
+      settings.skipUncoveredPixels
+          ? coverablePixels(mesh, worldFromObject, camera, out.x0, out.y0, w, h)
+          : std::vector<uint8_t>{};
+  std::atomic<int64_t> cameraRaysTotal{0};
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
-    int64_t rowHits = 0, rowSourceRays = 0;
+    int64_t rowHits = 0, rowSourceRays = 0, rowCameraRays = 0;
+    const uint8_t* coverableRow =
+        coverable.empty() ? nullptr : coverable.data() + size_t(y - out.y0) * size_t(w);
     // A pixel's hits, then grouped by the surface cell they landed in (triangle and the three
     // surface points around them).
     struct SampleHit {
@@ -363,6 +447,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<SampleHit> samples;
     samples.reserve(size_t(n) * size_t(n));
     for (int x = out.x0; x < out.x1; ++x) {
+      if (coverableRow && !coverableRow[x - out.x0]) continue;
+      rowCameraRays += n * n;
       glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
           albedoSum(0.0f);
       glm::dvec3 positionSum(0.0);
@@ -505,10 +591,11 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     }
     hitsTotal += rowHits;
     sourceRays += rowSourceRays;
+    cameraRaysTotal += rowCameraRays;
     const int done = ++rowsDone;
     if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
   });
-  out.rays = int64_t(w) * h * n * n + sourceRays;
+  out.rays = cameraRaysTotal + sourceRays;
   out.coverage = double(hitsTotal) * double(invSamples);
   report(progress, "render", 1.0);
   return out;

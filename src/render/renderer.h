@@ -62,6 +62,10 @@ struct RenderSettings {
   // ratio. So a lamp's or the sun's shadow keeps its edge at the pixel, not at the triangles'
   // scale; the extra rays go only where an edge passes.
   const std::vector<lighting::LightSource>* sources = nullptr;
+  // Trace only the pixels a triangle's projection reaches (the others cannot be hit; the image
+  // is the same). With a distorted or non-rectilinear lens, or the object partly behind the
+  // camera, every pixel of the rectangle is traced.
+  bool skipUncoveredPixels = true;
 };
 
 // The AOV channels, in order (Nuke's layer.channel names). All are the mean over the pixel's
@@ -80,8 +84,8 @@ struct RenderOutput {
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // the traced rectangle [x0, x1) x [y0, y1) on the plate
   Image beauty;                        // RGBA, premultiplied, working space; (x1 - x0) x (y1 - y0)
   Image aovs;                          // aovChannelNames(); (x1 - x0) x (y1 - y0)
-  int64_t rays = 0;
-  double coverage = 0.0;  // sum of alpha
+  int64_t rays = 0;                    // camera rays traced and rays to the bright sources
+  double coverage = 0.0;               // sum of alpha
 };
 
 RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& objectScene,

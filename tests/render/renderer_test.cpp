@@ -215,6 +215,75 @@ TEST(Renderer, ABoundingBoxCornerJustInFrontOfTheCameraIsClamped) {
   EXPECT_GT(out.coverage, 0.0) << "the wall is seen";
 }
 
+// Pixels no triangle's projection reaches are not traced, and the picture does not change: the
+// same values in every channel of every pixel as with every pixel of the rectangle traced, for a
+// finely tessellated sphere and for a soup of random triangles (slivers, needles, large ones,
+// edges at every angle), with fewer rays. A lens that bends straight edges traces every pixel.
+TEST(Renderer, PixelsNoTriangleReachesAreNotTracedAndThePictureIsTheSame) {
+  Mesh soup;
+  uint32_t state = 12345u;
+  auto next = [&] {
+    state = state * 1664525u + 1013904223u;
+    return float(state >> 8) / float(1u << 24);
+  };
+  for (int t = 0; t < 300; ++t) {
+    const glm::vec3 centre(2.0f * next() - 1.0f, 2.0f * next() - 1.0f, 2.0f * next() - 1.0f);
+    const float size = t % 10 == 0 ? 1.0f : 0.02f + 0.2f * next();
+    for (int c = 0; c < 3; ++c) {
+      const glm::vec3 offset(next() - 0.5f, next() - 0.5f, next() - 0.5f);
+      // Every fifth triangle a needle: its corners nearly on one line.
+      const glm::vec3 p = t % 5 == 1 ? centre + glm::vec3(0.01f * float(c) * offset.x,
+                                                          size * float(c), 0.001f * float(c))
+                                     : centre + size * offset;
+      soup.positions.push_back(p);
+      soup.normals.push_back(glm::normalize(p + glm::vec3(0.0f, 0.0f, 1e-3f)));
+    }
+    soup.indices.insert(soup.indices.end(),
+                        {uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
+  }
+  soup.normalsFromFile = true;
+  Scene scene;
+  const EmbreeScene soupBvh(soup.positions, soup.indices);
+  lighting::ShLighting sh(2);
+  sh.project(lighting::Environment::constant(glm::vec3(1.0f), 16));
+
+  auto compare = [&](const Mesh& mesh, const EmbreeScene& bvh, const calib::PlateCamera& camera,
+                     bool fewer) {
+    RenderSettings all, covered;
+    all.skipUncoveredPixels = false;
+    const RenderOutput a = renderDiffuse(mesh, bvh, scene.worldFromObject, camera, sh, all);
+    const RenderOutput b = renderDiffuse(mesh, bvh, scene.worldFromObject, camera, sh, covered);
+    ASSERT_GT(a.coverage, 100.0);
+    ASSERT_EQ(a.beauty.pixels.size(), b.beauty.pixels.size());
+    size_t differ = 0;
+    for (size_t i = 0; i < a.beauty.pixels.size(); ++i)
+      differ += a.beauty.pixels[i] != b.beauty.pixels[i];
+    for (size_t i = 0; i < a.aovs.pixels.size(); ++i)
+      differ += a.aovs.pixels[i] != b.aovs.pixels[i];
+    EXPECT_EQ(differ, 0u) << "values that differ";
+    EXPECT_EQ(a.coverage, b.coverage);
+    if (fewer) {
+      EXPECT_LT(double(b.rays), 0.9 * double(a.rays));
+    } else {
+      EXPECT_EQ(b.rays, a.rays);
+    }
+  };
+  compare(scene.sphere, scene.bvh, scene.camera, true);
+  compare(soup, soupBvh, scene.camera, true);
+
+  calib::CameraOptions options;
+  calib::Lens lens;
+  lens.width = 200;
+  lens.height = 150;
+  lens.fx = lens.fy = 180.0;
+  lens.cx = 100.0;
+  lens.cy = 75.0;
+  lens.distortion = {-0.2, 0.0, 0.0, 0.0, 0.0};
+  options.lens = lens;
+  const calib::PlateCamera distorted = calib::plateCamera(200, 150, {}, options);
+  compare(soup, soupBvh, distorted, false);
+}
+
 // The plate's lens distortion applies to the object's rays: the straight top edge of a wall bends
 // in the render exactly as the lens model bends a straight line of the scene (a ruler held in front
 // of the camera), and not as a pinhole would draw it.
