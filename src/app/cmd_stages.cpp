@@ -147,7 +147,10 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
     requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
-    request.targets = {pipeline::artefact::kObject};
+    // The layer's header carries the camera, made from the plate and the mesh: those are read
+    // even when the render and the ground shadow come from the cache.
+    request.targets = {pipeline::artefact::kObject, pipeline::artefact::kPlate,
+                       pipeline::artefact::kMesh};
     if (o->job.groundShadow) request.targets.push_back(pipeline::artefact::kGroundShadow);
     const fs::path file = *out;
     request.finish = [file, compression](pipeline::Context& ctx) {

@@ -106,6 +106,21 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
               quote(light) + " --out " + quote(layer) + " --cache " + quote(dir_ / "cache2"),
           dir_.path());
   ASSERT_EQ(ren.status, 0) << ren.err;
+  // Again with the same cache: the render and the ground shadow are reused, and the layer (whose
+  // header needs the plate's camera) is written the same.
+  const fs::path again = dir_ / "monkey_again.exr";
+  const RunResult ren2 =
+      run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(light) + " --out " + quote(again) + " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(ren2.status, 0) << ren2.err;
+  const size_t renderLine = ren2.err.find("compose: render ");
+  ASSERT_NE(renderLine, std::string::npos) << ren2.err;
+  EXPECT_NE(
+      ren2.err.substr(renderLine, ren2.err.find('\n', renderLine) - renderLine).find("reused"),
+      std::string::npos)
+      << ren2.err;
+  EXPECT_EQ(slurp(layer), slurp(again));
   const RunResult comp =
       run("-q composite --plate " + quote(plate_) + " --layer " + quote(layer) + " --out " +
               quote(dir_ / "two" / "compose") + " --cache " + quote(dir_ / "cache2"),
