@@ -137,13 +137,16 @@ std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendere
                                              const Image& shown, const fs::path& displayPath,
                                              const std::string& view) {
   const Image& beauty = rendered.beauty;
+  // Within half a code of the top two 8-bit codes: a view that rolls highlights off (Soft Clip)
+  // approaches white without reaching it, and its last codes hold no shading any more.
+  constexpr float kWhite = 253.5f / 255.0f;
   std::vector<int64_t> covered(size_t(beauty.height), 0), clipped(size_t(beauty.height), 0);
   parallelFor(0, beauty.height, [&](int64_t y) {
     for (int x = 0; x < beauty.width; ++x) {
       if (beauty.at(x, int(y))[3] < 0.5f) continue;
       ++covered[size_t(y)];
       const float* d = shown.at(x + rendered.x0, int(y) + rendered.y0);
-      if (std::max({d[0], d[1], d[2]}) >= 0.999f) ++clipped[size_t(y)];
+      if (std::max({d[0], d[1], d[2]}) >= kWhite) ++clipped[size_t(y)];
     }
   });
   int64_t allCovered = 0, allClipped = 0;

@@ -1,10 +1,12 @@
 // compose: put a synthetic diffuse object into a photograph, lit by the place the photo shows.
 // This file only parses the command line and maps errors to exit statuses; the commands are in
 // cmd_*.cpp and the work is in the libraries.
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -25,6 +27,20 @@ void requireValues(const CLI::App& app) {
   for (const CLI::App* sub : app.get_subcommands()) requireValues(*sub);
 }
 
+// A command given an option that only the one-shot command has (compose composite --yaw 45):
+// CLI11 passes it up to the top level, where it would be taken and silently not used. Throws
+// UsageError naming it.
+void refuseOneShotOptions(const CLI::App& app, const CLI::App& command,
+                          const std::vector<const CLI::Option*>& everyCommand) {
+  for (const CLI::Option* option : app.get_options()) {
+    if (option->count() == 0) continue;
+    if (std::find(everyCommand.begin(), everyCommand.end(), option) != everyCommand.end()) continue;
+    throw compose::UsageError(option->get_name() + " is not an option of compose " +
+                              command.get_name() + " (the one-shot command takes it; compose " +
+                              command.get_name() + " --help lists this command's options)");
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -39,13 +55,18 @@ int main(int argc, char** argv) {
   app.require_subcommand(0, 1);
   app.set_version_flag("--version", std::string("compose ") + COMPOSE_VERSION);
   Globals globals;
-  app.add_flag("-q,--quiet", globals.quiet, "Print only the output paths and errors");
-  app.add_option("--max-pixels", globals.limits.maxPixels,
-                 "Refuse images larger than this many pixels, before decoding them (any command)")
-      ->capture_default_str();
-  app.add_option("--max-triangles", globals.limits.maxTriangles,
-                 "Refuse meshes of more triangles than this, before loading them (any command)")
-      ->capture_default_str();
+  // The options every command takes. The others of the top level are the one-shot command's: a
+  // command reaches them only through CLI11's fallthrough, and they are refused there below.
+  const std::vector<const CLI::Option*> everyCommand = {
+      app.add_flag("-q,--quiet", globals.quiet, "Print only the output paths and errors"),
+      app.add_option("--max-pixels", globals.limits.maxPixels,
+                     "Refuse images larger than this many pixels, before decoding them (any "
+                     "command)")
+          ->capture_default_str(),
+      app.add_option("--max-triangles", globals.limits.maxTriangles,
+                     "Refuse meshes of more triangles than this, before loading them (any "
+                     "command)")
+          ->capture_default_str()};
 
   std::vector<std::pair<CLI::App*, Runner>> runners;
   for (const Command& c : commands()) {
@@ -75,7 +96,9 @@ int main(int argc, char** argv) {
     requireValues(app);
     compose::setResourceLimits(globals.limits);
     for (auto& [sub, run] : runners) {
-      if (sub->parsed()) return run();
+      if (!sub->parsed()) continue;
+      refuseOneShotOptions(app, *sub, everyCommand);
+      return run();
     }
     return oneShot();
   } catch (const compose::UsageError& e) {

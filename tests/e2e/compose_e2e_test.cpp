@@ -653,6 +653,38 @@ TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
   EXPECT_GT(largest, 1e28) << "the object's radiance is kept, not clamped";
 }
 
+// An object burnt to white is warned about in the default view too: Soft Clip rolls the
+// highlights off towards white without reaching it, so "clipped" is the last two 8-bit codes,
+// where no shading is left. The share the warning gives is the share of the JPEG's object pixels
+// there (within a point: the JPEG's own rounding), and a well exposed object is not warned about.
+TEST_F(ComposeOutputs, ABurntOutObjectIsWarnedAboutInTheDefaultView) {
+  const auto r = runCompose(args((dir_ / "w").string()) + " --exposure 3", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const size_t at =
+      r.err.find("% of the object's pixels are clipped to white in w.jpg (view Soft Clip)");
+  ASSERT_NE(at, std::string::npos) << r.err;
+  const size_t start = r.err.rfind("warning: ", at);
+  ASSERT_NE(start, std::string::npos) << r.err;
+  const double said = std::stod(r.err.substr(start + 9, at - start - 9));
+  const Raster e = readRaster(dir_ / "w.exr"), j = readRaster(dir_ / "w.jpg");
+  const int a = e.channel("object.A");
+  int64_t covered = 0, white = 0;
+  for (int y = 0; y < e.height; ++y) {
+    for (int x = 0; x < e.width; ++x) {
+      if (e.at(x, y, a) < 0.5f) continue;
+      ++covered;
+      if (std::max({j.at(x, y, 0), j.at(x, y, 1), j.at(x, y, 2)}) >= 253.5 / 255.0) ++white;
+    }
+  }
+  ASSERT_GT(covered, 500);
+  EXPECT_GT(said, 10.0);
+  EXPECT_NEAR(said, 100.0 * double(white) / double(covered), 1.0);
+
+  const auto fine = runCompose(args((dir_ / "f").string()), dir_.path());
+  ASSERT_EQ(fine.status, 0) << fine.err;
+  EXPECT_EQ(fine.err.find("clipped to white"), std::string::npos) << fine.err;
+}
+
 TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
   EXPECT_EQ(r.status, 1);

@@ -167,6 +167,42 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_FALSE(fs::exists(dir_ / "three" / "compose.exr"));
 }
 
+// An option only the one-shot command has, given to a command, is refused before anything is
+// read (CLI11 would pass it up to the one-shot command's options, where it was taken and not
+// used: compose composite --exposure 1 wrote the same picture as without). The options of every
+// command still work after the command's name.
+TEST_F(StageCommands, AnOptionOnlyTheOneShotCommandHasIsRefused) {
+  const std::string out = " --out " + quote(dir_ / "x");
+  const struct {
+    std::string args, option;
+  } cases[] = {
+      {"composite --plate " + quote(plate_) + " --layer missing.exr --exposure 1" + out,
+       "--exposure"},
+      {"composite --plate " + quote(plate_) + " --layer missing.exr --yaw 45" + out, "--yaw"},
+      {"render --plate " + quote(plate_) + " " + objectOptions() +
+           " --lighting-file missing.lighting --env " + quote(samples_ / "sunset.exr") + out,
+       "--env"},
+      {"precompute --env " + quote(samples_ / "forest.exr") + " --object " +
+           quote(samples_ / "monkey.obj") + out,
+       "--object"},
+      {"convert missing.exr --to cube --scale 3" + out, "--scale"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.args);
+    const RunResult r = run(c.args, dir_.path());
+    EXPECT_EQ(r.status, 2) << r.err;
+    EXPECT_NE(r.err.find(c.option + " is not an option of compose"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "x.exr"));
+    EXPECT_FALSE(fs::exists(dir_ / "x"));
+  }
+  const RunResult pre =
+      run("precompute -q --max-pixels 100000000 --env " + quote(samples_ / "forest.exr") +
+              " --lighting-params order=4" + " --out " + quote(dir_ / "f.lighting") + " --no-cache",
+          dir_.path());
+  EXPECT_EQ(pre.status, 0) << pre.err;
+  EXPECT_TRUE(fs::exists(dir_ / "f.lighting"));
+}
+
 TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
   const std::string common = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
                              quote(samples_ / "forest.exr") +
