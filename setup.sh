@@ -67,10 +67,17 @@ build_sanitize() {
 }
 
 # LeakSanitizer's own stop-the-world tracer sometimes crashes as a process exits ("Tracer caught
-# signal 11 ... LeakSanitizer has encountered a fatal error", google/sanitizers#1353; one test of
-# 450 in one run here): it reports no leak, and the test's own checks have passed. Succeeds
-# when every failed test in the ctest log $1 failed that way and nothing else: no failed check, no
-# sanitizer report.
+# signal 11 ... LeakSanitizer has encountered a fatal error", google/sanitizers#1353). The cause is
+# the runtime's __tls_get_addr interceptor (LLVM up to 16, Debian's clang 14 included): it takes a
+# dynamic TLS block that malloc happened to place 16 bytes past a page boundary for a glibc 2.19
+# block and reads the two words before it as that block's range, which the tracer then scans.
+# Fixed upstream in LLVM 17 ("Fix tls_get_addr handling for glibc >=2.25"). Here the interception
+# is turned off (intercept_tls_get_addr=0; since glibc 2.25 those blocks are ordinary malloc'd
+# memory). One test run 200 times, two at a time: 14 tracer crashes with the interceptor, none
+# without; the whole sanitizer suite passes without it, no leak reported.
+# Should a crash still happen, a failed test that reports no leak and whose own checks have passed
+# runs once more: this succeeds when every failed test in the ctest log $1 failed that way and
+# nothing else (no failed check, no sanitizer report).
 only_tracer_crashes() {
   awk '
     function close_block() {
@@ -96,7 +103,7 @@ only_tracer_crashes() {
 sanitizer_suite() {
   local exclude=() log status=0
   [ -n "$SANITIZE_EXCLUDE" ] && exclude=(-E "$SANITIZE_EXCLUDE")
-  local options=(ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0}"
+  local options=(ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:intercept_tls_get_addr=0}"
                  UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}")
   log=$(mktemp)
   env "${options[@]}" ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)" \
