@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 
 #include "app/cli.h"
@@ -43,6 +44,16 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     if (o->depth != "half" && o->depth != "float")
       throw UsageError("--depth must be half or float, got '" + o->depth + "'");
     if (o->out.empty()) throw UsageError("--out is empty: give the EXR to write");
+    {
+      std::string ext = fs::path(o->out).extension().string();
+      for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+      if (ext != ".exr") {
+        throw UsageError(
+            "--out must name an OpenEXR file (.exr): compose color writes "
+            "scene-linear values, which '" +
+            o->out + "' would not hold");
+      }
+    }
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     // The spaces named on the command line are checked before the image is read.
     std::string target;

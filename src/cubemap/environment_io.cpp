@@ -231,11 +231,27 @@ void writeAny(const fs::path& temporary, const fs::path& destination, const Imag
                 "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
                 destination);
   }
+  // Radiance above 1 needs a format of floats: an 8-bit PNG or JPEG would clip it (and say
+  // nothing). TIFF is written as float.
+  const std::string ext = lowerExtension(destination);
+  const bool floats = ext == ".exr" || ext == ".hdr" || ext == ".tif" || ext == ".tiff";
+  if (!floats) {
+    const float most = maxValue(rgb.pixels);
+    if (most > 1.0f) {
+      throw Error("output",
+                  "the environment holds values up to " + numberText(most) + ", which a " + ext +
+                      " file of 8-bit codes would clip to 1: write OpenEXR (.exr), Radiance "
+                      "(.hdr) or TIFF (.tif, written as float)",
+                  destination);
+    }
+  }
   try {
-    if (lowerExtension(destination) == ".exr") {
+    if (ext == ".exr") {
       writeExr(temporary, rgb, useHalf, envmap, options.chromaticities, options.exrCompression);
     } else {
-      ingest::writeImage(temporary, rgb, {});
+      ingest::WriteOptions write;
+      if (floats) write.depth = ingest::WriteOptions::Depth::Float;
+      ingest::writeImage(temporary, rgb, write);
     }
   } catch (const Error& e) {
     // The temporary is ours: the user knows the file by the name they gave.

@@ -606,6 +606,53 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
                 "--compression");
 }
 
+// Radiance above 1 is not written into 8-bit codes: a PNG or JPEG of an HDR map is refused,
+// naming the file and the formats that keep it, and nothing is written; a TIFF is written as
+// float and keeps every value. compose color writes OpenEXR only.
+TEST(ConvertCommand, RadianceGoesToFormatsOfFloatsOnly) {
+  if (!fs::exists(sample("forest.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+  TempDir dir;
+  const fs::path outs = dir / "outputs";
+  fs::create_directory(outs);
+  for (const std::string& args : {std::string(" --to cube --out ") + q(outs / "forest.png"),
+                                  std::string(" --to latlong --out ") + q(outs / "forest.jpg"),
+                                  std::string(" --to faces --out ") + q(outs / "forest_%.png")}) {
+    SCOPED_TRACE(args);
+    const RunResult r = run("convert " + q(sample("forest.exr")) + args, dir);
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_NE(r.err.find("file of 8-bit codes would clip to 1: write OpenEXR (.exr), Radiance "
+                         "(.hdr) or TIFF (.tif, written as float)"),
+              std::string::npos)
+        << r.err;
+    EXPECT_NE(r.err.find("forest"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::is_empty(outs)) << "nothing written";
+  }
+  const RunResult tif = run(
+      "convert " + q(sample("forest.exr")) + " --to latlong --width 256 --out " + q(dir / "f.tif"),
+      dir);
+  ASSERT_EQ(tif.status, 0) << tif.err;
+  const RunResult exr = run(
+      "convert " + q(sample("forest.exr")) + " --to latlong --width 256 --out " + q(dir / "f.exr"),
+      dir);
+  ASSERT_EQ(exr.status, 0) << exr.err;
+  const ingest::LoadedImage a = ingest::readImage(dir / "f.tif"),
+                            b = ingest::readImage(dir / "f.exr");
+  ASSERT_EQ(a.image.pixels.size(), b.image.pixels.size());
+  float largest = 0.0f;
+  for (size_t i = 0; i < a.image.pixels.size(); ++i) {
+    EXPECT_EQ(a.image.pixels[i], b.image.pixels[i]) << "at " << i;
+    largest = std::max(largest, a.image.pixels[i]);
+  }
+  EXPECT_GT(largest, 100.0f) << "the sun's radiance is kept";
+
+  const RunResult color =
+      run("color " + q(sample("forest.exr")) + " --out " + q(outs / "forest_acescg.png"), dir);
+  EXPECT_EQ(color.status, 2) << color.err;
+  EXPECT_NE(color.err.find("--out must name an OpenEXR file (.exr)"), std::string::npos)
+      << color.err;
+  EXPECT_TRUE(fs::is_empty(outs)) << "nothing written";
+}
+
 TEST(ConvertCommand, WritesTheCompressionAskedFor) {
   if (!fs::exists(sample("sunset.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   TempDir dir;

@@ -316,10 +316,16 @@ TEST_F(Robustness, AFullDiskIsANamedErrorAndThePreviousOutputsStay) {
 
   // The same for an environment written by convert, in each kind of file: the error names the
   // file asked for, not the temporary the writer fills. (OpenImageIO's PNG writer does not check
-  // its writes: the faces were left cut short with exit 0.)
+  // its writes: the faces were left cut short with exit 0.) A PNG takes values up to 1 only.
+  Image ldr(64, 32, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < ldr.pixels.size(); ++i)
+    ldr.pixels[i] = 0.2f + 0.6f * float(i % 97) / 97.0f;
+  ldr.colorSpace = "lin_rec709";
+  ingest::writeImage(dir / "ldr.exr", ldr);
   for (const std::string out : {"cube.exr", "faces_%.png"}) {
+    const std::string input = out == "cube.exr" ? "env.exr" : "ldr.exr";
     const RunResult c =
-        runShell("ulimit -f 4; " + kCompose + " convert " + quote((dir / "env.exr").string()) +
+        runShell("ulimit -f 4; " + kCompose + " convert " + quote((dir / input).string()) +
                      " --to " + (out == "cube.exr" ? "cube" : "faces") + " --size 256 --out " +
                      quote((dir / out).string()),
                  dir.path(), "convert");
