@@ -99,6 +99,18 @@ lighting::CaptureProxy captureProxy(const ComposeJob& job) {
 
 void validate(const ComposeJob& job) {
   if (job.output.empty()) throw UsageError("--out must not be empty");
+  {
+    // The name of an image format compose does not write here would end up inside the names
+    // (shot.tif.exr, shot.tif.jpg).
+    std::string ext = job.output.extension().string();
+    for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    for (const char* other : {".tif", ".tiff", ".hdr", ".bmp", ".webp", ".gif", ".tga", ".dpx"}) {
+      if (ext != other) continue;
+      throw UsageError("--out " + job.output.string() +
+                       ": compose writes BASE.exr and BASE.jpg (or BASE.png); give a base name, or "
+                       "one ending in .exr, .jpg or .png");
+    }
+  }
   if (job.samplesPerAxis < 1 || job.samplesPerAxis > 64) {
     throw UsageError("--samples must be in 1..64, got " + std::to_string(job.samplesPerAxis));
   }

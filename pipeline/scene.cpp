@@ -145,6 +145,11 @@ void setParameter(ComposeJob& job, const std::string& assignment) {
   const std::string name = assignment.substr(dot + 1, equals - dot - 1);
   const std::string text = assignment.substr(equals + 1);
   nlohmann::json value = nlohmann::json::parse(text, nullptr, false);
+  // A list written as the one-shot command writes it (--place 0.5,0.7): X,Y for [X, Y].
+  if (value.is_discarded() && text.find(',') != std::string::npos) {
+    const nlohmann::json list = nlohmann::json::parse("[" + text + "]", nullptr, false);
+    if (!list.is_discarded()) value = list;
+  }
   if (value.is_discarded()) value = text;
   setOne(job, stage, name, value, {});  // relative to where compose runs
 }

@@ -190,22 +190,24 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   std::vector<ingest::ExrPart> parts = {
       {"object", &layer, r.x0, r.y0, g.camera.width, g.camera.height, options}};
 
-  nlohmann::json header = {{"format", kLayerFormat},
-                           {"render",
-                            {{"x0", r.x0},
-                             {"y0", r.y0},
-                             {"x1", r.x1},
-                             {"y1", r.y1},
-                             {"rays", r.rays},
-                             {"coverage", r.coverage},
-                             {"exposure", object.exposure},
-                             {"notes", object.notes},
-                             {"mesh", object.meshFile},
-                             {"beautyChannels", r.beauty.channelNames},
-                             {"aovChannels", r.aovs.channelNames},
-                             {"colorSpace", r.beauty.colorSpace}}},
-                           {"geometry", geometryToJson(g)},
-                           {"ground", nullptr}};
+  nlohmann::json header = {
+      {"format", kLayerFormat},
+      {"render",
+       {{"x0", r.x0},
+        {"y0", r.y0},
+        {"x1", r.x1},
+        {"y1", r.y1},
+        {"rays", r.rays},
+        {"coverage", r.coverage},
+        {"exposure", object.exposure},
+        {"notes", object.notes},
+        {"mesh", object.meshFile},
+        {"beautyChannels", r.beauty.channelNames},
+        {"aovChannels", r.aovs.channelNames},
+        {"colorSpace", r.beauty.colorSpace}}},
+      {"geometry", geometryToJson(g)},
+      {"plate", {{"file", fs::absolute(ctx.job.plate).string()}, {"key", ctx.key(kPlate).hex()}}},
+      {"ground", nullptr}};
   const GroundShadowResult* ground =
       ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
           ? &*ctx.artefacts.groundShadow
@@ -306,6 +308,10 @@ StageInput objectLayerInput(const fs::path& file) {
       object.exposure = rj.at("exposure");
       object.notes = rj.at("notes").get<std::vector<std::string>>();
       object.meshFile = rj.value("mesh", "");
+      if (const auto plate = header.find("plate"); plate != header.end() && plate->is_object()) {
+        object.layerPlateFile = plate->value("file", "");
+        object.layerPlateKey = plate->value("key", "");
+      }
       int x = 0, y = 0;
       const Image layer = readPart("object", x, y);
       const auto beautyNames = rj.at("beautyChannels").get<std::vector<std::string>>();
@@ -332,7 +338,8 @@ StageInput objectLayerInput(const fs::path& file) {
         for (size_t c = 0; c < 4; ++c) r.beauty.pixels[4 * i + c] = s[from[c]];
         for (size_t c = 0; c < n; ++c) r.aovs.pixels[n * i + c] = s[from[4 + c]];
       }
-      for (const auto& note : object.notes) ctx.note(note);
+      // How the render chose the exposure (the layer's own --exposure, if any, was given there).
+      for (const auto& note : object.notes) ctx.note("the layer's render: " + note);
       ctx.artefacts.object = std::move(object);
 
       GroundShadowResult ground;

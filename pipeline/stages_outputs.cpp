@@ -166,7 +166,7 @@ std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendere
 
 glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
   if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number())
-    throw UsageError(name + " must be [X, Y]");
+    throw UsageError(name + " must be two numbers: [X, Y] in a scene file, X,Y after --set");
   return {v[0].get<double>(), v[1].get<double>()};
 }
 
@@ -432,6 +432,17 @@ class CompositeStage final : public Stage {
                            camera.width, camera.height, plate.width, plate.height),
                     ctx.job.plate);
       }
+    }
+    // A layer rendered on another plate of the same size (a graded copy, another take) is
+    // composited as it is: its exposure and ground shadow were matched to that plate.
+    if (!object.layerPlateKey.empty() && ctx.hasKey(kPlate) &&
+        object.layerPlateKey != ctx.key(kPlate).hex()) {
+      ctx.note(
+          format("the object layer was rendered on another plate (%s): its exposure (%+.2f "
+                 "stops) and its ground shadow were matched to that plate and are applied "
+                 "here as they are; render it again on %s to match this one",
+                 object.layerPlateFile.c_str(), std::log2(double(object.exposure)),
+                 ctx.job.plate.filename().string().c_str()));
     }
     std::string reason = "the object over the plate";
     // Made in place in the linear plate, which no later stage reads; a holdout needs the plate

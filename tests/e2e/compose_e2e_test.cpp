@@ -409,6 +409,21 @@ TEST_F(ComposeErrors, AnOutputCodecOrQualityItDoesNotKnowIsAUsageError) {
       << unknown.err;
 }
 
+// --out names a base: one ending in an image format compose does not write there would have
+// ended inside the names (x.tif.exr, x.tif.jpg).
+TEST_F(ComposeErrors, AnOutputNamedForAnotherImageFormatIsAUsageError) {
+  for (const char* name : {"x.tif", "x.HDR"}) {
+    const auto r = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) +
+                                  " --object " + quote((samples_ / "bunny.obj").string()) +
+                                  " --no-cache --out " + quote((dir_ / name).string()),
+                              dir_.path());
+    EXPECT_EQ(r.status, 2) << r.err;
+    EXPECT_NE(r.err.find("compose writes BASE.exr and BASE.jpg (or BASE.png)"), std::string::npos)
+        << r.err;
+    expectNothingWritten();
+  }
+}
+
 TEST_F(ComposeErrors, UnknownLightingBasisListsTheValidOnes) {
   const auto r =
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +

@@ -154,6 +154,24 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   for (size_t k = 3; k < object.pixels.size(); k += stride) alpha += object.pixels[k];
   EXPECT_GT(alpha, 100.0);
 
+  // On another plate of the same size (here the plate darkened, as a grade would) the layer is
+  // composited as it is, and a note says that its exposure and shadow were matched to the plate
+  // it was rendered on; on its own plate there is no such note.
+  const fs::path graded = dir_ / "graded.jpg";
+  ASSERT_TRUE(
+      OIIO::ImageBufAlgo::mul(OIIO::ImageBuf(plate_.string()), 0.6f).write(graded.string()));
+  const std::string note = "the object layer was rendered on another plate (" + plate_.string();
+  const RunResult other = run("composite --plate " + quote(graded) + " --layer " + quote(layer) +
+                                  " --out " + quote(dir_ / "graded" / "compose") + " --no-cache",
+                              dir_.path());
+  ASSERT_EQ(other.status, 0) << other.err;
+  EXPECT_NE(other.err.find(note), std::string::npos) << other.err;
+  const RunResult same = run("composite --plate " + quote(plate_) + " --layer " + quote(layer) +
+                                 " --out " + quote(dir_ / "same" / "compose") + " --no-cache",
+                             dir_.path());
+  ASSERT_EQ(same.status, 0) << same.err;
+  EXPECT_EQ(same.err.find("rendered on another plate"), std::string::npos) << same.err;
+
   // The layer belongs to its plate: another plate size is a named error and writes nothing.
   const fs::path smaller = dir_ / "smaller.jpg";
   OIIO::ImageBuf full(plate_.string());

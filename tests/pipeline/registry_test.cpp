@@ -75,6 +75,27 @@ TEST(Registry, AnOutputCodecOrQualityFromASceneIsCheckedBeforeAnythingRuns) {
   EXPECT_EQ(job.jpegQuality, 70);
 }
 
+// A pair after --set is written as on the one-shot command line (--place 0.5,0.7) or as JSON.
+TEST(Registry, APairIsTakenAsTheOneShotCommandWritesIt) {
+  ComposeJob job;
+  setParameter(job, "render.place=0.25,0.75");
+  EXPECT_EQ(job.placement.imagePoint.x, 0.25);
+  EXPECT_EQ(job.placement.imagePoint.y, 0.75);
+  setParameter(job, "render.place=[0.5, 0.6]");
+  EXPECT_EQ(job.placement.imagePoint.x, 0.5);
+  EXPECT_EQ(job.placement.imagePoint.y, 0.6);
+  for (const char* bad : {"render.place=0.5", "render.place=0.5,0.6,0.7", "render.place=a,b"}) {
+    try {
+      setParameter(job, bad);
+      ADD_FAILURE() << bad << " was taken";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find("[X, Y] in a scene file, X,Y after --set"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
   ComposeJob job;
   job.placement.heightFraction = 0.42;
