@@ -136,6 +136,15 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
   return s;
 }
 
+std::string leftOutNote(const std::vector<std::filesystem::path>& files) {
+  std::vector<std::string> names;
+  for (const auto& f : files) names.push_back(f.filename().string());
+  return "left out " + std::to_string(files.size()) + " file" + (files.size() == 1 ? "" : "s") +
+         " of the folder with no exposure time in EXIF, where the other photos have one (not a "
+         "photo of the brackets: a merged or edited image?): " +
+         join(names) + "; name them one by one, or in a capture description, to use them";
+}
+
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
                                               const std::string& faceNames) {
   cubemap::WriteOptions write;

@@ -2,6 +2,7 @@
 // printer. Commands only parse options, load, call the libraries and save; the work is elsewhere.
 #pragma once
 
+#include <filesystem>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -87,6 +88,9 @@ double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
 // "a,b,c" → numbers; throws UsageError naming `option`.
 std::vector<double> parseList(const std::string& text, const std::string& option);
+// The note for the files of a folder of photos that ingest::scanShots left out (no exposure time
+// in their EXIF where the others have one).
+std::string leftOutNote(const std::vector<std::filesystem::path>& files);
 
 // How convert and stitch write an environment: --depth (auto, half or float) and --face-names
 // (layouts.h); throws UsageError for a value that is neither.

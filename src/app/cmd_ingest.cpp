@@ -95,7 +95,10 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     if (group == "json") {
       capture = ingest::readCaptureDescription(o->capture);
     } else {
-      auto shots = ingest::scanShots(o->paths);
+      std::vector<std::filesystem::path> leftOut;
+      auto shots = ingest::scanShots(o->paths, "ingest", &leftOut);
+      if (!leftOut.empty() && !globals.quiet)
+        std::fprintf(stderr, "compose: note: %s\n", leftOutNote(leftOut).c_str());
       capture = group == "pattern" ? ingest::groupByPattern(std::move(shots), o->pattern)
                                    : ingest::groupByExif(std::move(shots), exif);
     }

@@ -79,8 +79,11 @@ std::string relativeTo(const fs::path& file, const fs::path& folder) {
 
 }  // namespace
 
-std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::string& stage) {
+std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::string& stage,
+                            std::vector<fs::path>* leftOut) {
   std::vector<Shot> shots;
+  std::vector<int> folderOf;  // per shot: the index of the folder it was found in, or -1
+  int folders = 0;
   for (const fs::path& p : paths) {
     std::error_code ec;
     if (fs::is_directory(p, ec)) {
@@ -92,14 +95,36 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
       if (ec) throw Error(stage, "cannot list the folder: " + ec.message(), p);
       if (inFolder.empty()) throw Error(stage, "no image files in the folder", p);
       std::sort(inFolder.begin(), inFolder.end(), shotNameLess);
-      for (Shot& s : inFolder) shots.push_back(std::move(s));
+      for (Shot& s : inFolder) {
+        shots.push_back(std::move(s));
+        folderOf.push_back(folders);
+      }
+      ++folders;
     } else {
       shots.push_back(Shot{p, {}, {}, {}, {}});
+      folderOf.push_back(-1);
     }
   }
   if (shots.empty()) throw Error(stage, "no photos given");
   for (Shot& s : shots) s.info = readCaptureInfo(s.file, stage);
-  return shots;
+  if (!leftOut) return shots;
+  // In a folder where some photos say their exposure time and others do not, the others are not
+  // photos of the brackets (a merged EXR, a panorama saved beside them): left out, and named.
+  std::vector<bool> timed(size_t(folders), false), untimed(size_t(folders), false);
+  for (size_t i = 0; i < shots.size(); ++i) {
+    if (folderOf[i] < 0) continue;
+    (shots[i].info.exposureTime ? timed : untimed)[size_t(folderOf[i])] = true;
+  }
+  std::vector<Shot> kept;
+  for (size_t i = 0; i < shots.size(); ++i) {
+    const int f = folderOf[i];
+    if (f >= 0 && timed[size_t(f)] && untimed[size_t(f)] && !shots[i].info.exposureTime) {
+      leftOut->push_back(shots[i].file);
+      continue;
+    }
+    kept.push_back(std::move(shots[i]));
+  }
+  return kept;
 }
 
 void ExifGrouping::validate() const {

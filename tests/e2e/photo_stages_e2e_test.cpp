@@ -125,6 +125,28 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     EXPECT_LT(worst, 1.0 / 1024.0);  // half keeps 11 significant bits
     EXPECT_LT(fs::file_size(dir / "half.exr"), fs::file_size(dir / "one.exr"));
   }
+  // An image with no exposure time in the folder of the brackets (a merged EXR saved beside
+  // them) is left out and named: the grouping stays by capture time and merge takes the folder.
+  {
+    TempDir dir;
+    Image merged(16, 12, 3, {"R", "G", "B"});
+    std::fill(merged.pixels.begin(), merged.pixels.end(), 2.5f);
+    ingest::writeImage(shot("merged.exr"), merged);
+    const CommandRun r =
+        compose("ingest --json " + q(dir / "grouped.json") + " " + q(dir_ / "shots"), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.err.find("left out 1 file of the folder with no exposure time in EXIF, where the "
+                         "other photos have one"),
+              std::string::npos)
+        << r.err;
+    EXPECT_NE(r.err.find("merged.exr"), std::string::npos) << r.err;
+    EXPECT_NE(r.out.find("grouped by EXIF capture times"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("2 views"), std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find("merged.exr"), std::string::npos) << r.out;
+    const CommandRun m =
+        compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
+    EXPECT_EQ(m.status, 0) << m.err;
+  }
 }
 
 // A real camera raw file (a Canon EOS 30D CR2 from Debian's rawtran-doc): its EXIF is read, and
