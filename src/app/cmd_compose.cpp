@@ -160,7 +160,7 @@ void ComposeOptions::addRun(CLI::App& app) {
                "Print each stage's time and the process's peak memory during it");
   app.add_flag("--explain", explain,
                "Say which stages would run, be reused from the cache or be skipped, and why, then "
-               "exit (reads the mesh and hashes the inputs; decodes no image)");
+               "exit (hashes the inputs and reads the mesh, if there is one; decodes no image)");
 }
 
 void ComposeOptions::apply(const CLI::App& app) {

@@ -1,5 +1,6 @@
 // compose convert: environment maps between layouts (lat-long, OpenEXR cube, crosses, six faces)
 // and mirror-ball photos to environments.
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 
@@ -188,12 +189,42 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     } else {
       cubemap::ReadOptions read;
       read.layout = from;
-      const cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
+      cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
       notes.push_back("read " + file.describe() + " (" + file.how + ")");
       // Values are resampled as stored; the colour metadata goes along.
       write.chromaticities = file.info.chromaticities;
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
+      }
+      // Codes of an 8- or 16-bit picture (an sRGB JPEG, a PNG) written into a format of floats
+      // are made linear first, as compose reads such a picture with --env: an OpenEXR holds
+      // linear light, and other tools take it so. The other way round, linear light written
+      // into 8-bit codes is encoded as compose (and other tools) will read those files.
+      std::string lower = std::filesystem::path(o->out).extension().string();
+      for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+      const bool floatsOut =
+          lower == ".exr" || lower == ".hdr" || lower == ".tif" || lower == ".tiff";
+      const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
+      if (floatsOut != !codesIn) {
+        const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+        const std::string source =
+            colors.inputSpaceFor(file.files.front(), file.info.fileColorSpace);
+        const std::string target = colors.inputSpaceFor(o->out, "");
+        if (source != target) {
+          auto linearise = [&](Image& image) {
+            image.colorSpace = source;
+            colors.convert(image, target);
+          };
+          if (file.isCube()) {
+            for (Image& face : file.faces) linearise(face);
+          } else {
+            linearise(file.image);
+          }
+          write.chromaticities = colors.chromaticities(target);
+          notes.push_back("its " + file.info.sampleType + " values read as '" + source +
+                          "' and written as '" + target + "' (as " +
+                          std::filesystem::path(o->out).extension().string() + " files are read)");
+        }
       }
       if (file.isCube()) {
         cube = cubemap::cubeMapOf(file, &sanitized);

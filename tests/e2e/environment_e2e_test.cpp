@@ -653,6 +653,45 @@ TEST(ConvertCommand, RadianceGoesToFormatsOfFloatsOnly) {
   EXPECT_TRUE(fs::is_empty(outs)) << "nothing written";
 }
 
+// A picture of 8-bit codes (an sRGB PNG) written as OpenEXR holds linear light: the sRGB curve
+// undone, as compose reads that picture with --env and as other tools read an EXR; written back
+// as a PNG it is encoded again, and every code comes back.
+TEST(ConvertCommand, CodesBecomeLinearLightInAnExrAndComeBack) {
+  TempDir dir;
+  Image codes(64, 32, 3, {"R", "G", "B"});
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 64; ++x)
+      for (int c = 0; c < 3; ++c)
+        codes.pixels[(size_t(y) * 64 + size_t(x)) * 3 + size_t(c)] =
+            float((x * 4 + y * 8 + c * 85) % 256) / 255.0f;
+  ingest::writeImage(dir / "codes.png", codes);
+  const RunResult toExr =
+      run("convert " + q(dir / "codes.png") + " --to latlong --out " + q(dir / "linear.exr"), dir);
+  ASSERT_EQ(toExr.status, 0) << toExr.err;
+  EXPECT_NE(toExr.err.find("its uint8 values read as 'sRGB - Texture'"), std::string::npos)
+      << toExr.err;
+  const ingest::LoadedImage linear = ingest::readImage(dir / "linear.exr");
+  ASSERT_EQ(linear.image.pixels.size(), codes.pixels.size());
+  double worst = 0.0;
+  for (size_t i = 0; i < codes.pixels.size(); ++i) {
+    const double v = codes.pixels[i];
+    const double expected = v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+    worst = std::max(worst, std::abs(double(linear.image.pixels[i]) - expected));
+  }
+  EXPECT_LT(worst, 1e-4) << "the sRGB curve undone";
+
+  const RunResult toPng =
+      run("convert " + q(dir / "linear.exr") + " --to latlong --out " + q(dir / "back.png"), dir);
+  ASSERT_EQ(toPng.status, 0) << toPng.err;
+  const ingest::LoadedImage back = ingest::readImage(dir / "back.png");
+  ASSERT_EQ(back.image.pixels.size(), codes.pixels.size());
+  int moved = 0;
+  for (size_t i = 0; i < codes.pixels.size(); ++i)
+    moved = std::max(moved,
+                     int(std::lround(std::abs(back.image.pixels[i] - codes.pixels[i]) * 255.0f)));
+  EXPECT_EQ(moved, 0) << "codes that moved";
+}
+
 TEST(ConvertCommand, WritesTheCompressionAskedFor) {
   if (!fs::exists(sample("sunset.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   TempDir dir;
