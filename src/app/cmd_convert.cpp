@@ -119,9 +119,14 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     // 800 megapixels, 13 GB of float RGBA with its working copies).
     const int64_t limit = resourceLimits().maxPixels;
     const auto tooLarge = [&](const std::string& option, int value, int64_t pixels) {
-      return UsageError(option + " " + std::to_string(value) + " makes a map of " +
-                        std::to_string((pixels + 500000) / 1000000) +
-                        " megapixels, more than the limit of " + std::to_string(limit / 1000000) +
+      // In megapixels, or in pixels for a limit below one megapixel.
+      const bool mega = limit >= 1000000;
+      const auto count = [&](int64_t n) {
+        return mega ? std::to_string((n + 500000) / 1000000) : std::to_string(n);
+      };
+      return UsageError(option + " " + std::to_string(value) + " makes a map of " + count(pixels) +
+                        (mega ? " megapixels" : " pixels") + ", more than the limit of " +
+                        (mega ? std::to_string(limit / 1000000) : count(limit)) +
                         " (raise it with --max-pixels)");
     };
     if (sizeGiven && 6 * int64_t(o->size) * o->size > limit)

@@ -578,6 +578,9 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
   expectRefused(
       "--max-pixels 1000000 convert missing.exr --to cube --size 1000 --out " + q(dir_ / "x.exr"),
       2, "--size 1000 makes a map of 6 megapixels, more than the limit of 1", "--size");
+  expectRefused(
+      "--max-pixels 1000 convert missing.exr --to cube --size 32 --out " + q(dir_ / "x.exr"), 2,
+      "--size 32 makes a map of 6144 pixels, more than the limit of 1000", "--size");
   // Options of the mirror-ball unwrapping were ignored for other layouts.
   expectRefused("convert missing.exr --to cube --photo-space sRGB --out " + q(dir_ / "x.exr"), 2,
                 "--photo-space applies to a mirror-ball photo only (with --from mirrorball)",
