@@ -105,19 +105,22 @@ class CameraRays {
 // Empty (trace every pixel) when the lens bends straight edges or a corner is not in front of the
 // camera: a projected triangle is then not the triangle of its projected corners.
 std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFromObject,
-                                     const calib::PlateCamera& camera, int x0, int y0, int w,
-                                     int h) {
+                                     const calib::PlateCamera& camera, const glm::vec3& rayOrigin,
+                                     int x0, int y0, int w, int h) {
   if (camera.lens.projection != calib::Projection::Rectilinear || camera.lens.hasDistortion() ||
       w <= 0 || h <= 0)
     return {};
-  const glm::dmat4 cameraFromObject = camera.cameraFromWorld() * worldFromObject;
+  // Seen from where the rays start: the camera's centre in the object's coordinates as the rays
+  // have it, rounded to float (far from the object's origin that rounding is more than a pixel's
+  // padding). cameraFromObject · v = M · (v - centre) for the exact centre.
+  const glm::dmat3 cameraFromObject = glm::dmat3(camera.cameraFromWorld() * worldFromObject);
+  const glm::dvec3 origin(rayOrigin);
   const calib::Lens& lens = camera.lens;
   // The corners projected as CameraRays inverts it: direction ∝ ((px - cx) / fx,
   // -(py - cy) / fy, -1).
   std::vector<glm::dvec2> projected(mesh.positions.size());
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
-    const glm::dvec3 c =
-        glm::dvec3(cameraFromObject * glm::dvec4(glm::dvec3(mesh.positions[v]), 1.0));
+    const glm::dvec3 c = cameraFromObject * (glm::dvec3(mesh.positions[v]) - origin);
     if (!(c.z < -1e-9)) return {};
     projected[v] = {lens.cx + lens.fx * c.x / -c.z, lens.cy - lens.fy * c.y / -c.z};
   }
@@ -424,7 +427,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   // Pixels no triangle reaches are not traced (they would be left empty all the same).
   const std::vector<uint8_t> coverable =
       settings.skipUncoveredPixels
-          ? coverablePixels(mesh, worldFromObject, camera, out.x0, out.y0, w, h)
+          ? coverablePixels(mesh, worldFromObject, camera,
+                            glm::vec3(objectFromWorld * glm::dvec4(camera.position(), 1.0)), out.x0,
+                            out.y0, w, h)
           : std::vector<uint8_t>{};
   std::atomic<int64_t> cameraRaysTotal{0};
   parallelFor(out.y0, out.y1, [&](int64_t yy) {

@@ -248,11 +248,11 @@ TEST(Renderer, PixelsNoTriangleReachesAreNotTracedAndThePictureIsTheSame) {
   sh.project(lighting::Environment::constant(glm::vec3(1.0f), 16));
 
   auto compare = [&](const Mesh& mesh, const EmbreeScene& bvh, const calib::PlateCamera& camera,
-                     bool fewer) {
+                     bool fewer, const glm::dmat4& worldFromObject) {
     RenderSettings all, covered;
     all.skipUncoveredPixels = false;
-    const RenderOutput a = renderDiffuse(mesh, bvh, scene.worldFromObject, camera, sh, all);
-    const RenderOutput b = renderDiffuse(mesh, bvh, scene.worldFromObject, camera, sh, covered);
+    const RenderOutput a = renderDiffuse(mesh, bvh, worldFromObject, camera, sh, all);
+    const RenderOutput b = renderDiffuse(mesh, bvh, worldFromObject, camera, sh, covered);
     ASSERT_GT(a.coverage, 100.0);
     ASSERT_EQ(a.beauty.pixels.size(), b.beauty.pixels.size());
     size_t differ = 0;
@@ -268,8 +268,20 @@ TEST(Renderer, PixelsNoTriangleReachesAreNotTracedAndThePictureIsTheSame) {
       EXPECT_EQ(b.rays, a.rays);
     }
   };
-  compare(scene.sphere, scene.bvh, scene.camera, true);
-  compare(soup, soupBvh, scene.camera, true);
+  compare(scene.sphere, scene.bvh, scene.camera, true, scene.worldFromObject);
+  compare(soup, soupBvh, scene.camera, true, scene.worldFromObject);
+  // A mesh far from its own origin (a georeferenced scan): the rays start from the camera's
+  // centre rounded to float there, and the mask must see the triangles from the same point.
+  Mesh far = scene.sphere;
+  const glm::vec3 offset(3e5f, 3e5f, 3e5f);
+  for (glm::vec3& p : far.positions) p += offset;
+  const EmbreeScene farBvh(far.positions, far.indices);
+  calib::Placement place;
+  place.imagePoint = {0.5, 0.8};
+  place.heightFraction = 0.5;
+  compare(far, farBvh, scene.camera, true,
+          calib::placeOnGround(scene.camera, place, glm::dvec3(far.boundsMin()),
+                               glm::dvec3(far.boundsMax())));
 
   calib::CameraOptions options;
   calib::Lens lens;
@@ -281,7 +293,7 @@ TEST(Renderer, PixelsNoTriangleReachesAreNotTracedAndThePictureIsTheSame) {
   lens.distortion = {-0.2, 0.0, 0.0, 0.0, 0.0};
   options.lens = lens;
   const calib::PlateCamera distorted = calib::plateCamera(200, 150, {}, options);
-  compare(soup, soupBvh, distorted, false);
+  compare(soup, soupBvh, distorted, false, scene.worldFromObject);
 }
 
 // The plate's lens distortion applies to the object's rays: the straight top edge of a wall bends
