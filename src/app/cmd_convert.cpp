@@ -207,10 +207,9 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // into 8-bit codes is encoded as compose (and other tools) will read those files.
       std::string lower = std::filesystem::path(o->out).extension().string();
       for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
-      const bool floatsOut =
-          lower == ".exr" || lower == ".hdr" || lower == ".tif" || lower == ".tiff";
+      const bool floatsOut = lower == ".exr" || lower == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
-      if (floatsOut != !codesIn) {
+      if (floatsOut == codesIn) {
         const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
         const std::string source =
             colors.inputSpaceFor(file.files.front(), file.info.fileColorSpace);

@@ -293,6 +293,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     }
 
     write.chromaticities = colors.chromaticities(target);
+    write.fromCodes =
+        std::none_of(headers.begin(), headers.end(), [](const auto& h) { return h.floatingPoint; });
     ProgressPrinter printer(globals);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, printer.callback());
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdio>
 #include <fstream>
 #include <map>
 
@@ -225,23 +226,34 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
 }
 
 void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
-              bool useHalf, std::optional<Layout> envmap, const WriteOptions& options) {
+              bool useHalf, std::optional<Layout> envmap, const WriteOptions& options,
+              std::vector<std::string>& notes) {
   if (lowerExtension(destination).empty()) {
     throw Error("output",
                 "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
                 destination);
   }
-  // Radiance above 1 needs a format of floats: an 8-bit PNG or JPEG would clip it (and say
-  // nothing). TIFF is written as float.
+  // Radiance above 1 needs a format of floats that is read as linear light: OpenEXR or Radiance.
+  // An 8- or 16-bit PNG, JPEG or TIFF would clip it (and say nothing); a float TIFF would be read
+  // back as sRGB, as the colour config's file rules take TIFFs.
   const std::string ext = lowerExtension(destination);
-  const bool floats = ext == ".exr" || ext == ".hdr" || ext == ".tif" || ext == ".tiff";
+  const bool floats = ext == ".exr" || ext == ".hdr";
   if (!floats) {
     const float most = maxValue(rgb.pixels);
-    if (most > 1.0f) {
+    if (most > 1.0f && options.fromCodes) {
+      size_t above = 0;
+      for (const float v : rgb.pixels) above += v > 1.0f;
+      char line[200];
+      std::snprintf(line, sizeof line,
+                    "%zu values above 1 (up to %.4g: clipped white times an exposure gain) are "
+                    "written as white in %s",
+                    above, double(most), destination.filename().c_str());
+      notes.push_back(line);
+    } else if (most > 1.0f) {
       throw Error("output",
                   "the environment holds values up to " + numberText(most) + ", which a " + ext +
-                      " file of 8-bit codes would clip to 1: write OpenEXR (.exr), Radiance "
-                      "(.hdr) or TIFF (.tif, written as float)",
+                      " file of 8- or 16-bit codes would clip to 1: write OpenEXR (.exr) or "
+                      "Radiance (.hdr)",
                   destination);
     }
   }
@@ -513,7 +525,7 @@ std::vector<std::string> writeLatLong(OutputFiles& outputs, const fs::path& path
   img.colorSpace = env.colorSpace();
   img.pixels.assign(env.texels().begin(), env.texels().end());
   const bool half = chooseHalf(options.depth, maxValue(img.pixels), path, notes);
-  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options);
+  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options, notes);
   return notes;
 }
 
@@ -545,7 +557,7 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path
     const bool half = chooseHalf(options.depth, maximum, paths[0], notes);
     for (int f = 0; f < kCubeFaces; ++f) {
       writeAny(outputs.add(paths[size_t(f)]), paths[size_t(f)], cube.faceImage(f), half,
-               std::nullopt, options);
+               std::nullopt, options, notes);
     }
     return notes;
   }
@@ -554,7 +566,8 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path
   const bool half = chooseHalf(options.depth, maximum, path, notes);
   const Image packed = packFaces(cube, layout);
   writeAny(outputs.add(path), path, packed, half,
-           layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt, options);
+           layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt, options,
+           notes);
   return notes;
 }
 

@@ -96,6 +96,10 @@ struct WriteOptions {
   std::optional<std::array<double, 8>> chromaticities;
   // OpenEXR only: the compression, as OpenImageIO names it (ingest::parseExrCompression).
   std::string exrCompression = "piz";
+  // The map was made from pictures of 8- or 16-bit codes (stitched photos): written into codes
+  // (PNG, JPEG, TIFF), values above 1 (a clipped sky times an exposure gain) are clipped to 1 with
+  // a note. Otherwise such a file is refused when the map holds values above 1.
+  bool fromCodes = false;
 };
 
 // Writes a lat-long environment to `path` (EXR gets envmap=latlong). Returns a note when the depth

@@ -141,6 +141,45 @@ TEST(ConvertCommand, MirrorBallToLatLong) {
 
 // Six photos named for their faces, rendered from the courtyard HDRI with orientations up to 2°
 // off, stitched through the command line.
+// Photos of 8-bit codes stitched into a JPEG: a clipped sky times an exposure gain goes a little
+// above 1, which the JPEG writes as white, with a note; float photos (radiance) into a JPEG are
+// refused, as convert refuses them.
+TEST(StitchCommand, PhotosOfCodesMayBeStitchedIntoAJpeg) {
+  if (!fs::exists(sample("courtyard.exr"))) GTEST_SKIP() << "samples missing";
+  TempDir dir;
+  const Environment env =
+      Environment::fromLatLong(ingest::readImage(sample("courtyard.exr")).image);
+  const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
+  const calib::Lens lens = calib::Lens::fromFieldOfView(192, 192, 100.0);
+  const char* names[kCubeFaces] = {"px", "nx", "py", "ny", "pz", "nz"};
+  std::string jpegs, exrs;
+  for (int f = 0; f < kCubeFaces; ++f) {
+    Image view = cubemap::renderView(scene, lens, cubemap::faceCameraRotation(f), 2);
+    ingest::WriteOptions w;
+    w.depth = ingest::WriteOptions::Depth::Float;
+    ingest::writeImage(dir / (std::string("hdr_") + names[f] + ".exr"), view, w);
+    exrs += " " + q(dir / (std::string("hdr_") + names[f] + ".exr"));
+    // A camera's photo: bright, clipped at white, one of them taken darker (its gain above 1).
+    for (float& v : view.pixels) v = std::min(1.0f, v * (f == 2 ? 2.0f : 4.0f));
+    ingest::writeImage(dir / (std::string("ldr_") + names[f] + ".png"), view);
+    jpegs += " " + q(dir / (std::string("ldr_") + names[f] + ".png"));
+  }
+  const RunResult ldr =
+      run("stitch --fov 100 --size 64 --gains on --to latlong --out " + q(dir / "pano.jpg") + jpegs,
+          dir);
+  ASSERT_EQ(ldr.status, 0) << ldr.err;
+  EXPECT_NE(ldr.err.find("are written as white in pano.jpg"), std::string::npos) << ldr.err;
+  EXPECT_TRUE(fs::exists(dir / "pano.jpg"));
+  const RunResult hdr =
+      run("stitch --fov 100 --size 64 --no-refine --to latlong --out " + q(dir / "hdr.jpg") + exrs,
+          dir);
+  EXPECT_EQ(hdr.status, 1) << hdr.err;
+  EXPECT_NE(hdr.err.find("would clip to 1: write OpenEXR (.exr) or Radiance (.hdr)"),
+            std::string::npos)
+      << hdr.err;
+  EXPECT_FALSE(fs::exists(dir / "hdr.jpg"));
+}
+
 TEST(StitchCommand, SixNamedPhotosToACube) {
   if (!fs::exists(sample("courtyard.exr"))) GTEST_SKIP() << "samples missing";
   TempDir dir;
@@ -609,9 +648,9 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
                 "--compression");
 }
 
-// Radiance above 1 is not written into 8-bit codes: a PNG or JPEG of an HDR map is refused,
-// naming the file and the formats that keep it, and nothing is written; a TIFF is written as
-// float and keeps every value. compose color writes OpenEXR only.
+// Radiance above 1 is not written into 8- or 16-bit codes: a PNG, JPEG or TIFF of an HDR map is
+// refused, naming the file and the formats that keep it, and nothing is written; Radiance's .hdr
+// keeps the sun (within its shared-exponent precision). compose color writes OpenEXR only.
 TEST(ConvertCommand, RadianceGoesToFormatsOfFloatsOnly) {
   if (!fs::exists(sample("forest.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   TempDir dir;
@@ -619,33 +658,39 @@ TEST(ConvertCommand, RadianceGoesToFormatsOfFloatsOnly) {
   fs::create_directory(outs);
   for (const std::string& args : {std::string(" --to cube --out ") + q(outs / "forest.png"),
                                   std::string(" --to latlong --out ") + q(outs / "forest.jpg"),
-                                  std::string(" --to faces --out ") + q(outs / "forest_%.png")}) {
+                                  std::string(" --to faces --out ") + q(outs / "forest_%.png"),
+                                  std::string(" --to latlong --out ") + q(outs / "forest.tif")}) {
     SCOPED_TRACE(args);
     const RunResult r = run("convert " + q(sample("forest.exr")) + args, dir);
     EXPECT_EQ(r.status, 1) << r.err;
-    EXPECT_NE(r.err.find("file of 8-bit codes would clip to 1: write OpenEXR (.exr), Radiance "
-                         "(.hdr) or TIFF (.tif, written as float)"),
+    EXPECT_NE(r.err.find("file of 8- or 16-bit codes would clip to 1: write OpenEXR (.exr) or "
+                         "Radiance (.hdr)"),
               std::string::npos)
         << r.err;
     EXPECT_NE(r.err.find("forest"), std::string::npos) << r.err;
     EXPECT_TRUE(fs::is_empty(outs)) << "nothing written";
   }
   const RunResult tif = run(
-      "convert " + q(sample("forest.exr")) + " --to latlong --width 256 --out " + q(dir / "f.tif"),
+      "convert " + q(sample("forest.exr")) + " --to latlong --width 256 --out " + q(dir / "f.hdr"),
       dir);
   ASSERT_EQ(tif.status, 0) << tif.err;
   const RunResult exr = run(
       "convert " + q(sample("forest.exr")) + " --to latlong --width 256 --out " + q(dir / "f.exr"),
       dir);
   ASSERT_EQ(exr.status, 0) << exr.err;
-  const ingest::LoadedImage a = ingest::readImage(dir / "f.tif"),
+  const ingest::LoadedImage a = ingest::readImage(dir / "f.hdr"),
                             b = ingest::readImage(dir / "f.exr");
   ASSERT_EQ(a.image.pixels.size(), b.image.pixels.size());
   float largest = 0.0f;
-  for (size_t i = 0; i < a.image.pixels.size(); ++i) {
-    EXPECT_EQ(a.image.pixels[i], b.image.pixels[i]) << "at " << i;
-    largest = std::max(largest, a.image.pixels[i]);
+  double worst = 0.0;
+  for (size_t i = 0; i < a.image.pixels.size(); i += 3) {
+    // RGBE: 8 bits of mantissa for the largest channel of each texel.
+    const float ea = std::max({a.image.pixels[i], a.image.pixels[i + 1], a.image.pixels[i + 2]});
+    const float eb = std::max({b.image.pixels[i], b.image.pixels[i + 1], b.image.pixels[i + 2]});
+    if (eb > 1e-3f) worst = std::max(worst, std::abs(double(ea) / double(eb) - 1.0));
+    largest = std::max(largest, ea);
   }
+  EXPECT_LT(worst, 0.01);
   EXPECT_GT(largest, 100.0f) << "the sun's radiance is kept";
 
   const RunResult color =
