@@ -103,7 +103,8 @@ only_tracer_crashes() {
 sanitizer_suite() {
   local exclude=() log status=0
   [ -n "$SANITIZE_EXCLUDE" ] && exclude=(-E "$SANITIZE_EXCLUDE")
-  local options=(ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:intercept_tls_get_addr=0}"
+  # The interception is turned off whatever ASAN_OPTIONS the caller sets (see above).
+  local options=(ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0}:intercept_tls_get_addr=0"
                  UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}")
   log=$(mktemp)
   env "${options[@]}" ctest --test-dir "$SANITIZE_DIR" --output-on-failure -j"$(nproc)" \

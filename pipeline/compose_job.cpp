@@ -104,7 +104,8 @@ void validate(const ComposeJob& job) {
     // (shot.tif.exr, shot.tif.jpg).
     std::string ext = job.output.extension().string();
     for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-    for (const char* other : {".tif", ".tiff", ".hdr", ".bmp", ".webp", ".gif", ".tga", ".dpx"}) {
+    for (const char* other : {".tif", ".tiff", ".hdr", ".pfm", ".ppm", ".pgm", ".bmp", ".webp",
+                              ".gif", ".tga", ".dpx", ".cin", ".jp2", ".psd", ".heic", ".avif"}) {
       if (ext != other) continue;
       throw UsageError("--out " + job.output.string() +
                        ": compose writes BASE.exr and BASE.jpg (or BASE.png); give a base name, or "

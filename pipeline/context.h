@@ -83,8 +83,8 @@ struct RenderedObject {
   float exposure = 1.0f;
   std::vector<std::string> notes;  // how the exposure was chosen
   std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
-  // Read from an object layer (compose render): the plate it was rendered on (absolute) and that
-  // plate's key; empty for a layer that does not say.
+  // Read from an object layer (compose render): the plate it was rendered on (absolute) and the
+  // hash of that plate's bytes (contentKey); empty for a layer that does not say.
   std::string layerPlateFile, layerPlateKey;
 };
 

@@ -190,24 +190,25 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   std::vector<ingest::ExrPart> parts = {
       {"object", &layer, r.x0, r.y0, g.camera.width, g.camera.height, options}};
 
-  nlohmann::json header = {
-      {"format", kLayerFormat},
-      {"render",
-       {{"x0", r.x0},
-        {"y0", r.y0},
-        {"x1", r.x1},
-        {"y1", r.y1},
-        {"rays", r.rays},
-        {"coverage", r.coverage},
-        {"exposure", object.exposure},
-        {"notes", object.notes},
-        {"mesh", object.meshFile},
-        {"beautyChannels", r.beauty.channelNames},
-        {"aovChannels", r.aovs.channelNames},
-        {"colorSpace", r.beauty.colorSpace}}},
-      {"geometry", geometryToJson(g)},
-      {"plate", {{"file", fs::absolute(ctx.job.plate).string()}, {"key", ctx.key(kPlate).hex()}}},
-      {"ground", nullptr}};
+  nlohmann::json header = {{"format", kLayerFormat},
+                           {"render",
+                            {{"x0", r.x0},
+                             {"y0", r.y0},
+                             {"x1", r.x1},
+                             {"y1", r.y1},
+                             {"rays", r.rays},
+                             {"coverage", r.coverage},
+                             {"exposure", object.exposure},
+                             {"notes", object.notes},
+                             {"mesh", object.meshFile},
+                             {"beautyChannels", r.beauty.channelNames},
+                             {"aovChannels", r.aovs.channelNames},
+                             {"colorSpace", r.beauty.colorSpace}}},
+                           {"geometry", geometryToJson(g)},
+                           {"plate",
+                            {{"file", fs::absolute(ctx.job.plate).string()},
+                             {"content", contentKey(ctx.job.plate, "render")}}},
+                           {"ground", nullptr}};
   const GroundShadowResult* ground =
       ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
           ? &*ctx.artefacts.groundShadow
@@ -310,7 +311,7 @@ StageInput objectLayerInput(const fs::path& file) {
       object.meshFile = rj.value("mesh", "");
       if (const auto plate = header.find("plate"); plate != header.end() && plate->is_object()) {
         object.layerPlateFile = plate->value("file", "");
-        object.layerPlateKey = plate->value("key", "");
+        object.layerPlateKey = plate->value("content", "");
       }
       int x = 0, y = 0;
       const Image layer = readPart("object", x, y);

@@ -12,7 +12,10 @@
 
 namespace compose::pipeline {
 
-void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage) {
+namespace {
+
+void hashBytes(Hash128& hash, const std::filesystem::path& file, const std::string& stage,
+               bool withName) {
   protectInput(file);
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw Error(stage, "file not found", file);
@@ -23,7 +26,7 @@ void hashFile(Hash128& hash, const std::filesystem::path& file, const std::strin
     const int error = errno;
     throw Error(stage, std::string("cannot read: ") + std::strerror(error), file);
   }
-  hash.bytes(file.filename().string());
+  if (withName) hash.bytes(file.filename().string());
   std::vector<char> buffer(size_t(1) << 20);
   while (in) {
     in.read(buffer.data(), std::streamsize(buffer.size()));
@@ -31,6 +34,18 @@ void hashFile(Hash128& hash, const std::filesystem::path& file, const std::strin
     if (n > 0) hash.data(buffer.data(), size_t(n));
   }
   if (in.bad()) throw Error(stage, "read error", file);
+}
+
+}  // namespace
+
+void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage) {
+  hashBytes(hash, file, stage, true);
+}
+
+std::string contentKey(const std::filesystem::path& file, const std::string& stage) {
+  Hash128 hash;
+  hashBytes(hash, file, stage, false);
+  return hash.hex();
 }
 
 Image toRgb(const Image& in) {

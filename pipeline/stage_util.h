@@ -17,6 +17,8 @@ namespace compose::pipeline {
 // The contents of a file, into `hash` (its name too, which can carry meaning: cube faces).
 // Throws compose::Error (stage `stage`) naming the file when it cannot be read.
 void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage);
+// The hash of the file's bytes alone (its name left out), as hex: the same for a renamed copy.
+std::string contentKey(const std::filesystem::path& file, const std::string& stage);
 
 inline void hashVector(Hash128& hash, const glm::dvec3& v) {
   hash.number(v.x);

@@ -435,8 +435,8 @@ class CompositeStage final : public Stage {
     }
     // A layer rendered on another plate of the same size (a graded copy, another take) is
     // composited as it is: its exposure and ground shadow were matched to that plate.
-    if (!object.layerPlateKey.empty() && ctx.hasKey(kPlate) &&
-        object.layerPlateKey != ctx.key(kPlate).hex()) {
+    if (!object.layerPlateKey.empty() &&
+        object.layerPlateKey != contentKey(ctx.job.plate, "composite")) {
       ctx.note(
           format("the object layer was rendered on another plate (%s): its exposure (%+.2f "
                  "stops) and its ground shadow were matched to that plate and are applied "

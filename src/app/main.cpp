@@ -27,17 +27,37 @@ void requireValues(const CLI::App& app) {
   for (const CLI::App* sub : app.get_subcommands()) requireValues(*sub);
 }
 
-// A command given an option that only the one-shot command has (compose composite --yaw 45):
-// CLI11 passes it up to the top level, where it would be taken and silently not used. Throws
-// UsageError naming it.
+// A command given an option that only the one-shot command has (compose composite --yaw 45), or
+// one of its own options before its name (compose --exposure 1 render ...): CLI11 passes it to the
+// top level, where it would be taken and silently not used. Throws UsageError naming it.
 void refuseOneShotOptions(const CLI::App& app, const CLI::App& command,
                           const std::vector<const CLI::Option*>& everyCommand) {
+  // The command's full name and its innermost parsed level (compose calib lens).
+  std::string name = command.get_name();
+  const CLI::App* innermost = &command;
+  for (bool deeper = true; deeper;) {
+    deeper = false;
+    for (const CLI::App* sub : innermost->get_subcommands()) {
+      if (!sub->parsed()) continue;
+      name += " " + sub->get_name();
+      innermost = sub;
+      deeper = true;
+      break;
+    }
+  }
   for (const CLI::Option* option : app.get_options()) {
     if (option->count() == 0) continue;
     if (std::find(everyCommand.begin(), everyCommand.end(), option) != everyCommand.end()) continue;
-    throw compose::UsageError(option->get_name() + " is not an option of compose " +
-                              command.get_name() + " (the one-shot command takes it; compose " +
-                              command.get_name() + " --help lists this command's options)");
+    bool own = false;
+    for (const std::string& n : option->get_lnames())
+      own = own || innermost->get_option_no_throw("--" + n) != nullptr;
+    if (own) {
+      throw compose::UsageError(option->get_name() + " is an option of compose " + name +
+                                ": give it after the command's name");
+    }
+    throw compose::UsageError(option->get_name() + " is not an option of compose " + name +
+                              " (the one-shot command takes it; compose " + name +
+                              " --help lists this command's options)");
   }
 }
 

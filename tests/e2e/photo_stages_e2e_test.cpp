@@ -146,6 +146,17 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     const CommandRun m =
         compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
     EXPECT_EQ(m.status, 0) << m.err;
+    // merge given a folder of one view's brackets with such an image: the same.
+    const fs::path folder = dir / "one view";
+    fs::create_directories(folder);
+    for (const char* name : {"yaw000_1.jpg", "yaw000_2.jpg", "yaw000_3.jpg", "merged.exr"})
+      fs::copy_file(shot(name), folder / name);
+    const CommandRun f = compose("merge --out " + q(dir / "one.exr") + " " + q(folder), dir);
+    EXPECT_EQ(f.status, 0) << f.err;
+    EXPECT_NE(f.err.find("left out 1 file of the folder with no exposure time in EXIF"),
+              std::string::npos)
+        << f.err;
+    EXPECT_TRUE(fs::exists(dir / "one.exr"));
   }
 }
 

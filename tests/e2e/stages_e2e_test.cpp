@@ -171,6 +171,14 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
                              dir_.path());
   ASSERT_EQ(same.status, 0) << same.err;
   EXPECT_EQ(same.err.find("rendered on another plate"), std::string::npos) << same.err;
+  // Nor on a copy of it under another name: the bytes are compared, not the names.
+  fs::copy_file(plate_, dir_ / "copy of plate.jpg");
+  const RunResult copy =
+      run("composite --plate " + quote(dir_ / "copy of plate.jpg") + " --layer " + quote(layer) +
+              " --out " + quote(dir_ / "copy" / "compose") + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(copy.status, 0) << copy.err;
+  EXPECT_EQ(copy.err.find("rendered on another plate"), std::string::npos) << copy.err;
 
   // The layer belongs to its plate: another plate size is a named error and writes nothing.
   const fs::path smaller = dir_ / "smaller.jpg";
@@ -213,6 +221,15 @@ TEST_F(StageCommands, AnOptionOnlyTheOneShotCommandHasIsRefused) {
     EXPECT_FALSE(fs::exists(dir_ / "x.exr"));
     EXPECT_FALSE(fs::exists(dir_ / "x"));
   }
+  // A command's own option given before its name is refused too, saying where it goes.
+  const RunResult before = run("--exposure 1 render --plate " + quote(plate_) + " " +
+                                   objectOptions() + " --lighting-file missing.lighting" + out,
+                               dir_.path());
+  EXPECT_EQ(before.status, 2) << before.err;
+  EXPECT_NE(before.err.find("--exposure is an option of compose render: give it after the "
+                            "command's name"),
+            std::string::npos)
+      << before.err;
   const RunResult pre =
       run("precompute -q --max-pixels 100000000 --env " + quote(samples_ / "forest.exr") +
               " --lighting-params order=4" + " --out " + quote(dir_ / "f.lighting") + " --no-cache",

@@ -55,8 +55,8 @@ fuzz_one() {
     return
   fi
   # The working corpus first: libFuzzer adds what it finds to the first folder only.
-  # intercept_tls_get_addr=0: see setup.sh (LeakSanitizer's tracer crash).
-  ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:intercept_tls_get_addr=0} \
+  # intercept_tls_get_addr=0 whatever the caller sets: see setup.sh (LeakSanitizer's tracer crash).
+  ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}:intercept_tls_get_addr=0 \
     LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/tests/lsan.supp} \
     "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$work/$t/" "$corpus" "tests/fuzz/corpus/$t" "tests/fuzz/regressions/$t" \
