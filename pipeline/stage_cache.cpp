@@ -169,6 +169,8 @@ bool StageCache::write() const {
     fs::create_directories(path_.parent_path(), ec);
     if (ec) return fail(ec.message());
   }
+  if (const char* kind = specialFileKind(path_))
+    return fail(std::string("it is ") + kind + ", not a file (it would be replaced by one)");
   nlohmann::json header;
   header["stage"] = stage_;
   header["key"] = key_;

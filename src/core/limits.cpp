@@ -75,30 +75,28 @@ void checkTriangleCount(int64_t triangles, const std::filesystem::path& file) {
   }
 }
 
-void requireRegularFile(const std::filesystem::path& file, const std::string& stage) {
+const char* specialFileKind(const std::filesystem::path& file) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  const fs::file_status status = fs::status(file, ec);
-  const char* kind = nullptr;
-  switch (status.type()) {
+  switch (fs::status(file, ec).type()) {
     case fs::file_type::character:
-      kind = "a character device";
-      break;
+      return "a character device";
     case fs::file_type::block:
-      kind = "a block device";
-      break;
+      return "a block device";
     case fs::file_type::fifo:
-      kind = "a FIFO (named pipe)";
-      break;
+      return "a FIFO (named pipe)";
     case fs::file_type::socket:
-      kind = "a socket";
-      break;
+      return "a socket";
     case fs::file_type::unknown:
-      kind = "of an unknown kind";
-      break;
+      return "of an unknown kind";
     default:
-      return;  // regular, folder, missing: the caller's concern
+      return nullptr;  // regular, folder, missing
   }
+}
+
+void requireRegularFile(const std::filesystem::path& file, const std::string& stage) {
+  const char* kind = specialFileKind(file);
+  if (!kind) return;  // regular, folder, missing: the caller's concern
   throw Error(
       stage, std::string("is ") + kind + ", not a regular file (inputs are read from files)", file);
 }

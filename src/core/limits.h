@@ -54,5 +54,9 @@ void requireRegularFile(const std::filesystem::path& file, const std::string& st
 // folder, not a file".
 void requireInputFile(const std::filesystem::path& file, const std::string& stage,
                       const std::string& what);
+// What `file` is when it exists and is neither a regular file nor a folder ("a character
+// device", "a FIFO (named pipe)", ...), else nullptr. An output is written to a temporary file and
+// renamed over its destination: over /dev/null that would put a file in the device's place.
+const char* specialFileKind(const std::filesystem::path& file);
 
 }  // namespace compose

@@ -14,6 +14,7 @@
 #include <optional>
 
 #include "core/error.h"
+#include "core/limits.h"
 
 namespace compose {
 
@@ -121,6 +122,12 @@ fs::path OutputFiles::add(const fs::path& destination) {
     throw Error(stage_, "output path names a folder, not a file", destination);
   if (fs::is_directory(destination, ec))
     throw Error(stage_, "output path is an existing folder", destination);
+  if (const char* kind = specialFileKind(destination)) {
+    throw Error(stage_,
+                std::string("output path is ") + kind +
+                    ", not a file: outputs are written to files (it would be replaced by one)",
+                destination);
+  }
   const fs::path dir = destination.parent_path();
   if (!dir.empty() && !fs::exists(dir, ec)) {
     fs::create_directories(dir, ec);

@@ -12,6 +12,7 @@
 
 #include "core/float_cache.h"
 #include "core/limits.h"
+#include "core/output_files.h"
 #include "core/progress.h"
 #include "ingest/image_io.h"
 #include "pipeline/stage_cache.h"
@@ -111,6 +112,27 @@ TEST(ResourceLimits, MeshesBeyondTheTriangleLimitAreRefused) {
   COMPOSE_EXPECT_ERROR(render::loadMesh(dir / "quad.obj"),
                        "mesh has at least 2 triangles, more than the limit of 1 (raise it with "
                        "--max-triangles)");
+}
+
+// An output is written to a temporary file and renamed over its destination: over a device or a
+// FIFO that would put a file in its place (`--out /dev/null` replaced /dev/null). Refused, and the
+// node stays what it was. (OutputFiles::add writes nothing: /dev/null is safe to ask about.)
+TEST(RegularFilesOnly, AnOutputOverADeviceOrAFifoIsRefusedAndTheNodeStays) {
+  TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "out.exr").c_str(), 0600), 0);
+  OutputFiles outputs("output");
+  COMPOSE_EXPECT_ERROR(outputs.add(dir / "out.exr"),
+                       "output path is a FIFO (named pipe), not a file");
+  COMPOSE_EXPECT_ERROR(outputs.add("/dev/null"), "output path is a character device, not a file");
+  EXPECT_EQ(fs::status(dir / "out.exr").type(), fs::file_type::fifo);
+
+  ASSERT_EQ(::mkfifo((dir / "out.lighting").c_str(), 0600), 0);
+  pipeline::StageCache entry = pipeline::StageCache::atFile(dir / "out.lighting", "precompute");
+  entry.meta() = {{"x", 1}};
+  EXPECT_FALSE(entry.write());
+  EXPECT_NE(entry.error().find("a FIFO (named pipe), not a file"), std::string::npos)
+      << entry.error();
+  EXPECT_EQ(fs::status(dir / "out.lighting").type(), fs::file_type::fifo);
 }
 
 TEST(RegularFilesOnly, DevicesAndFifosAreNamedErrors) {
