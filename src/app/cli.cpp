@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -134,6 +135,14 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
   std::string s;
   for (const auto& i : items) s += (s.empty() ? "" : separator) + i;
   return s;
+}
+
+void requireExrName(const std::string& out, const std::string& why) {
+  std::string ext = std::filesystem::path(out).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext != ".exr")
+    throw UsageError("--out must name an OpenEXR file (.exr): " + why + " ('" + out +
+                     "' is not one)");
 }
 
 std::string leftOutNote(const std::vector<std::filesystem::path>& files) {

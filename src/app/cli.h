@@ -88,6 +88,8 @@ double parseNumber(const std::string& text, const std::string& option);
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ");
 // "a,b,c" → numbers; throws UsageError naming `option`.
 std::vector<double> parseList(const std::string& text, const std::string& option);
+// Throws UsageError unless `out` names an OpenEXR file (.exr, any case); `why` says why it must.
+void requireExrName(const std::string& out, const std::string& why);
 // The note for the files of a folder of photos that ingest::scanShots left out (no exposure time
 // in their EXIF where the others have one).
 std::string leftOutNote(const std::vector<std::filesystem::path>& files);

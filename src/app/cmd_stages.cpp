@@ -4,7 +4,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cctype>
 #include <cstdio>
 
 #include "app/cli.h"
@@ -44,16 +43,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     if (o->depth != "half" && o->depth != "float")
       throw UsageError("--depth must be half or float, got '" + o->depth + "'");
     if (o->out.empty()) throw UsageError("--out is empty: give the EXR to write");
-    {
-      std::string ext = fs::path(o->out).extension().string();
-      for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-      if (ext != ".exr") {
-        throw UsageError(
-            "--out must name an OpenEXR file (.exr): compose color writes "
-            "scene-linear values, which '" +
-            o->out + "' would not hold");
-      }
-    }
+    requireExrName(o->out, "compose color writes scene-linear values");
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     // The spaces named on the command line are checked before the image is read.
     std::string target;
@@ -156,6 +146,7 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
   return [o, out, lightingFile, compression, &cmd, &globals]() -> int {
     o->apply(cmd);
     requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
+    requireExrName(*out, "the object's layer is a multi-part OpenEXR");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
     // The layer's header carries the camera, made from the plate and the mesh: those are read

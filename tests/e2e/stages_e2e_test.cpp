@@ -221,6 +221,17 @@ TEST_F(StageCommands, AnOptionOnlyTheOneShotCommandHasIsRefused) {
     EXPECT_FALSE(fs::exists(dir_ / "x.exr"));
     EXPECT_FALSE(fs::exists(dir_ / "x"));
   }
+  // The object's layer is an OpenEXR: another name is refused before the render (it wrote an EXR
+  // named layer.png).
+  const RunResult png = run("render --plate " + quote(plate_) + " " + objectOptions() +
+                                " --lighting-file missing.lighting --out " + quote(dir_ / "x.png"),
+                            dir_.path());
+  EXPECT_EQ(png.status, 2) << png.err;
+  EXPECT_NE(png.err.find("--out must name an OpenEXR file (.exr): the object's layer is a "
+                         "multi-part OpenEXR"),
+            std::string::npos)
+      << png.err;
+  EXPECT_FALSE(fs::exists(dir_ / "x.png"));
   // A command's own option given before its name is refused too, saying where it goes.
   const RunResult before = run("--exposure 1 render --plate " + quote(plate_) + " " +
                                    objectOptions() + " --lighting-file missing.lighting" + out,
