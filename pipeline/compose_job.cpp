@@ -7,6 +7,7 @@
 #include "core/numbers.h"
 #include "core/params.h"
 #include "ingest/exr_io.h"
+#include "ingest/image_io.h"
 #include "lighting/capture_volume.h"
 #include "lighting/lighting.h"
 #include "pipeline/shadows.h"
@@ -57,8 +58,7 @@ fs::path outputBase(const ComposeJob& job) {
   if (!base.empty() && (!base.has_filename() || fs::is_directory(base, ec))) {
     return base / "compose";
   }
-  std::string ext = base.extension().string();
-  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  const std::string ext = ingest::lowerExtension(base);
   if (ext == ".exr" || ext == ".jpg" || ext == ".jpeg" || ext == ".png") base.replace_extension();
   return base;
 }
@@ -76,8 +76,7 @@ fs::path exrPathFor(const ComposeJob& job) {
 }
 
 fs::path displayPathFor(const ComposeJob& job) {
-  std::string ext = job.output.extension().string();
-  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  const std::string ext = ingest::lowerExtension(job.output);
   fs::path p = outputBase(job);
   p += (ext == ".png") ? ".png" : ".jpg";
   return p;
@@ -102,8 +101,7 @@ void validate(const ComposeJob& job) {
   {
     // The name of an image format compose does not write here would end up inside the names
     // (shot.tif.exr, shot.tif.jpg).
-    std::string ext = job.output.extension().string();
-    for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    const std::string ext = ingest::lowerExtension(job.output);
     for (const char* other : {".tif", ".tiff", ".hdr", ".pfm", ".ppm", ".pgm", ".bmp", ".webp",
                               ".gif", ".tga", ".dpx", ".cin", ".jp2", ".psd", ".heic", ".avif"}) {
       if (ext != other) continue;

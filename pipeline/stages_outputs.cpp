@@ -1,7 +1,6 @@
 // The stages that make the picture: render (the object and its AOVs), composite (the plate
 // darkened by the ground shadow, the object over it, the holdout in front), output (the files).
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <future>
 #include <numbers>
@@ -15,6 +14,7 @@
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/exr_io.h"
+#include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
@@ -520,8 +520,7 @@ class OutputStage final : public Stage {
                           ground, object.meshFile, exrPath, displayPath);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
-    std::string ext = displayPath.extension().string();
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    const std::string ext = ingest::lowerExtension(displayPath);
     const bool jpeg = ext == ".jpg" || ext == ".jpeg";
     return "wrote " + exrPath.string() + " (" + job.exrCompression + ") and " +
            displayPath.string() +

@@ -2,7 +2,6 @@
 
 #include <unistd.h>
 
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -11,6 +10,7 @@
 #include "core/error.h"
 #include "cubemap/layouts.h"
 #include "ingest/exr_io.h"
+#include "ingest/image_io.h"
 
 namespace compose::app {
 
@@ -138,9 +138,7 @@ std::string join(const std::vector<std::string>& items, const std::string& separ
 }
 
 void requireExrName(const std::string& out, const std::string& why) {
-  std::string ext = std::filesystem::path(out).extension().string();
-  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (ext != ".exr")
+  if (ingest::lowerExtension(out) != ".exr")
     throw UsageError("--out must name an OpenEXR file (.exr): " + why + " ('" + out +
                      "' is not one)");
 }

@@ -1,6 +1,5 @@
 // compose convert: environment maps between layouts (lat-long, OpenEXR cube, crosses, six faces)
 // and mirror-ball photos to environments.
-#include <cctype>
 #include <cmath>
 #include <cstdio>
 
@@ -11,6 +10,7 @@
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/mirror_ball.h"
+#include "ingest/image_io.h"
 #include "lighting/sphere_resample.h"
 
 namespace compose::app {
@@ -205,9 +205,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // are made linear first, as compose reads such a picture with --env: an OpenEXR holds
       // linear light, and other tools take it so. The other way round, linear light written
       // into 8-bit codes is encoded as compose (and other tools) will read those files.
-      std::string lower = std::filesystem::path(o->out).extension().string();
-      for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
-      const bool floatsOut = lower == ".exr" || lower == ".hdr";
+      const std::string ext = ingest::lowerExtension(o->out);
+      const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
       if (floatsOut == codesIn) {
         const color::ColorConfig colors = color::ColorConfig::fromEnvironment();

@@ -1,7 +1,6 @@
 #include "cubemap/environment_io.h"
 
 #include <algorithm>
-#include <cctype>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -25,15 +24,10 @@
 namespace compose::cubemap {
 
 namespace fs = std::filesystem;
+using ingest::lowerExtension;
 using lighting::kCubeFaces;
 
 namespace {
-
-std::string lowerExtension(const fs::path& p) {
-  std::string e = p.extension().string();
-  for (auto& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
 
 bool isImageFile(const fs::path& p) {
   static const char* kExtensions[] = {".exr",  ".hdr", ".tif", ".tiff", ".png", ".jpg",

@@ -47,14 +47,14 @@ float largestFiniteMagnitude(const ChannelSources& sources) {
 
 }  // namespace detail
 
-namespace {
-
 std::string lowerExtension(const fs::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   return ext;
 }
+
+namespace {
 
 std::string trimmed(std::string s) {
   while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();

@@ -101,6 +101,8 @@ CaptureInfo readCaptureInfo(const std::filesystem::path& path, const std::string
 // Whether `path` has the extension of an image format readImage() is meant for (JPEG, PNG, TIFF,
 // OpenEXR, Radiance HDR, and camera raw formats), for scanning folders.
 bool looksLikeImageFile(const std::filesystem::path& path);
+// The path's extension in lower case, with its dot (".exr"; "" when it has none).
+std::string lowerExtension(const std::filesystem::path& path);
 
 struct LoadedImage {
   Image image;  // float, channels as stored (1-4 or more), orientation applied
