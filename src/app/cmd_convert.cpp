@@ -100,6 +100,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       throw UsageError("--to must be one of latlong, cube, hcross, vcross, faces; got '" + o->to +
                        "'");
     }
+    // One file (faces: one per face, named from a pattern), checked before any photo is read.
+    if (*to != Layout::Faces) OutputFiles::check(o->out, "output");
     std::optional<Layout> from;
     if (!o->from.empty()) {
       from = cubemap::parseLayout(o->from);

@@ -191,6 +191,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     });
     if (o->capture.empty() && o->out.extension() != ".exr")
       throw UsageError("--out must name an .exr file (or a folder, with --capture)");
+    if (o->capture.empty()) OutputFiles::check(o->out, "merge");
 
     // Group, resolve exposures, read.
     ingest::Capture capture;

@@ -44,6 +44,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
       throw UsageError("--depth must be half or float, got '" + o->depth + "'");
     if (o->out.empty()) throw UsageError("--out is empty: give the EXR to write");
     requireExrName(o->out, "compose color writes scene-linear values");
+    OutputFiles::check(o->out, "output");
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     // The spaces named on the command line are checked before the image is read.
     std::string target;
@@ -110,6 +111,7 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--out", *out, "Lighting file to write")->required();
   return [o, out, &cmd, &globals]() -> int {
     o->apply(cmd);
+    OutputFiles::check(*out, "precompute");
     pipeline::RunRequest request;
     request.targets = {pipeline::artefact::kLighting};
     if (o->job.shadows || o->job.groundShadow)
@@ -147,6 +149,7 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
     o->apply(cmd);
     requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
     requireExrName(*out, "the object's layer is a multi-part OpenEXR");
+    OutputFiles::check(*out, "render");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
     // The layer's header carries the camera, made from the plate and the mesh: those are read

@@ -149,6 +149,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     if (!to || *to == Layout::MirrorBall)
       throw UsageError("--to must be one of cube, latlong, hcross, vcross, faces; got '" + o->to +
                        "'");
+    // One file (faces: one per face, named from a pattern), checked before any photo is read.
+    if (*to != Layout::Faces) OutputFiles::check(o->out, "output");
     if (cmd.count("--fov") && cmd.count("--calib"))
       throw UsageError("give either --fov or --calib, not both");
     if (cmd.count("--fov") && !(o->fov > 1.0 && o->fov < (o->fisheye ? 360.0 : 179.0)))

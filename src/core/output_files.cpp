@@ -116,18 +116,26 @@ OutputFiles::~OutputFiles() {
   for (const Entry& e : entries_) fs::remove(e.temporary, ec);
 }
 
-fs::path OutputFiles::add(const fs::path& destination) {
+void OutputFiles::check(const fs::path& destination, const std::string& stage) {
   std::error_code ec;
   if (destination.filename().empty())
-    throw Error(stage_, "output path names a folder, not a file", destination);
+    throw Error(stage, "output path names a folder, not a file", destination);
   if (fs::is_directory(destination, ec))
-    throw Error(stage_, "output path is an existing folder", destination);
+    throw Error(stage, "output path is an existing folder", destination);
   if (const char* kind = specialFileKind(destination)) {
-    throw Error(stage_,
+    throw Error(stage,
                 std::string("output path is ") + kind +
                     ", not a file: outputs are written to files (it would be replaced by one)",
                 destination);
   }
+  const fs::path dir = destination.parent_path();
+  if (!dir.empty() && fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw Error(stage, "cannot write into the output folder: it is a file, not a folder", dir);
+}
+
+fs::path OutputFiles::add(const fs::path& destination) {
+  std::error_code ec;
+  check(destination, stage_);
   const fs::path dir = destination.parent_path();
   if (!dir.empty() && !fs::exists(dir, ec)) {
     fs::create_directories(dir, ec);

@@ -32,6 +32,11 @@ class OutputFiles {
   // written) from several threads at once; commit() is called once, after they are all written.
   std::filesystem::path add(const std::filesystem::path& destination);
 
+  // The checks of add() that need nothing written or made: `destination` names a file, is not
+  // an existing folder, a device, a FIFO or a socket, and its folder is not a file. A command
+  // calls it on its --out before long work, so that a bad path is refused before, not after.
+  static void check(const std::filesystem::path& destination, const std::string& stage);
+
   // Moves every temporary into place. On failure, restores what was there and throws.
   void commit();
 

@@ -124,6 +124,42 @@ TEST_F(Robustness, DevicesAndFifosAsInputsAreNamedErrorsNotHangs) {
   EXPECT_FALSE(fs::exists(dir / "z.exr"));
 }
 
+// A stage command's --out that cannot be a file (a FIFO, an existing folder) is refused before
+// the stage works, not after: nothing is computed, so nothing reaches the cache.
+TEST_F(Robustness, AStageCommandRefusesAnOutputThatCannotBeAFileBeforeWorking) {
+  ASSERT_EQ(::mkfifo((dir / "pipe.lighting").c_str(), 0600), 0);
+  fs::create_directories(dir / "folder.exr");
+  const std::string cache = " --cache " + quote((dir / "cache").string());
+  const std::string env = " --env " + quote((dir / "env.exr").string());
+  const RunResult precompute = runShell(
+      kCompose + " precompute" + env + cache + " --out " + quote((dir / "pipe.lighting").string()),
+      dir.path(), "precompute");
+  EXPECT_EQ(precompute.status, 1) << precompute.err;
+  EXPECT_NE(precompute.err.find("precompute: output path is a FIFO (named pipe)"),
+            std::string::npos)
+      << precompute.err;
+  const RunResult render =
+      runShell(kCompose + " render --plate " + quote((dir / "plate.jpg").string()) + " --object " +
+                   quote((dir / "two.obj").string()) + " --lighting-file " +
+                   quote((dir / "pipe.lighting").string()) + cache + " --out " +
+                   quote((dir / "folder.exr").string()),
+               dir.path(), "render");
+  EXPECT_EQ(render.status, 1) << render.err;
+  EXPECT_NE(render.err.find("render: output path is an existing folder"), std::string::npos)
+      << render.err;
+  const RunResult convert = runShell(kCompose + " convert " + quote((dir / "env.exr").string()) +
+                                         " --to cube --out " + quote((dir / "folder.exr").string()),
+                                     dir.path(), "convert");
+  EXPECT_EQ(convert.status, 1) << convert.err;
+  EXPECT_NE(convert.err.find("output path is an existing folder"), std::string::npos)
+      << convert.err;
+  // Nothing was computed: no cache entry, and the nodes are what they were.
+  std::error_code ec;
+  EXPECT_TRUE(!fs::exists(dir / "cache") || fs::is_empty(dir / "cache", ec));
+  EXPECT_EQ(fs::status(dir / "pipe.lighting").type(), fs::file_type::fifo);
+  EXPECT_TRUE(fs::is_directory(dir / "folder.exr") && fs::is_empty(dir / "folder.exr", ec));
+}
+
 TEST_F(Robustness, LimitsRefuseWithTheirOptionNamed) {
   const RunResult pixels = run("p", "--max-pixels 1000");
   EXPECT_EQ(pixels.status, 1) << pixels.err;
