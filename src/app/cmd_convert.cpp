@@ -203,6 +203,19 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
       }
+      const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+      // An OpenEXR's chromaticities say its primaries, as compose --env reads them: the space
+      // of the config with those primaries is the name written, not the generic 'Linear'
+      // OpenImageIO gives every EXR without a colorSpace; with no such space, the
+      // chromaticities alone go along.
+      std::string declared = file.info.fileColorSpace;
+      if (file.info.chromaticities) {
+        declared = colors.spaceWithChromaticities(*file.info.chromaticities);
+        if (!declared.empty())
+          notes.push_back("read as '" + declared + "' (by the chromaticities in its header)");
+      }
+      file.image.colorSpace = declared;
+      for (Image& face : file.faces) face.colorSpace = declared;
       // Codes of an 8- or 16-bit picture (an sRGB JPEG, a PNG) written into a format of floats
       // are made linear first, as compose reads such a picture with --env: an OpenEXR holds
       // linear light, and other tools take it so. The other way round, linear light written
@@ -211,13 +224,20 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
       if (floatsOut == codesIn) {
-        const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+        const bool byMatrix = file.info.chromaticities && declared.empty();
         const std::string source =
-            colors.inputSpaceFor(file.files.front(), file.info.fileColorSpace);
+            byMatrix ? std::string("the RGB space of the chromaticities in its header")
+            : file.info.chromaticities ? declared
+                                       : colors.inputSpaceFor(file.files.front(), declared);
         const std::string target = colors.inputSpaceFor(o->out, "");
         if (source != target) {
           auto linearise = [&](Image& image) {
-            image.colorSpace = source;
+            if (byMatrix) {  // by matrix into the working space, then as any other space
+              colors.convertFromChromaticities(image, *file.info.chromaticities,
+                                               colors.workingSpace());
+            } else {
+              image.colorSpace = source;
+            }
             colors.convert(image, target);
           };
           if (file.isCube()) {
@@ -230,6 +250,10 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                           "' and written as '" + target + "' (as " +
                           std::filesystem::path(o->out).extension().string() + " files are read)");
         }
+      } else if (file.info.chromaticities && declared.empty()) {
+        notes.push_back(
+            "the header's chromaticities match no space of the colour config: "
+            "written with them and no space name");
       }
       if (file.isCube()) {
         cube = cubemap::cubeMapOf(file, &sanitized);

@@ -255,10 +255,17 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     auto load = [&](int i) {
       ingest::LoadedImage img =
           ingest::readImage(args[size_t(i)].file, "ingest", {.codesForEightBit = true});
+      // A photo's space: --photo-space, else an OpenEXR's chromaticities (as compose --env reads
+      // them: the config's space with those primaries, or a matrix into the working space),
+      // else what the file says, else the config's file rules.
+      const std::optional<std::array<double, 8>> primaries =
+          forced.empty() && img.hasPixels() ? img.info.chromaticities : std::nullopt;
+      const std::string byPrimaries = primaries ? colors.spaceWithChromaticities(*primaries) : "";
       const std::string space =
-          forced.empty() ? colors.inputSpaceFor(args[size_t(i)].file, img.info.fileColorSpace)
-                         : forced;
-      spaces[size_t(i)] = space;
+          !forced.empty() ? forced
+          : primaries     ? byPrimaries
+                          : colors.inputSpaceFor(args[size_t(i)].file, img.info.fileColorSpace);
+      spaces[size_t(i)] = space.empty() ? "the primaries in its header" : space;
       const int channels = img.image.channels;
       if (!img.hasPixels() && channels >= 3) {
         // An 8-bit photo: linearised from its codes (a table of the 256 codes per channel).
@@ -280,7 +287,11 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
             rgb.pixels[3 * k + size_t(c)] = s[img.image.channels >= 3 ? c : 0];
         }
       }
-      rgb.colorSpace = space;
+      if (space.empty()) {
+        colors.convertFromChromaticities(rgb, *primaries, colors.workingSpace());
+      } else {
+        rgb.colorSpace = space;
+      }
       colors.convert(rgb, target);
       return rgb;
     };

@@ -740,6 +740,67 @@ TEST(ConvertCommand, CodesBecomeLinearLightInAnExrAndComeBack) {
   EXPECT_EQ(moved, 0) << "codes that moved";
 }
 
+// An OpenEXR that says its primaries by chromaticities only (no colorSpace attribute; OpenImageIO
+// calls every such file 'Linear') is read as compose --env reads it: as the config's space with
+// those primaries, whose name the converted map carries; encoded into a PNG it gives the codes
+// of the same map named. Primaries no space has go along as chromaticities, with no name.
+TEST(ConvertCommand, ChromaticitiesAloneSayTheSourceSpace) {
+  TempDir dir;
+  const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+  const auto acescg = colors.chromaticities("ACEScg");
+  ASSERT_TRUE(acescg);
+  Image map(64, 32, 3, {"R", "G", "B"});
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 64; ++x)
+      for (int c = 0; c < 3; ++c)
+        map.pixels[(size_t(y) * 64 + size_t(x)) * 3 + size_t(c)] =
+            0.02f + 0.3f * float((x * 3 + y * 5 + c * 11) % 17) / 17.0f;
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  options.chromaticities = acescg;
+  map.colorSpace = "ACEScg";
+  ingest::writeImage(dir / "named.exr", map, options);
+  map.colorSpace.clear();
+  ingest::writeImage(dir / "primaries.exr", map, options);
+  std::array<double, 8> odd = *acescg;
+  odd[0] -= 0.02;  // a red no space of the config has
+  options.chromaticities = odd;
+  ingest::writeImage(dir / "odd.exr", map, options);
+  ASSERT_NE(ingest::readImage(dir / "primaries.exr").info.fileColorSpace, "ACEScg");
+
+  const RunResult cube =
+      run("convert " + q(dir / "primaries.exr") + " --to cube --out " + q(dir / "cube.exr"), dir);
+  ASSERT_EQ(cube.status, 0) << cube.err;
+  EXPECT_NE(cube.err.find("read as 'ACEScg' (by the chromaticities in its header)"),
+            std::string::npos)
+      << cube.err;
+  const ingest::LoadedImage cubeFile = ingest::readImage(dir / "cube.exr");
+  EXPECT_EQ(cubeFile.info.fileColorSpace, "ACEScg");
+  ASSERT_TRUE(cubeFile.info.chromaticities);
+  for (int i = 0; i < 8; ++i)  // stored as float
+    EXPECT_NEAR((*cubeFile.info.chromaticities)[size_t(i)], (*acescg)[size_t(i)], 1e-6);
+
+  for (const char* name : {"named", "primaries"}) {
+    const RunResult png = run("convert " + q(dir / (std::string(name) + ".exr")) +
+                                  " --to latlong --out " + q(dir / (std::string(name) + ".png")),
+                              dir);
+    ASSERT_EQ(png.status, 0) << png.err;
+  }
+  EXPECT_EQ(ingest::readImage(dir / "named.png").image.pixels,
+            ingest::readImage(dir / "primaries.png").image.pixels);
+
+  const RunResult oddCube =
+      run("convert " + q(dir / "odd.exr") + " --to cube --out " + q(dir / "odd_cube.exr"), dir);
+  ASSERT_EQ(oddCube.status, 0) << oddCube.err;
+  EXPECT_NE(oddCube.err.find("match no space of the colour config"), std::string::npos)
+      << oddCube.err;
+  const ingest::LoadedImage oddFile = ingest::readImage(dir / "odd_cube.exr");
+  ASSERT_TRUE(oddFile.info.chromaticities);
+  for (int i = 0; i < 8; ++i)
+    EXPECT_NEAR((*oddFile.info.chromaticities)[size_t(i)], odd[size_t(i)], 1e-6);
+  EXPECT_NE(oddFile.info.fileColorSpace, "ACEScg");
+}
+
 TEST(ConvertCommand, WritesTheCompressionAskedFor) {
   if (!fs::exists(sample("sunset.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
   TempDir dir;
