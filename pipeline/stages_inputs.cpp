@@ -382,7 +382,8 @@ class StitchStage final : public Stage {
         throw Error("stitch",
                     "cannot tell where view '" + v.name +
                         "' points: give it a worldFromCamera rotation in the capture description "
-                        "or name it for a cube face (px, nx, py, ny, pz, nz)",
+                        "or name it for a cube face (px, nx, py, ny, pz, nz); compose ingest "
+                        "names views so when their photos' names end in a face (px_1.jpg)",
                     ctx.environmentInput.path);
       }
       p.lens = cubemap::photoLens(first.file, header, lensFile);

@@ -1,9 +1,11 @@
 // compose ingest: what the photos say about themselves (EXIF) and how they group into views and
 // brackets. Reads headers only.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
 #include "app/cli.h"
+#include "cubemap/layouts.h"
 #include "ingest/capture.h"
 
 namespace compose::app {
@@ -68,7 +70,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                      "Relative exposures t1,t2,... overriding EXIF (one view only)");
   command.add_option("--json", o->json, "Write the grouping as a JSON capture description");
 
-  return [o, &globals]() -> int {
+  return [o, &command, &globals]() -> int {
     // Everything the command line alone can refute, before a file is read.
     std::string group = o->group;
     if (group == "auto")
@@ -81,6 +83,23 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     if (group == "json" && !o->paths.empty())
       throw UsageError("give either --capture or photos, not both");
     if (group != "json" && o->paths.empty()) throw UsageError("no photos given");
+    // Options of a grouping that does not run are refused, not ignored.
+    for (const char* option : {"--max-gap", "--brackets"}) {
+      if (group != "exif" && command.count(option) > 0) {
+        throw UsageError(std::string(option) +
+                         " is the EXIF grouping's; it goes with --group exif (the grouping here "
+                         "is " +
+                         group + ")");
+      }
+    }
+    if (group != "pattern" && !o->pattern.empty())
+      throw UsageError("--pattern goes with --group pattern (or auto); the grouping here is " +
+                       group);
+    if (group != "json" && !o->capture.empty())
+      throw UsageError("--capture goes with --group json (or auto); the grouping here is " + group);
+    if (group == "pattern" && o->pattern.find("{view}") == std::string::npos)
+      throw UsageError("--pattern needs a {view} placeholder, e.g. '{view}_{bracket}.jpg'; got '" +
+                       o->pattern + "'");
     ingest::ExifGrouping exif;
     exif.maxGapSeconds = o->maxGap;
     exif.bracketSize = o->brackets;
@@ -146,6 +165,29 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                           ": no exposure time in EXIF; merging needs --exposures");
       }
     }
+    if (group == "exif") {
+      // Views whose photos' names all say one cube face (px_1.jpg px_2.jpg px_3.jpg) are named
+      // for it, so that the description tells compose --env and stitch where they point.
+      std::vector<std::string> faces(capture.views.size());
+      for (size_t v = 0; v < capture.views.size(); ++v) {
+        for (const ingest::Shot& s : capture.views[v].shots) {
+          const auto token = cubemap::faceFromPhotoName(s.file);
+          const std::string name = token ? token->token : std::string();
+          if (name.empty() || (!faces[v].empty() && name != faces[v])) {
+            faces[v].clear();
+            break;
+          }
+          faces[v] = name;
+        }
+      }
+      int named = 0;
+      for (size_t v = 0; v < capture.views.size(); ++v) {
+        if (faces[v].empty() || std::count(faces.begin(), faces.end(), faces[v]) > 1) continue;
+        capture.views[v].name = faces[v];
+        ++named;
+      }
+      if (named > 0) capture.method += "; views named for the cube face in their photos' names";
+    }
     std::printf("\ngrouped by %s: %zu view%s\n", capture.method.c_str(), capture.views.size(),
                 capture.views.size() == 1 ? "" : "s");
     for (auto& v : capture.views)
@@ -161,6 +203,12 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         notes.push_back(
             "views have different numbers of photos: check the grouping (--max-gap, "
             "--brackets, --pattern)");
+    try {  // what merge will say of this capture, said now
+      ingest::Capture check = capture;
+      ingest::resolveExposures(check);
+    } catch (const Error& e) {
+      notes.push_back(std::string("compose merge will refuse this capture: ") + e.what());
+    }
     // Duplicate notes (one per photo) are common; print each once.
     std::vector<std::string> unique;
     for (const auto& n : notes)

@@ -36,9 +36,12 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
   for (const auto& f : view.files) files += (files.empty() ? "" : ";") + f.filename().string();
   a.push_back({"compose:relativeExposures", exposures});
   a.push_back({"compose:sourceFiles", files});
-  a.push_back({"compose:radianceUnit",
-               std::string("linear value / (t * ISO / N^2), the linear value in the unit of the "
-                           "response curve (1 = code 128 for a recovered curve)")});
+  a.push_back(
+      {"compose:radianceUnit",
+       !result.response.empty()  // 8-bit photos were linearised by a curve
+           ? std::string("linear value / (t * ISO / N^2), 8-bit photos' linear values scaled so "
+                         "that code 118 (middle grey) decodes as the sRGB curve decodes it")
+           : std::string("linear value / (t * ISO / N^2), in the photos' own linear unit")});
   a.push_back({"compose:linearisation", result.linearisation});
   if (!result.response.empty())
     a.push_back({"compose:response", result.response.method + ": " + result.response.source});
@@ -192,6 +195,11 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     if (o->capture.empty() && o->out.extension() != ".exr")
       throw UsageError("--out must name an .exr file (or a folder, with --capture)");
     if (o->capture.empty()) OutputFiles::check(o->out, "merge");
+    if (!o->capture.empty() && ingest::looksLikeImageFile(o->out)) {
+      throw UsageError(
+          "with --capture, --out is a folder (one EXR per view, named by the views); '" +
+          o->out.string() + "' names an image file");
+    }
 
     // Group, resolve exposures, read.
     ingest::Capture capture;
@@ -208,10 +216,12 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
         throw UsageError("--exposures needs one value per photo; folders were given");
       if (!exposures.empty()) ingest::setExposures(capture.views[0], exposures, "--exposures");
       capture.method = "the photos given";
+    }
+    ingest::resolveExposures(capture);  // checks too that the photos are one camera's
+    if (o->capture.empty()) {
       capture.cameraMake = capture.views[0].shots[0].info.cameraMake;
       capture.cameraModel = capture.views[0].shots[0].info.cameraModel;
     }
-    ingest::resolveExposures(capture);
     ProgressPrinter printer(globals);
     std::vector<std::vector<ingest::LoadedImage>> photos =
         hdr::readCapturePhotos(capture, printer.callback());

@@ -24,18 +24,6 @@ namespace compose::app {
 
 namespace {
 
-// The cube face a photo's name points it at: a face token at the end of the name (room_px.jpg),
-// or before a bracket number (px_2.jpg, room-nz-3.jpg, as compose capture-sim names them).
-std::optional<cubemap::FaceToken> photoFace(const std::filesystem::path& file) {
-  const std::string stem = file.stem().string();
-  if (auto token = cubemap::faceFromName(stem)) return token;
-  size_t end = stem.size();
-  while (end > 0 && std::isdigit(static_cast<unsigned char>(stem[end - 1]))) --end;
-  if (end == stem.size() || end < 2 || std::string("_-. ").find(stem[end - 1]) == std::string::npos)
-    return std::nullopt;
-  return cubemap::faceFromName(stem.substr(0, end - 1));
-}
-
 namespace fs = std::filesystem;
 
 struct StitchCommandOptions {
@@ -192,6 +180,17 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     // Where each photo points.
     std::vector<PhotoArgument> args;
     for (const auto& p : o->photos) args.push_back(parsePhoto(p));
+    for (size_t i = 0; i < args.size(); ++i) {
+      for (size_t j = 0; j < i; ++j) {
+        std::error_code ec;
+        if (fs::equivalent(args[i].file, args[j].file, ec)) {
+          throw Error("stitch",
+                      "the same photo is given twice (also as " + args[j].file.string() +
+                          "): each photo is one view",
+                      args[i].file);
+        }
+      }
+    }
     std::vector<std::string> notes;
     std::vector<glm::dmat3> rough(args.size());
     bool allNamed = true, noneNamed = true;
@@ -199,7 +198,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       if (args[i].angles) {
         rough[i] = cubemap::cameraRotation(args[i].angles->x, args[i].angles->y, args[i].angles->z);
         noneNamed = false;
-      } else if (const auto token = photoFace(args[i].file)) {
+      } else if (const auto token = cubemap::faceFromPhotoName(args[i].file)) {
         rough[i] = cubemap::faceCameraRotation(token->face);
         noneNamed = false;
       } else {
@@ -212,7 +211,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         notes.push_back("no directions in the photo names: taken in the order +X -X +Y -Y +Z -Z");
       } else {
         for (const auto& a : args) {
-          if (!a.angles && !photoFace(a.file))
+          if (!a.angles && !cubemap::faceFromPhotoName(a.file))
             throw UsageError("cannot tell where " + a.file.string() +
                              " points: name it for a cube face (_px, _nx, ...) or add "
                              "@YAW,PITCH[,ROLL]");
@@ -364,6 +363,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       notes.push_back("time: " + timing + w);
       for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
     }
+    for (const auto& w : result.warnings) std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
     for (const auto& w : written) std::printf("%s\n", w.c_str());
     return 0;
   };

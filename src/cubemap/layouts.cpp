@@ -230,6 +230,16 @@ std::optional<FaceToken> faceFromName(const std::string& stem) {
   return best;
 }
 
+std::optional<FaceToken> faceFromPhotoName(const std::filesystem::path& file) {
+  const std::string stem = file.stem().string();
+  if (auto token = faceFromName(stem)) return token;
+  size_t end = stem.size();
+  while (end > 0 && std::isdigit(static_cast<unsigned char>(stem[end - 1]))) --end;
+  if (end == stem.size() || end < 2 || std::string("_-. ").find(stem[end - 1]) == std::string::npos)
+    return std::nullopt;
+  return faceFromName(stem.substr(0, end - 1));
+}
+
 std::string faceNameIn(int family, int face, const std::string& like) {
   std::string token = families()[size_t(family)][size_t(face)];
   const bool upper =

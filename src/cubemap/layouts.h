@@ -22,6 +22,7 @@
 #pragma once
 
 #include <array>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -74,6 +75,9 @@ struct FaceToken {
   int family;         // which naming scheme, so that siblings can be derived (faceNameIn)
 };
 std::optional<FaceToken> faceFromName(const std::string& stem);
+// The face a photo's file name points it at: a face token at the end of the stem (room_px.jpg),
+// or before a bracket number (px_2.jpg, room-nz-3.jpg, as compose capture-sim names them).
+std::optional<FaceToken> faceFromPhotoName(const std::filesystem::path& file);
 // The token for `face` in naming family `family`, in the letter case of `like`.
 std::string faceNameIn(int family, int face, const std::string& like);
 

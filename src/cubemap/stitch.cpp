@@ -775,6 +775,24 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     }
     result.notes.push_back(std::to_string(verified) + " of " + std::to_string(candidates.size()) +
                            " overlapping photo pairs matched");
+    // Photos with detail that overlap as placed share features; when hardly any such pair
+    // matches, the photos are most likely not where their names (or their order) put them.
+    constexpr size_t kDetailed = 100;  // features that make a photo one with detail
+    int detailedPairs = 0, detailedMatched = 0;
+    for (size_t k = 0; k < candidates.size(); ++k) {
+      if (features[size_t(candidates[k].first)].keys.size() < kDetailed ||
+          features[size_t(candidates[k].second)].keys.size() < kDetailed)
+        continue;
+      ++detailedPairs;
+      if (!pairs[k].inliers.empty()) ++detailedMatched;
+    }
+    if (detailedPairs >= 2 && 4 * detailedMatched < detailedPairs) {
+      result.warnings.push_back(
+          std::to_string(detailedMatched) + " of " + std::to_string(detailedPairs) +
+          " overlapping pairs of photos with detail matched by their features: are the photos' "
+          "directions right? (their names _px _nx ..., @YAW,PITCH, or, for six unnamed photos, "
+          "the order +X -X +Y -Y +Z -Z)");
+    }
 
     timer.add("match", t0);
     t0 = Clock::now();

@@ -86,6 +86,7 @@ struct StitchResult {
   std::vector<double> correctionDegrees;    // angle between refined and rough, per photo
   std::vector<float> gains;                 // per photo
   std::vector<std::string> notes;           // matches per pair, residuals, anything refused
+  std::vector<std::string> warnings;        // what is likely wrong with the input
   // Wall-clock seconds per step: "load", "features", "match", "adjust", "warp", "fill".
   std::vector<std::pair<std::string, double>> seconds;
 };

@@ -434,6 +434,50 @@ void setExposures(View& view, const std::vector<double>& exposures, const std::s
 }
 
 void resolveExposures(Capture& capture) {
+  // One photo, one shot: a file given twice would count as two exposures (or two views).
+  std::vector<std::pair<fs::path, fs::path>> seen;  // canonical, as given
+  // One camera: a response belongs to one (it is stored under its Make and Model).
+  CaptureInfo described;
+  described.cameraMake = capture.cameraMake;
+  described.cameraModel = capture.cameraModel;
+  const std::string declared = described.camera();
+  const Shot* firstNamed = nullptr;
+  for (const View& v : capture.views) {
+    for (const Shot& s : v.shots) {
+      std::error_code ec;
+      fs::path canonical = fs::weakly_canonical(s.file, ec);
+      if (ec) canonical = fs::absolute(s.file, ec).lexically_normal();
+      for (const auto& [other, given] : seen) {
+        if (other == canonical) {
+          throw Error(kStage,
+                      "the same photo is given twice (also as " + given.string() +
+                          "): each shot is one exposure of one view",
+                      s.file);
+        }
+      }
+      seen.emplace_back(canonical, s.file);
+      const std::string camera = s.info.camera();
+      if (camera.empty()) continue;
+      if (!firstNamed) firstNamed = &s;
+      if (camera != firstNamed->info.camera()) {
+        throw Error(kStage,
+                    "the photos come from more than one camera: '" + camera + "' here, '" +
+                        firstNamed->info.camera() + "' in " + firstNamed->file.string() +
+                        ": a capture is one camera's (its response is recovered and stored "
+                        "under its name); merge each camera's photos on their own",
+                    s.file);
+      }
+    }
+  }
+  // A description's camera (grouping takes the photos' own) is the one whose response is used.
+  if (firstNamed && !declared.empty() && firstNamed->info.camera() != declared) {
+    throw Error(kStage,
+                "the photos' EXIF name the camera '" + firstNamed->info.camera() +
+                    "', the capture description '" + declared +
+                    "': a capture is one camera's (its response is recovered and stored under "
+                    "its name)",
+                firstNamed->file);
+  }
   for (View& v : capture.views) {
     for (Shot& s : v.shots) {
       if (s.exposure) continue;

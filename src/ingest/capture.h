@@ -103,7 +103,8 @@ std::string captureDescriptionText(const std::filesystem::path& file, const Capt
 // Sets every shot's exposure from EXIF where it has none, checks the result and sorts each view
 // by increasing exposure: every shot needs an exposure (error naming the first file without one,
 // suggesting --exposures), and a view of more than one shot needs at least two different
-// exposures (error naming the view's files).
+// exposures (error naming the view's files). A file given twice, photos whose EXIF names two
+// cameras, or a camera other than the description's are errors naming the file.
 void resolveExposures(Capture& capture);
 
 // The range of relative exposures (t·ISO/N², or the values of --exposures) the merge accepts:

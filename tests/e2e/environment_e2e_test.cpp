@@ -224,6 +224,31 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
   // The photos' common orientation error is not removed here (as in the library test), so the
   // whole map may turn by up to ~1°: looser than 5 %.
   EXPECT_LT(rel[rel.size() / 2], 0.10);
+  EXPECT_EQ(r.err.find("compose: warning"), std::string::npos) << r.err;
+
+  // The same photos unnamed, in the order a photographer turning round takes them (front, right,
+  // back, left, up, down), are taken in the order +X -X +Y -Y +Z -Z: nothing matches where they
+  // are put, which is said.
+  const char* turning[kCubeFaces] = {"nz_2", "yard_px", "yard_pz", "nx_2", "yard_py", "ny_2"};
+  std::string unnamed;
+  for (int i = 0; i < kCubeFaces; ++i) {
+    const fs::path to = dir / ("IMG_000" + std::to_string(i + 1) + ".exr");
+    fs::copy_file(dir / (std::string(turning[i]) + ".exr"), to);
+    unnamed += " " + q(to);
+  }
+  const RunResult scrambled =
+      run("stitch --fov 100 --size 128 --out " + q(dir / "scrambled.exr") + unnamed, dir);
+  ASSERT_EQ(scrambled.status, 0) << scrambled.err;
+  EXPECT_NE(scrambled.err.find("compose: warning: 0 of"), std::string::npos) << scrambled.err;
+  EXPECT_NE(scrambled.err.find("are the photos' directions right?"), std::string::npos)
+      << scrambled.err;
+
+  const RunResult twice = run("stitch --fov 100 --size 128 --out " + q(dir / "twice.exr") +
+                                  unnamed + " " + q(dir / "." / "IMG_0001.exr"),
+                              dir);
+  EXPECT_EQ(twice.status, 1) << twice.err;
+  EXPECT_NE(twice.err.find("the same photo is given twice"), std::string::npos) << twice.err;
+  EXPECT_FALSE(fs::exists(dir / "twice.exr"));
 }
 
 // A float photo holding NaN is an error naming it and the pixel, and nothing is written (the NaN

@@ -12,6 +12,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
+#include "ingest/capture.h"
 #include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -82,6 +83,26 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
         compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
     EXPECT_EQ(m.status, 0) << m.err;
     EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"view1.exr", "view2.exr"}));
+
+    // Photos named for the cube face they look at give their views that name, so that the
+    // description says where each points (compose --env and stitch read it).
+    fs::create_directories(dir / "named");
+    for (int b = 1; b <= 3; ++b) {
+      fs::copy_file(shot("yaw000_" + std::to_string(b) + ".jpg"),
+                    dir / "named" / ("room_nz_" + std::to_string(b) + ".jpg"));
+      fs::copy_file(shot("yaw180_" + std::to_string(b) + ".jpg"),
+                    dir / "named" / ("room_pz_" + std::to_string(b) + ".jpg"));
+    }
+    const CommandRun named =
+        compose("ingest --json " + q(dir / "named.json") + " " + q(dir / "named"), dir);
+    ASSERT_EQ(named.status, 0) << named.err;
+    EXPECT_NE(named.out.find("views named for the cube face"), std::string::npos) << named.out;
+    EXPECT_NE(named.out.find("  nz: 3 photos"), std::string::npos) << named.out;
+    EXPECT_NE(named.out.find("  pz: 3 photos"), std::string::npos) << named.out;
+    const ingest::Capture described = ingest::readCaptureDescription(dir / "named.json");
+    ASSERT_EQ(described.views.size(), 2u);
+    EXPECT_EQ(described.views[0].name, "nz");
+    EXPECT_EQ(described.views[1].name, "pz");
   }
   // merge recovers the response once and reuses it.
   {
@@ -374,6 +395,20 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --size 20000x20000", dir), 2,
                     "image size 20000x20000 is more pixels than the limit of 268 megapixels");
   EXPECT_FAILS_WITH(compose("merge --out '' a.jpg b.jpg", dir), 2, "--out is given an empty value");
+  EXPECT_FAILS_WITH(compose("merge --capture " + q(shot("capture.json")) + " --out hdr.exr", dir),
+                    2, "with --capture, --out is a folder");
+  EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  // Options of a grouping that does not run.
+  EXPECT_FAILS_WITH(compose("ingest --max-gap 10 --pattern '{view}_{bracket}.jpg' a.jpg", dir), 2,
+                    "--max-gap is the EXIF grouping's");
+  EXPECT_FAILS_WITH(compose("ingest --brackets 2 --pattern '{view}_{bracket}.jpg' a.jpg", dir), 2,
+                    "--brackets is the EXIF grouping's");
+  EXPECT_FAILS_WITH(compose("ingest --group exif --pattern '{view}_{bracket}.jpg' a.jpg", dir), 2,
+                    "--pattern goes with --group pattern");
+  EXPECT_FAILS_WITH(compose("ingest --capture c.json --max-gap 9", dir), 2,
+                    "--max-gap is the EXIF grouping's");
+  EXPECT_FAILS_WITH(compose("ingest --pattern 'x_{bracket}.jpg' a.jpg", dir), 2,
+                    "--pattern needs a {view} placeholder");
 }
 
 }  // namespace

@@ -130,6 +130,39 @@ TEST(Capture, AllEqualExposuresAreRefused) {
   COMPOSE_EXPECT_ERROR(resolveExposures(c), "exposures of view 'front' are all equal");
 }
 
+// A response is one camera's, and a shot is one photo: photos of two cameras, a camera other
+// than the description's, and a file given twice (by another name) are refused.
+TEST(Capture, OneCameraAndEachPhotoOnce) {
+  TempDir dir;
+  writeShot(dir / "a.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
+  CaptureInfo other = cameraShot(0.04, "2024:05:01 12:00:01");
+  other.cameraMake = "Canon";
+  other.cameraModel = "EOS R5";
+  writeShot(dir / "b.jpg", other);
+  writeShot(dir / "c.jpg", cameraShot(0.04, "2024:05:01 12:00:01"));
+  Capture mixed;
+  mixed.views.push_back(View{"front", scanShots({dir / "a.jpg", dir / "b.jpg"}), {}});
+  COMPOSE_EXPECT_ERROR(resolveExposures(mixed), "the photos come from more than one camera");
+  COMPOSE_EXPECT_ERROR(resolveExposures(mixed), "'Canon EOS R5' here");
+
+  Capture one;
+  one.views.push_back(View{"front", scanShots({dir / "a.jpg", dir / "c.jpg"}), {}});
+  resolveExposures(one);
+  Capture described = one;
+  described.cameraMake = "Canon";
+  described.cameraModel = "EOS R5";
+  COMPOSE_EXPECT_ERROR(resolveExposures(described), "the capture description 'Canon EOS R5'");
+
+  Capture twice;
+  twice.views.push_back(
+      View{"front", scanShots({dir / "a.jpg", dir / "c.jpg", dir / "." / "a.jpg"}), {}});
+  COMPOSE_EXPECT_ERROR(resolveExposures(twice), "the same photo is given twice");
+  Capture acrossViews;
+  acrossViews.views.push_back(View{"front", scanShots({dir / "a.jpg", dir / "c.jpg"}), {}});
+  acrossViews.views.push_back(View{"back", scanShots({dir / "c.jpg"}), {}});
+  COMPOSE_EXPECT_ERROR(resolveExposures(acrossViews), "the same photo is given twice");
+}
+
 TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
   TempDir dir;
   // Two views of an auto-bracketed sequence in the camera's order 0, -2, +2 EV; the second view
