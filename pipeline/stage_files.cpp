@@ -3,6 +3,7 @@
 #include <variant>
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 
 #include "calib/lens_json.h"
@@ -14,6 +15,7 @@
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
 #include "pipeline/stage_util.h"
+#include "pipeline/stages.h"
 
 namespace compose::pipeline {
 
@@ -89,11 +91,14 @@ Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
   return g;
 }
 
-// The parameters a precompute file fixes for the stages that use it.
+// The parameters a precompute file fixes for the stages that use it. The environment's turn
+// (--env-yaw) is not applied to the moments (they stay in the environment's frame) but to the
+// directions the renderer looks them up in: it goes along for the render.
 nlohmann::json lightingParameters(const ComposeJob& job) {
   return {{"lighting", job.lighting},
           {"lighting-params", job.lightingParams},
-          {"shadow-params", job.shadowParams}};
+          {"shadow-params", job.shadowParams},
+          {"env-yaw", job.environmentYawDegrees}};
 }
 
 }  // namespace
@@ -131,6 +136,9 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
     job.lighting = p.value("lighting", job.lighting);
     job.lightingParams = p.value("lighting-params", std::string());
     job.shadowParams = p.value("shadow-params", std::string());
+    job.environmentYawDegrees = p.value("env-yaw", 0.0);
+    if (!std::isfinite(job.environmentYawDegrees))
+      throw Error("render", "the lighting file's env-yaw is not a number of degrees", file);
   } catch (const nlohmann::json::exception& e) {
     throw Error("render", std::string("the lighting file's parameters are damaged: ") + e.what(),
                 file);
@@ -173,7 +181,8 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   const Geometry& g = ctx.geometry();
   const std::vector<std::string>& aovNames = render::aovChannelNames();
   const int channels = 4 + int(aovNames.size());
-  std::vector<std::string> names = {"R", "G", "B", "A"};
+  // Channels named as in the one-shot command's object part (Nuke's layer.channel).
+  std::vector<std::string> names = {"object.R", "object.G", "object.B", "object.A"};
   names.insert(names.end(), aovNames.begin(), aovNames.end());
   Image layer(r.beauty.width, r.beauty.height, channels, names);
   layer.colorSpace = r.beauty.colorSpace;
@@ -228,7 +237,9 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   } else if (ctx.artefacts.groundShadow) {
     header["ground"] = {{"reason", ctx.artefacts.groundShadow->reason}};
   }
-  ingest::ExrHeader exrHeader;
+  // The camera and placement as the one-shot command's EXR carries them (for Nuke and other
+  // tools), and in full for compose composite.
+  ingest::ExrHeader exrHeader = sceneHeader(g, object.meshFile);
   exrHeader.strings.emplace_back(kLayerAttribute, header.dump());
   OutputFiles outputs("render");
   ingest::writeExrParts(outputs, file, parts, exrHeader);
@@ -323,12 +334,16 @@ StageInput objectLayerInput(const fs::path& file) {
       r.beauty = Image(layer.width, layer.height, 4, beautyNames);
       r.aovs = Image(layer.width, layer.height, int(aovNames.size()), aovNames);
       r.beauty.colorSpace = rj.at("colorSpace").get<std::string>();
-      // OpenEXR keeps channels in its own order: find each by the name it was written under.
-      std::vector<std::string> written = {"R", "G", "B", "A"};
+      // OpenEXR keeps channels in its own order: find each by the name it was written under
+      // (object.R ...; R ... in layers written before the names followed the one-shot EXR's).
+      std::vector<std::string> written = {"object.R", "object.G", "object.B", "object.A"};
       written.insert(written.end(), aovNames.begin(), aovNames.end());
       std::vector<size_t> from;
-      for (const std::string& name : written) {
-        const auto it = std::find(layer.channelNames.begin(), layer.channelNames.end(), name);
+      for (size_t k = 0; k < written.size(); ++k) {
+        const std::string& name = written[k];
+        auto it = std::find(layer.channelNames.begin(), layer.channelNames.end(), name);
+        if (it == layer.channelNames.end() && k < 4)
+          it = std::find(layer.channelNames.begin(), layer.channelNames.end(), name.substr(7));
         if (it == layer.channelNames.end())
           throw Error("composite", "the object part has no channel '" + name + "'", file);
         from.push_back(size_t(it - layer.channelNames.begin()));

@@ -27,6 +27,12 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
                            const ingest::CaptureInfo& info, const std::string& explicitSpace,
                            const std::string& option, const color::ColorConfig& colors);
 
+// The camera and the placement in OpenEXR header attributes, so that another tool can rebuild
+// the scene: worldToCamera and worldToNDC (OpenEXR's standard attributes; the pinhole part of a
+// distorted lens, said in compose:lens), compose:worldFromObject (the mesh file's coordinates to
+// world space) and compose:object (the mesh file).
+ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile);
+
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
 // not at all. Returns notes for the user.

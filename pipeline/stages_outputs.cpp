@@ -530,6 +530,39 @@ class OutputStage final : public Stage {
 
 }  // namespace
 
+ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile) {
+  ingest::ExrHeader header;
+  auto asImath = [](const glm::dmat4& m) {
+    // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
+    // Imath's rows of the row-vector matrix (translation in the last row).
+    std::array<float, 16> out;
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) out[size_t(4 * c + r)] = float(m[c][r]);
+    return out;
+  };
+  const calib::PlateCamera& camera = geometry.camera;
+  // OpenEXR's camera space looks along +Z (left-handed): flip our -Z.
+  const glm::dmat4 flipZ = glm::scale(glm::dmat4(1.0), glm::dvec3(1.0, 1.0, -1.0));
+  const glm::dmat4 cameraFromWorld = camera.cameraFromWorld();
+  glm::dmat4 ndcFromCamera(0.0);  // pinhole part of the lens (distortion is not a matrix)
+  const calib::Lens& lens = camera.lens;
+  ndcFromCamera[0][0] = lens.fx / camera.width;
+  ndcFromCamera[2][0] = -lens.cx / camera.width;
+  ndcFromCamera[1][1] = -lens.fy / camera.height;
+  ndcFromCamera[2][1] = -lens.cy / camera.height;
+  ndcFromCamera[2][2] = -1.0;
+  ndcFromCamera[2][3] = -1.0;
+  header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
+  header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
+  header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
+  if (!meshFile.empty()) header.strings.emplace_back("compose:object", meshFile);
+  if (lens.hasDistortion()) {
+    header.strings.emplace_back("compose:lens",
+                                "distorted lens: worldToNDC holds its pinhole part only");
+  }
+  return header;
+}
+
 std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
                                            const Geometry& geometry, const Image& composite,
                                            const render::RenderOutput& rendered,
@@ -564,36 +597,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                     ") does not say what the primaries of the working space '" + working +
                     "' are: the EXR carries its name but no chromaticities");
   }
-  // The camera and the placement, so that another tool can rebuild the scene.
-  ingest::ExrHeader header;
-  auto asImath = [](const glm::dmat4& m) {
-    // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
-    // Imath's rows of the row-vector matrix (translation in the last row).
-    std::array<float, 16> out;
-    for (int c = 0; c < 4; ++c)
-      for (int r = 0; r < 4; ++r) out[size_t(4 * c + r)] = float(m[c][r]);
-    return out;
-  };
-  const calib::PlateCamera& camera = geometry.camera;
-  // OpenEXR's camera space looks along +Z (left-handed): flip our -Z.
-  const glm::dmat4 flipZ = glm::scale(glm::dmat4(1.0), glm::dvec3(1.0, 1.0, -1.0));
-  const glm::dmat4 cameraFromWorld = camera.cameraFromWorld();
-  glm::dmat4 ndcFromCamera(0.0);  // pinhole part of the lens (distortion is not a matrix)
-  const calib::Lens& lens = camera.lens;
-  ndcFromCamera[0][0] = lens.fx / camera.width;
-  ndcFromCamera[2][0] = -lens.cx / camera.width;
-  ndcFromCamera[1][1] = -lens.fy / camera.height;
-  ndcFromCamera[2][1] = -lens.cy / camera.height;
-  ndcFromCamera[2][2] = -1.0;
-  ndcFromCamera[2][3] = -1.0;
-  header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
-  header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
-  header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
-  if (!meshFile.empty()) header.strings.emplace_back("compose:object", meshFile);
-  if (lens.hasDistortion()) {
-    header.strings.emplace_back("compose:lens",
-                                "distorted lens: worldToNDC holds its pinhole part only");
-  }
+  ingest::ExrHeader header = sceneHeader(geometry, meshFile);
 
   const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
   const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;

@@ -96,7 +96,8 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
   cmd.description(
       "Project an environment onto the lighting basis (the pipeline's precompute stage) and split "
       "off its brightest sources for the shadows; write both to a lighting file for compose "
-      "render. The file fixes the basis, its parameters and the shadow parameters.\n\n"
+      "render. The file fixes the basis, its parameters, the shadow parameters and the "
+      "environment's turn (--env-yaw).\n\n"
       "Example:\n"
       "  compose precompute --env forest.exr --out forest.lighting\n"
       "  compose render --plate plate.jpg --object bunny.obj --lighting-file forest.lighting "

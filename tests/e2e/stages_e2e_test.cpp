@@ -88,7 +88,9 @@ TEST(Compose, VersionIsPrintedAndExitsZero) {
 }
 
 TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
-  const std::string env = " --env " + quote(samples_ / "forest.exr");
+  // The environment turned: the lighting file carries the turn to the render (it was dropped,
+  // and the chained stages lit the object with the map unturned).
+  const std::string env = " --env " + quote(samples_ / "forest.exr") + " --env-yaw 70";
   const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
   const RunResult one =
       run("-q --plate " + quote(plate_) + " " + objectOptions() + env + lighting + " --out " +
@@ -126,6 +128,25 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
               quote(dir_ / "two" / "compose") + " --cache " + quote(dir_ / "cache2"),
           dir_.path());
   ASSERT_EQ(comp.status, 0) << comp.err;
+
+  // The layer carries the camera and placement as the one-shot EXR does (Nuke reads the
+  // standard attributes), and names its object channels as it does.
+  {
+    auto layerIn = OIIO::ImageInput::open(layer.string());
+    auto oneIn = OIIO::ImageInput::open((dir_ / "one" / "compose.exr").string());
+    ASSERT_TRUE(layerIn && oneIn);
+    for (const char* attribute : {"worldToCamera", "worldToNDC", "compose:worldFromObject"}) {
+      SCOPED_TRACE(attribute);
+      const OIIO::ParamValue* mine = layerIn->spec().find_attribute(attribute);
+      const OIIO::ParamValue* theirs = oneIn->spec().find_attribute(attribute);
+      ASSERT_TRUE(mine && theirs);
+      ASSERT_EQ(mine->type(), OIIO::TypeMatrix44);
+      ASSERT_EQ(theirs->type(), OIIO::TypeMatrix44);
+      EXPECT_EQ(std::memcmp(mine->data(), theirs->data(), 16 * sizeof(float)), 0);
+    }
+    const auto& names = layerIn->spec().channelnames;
+    EXPECT_NE(std::find(names.begin(), names.end(), "object.A"), names.end());
+  }
 
   const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
   const std::vector<Part> b = readParts(dir_ / "two" / "compose.exr");
