@@ -385,6 +385,24 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                 path);
   }
   checkShape(out.layout, w, h, path);
+  if (!options.layout && !declared &&
+      (out.layout == Layout::HorizontalCross || out.layout == Layout::VerticalCross)) {
+    // A cross leaves six cells empty (black); a photo of that aspect (4:3 is most cameras')
+    // fills them. Read as a cross, it would light the object with the wrong light everywhere.
+    const double corners = crossCornerRatio(img.image, out.layout);
+    if (corners > 0.05) {
+      char ratio[32];
+      std::snprintf(ratio, sizeof ratio, "%.2f", corners);
+      throw Error("ingest",
+                  std::string("the image has a cross's aspect (") + aspectText(out.layout) +
+                      ") but its cells outside the cross are not empty (" + ratio +
+                      " times as bright as the faces): a photo, not a cross? Photos of views "
+                      "are stitched into an environment (compose stitch, or --env with the "
+                      "capture description); if it is a cross all the same, " +
+                      layoutAdvice(options, path, layoutName(out.layout)),
+                  path);
+    }
+  }
   out.files.push_back(path);
   out.info = img.info;
   if (out.layout == Layout::LatLong || out.layout == Layout::MirrorBall) {

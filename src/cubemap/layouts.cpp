@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -120,6 +121,27 @@ CrossCell crossCell(Layout layout, int face) {
   static const CrossCell kVertical[kCubeFaces] = {{2, 1, false}, {0, 1, false}, {1, 0, false},
                                                   {1, 2, false}, {1, 3, true},  {1, 1, false}};
   return (layout == Layout::HorizontalCross ? kHorizontal : kVertical)[face];
+}
+
+double crossCornerRatio(const Image& image, Layout layout) {
+  const int n = checkShape(layout, image.width, image.height, {});
+  const int columns = image.width / n, rows = image.height / n;
+  std::vector<bool> used(size_t(columns * rows), false);
+  for (int f = 0; f < kCubeFaces; ++f) {
+    const CrossCell c = crossCell(layout, f);
+    used[size_t(c.row * columns + c.column)] = true;
+  }
+  double sum[2] = {0.0, 0.0};  // outside the cross, the faces
+  const int channels = std::min(image.channels, 3);
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      const float* p = image.at(x, y);
+      double v = 0.0;
+      for (int k = 0; k < channels; ++k) v += std::isfinite(p[k]) ? std::abs(double(p[k])) : 0.0;
+      sum[used[size_t((y / n) * columns + x / n)] ? 1 : 0] += v;
+    }
+  }
+  return sum[1] > 0.0 ? sum[0] / sum[1] : (sum[0] > 0.0 ? 1.0 : 0.0);  // six cells each
 }
 
 // Both directions build their outputs row by row with insert(), so every output float is written

@@ -59,6 +59,10 @@ struct CrossCell {
 };
 CrossCell crossCell(Layout layout, int face);
 
+// For an image of a cross's shape: the mean magnitude of the six cells outside the cross over
+// that of the six faces (0 for a cross with black corners; about 1 for a photo of a 4:3 frame).
+double crossCornerRatio(const Image& image, Layout layout);
+
 // Splits a cross or an OpenEXR cube strip into its six faces (channels as in the image).
 std::array<Image, lighting::kCubeFaces> unpackFaces(const Image& image, Layout layout);
 // Packs six faces (RGB) into a cross or cube strip; unused cross cells are black.

@@ -583,6 +583,17 @@ TEST_F(BadEnvironmentInput, CrossOfTheWrongAspect) {
                 "odd.exr");
   expectRefused("convert " + q(dir_ / "odd.exr") + " --to cube --out " + q(dir_ / "x.exr"), 1,
                 "or 3:4 (vertical cross); say which with --layout (LAYOUT)", "odd.exr");
+  // A photo of a 4:3 frame (a merged view) has a horizontal cross's aspect, but fills the cells
+  // a cross leaves empty: refused, not read as a cross; --layout hcross reads it as one.
+  write("view.exr", 64, 48);
+  expectRefused("convert " + q(dir_ / "view.exr") + " --to latlong --out " + q(dir_ / "x.exr"), 1,
+                "its cells outside the cross are not empty (1.00 times as bright as the faces)",
+                "view.exr");
+  const RunResult forced = run("convert " + q(dir_ / "view.exr") +
+                                   " --layout hcross --to latlong --out " + q(dir_ / "forced.exr"),
+                               dir_);
+  EXPECT_EQ(forced.status, 0) << forced.err;
+  fs::remove(dir_ / "forced.exr");
   // An output without an extension: said so, naming the file asked for.
   write("ok.exr", 64, 32);
   expectRefused("convert " + q(dir_ / "ok.exr") + " --to cube --out " + q(dir_ / "cube"), 1,
