@@ -1,6 +1,7 @@
 #include "cubemap/photo_header.h"
 
 #include <cmath>
+#include <cstdio>
 
 #include "core/error.h"
 #include "ingest/image_io.h"
@@ -50,11 +51,14 @@ calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
     constexpr double kDiagonalMm = 43.266615305567875;
     calib::Lens lens = calib::Lens::fromFieldOfView(h.width, h.height, 90.0);
     lens.fx = lens.fy = *h.focalLength35mm / kDiagonalMm * std::hypot(h.width, h.height);
+    char mm[32];
+    std::snprintf(mm, sizeof mm, h.focalLength35mmDerived ? "%.2f mm" : "%.0f mm",
+                  *h.focalLength35mm);
     lens.source = (h.focalLength35mmDerived
                        ? "35 mm focal length derived from EXIF FocalLength and the focal-plane "
                          "resolution: "
                        : "EXIF 35 mm focal length ") +
-                  std::to_string(int(std::lround(*h.focalLength35mm))) + " mm";
+                  std::string(mm);
     return lens;
   }
   throw Error(

@@ -188,26 +188,42 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   if (info.dateTimeOriginal.empty()) info.dateTimeOriginal = trimmed(h.text("DateTime"));
   info.captureSeconds = exifSeconds(info.dateTimeOriginal, h.text("Exif:SubsecTimeOriginal"));
 
-  info.focalLength35mm = h.positive("Exif:FocalLengthIn35mmFilm");
-  if (info.focalLength35mm) {
-    info.focal35mmSource = "EXIF FocalLengthIn35mmFilm";
-  } else if (info.focalLengthMm && info.focalPlaneXResolution && info.focalPlaneYResolution &&
-             unitMillimetres(info.focalPlaneResolutionUnit) > 0.0) {
-    // Sensor size = image size / (pixels per unit); the 35 mm equivalent scales the focal length
-    // by the ratio of diagonals (43.27 mm for the 36 x 24 mm frame).
+  // The 35 mm equivalent: derived from the true focal length and the focal-plane resolution
+  // (sensor size = image size / pixels per unit; scaled by the ratio of diagonals, 43.27 mm for
+  // the 36 x 24 mm frame), or EXIF's FocalLengthIn35mmFilm, a whole number of millimetres. Both
+  // given, the derived one is taken when it agrees with the tag to the tag's rounding (15 mm for
+  // 14.5 mm is 2° of a 100° field of view); otherwise the tag (a resized photo keeps the sensor's
+  // focal-plane resolution, which then gives a wrong sensor size).
+  std::optional<double> derived;
+  std::string derivedText;
+  if (info.focalLengthMm && info.focalPlaneXResolution && info.focalPlaneYResolution &&
+      unitMillimetres(info.focalPlaneResolutionUnit) > 0.0) {
     const double unit = unitMillimetres(info.focalPlaneResolutionUnit);
     const double w = h.width / *info.focalPlaneXResolution * unit;
     const double hgt = h.height / *info.focalPlaneYResolution * unit;
     const double diagonal = std::sqrt(w * w + hgt * hgt);
     if (diagonal > 0.5 && diagonal < 500.0) {
-      info.focalLength35mm = *info.focalLengthMm * 43.266615305567875 / diagonal;
-      char text[160];
+      derived = *info.focalLengthMm * 43.266615305567875 / diagonal;
+      char text[200];
       std::snprintf(text, sizeof text,
                     "derived from FocalLength %.3g mm and the focal-plane resolution (sensor "
-                    "%.1f x %.1f mm)",
-                    *info.focalLengthMm, w, hgt);
-      info.focal35mmSource = text;
+                    "%.1f x %.1f mm): %.2f mm",
+                    *info.focalLengthMm, w, hgt, *derived);
+      derivedText = text;
     }
+  }
+  const std::optional<double> tag = h.positive("Exif:FocalLengthIn35mmFilm");
+  if (tag && derived && std::abs(*derived - *tag) <= 0.5 + 1e-6) {
+    info.focalLength35mm = derived;
+    char text[64];
+    std::snprintf(text, sizeof text, ", which FocalLengthIn35mmFilm rounds to %.0f mm", *tag);
+    info.focal35mmSource = derivedText + text;
+  } else if (tag) {
+    info.focalLength35mm = tag;
+    info.focal35mmSource = "EXIF FocalLengthIn35mmFilm";
+  } else if (derived) {
+    info.focalLength35mm = derived;
+    info.focal35mmSource = derivedText;
   }
 }
 

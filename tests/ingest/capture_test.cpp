@@ -86,6 +86,24 @@ TEST(CaptureInfo, ThirtyFiveMillimetreEquivalentFromTheFocalPlaneResolution) {
   EXPECT_NEAR(*out.focalLength35mm, 4.2 * 43.266615305567875 / 8.0, 1e-3);
   EXPECT_NE(out.focal35mmSource.find("derived"), std::string::npos);
 
+  // With FocalLengthIn35mmFilm too: the tag is whole millimetres (23 for 22.71 mm), so the
+  // derived value is taken where the tag is its rounding; where it is not (a resized photo keeps
+  // the sensor's focal-plane resolution, which then says another sensor), the tag is.
+  CaptureInfo both = in;
+  both.focalLength35mm = 23.0;
+  writeShot(dir / "both.jpg", both, 4000, 3000);
+  const CaptureInfo precise = readCaptureInfo(dir / "both.jpg");
+  ASSERT_TRUE(precise.focalLength35mm);
+  EXPECT_NEAR(*precise.focalLength35mm, 4.2 * 43.266615305567875 / 8.0, 1e-3);
+  EXPECT_NE(precise.focal35mmSource.find("which FocalLengthIn35mmFilm rounds to 23 mm"),
+            std::string::npos)
+      << precise.focal35mmSource;
+  writeShot(dir / "resized.jpg", both, 2000, 1500);
+  const CaptureInfo resized = readCaptureInfo(dir / "resized.jpg");
+  ASSERT_TRUE(resized.focalLength35mm);
+  EXPECT_EQ(*resized.focalLength35mm, 23.0);
+  EXPECT_EQ(resized.focal35mmSource, "EXIF FocalLengthIn35mmFilm");
+
   // Without the resolution tags nothing can be derived: the field stays empty.
   writeShot(dir / "bare.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
   EXPECT_FALSE(readCaptureInfo(dir / "bare.jpg").focalLength35mm);
