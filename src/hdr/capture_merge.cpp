@@ -82,6 +82,11 @@ ResponseCurve curveFromColorSpace(const color::ColorConfig& colors, const std::s
   return curve;
 }
 
+// Median disagreement between adjacent exposures through a stored response above which it is
+// checked against a curve recovered from the photos (responseDisagreement): a curve recovered
+// from photos of the same setting gives a few per cent.
+constexpr double kStoredResponseTolerance = 0.06;
+
 std::vector<std::vector<ingest::LoadedImage>> readCapturePhotos(const ingest::Capture& capture,
                                                                 const Progress& progress) {
   std::vector<std::vector<ingest::LoadedImage>> photos;
@@ -184,17 +189,17 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     cameraInfo.cameraMake = capture.cameraMake;
     cameraInfo.cameraModel = capture.cameraModel;
     const std::string camera = cameraInfo.camera();
-    auto recover = [&] {
-      std::vector<BracketCodes> brackets;
-      for (size_t v = 0; v < capture.views.size(); ++v) {
-        if (!eightBit[v] || photos[v].size() < 2) continue;
-        BracketCodes b;
-        for (size_t s = 0; s < photos[v].size(); ++s) {
-          b.images.push_back(&codes[v][s]);
-          b.exposures.push_back(*capture.views[v].shots[s].exposure);
-        }
-        brackets.push_back(std::move(b));
+    std::vector<BracketCodes> brackets;
+    for (size_t v = 0; v < capture.views.size(); ++v) {
+      if (!eightBit[v] || photos[v].size() < 2) continue;
+      BracketCodes b;
+      for (size_t s = 0; s < photos[v].size(); ++s) {
+        b.images.push_back(&codes[v][s]);
+        b.exposures.push_back(*capture.views[v].shots[s].exposure);
       }
+      brackets.push_back(std::move(b));
+    }
+    auto recover = [&] {
       if (brackets.empty()) {
         throw Error(kStage,
                     "recovering the camera's response needs a bracket of at least two 8-bit "
@@ -266,6 +271,38 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
               cached.string() +
               (result.response.created.empty() ? "" : ", recovered " + result.response.created) +
               "); recovery skipped (--response recover to redo it)";
+          // The stored curve is the camera's as it was set when recovered: another picture
+          // style, contrast or JPEG setting makes it wrong for these photos. Checked on their
+          // brackets: when the shots disagree through it, a curve is recovered from them and the
+          // better one used (the stored one is kept as it is).
+          const double stored = responseDisagreement(result.response, brackets);
+          if (std::isfinite(stored) && stored > kStoredResponseTolerance) {
+            const ResponseCurve storedCurve = result.response;
+            recover();
+            const double fresh = responseDisagreement(result.response, brackets);
+            char text[512];
+            if (fresh < 0.5 * stored) {
+              std::snprintf(
+                  text, sizeof text,
+                  "the stored response of %s does not fit these photos (their exposures "
+                  "disagree by %.1f %% through it, %.1f %% through a curve recovered from them: "
+                  "another picture style or tone setting?): the recovered curve is used and not "
+                  "stored (--response recover stores it instead; --response-dir keeps one "
+                  "folder of curves per setting)",
+                  camera.c_str(), 100.0 * stored, 100.0 * fresh);
+              result.notes.push_back(text);
+              result.responseCacheFile.clear();
+              result.responseRecovered = false;
+              result.linearisation =
+                  "8-bit photos linearised by a camera response recovered "
+                  "from them (the stored one of " +
+                  camera + " does not fit them)";
+            } else {
+              result.response = storedCurve;
+              result.responseCacheFile.clear();
+              result.responseRecovered = false;
+            }
+          }
         } else {
           recover();
           result.linearisation = "8-bit photos linearised by the camera response " +

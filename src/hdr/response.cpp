@@ -488,6 +488,37 @@ void RecoveryParams::validate() const {
   if (maxPixels < 1024) throw Error(kStage, "Robertson needs at least 1024 pixels");
 }
 
+double responseDisagreement(const ResponseCurve& curve, const std::vector<BracketCodes>& brackets) {
+  COMPOSE_CHECK(!curve.empty());
+  std::array<std::array<double, 256>, 3> lnX;
+  for (size_t c = 0; c < 3; ++c)
+    for (size_t z = 0; z < 256; ++z)
+      lnX[c][z] = std::log(std::max(double(curve.inverse[c][z]), 1e-30));
+  constexpr int kLow = 16, kHigh = 235;
+  constexpr size_t kPixelsPerBracket = 40000;  // a strided sample: enough for a median
+  std::vector<float> d;
+  for (const BracketCodes& b : brackets) {
+    if (b.images.size() < 2) continue;
+    const size_t pixels = size_t(b.images[0]->width) * size_t(b.images[0]->height);
+    const size_t step = std::max<size_t>(1, pixels / kPixelsPerBracket);
+    for (size_t j = 0; j + 1 < b.images.size(); ++j) {
+      const uint8_t* a = b.images[j]->data();
+      const uint8_t* n = b.images[j + 1]->data();
+      const double lnRatio = std::log(b.exposures[j + 1] / b.exposures[j]);
+      for (size_t i = 0; i < pixels; i += step) {
+        for (size_t c = 0; c < 3; ++c) {
+          const int z1 = a[3 * i + c], z2 = n[3 * i + c];
+          if (z1 < kLow || z1 > kHigh || z2 < kLow || z2 > kHigh) continue;
+          d.push_back(float(std::abs(lnX[c][size_t(z2)] - lnX[c][size_t(z1)] - lnRatio)));
+        }
+      }
+    }
+  }
+  if (d.empty()) return std::nan("");
+  std::nth_element(d.begin(), d.begin() + ptrdiff_t(d.size() / 2), d.end());
+  return double(d[d.size() / 2]);
+}
+
 ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
                               const RecoveryParams& params, const Progress& progress,
                               double* openCvSeconds) {

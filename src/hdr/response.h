@@ -128,6 +128,13 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
                               const RecoveryParams& params, const Progress& progress = {},
                               double* openCvSeconds = nullptr);
 
+// How well `curve` explains the brackets: the median, over pixels and channels of every pair of
+// adjacent exposures where both codes are well exposed (16-235), of |ln(X(z1)/e1) - ln(X(z2)/e2)|,
+// the disagreement between the two shots' radiance through the curve (a per-channel scale
+// cancels). A curve recovered from the photos gives a few per cent (noise, JPEG); another
+// camera's or another picture style's, tens of per cent. NaN when no pixel qualifies.
+double responseDisagreement(const ResponseCurve& curve, const std::vector<BracketCodes>& brackets);
+
 ResponseCurve readResponse(const std::filesystem::path& file);
 void writeResponse(const std::filesystem::path& file, const ResponseCurve& curve);
 // The JSON text writeResponse() writes (for OutputFiles users).

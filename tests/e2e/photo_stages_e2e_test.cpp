@@ -145,6 +145,28 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     }
     EXPECT_LT(worst, 1.0 / 1024.0);  // half keeps 11 significant bits
     EXPECT_LT(fs::file_size(dir / "half.exr"), fs::file_size(dir / "one.exr"));
+
+    // The same camera set to another tone curve (a picture style): the stored response does not
+    // fit its photos, which is found on their brackets; a curve recovered from them is used and
+    // the stored one is kept.
+    const fs::path stored = dir / "responses" / "compose_virtual_camera.json";
+    const std::string before = slurp(stored);
+    const CommandRun styled =
+        compose("capture-sim --env " + q(pipeline::samplesDirectory() / "interior.exr") +
+                    " --out " + q(dir / "styled") +
+                    " --size 160x120 --views 2 --brackets 3 --seed 5 --response gamma:1.8",
+                dir);
+    ASSERT_EQ(styled.status, 0) << styled.err;
+    const CommandRun other = compose("merge --capture " + q(dir / "styled" / "capture.json") +
+                                         " --out " + q(dir / "styled_merged"),
+                                     dir);
+    ASSERT_EQ(other.status, 0) << other.err;
+    EXPECT_NE(other.err.find("the stored response of compose virtual camera does not fit these "
+                             "photos"),
+              std::string::npos)
+        << other.err;
+    EXPECT_EQ(other.err.find("recovery skipped"), std::string::npos) << other.err;
+    EXPECT_EQ(slurp(stored), before);
   }
   // An image with no exposure time in the folder of the brackets (a merged EXR saved beside
   // them) is left out and named: the grouping stays by capture time and merge takes the folder.
