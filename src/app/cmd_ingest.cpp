@@ -127,6 +127,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                          std::to_string(capture.views.size()) + " views");
       }
       ingest::setExposures(capture.views[0], exposures, "--exposures");
+      if (const std::string w = ingest::exposureContradiction(capture.views[0]); !w.empty())
+        std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
     }
 
     // The table: one line per photo, as found.

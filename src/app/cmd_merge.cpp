@@ -218,6 +218,9 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       capture.method = "the photos given";
     }
     ingest::resolveExposures(capture);  // checks too that the photos are one camera's
+    for (const ingest::View& v : capture.views)
+      if (const std::string w = ingest::exposureContradiction(v); !w.empty())
+        std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
     if (o->capture.empty()) {
       capture.cameraMake = capture.views[0].shots[0].info.cameraMake;
       capture.cameraModel = capture.views[0].shots[0].info.cameraModel;

@@ -433,6 +433,46 @@ void setExposures(View& view, const std::vector<double>& exposures, const std::s
   }
 }
 
+std::string exposureContradiction(const View& view) {
+  const size_t n = view.shots.size();
+  for (const Shot& s : view.shots)
+    if (!s.exposure || !s.info.relativeExposure()) return {};
+  double worst = 0.0;
+  size_t worstI = 0, worstJ = 0;
+  bool reordered = false;
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t j = i + 1; j < n; ++j) {
+      const Shot& a = view.shots[i];
+      const Shot& b = view.shots[j];
+      const double given = std::log2(*b.exposure / *a.exposure);
+      const double exif = std::log2(*b.info.relativeExposure() / *a.info.relativeExposure());
+      const bool flipped = (given > 1.0 / 6.0 && exif < -1.0 / 6.0) ||
+                           (given < -1.0 / 6.0 && exif > 1.0 / 6.0);
+      if (flipped && !reordered) {
+        reordered = true;
+        worst = 0.0;
+      }
+      if ((flipped || !reordered) && std::abs(given - exif) > worst) {
+        worst = std::abs(given - exif);
+        worstI = i;
+        worstJ = j;
+      }
+    }
+  }
+  if (!reordered && worst <= 1.0 / 3.0) return {};
+  const Shot& a = view.shots[worstI];
+  const Shot& b = view.shots[worstJ];
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the exposures given (%s) %s their EXIF: %s to %s is %+.1f stops given, %+.1f "
+                "stops by EXIF; the given ones are used (is their order that of the photos?)",
+                a.exposureSource.c_str(), reordered ? "order the photos otherwise than" : "differ from",
+                a.file.filename().string().c_str(), b.file.filename().string().c_str(),
+                std::log2(*b.exposure / *a.exposure),
+                std::log2(*b.info.relativeExposure() / *a.info.relativeExposure()));
+  return text;
+}
+
 void resolveExposures(Capture& capture) {
   // One photo, one shot: a file given twice would count as two exposures (or two views).
   std::vector<std::pair<fs::path, fs::path>> seen;  // canonical, as given

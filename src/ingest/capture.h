@@ -116,6 +116,12 @@ inline constexpr double kMinExposure = 1e-12, kMaxExposure = 1e12;
 // one value per shot, in the order the shots were given.
 void setExposures(View& view, const std::vector<double>& exposures, const std::string& source);
 
+// When every shot of `view` has both an exposure given (setExposures) and one in EXIF, and the
+// two disagree beyond EXIF's rounding (the given ones order the photos otherwise, or a ratio
+// between two photos differs by more than a third of a stop): a sentence saying so, naming the
+// photos. Empty otherwise. (The given list wins; a wrong one silently scales the radiance.)
+std::string exposureContradiction(const View& view);
+
 // A human-readable summary: one line per view with its shots and exposures in stops.
 std::vector<std::string> describeCapture(const Capture& capture);
 

@@ -181,6 +181,30 @@ TEST(Capture, OneCameraAndEachPhotoOnce) {
   COMPOSE_EXPECT_ERROR(resolveExposures(acrossViews), "the same photo is given twice");
 }
 
+// Exposures given on the command line win over EXIF; where they contradict it (another order, or
+// ratios other than EXIF's beyond its rounding), that is said.
+TEST(Capture, GivenExposuresThatContradictExifAreSaid) {
+  TempDir dir;
+  writeShot(dir / "a.jpg", cameraShot(1.0 / 64.0, "2024:05:01 12:00:00"));
+  writeShot(dir / "b.jpg", cameraShot(1.0 / 16.0, "2024:05:01 12:00:01"));
+  writeShot(dir / "c.jpg", cameraShot(1.0 / 4.0, "2024:05:01 12:00:02"));
+  View view{"v", scanShots({dir / "a.jpg", dir / "b.jpg", dir / "c.jpg"}), {}};
+  EXPECT_EQ(exposureContradiction(view), "");  // nothing given: nothing to contradict
+  setExposures(view, {1.0, 4.0, 16.0}, "--exposures");
+  EXPECT_EQ(exposureContradiction(view), "") << "the same ratios in other units";
+  setExposures(view, {1.0, 3.5, 16.0}, "--exposures");
+  EXPECT_EQ(exposureContradiction(view), "") << "within a third of a stop";
+  setExposures(view, {1.0, 2.0, 4.0}, "--exposures");
+  EXPECT_NE(exposureContradiction(view).find("differ from their EXIF: a.jpg to c.jpg is +2.0 "
+                                             "stops given, +4.0 stops by EXIF"),
+            std::string::npos)
+      << exposureContradiction(view);
+  setExposures(view, {16.0, 1.0, 4.0}, "--exposures");
+  EXPECT_NE(exposureContradiction(view).find("order the photos otherwise than their EXIF"),
+            std::string::npos)
+      << exposureContradiction(view);
+}
+
 TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
   TempDir dir;
   // Two views of an auto-bracketed sequence in the camera's order 0, -2, +2 EV; the second view
