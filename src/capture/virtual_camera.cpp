@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <numbers>
 #include <random>
+#include <set>
 
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
@@ -495,6 +496,38 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
     c->cameraModel = p.model;
     c->lensFile = absolute / "camera.json";
     c->groundTruth = absolute / "truth.json";
+  }
+  {
+    // Photos of an earlier capture in the folder, which this one does not replace, would be
+    // grouped with the new ones by ingest and merge of the folder (the EXIF times are the same
+    // for every run): refused before anything is written.
+    std::set<std::string> mine;
+    for (const SimulatedView& v : cap.views) {
+      mine.insert(v.name + "_truth.exr");
+      for (const SimulatedShot& s : v.shots) {
+        mine.insert(s.stem + ".jpg");
+        mine.insert(s.stem + ".tif");
+      }
+    }
+    std::vector<std::string> stale;
+    std::error_code ec;
+    for (fs::directory_iterator it(absolute, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (ingest::looksLikeImageFile(it->path()) && !mine.count(name)) stale.push_back(name);
+    }
+    if (!stale.empty()) {
+      std::sort(stale.begin(), stale.end());
+      std::string listed;
+      for (size_t i = 0; i < std::min<size_t>(stale.size(), 4); ++i)
+        listed += (i ? ", " : "") + stale[i];
+      if (stale.size() > 4) listed += ", ...";
+      throw Error(kStage,
+                  "the output folder holds " + std::to_string(stale.size()) + " image" +
+                      (stale.size() == 1 ? "" : "s") + " this capture does not write (" + listed +
+                      "): ingest or merge of the folder would take them with the new photos; "
+                      "write into an empty folder, or remove them",
+                  folder);
+    }
   }
   nlohmann::ordered_json truthViews = nlohmann::ordered_json::array();
   size_t done = 0;

@@ -446,8 +446,8 @@ std::string exposureContradiction(const View& view) {
       const Shot& b = view.shots[j];
       const double given = std::log2(*b.exposure / *a.exposure);
       const double exif = std::log2(*b.info.relativeExposure() / *a.info.relativeExposure());
-      const bool flipped = (given > 1.0 / 6.0 && exif < -1.0 / 6.0) ||
-                           (given < -1.0 / 6.0 && exif > 1.0 / 6.0);
+      const bool flipped =
+          (given > 1.0 / 6.0 && exif < -1.0 / 6.0) || (given < -1.0 / 6.0 && exif > 1.0 / 6.0);
       if (flipped && !reordered) {
         reordered = true;
         worst = 0.0;
@@ -466,7 +466,8 @@ std::string exposureContradiction(const View& view) {
   std::snprintf(text, sizeof text,
                 "the exposures given (%s) %s their EXIF: %s to %s is %+.1f stops given, %+.1f "
                 "stops by EXIF; the given ones are used (is their order that of the photos?)",
-                a.exposureSource.c_str(), reordered ? "order the photos otherwise than" : "differ from",
+                a.exposureSource.c_str(),
+                reordered ? "order the photos otherwise than" : "differ from",
                 a.file.filename().string().c_str(), b.file.filename().string().c_str(),
                 std::log2(*b.exposure / *a.exposure),
                 std::log2(*b.info.relativeExposure() / *a.info.relativeExposure()));

@@ -360,6 +360,19 @@ TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
     EXPECT_NE(r.err.find("cut.jpg"), std::string::npos);
     EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
   }
+  // A capture into a folder holding photos it does not replace (an earlier capture with more
+  // exposures): ingest would group them with the new ones. Refused, the folder as it was.
+  {
+    TempDir dir;
+    const std::vector<std::string> before = filesIn(dir_ / "shots");
+    const CommandRun r = compose(
+        "capture-sim --env " + q(pipeline::samplesDirectory() / "interior.exr") + " --out " +
+            q(dir_ / "shots") + " --size 160x120 --views 2 --brackets 2 --seed 4",
+        dir);
+    EXPECT_FAILS_WITH(r, 1, "the output folder holds 2 images this capture does not write");
+    EXPECT_NE(r.err.find("yaw000_3.jpg"), std::string::npos) << r.err;
+    EXPECT_EQ(filesIn(dir_ / "shots"), before);
+  }
   // An unknown colour space, refused before anything is read.
   {
     TempDir dir;
