@@ -32,6 +32,7 @@ const Hash128& Context::key(const std::string& name) const {
 Hash128 Context::geometryKey() const {
   Hash128 h;
   h.bytes("geometry");
+  h.word(2);  // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it
   h.combine(key(artefact::kPlate));
   h.combine(key(artefact::kMesh));
   if (!job.lensFile.empty()) hashFile(h, job.lensFile, "camera");

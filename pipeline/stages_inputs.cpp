@@ -197,7 +197,7 @@ class IngestStage final : public Stage {
 class MergeStage final : public Stage {
  public:
   // Bump when merging gives other numbers for the same photos.
-  static constexpr int kVersion = 1;
+  static constexpr int kVersion = 2;  // 2: a stored response is checked against the photos
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -282,7 +282,7 @@ class MergeStage final : public Stage {
 
 class StitchStage final : public Stage {
  public:
-  static constexpr int kVersion = 1;
+  static constexpr int kVersion = 2;  // 2: the 35 mm focal length derived where EXIF rounds it
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {
@@ -407,6 +407,7 @@ class StitchStage final : public Stage {
     options.faceSize = std::clamp(int(std::lround(2.0 * fx / 8.0)) * 8, 64, 2048);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, ctx.progress);
     for (const std::string& n : result.notes) ctx.note("stitch: " + n);
+    for (const std::string& w : result.warnings) ctx.note("stitch: warning: " + w);
     const lighting::Environment env =
         lighting::latLongFromCube(result.cube, 4 * result.cube.size(), ctx.progress);
     Image image(env.width(), env.height(), 3, {"R", "G", "B"});

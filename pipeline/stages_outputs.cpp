@@ -85,7 +85,9 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
 std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   const ingest::CaptureInfo& plate = ctx.artefacts.plate->info;
   if (!ctx.artefacts.capture) {
-    why = "the environment is not from photos";
+    why =
+        "the environment is not a capture description (compose --env capture.json), whose "
+        "photos' EXIF would set it";
     return std::nullopt;
   }
   const ingest::Capture& capture = *ctx.artefacts.capture;
@@ -365,7 +367,9 @@ class RenderStage final : public Stage {
                    "environment's units) matched to the plate's log-average (%.4g)%s; override "
                    "with --exposure",
                    std::log2(match.scale), match.ballRadiance, match.plateKey,
-                   ctx.artefacts.capture ? (" (not from EXIF: " + why + ")").c_str() : ""));
+                   ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
+                       ? (" (not from EXIF: " + why + ")").c_str()
+                       : ""));
       }
       r.notes.push_back(ctx.notes.back());
     }

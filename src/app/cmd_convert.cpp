@@ -223,7 +223,9 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       const std::string ext = ingest::lowerExtension(o->out);
       const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
-      if (floatsOut == codesIn) {
+      // A Radiance file says no primaries: it is read as the config's rules say, so it is
+      // written in that space.
+      if (floatsOut == codesIn || ext == ".hdr") {
         const bool byMatrix = file.info.chromaticities && declared.empty();
         const std::string source =
             byMatrix ? std::string("the RGB space of the chromaticities in its header")

@@ -139,8 +139,9 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
       for (const auto& s : view.shots) {
         const auto& i = s.info;
         const auto rel = s.exposure ? s.exposure : i.relativeExposure();
-        std::string f35 = number(i.focalLength35mm, "%.0f mm");
-        if (i.focalLength35mm && i.focal35mmSource.rfind("derived", 0) == 0) f35 += "*";
+        const bool derived = i.focalLength35mm && i.focal35mmSource.rfind("derived", 0) == 0;
+        std::string f35 = number(i.focalLength35mm, derived ? "%.1f mm" : "%.0f mm");
+        if (derived) f35 += "*";
         std::printf("%-24s %-11s %-6s %-10s %-5s %-6s %-9s %-7s %-7s %-22s %s\n",
                     s.file.filename().string().c_str(),
                     (std::to_string(i.fileWidth) + "x" + std::to_string(i.fileHeight)).c_str(),
@@ -155,7 +156,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                           ": no 35 mm equivalent focal length (FocalLengthIn35mmFilm is 0 or "
                           "missing and no focal-plane resolution): the plate camera assumes 50 mm "
                           "unless --focal35 is given");
-        } else if (i.focal35mmSource.rfind("derived", 0) == 0) {
+        } else if (derived && i.focal35mmSource.find("rounds to") == std::string::npos) {
           notes.push_back(s.file.filename().string() + ": 35 mm equivalent " + i.focal35mmSource +
                           " (marked *)");
         }

@@ -222,8 +222,12 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       if (const std::string w = ingest::exposureContradiction(v); !w.empty())
         std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
     if (o->capture.empty()) {
-      capture.cameraMake = capture.views[0].shots[0].info.cameraMake;
-      capture.cameraModel = capture.views[0].shots[0].info.cameraModel;
+      for (const ingest::Shot& s : capture.views[0].shots) {  // the first photo that names one
+        if (s.info.camera().empty()) continue;
+        capture.cameraMake = s.info.cameraMake;
+        capture.cameraModel = s.info.cameraModel;
+        break;
+      }
     }
     ProgressPrinter printer(globals);
     std::vector<std::vector<ingest::LoadedImage>> photos =

@@ -45,7 +45,11 @@ struct PhotoArgument {
 PhotoArgument parsePhoto(const std::string& text) {
   PhotoArgument p;
   const size_t at = text.rfind('@');
-  if (at == std::string::npos || text.find('/', at) != std::string::npos) {
+  std::error_code ec;
+  // A file whose name holds an '@' (photo@2x.jpg) is that file, not a direction; so is a name
+  // whose part before the '@' is no file (then "not found" names it whole).
+  if (at == std::string::npos || text.find('/', at) != std::string::npos || fs::exists(text, ec) ||
+      !fs::exists(text.substr(0, at), ec)) {
     p.file = text;
     return p;
   }

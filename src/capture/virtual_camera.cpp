@@ -503,17 +503,18 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
     // for every run): refused before anything is written.
     std::set<std::string> mine;
     for (const SimulatedView& v : cap.views) {
-      mine.insert(v.name + "_truth.exr");
+      if (options.truthImages) mine.insert(v.name + "_truth.exr");
       for (const SimulatedShot& s : v.shots) {
-        mine.insert(s.stem + ".jpg");
-        mine.insert(s.stem + ".tif");
+        if (p.writeJpeg) mine.insert(s.stem + ".jpg");
+        if (p.writeTiff16) mine.insert(s.stem + ".tif");
       }
     }
     std::vector<std::string> stale;
     std::error_code ec;
     for (fs::directory_iterator it(absolute, ec), end; !ec && it != end; it.increment(ec)) {
       const std::string name = it->path().filename().string();
-      if (ingest::looksLikeImageFile(it->path()) && !mine.count(name)) stale.push_back(name);
+      if (ingest::looksLikeImageFile(it->path()) && !mine.count(name) && name.front() != '.')
+        stale.push_back(name);
     }
     if (!stale.empty()) {
       std::sort(stale.begin(), stale.end());

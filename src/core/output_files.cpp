@@ -128,9 +128,17 @@ void OutputFiles::check(const fs::path& destination, const std::string& stage) {
                     ", not a file: outputs are written to files (it would be replaced by one)",
                 destination);
   }
-  const fs::path dir = destination.parent_path();
-  if (!dir.empty() && fs::exists(dir, ec) && !fs::is_directory(dir, ec))
-    throw Error(stage, "cannot write into the output folder: it is a file, not a folder", dir);
+  // The nearest folder on the path that exists must be a folder (a/b/out.exr with a a file
+  // cannot be made).
+  for (fs::path dir = destination.parent_path(); !dir.empty(); dir = dir.parent_path()) {
+    if (!fs::exists(dir, ec)) {
+      if (dir == dir.parent_path()) break;
+      continue;
+    }
+    if (!fs::is_directory(dir, ec))
+      throw Error(stage, "cannot write into the output folder: it is a file, not a folder", dir);
+    break;
+  }
 }
 
 fs::path OutputFiles::add(const fs::path& destination) {

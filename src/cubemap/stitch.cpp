@@ -194,6 +194,9 @@ struct PairMatches {
   std::vector<std::pair<int, int>> inliers;  // keypoint indices in i and j
   glm::dmat3 relative{1.0};                  // cam i → cam j
   double rejected = 0.0;  // > 0: matched, but the overlap's light said no (this cost ratio)
+  // Keypoints of each photo that the rough orientations put inside the other's frame (no margin),
+  // the fewer of the two: how much detail the pair shares as roughly placed.
+  size_t sharedKeypoints = 0;
 };
 
 // How well photo j, turned by `jFromI` relative to photo i, agrees with i where they overlap: the
@@ -246,9 +249,11 @@ PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
       glm::transpose(photos[size_t(j)].worldFromCamera) * photos[size_t(i)].worldFromCamera;
   const double tolerance = 2.0 * options.maxCorrectionDegrees * kDegrees + 2.0 * kDegrees;
   // Keypoints of one photo that the rough orientations could put inside the other's frame.
-  auto candidates = [&](const Features& f, const glm::dmat3& toOther, const calib::Lens& other) {
+  auto candidates = [&](const Features& f, const glm::dmat3& toOther, const calib::Lens& other,
+                        size_t& inside) {
     std::vector<int> keep;
     const double margin = std::tan(tolerance) * other.fx;
+    inside = 0;
     for (size_t k = 0; k < f.rays.size(); ++k) {
       if (f.rays[k] == glm::dvec3(0.0)) continue;
       glm::dvec2 p;
@@ -256,11 +261,15 @@ PairMatches matchPair(int i, int j, const std::vector<StitchPhoto>& photos,
       if (p.x > -margin && p.x < other.width + margin && p.y > -margin &&
           p.y < other.height + margin)
         keep.push_back(int(k));
+      if (p.x >= 0.0 && p.x < other.width && p.y >= 0.0 && p.y < other.height) ++inside;
     }
     return keep;
   };
-  const std::vector<int> ki = candidates(fi, roughIj, photos[size_t(j)].lens);
-  const std::vector<int> kj = candidates(fj, glm::transpose(roughIj), photos[size_t(i)].lens);
+  size_t insideJ = 0, insideI = 0;
+  const std::vector<int> ki = candidates(fi, roughIj, photos[size_t(j)].lens, insideJ);
+  const std::vector<int> kj =
+      candidates(fj, glm::transpose(roughIj), photos[size_t(i)].lens, insideI);
+  out.sharedKeypoints = std::min(insideI, insideJ);
   if (ki.size() < 8 || kj.size() < 8) return out;
   cv::Mat di(int(ki.size()), fi.descriptors.cols, fi.descriptors.type());
   cv::Mat dj(int(kj.size()), fj.descriptors.cols, fj.descriptors.type());
@@ -775,16 +784,15 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     }
     result.notes.push_back(std::to_string(verified) + " of " + std::to_string(candidates.size()) +
                            " overlapping photo pairs matched");
-    // Photos with detail that overlap as placed share features; when hardly any such pair
-    // matches, the photos are most likely not where their names (or their order) put them.
-    constexpr size_t kDetailed = 100;  // features that make a photo one with detail
+    // Photos that, as roughly placed, put many keypoints inside each other's frames share that
+    // detail; when hardly any such pair matches, the photos are most likely not where their
+    // names (or their order) put them. (Photos that only touch, as 90° cube faces do, share none.)
+    constexpr size_t kShared = 50;
     int detailedPairs = 0, detailedMatched = 0;
-    for (size_t k = 0; k < candidates.size(); ++k) {
-      if (features[size_t(candidates[k].first)].keys.size() < kDetailed ||
-          features[size_t(candidates[k].second)].keys.size() < kDetailed)
-        continue;
+    for (const PairMatches& pm : pairs) {
+      if (pm.sharedKeypoints < kShared) continue;
       ++detailedPairs;
-      if (!pairs[k].inliers.empty()) ++detailedMatched;
+      if (!pm.inliers.empty()) ++detailedMatched;
     }
     if (detailedPairs >= 2 && 4 * detailedMatched < detailedPairs) {
       result.warnings.push_back(

@@ -273,15 +273,18 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
               "); recovery skipped (--response recover to redo it)";
           // The stored curve is the camera's as it was set when recovered: another picture
           // style, contrast or JPEG setting makes it wrong for these photos. Checked on their
-          // brackets: when the shots disagree through it, a curve is recovered from them and the
-          // better one used (the stored one is kept as it is).
+          // brackets: when the shots disagree through it, a curve is recovered from them and used
+          // if it explains them clearly better (by a quarter; noise and movement make the shots
+          // disagree as much through either); the stored one is kept as it is.
           const double stored = responseDisagreement(result.response, brackets);
           if (std::isfinite(stored) && stored > kStoredResponseTolerance) {
             const ResponseCurve storedCurve = result.response;
+            const std::string storedLinearisation = result.linearisation;
+            const std::vector<std::string> notesBefore = result.notes;
             recover();
             const double fresh = responseDisagreement(result.response, brackets);
             char text[512];
-            if (fresh < 0.5 * stored) {
+            if (fresh < 0.75 * stored) {
               std::snprintf(
                   text, sizeof text,
                   "the stored response of %s does not fit these photos (their exposures "
@@ -298,9 +301,25 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                   "from them (the stored one of " +
                   camera + " does not fit them)";
             } else {
+              // The photos disagree as much through a curve of their own: noise (a high ISO),
+              // a hand-held shift, not the curve. The stored one is kept, and the recovery's
+              // notes go with the curve that is not used.
               result.response = storedCurve;
               result.responseCacheFile.clear();
               result.responseRecovered = false;
+              result.notes = notesBefore;
+              result.linearisation = storedLinearisation;
+              std::snprintf(
+                  text, sizeof text,
+                  "the stored response of %s was checked against a curve recovered from these "
+                  "photos, their exposures disagreeing by %.1f %% through it and %.1f %% through "
+                  "the recovered one (the photos' noise or movement, not the curve): the stored "
+                  "one is used",
+                  camera.c_str(), 100.0 * stored, 100.0 * fresh);
+              result.notes.push_back(text);
+              result.linearisation = "8-bit photos linearised by the stored response of " + camera +
+                                     " (" + cached.string() +
+                                     "), checked against a recovery from them";
             }
           }
         } else {

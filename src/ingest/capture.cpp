@@ -1,6 +1,7 @@
 #include "ingest/capture.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -68,6 +69,26 @@ void fillCamera(Capture& capture) {
   }
 }
 
+// Whether two headers name one camera: Make and Model compared without letter case (firmware
+// and editors write "Canon" or "CANON"; the stored responses' file names are lower case), a Make
+// missing on either side not counting against it.
+bool sameCamera(const CaptureInfo& a, const CaptureInfo& b) {
+  auto lower = [](std::string t) {
+    std::string out;
+    for (unsigned char c : t)
+      if (!std::isspace(c)) out.push_back(char(std::tolower(c)));
+    return out;
+  };
+  const std::string makeA = lower(a.cameraMake), makeB = lower(b.cameraMake);
+  if (!makeA.empty() && !makeB.empty() && makeA != makeB) return false;
+  std::string modelA = lower(a.cameraModel), modelB = lower(b.cameraModel);
+  // Some cameras repeat the make in the model ("Canon EOS R5" under Make "Canon").
+  for (std::string* m : {&modelA, &modelB})
+    for (const std::string& make : {makeA, makeB})
+      if (!make.empty() && m->rfind(make, 0) == 0) m->erase(0, make.size());
+  return modelA == modelB;
+}
+
 std::string relativeTo(const fs::path& file, const fs::path& folder) {
   std::error_code ec;
   const fs::path absFile = fs::absolute(file, ec);
@@ -89,7 +110,10 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
     if (fs::is_directory(p, ec)) {
       std::vector<Shot> inFolder;
       for (const auto& entry : fs::directory_iterator(p, ec)) {
-        if (!entry.is_regular_file(ec) || !looksLikeImageFile(entry.path())) continue;
+        // Hidden files are not photos: macOS's "._IMG_0001.jpg" resource forks, editors' copies.
+        if (!entry.is_regular_file(ec) || !looksLikeImageFile(entry.path()) ||
+            entry.path().filename().string().front() == '.')
+          continue;
         inFolder.push_back(Shot{entry.path(), {}, {}, {}, {}});
       }
       if (ec) throw Error(stage, "cannot list the folder: " + ec.message(), p);
@@ -500,7 +524,7 @@ void resolveExposures(Capture& capture) {
       const std::string camera = s.info.camera();
       if (camera.empty()) continue;
       if (!firstNamed) firstNamed = &s;
-      if (camera != firstNamed->info.camera()) {
+      if (!sameCamera(s.info, firstNamed->info)) {
         throw Error(kStage,
                     "the photos come from more than one camera: '" + camera + "' here, '" +
                         firstNamed->info.camera() + "' in " + firstNamed->file.string() +
@@ -511,7 +535,7 @@ void resolveExposures(Capture& capture) {
     }
   }
   // A description's camera (grouping takes the photos' own) is the one whose response is used.
-  if (firstNamed && !declared.empty() && firstNamed->info.camera() != declared) {
+  if (firstNamed && !declared.empty() && !sameCamera(firstNamed->info, described)) {
     throw Error(kStage,
                 "the photos' EXIF name the camera '" + firstNamed->info.camera() +
                     "', the capture description '" + declared +

@@ -59,8 +59,9 @@ struct CaptureInfo {
   std::optional<double> fNumber;        // EXIF FNumber
   std::optional<double> iso;            // EXIF PhotographicSensitivity (ISOSpeedRatings)
   std::optional<double> focalLengthMm;  // true focal length (EXIF FocalLength)
-  // 35 mm equivalent focal length: EXIF FocalLengthIn35mmFilm, or derived from FocalLength and the
-  // focal-plane resolution tags when that is 0 or missing (see focal35mmSource).
+  // 35 mm equivalent focal length: derived from FocalLength and the focal-plane resolution tags
+  // when EXIF FocalLengthIn35mmFilm is that value rounded to whole millimetres, or is 0 or
+  // missing; else FocalLengthIn35mmFilm (see focal35mmSource).
   std::optional<double> focalLength35mm;
   std::string focal35mmSource;  // where focalLength35mm came from; empty when it is unknown
   // EXIF FocalPlaneX/YResolution: sensor pixels per unit of FocalPlaneResolutionUnit (2 inch,

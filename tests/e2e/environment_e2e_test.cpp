@@ -824,6 +824,13 @@ TEST(ConvertCommand, ChromaticitiesAloneSayTheSourceSpace) {
   }
   EXPECT_EQ(ingest::readImage(dir / "named.png").image.pixels,
             ingest::readImage(dir / "primaries.png").image.pixels);
+  // A Radiance file says no primaries and is read as the config's rules say: written in that
+  // space, not in ACEScg's.
+  const RunResult hdr =
+      run("convert " + q(dir / "primaries.exr") + " --to latlong --out " + q(dir / "map.hdr"), dir);
+  ASSERT_EQ(hdr.status, 0) << hdr.err;
+  EXPECT_NE(hdr.err.find("read as 'ACEScg' and written as"), std::string::npos) << hdr.err;
+  EXPECT_NE(hdr.err.find("(as .hdr files are read)"), std::string::npos) << hdr.err;
 
   const RunResult oddCube =
       run("convert " + q(dir / "odd.exr") + " --to cube --out " + q(dir / "odd_cube.exr"), dir);

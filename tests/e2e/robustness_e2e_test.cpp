@@ -147,12 +147,13 @@ TEST_F(Robustness, AStageCommandRefusesAnOutputThatCannotBeAFileBeforeWorking) {
   EXPECT_EQ(render.status, 1) << render.err;
   EXPECT_NE(render.err.find("render: output path is an existing folder"), std::string::npos)
       << render.err;
-  const RunResult convert = runShell(kCompose + " convert " + quote((dir / "env.exr").string()) +
-                                         " --to cube --out " + quote((dir / "folder.exr").string()),
-                                     dir.path(), "convert");
-  EXPECT_EQ(convert.status, 1) << convert.err;
-  EXPECT_NE(convert.err.find("output path is an existing folder"), std::string::npos)
-      << convert.err;
+  // A folder on the way that is a file: nothing can be made there, said before the work.
+  compose::testing::writeText(dir / "afile", "not a folder");
+  const RunResult nested = runShell(kCompose + " precompute" + env + cache + " --out " +
+                                        quote((dir / "afile" / "sub" / "out.lighting").string()),
+                                    dir.path(), "nested");
+  EXPECT_EQ(nested.status, 1) << nested.err;
+  EXPECT_NE(nested.err.find("it is a file, not a folder"), std::string::npos) << nested.err;
   // Nothing was computed: no cache entry, and the nodes are what they were.
   std::error_code ec;
   EXPECT_TRUE(!fs::exists(dir / "cache") || fs::is_empty(dir / "cache", ec));

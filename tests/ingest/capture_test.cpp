@@ -139,6 +139,17 @@ TEST(Capture, NoExposureAnywhereNamesTheFile) {
                        "1 exposure given for 2 photos");
 }
 
+// A folder's hidden files are not photos (macOS writes "._IMG_0001.jpg" beside each photo on
+// other file systems: not an image at all).
+TEST(Capture, HiddenFilesOfAFolderAreNotPhotos) {
+  TempDir dir;
+  writeShot(dir / "a.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
+  compose::testing::writeText(dir / "._a.jpg", "Mac OS X resource fork");
+  const std::vector<Shot> shots = scanShots({dir.path()});
+  ASSERT_EQ(shots.size(), 1u);
+  EXPECT_EQ(shots[0].file.filename(), "a.jpg");
+}
+
 TEST(Capture, AllEqualExposuresAreRefused) {
   TempDir dir;
   writeShot(dir / "a.jpg", cameraShot(0.01, "2024:05:01 12:00:00"));
@@ -170,6 +181,20 @@ TEST(Capture, OneCameraAndEachPhotoOnce) {
   described.cameraMake = "Canon";
   described.cameraModel = "EOS R5";
   COMPOSE_EXPECT_ERROR(resolveExposures(described), "the capture description 'Canon EOS R5'");
+
+  // One camera however its firmware or an editor spells it: letter case, the make repeated in
+  // the model, a make left out.
+  CaptureInfo shouted = cameraShot(0.04, "2024:05:01 12:00:01");
+  shouted.cameraMake = "ACME";
+  shouted.cameraModel = "Acme Phone 3";
+  writeShot(dir / "d.jpg", shouted);
+  CaptureInfo modelOnly = cameraShot(0.16, "2024:05:01 12:00:02");
+  modelOnly.cameraMake.clear();
+  writeShot(dir / "e.jpg", modelOnly);
+  Capture spelled;
+  spelled.views.push_back(
+      View{"front", scanShots({dir / "a.jpg", dir / "d.jpg", dir / "e.jpg"}), {}});
+  resolveExposures(spelled);
 
   Capture twice;
   twice.views.push_back(
