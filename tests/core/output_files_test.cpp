@@ -92,12 +92,14 @@ TEST(OutputFiles, RefusesAFolderAsDestination) {
   COMPOSE_EXPECT_ERROR(out.add(dir / "out.jpg"), "is an existing folder");
 }
 
-TEST(OutputFiles, WriteErrorsKeepTheSystemReason) {
+TEST(OutputFiles, APathUnderAFileNamesTheFile) {
   TempDir dir;
   writeText(dir / "file", "x");
-  // A path under a regular file cannot be created: "Not a directory".
+  // A path under a regular file cannot be created: the file on the way is named.
   COMPOSE_EXPECT_ERROR(writeTextFile(dir / "file" / "sub" / "t.txt", "y", "output"),
-                       "cannot create the output folder: Not a directory");
+                       "cannot write into the output folder: it is a file, not a folder");
+  COMPOSE_EXPECT_ERROR(writeTextFile(dir / "file" / "sub" / "t.txt", "y", "output"),
+                       (dir / "file").string() + ")");
 }
 
 }  // namespace
