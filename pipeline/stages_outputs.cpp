@@ -78,17 +78,38 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
 }
 
 // Exposure from EXIF: when the environment was merged from 8-bit photos whose exposures are their
-// EXIF ones (t · ISO / N²), and the plate is an 8-bit photo of the same camera (EXIF Make and
-// Model) with its own exposure in EXIF, the merged radiance is in the plate's units at relative
-// exposure 1 (hdr/capture_merge.h, Units): the plate's relative exposure is the scale. Empty, with
-// the reason in `why`, when any of that does not hold.
+// EXIF ones (t · ISO / N²) — a capture description, or a map the photo stages wrote and marked
+// (compose:exposureUnit, ingest::kExifExposureUnit) — and the plate is an 8-bit photo of the same
+// camera (EXIF Make and Model) with its own exposure in EXIF, the merged radiance is in the
+// plate's units at relative exposure 1 (hdr/capture_merge.h, Units): the plate's relative
+// exposure is the scale. Empty, with the reason in `why`, when any of that does not hold.
 std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   const ingest::CaptureInfo& plate = ctx.artefacts.plate->info;
+  const std::optional<double> e = plate.relativeExposure();
+  const bool plateReady = e && plate.exposureAssumptions().empty() && plate.bitsPerSample == 8;
   if (!ctx.artefacts.capture) {
-    why =
-        "the environment is not a capture description (compose --env capture.json), whose "
-        "photos' EXIF would set it";
-    return std::nullopt;
+    // An environment file that the photo stages made (merge, stitch, convert) says its camera
+    // and whether its radiance is in that camera's EXIF exposure unit.
+    ingest::CaptureInfo env;
+    const fs::path& file = ctx.environmentInput.path;
+    std::error_code ec;
+    if (!file.empty() && fs::is_regular_file(file, ec)) env = ingest::readCaptureInfo(file);
+    if (env.exposureUnit != ingest::kExifExposureUnit) {
+      why =
+          "the environment is not a capture description (compose --env capture.json) nor a map "
+          "that compose merged from photos at their EXIF exposures";
+      return std::nullopt;
+    }
+    if (plate.camera().empty() || plate.camera() != env.camera()) {
+      why = "the plate's camera (" + (plate.camera().empty() ? "not in EXIF" : plate.camera()) +
+            ") is not the environment's (" + env.camera() + ")";
+      return std::nullopt;
+    }
+    if (!plateReady) {
+      why = "the plate is not an 8-bit photo with its exposure time, f-number and ISO in EXIF";
+      return std::nullopt;
+    }
+    return *e;
   }
   const ingest::Capture& capture = *ctx.artefacts.capture;
   ingest::CaptureInfo captureCamera;
@@ -100,8 +121,7 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
           (captureCamera.camera().empty() ? "unknown" : captureCamera.camera()) + ")";
     return std::nullopt;
   }
-  const std::optional<double> e = plate.relativeExposure();
-  if (!e || !plate.exposureAssumptions().empty() || plate.bitsPerSample != 8) {
+  if (!plateReady) {
     why = "the plate is not an 8-bit photo with its exposure time, f-number and ISO in EXIF";
     return std::nullopt;
   }

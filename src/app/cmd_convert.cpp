@@ -198,8 +198,14 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       read.layout = from;
       cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
       notes.push_back("read " + file.describe() + " (" + file.how + ")");
-      // Values are resampled as stored; the colour metadata goes along.
+      // Values are resampled as stored; the colour metadata goes along, and the camera and
+      // exposure unit of a map stitched from merged photos.
       write.chromaticities = file.info.chromaticities;
+      if (!file.info.cameraMake.empty()) write.strings.emplace_back("Make", file.info.cameraMake);
+      if (!file.info.cameraModel.empty())
+        write.strings.emplace_back("Model", file.info.cameraModel);
+      if (!file.info.exposureUnit.empty())
+        write.strings.emplace_back("compose:exposureUnit", file.info.exposureUnit);
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
       }

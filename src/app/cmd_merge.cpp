@@ -46,6 +46,21 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
   if (!result.response.empty())
     a.push_back({"compose:response", result.response.method + ": " + result.response.source});
   a.push_back({"compose:clippedPixels", int(view.stats.saturated + view.stats.dark)});
+  // The radiance is in the camera's EXIF exposure unit when every photo of the view is 8-bit
+  // and merged at its own EXIF exposure (not --exposures, not a description's numbers).
+  const ingest::View* source = nullptr;
+  for (const ingest::View& v : capture.views)
+    if (v.name == view.name) source = &v;
+  bool exifUnit = source && !result.response.empty();
+  if (source) {
+    for (const ingest::Shot& s : source->shots) {
+      const std::optional<double> own = s.info.relativeExposure();
+      if (s.info.bitsPerSample != 8 || !s.exposure || !own ||
+          !s.info.exposureAssumptions().empty() || std::abs(*s.exposure / *own - 1.0) > 1e-6)
+        exifUnit = false;
+    }
+  }
+  if (exifUnit) a.push_back({"compose:exposureUnit", std::string(ingest::kExifExposureUnit)});
   if (!capture.cameraMake.empty()) a.push_back({"Make", capture.cameraMake});
   if (!capture.cameraModel.empty()) a.push_back({"Model", capture.cameraModel});
   return a;

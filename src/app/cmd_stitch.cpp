@@ -309,6 +309,23 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     }
 
     write.chromaticities = colors.chromaticities(target);
+    // Photos of one camera, merged at its EXIF exposures and not evened out by gains: the map
+    // keeps their unit, and says so (the one-shot command then takes the exposure from the
+    // plate's EXIF, as it does with the capture description).
+    const auto agree = [&](auto field) {
+      return std::all_of(headers.begin(), headers.end(), [&](const cubemap::PhotoHeader& h) {
+        return h.*field == headers.front().*field;
+      });
+    };
+    if (!headers.front().cameraModel.empty() && agree(&cubemap::PhotoHeader::cameraMake) &&
+        agree(&cubemap::PhotoHeader::cameraModel)) {
+      if (!headers.front().cameraMake.empty())
+        write.strings.emplace_back("Make", headers.front().cameraMake);
+      write.strings.emplace_back("Model", headers.front().cameraModel);
+      if (!options.gains && headers.front().exposureUnit == ingest::kExifExposureUnit &&
+          agree(&cubemap::PhotoHeader::exposureUnit))
+        write.strings.emplace_back("compose:exposureUnit", ingest::kExifExposureUnit);
+    }
     write.fromCodes =
         std::none_of(headers.begin(), headers.end(), [](const auto& h) { return h.floatingPoint; });
     ProgressPrinter printer(globals);

@@ -253,7 +253,8 @@ void writeAny(const fs::path& temporary, const fs::path& destination, const Imag
   }
   try {
     if (ext == ".exr") {
-      writeExr(temporary, rgb, useHalf, envmap, options.chromaticities, options.exrCompression);
+      writeExr(temporary, rgb, useHalf, envmap, options.chromaticities, options.exrCompression,
+               options.strings);
     } else {
       ingest::WriteOptions write;
       if (floats) write.depth = ingest::WriteOptions::Depth::Float;
@@ -474,7 +475,8 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
 
 void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optional<Layout> envmap,
               const std::optional<std::array<double, 8>>& chromaticities,
-              const std::string& compression) {
+              const std::string& compression,
+              const std::vector<std::pair<std::string, std::string>>& strings) {
   COMPOSE_CHECK(rgb.channels == 3 && rgb.width > 0 && rgb.height > 0);
   std::string why;
   const std::optional<ingest::ExrCompression> codec =
@@ -490,6 +492,7 @@ void writeExr(const fs::path& path, const Image& rgb, bool useHalf, std::optiona
       Imf::addEnvmap(header, *envmap == Layout::Cube ? Imf::ENVMAP_CUBE : Imf::ENVMAP_LATLONG);
     }
     header.insert("software", Imf::StringAttribute("compose"));
+    for (const auto& [name, value] : strings) header.insert(name, Imf::StringAttribute(value));
     if (!rgb.colorSpace.empty()) header.insert("colorSpace", Imf::StringAttribute(rgb.colorSpace));
     if (chromaticities) {
       const auto& c = *chromaticities;

@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/output_files.h"
@@ -100,6 +101,8 @@ struct WriteOptions {
   // (PNG, JPEG, TIFF), values above 1 (a clipped sky times an exposure gain) are clipped to 1 with
   // a note. Otherwise such a file is refused when the map holds values above 1.
   bool fromCodes = false;
+  // OpenEXR only: string attributes to carry (Make, Model, compose:exposureUnit).
+  std::vector<std::pair<std::string, std::string>> strings;
 };
 
 // Writes a lat-long environment to `path` (EXR gets envmap=latlong). Returns a note when the depth
@@ -119,10 +122,12 @@ std::array<std::filesystem::path, lighting::kCubeFaces> facePaths(const std::fil
 
 // Writes RGB float data as an EXR through OpenEXR (scanlines; `compression` as OpenImageIO names
 // it, PIZ by default), with an optional envmap attribute, the image's colour-space name and
-// optional chromaticities. Used by the writers above; exposed for tests and other stages.
+// optional chromaticities and string attributes. Used by the writers above; exposed for tests
+// and other stages.
 void writeExr(const std::filesystem::path& path, const Image& rgb, bool useHalf,
               std::optional<Layout> envmap,
               const std::optional<std::array<double, 8>>& chromaticities = std::nullopt,
-              const std::string& compression = "piz");
+              const std::string& compression = "piz",
+              const std::vector<std::pair<std::string, std::string>>& strings = {});
 
 }  // namespace compose::cubemap

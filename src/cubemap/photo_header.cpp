@@ -19,6 +19,9 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   h.focalLength35mmDerived =
       info.focalLength35mm && info.focal35mmSource != "EXIF FocalLengthIn35mmFilm";
   h.focalLengthMm = info.focalLengthMm;
+  h.cameraMake = info.cameraMake;
+  h.cameraModel = info.cameraModel;
+  h.exposureUnit = info.exposureUnit;
   h.floatingPoint =
       info.sampleType == "float" || info.sampleType == "half" || info.sampleType == "double";
   h.format = info.format;

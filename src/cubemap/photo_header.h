@@ -21,6 +21,8 @@ struct PhotoHeader {
   std::optional<double> focalLengthMm;  // EXIF FocalLength
   bool floatingPoint = false;           // float or half samples (HDR), else integer (LDR)
   std::string format;                   // reader name, e.g. "jpeg", "openexr"
+  // EXIF Make and Model, and a merged photo's compose:exposureUnit (ingest::CaptureInfo).
+  std::string cameraMake, cameraModel, exposureUnit;
 };
 
 // Throws compose::Error (stage "ingest", naming the file) if the file is missing or unreadable.

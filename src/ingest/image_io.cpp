@@ -173,6 +173,7 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.focalPlaneResolutionUnit = h.integer("Exif:FocalPlaneResolutionUnit", 2);
   info.cameraMake = trimmed(h.text("Make"));
   info.cameraModel = trimmed(h.text("Model"));
+  info.exposureUnit = trimmed(h.text("compose:exposureUnit"));
   info.fileColorSpace = h.text("oiio:ColorSpace");
   if (const std::string named = h.text("colorSpace"); !named.empty()) info.fileColorSpace = named;
   if (const ImageAttribute* c = h.find("chromaticities")) {

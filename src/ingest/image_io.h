@@ -54,6 +54,12 @@ namespace compose::ingest {
 
 // Capture metadata from EXIF (and the file header). Absent fields are empty; EXIF values of 0
 // (which many cameras write for "unknown") count as absent.
+// compose:exposureUnit of merged radiance whose unit is the camera's EXIF relative exposure
+// (t · ISO / N²) as an 8-bit photo shows it decoded as sRGB (hdr/capture_merge.h, Units): a plate
+// of the same camera, decoded so, shows radiance L as about L times its own relative exposure. The
+// merge writes it, stitch and convert carry it, the one-shot command's exposure reads it.
+inline constexpr const char* kExifExposureUnit = "EXIF";
+
 struct CaptureInfo {
   std::optional<double> exposureTime;   // seconds (EXIF ExposureTime)
   std::optional<double> fNumber;        // EXIF FNumber
@@ -75,6 +81,9 @@ struct CaptureInfo {
   std::optional<double> captureSeconds;
   int orientation = 1;  // EXIF orientation of the file (already applied)
   std::string cameraMake, cameraModel;
+  // compose:exposureUnit of an EXR that compose merged from photos (kExifExposureUnit: the
+  // radiance is in the unit of the camera's EXIF relative exposures), or empty.
+  std::string exposureUnit;
   std::string fileColorSpace;  // colour space the file or its reader declares
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
   std::optional<std::array<double, 8>> chromaticities;

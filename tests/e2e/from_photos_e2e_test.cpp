@@ -30,6 +30,7 @@
 #include "command_util.h"
 #include "core/numbers.h"
 #include "hdr/response.h"
+#include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -965,31 +966,65 @@ TEST_F(FromPhotos, ExposureFromExifWhenThePlateIsFromTheCapturesCamera) {
   EXPECT_NE(r.err.find("compose virtual camera"), std::string::npos) << r.err;
 
   // The object's fully covered pixels against the plate (uniform but for noise), both linear.
-  const ImageFile out = readImageFile(dir_ / "exif.exr");
-  const Layer* layer = out.part("object");
-  ASSERT_NE(layer, nullptr);
-  const int alpha = layer->channel("object.A");
-  const int rgb[3] = {layer->channel("object.R"), layer->channel("object.G"),
-                      layer->channel("object.B")};
-  ASSERT_GE(std::min({alpha, rgb[0], rgb[1], rgb[2]}), 0) << "the object part's channels";
-  double objectSum = 0.0;
-  int covered = 0;
-  for (int y = layer->y0; y < layer->y0 + layer->height; ++y)
-    for (int x = layer->x0; x < layer->x0 + layer->width; ++x)
-      if (layer->at(x, y, alpha) == 1.0f) {
-        for (int c : rgb) objectSum += layer->at(x, y, c);
-        ++covered;
-      }
-  ASSERT_GT(covered, 50);
   const Layer plateLinear = linearPlate(plate);
   double plateSum = 0.0;
   for (float v : plateLinear.px) plateSum += v;
-  const double ratio = (objectSum / covered) / (plateSum / double(plateLinear.px.size() / 3));
-  std::printf(
-      "[ figures ] exposure from EXIF: a white object in uniform light %.4f, the plate %.4f: "
-      "ratio %.4f\n",
-      objectSum / 3.0 / covered, plateSum / double(plateLinear.px.size()), ratio);
-  EXPECT_NEAR(ratio, 1.0, kExifExposureTolerance);
+  const double plateMean = plateSum / double(plateLinear.px.size());
+  auto objectOverPlate = [&](const fs::path& exrFile, const char* what) {
+    const ImageFile out = readImageFile(exrFile);
+    const Layer* layer = out.part("object");
+    EXPECT_NE(layer, nullptr);
+    if (!layer) return 0.0;
+    const int alpha = layer->channel("object.A");
+    const int rgb[3] = {layer->channel("object.R"), layer->channel("object.G"),
+                        layer->channel("object.B")};
+    EXPECT_GE(std::min({alpha, rgb[0], rgb[1], rgb[2]}), 0) << "the object part's channels";
+    double objectSum = 0.0;
+    int covered = 0;
+    for (int y = layer->y0; y < layer->y0 + layer->height; ++y)
+      for (int x = layer->x0; x < layer->x0 + layer->width; ++x)
+        if (layer->at(x, y, alpha) == 1.0f) {
+          for (int c : rgb) objectSum += layer->at(x, y, c);
+          ++covered;
+        }
+    EXPECT_GT(covered, 50);
+    const double white = objectSum / 3.0 / std::max(covered, 1);
+    std::printf(
+        "[ figures ] exposure from EXIF (%s): a white object in uniform light %.4f, the plate "
+        "%.4f: ratio %.4f\n",
+        what, white, plateMean, white / plateMean);
+    return white / plateMean;
+  };
+  EXPECT_NEAR(objectOverPlate(dir_ / "exif.exr", "the capture description"), 1.0,
+              kExifExposureTolerance);
+
+  // The same by hand, stage by stage: merge, stitch, and the stitched map as --env. The merged
+  // views and the map say their camera and that their radiance is in its EXIF exposure unit, so
+  // the plate's EXIF sets the exposure as it does with the capture description.
+  r = run("merge --capture " + q(shots / "capture.json") + " --out " + q(dir_ / "merged"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::string views;
+  for (const char* v : {"px", "nx", "py", "ny", "pz", "nz"})
+    views += " " + q(dir_ / "merged" / (std::string(v) + ".exr"));
+  r = run("stitch --calib " + q(shots / "camera.json") + " --no-refine --to latlong --out " +
+              q(dir_ / "stitched.exr") + views,
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(ingest::readCaptureInfo(dir_ / "stitched.exr").exposureUnit, ingest::kExifExposureUnit);
+  r = run("--plate " + q(plate) + " --env " + q(dir_ / "stitched.exr") + object + " --out " +
+              q(dir_ / "exif_by_hand"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
+  EXPECT_NEAR(objectOverPlate(dir_ / "exif_by_hand.exr", "merged and stitched by hand"), 1.0,
+              kExifExposureTolerance);
+  // Merged with exposures given on the command line, the unit is not EXIF's: not marked.
+  r = run("merge --exposures 0.25,1,4 --out " + q(dir_ / "given.exr") + " " +
+              q(shots / "pz_1.jpg") + " " + q(shots / "pz_2.jpg") + " " + q(shots / "pz_3.jpg"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(ingest::readCaptureInfo(dir_ / "given.exr").exposureUnit, "");
 
   // A plate from another camera (the small tabletop plate: no EXIF): the automatic match, and
   // the reason EXIF was not used.
