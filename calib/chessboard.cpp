@@ -218,7 +218,7 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
 }
 
 PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens& lensIn,
-                            const Board& board) {
+                            const Board& board, int orientation) {
   board.validate();
   PlatePose pose;
   pose.board = board;
@@ -226,6 +226,16 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
   pose.width = plate.width;
   pose.height = plate.height;
   Lens lens = lensIn;
+  {
+    // A portrait plate (turned by its EXIF orientation) from a lens calibrated in landscape.
+    const Lens turned = lensIn.turnedFor(orientation);
+    const double b = double(plate.width) / plate.height;
+    if (std::abs(double(lens.width) / lens.height / b - 1.0) > 0.002 &&
+        std::abs(double(turned.width) / turned.height / b - 1.0) <= 0.002) {
+      lens = turned;
+      pose.notes.push_back("the lens was turned for the plate's EXIF orientation");
+    }
+  }
   if (lens.width != plate.width || lens.height != plate.height) {
     const double a = double(lens.width) / lens.height, b = double(plate.width) / plate.height;
     if (std::abs(a / b - 1.0) > 0.002) {

@@ -83,11 +83,12 @@ struct PlatePose {
   glm::dvec3 cameraPosition() const { return glm::dvec3(worldFromCamera[3]); }
 };
 
-// The camera's pose relative to a chessboard visible in the plate. The lens is scaled to the
-// plate's size when it was calibrated at another size of the same aspect ratio (noted); a
-// different aspect ratio is an error.
+// The camera's pose relative to a chessboard visible in the plate. The lens is turned for a plate
+// the EXIF `orientation` (of the plate file, already applied to `plate`) turned by 90° when it was
+// calibrated the other way round, and scaled to the plate's size when it was calibrated at
+// another size of the same aspect ratio (both noted); another aspect ratio is an error.
 PlatePose estimatePlatePose(const Image& plate, const std::filesystem::path& file, const Lens& lens,
-                            const Board& board);
+                            const Board& board, int orientation = 1);
 
 void writePose(const std::filesystem::path& file, const PlatePose& pose);
 // The JSON text writePose() writes.

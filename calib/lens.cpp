@@ -141,6 +141,27 @@ Lens Lens::resized(int newWidth, int newHeight) const {
   return l;
 }
 
+Lens Lens::turnedFor(int exifOrientation) const {
+  if (exifOrientation != 6 && exifOrientation != 8) return *this;
+  Lens l = *this;
+  l.width = height;
+  l.height = width;
+  l.fx = fy;
+  l.fy = fx;
+  // Stored (x, y) is seen at (H - y, x) for 6 and at (y, W - x) for 8 (continuous pixels);
+  // normalised coordinates (u, v) become (-v, u) and (v, -u).
+  const bool clockwise = exifOrientation == 6;
+  l.cx = clockwise ? double(height) - cy : cy;
+  l.cy = clockwise ? cx : double(width) - cx;
+  if (projection == Projection::Rectilinear && distortion.size() >= 4) {
+    const double p1 = distortion[2], p2 = distortion[3];
+    l.distortion[2] = clockwise ? p2 : -p2;
+    l.distortion[3] = clockwise ? -p1 : p1;
+  }
+  l.source = source + (source.empty() ? "" : ", ") + "turned for the photo's EXIF orientation";
+  return l;
+}
+
 double Lens::horizontalFovDegrees() const {
   glm::dvec3 left, right;
   if (!direction(0.0, cy, left) || !direction(double(width), cy, right)) return 0.0;

@@ -56,6 +56,12 @@ struct Lens {
   // The same lens for the image resized to width x height (focal lengths and principal point
   // scale with the image; distortion is in normalised coordinates and does not change).
   Lens resized(int newWidth, int newHeight) const;
+  // The same lens for its image turned as EXIF orientation 6 (turned 90° clockwise to be seen
+  // upright) or 8 (90° anticlockwise) turns it: a portrait photo from a lens calibrated on
+  // landscape ones. Width and height, the focal lengths and the principal point swap, and the
+  // tangential distortion turns with the image (radial terms do not change). Any other
+  // orientation: the lens as it is.
+  Lens turnedFor(int exifOrientation) const;
   // Horizontal field of view in degrees across the image's width through the principal point.
   double horizontalFovDegrees() const;
 

@@ -70,13 +70,21 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   cam.height = height;
   const double diagonalPx = std::hypot(double(width), double(height));
   if (options.lens) {
-    const Lens& l = *options.lens;
-    const double aspect = double(width) / height, lensAspect = double(l.width) / l.height;
+    const double aspect = double(width) / height;
+    auto aspectOf = [](const Lens& lens) { return double(lens.width) / lens.height; };
+    // A portrait plate (turned by its EXIF orientation) from a lens calibrated in landscape.
+    const Lens turned = options.lens->turnedFor(exif.orientation);
+    const Lens& l = std::abs(aspect / aspectOf(*options.lens) - 1.0) > 0.01 &&
+                            std::abs(aspect / aspectOf(turned) - 1.0) <= 0.01
+                        ? turned
+                        : *options.lens;
+    const double lensAspect = aspectOf(l);
     if (std::abs(aspect / lensAspect - 1.0) > 0.01) {
       throw Error("camera", "the calibration is for " + std::to_string(l.width) + "x" +
                                 std::to_string(l.height) + " images, the plate is " +
                                 std::to_string(width) + "x" + std::to_string(height) +
-                                " (another aspect ratio: cropped or rotated?)");
+                                " (another aspect ratio: cropped, or turned without an EXIF "
+                                "orientation that says so?)");
     }
     cam.lens = (l.width == width && l.height == height) ? l : l.resized(width, height);
     cam.focal35mm = 0.5 * (cam.lens.fx + cam.lens.fy) / diagonalPx * kFullFrameDiagonalMm;

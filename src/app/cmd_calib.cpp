@@ -154,7 +154,7 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
                       " mm equivalent); calibrate the lens for an accurate pose");
     }
     const calib::PlatePose result =
-        calib::estimatePlatePose(plate.image, o->plate, lensModel, board);
+        calib::estimatePlatePose(plate.image, o->plate, lensModel, board, plate.info.orientation);
     calib::writePose(o->poseOut, result);
     if (!globals.quiet) {
       const glm::dvec3 c = result.cameraPosition();

@@ -22,6 +22,7 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   h.cameraMake = info.cameraMake;
   h.cameraModel = info.cameraModel;
   h.exposureUnit = info.exposureUnit;
+  h.orientation = info.orientation;
   h.floatingPoint =
       info.sampleType == "float" || info.sampleType == "half" || info.sampleType == "double";
   h.format = info.format;
@@ -35,6 +36,10 @@ calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
     if (lensFile->width == h.width && lensFile->height == h.height) return *lensFile;
     if (std::abs(double(lensFile->width) / lensFile->height - double(h.width) / h.height) < 1e-3)
       return lensFile->resized(h.width, h.height);
+    // A portrait photo (turned by its EXIF orientation) from a lens calibrated in landscape.
+    const calib::Lens turned = lensFile->turnedFor(h.orientation);
+    if (std::abs(double(turned.width) / turned.height - double(h.width) / h.height) < 1e-3)
+      return turned.width == h.width ? turned : turned.resized(h.width, h.height);
     throw Error("stitch",
                 "the lens file is for " + std::to_string(lensFile->width) + "x" +
                     std::to_string(lensFile->height) + " images, the photo is " +

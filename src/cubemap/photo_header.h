@@ -23,6 +23,7 @@ struct PhotoHeader {
   std::string format;                   // reader name, e.g. "jpeg", "openexr"
   // EXIF Make and Model, and a merged photo's compose:exposureUnit (ingest::CaptureInfo).
   std::string cameraMake, cameraModel, exposureUnit;
+  int orientation = 1;  // EXIF orientation (applied: width and height are as seen)
 };
 
 // Throws compose::Error (stage "ingest", naming the file) if the file is missing or unreadable.

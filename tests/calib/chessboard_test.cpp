@@ -2,6 +2,7 @@
 // synthetic photo of a board seen through a known camera.
 #include "calib/chessboard.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -193,6 +194,26 @@ TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
   EXPECT_GT(glm::dot(forward, toOrigin), std::cos(0.2 * std::numbers::pi / 180.0));
   // +Y of the camera's image is up in the world, roughly (the camera is not rolled).
   EXPECT_GT(pose.worldFromCamera[1][1], 0.5);
+
+  // The same photo held as a portrait (stored landscape, EXIF orientation 6: seen turned 90°
+  // clockwise), posed with the landscape lens: the lens is turned with it, and the camera is
+  // where it was, to the precision of the corners.
+  Image portrait(photo.height, photo.width, photo.channels, photo.channelNames);
+  for (int y = 0; y < photo.height; ++y)
+    for (int x = 0; x < photo.width; ++x)
+      for (int c = 0; c < photo.channels; ++c)
+        portrait.at(photo.height - 1 - y, x)[c] = photo.at(x, y)[c];
+  const PlatePose turned = estimatePlatePose(portrait, "portrait.png", lens, board, 6);
+  glm::dvec3 q = turned.cameraPosition();
+  if (glm::length(q - eye) > glm::length(glm::dvec3(-q.x, q.y, -q.z) - eye)) q = {-q.x, q.y, -q.z};
+  EXPECT_NEAR(glm::length(q - eye), 0.0, 0.002);
+  EXPECT_LT(turned.rms, 0.2);
+  EXPECT_NE(std::find(turned.notes.begin(), turned.notes.end(),
+                      "the lens was turned for the plate's EXIF orientation"),
+            turned.notes.end());
+  // Without the orientation the aspect is another one: an error, as before.
+  COMPOSE_EXPECT_ERROR(estimatePlatePose(portrait, "portrait.png", lens, board),
+                       "another aspect ratio");
 
   TempDir dir;
   writePose(dir / "pose.json", pose);

@@ -60,6 +60,46 @@ TEST(Lens, RectilinearWithDistortionRoundTrips) {
   EXPECT_GT(std::acos(glm::dot(a, b)), 0.02);
 }
 
+// A portrait photo turned upright by EXIF orientation 6 or 8, from a lens calibrated in
+// landscape: the turned lens sees a direction (in the upright photo's camera frame) at the pixel
+// where the stored photo shows it, turned. Off-centre principal point and tangential distortion
+// make every term count.
+TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
+  Lens lens = Lens::fromFieldOfView(640, 480, 70.0);
+  lens.fy = lens.fx * 1.01;
+  lens.cx = 330.0;
+  lens.cy = 228.0;
+  lens.distortion = {-0.29, 0.11, 0.004, -0.003, 0.02};
+  for (const int orientation : {6, 8}) {
+    SCOPED_TRACE(orientation);
+    const Lens turned = lens.turnedFor(orientation);
+    EXPECT_EQ(turned.width, 480);
+    EXPECT_EQ(turned.height, 640);
+    int checked = 0;
+    for (double a = -0.5; a <= 0.5; a += 0.125) {
+      for (double b = -0.4; b <= 0.4; b += 0.1) {
+        const glm::dvec3 d = glm::normalize(glm::dvec3(a, b, -1.0));
+        glm::dvec2 stored, seen;
+        ASSERT_TRUE(lens.project(d, stored));
+        // The upright photo's camera frame: for 6 its right is the stored up (+Y) and its up
+        // the stored left (-X); for 8 the other way round.
+        const glm::dvec3 upright =
+            orientation == 6 ? glm::dvec3(d.y, -d.x, d.z) : glm::dvec3(-d.y, d.x, d.z);
+        ASSERT_TRUE(turned.project(upright, seen));
+        const glm::dvec2 expected = orientation == 6 ? glm::dvec2(480.0 - stored.y, stored.x)
+                                                     : glm::dvec2(stored.y, 640.0 - stored.x);
+        EXPECT_NEAR(seen.x, expected.x, 1e-6);
+        EXPECT_NEAR(seen.y, expected.y, 1e-6);
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 50);
+  }
+  // Other orientations leave the lens as it is.
+  EXPECT_EQ(lens.turnedFor(1).width, 640);
+  EXPECT_EQ(lens.turnedFor(3).cx, lens.cx);
+}
+
 TEST(Lens, EquidistantFisheye) {
   Lens lens = Lens::fromFieldOfView(1000, 1000, 180.0, Projection::Equidistant);
   glm::dvec3 d;
