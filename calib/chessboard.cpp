@@ -117,17 +117,61 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
                             " given, and the calibration asks for at least " +
                             std::to_string(params.minPhotos) + " with the board (--min-photos)");
   }
-  const Image& first = *photos.front().image;
+  // Photos turned upright by their EXIF orientation (a portrait among landscapes) are one
+  // sensor's: their corners are taken back to the sensor's frame and on to the first photo's.
+  auto turnsBy90 = [](int o) { return o == 6 || o == 8; };
+  auto stored = [&](const CalibrationPhoto& p) {  // the sensor's size of a photo
+    return turnsBy90(p.orientation) ? cv::Size(p.image->height, p.image->width)
+                                    : cv::Size(p.image->width, p.image->height);
+  };
   for (const CalibrationPhoto& p : photos) {
-    if (p.image->width != first.width || p.image->height != first.height) {
+    if (p.orientation != 1 && p.orientation != 3 && !turnsBy90(p.orientation) &&
+        p.orientation != photos.front().orientation) {
       throw Error(kStage,
-                  "calibration photos must all have the same size: this one is " +
-                      std::to_string(p.image->width) + "x" + std::to_string(p.image->height) +
-                      ", " + photos.front().file.filename().string() + " is " +
-                      std::to_string(first.width) + "x" + std::to_string(first.height),
+                  "the photo's EXIF orientation " + std::to_string(p.orientation) +
+                      " mirrors it, unlike " + photos.front().file.filename().string() +
+                      ": a mirrored photo cannot be calibrated with the others",
+                  p.file);
+    }
+    if (stored(p) != stored(photos.front())) {
+      const cv::Size a = stored(p), b = stored(photos.front());
+      throw Error(kStage,
+                  "calibration photos must all come from one sensor size: this one is " +
+                      std::to_string(a.width) + "x" + std::to_string(a.height) + ", " +
+                      photos.front().file.filename().string() + " is " + std::to_string(b.width) +
+                      "x" + std::to_string(b.height) + " (before their EXIF orientations)",
                   p.file);
     }
   }
+  const Image& first = *photos.front().image;
+  const cv::Size sensor = stored(photos.front());
+  // Pixel centres (OpenCV's convention) of the upright photo to the sensor's frame and back.
+  auto toSensor = [&](cv::Point2f q, int o) {
+    const float w = float(sensor.width - 1), h = float(sensor.height - 1);
+    switch (o) {
+      case 3:
+        return cv::Point2f(w - q.x, h - q.y);
+      case 6:
+        return cv::Point2f(q.y, h - q.x);
+      case 8:
+        return cv::Point2f(w - q.y, q.x);
+      default:
+        return q;
+    }
+  };
+  auto fromSensor = [&](cv::Point2f q, int o) {
+    const float w = float(sensor.width - 1), h = float(sensor.height - 1);
+    switch (o) {
+      case 3:
+        return cv::Point2f(w - q.x, h - q.y);
+      case 6:
+        return cv::Point2f(h - q.y, q.x);
+      case 8:
+        return cv::Point2f(q.y, w - q.x);
+      default:
+        return q;
+    }
+  };
   LensCalibration out;
   std::vector<std::vector<cv::Point2f>> imagePoints;
   for (size_t i = 0; i < photos.size(); ++i) {
@@ -136,6 +180,10 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
     if (corners.empty()) {
       out.rejected.push_back(photos[i].file);
     } else {
+      if (photos[i].orientation != photos.front().orientation) {
+        for (cv::Point2f& c : corners)
+          c = fromSensor(toSensor(c, photos[i].orientation), photos.front().orientation);
+      }
       out.used.push_back(photos[i].file);
       imagePoints.push_back(std::move(corners));
     }

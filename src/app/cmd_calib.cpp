@@ -86,7 +86,8 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
         printer("read", double(i + 1) / double(shots.size()));
       }
       std::vector<calib::CalibrationPhoto> photos;
-      for (size_t i = 0; i < shots.size(); ++i) photos.push_back({shots[i].file, &images[i].image});
+      for (size_t i = 0; i < shots.size(); ++i)
+        photos.push_back({shots[i].file, &images[i].image, images[i].info.orientation});
       const calib::LensCalibration cal =
           calib::calibrateLens(photos, board, params, printer.callback());
       calib::writeLens(o->lensOut, cal.lens);

@@ -73,6 +73,58 @@ TEST(Chessboard, CalibratesTheOpenCvLeftCameraWithinTheIssueTargets) {
   EXPECT_EQ(back.distortion, l.distortion);
 }
 
+// Some of the same photos held as portraits (turned upright by EXIF orientation 6 or 8) or
+// upside down (3): their corners go back to the sensor's frame, and the lens is the one the
+// landscape photos alone give.
+TEST(Chessboard, PortraitAndUpsideDownPhotosCalibrateTheSameLens) {
+  std::vector<std::filesystem::path> files;
+  const auto images = loadLeftPhotos(files);
+  ASSERT_GE(files.size(), 10u) << "sample chessboard photos missing (samples/fetch.sh)";
+  const LensCalibration plain = calibrateLens(photosOf(files, images), Board::parse("9x6"), {});
+  // Turned as a camera held so would store them, seen upright: 6 turns clockwise to be seen.
+  auto turned = [](const Image& img, int orientation) {
+    const bool quarter = orientation == 6 || orientation == 8;
+    Image out(quarter ? img.height : img.width, quarter ? img.width : img.height, img.channels,
+              img.channelNames);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        const int tx = orientation == 6   ? img.height - 1 - y
+                       : orientation == 8 ? y
+                                          : img.width - 1 - x;
+        const int ty = orientation == 6   ? x
+                       : orientation == 8 ? img.width - 1 - x
+                                          : img.height - 1 - y;
+        for (int c = 0; c < img.channels; ++c) out.at(tx, ty)[c] = img.at(x, y)[c];
+      }
+    return out;
+  };
+  std::vector<Image> held(images.size());
+  std::vector<CalibrationPhoto> photos;
+  const int orientations[] = {1, 6, 8, 3, 6};  // the first stays a landscape: the lens's frame
+  for (size_t i = 0; i < images.size(); ++i) {
+    const int o = i < 5 ? orientations[i] : 1;
+    held[i] = o == 1 ? images[i].image : turned(images[i].image, o);
+    photos.push_back({files[i], &held[i], o});
+  }
+  const LensCalibration mixed = calibrateLens(photos, Board::parse("9x6"), {});
+  const Lens &a = plain.lens, &b = mixed.lens;
+  std::printf(
+      "[ figures ] mixed orientations: fx %.3f / %.3f, cx %.3f / %.3f, cy %.3f / %.3f, "
+      "RMS %.4f / %.4f px\n",
+      b.fx, a.fx, b.cx, a.cx, b.cy, a.cy, b.rms, a.rms);
+  EXPECT_EQ(b.width, 640);
+  EXPECT_EQ(b.height, 480);
+  EXPECT_NEAR(b.fx, a.fx, 0.5);
+  EXPECT_NEAR(b.fy, a.fy, 0.5);
+  EXPECT_NEAR(b.cx, a.cx, 0.5);
+  EXPECT_NEAR(b.cy, a.cy, 0.5);
+  EXPECT_NEAR(b.rms, a.rms, 0.05);
+  EXPECT_EQ(mixed.used.size(), plain.used.size());
+  // Without the orientations the sizes differ: refused, naming the photo.
+  photos[1].orientation = 1;
+  COMPOSE_EXPECT_ERROR(calibrateLens(photos, Board::parse("9x6"), {}), "one sensor size");
+}
+
 TEST(Chessboard, WrongBoardSizeNamesTheBoardAndThePhotos) {
   std::vector<std::filesystem::path> files;
   const auto images = loadLeftPhotos(files);
