@@ -7,6 +7,7 @@
 #include "app/cli.h"
 #include "capture/virtual_camera.h"
 #include "color/color.h"
+#include "cubemap/environment_io.h"
 #include "hdr/capture_merge.h"
 #include "ingest/image_io.h"
 #include "lighting/environment.h"
@@ -36,7 +37,11 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       "camera.json (the lens), truth.json and response_truth.json (the ground truth).\n\n"
       "Example:\n  compose capture-sim --env forest.exr --out shots/ --views 6 --brackets 3 "
       "--ev-step 2\n  compose merge --capture shots/capture.json --out merged/");
-  command.add_option("--env", o->env, "HDR environment, lat-long (equirectangular)")->required();
+  command
+      .add_option("--env", o->env,
+                  "HDR environment: lat-long (equirectangular), a cube, a cross or six faces, "
+                  "as compose --env takes it")
+      ->required();
   command.add_option("--out", o->out, "Output folder")->required();
   command.add_option("--fov", params.fovDegrees, "Horizontal field of view, degrees")
       ->capture_default_str();
@@ -150,10 +155,23 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     std::string why;
     const std::string cameraSpace = hdr::linearSpaceFor(colors, "sRGB", "", &why);
 
-    ingest::LoadedImage env = ingest::readImage(o->env, "capture-sim");
-    env.image.colorSpace =
-        envSpace.empty() ? colors.inputSpaceFor(o->env, env.info.fileColorSpace) : envSpace;
-    colors.convert(env.image, cameraSpace);
+    // Any layout --env takes (a cube, a cross, six faces), as a lat-long map; its colour space
+    // as compose --env reads it (an OpenEXR's chromaticities first).
+    cubemap::LoadedEnvironment env = cubemap::loadEnvironment(o->env, {});
+    if (!globals.quiet)
+      for (const std::string& n : env.notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
+    const std::string byPrimaries = envSpace.empty() && env.info.chromaticities
+                                        ? colors.spaceWithChromaticities(*env.info.chromaticities)
+                                        : std::string();
+    if (envSpace.empty() && env.info.chromaticities && byPrimaries.empty()) {
+      colors.convertFromChromaticities(env.image, *env.info.chromaticities, cameraSpace);
+    } else {
+      env.image.colorSpace = !envSpace.empty() ? envSpace
+                             : !byPrimaries.empty()
+                                 ? byPrimaries
+                                 : colors.inputSpaceFor(o->env, env.info.fileColorSpace);
+      colors.convert(env.image, cameraSpace);
+    }
     lighting::SanitizeReport sanitize;
     const lighting::Environment environment =
         lighting::Environment::fromLatLong(env.image, o->env, &sanitize);

@@ -144,7 +144,11 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         if (derived) f35 += "*";
         std::printf("%-24s %-11s %-6s %-10s %-5s %-6s %-9s %-7s %-7s %-22s %s\n",
                     s.file.filename().string().c_str(),
-                    (std::to_string(i.fileWidth) + "x" + std::to_string(i.fileHeight)).c_str(),
+                    // As seen (after the EXIF orientation), as merge and stitch report it.
+                    (i.orientation >= 5 && i.orientation <= 8
+                         ? std::to_string(i.fileHeight) + "x" + std::to_string(i.fileWidth)
+                         : std::to_string(i.fileWidth) + "x" + std::to_string(i.fileHeight))
+                        .c_str(),
                     i.sampleType.c_str(), exposureTime(i.exposureTime).c_str(),
                     number(i.fNumber, "%.1f").c_str(), number(i.iso, "%.0f").c_str(),
                     rel ? number(std::log2(*rel), "%+.2f").c_str() : "-",

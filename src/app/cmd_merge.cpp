@@ -124,7 +124,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       ->capture_default_str();
   command.add_option("--response-dir", o->responseDir,
                      "Folder of per-camera response curves [default: $COMPOSE_RESPONSE_DIR, "
-                     "else ~/.cache/compose/responses]");
+                     "else $XDG_CACHE_HOME/compose/responses, else ~/.cache/compose/responses]");
   command.add_option("--input-space", o->inputSpace,
                      "Colour space of the photos [default: declared by the files]");
   command.add_option("--linear-space", o->linearSpace,

@@ -241,10 +241,14 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
                     (o->gains == "auto" &&
                      std::any_of(headers.begin(), headers.end(),
                                  [](const cubemap::PhotoHeader& h) { return !h.floatingPoint; }));
+    std::string faceSizeFrom;  // the photo whose pixels set the face size
     if (o->size == 0) {
       // Texels as fine as the photos' pixels at their centres: a face of 2 fx texels, at most 2048.
       double fx = 1e9;
-      for (const auto& p : photos) fx = std::min(fx, p.lens.fx);
+      for (const auto& p : photos) {
+        if (p.lens.fx < fx) faceSizeFrom = p.name;
+        fx = std::min(fx, p.lens.fx);
+      }
       options.faceSize = std::clamp(int(std::lround(2.0 * fx / 8.0)) * 8, 64, 2048);
     }
 
@@ -366,8 +370,12 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         notes.push_back(line);
       }
       for (const auto& n : result.notes) notes.push_back(n);
-      notes.push_back("cube faces " + std::to_string(cube.size()) + "x" +
-                      std::to_string(cube.size()) + ", colour space '" + target + "'");
+      notes.push_back(
+          "cube faces " + std::to_string(cube.size()) + "x" + std::to_string(cube.size()) +
+          (faceSizeFrom.empty() ? std::string(" (--size)")
+                                : " (as fine as the coarsest photo's pixels: " + faceSizeFrom +
+                                      "; --size sets it)") +
+          ", colour space '" + target + "'");
       notes.push_back(percent(result.coverage.uncovered) +
                       " of the sphere was seen by no photo and filled from its surroundings" +
                       (result.coverage.partial > 0.0

@@ -548,9 +548,13 @@ void resolveExposures(Capture& capture) {
       if (s.exposure) continue;
       s.exposure = s.info.relativeExposure();
       if (!s.exposure) {
+        const bool fromDescription = capture.method.rfind("capture description", 0) == 0;
         throw Error(kStage,
-                    "no exposure time in EXIF and no exposure given (pass --exposures t1,t2,... "
-                    "in the order of the photos, or a capture description)",
+                    fromDescription
+                        ? "no exposure time in EXIF and none in the capture description "
+                          "(give it an \"exposure\" or \"exposureTime\")"
+                        : "no exposure time in EXIF and no exposure given (pass --exposures "
+                          "t1,t2,... in the order of the photos, or a capture description)",
                     s.file);
       }
       s.exposureSource = "EXIF";
