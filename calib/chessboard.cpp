@@ -118,19 +118,18 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
                             std::to_string(params.minPhotos) + " with the board (--min-photos)");
   }
   // Photos turned upright by their EXIF orientation (a portrait among landscapes) are one
-  // sensor's: their corners are taken back to the sensor's frame and on to the first photo's.
+  // sensor's: their corners are taken back to the sensor's frame, in which the lens is written
+  // (and turned again for each photo that uses it: calib::lensForImage).
   auto turnsBy90 = [](int o) { return o == 6 || o == 8; };
   auto stored = [&](const CalibrationPhoto& p) {  // the sensor's size of a photo
     return turnsBy90(p.orientation) ? cv::Size(p.image->height, p.image->width)
                                     : cv::Size(p.image->width, p.image->height);
   };
   for (const CalibrationPhoto& p : photos) {
-    if (p.orientation != 1 && p.orientation != 3 && !turnsBy90(p.orientation) &&
-        p.orientation != photos.front().orientation) {
+    if (p.orientation != 1 && p.orientation != 3 && !turnsBy90(p.orientation)) {
       throw Error(kStage,
                   "the photo's EXIF orientation " + std::to_string(p.orientation) +
-                      " mirrors it, unlike " + photos.front().file.filename().string() +
-                      ": a mirrored photo cannot be calibrated with the others",
+                      " mirrors it: a mirrored photo is not a camera's view of the board",
                   p.file);
     }
     if (stored(p) != stored(photos.front())) {
@@ -143,7 +142,6 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
                   p.file);
     }
   }
-  const Image& first = *photos.front().image;
   const cv::Size sensor = stored(photos.front());
   // Pixel centres (OpenCV's convention) of the upright photo to the sensor's frame and back.
   auto toSensor = [&](cv::Point2f q, int o) {
@@ -159,19 +157,6 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
         return q;
     }
   };
-  auto fromSensor = [&](cv::Point2f q, int o) {
-    const float w = float(sensor.width - 1), h = float(sensor.height - 1);
-    switch (o) {
-      case 3:
-        return cv::Point2f(w - q.x, h - q.y);
-      case 6:
-        return cv::Point2f(h - q.y, q.x);
-      case 8:
-        return cv::Point2f(q.y, w - q.x);
-      default:
-        return q;
-    }
-  };
   LensCalibration out;
   std::vector<std::vector<cv::Point2f>> imagePoints;
   for (size_t i = 0; i < photos.size(); ++i) {
@@ -180,10 +165,8 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
     if (corners.empty()) {
       out.rejected.push_back(photos[i].file);
     } else {
-      if (photos[i].orientation != photos.front().orientation) {
-        for (cv::Point2f& c : corners)
-          c = fromSensor(toSensor(c, photos[i].orientation), photos.front().orientation);
-      }
+      if (photos[i].orientation != 1)
+        for (cv::Point2f& c : corners) c = toSensor(c, photos[i].orientation);
       out.used.push_back(photos[i].file);
       imagePoints.push_back(std::move(corners));
     }
@@ -204,13 +187,13 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
     throw Error(kStage, what, photos.front().file);
   }
   const std::vector<std::vector<cv::Point3f>> objectPoints(imagePoints.size(), boardPoints(board));
-  const cv::Size size(first.width, first.height);
+  const cv::Size size = sensor;
   cv::Mat K, dist;
   std::vector<cv::Mat> rvecs, tvecs;
   double rms = 0.0;
   Lens& lens = out.lens;
-  lens.width = first.width;
-  lens.height = first.height;
+  lens.width = sensor.width;
+  lens.height = sensor.height;
   lens.projection = params.model;
   try {
     if (params.model == Projection::Rectilinear) {
@@ -273,31 +256,26 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
   pose.image = file;
   pose.width = plate.width;
   pose.height = plate.height;
-  Lens lens = lensIn;
-  {
-    // A portrait plate (turned by its EXIF orientation) from a lens calibrated in landscape.
-    const Lens turned = lensIn.turnedFor(orientation);
-    const double b = double(plate.width) / plate.height;
-    if (std::abs(double(lens.width) / lens.height / b - 1.0) > 0.002 &&
-        std::abs(double(turned.width) / turned.height / b - 1.0) <= 0.002) {
-      lens = turned;
-      pose.notes.push_back("the lens was turned for the plate's EXIF orientation");
-    }
+  // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
+  const std::optional<Lens> fitted =
+      lensForImage(lensIn, plate.width, plate.height, orientation, 0.002);
+  if (!fitted) {
+    throw Error(kStage,
+                "the lens was calibrated for " + std::to_string(lensIn.width) + "x" +
+                    std::to_string(lensIn.height) + " images, the plate is " +
+                    std::to_string(plate.width) + "x" + std::to_string(plate.height) +
+                    " (another aspect ratio: a crop, which the calibration cannot follow, or a "
+                    "photo turned without an EXIF orientation that says so)",
+                file);
   }
-  if (lens.width != plate.width || lens.height != plate.height) {
-    const double a = double(lens.width) / lens.height, b = double(plate.width) / plate.height;
-    if (std::abs(a / b - 1.0) > 0.002) {
-      throw Error(kStage,
-                  "the lens was calibrated for " + std::to_string(lens.width) + "x" +
-                      std::to_string(lens.height) + " images, the plate is " +
-                      std::to_string(plate.width) + "x" + std::to_string(plate.height) +
-                      " (another aspect ratio: a crop, which the calibration cannot follow)",
-                  file);
-    }
-    lens = lens.resized(plate.width, plate.height);
+  const Lens lens = *fitted;
+  if (lens.source != lensIn.source)  // lensForImage says when it turned the lens
+    pose.notes.push_back("the lens was turned for the plate's EXIF orientation");
+  const bool sameSize = (lensIn.width == plate.width && lensIn.height == plate.height) ||
+                        (lensIn.width == plate.height && lensIn.height == plate.width);
+  if (!sameSize)
     pose.notes.push_back("the lens (" + std::to_string(lensIn.width) + "x" +
                          std::to_string(lensIn.height) + ") was scaled to the plate's size");
-  }
   pose.lens = lens;
   const auto corners = findCorners(grey8(plate), board);
   if (corners.empty()) {

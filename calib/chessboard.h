@@ -57,7 +57,7 @@ struct CalibrationPhoto {
   std::filesystem::path file;
   const Image* image = nullptr;  // as read (ingest::readImage): encoded values in [0, 1]
   // The EXIF orientation readImage applied (1 upright, 3 turned 180°, 6 and 8 turned 90°): photos
-  // held as portraits and as landscapes calibrate one lens, in the first photo's frame.
+  // held as portraits and as landscapes calibrate one lens, in the sensor's frame (as stored).
   int orientation = 1;
 };
 

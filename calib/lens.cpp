@@ -142,6 +142,17 @@ Lens Lens::resized(int newWidth, int newHeight) const {
 }
 
 Lens Lens::turnedFor(int exifOrientation) const {
+  if (exifOrientation == 3) {  // turned 180°: (x, y) is seen at (W - x, H - y), (u, v) at (-u, -v)
+    Lens l = *this;
+    l.cx = double(width) - cx;
+    l.cy = double(height) - cy;
+    if (projection == Projection::Rectilinear && distortion.size() >= 4) {
+      l.distortion[2] = -distortion[2];
+      l.distortion[3] = -distortion[3];
+    }
+    l.source = source + (source.empty() ? "" : ", ") + "turned for the photo's EXIF orientation";
+    return l;
+  }
   if (exifOrientation != 6 && exifOrientation != 8) return *this;
   Lens l = *this;
   l.width = height;
@@ -160,6 +171,21 @@ Lens Lens::turnedFor(int exifOrientation) const {
   }
   l.source = source + (source.empty() ? "" : ", ") + "turned for the photo's EXIF orientation";
   return l;
+}
+
+std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation,
+                                 double aspectTolerance) {
+  const double aspect = double(width) / height;
+  auto fits = [&](const Lens& l) {
+    return std::abs(double(l.width) / l.height / aspect - 1.0) <= aspectTolerance;
+  };
+  auto sized = [&](const Lens& l) {
+    return l.width == width && l.height == height ? l : l.resized(width, height);
+  };
+  const Lens turned = lens.turnedFor(exifOrientation);
+  if (fits(turned)) return sized(turned);
+  if (fits(lens)) return sized(lens);  // a lens file written in the photo's upright frame
+  return std::nullopt;
 }
 
 double Lens::horizontalFovDegrees() const {

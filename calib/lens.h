@@ -20,6 +20,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -57,10 +58,10 @@ struct Lens {
   // scale with the image; distortion is in normalised coordinates and does not change).
   Lens resized(int newWidth, int newHeight) const;
   // The same lens for its image turned as EXIF orientation 6 (turned 90° clockwise to be seen
-  // upright) or 8 (90° anticlockwise) turns it: a portrait photo from a lens calibrated on
-  // landscape ones. Width and height, the focal lengths and the principal point swap, and the
-  // tangential distortion turns with the image (radial terms do not change). Any other
-  // orientation: the lens as it is.
+  // upright), 8 (90° anticlockwise) or 3 (180°) turns it: a portrait photo from a lens calibrated
+  // on landscape ones. For 6 and 8 width and height, the focal lengths and the principal point
+  // swap; the principal point and the tangential distortion turn with the image (radial terms do
+  // not change). Any other orientation (mirrored ones included): the lens as it is.
   Lens turnedFor(int exifOrientation) const;
   // Horizontal field of view in degrees across the image's width through the principal point.
   double horizontalFovDegrees() const;
@@ -68,6 +69,14 @@ struct Lens {
   // Throws compose::Error (stage "calib") if a value is not usable; `file` names the source.
   void validate(const std::filesystem::path& file = {}) const;
 };
+
+// The lens for an image of width x height seen upright after its EXIF orientation, from a lens
+// in the sensor's frame (photos as stored, which is how compose calib lens writes it): turned by
+// the orientation and resized. A lens that fits the upright image as it is (a lens file
+// calibrated on photos held that way) is taken as it is. Empty when neither fits the aspect
+// ratio (within the relative `aspectTolerance`): a crop.
+std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation,
+                                 double aspectTolerance);
 
 // Lens file (JSON): {"model": "rectilinear"|"equidistant", "width", "height", "fx", "fy", "cx",
 // "cy", "dist": [...], "rms"}, with cx, cy in OpenCV's pixel convention. Errors throw

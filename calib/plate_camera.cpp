@@ -70,26 +70,22 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   cam.height = height;
   const double diagonalPx = std::hypot(double(width), double(height));
   if (options.lens) {
-    const double aspect = double(width) / height;
-    auto aspectOf = [](const Lens& lens) { return double(lens.width) / lens.height; };
-    // A portrait plate (turned by its EXIF orientation) from a lens calibrated in landscape.
-    const Lens turned = options.lens->turnedFor(exif.orientation);
-    const Lens& l = std::abs(aspect / aspectOf(*options.lens) - 1.0) > 0.01 &&
-                            std::abs(aspect / aspectOf(turned) - 1.0) <= 0.01
-                        ? turned
-                        : *options.lens;
-    const double lensAspect = aspectOf(l);
-    if (std::abs(aspect / lensAspect - 1.0) > 0.01) {
-      throw Error("camera", "the calibration is for " + std::to_string(l.width) + "x" +
-                                std::to_string(l.height) + " images, the plate is " +
+    // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
+    const Lens& file = *options.lens;
+    const std::optional<Lens> fitted = lensForImage(file, width, height, exif.orientation, 0.01);
+    if (!fitted) {
+      throw Error("camera", "the calibration is for " + std::to_string(file.width) + "x" +
+                                std::to_string(file.height) + " images, the plate is " +
                                 std::to_string(width) + "x" + std::to_string(height) +
                                 " (another aspect ratio: cropped, or turned without an EXIF "
                                 "orientation that says so?)");
     }
-    cam.lens = (l.width == width && l.height == height) ? l : l.resized(width, height);
+    cam.lens = *fitted;
     cam.focal35mm = 0.5 * (cam.lens.fx + cam.lens.fy) / diagonalPx * kFullFrameDiagonalMm;
-    cam.focalSource = l.source.empty() ? std::string("calibration") : l.source;
-    if (l.width != width) cam.focalSource += " (scaled to the plate's size)";
+    cam.focalSource = cam.lens.source.empty() ? std::string("calibration") : cam.lens.source;
+    const bool sameSize = (file.width == width && file.height == height) ||
+                          (file.width == height && file.height == width);
+    if (!sameSize) cam.focalSource += " (scaled to the plate's size)";
   } else {
     if (options.focal35mm) {
       cam.focal35mm = *options.focal35mm;

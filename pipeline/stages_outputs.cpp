@@ -89,12 +89,22 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   const bool plateReady = e && plate.exposureAssumptions().empty() && plate.bitsPerSample == 8;
   if (!ctx.artefacts.capture) {
     // An environment file that the photo stages made (merge, stitch, convert) says its camera
-    // and whether its radiance is in that camera's EXIF exposure unit.
+    // and whether its radiance is in that camera's EXIF exposure unit; six faces must all say
+    // the same.
     ingest::CaptureInfo env;
-    const fs::path& file = ctx.environmentInput.path;
-    std::error_code ec;
-    if (!file.empty() && fs::is_regular_file(file, ec)) env = ingest::readCaptureInfo(file);
-    if (env.exposureUnit != ingest::kExifExposureUnit) {
+    bool first = true, agree = true;
+    for (const fs::path& file : ctx.environmentInput.files) {
+      std::error_code ec;
+      if (!fs::is_regular_file(file, ec)) continue;
+      const ingest::CaptureInfo info = ingest::readCaptureInfo(file);
+      if (first) {
+        env = info;
+        first = false;
+      } else if (info.exposureUnit != env.exposureUnit || info.camera() != env.camera()) {
+        agree = false;
+      }
+    }
+    if (!agree || env.exposureUnit != ingest::kExifExposureUnit) {
       why =
           "the environment is not a capture description (compose --env capture.json) nor a map "
           "that compose merged from photos at their EXIF exposures";
@@ -196,7 +206,9 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 
 class RenderStage final : public Stage {
  public:
-  static constexpr int kVersion = 3;  // 3: samples in one surface cell shaded once
+  // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
+  // stages marked
+  static constexpr int kVersion = 4;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -374,9 +386,10 @@ class RenderStage final : public Stage {
         settings.exposure = float(*exif);
         const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
         ctx.note(format(
-            "exposure from EXIF: %+.2f stops: the plate and the capture come from one camera "
+            "exposure from EXIF: %+.2f stops: the plate and the environment's photos come from one "
+            "camera "
             "(%s); the plate's relative exposure %.4g (%.4g s, f/%.3g, ISO %.0f) puts the "
-            "capture's radiance in the plate's units (the automatic match would give %+.2f "
+            "environment's radiance in the plate's units (the automatic match would give %+.2f "
             "stops); override with --exposure",
             std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
             *info.iso, std::log2(match.scale)));

@@ -201,11 +201,19 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // Values are resampled as stored; the colour metadata goes along, and the camera and
       // exposure unit of a map stitched from merged photos.
       write.chromaticities = file.info.chromaticities;
-      if (!file.info.cameraMake.empty()) write.strings.emplace_back("Make", file.info.cameraMake);
-      if (!file.info.cameraModel.empty())
-        write.strings.emplace_back("Model", file.info.cameraModel);
-      if (!file.info.exposureUnit.empty())
-        write.strings.emplace_back("compose:exposureUnit", file.info.exposureUnit);
+      {
+        // Only what every file says (six faces: each of them).
+        std::string make = file.info.cameraMake, model = file.info.cameraModel,
+                    unit = file.info.exposureUnit;
+        for (size_t f = 1; f < file.files.size(); ++f) {
+          const ingest::CaptureInfo other = ingest::readCaptureInfo(file.files[f]);
+          if (other.cameraMake != make || other.cameraModel != model) make = model = unit = "";
+          if (other.exposureUnit != unit) unit.clear();
+        }
+        if (!make.empty()) write.strings.emplace_back("Make", make);
+        if (!model.empty()) write.strings.emplace_back("Model", model);
+        if (!unit.empty()) write.strings.emplace_back("compose:exposureUnit", unit);
+      }
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
       }

@@ -56,11 +56,21 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
     for (const ingest::Shot& s : source->shots) {
       const std::optional<double> own = s.info.relativeExposure();
       if (s.info.bitsPerSample != 8 || !s.exposure || !own ||
-          !s.info.exposureAssumptions().empty() || std::abs(*s.exposure / *own - 1.0) > 1e-6)
+          !s.info.exposureAssumptions().empty() || std::abs(*s.exposure / *own - 1.0) > 1e-6 ||
+          s.info.camera().empty())  // every photo names the camera whose unit it is
         exifUnit = false;
     }
   }
   if (exifUnit) a.push_back({"compose:exposureUnit", std::string(ingest::kExifExposureUnit)});
+  // The photos were turned upright by their EXIF orientation; the merged view is stored upright
+  // and says how, so that a lens calibrated in the sensor's frame is turned for it (stitch).
+  if (source && !source->shots.empty()) {
+    const int turn = source->shots.front().info.orientation;
+    const bool same =
+        std::all_of(source->shots.begin(), source->shots.end(),
+                    [&](const ingest::Shot& s) { return s.info.orientation == turn; });
+    if (same && turn != 1) a.push_back({"compose:sensorOrientation", turn});
+  }
   if (!capture.cameraMake.empty()) a.push_back({"Make", capture.cameraMake});
   if (!capture.cameraModel.empty()) a.push_back({"Model", capture.cameraModel});
   return a;

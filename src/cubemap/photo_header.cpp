@@ -22,7 +22,9 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   h.cameraMake = info.cameraMake;
   h.cameraModel = info.cameraModel;
   h.exposureUnit = info.exposureUnit;
-  h.orientation = info.orientation;
+  // The turn from the sensor's frame: the file's own EXIF orientation, or, for a merged view
+  // stored upright, the one its photos had.
+  h.orientation = info.orientation != 1 ? info.orientation : info.sensorOrientation;
   h.floatingPoint =
       info.sampleType == "float" || info.sampleType == "half" || info.sampleType == "double";
   h.format = info.format;
@@ -33,13 +35,10 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
 calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
                       const std::optional<calib::Lens>& lensFile, double fovDegrees, bool fisheye) {
   if (lensFile) {
-    if (lensFile->width == h.width && lensFile->height == h.height) return *lensFile;
-    if (std::abs(double(lensFile->width) / lensFile->height - double(h.width) / h.height) < 1e-3)
-      return lensFile->resized(h.width, h.height);
-    // A portrait photo (turned by its EXIF orientation) from a lens calibrated in landscape.
-    const calib::Lens turned = lensFile->turnedFor(h.orientation);
-    if (std::abs(double(turned.width) / turned.height - double(h.width) / h.height) < 1e-3)
-      return turned.width == h.width ? turned : turned.resized(h.width, h.height);
+    // Turned by the photo's EXIF orientation (the lens is in the sensor's frame) and scaled.
+    if (const std::optional<calib::Lens> fitted =
+            calib::lensForImage(*lensFile, h.width, h.height, h.orientation, 1e-3))
+      return *fitted;
     throw Error("stitch",
                 "the lens file is for " + std::to_string(lensFile->width) + "x" +
                     std::to_string(lensFile->height) + " images, the photo is " +

@@ -174,6 +174,8 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.cameraMake = trimmed(h.text("Make"));
   info.cameraModel = trimmed(h.text("Model"));
   info.exposureUnit = trimmed(h.text("compose:exposureUnit"));
+  info.sensorOrientation = h.integer("compose:sensorOrientation", 1);
+  if (info.sensorOrientation < 1 || info.sensorOrientation > 8) info.sensorOrientation = 1;
   info.fileColorSpace = h.text("oiio:ColorSpace");
   if (const std::string named = h.text("colorSpace"); !named.empty()) info.fileColorSpace = named;
   if (const ImageAttribute* c = h.find("chromaticities")) {

@@ -84,6 +84,10 @@ struct CaptureInfo {
   // compose:exposureUnit of an EXR that compose merged from photos (kExifExposureUnit: the
   // radiance is in the unit of the camera's EXIF relative exposures), or empty.
   std::string exposureUnit;
+  // compose:sensorOrientation of an EXR that compose merged from photos turned upright by their
+  // EXIF orientation (which the EXR, stored upright, no longer has): how the camera's sensor
+  // frame was turned, for a lens calibrated in it. 1 otherwise.
+  int sensorOrientation = 1;
   std::string fileColorSpace;  // colour space the file or its reader declares
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
   std::optional<std::array<double, 8>> chromaticities;

@@ -70,11 +70,11 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
   lens.cx = 330.0;
   lens.cy = 228.0;
   lens.distortion = {-0.29, 0.11, 0.004, -0.003, 0.02};
-  for (const int orientation : {6, 8}) {
+  for (const int orientation : {6, 8, 3}) {
     SCOPED_TRACE(orientation);
     const Lens turned = lens.turnedFor(orientation);
-    EXPECT_EQ(turned.width, 480);
-    EXPECT_EQ(turned.height, 640);
+    EXPECT_EQ(turned.width, orientation == 3 ? 640 : 480);
+    EXPECT_EQ(turned.height, orientation == 3 ? 480 : 640);
     int checked = 0;
     for (double a = -0.5; a <= 0.5; a += 0.125) {
       for (double b = -0.4; b <= 0.4; b += 0.1) {
@@ -83,11 +83,14 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
         ASSERT_TRUE(lens.project(d, stored));
         // The upright photo's camera frame: for 6 its right is the stored up (+Y) and its up
         // the stored left (-X); for 8 the other way round.
-        const glm::dvec3 upright =
-            orientation == 6 ? glm::dvec3(d.y, -d.x, d.z) : glm::dvec3(-d.y, d.x, d.z);
+        const glm::dvec3 upright = orientation == 6   ? glm::dvec3(d.y, -d.x, d.z)
+                                   : orientation == 8 ? glm::dvec3(-d.y, d.x, d.z)
+                                                      : glm::dvec3(-d.x, -d.y, d.z);
         ASSERT_TRUE(turned.project(upright, seen));
         const glm::dvec2 expected = orientation == 6 ? glm::dvec2(480.0 - stored.y, stored.x)
-                                                     : glm::dvec2(stored.y, 640.0 - stored.x);
+                                    : orientation == 8
+                                        ? glm::dvec2(stored.y, 640.0 - stored.x)
+                                        : glm::dvec2(640.0 - stored.x, 480.0 - stored.y);
         EXPECT_NEAR(seen.x, expected.x, 1e-6);
         EXPECT_NEAR(seen.y, expected.y, 1e-6);
         ++checked;
@@ -96,8 +99,17 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
     EXPECT_GT(checked, 50);
   }
   // Other orientations leave the lens as it is.
-  EXPECT_EQ(lens.turnedFor(1).width, 640);
-  EXPECT_EQ(lens.turnedFor(3).cx, lens.cx);
+  EXPECT_EQ(lens.turnedFor(1).cx, lens.cx);
+  EXPECT_EQ(lens.turnedFor(2).cx, lens.cx);
+  // lensForImage: turned and scaled for a portrait of half the size; a lens already in the
+  // upright frame is taken as it is; another aspect is none.
+  const std::optional<Lens> half = lensForImage(lens, 240, 320, 6, 0.01);
+  ASSERT_TRUE(half);
+  EXPECT_NEAR(half->cx, lens.turnedFor(6).cx / 2.0, 1e-9);
+  const std::optional<Lens> asIs = lensForImage(lens.turnedFor(6), 480, 640, 6, 0.01);
+  ASSERT_TRUE(asIs);
+  EXPECT_EQ(asIs->cx, lens.turnedFor(6).cx);
+  EXPECT_FALSE(lensForImage(lens, 500, 500, 1, 0.01));
 }
 
 TEST(Lens, EquidistantFisheye) {

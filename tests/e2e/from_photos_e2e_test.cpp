@@ -1019,6 +1019,16 @@ TEST_F(FromPhotos, ExposureFromExifWhenThePlateIsFromTheCapturesCamera) {
   EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
   EXPECT_NEAR(objectOverPlate(dir_ / "exif_by_hand.exr", "merged and stitched by hand"), 1.0,
               kExifExposureTolerance);
+  // Converted to six face files, named by a pattern: every face carries the mark.
+  r = run("convert " + q(dir_ / "stitched.exr") + " --to faces --out " +
+              q(dir_ / "faces" / "env_%.exr"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run("--plate " + q(plate) + " --env " + q(dir_ / "faces" / "env_%.exr") + object + " --out " +
+              q(dir_ / "exif_faces"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
   // Merged with exposures given on the command line, the unit is not EXIF's: not marked.
   r = run("merge --exposures 0.25,1,4 --out " + q(dir_ / "given.exr") + " " +
               q(shots / "pz_1.jpg") + " " + q(shots / "pz_2.jpg") + " " + q(shots / "pz_3.jpg"),
