@@ -137,10 +137,7 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   }
   for (const ingest::View& view : capture.views) {
     for (const ingest::Shot& shot : view.shots) {
-      const std::optional<double> own = shot.info.relativeExposure();
-      if (shot.info.bitsPerSample != 8 || !shot.exposure || !own ||
-          !shot.info.exposureAssumptions().empty() ||
-          std::abs(*shot.exposure / *own - 1.0) > 1e-6) {
+      if (!ingest::atOwnExifExposure(shot)) {
         why = "the capture's photos are not all 8-bit with their exposures from EXIF";
         return std::nullopt;
       }

@@ -53,13 +53,8 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
     if (v.name == view.name) source = &v;
   bool exifUnit = source && !result.response.empty();
   if (source) {
-    for (const ingest::Shot& s : source->shots) {
-      const std::optional<double> own = s.info.relativeExposure();
-      if (s.info.bitsPerSample != 8 || !s.exposure || !own ||
-          !s.info.exposureAssumptions().empty() || std::abs(*s.exposure / *own - 1.0) > 1e-6 ||
-          s.info.camera().empty())  // every photo names the camera whose unit it is
-        exifUnit = false;
-    }
+    for (const ingest::Shot& s : source->shots)  // every photo names the camera of the unit
+      if (!ingest::atOwnExifExposure(s) || s.info.camera().empty()) exifUnit = false;
   }
   if (exifUnit) a.push_back({"compose:exposureUnit", std::string(ingest::kExifExposureUnit)});
   // The photos were turned upright by their EXIF orientation; the merged view is stored upright

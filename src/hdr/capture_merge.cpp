@@ -279,9 +279,11 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
           const double stored = responseDisagreement(result.response, brackets);
           if (std::isfinite(stored) && stored > kStoredResponseTolerance) {
             const ResponseCurve storedCurve = result.response;
-            const std::string storedLinearisation = result.linearisation;
             const std::vector<std::string> notesBefore = result.notes;
             recover();
+            // Either way this run stores no curve.
+            result.responseCacheFile.clear();
+            result.responseRecovered = false;
             const double fresh = responseDisagreement(result.response, brackets);
             char text[512];
             if (fresh < 0.75 * stored) {
@@ -294,8 +296,6 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                   "folder of curves per setting)",
                   camera.c_str(), 100.0 * stored, 100.0 * fresh);
               result.notes.push_back(text);
-              result.responseCacheFile.clear();
-              result.responseRecovered = false;
               result.linearisation =
                   "8-bit photos linearised by a camera response recovered "
                   "from them (the stored one of " +
@@ -305,10 +305,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
               // a hand-held shift, not the curve. The stored one is kept, and the recovery's
               // notes go with the curve that is not used.
               result.response = storedCurve;
-              result.responseCacheFile.clear();
-              result.responseRecovered = false;
               result.notes = notesBefore;
-              result.linearisation = storedLinearisation;
               std::snprintf(
                   text, sizeof text,
                   "the stored response of %s was checked against a curve recovered from these "

@@ -457,6 +457,12 @@ void setExposures(View& view, const std::vector<double>& exposures, const std::s
   }
 }
 
+bool atOwnExifExposure(const Shot& shot) {
+  const std::optional<double> own = shot.info.relativeExposure();
+  return shot.info.bitsPerSample == 8 && shot.exposure && own &&
+         shot.info.exposureAssumptions().empty() && std::abs(*shot.exposure / *own - 1.0) <= 1e-6;
+}
+
 std::string exposureContradiction(const View& view) {
   const size_t n = view.shots.size();
   for (const Shot& s : view.shots)

@@ -116,6 +116,10 @@ inline constexpr double kMinExposure = 1e-12, kMaxExposure = 1e12;
 // one value per shot, in the order the shots were given.
 void setExposures(View& view, const std::vector<double>& exposures, const std::string& source);
 
+// Whether a shot is an 8-bit photo merged at its own EXIF exposure (t · ISO / N², every field in
+// EXIF), so that merged radiance is in the camera's EXIF exposure unit (kExifExposureUnit).
+bool atOwnExifExposure(const Shot& shot);
+
 // When every shot of `view` has both an exposure given (setExposures) and one in EXIF, and the
 // two disagree beyond EXIF's rounding (the given ones order the photos otherwise, or a ratio
 // between two photos differs by more than a third of a stop): a sentence saying so, naming the
