@@ -8,6 +8,7 @@
 #include "cubemap/photo_header.h"
 #include "cubemap/render_view.h"
 #include "cubemap/stitch.h"
+#include "ingest/image_io.h"
 #include "lighting/sphere_resample.h"
 #include "pipeline/context.h"
 #include "pipeline/materials.h"
@@ -47,11 +48,41 @@ void prepareEnvironment(Context& ctx) {
   std::string ext = envPath.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return std::tolower(c); });
-  if (ext == ".json") {
+  // A folder of photos described by `compose ingest --json` or written by `compose capture-sim`
+  // is that capture, when the folder holds no cube faces.
+  fs::path capturePath = envPath;
+  if (ext != ".json" && fs::is_directory(envPath, ec) &&
+      envPath.string().find('%') == std::string::npos) {
+    try {
+      in.files = cubemap::environmentFiles(envPath);
+    } catch (const Error& e) {
+      const fs::path described = envPath / "capture.json";
+      if (fs::is_regular_file(described, ec)) {
+        capturePath = described;
+        ctx.note("the folder " + envPath.string() +
+                 " holds no cube faces: its capture "
+                 "description " +
+                 described.string() + " is taken");
+      } else {
+        size_t images = 0;
+        for (const auto& entry : fs::directory_iterator(envPath, ec))
+          if (entry.is_regular_file() && ingest::looksLikeImageFile(entry.path())) ++images;
+        if (images == 0) throw;
+        throw Error("ingest",
+                    std::string(e.what()) + "; its " + plural(images, "image") +
+                        " are not named as cube faces. Photos? `compose ingest --json " +
+                        described.string() + " " + envPath.string() +
+                        "` describes them, then --env takes that file",
+                    envPath);
+      }
+    }
+  }
+  if (ext == ".json" || capturePath != envPath) {
     in.kind = EnvironmentInput::Kind::Capture;
-    ingest::Capture capture = ingest::readCaptureDescription(envPath);
+    in.path = capturePath;
+    ingest::Capture capture = ingest::readCaptureDescription(capturePath);
     ingest::resolveExposures(capture);
-    in.files = {envPath};
+    in.files = {capturePath};
     for (const ingest::View& v : capture.views) {
       for (const ingest::Shot& s : v.shots) in.files.push_back(s.file);
       if (v.shots.size() > 1) in.bracketed = true;
@@ -61,7 +92,7 @@ void prepareEnvironment(Context& ctx) {
     ctx.artefacts.capture = std::move(capture);
   } else {
     in.kind = EnvironmentInput::Kind::Image;
-    in.files = cubemap::environmentFiles(envPath);
+    if (in.files.empty()) in.files = cubemap::environmentFiles(envPath);
   }
 }
 

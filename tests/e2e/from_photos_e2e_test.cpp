@@ -849,6 +849,23 @@ TEST_F(FromPhotos, FromBrackets) {
   EXPECT_EQ(explainStatus(r.out, "stitch"), "run") << r.out;
   EXPECT_EQ(explainStatus(r.out, "ingest"), "run") << r.out;
   EXPECT_FALSE(fs::exists(dir_ / "oneshot.exr")) << "--explain writes nothing";
+  // The folder of photos stands for its capture description; photos without one are refused
+  // with the command that describes them.
+  r = run(composeArgs(plate_, dir_ / "shots", kPhotoStops, dir_ / "oneshot") + " --explain",
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(explainStatus(r.out, "merge"), "run") << r.out;
+  EXPECT_EQ(explainStatus(r.out, "stitch"), "run") << r.out;
+  {
+    const fs::path bare = dir_ / "photos_only";
+    fs::create_directories(bare);
+    for (const char* f : {"px_1.jpg", "px_2.jpg", "nx_1.jpg"})
+      fs::copy_file(dir_ / "shots" / f, bare / f);
+    r = run(composeArgs(plate_, bare, kPhotoStops, dir_ / "bare") + " --explain", dir_.path());
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.err.find("3 images are not named as cube faces"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("compose ingest --json"), std::string::npos) << r.err;
+  }
   r = run(oneShotArgs, dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("merged 6 views from 18 photos"), std::string::npos) << r.err;
