@@ -37,7 +37,15 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
 
   std::map<std::string, int> textureSpaces;
   for (render::Texture& texture : mesh.textures) {
-    texture.image.colorSpace = colors.inputSpaceFor(texture.file, texture.image.colorSpace);
+    if (texture.srgbByFormat && texture.image.colorSpace != working) {
+      // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
+      texture.image.colorSpace =
+          colors.has("sRGB") ? colors.resolve("sRGB", "a glTF texture") : colors.srgbEncodedSpace();
+      if (texture.image.colorSpace.empty())
+        texture.image.colorSpace = colors.inputSpaceFor(texture.file, "");
+    } else {
+      texture.image.colorSpace = colors.inputSpaceFor(texture.file, texture.image.colorSpace);
+    }
     ++textureSpaces["'" + texture.image.colorSpace + "'"];
     colors.convert(texture.image, working);
   }

@@ -48,6 +48,7 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
   for (const render::Material& m : mesh.materials) {
     h.floats(std::span<const float>(&m.baseColor.x, 3));
     h.word(uint32_t(m.texture));
+    h.floats(std::span<const float>(&m.uvTransform[0][0], 9));
   }
   for (const render::Texture& t : mesh.textures) {
     h.word(uint32_t(t.image.width));
@@ -55,6 +56,9 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.word(uint32_t(t.image.channels));
     h.bytes(t.image.colorSpace);
     h.bytes(t.file.filename().string());
+    h.word(uint32_t(t.wrapU));
+    h.word(uint32_t(t.wrapV));
+    h.word(t.srgbByFormat ? 1u : 0u);
     h.floats(t.image.pixels);
   }
   h.bytes(mesh.colorSpace);

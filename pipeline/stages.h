@@ -26,6 +26,11 @@ std::unique_ptr<Stage> makeOutputStage();
 std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
                            const ingest::CaptureInfo& info, const std::string& explicitSpace,
                            const std::string& option, const color::ColorConfig& colors);
+// The colour space to assume for a file with this header (ColorConfig::inputSpace): what it
+// declares, or its format's convention, else the config's rules, 8- and 16-bit images taken as
+// sRGB-encoded where those make them linear.
+color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::filesystem::path& file,
+                               const ingest::CaptureInfo& info);
 
 // The camera and the placement in OpenEXR header attributes, so that another tool can rebuild
 // the scene: worldToCamera and worldToNDC (OpenEXR's standard attributes; the pinhole part of a

@@ -364,7 +364,7 @@ class StitchStage final : public Stage {
       const ingest::Shot& shot = capture.views[size_t(i)].shots.front();
       ingest::LoadedImage img = ingest::readImage(shot.file, "stitch", {.codesForEightBit = true});
       const std::string space =
-          shot.colorSpace.empty() ? ctx.colors.inputSpaceFor(shot.file, img.info.fileColorSpace)
+          shot.colorSpace.empty() ? inputSpaceOf(ctx.colors, shot.file, img.info).space
                                   : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
       Image rgb;
       if (!img.hasPixels() && img.image.channels >= 3) {
@@ -422,8 +422,9 @@ class StitchStage final : public Stage {
         anyLdr = true;
         Image white(1, 1, 3, {"R", "G", "B"});
         white.pixels = {1.0f, 1.0f, 1.0f};
-        white.colorSpace =
-            first.colorSpace.empty() ? ctx.colors.inputSpaceFor(first.file, "") : first.colorSpace;
+        white.colorSpace = first.colorSpace.empty()
+                               ? ctx.colors.inputSpace(first.file, "", false, true).space
+                               : first.colorSpace;
         ctx.colors.convert(white, working);
         const float scale = first.exposure ? float(1.0 / *first.exposure) : 1.0f;
         p.saturation =
@@ -477,10 +478,14 @@ class ColorStage final : public Stage {
                           &ComposeJob::environmentSpace)};
   }
 
+  // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded
+  static constexpr int kColorVersion = 2;
+
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
       Hash128 plate;
       plate.bytes("plate-linear");
+      plate.word(kColorVersion);
       plate.combine(ctx.key(kPlate));
       plate.bytes(ctx.job.plateSpace);
       plate.bytes(ctx.colors.identity());
@@ -489,6 +494,7 @@ class ColorStage final : public Stage {
     if (!ctx.mayNeed(kEnvironment)) return;
     Hash128 env;
     env.bytes("environment");
+    env.word(kColorVersion);
     env.combine(ctx.keys.count(kStitched) ? ctx.key(kStitched) : ctx.key(kEnvironmentFile));
     env.bytes(ctx.job.environmentSpace);
     env.bytes(ctx.colors.identity());
@@ -503,21 +509,28 @@ class ColorStage final : public Stage {
       // pixels become the linear plate. An 8-bit RGB plate (a JPEG) is converted from its codes
       // into a new float image; any other RGB plate is converted in place.
       ingest::LoadedImage& plate = *ctx.artefacts.plate;
+      if (plate.image.channels == 2 || plate.image.channels == 4) {
+        ctx.note("the plate " + ctx.job.plate.filename().string() +
+                 " has an alpha channel, which compose does not use: its colour is the "
+                 "background as it is stored, opaque (alpha 1 in the outputs); flatten it over "
+                 "a background first where it is transparent");
+      }
       Image linear;
       if (!plate.codes.empty() && plate.image.channels >= 3 && !plate.info.chromaticities) {
         const bool named = !ctx.job.plateSpace.empty();
-        const std::string space =
-            named ? ctx.colors.resolve(ctx.job.plateSpace, "--plate-space")
-                  : ctx.colors.inputSpaceFor(ctx.job.plate, plate.info.fileColorSpace);
+        const color::InputSpace space =
+            named ? color::InputSpace{ctx.colors.resolve(ctx.job.plateSpace, "--plate-space"),
+                                      "--plate-space"}
+                  : inputSpaceOf(ctx.colors, ctx.job.plate, plate.info);
         linear = ctx.colors.convertCodes(plate.codes, plate.image.width, plate.image.height,
-                                         plate.image.channels, space, working);
+                                         plate.image.channels, space.space, working);
         plate.codes = {};
-        reason = "plate read as '" + space + "'" + (named ? " (--plate-space)" : "");
-        if (!named && !plate.info.fileColorSpace.empty() &&
-            !ctx.colors.has(plate.info.fileColorSpace)) {
-          reason += " (the file says '" + plate.info.fileColorSpace +
-                    "', which the colour config does not know; give --plate-space to say which "
-                    "it is)";
+        reason = "plate read as '" + space.space + "' (" + space.how + ")";
+        if (space.assumed) {
+          ctx.note("the plate " + ctx.job.plate.filename().string() +
+                   " names no colour space "
+                   "the config knows: read as '" +
+                   space.space + "' (" + space.how + "); give --plate-space to say which it is");
         }
       } else {
         if (!plate.codes.empty())
@@ -593,15 +606,17 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
     colors.convertFromChromaticities(image, *info.chromaticities, working);
     return "the RGB space of the chromaticities in its header (converted by matrix)";
   }
-  image.colorSpace = colors.inputSpaceFor(file, info.fileColorSpace);
-  const std::string read = image.colorSpace;
+  const color::InputSpace space = inputSpaceOf(colors, file, info);
+  image.colorSpace = space.space;
   colors.convert(image, working);
-  if (!info.fileColorSpace.empty() && !colors.has(info.fileColorSpace)) {
-    // The header names a space the config does not have: say what was assumed instead.
-    return "'" + read + "' (the file says '" + info.fileColorSpace +
-           "', which the colour config does not know; give " + option + " to say which it is)";
-  }
-  return "'" + read + "'";
+  return "'" + space.space + "' (" + space.how +
+         (space.assumed ? "; give " + option + " to say which it is" : std::string()) + ")";
+}
+
+color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::filesystem::path& file,
+                               const ingest::CaptureInfo& info) {
+  return colors.inputSpace(file, info.fileColorSpace, info.colorSpaceByConvention,
+                           info.integerSamples());
 }
 
 std::unique_ptr<Stage> makeIngestStage() {

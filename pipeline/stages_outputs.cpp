@@ -37,12 +37,13 @@ namespace {
 // the camera, a dark backdrop in view).
 struct ExposureMatch {
   double scale = 1.0;         // plate units per environment unit
-  double plateKey = 0.0;      // log-average of the plate's RGB mean
+  double plateKey = 0.0;      // log-average of the plate's luminance
   double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
 };
 
 ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLighting& lighting,
-                           const glm::dvec3& towardCamera, const glm::mat3& envFromWorld) {
+                           const glm::dvec3& towardCamera, const glm::mat3& envFromWorld,
+                           const glm::dvec3& luma) {
   ExposureMatch m;
   // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level.
   constexpr double kFloor = 1e-4;
@@ -52,7 +53,7 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
   for (int y = step / 2; y < plateLinear.height; y += step) {
     for (int x = step / 2; x < plateLinear.width; x += step) {
       const float* p = plateLinear.at(x, y);
-      logSum += std::log(std::max(kFloor, (double(p[0]) + p[1] + p[2]) / 3.0));
+      logSum += std::log(std::max(kFloor, luma.x * p[0] + luma.y * p[1] + luma.z * p[2]));
       ++count;
     }
   }
@@ -69,7 +70,7 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
     const double phi = double(i) * 2.399963229728653;  // golden angle
     const glm::dvec3 n = z * c + r * std::cos(phi) * u + r * std::sin(phi) * v;
     const glm::vec3 e = glm::max(lighting.irradiance(envFromWorld * glm::vec3(n)), glm::vec3(0.0f));
-    weighted += z * (double(e.x) + e.y + e.z) / 3.0;
+    weighted += z * (luma.x * e.x + luma.y * e.y + luma.z * e.z);
     weights += z;
   }
   m.ballRadiance = 0.18 * weighted / weights / std::numbers::pi;
@@ -204,8 +205,9 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 class RenderStage final : public Stage {
  public:
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
-  // stages marked
-  static constexpr int kVersion = 4;
+  // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
+  // middle
+  static constexpr int kVersion = 5;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -374,10 +376,14 @@ class RenderStage final : public Stage {
     if (job.exposureStops) {
       settings.exposure = float(std::exp2(*job.exposureStops));
     } else {
-      const glm::dvec3 objectBase(g.worldFromObject[3]);
-      const ExposureMatch match =
-          autoExposure(*ctx.artefacts.plateLinear, *ctx.artefacts.lighting,
-                       g.camera.position() - objectBase, settings.envFromWorld);
+      // The ball stands where the object does (the middle of its bounds), wherever the mesh
+      // file puts its own origin.
+      const glm::dvec3 middle =
+          0.5 * (glm::dvec3(ctx.mesh().boundsMin()) + glm::dvec3(ctx.mesh().boundsMax()));
+      const glm::dvec3 objectCentre(g.worldFromObject * glm::dvec4(middle, 1.0));
+      const ExposureMatch match = autoExposure(
+          *ctx.artefacts.plateLinear, *ctx.artefacts.lighting, g.camera.position() - objectCentre,
+          settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
       if (const std::optional<double> exif = exifExposure(ctx, why)) {
         settings.exposure = float(*exif);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <mutex>
 #include <sstream>
 #include <utility>
 
@@ -24,6 +25,12 @@ namespace compose::color {
 struct ColorConfig::Impl {
   OCIO::ConstConfigRcPtr config;
   std::string source;
+  // The config's sRGB-encoded colour space, found on first use (srgbEncodedSpace()).
+  struct Found {
+    std::once_flag once;
+    std::string name;
+  };
+  std::shared_ptr<Found> srgb = std::make_shared<Found>();
 };
 
 namespace {
@@ -228,12 +235,143 @@ std::string ColorConfig::resolve(const std::string& name, const std::string& wha
   return cs->getName();
 }
 
+namespace {
+
+// The sRGB transfer function, code (0..1) to linear.
+double srgbDecode(double c) {
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+
+}  // namespace
+
+bool ColorConfig::isLinearOrData(const std::string& space) const {
+  const OCIO::ConstConfigRcPtr& config = impl_->config;
+  OCIO::ConstColorSpaceRcPtr cs = space.empty() ? nullptr : config->getColorSpace(space.c_str());
+  if (!cs) return false;
+  if (cs->isData()) return true;
+  try {
+    OCIO::ConstCPUProcessorRcPtr cpu =
+        config->getProcessor(cs->getName(), OCIO::ROLE_SCENE_LINEAR)->getDefaultCPUProcessor();
+    float v[3][3] = {{0.25f, 0.25f, 0.25f}, {0.5f, 0.5f, 0.5f}, {1.0f, 1.0f, 1.0f}};
+    for (auto& rgb : v) cpu->applyRGB(rgb);
+    for (int c = 0; c < 3; ++c) {
+      if (!(std::abs(v[1][c] - 2.0f * v[0][c]) <= 1e-3f * std::abs(v[1][c])) ||
+          !(std::abs(v[2][c] - 2.0f * v[1][c]) <= 1e-3f * std::abs(v[2][c])))
+        return false;
+    }
+    return true;
+  } catch (const OCIO::Exception&) {
+    return false;
+  }
+}
+
+std::string ColorConfig::srgbEncodedSpace() const {
+  std::call_once(impl_->srgb->once, [&] {
+    const OCIO::ConstConfigRcPtr& config = impl_->config;
+    // Candidates: the roles for display-encoded images, then every space named like sRGB.
+    std::vector<std::string> candidates;
+    for (const char* role : {"default_byte", OCIO::ROLE_MATTE_PAINT, OCIO::ROLE_TEXTURE_PAINT,
+                             OCIO::ROLE_COLOR_PICKING})
+      if (config->hasRole(role)) candidates.push_back(role);
+    auto lower = [](std::string t) {
+      std::transform(t.begin(), t.end(), t.begin(),
+                     [](unsigned char c) { return std::tolower(c); });
+      return t;
+    };
+    for (int i = 0; i < config->getNumColorSpaces(); ++i) {
+      OCIO::ConstColorSpaceRcPtr cs = config->getColorSpace(config->getColorSpaceNameByIndex(i));
+      if (!cs) continue;
+      bool named = lower(cs->getName()).find("srgb") != std::string::npos;
+      for (size_t a = 0; a < cs->getNumAliases(); ++a)
+        named = named || lower(cs->getAlias(a)).find("srgb") != std::string::npos;
+      if (named) candidates.push_back(cs->getName());
+    }
+    // Linear Rec.709, to check the primaries too when the config says which space that is.
+    const std::string rec709 = spaceWithChromaticities(kRec709Chromaticities);
+    for (const std::string& candidate : candidates) {
+      try {
+        OCIO::ConstColorSpaceRcPtr cs = config->getColorSpace(candidate.c_str());
+        if (!cs || cs->isData()) continue;
+        OCIO::ConstCPUProcessorRcPtr cpu =
+            config->getProcessor(cs->getName(), OCIO::ROLE_SCENE_LINEAR)->getDefaultCPUProcessor();
+        // Greys: the sRGB curve against white (a gamma of 2.2 is 12 % off at code 0.2).
+        float white[3] = {1.0f, 1.0f, 1.0f};
+        cpu->applyRGB(white);
+        bool fits = white[0] > 0.0f && white[1] > 0.0f && white[2] > 0.0f;
+        for (const double code : {0.1, 0.2, 0.5, 0.8}) {
+          float rgb[3] = {float(code), float(code), float(code)};
+          cpu->applyRGB(rgb);
+          for (int c = 0; c < 3 && fits; ++c)
+            fits = std::abs(rgb[c] / white[c] - srgbDecode(code)) <= 0.01 * srgbDecode(code);
+        }
+        if (fits && !rec709.empty()) {
+          // Colours: decoded, then taken from linear Rec.709.
+          OCIO::ConstCPUProcessorRcPtr linear =
+              config->getProcessor(rec709.c_str(), OCIO::ROLE_SCENE_LINEAR)
+                  ->getDefaultCPUProcessor();
+          for (const glm::dvec3 code : {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0),
+                                        glm::dvec3(0, 0, 1), glm::dvec3(0.5, 0.2, 0.8)}) {
+            float a[3] = {float(code.x), float(code.y), float(code.z)};
+            float b[3] = {float(srgbDecode(code.x)), float(srgbDecode(code.y)),
+                          float(srgbDecode(code.z))};
+            cpu->applyRGB(a);
+            linear->applyRGB(b);
+            for (int c = 0; c < 3 && fits; ++c)
+              fits = std::abs(a[c] - b[c]) <= 0.01 * std::max(std::abs(b[c]), 0.01f * white[c]);
+          }
+        }
+        if (fits) {
+          impl_->srgb->name = cs->getName();
+          return;
+        }
+      } catch (const OCIO::Exception&) {
+      }
+    }
+  });
+  return impl_->srgb->name;
+}
+
+InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std::string& declared,
+                                   bool declaredByConvention, bool integerData) const {
+  InputSpace r;
+  if (has(declared)) {
+    r.space = resolve(declared, file.string());
+    r.how = declaredByConvention ? "its format's usual space" : "as the file says";
+  } else {
+    const OCIO::ConstConfigRcPtr& config = impl_->config;
+    const std::string path = file.string();
+    const char* byRule = config->getColorSpaceFromFilepath(path.c_str());
+    const bool onlyDefault = config->filepathOnlyMatchesDefaultRule(path.c_str());
+    r.space = byRule && has(byRule) ? resolve(byRule, path)
+                                    : resolve(OCIO::ROLE_DEFAULT, "the default role");
+    r.how = onlyDefault ? "the config's default rule" : "the config's file rule for it";
+    if (!declared.empty() && !declaredByConvention)
+      r.how = "the file says '" + declared + "', which the config does not know; " + r.how;
+    r.assumed = onlyDefault || !declared.empty();
+  }
+  if (integerData && (r.assumed || declaredByConvention) && isLinearOrData(r.space)) {
+    // 8- and 16-bit images hold display-encoded values (a linear 16-bit TIFF says so in its
+    // header or capture description), as Nuke and Blender read them.
+    const std::string srgb = srgbEncodedSpace();
+    if (!srgb.empty()) {
+      r.how = "an 8- or 16-bit image, taken as sRGB-encoded (" + r.how + " gave '" + r.space +
+              "', linear)";
+      r.space = srgb;
+    } else {
+      r.how += "; the config has no sRGB-encoded space for this 8- or 16-bit image";
+    }
+    r.assumed = true;
+  }
+  return r;
+}
+
 std::string ColorConfig::inputSpaceFor(const std::filesystem::path& file,
                                        const std::string& declared) const {
-  if (has(declared)) return resolve(declared, file.string());
-  const char* byRule = impl_->config->getColorSpaceFromFilepath(file.string().c_str());
-  if (byRule && has(byRule)) return resolve(byRule, file.string());
-  return resolve(OCIO::ROLE_DEFAULT, "the default role");
+  std::string ext = file.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  const bool integer = ext == ".jpg" || ext == ".jpeg" || ext == ".png";
+  return inputSpace(file, declared, false, integer).space;
 }
 
 Image ColorConfig::convertCodes(std::span<const uint8_t> codes, int width, int height, int channels,
@@ -283,6 +421,16 @@ void ColorConfig::convert(Image& image, const std::string& to) const {
     }
   }
   image.colorSpace = dst;
+}
+
+glm::dvec3 ColorConfig::lumaWeights(const std::string& space) const {
+  if (const std::optional<Chromaticities> c = chromaticities(space)) {
+    const glm::dmat3 m = xyzFromRgb(*c);  // columns: the primaries' XYZ
+    return {m[0].y, m[1].y, m[2].y};
+  }
+  double coefs[3];
+  impl_->config->getDefaultLumaCoefs(coefs);
+  return {coefs[0], coefs[1], coefs[2]};
 }
 
 std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& space) const {

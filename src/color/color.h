@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include <glm/vec3.hpp>
+
 #include "core/image.h"
 
 namespace compose::color {
@@ -32,6 +34,13 @@ inline constexpr Chromaticities kAcesAp1Chromaticities = {0.713, 0.293, 0.165,  
                                                           0.128, 0.044, 0.32168, 0.33767};
 inline constexpr Chromaticities kAcesAp0Chromaticities = {0.7347, 0.2653,  0.0,     1.0,
                                                           0.0001, -0.0770, 0.32168, 0.33767};
+
+// How an input file's colour space was chosen (ColorConfig::inputSpace).
+struct InputSpace {
+  std::string space;     // canonical name in the config
+  std::string how;       // for the user: "as the file says", "the config's default rule", ...
+  bool assumed = false;  // a guess (no statement in the file, no file rule for it)
+};
 
 class ColorConfig {
  public:
@@ -54,9 +63,22 @@ class ColorConfig {
   std::string resolve(const std::string& name, const std::string& what) const;
   bool has(const std::string& name) const;
 
-  // The colour space to assume for a file read from disk: `declared` (what the file or its reader
-  // says) if the config knows it, else the config's file rules, else its default role.
+  // The colour space to assume for a file read from disk: `declared` (what the file says, or its
+  // format's convention when `declaredByConvention`: OpenImageIO's "sRGB" for a JPEG, "Linear"
+  // for an OpenEXR) if the config knows it, else the config's file rules (its default rule
+  // last). An 8- or 16-bit image (`integerData`) that this makes linear or data is taken as
+  // sRGB-encoded (srgbEncodedSpace()) when the config has such a space.
+  InputSpace inputSpace(const std::filesystem::path& file, const std::string& declared,
+                        bool declaredByConvention, bool integerData) const;
+  // inputSpace(...).space, an image being 8- or 16-bit when its extension is a JPEG's or a PNG's.
   std::string inputSpaceFor(const std::filesystem::path& file, const std::string& declared) const;
+  // The config's space for sRGB-encoded images (display-referred sRGB codes of Rec.709 colours):
+  // the first of the roles default_byte, matte_paint, texture_paint, color_picking and the spaces
+  // named like "sRGB" whose conversion to the working space decodes the sRGB curve (and, when
+  // the config's linear Rec.709 space is known, its primaries) within 1 %. Empty when none does.
+  std::string srgbEncodedSpace() const;
+  // Whether converting `space` to the working space scales greys linearly, or it is a data space.
+  bool isLinearOrData(const std::string& space) const;
 
   // Converts the first three channels of `image` from image.colorSpace to `to` in place and sets
   // image.colorSpace. Other channels (alpha, AOVs) are left alone. The image needs >= 3 channels.
@@ -76,6 +98,9 @@ class ColorConfig {
   // reports that set. Empty when the config has no interchange role, or the space is not linear
   // RGB (an encoded or data space).
   std::optional<Chromaticities> chromaticities(const std::string& space) const;
+  // The weights of R, G and B in the luminance (CIE Y) of a linear space: from its chromaticities
+  // when known, else the config's `luma` coefficients.
+  glm::dvec3 lumaWeights(const std::string& space) const;
   // A linear colour space of the config with these chromaticities (within 1e-3), or empty.
   std::string spaceWithChromaticities(const Chromaticities& c) const;
   // Converts the first three channels of `image` from the linear RGB space with chromaticities

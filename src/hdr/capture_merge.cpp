@@ -146,7 +146,12 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       std::string space = overrideSpace;
       if (space.empty() && !shot.colorSpace.empty())
         space = colors.resolve(shot.colorSpace, "the colour space of " + shot.file.string());
-      if (space.empty()) space = colors.inputSpaceFor(shot.file, shot.info.fileColorSpace);
+      if (space.empty()) {
+        space = colors
+                    .inputSpace(shot.file, shot.info.fileColorSpace,
+                                shot.info.colorSpaceByConvention, shot.info.integerSamples())
+                    .space;
+      }
       spaces[v].push_back(space);
       if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;
     }

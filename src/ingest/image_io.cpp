@@ -177,7 +177,13 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.sensorOrientation = h.integer("compose:sensorOrientation", 1);
   if (info.sensorOrientation < 1 || info.sensorOrientation > 8) info.sensorOrientation = 1;
   info.fileColorSpace = h.text("oiio:ColorSpace");
-  if (const std::string named = h.text("colorSpace"); !named.empty()) info.fileColorSpace = named;
+  info.colorSpaceByConvention =
+      (info.fileColorSpace == "Linear" && (h.format == "openexr" || h.format == "hdr")) ||
+      (info.fileColorSpace == "sRGB" && (h.format == "jpeg" || h.format == "png"));
+  if (const std::string named = h.text("colorSpace"); !named.empty()) {
+    info.fileColorSpace = named;
+    info.colorSpaceByConvention = false;
+  }
   if (const ImageAttribute* c = h.find("chromaticities")) {
     const auto* v = std::get_if<std::vector<float>>(&c->value);
     if (v && v->size() == 8 &&

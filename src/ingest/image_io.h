@@ -89,6 +89,11 @@ struct CaptureInfo {
   // frame was turned, for a lens calibrated in it. 1 otherwise.
   int sensorOrientation = 1;
   std::string fileColorSpace;  // colour space the file or its reader declares
+  // fileColorSpace is only the format's convention as the reader states it (OpenImageIO's
+  // "Linear" for OpenEXR and Radiance HDR, "sRGB" for JPEG and PNG), not a statement of the file.
+  bool colorSpaceByConvention = false;
+  // 8- or 16-bit integer samples (display-encoded unless the file says otherwise).
+  bool integerSamples() const { return sampleType == "uint8" || sampleType == "uint16"; }
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.
   std::optional<std::array<double, 8>> chromaticities;
   std::string format;                 // reader name, e.g. "jpeg", "openexr"

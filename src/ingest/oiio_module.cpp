@@ -128,6 +128,10 @@ class OiioModule final : public Module {
     OIIO::ImageSpec config;
     config.attribute("raw:ColorSpace", "linear");
     config.attribute("raw:auto_bright", 0);
+    // Colour as the file stores it: a PNG's or TIFF's unassociated alpha is not multiplied into
+    // the display-encoded colour (which would then decode wrongly); callers that use alpha
+    // premultiply in linear light.
+    config.attribute("oiio:UnassociatedAlpha", 1);
     auto input = OIIO::ImageInput::open(path, &config);
     if (!input) {
       error = oneLine(OIIO::geterror());
@@ -140,7 +144,12 @@ class OiioModule final : public Module {
   std::unique_ptr<Reader> openMemory(const unsigned char* bytes, size_t size,
                                      const std::string& name, std::string& error) override {
     auto proxy = std::make_unique<OIIO::Filesystem::IOMemReader>(bytes, size);
-    auto input = OIIO::ImageInput::open(name, nullptr, proxy.get());
+    OIIO::ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1);  // as open()
+    // With a configuration, the proxy goes in it.
+    OIIO::Filesystem::IOProxy* io = proxy.get();
+    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &io);
+    auto input = OIIO::ImageInput::open(name, &config, proxy.get());
     if (!input) {
       error = oneLine(OIIO::geterror());
       if (error.empty()) error = "unknown reason";

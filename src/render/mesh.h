@@ -63,6 +63,9 @@ struct Texture {
   std::filesystem::path file;  // the image file, or a description of where an embedded one was
   Image image;
   Wrap wrapU = Wrap::Repeat, wrapV = Wrap::Repeat;
+  // The format says the colour is sRGB-encoded whatever the image file says (glTF's base colour
+  // textures): the file's own tag (a PNG's gAMA) is not followed.
+  bool srgbByFormat = false;
 };
 
 // A diffuse material: the albedo is baseColor times the texture's colour (when there is one).

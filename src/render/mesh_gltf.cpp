@@ -30,9 +30,13 @@ struct PrimitiveError {
 
 // Extensions a file may require that do not change what compose reads.
 const std::set<std::string>& supportedRequiredExtensions() {
-  static const std::set<std::string> names = {
-      "KHR_texture_transform", "KHR_mesh_quantization", "KHR_materials_emissive_strength",
-      "KHR_materials_unlit",   "KHR_materials_ior",     "KHR_materials_specular"};
+  static const std::set<std::string> names = {"KHR_texture_transform",
+                                              "KHR_mesh_quantization",
+                                              "KHR_materials_emissive_strength",
+                                              "KHR_materials_unlit",
+                                              "KHR_materials_ior",
+                                              "KHR_materials_specular",
+                                              "KHR_materials_pbrSpecularGlossiness"};
   return names;
 }
 
@@ -398,6 +402,7 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
     const tinygltf::Texture& t = model_.textures[size_t(gltfTexture)];
     Texture texture;
     texture.image = decodeImage(t.source, texture.file, where);
+    texture.srgbByFormat = true;  // glTF: base colour textures are sRGB-encoded
     if (t.sampler >= 0 && size_t(t.sampler) < model_.samplers.size()) {
       auto wrap = [](int mode) {
         return mode == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE     ? Texture::Wrap::Clamp
@@ -440,7 +445,36 @@ uint32_t GltfReader::material(int gltfMaterial) {
       mesh_.warnings.push_back("material '" + m.name +
                                "' has no valid baseColorFactor: using white");
     }
-    const tinygltf::TextureInfo& info = gm.pbrMetallicRoughness.baseColorTexture;
+    tinygltf::TextureInfo info = gm.pbrMetallicRoughness.baseColorTexture;
+    // Older exporters' KHR_materials_pbrSpecularGlossiness: its diffuse colour and texture are
+    // the albedo (the metallic-roughness fallback, when there is one, is left for it).
+    if (const auto sg = gm.extensions.find("KHR_materials_pbrSpecularGlossiness");
+        sg != gm.extensions.end() && sg->second.IsObject()) {
+      const tinygltf::Value& d = sg->second.Get("diffuseFactor");
+      if (d.IsArray() && d.ArrayLen() >= 3 && d.Get(0).IsNumber() && d.Get(1).IsNumber() &&
+          d.Get(2).IsNumber()) {
+        m.baseColor =
+            glm::vec3(float(d.Get(0).GetNumberAsDouble()), float(d.Get(1).GetNumberAsDouble()),
+                      float(d.Get(2).GetNumberAsDouble()));
+      } else {
+        m.baseColor = glm::vec3(1.0f);
+      }
+      const tinygltf::Value& t = sg->second.Get("diffuseTexture");
+      info = tinygltf::TextureInfo();
+      if (t.IsObject() && t.Get("index").IsNumber()) {
+        info.index = t.Get("index").GetNumberAsInt();
+        if (t.Get("texCoord").IsNumber()) info.texCoord = t.Get("texCoord").GetNumberAsInt();
+        if (t.Has("extensions") && t.Get("extensions").IsObject() &&
+            t.Get("extensions").Has("KHR_texture_transform"))
+          info.extensions["KHR_texture_transform"] =
+              t.Get("extensions").Get("KHR_texture_transform");
+      }
+    }
+    if (gm.alphaMode == "MASK" || gm.alphaMode == "BLEND") {
+      mesh_.warnings.push_back("material '" + m.name + "' is alphaMode " + gm.alphaMode +
+                               ": its transparency is not rendered (drawn opaque, with the "
+                               "colour where alpha is 0)");
+    }
     if (info.index >= 0) {
       m.texture = texture(info.index, m.name);
       set = info.texCoord;

@@ -30,6 +30,8 @@ namespace {
 struct ObjScan {
   bool smoothingGroups = false;  // an `s` statement
   size_t linesAndPoints = 0;     // `l` and `p` elements (not rendered)
+  // What follows each `mtllib`, whole: one file whose name has spaces, or several names.
+  std::vector<std::string> materialLines;
 };
 
 // tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so, and an
@@ -100,6 +102,10 @@ ObjScan scanObj(const fs::path& path) {
           start = slash + 1;
         }
       }
+    } else if (key == "mtllib" && fields.size() > 2) {
+      const size_t from = size_t(fields[1].data() - line.data());
+      const size_t to = size_t(fields.back().data() + fields.back().size() - line.data());
+      scan.materialLines.push_back(line.substr(from, to - from));
     } else if (key == "s") {
       scan.smoothingGroups = true;
     } else if (key == "l" || key == "p") {
@@ -113,9 +119,40 @@ ObjScan scanObj(const fs::path& path) {
 // that cannot be read are remembered for a warning instead of failing the load.
 class MaterialLibraries : public tinyobj::MaterialReader {
  public:
-  explicit MaterialLibraries(fs::path folder) : folder_(std::move(folder)) {}
+  // `wholeLines`: what follows each `mtllib` of more than one word (ObjScan::materialLines).
+  MaterialLibraries(fs::path folder, std::vector<std::string> wholeLines)
+      : folder_(std::move(folder)), wholeLines_(std::move(wholeLines)) {}
   bool operator()(const std::string& name, std::vector<tinyobj::material_t>* materials,
                   std::map<std::string, int>* names, std::string* warn, std::string* err) override {
+    // tinyobjloader splits `mtllib My Chair.mtl` at the space and stops at the first library it
+    // reads. Blender reads one file of that whole name when it exists, else every library the
+    // line names; so does this, at the line's first word (later words ask again: nothing more).
+    std::vector<std::string> files = {name};
+    for (const std::string& whole : wholeLines_) {
+      std::istringstream split(whole);
+      std::vector<std::string> words;
+      for (std::string w; split >> w;) words.push_back(w);
+      if (std::find(words.begin(), words.end(), name) == words.end()) continue;
+      std::error_code ec;
+      files = fs::is_regular_file(folder_ / whole, ec) ? std::vector<std::string>{whole} : words;
+      if (!linesRead_.insert(whole).second) return true;  // read for an earlier word
+      break;
+    }
+    bool any = false;
+    for (const std::string& f : files) any = read(f, materials, names, warn, err) || any;
+    return any;
+  }
+  std::vector<std::string> unreadable;
+  std::vector<fs::path> looked;  // every library file asked for
+  std::set<std::string> withKd;  // materials that give Kd
+
+ private:
+  fs::path folder_;
+  std::vector<std::string> wholeLines_;
+  std::set<std::string> linesRead_;
+
+  bool read(const std::string& name, std::vector<tinyobj::material_t>* materials,
+            std::map<std::string, int>* names, std::string* warn, std::string* err) {
     std::string relative = name;
     std::replace(relative.begin(), relative.end(), '\\', '/');
     const fs::path file = folder_ / relative;
@@ -152,12 +189,6 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     tinyobj::LoadMtl(names, materials, &stream, warn, err);
     return true;
   }
-  std::vector<std::string> unreadable;
-  std::vector<fs::path> looked;  // every library file asked for
-  std::set<std::string> withKd;  // materials that give Kd
-
- private:
-  fs::path folder_;
 };
 
 // (position, texture coordinate, normal) indices of a face corner, -1 where absent.
@@ -182,7 +213,7 @@ LoadedMesh loadObj(const fs::path& path) {
   std::vector<tinyobj::shape_t> shapes;
   std::vector<tinyobj::material_t> objMaterials;
   std::string warn, err;
-  MaterialLibraries libraries(path.parent_path());
+  MaterialLibraries libraries(path.parent_path(), scan.materialLines);
   // Polygons are triangulated below, in their own plane (tinyobjloader's fans and
   // shorter-diagonal quads can leave a concave polygon's outline).
   if (!tinyobj::LoadObj(&attrib, &shapes, &objMaterials, &warn, &err, &in, &libraries,

@@ -156,6 +156,98 @@ TEST(ColorConfig, PicksInputSpacesFromFileDeclarationsAndRules) {
   EXPECT_EQ(c.inputSpaceFor("plate.png", "no-such-space"), "sRGB - Texture");
 }
 
+// A studio config in the style of the ACES cg-config: no 'sRGB' or 'Linear' names, a default
+// file rule that says ACES2065-1, and a display-encoded role that is a gamma of 2.2, not sRGB.
+constexpr const char* kStudioConfig = R"(ocio_profile_version: 2.1
+roles:
+  aces_interchange: ACES2065-1
+  scene_linear: ACEScg
+  data: Raw
+  matte_paint: Gamma 2.2 Rec.709
+  texture_paint: sRGB - Texture
+file_rules:
+  - !<Rule> {name: Default, colorspace: ACES2065-1}
+displays:
+  sRGB - Display:
+    - !<View> {name: Raw, colorspace: Raw}
+colorspaces:
+  - !<ColorSpace>
+    name: ACES2065-1
+    isdata: false
+  - !<ColorSpace>
+    name: ACEScg
+    isdata: false
+    to_scene_reference: !<BuiltinTransform> {style: ACEScg_to_ACES2065-1}
+  - !<ColorSpace>
+    name: Linear Rec.709
+    isdata: false
+    to_scene_reference: !<MatrixTransform> {matrix: [0.4397010, 0.3829780, 0.1773350, 0, 0.0897923, 0.8134230, 0.0967616, 0, 0.0175440, 0.1115440, 0.8707040, 0, 0, 0, 0, 1]}
+  - !<ColorSpace>
+    name: Gamma 2.2 Rec.709
+    isdata: false
+    to_scene_reference: !<GroupTransform>
+      children:
+        - !<ExponentTransform> {value: 2.2}
+        - !<MatrixTransform> {matrix: [0.4397010, 0.3829780, 0.1773350, 0, 0.0897923, 0.8134230, 0.0967616, 0, 0.0175440, 0.1115440, 0.8707040, 0, 0, 0, 0, 1]}
+  - !<ColorSpace>
+    name: sRGB - Texture
+    isdata: false
+    to_scene_reference: !<GroupTransform>
+      children:
+        - !<ExponentWithLinearTransform> {gamma: 2.4, offset: 0.055}
+        - !<MatrixTransform> {matrix: [0.4397010, 0.3829780, 0.1773350, 0, 0.0897923, 0.8134230, 0.0967616, 0, 0.0175440, 0.1115440, 0.8707040, 0, 0, 0, 0, 1]}
+  - !<ColorSpace>
+    name: Raw
+    isdata: true
+)";
+
+// 8- and 16-bit images are display-encoded: where the config's rules would make them linear
+// (a studio config's default rule), they are read as its sRGB-encoded space, found by what its
+// conversion does (the gamma-2.2 role before it is passed over); float images keep the rules.
+TEST(ColorConfig, IntegerImagesAreReadAsSrgbWhereTheRulesMakeThemLinear) {
+  compose::testing::TempDir dir;
+  const auto file = dir.path() / "studio.ocio";
+  compose::testing::writeText(file, kStudioConfig);
+  const ColorConfig c = ColorConfig::fromFile(file);
+  EXPECT_EQ(c.srgbEncodedSpace(), "sRGB - Texture");
+  EXPECT_TRUE(c.isLinearOrData("ACES2065-1"));
+  EXPECT_TRUE(c.isLinearOrData("Raw"));
+  EXPECT_FALSE(c.isLinearOrData("Gamma 2.2 Rec.709"));
+  InputSpace s = c.inputSpace("plate.jpg", "sRGB", true, true);
+  EXPECT_EQ(s.space, "sRGB - Texture");
+  EXPECT_TRUE(s.assumed);
+  EXPECT_NE(s.how.find("default rule gave 'ACES2065-1'"), std::string::npos) << s.how;
+  EXPECT_EQ(c.inputSpace("plate.tif", "", false, true).space, "sRGB - Texture");
+  s = c.inputSpace("sky.exr", "Linear", true, false);
+  EXPECT_EQ(s.space, "ACES2065-1");
+  EXPECT_TRUE(s.assumed);
+  // What the file says wins, and is no guess.
+  s = c.inputSpace("plate.jpg", "Gamma 2.2 Rec.709", false, true);
+  EXPECT_EQ(s.space, "Gamma 2.2 Rec.709");
+  EXPECT_FALSE(s.assumed);
+  EXPECT_EQ(s.how, "as the file says");
+
+  const ColorConfig builtin = ColorConfig::builtin();
+  EXPECT_EQ(builtin.srgbEncodedSpace(), "sRGB - Texture");
+  EXPECT_EQ(builtin.inputSpace("plate.tif", "", false, true).space, "sRGB - Texture");
+  EXPECT_EQ(builtin.inputSpace("sky.exr", "Linear", true, false).space, "Linear Rec.709 (sRGB)");
+}
+
+// Luminance weights from a space's primaries: Rec.709's are the familiar ones; ACEScg's differ,
+// so that a grey's luminance is the same number whichever the working space.
+TEST(ColorConfig, LumaWeightsFollowThePrimaries) {
+  const ColorConfig c = ColorConfig::builtin();
+  const glm::dvec3 rec709 = c.lumaWeights("Linear Rec.709 (sRGB)");
+  EXPECT_NEAR(rec709.x, 0.2126, 2e-4);
+  EXPECT_NEAR(rec709.y, 0.7152, 2e-4);
+  EXPECT_NEAR(rec709.z, 0.0722, 2e-4);
+  const glm::dvec3 ap1 = c.lumaWeights("ACEScg");
+  EXPECT_NEAR(ap1.x, 0.2722, 1e-3);
+  EXPECT_NEAR(ap1.y, 0.6741, 1e-3);
+  EXPECT_NEAR(ap1.z, 0.0537, 1e-3);
+  EXPECT_NEAR(ap1.x + ap1.y + ap1.z, 1.0, 1e-6);
+}
+
 TEST(ColorConfig, MissingConfigFileIsAnError) {
   COMPOSE_EXPECT_ERROR(ColorConfig::fromFile("/nonexistent/config.ocio"),
                        "color: OpenColorIO config not found (/nonexistent/config.ocio)");

@@ -75,6 +75,45 @@ TEST_F(MeshCache, ASecondRunTakesTheSameMeshAndSummaryFromTheCache) {
   EXPECT_TRUE(problem.empty());
 }
 
+// Whatever changes the object's look changes its key (and so every stage after it): a texture's
+// wrap modes and a material's texture-coordinate transform too (an edited .mtl's -s, a glTF's
+// KHR_texture_transform or sampler), with the same geometry and texels.
+TEST(MeshKey, EveryPartOfTheLookIsInIt) {
+  render::Mesh mesh = render::loadMesh(
+      [] {
+        static TempDir dir;
+        const fs::path f = dir.path() / "tri.obj";
+        writeText(f, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n");
+        return f;
+      }(),
+      {});
+  mesh.materials.push_back({});
+  mesh.textures.push_back({});
+  mesh.textures[0].image = Image(2, 2, 3, {"R", "G", "B"});
+  mesh.materials[0].texture = 0;
+  const Hash128 base = meshKey(mesh, 60.0);
+  EXPECT_EQ(meshKey(mesh, 60.0), base);
+  EXPECT_NE(meshKey(mesh, 30.0), base);
+  render::Mesh m = mesh;
+  m.textures[0].wrapU = render::Texture::Wrap::Clamp;
+  EXPECT_NE(meshKey(m, 60.0), base) << "wrap u";
+  m = mesh;
+  m.textures[0].wrapV = render::Texture::Wrap::Mirror;
+  EXPECT_NE(meshKey(m, 60.0), base) << "wrap v";
+  m = mesh;
+  m.materials[0].uvTransform[0][0] = 2.0f;
+  EXPECT_NE(meshKey(m, 60.0), base) << "texture-coordinate scale";
+  m = mesh;
+  m.materials[0].uvTransform[2][1] = 0.5f;
+  EXPECT_NE(meshKey(m, 60.0), base) << "texture-coordinate offset";
+  m = mesh;
+  m.materials[0].baseColor.y = 0.5f;
+  EXPECT_NE(meshKey(m, 60.0), base) << "base colour";
+  m = mesh;
+  m.textures[0].image.pixels[4] = 1.0f;
+  EXPECT_NE(meshKey(m, 60.0), base) << "a texel";
+}
+
 TEST_F(MeshCache, ADamagedOrForgedEntryIsAProblemNotAMesh) {
   readAndStore();
   const fs::path entry = entryFile();

@@ -61,6 +61,45 @@ std::vector<uint8_t> quadrantPng(const TempDir& dir) {
   return readBytes(dir / "quadrants.png");
 }
 
+// The quadrant texture as an RGBA PNG with unassociated alpha, written byte by byte (stored
+// deflate blocks): green fully transparent, blue half.
+std::vector<uint8_t> quadrantPngWithAlpha() {
+  auto crc32 = [](const uint8_t* p, size_t n) {
+    uint32_t c = 0xFFFFFFFFu;
+    for (size_t i = 0; i < n; ++i) {
+      c ^= p[i];
+      for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
+    }
+    return ~c;
+  };
+  auto be32 = [](std::vector<uint8_t>& out, uint32_t v) {
+    for (int s = 24; s >= 0; s -= 8) out.push_back(uint8_t(v >> s));
+  };
+  std::vector<uint8_t> png = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  auto chunk = [&](const char* type, const std::vector<uint8_t>& data) {
+    be32(png, uint32_t(data.size()));
+    std::vector<uint8_t> body(type, type + 4);
+    body.insert(body.end(), data.begin(), data.end());
+    png.insert(png.end(), body.begin(), body.end());
+    be32(png, crc32(body.data(), body.size()));
+  };
+  std::vector<uint8_t> header;
+  be32(header, 2);
+  be32(header, 2);
+  header.insert(header.end(), {8, 6, 0, 0, 0});  // 8 bits, RGBA
+  chunk("IHDR", header);
+  const std::vector<uint8_t> raw = {0, 255, 0, 0,   255, 0,   255, 0,   0,
+                                    0, 0,   0, 255, 128, 128, 128, 128, 255};
+  uint32_t a = 1, b = 0;  // Adler-32
+  for (const uint8_t v : raw) a = (a + v) % 65521u, b = (b + a) % 65521u;
+  std::vector<uint8_t> z = {0x78, 0x01, 1, uint8_t(raw.size()), 0, uint8_t(~raw.size()), 0xFF};
+  z.insert(z.end(), raw.begin(), raw.end());
+  be32(z, (b << 16) | a);
+  chunk("IDAT", z);
+  chunk("IEND", {});
+  return png;
+}
+
 TEST(Gltf, AHandWrittenTriangleWithoutNormals) {
   TempDir dir;
   const std::string data = base64(asBytes({0, 0, 0, 1, 0, 0, 0, 1, 0}));
@@ -274,6 +313,47 @@ TEST(Gltf, BaseColourFactorsAndTexturesFromDataUris) {
   const Mesh m = loadMesh(dir / "pair.gltf");
   EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
   expectPaintedPair(m);
+}
+
+// A base colour texture's alpha is not its colour: transparent and half-transparent texels keep
+// the colour they store (alpha is not multiplied into it), and the texture is sRGB by glTF's
+// rule. A MASK material says its transparency is not rendered.
+TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
+  TempDir dir;
+  const std::vector<uint8_t> png = quadrantPngWithAlpha();
+  GltfBuilder b = texturedPair(json::object());
+  const int view = b.view(png.data(), png.size());
+  b.json["images"][0] = {{"bufferView", view}, {"mimeType", "image/png"}};
+  writeBytes(dir / "alpha.glb", b.glb());
+  const Mesh m = loadMesh(dir / "alpha.glb");
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  expectPaintedPair(m);
+  ASSERT_EQ(m.textures.size(), 1u);
+  EXPECT_TRUE(m.textures[0].srgbByFormat);
+  b.json["materials"][0]["alphaMode"] = "MASK";
+  writeBytes(dir / "mask.glb", b.glb());
+  const Mesh masked = loadMesh(dir / "mask.glb");
+  ASSERT_EQ(masked.warnings.size(), 1u);
+  EXPECT_NE(masked.warnings[0].find("alphaMode MASK: its transparency is not rendered"),
+            std::string::npos)
+      << masked.warnings[0];
+}
+
+// KHR_materials_pbrSpecularGlossiness: the diffuse factor is the base colour.
+TEST(Gltf, SpecularGlossinessDiffuseIsTheBaseColour) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  b.json["materials"] = json::array(
+      {{{"name", "old"},
+        {"extensions",
+         {{"KHR_materials_pbrSpecularGlossiness", {{"diffuseFactor", {0.8, 0.1, 0.2, 1}}}}}}}});
+  b.json["extensionsUsed"] = json::array({"KHR_materials_pbrSpecularGlossiness"});
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"material", 0}})}})});
+  writeText(dir / "sg.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "sg.gltf");
+  ASSERT_EQ(m.materials.size(), 1u);
+  EXPECT_EQ(m.materials[0].baseColor, glm::vec3(0.8f, 0.1f, 0.2f));
 }
 
 TEST(Gltf, JpegTexturesAreDecodedToo) {

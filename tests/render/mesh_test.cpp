@@ -359,6 +359,27 @@ TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
   }
 }
 
+// `mtllib My Chair.mtl`: one library whose name has a space (as Blender reads it), not two
+// files, even when a file named like the last word exists.
+TEST(Mesh, AMaterialLibraryWhoseNameHasSpaces) {
+  TempDir dir;
+  writeText(dir / "my mats.mtl", "newmtl a\nKd 0.8 0.1 0.2\n");
+  writeText(dir / "mats.mtl", "newmtl a\nKd 0 0 1\n");
+  writeText(dir / "m.obj", "mtllib my mats.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  ASSERT_EQ(m.materials.size(), 1u);
+  EXPECT_TRUE(near(m.materials[0].baseColor, {0.8f, 0.1f, 0.2f}));
+  // Two libraries on one line still are two.
+  writeText(dir / "b.mtl", "newmtl b\nKd 0.3 0.3 0.3\n");
+  writeText(dir / "two.obj",
+            "mtllib mats.mtl b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl a\nf 1 2 3\n"
+            "usemtl b\nf 2 4 3\n");
+  const Mesh two = loadMesh(dir / "two.obj");
+  EXPECT_TRUE(two.warnings.empty()) << two.warnings[0];
+  EXPECT_EQ(two.materials.size(), 2u);
+}
+
 TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
   TempDir dir;
   writeText(dir / "m.obj", "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
