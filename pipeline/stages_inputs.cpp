@@ -175,6 +175,7 @@ class IngestStage final : public Stage {
       // them to the working space in one pass.
       ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest", {.codesForEightBit = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
+      for (const std::string& n : p.notes) ctx.note("the plate " + n);
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
       if (!ctx.job.holdout.empty()) {
         // The holdout is read at the end, by the composite: its header is checked now, so that

@@ -89,6 +89,7 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   for (int f = 0; f < kCubeFaces; ++f) files[size_t(f)] = *byFace[size_t(f)];
   for (int f = 0; f < kCubeFaces; ++f) {
     ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest");
+    out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
     checkShape(Layout::Faces, img.image.width, img.image.height, files[size_t(f)]);
     if (f > 0 && img.image.width != out.faces[0].width) {
@@ -355,6 +356,7 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
 
   EnvironmentFile out;
   ingest::LoadedImage img = ingest::readImage(path, "ingest");
+  out.notes = img.notes;
   const int w = img.image.width, h = img.image.height;
   const std::optional<Layout> declared = exrEnvmapLayout(path);
   if (options.layout) {
@@ -449,6 +451,7 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
   LoadedEnvironment out;
   out.info = file.info;
   out.file = file.files.front();
+  for (const std::string& n : file.notes) out.notes.push_back("environment " + n);
   if (file.layout == Layout::MirrorBall) {
     throw Error("ingest",
                 "a mirror ball needs unwrapping first: compose convert BALL --from mirrorball "

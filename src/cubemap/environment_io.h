@@ -48,6 +48,7 @@ struct EnvironmentFile {
   Image image;  // LatLong and MirrorBall: the image as read (channels as stored)
   std::array<Image, lighting::kCubeFaces> faces;  // cube layouts: the faces as read
   ingest::CaptureInfo info;                       // of the first file
+  std::vector<std::string> notes;                 // what reading changed (LoadedImage::notes)
 
   bool isCube() const { return layout != Layout::LatLong && layout != Layout::MirrorBall; }
   // "vertical cross, faces 256²" / "lat-long 1024x512".

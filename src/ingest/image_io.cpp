@@ -324,6 +324,37 @@ LoadedImage readExr(const fs::path& path, const std::string& stage) {
   fillCaptureInfo(headerOf(part), out.info);
   checkImageSize(part.width, part.height, int(part.channelNames.size()), stage, path);
   out.image = reader.read(0);
+  if (part.x != 0 || part.y != 0 || part.width != part.fullWidth ||
+      part.height != part.fullHeight) {
+    // The image is the display window (OpenEXR's frame, as Nuke keeps it): the stored pixels go
+    // where the data window says, pixels outside it are 0 and overscan beyond the frame is not
+    // kept.
+    checkImageSize(part.fullWidth, part.fullHeight, int(part.channelNames.size()), stage, path);
+    Image framed(part.fullWidth, part.fullHeight, out.image.channels, out.image.channelNames);
+    const int x0 = std::max(0, part.x), x1 = std::min(part.fullWidth, part.x + part.width);
+    const int y0 = std::max(0, part.y), y1 = std::min(part.fullHeight, part.y + part.height);
+    const size_t c = size_t(out.image.channels);
+    for (int y = y0; y < y1 && x0 < x1; ++y) {
+      std::copy_n(out.image.at(x0 - part.x, y - part.y), size_t(x1 - x0) * c, framed.at(x0, y));
+    }
+    char line[320];
+    std::snprintf(line, sizeof line,
+                  "%s: its data window (%dx%d at %d,%d) is not its display window (%dx%d): the "
+                  "image is the display window%s%s",
+                  path.filename().string().c_str(), part.width, part.height, part.x, part.y,
+                  part.fullWidth, part.fullHeight,
+                  (x0 > 0 || y0 > 0 || x1 < part.fullWidth || y1 < part.fullHeight)
+                      ? ", 0 where no pixel is stored"
+                      : "",
+                  (part.x < 0 || part.y < 0 || part.x + part.width > part.fullWidth ||
+                   part.y + part.height > part.fullHeight)
+                      ? ", the overscan outside it left out"
+                      : "");
+    out.notes.push_back(line);
+    out.image = std::move(framed);
+    out.info.fileWidth = part.fullWidth;
+    out.info.fileHeight = part.fullHeight;
+  }
   if (out.info.orientation != 1) {
     detail::applyOrientation(out.image.pixels, out.image.width, out.image.height,
                              out.image.channels, out.info.orientation);

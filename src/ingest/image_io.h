@@ -130,6 +130,8 @@ struct LoadedImage {
   // as stored, orientation applied; `image` then has its size, channels, names and colour space
   // but no pixels.
   std::vector<uint8_t> codes;
+  // What reading changed, for the user (an OpenEXR's data window put in its display window).
+  std::vector<std::string> notes;
   bool hasPixels() const { return !image.pixels.empty(); }
 };
 

@@ -71,6 +71,55 @@ TEST(ImageIo, AppliesExifOrientation) {
   EXPECT_EQ(img.image.at(0, 0)[0], 0.0f);
 }
 
+// An OpenEXR whose data window is not its display window is read as the display window: the
+// stored pixels where the data window puts them, 0 around them, overscan left out, and a note.
+TEST(ImageIo, AnExrIsItsDisplayWindow) {
+  TempDir dir;
+  auto write = [&](const std::string& name, int x, int y, int w, int h, int fw, int fh) {
+    OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::FLOAT);
+    spec.x = x;
+    spec.y = y;
+    spec.full_x = 0;
+    spec.full_y = 0;
+    spec.full_width = fw;
+    spec.full_height = fh;
+    std::vector<float> px(size_t(w) * size_t(h) * 3);
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i)
+        for (int c = 0; c < 3; ++c)
+          px[(size_t(j) * size_t(w) + size_t(i)) * 3 + size_t(c)] =
+              float(1000 * (x + i) + (y + j) + c * 0.25);
+    auto out = OIIO::ImageOutput::create((dir / name).string());
+    ASSERT_TRUE(out && out->open((dir / name).string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  };
+  // Shifted inside the frame: pixel (X, Y) of the frame holds 1000 X + Y where it is stored.
+  write("shift.exr", 3, 2, 4, 3, 8, 6);
+  LoadedImage shifted = readImage(dir / "shift.exr");
+  ASSERT_EQ(shifted.image.width, 8);
+  ASSERT_EQ(shifted.image.height, 6);
+  EXPECT_EQ(shifted.image.at(3, 2)[0], 3002.0f);
+  EXPECT_EQ(shifted.image.at(6, 4)[1], 6004.25f);
+  EXPECT_EQ(shifted.image.at(2, 2)[0], 0.0f);
+  EXPECT_EQ(shifted.image.at(3, 5)[0], 0.0f);
+  ASSERT_EQ(shifted.notes.size(), 1u);
+  EXPECT_NE(shifted.notes[0].find("0 where no pixel is stored"), std::string::npos)
+      << shifted.notes[0];
+  // Overscan around the frame: the frame's pixels only.
+  write("overscan.exr", -2, -1, 10, 8, 6, 5);
+  LoadedImage framed = readImage(dir / "overscan.exr");
+  ASSERT_EQ(framed.image.width, 6);
+  ASSERT_EQ(framed.image.height, 5);
+  EXPECT_EQ(framed.image.at(0, 0)[0], 0.0f);
+  EXPECT_EQ(framed.image.at(5, 4)[0], 5004.0f);
+  ASSERT_EQ(framed.notes.size(), 1u);
+  EXPECT_NE(framed.notes[0].find("the overscan outside it left out"), std::string::npos);
+  // The same windows: nothing to say.
+  write("plain.exr", 0, 0, 4, 3, 4, 3);
+  EXPECT_TRUE(readImage(dir / "plain.exr").notes.empty());
+}
+
 TEST(ImageIo, ReadErrorsNameTheFile) {
   TempDir dir;
   COMPOSE_EXPECT_ERROR(readImage(dir / "missing.jpg"), "ingest: file not found");
