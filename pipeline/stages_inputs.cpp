@@ -528,9 +528,7 @@ class ColorStage final : public Stage {
         plate.codes = {};
         reason = "plate read as '" + space.space + "' (" + space.how + ")";
         if (space.assumed) {
-          ctx.note("the plate " + ctx.job.plate.filename().string() +
-                   " names no colour space "
-                   "the config knows: read as '" +
+          ctx.note("the plate " + ctx.job.plate.filename().string() + " is read as '" +
                    space.space + "' (" + space.how + "); give --plate-space to say which it is");
         }
       } else {
@@ -616,8 +614,17 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
 
 color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::filesystem::path& file,
                                const ingest::CaptureInfo& info) {
-  return colors.inputSpace(file, info.fileColorSpace, info.colorSpaceByConvention,
-                           info.integerSamples());
+  color::InputSpace s = colors.inputSpace(file, info.fileColorSpace, info.colorSpaceByConvention,
+                                          info.integerSamples());
+  if (!info.iccProfile.empty() && s.how == "as the file says")
+    s.how = "by its ICC profile '" + info.iccProfile + "'";
+  if (info.exifUncalibrated) {
+    s.how +=
+        "; its EXIF says the colour space is uncalibrated (65535), as cameras set to Adobe "
+        "RGB write: give the space (such as 'Adobe RGB (1998)') if it is not this one";
+    s.assumed = true;
+  }
+  return s;
 }
 
 std::unique_ptr<Stage> makeIngestStage() {

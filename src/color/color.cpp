@@ -334,8 +334,19 @@ std::string ColorConfig::srgbEncodedSpace() const {
 InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std::string& declared,
                                    bool declaredByConvention, bool integerData) const {
   InputSpace r;
-  if (has(declared)) {
-    r.space = resolve(declared, file.string());
+  // The names an embedded ICC profile's space goes by in other configs (ingest::CaptureInfo).
+  std::string known = declared;
+  if (!has(known)) {
+    static const std::vector<std::pair<std::string, std::vector<std::string>>> kSynonyms = {
+        {"Display P3", {"sRGB Encoded P3-D65", "srgb_encoded_p3d65", "Display P3 - Texture"}},
+        {"Adobe RGB (1998)", {"Adobe RGB", "AdobeRGB", "adobe_rgb"}}};
+    for (const auto& [name, others] : kSynonyms)
+      if (declared == name)
+        for (const std::string& o : others)
+          if (known == declared && has(o)) known = o;
+  }
+  if (has(known)) {
+    r.space = resolve(known, file.string());
     r.how = declaredByConvention ? "its format's usual space" : "as the file says";
   } else {
     const OCIO::ConstConfigRcPtr& config = impl_->config;

@@ -1,6 +1,7 @@
 #include "ingest/exif.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <optional>
@@ -326,6 +327,40 @@ std::vector<unsigned char> encode(const std::vector<ImageAttribute>& attributes)
   w.ifd(out, zero);
   if (!exif.empty()) w.ifd(out, exif);
   return out;
+}
+
+std::string iccDescription(std::span<const unsigned char> p) {
+  auto be32 = [&](size_t at) -> uint32_t {
+    return at + 4 > p.size() ? 0u
+                             : (uint32_t(p[at]) << 24) | (uint32_t(p[at + 1]) << 16) |
+                                   (uint32_t(p[at + 2]) << 8) | uint32_t(p[at + 3]);
+  };
+  if (p.size() < 132) return {};
+  const uint32_t tags = be32(128);
+  for (uint32_t t = 0; t < tags && 132 + 12 * size_t(t) + 12 <= p.size(); ++t) {
+    const size_t entry = 132 + 12 * size_t(t);
+    if (std::memcmp(p.data() + entry, "desc", 4) != 0) continue;
+    const size_t at = be32(entry + 4), size = be32(entry + 8);
+    if (at >= p.size() || size > p.size() - at || size < 12) return {};
+    const unsigned char* d = p.data() + at;
+    std::string text;
+    if (std::memcmp(d, "desc", 4) == 0) {
+      const size_t n = std::min<size_t>(be32(at + 8), size - 12);
+      text.assign(reinterpret_cast<const char*>(d + 12), n);
+    } else if (std::memcmp(d, "mluc", 4) == 0 && size >= 28 && be32(at + 8) >= 1) {
+      const size_t length = be32(at + 20), offset = be32(at + 24);
+      if (offset > size || length > size - offset) return {};
+      for (size_t i = 0; i + 1 < length; i += 2) {
+        const unsigned code = (unsigned(d[offset + i]) << 8) | d[offset + i + 1];
+        text += code < 128 ? char(code) : '?';  // the names that matter are ASCII
+      }
+    }
+    while (!text.empty() &&
+           (text.back() == '\0' || std::isspace(static_cast<unsigned char>(text.back()))))
+      text.pop_back();
+    return text;
+  }
+  return {};
 }
 
 }  // namespace compose::ingest::exif

@@ -25,6 +25,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "ingest/image_io.h"
@@ -37,5 +38,10 @@ std::vector<ImageAttribute> decode(std::span<const unsigned char> tiff);
 // The TIFF-structured block for `attributes` (without the "Exif\0\0" prefix); empty when none of
 // them is an EXIF tag.
 std::vector<unsigned char> encode(const std::vector<ImageAttribute>& attributes);
+
+// The description ('desc' tag) of an ICC profile, version 2 (ASCII) or 4 (the first record of a
+// multi-localised string): "Display P3", "sRGB IEC61966-2.1". Empty when the profile has none or
+// is malformed.
+std::string iccDescription(std::span<const unsigned char> profile);
 
 }  // namespace compose::ingest::exif

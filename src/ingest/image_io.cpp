@@ -1,6 +1,7 @@
 #include "ingest/image_io.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -180,7 +181,24 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.colorSpaceByConvention =
       (info.fileColorSpace == "Linear" && (h.format == "openexr" || h.format == "hdr")) ||
       (info.fileColorSpace == "sRGB" && (h.format == "jpeg" || h.format == "png"));
+  info.iccProfile = trimmed(h.text("ICCProfile:profile_description"));
+  if (!info.iccProfile.empty() && (h.format == "jpeg" || h.format == "png" || h.format == "tiff")) {
+    std::string lower = info.iccProfile;
+    std::transform(lower.begin(), lower.end(), lower.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    if (lower.find("p3") != std::string::npos) {
+      info.fileColorSpace = "Display P3";
+    } else if (lower.find("adobe rgb") != std::string::npos ||
+               lower.find("adobergb") != std::string::npos) {
+      info.fileColorSpace = "Adobe RGB (1998)";
+    } else if (lower.find("srgb") == std::string::npos) {
+      info.fileColorSpace = info.iccProfile;  // ProPhoto, a camera's own: not a config's name
+    }
+    if (info.fileColorSpace != "sRGB") info.colorSpaceByConvention = false;
+  }
+  info.exifUncalibrated = info.iccProfile.empty() && h.integer("Exif:ColorSpace", 1) == 65535;
   if (const std::string named = h.text("colorSpace"); !named.empty()) {
+    info.exifUncalibrated = false;
     info.fileColorSpace = named;
     info.colorSpaceByConvention = false;
   }

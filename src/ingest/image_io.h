@@ -92,6 +92,13 @@ struct CaptureInfo {
   // fileColorSpace is only the format's convention as the reader states it (OpenImageIO's
   // "Linear" for OpenEXR and Radiance HDR, "sRGB" for JPEG and PNG), not a statement of the file.
   bool colorSpaceByConvention = false;
+  // The description of an embedded ICC profile ("Display P3"), empty when there is none. A
+  // profile other than sRGB's makes fileColorSpace its space ("Display P3", "Adobe RGB (1998)",
+  // else the description itself, which a config will not know: then the note says so).
+  std::string iccProfile;
+  // EXIF ColorSpace 65535 ("uncalibrated", how cameras set to Adobe RGB mark their JPEGs) and no
+  // profile that says more.
+  bool exifUncalibrated = false;
   // 8- or 16-bit integer samples (display-encoded unless the file says otherwise).
   bool integerSamples() const { return sampleType == "uint8" || sampleType == "uint16"; }
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.

@@ -78,6 +78,7 @@ bool readHeaderPhase(Decompressor& d, const unsigned char* bytes, size_t size) {
     jpeg_mem_src(&d.cinfo, bytes, static_cast<unsigned long>(size));
   }
   jpeg_save_markers(&d.cinfo, JPEG_APP0 + 1, 0xffff);
+  jpeg_save_markers(&d.cinfo, JPEG_APP0 + 2, 0xffff);  // an ICC profile
   jpeg_read_header(&d.cinfo, TRUE);
   return true;
 }
@@ -116,6 +117,24 @@ Decoded read(Decompressor& d, const unsigned char* bytes, size_t size, const fs:
       h.attributes.insert(h.attributes.end(), exif.begin(), exif.end());
       break;
     }
+  }
+  // An embedded ICC profile, in APP2 chunks "ICC_PROFILE\0", sequence number, count: its
+  // description, as OpenImageIO names it.
+  std::vector<std::pair<int, std::span<const unsigned char>>> chunks;
+  for (jpeg_saved_marker_ptr m = d.cinfo.marker_list; m; m = m->next) {
+    if (m->marker == JPEG_APP0 + 2 && m->data_length > 14 &&
+        std::memcmp(m->data, "ICC_PROFILE\0", 12) == 0)
+      chunks.emplace_back(m->data[12],
+                          std::span<const unsigned char>(m->data + 14, m->data_length - 14));
+  }
+  if (!chunks.empty()) {
+    std::sort(chunks.begin(), chunks.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::vector<unsigned char> profile;
+    for (const auto& [sequence, chunk] : chunks)
+      profile.insert(profile.end(), chunk.begin(), chunk.end());
+    if (const std::string description = exif::iccDescription(profile); !description.empty())
+      h.attributes.push_back({"ICCProfile:profile_description", description});
   }
   h.attributes.push_back({"oiio:ColorSpace", std::string("sRGB")});
   if (h.width <= 0 || h.height <= 0) throw Error(stage, "image has no pixels", file);

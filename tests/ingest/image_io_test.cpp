@@ -8,6 +8,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "core/output_files.h"
+#include "ingest/exif.h"
 #include "test_util.h"
 
 namespace compose::ingest {
@@ -118,6 +119,72 @@ TEST(ImageIo, AnExrIsItsDisplayWindow) {
   // The same windows: nothing to say.
   write("plain.exr", 0, 0, 4, 3, 4, 3);
   EXPECT_TRUE(readImage(dir / "plain.exr").notes.empty());
+}
+
+// A minimal ICC profile: the header, a tag table of one 'desc' tag, and the tag, version 2
+// (ASCII) or 4 ('mluc', UTF-16).
+std::vector<unsigned char> iccProfileDescribed(const std::string& text, bool v4) {
+  std::vector<unsigned char> p(128, 0);
+  auto be32 = [&](uint32_t v) {
+    for (int s = 24; s >= 0; s -= 8) p.push_back((unsigned char)(v >> s));
+  };
+  be32(1);
+  p.insert(p.end(), {'d', 'e', 's', 'c'});
+  be32(144);
+  const size_t sizeAt = p.size();
+  be32(0);
+  const size_t start = p.size();
+  if (!v4) {
+    p.insert(p.end(), {'d', 'e', 's', 'c', 0, 0, 0, 0});
+    be32(uint32_t(text.size() + 1));
+    p.insert(p.end(), text.begin(), text.end());
+    p.push_back(0);
+  } else {
+    p.insert(p.end(), {'m', 'l', 'u', 'c', 0, 0, 0, 0});
+    be32(1);
+    be32(12);
+    p.insert(p.end(), {'e', 'n', 'U', 'S'});
+    be32(uint32_t(2 * text.size()));
+    be32(28);
+    for (const char c : text) p.insert(p.end(), {0, (unsigned char)c});
+  }
+  const uint32_t size = uint32_t(p.size() - start);
+  for (int k = 0; k < 4; ++k) p[sizeAt + size_t(k)] = (unsigned char)(size >> (24 - 8 * k));
+  const uint32_t total = uint32_t(p.size());
+  for (int k = 0; k < 4; ++k) p[size_t(k)] = (unsigned char)(total >> (24 - 8 * k));
+  return p;
+}
+
+// A photo's embedded ICC profile names its colour space: Display P3 (an iPhone's), Adobe RGB; an
+// sRGB profile changes nothing, and another is named as it is (no config knows it: a note).
+TEST(ImageIo, AnEmbeddedIccProfileNamesTheColourSpace) {
+  EXPECT_EQ(exif::iccDescription(iccProfileDescribed("Display P3", false)), "Display P3");
+  EXPECT_EQ(exif::iccDescription(iccProfileDescribed("Adobe RGB (1998)", true)),
+            "Adobe RGB (1998)");
+  std::vector<unsigned char> broken = iccProfileDescribed("Display P3", false);
+  broken.resize(150);
+  EXPECT_EQ(exif::iccDescription(broken), "");
+  TempDir dir;
+  for (const auto& [description, space] :
+       std::vector<std::pair<std::string, std::string>>{{"Display P3", "Display P3"},
+                                                        {"Adobe RGB (1998)", "Adobe RGB (1998)"},
+                                                        {"sRGB IEC61966-2.1", "sRGB"},
+                                                        {"ProPhoto RGB", "ProPhoto RGB"}}) {
+    const std::vector<unsigned char> icc = iccProfileDescribed(description, description[0] == 'A');
+    const std::filesystem::path file = dir.path() / "photo.jpg";
+    OIIO::ImageSpec spec(8, 4, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("ICCProfile", OIIO::TypeDesc(OIIO::TypeDesc::UINT8, int(icc.size())),
+                   icc.data());
+    std::vector<unsigned char> px(8 * 4 * 3, 128);
+    auto out = OIIO::ImageOutput::create(file.string());
+    ASSERT_TRUE(out && out->open(file.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+    const CaptureInfo info = readCaptureInfo(file);
+    EXPECT_EQ(info.iccProfile, description);
+    EXPECT_EQ(info.fileColorSpace, space) << description;
+    EXPECT_EQ(info.colorSpaceByConvention, space == "sRGB") << description;
+  }
 }
 
 TEST(ImageIo, ReadErrorsNameTheFile) {
