@@ -201,8 +201,15 @@ ColorConfig ColorConfig::fromFile(const std::filesystem::path& file) {
 
 ColorConfig ColorConfig::fromEnvironment() {
   const char* env = std::getenv("OCIO");
-  if (env && *env) return fromFile(env);
-  return builtin();
+  if (!(env && *env)) return builtin();
+  try {
+    return fromFile(env);
+  } catch (const Error& e) {
+    // Say where the name came from: the user may not know $OCIO is set.
+    throw Error("color",
+                std::string(e.what()) + " (named by $OCIO; unset it for the built-in config)",
+                e.file());
+  }
 }
 
 const std::string& ColorConfig::source() const {
@@ -218,6 +225,11 @@ std::string ColorConfig::identity() const {
 }
 
 std::string ColorConfig::workingSpace() const {
+  if (!impl_->config->hasRole(OCIO::ROLE_SCENE_LINEAR)) {
+    throw Error("color", "the OpenColorIO config (" + impl_->source +
+                             ") has no scene_linear role: it names the working space, which "
+                             "compose needs");
+  }
   return resolve(OCIO::ROLE_SCENE_LINEAR, "the scene_linear role");
 }
 

@@ -609,6 +609,18 @@ void convertRows(const Image& image, int y0, int rows, oiio::Sample sample, void
   });
 }
 
+// Whether an image tagged `space` holds sRGB codes: "sRGB", or a display transform's output
+// ("<display>/<view>", ColorConfig::toDisplay) whose display is an sRGB one and whose view is not
+// Raw.
+bool isSrgbEncoded(const std::string& space) {
+  std::string s = space;
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  const size_t slash = s.find('/');
+  if (slash == std::string::npos) return s == "srgb";
+  return s.rfind("srgb", 0) == 0 && s.substr(slash + 1) != "raw";
+}
+
 // A JPEG holds one or three channels, as OpenImageIO writes them: the first three of three or
 // more, a two-channel image as luminance when its first channel is Y (else RGB with a black
 // third), one as grayscale.
@@ -619,10 +631,7 @@ void writeJpeg(const fs::path& file, const fs::path& shown, const Image& image,
   const int channels = gray ? 1 : 3;
   std::vector<ImageAttribute> attributes = options.attributes;
   attributes.push_back({"Software", std::string("compose")});
-  std::string space = image.colorSpace;
-  std::transform(space.begin(), space.end(), space.begin(),
-                 [](unsigned char c) { return char(std::tolower(c)); });
-  if (space == "srgb") attributes.push_back({"Exif:ColorSpace", 1});
+  if (isSrgbEncoded(image.colorSpace)) attributes.push_back({"Exif:ColorSpace", 1});
   jpeg::write(file, shown, image.width, image.height, channels, options.jpegQuality, attributes,
               [&](int y0, int rows, uint8_t* codes) {
                 parallelFor(0, rows, [&](int64_t r) {
@@ -665,7 +674,9 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
   spec.channels = image.channels;
   spec.channelNames = image.channelNames;
   spec.alphaChannel = options.alphaChannel;
-  spec.colorSpace = image.colorSpace;
+  // A display image says sRGB where its display is one (the PNG's sRGB chunk), not the
+  // config's "display/view" name, which no reader knows.
+  spec.colorSpace = isSrgbEncoded(image.colorSpace) ? "sRGB" : image.colorSpace;
   spec.jpegQuality = options.jpegQuality;
   spec.attributes = options.attributes;
   switch (options.depth) {

@@ -624,6 +624,12 @@ void GltfReader::read() {
   std::vector<int> roots;
   if (!model_.scenes.empty()) {
     int scene = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+    if (model_.defaultScene < 0 && model_.scenes.size() > 1) {
+      mesh_.warnings.push_back(
+          "the file has " + std::to_string(model_.scenes.size()) +
+          " scenes and names no default one: rendered scene 0" +
+          (model_.scenes[0].name.empty() ? std::string() : " ('" + model_.scenes[0].name + "')"));
+    }
     if (size_t(scene) >= model_.scenes.size()) {
       mesh_.warnings.push_back("the default scene " + std::to_string(scene) +
                                " does not exist: rendered scene 0");

@@ -230,6 +230,11 @@ LoadedMesh loadObj(const fs::path& path) {
   Mesh& mesh = loaded.mesh;
   for (const std::string& w : libraries.unreadable)
     mesh.warnings.push_back(w + ": its materials render with the default albedo");
+  if (!attrib.colors.empty()) {
+    mesh.warnings.push_back("ignored the vertex colours (v x y z r g b) of " +
+                            count(attrib.colors.size() / 3, "vertex", "vertices") +
+                            ": the albedo is the material's colour (or --albedo)");
+  }
   mesh.otherFiles = libraries.looked;
 
   // Materials in the order faces first use them; -1 (no material, or a name no library

@@ -269,6 +269,22 @@ TEST(ColorConfig, LumaWeightsFollowThePrimaries) {
 TEST(ColorConfig, MissingConfigFileIsAnError) {
   COMPOSE_EXPECT_ERROR(ColorConfig::fromFile("/nonexistent/config.ocio"),
                        "color: OpenColorIO config not found (/nonexistent/config.ocio)");
+  // Named by $OCIO: the error says so.
+  ::setenv("OCIO", "/nonexistent/config.ocio", 1);
+  try {
+    ColorConfig::fromEnvironment();
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("named by $OCIO"), std::string::npos) << e.what();
+  }
+  ::unsetenv("OCIO");
+  // A config without scene_linear: the role is named as missing.
+  compose::testing::TempDir dir;
+  std::string text = kStudioConfig;
+  text.erase(text.find("  scene_linear: ACEScg\n"), std::string("  scene_linear: ACEScg\n").size());
+  compose::testing::writeText(dir.path() / "c.ocio", text);
+  COMPOSE_EXPECT_ERROR(ColorConfig::fromFile(dir.path() / "c.ocio").workingSpace(),
+                       "has no scene_linear role");
 }
 
 // $OCIO is honoured: a real third-party config (Blender's, from the sample data).

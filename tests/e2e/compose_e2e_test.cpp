@@ -637,6 +637,15 @@ TEST_F(ComposeOutputs, ExrSaysWhatColourSpaceItIsIn) {
   const float ap1[8] = {0.713f, 0.293f, 0.165f, 0.830f, 0.128f, 0.044f, 0.32168f, 0.33767f};
   for (int i = 0; i < 8; ++i) EXPECT_NEAR(xy[i], ap1[i], 1e-6) << "entry " << i;
   EXPECT_EQ(spec.get_string_attribute("colorSpace"), "ACEScg");
+  // The display image is tagged sRGB (EXIF ColorSpace 1), unless its view is Raw.
+  auto jpeg = OIIO::ImageInput::open((dir_ / "c.jpg").string());
+  ASSERT_TRUE(jpeg);
+  EXPECT_EQ(jpeg->spec().get_int_attribute("Exif:ColorSpace", 0), 1);
+  const auto raw = runCompose(args((dir_ / "r").string()) + " --view Raw", dir_.path());
+  ASSERT_EQ(raw.status, 0) << raw.err;
+  auto rawJpeg = OIIO::ImageInput::open((dir_ / "r.jpg").string());
+  ASSERT_TRUE(rawJpeg);
+  EXPECT_NE(rawJpeg->spec().get_int_attribute("Exif:ColorSpace", 0), 1);
 }
 
 TEST_F(ComposeOutputs, OutEndingInASlashWritesIntoThatFolder) {

@@ -225,6 +225,16 @@ TEST(Gltf, TheNodeHierarchyIsFlattenedIntoObjectSpace) {
   EXPECT_TRUE(hasPosition(m, {10, 0, 0}));
   EXPECT_TRUE(hasPosition(m, {1, 5, 0}));
   EXPECT_TRUE(hasPosition(m, {0, 6, 0}));
+  // Two scenes and no default: the first renders, and a note says so.
+  b.json["scenes"].push_back({{"name", "other"}, {"nodes", json::array()}});
+  b.json.erase("scene");
+  writeText(dir / "twoscenes.gltf", b.gltf());
+  const Mesh two = loadMesh(dir / "twoscenes.gltf");
+  EXPECT_EQ(two.triangleCount(), 2u);
+  ASSERT_EQ(two.warnings.size(), 1u);
+  EXPECT_NE(two.warnings[0].find("2 scenes and names no default one: rendered scene 0"),
+            std::string::npos)
+      << two.warnings[0];
   // Without scenes, every root node renders.
   b.json.erase("scenes");
   b.json.erase("scene");

@@ -380,6 +380,21 @@ TEST(Mesh, AMaterialLibraryWhoseNameHasSpaces) {
   EXPECT_EQ(two.materials.size(), 2u);
 }
 
+// Vertex colours (v x y z r g b) are not the albedo: a note says they were ignored.
+TEST(Mesh, ObjVertexColoursAreSaidToBeIgnored) {
+  TempDir dir;
+  writeText(dir / "c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
+  const Mesh m = loadMesh(dir / "c.obj");
+  ASSERT_EQ(m.triangleCount(), 1u);
+  bool said = false;
+  for (const std::string& w : m.warnings)
+    said = said || w.find("ignored the vertex colours (v x y z r g b) of 3 vertices") == 0;
+  EXPECT_TRUE(said) << (m.warnings.empty() ? "no warning" : m.warnings[0]);
+  writeText(dir / "plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  for (const std::string& w : loadMesh(dir / "plain.obj").warnings)
+    EXPECT_EQ(w.find("vertex colours"), std::string::npos) << w;
+}
+
 TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
   TempDir dir;
   writeText(dir / "m.obj", "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
