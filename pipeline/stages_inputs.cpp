@@ -510,11 +510,20 @@ class ColorStage final : public Stage {
       // pixels become the linear plate. An 8-bit RGB plate (a JPEG) is converted from its codes
       // into a new float image; any other RGB plate is converted in place.
       ingest::LoadedImage& plate = *ctx.artefacts.plate;
+      // A plate's alpha (the last of 2 or 4 channels), kept when it is not 1 everywhere.
+      std::vector<float> alpha;
       if (plate.image.channels == 2 || plate.image.channels == 4) {
-        ctx.note("the plate " + ctx.job.plate.filename().string() +
-                 " has an alpha channel, which compose does not use: its colour is the "
-                 "background as it is stored, opaque (alpha 1 in the outputs); flatten it over "
-                 "a background first where it is transparent");
+        const size_t n = size_t(plate.image.width) * size_t(plate.image.height);
+        const size_t stride = size_t(plate.image.channels), at = stride - 1;
+        alpha.resize(n);
+        bool opaque = true;
+        for (size_t i = 0; i < n; ++i) {
+          alpha[i] = plate.codes.empty()
+                         ? std::clamp(plate.image.pixels[i * stride + at], 0.0f, 1.0f)
+                         : float(plate.codes[i * stride + at]) / 255.0f;
+          opaque = opaque && alpha[i] == 1.0f;
+        }
+        if (opaque) alpha.clear();
       }
       Image linear;
       if (!plate.codes.empty() && plate.image.channels >= 3 && !plate.info.chromaticities) {
@@ -547,6 +556,30 @@ class ColorStage final : public Stage {
         }
         reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
                                                    ctx.job.plateSpace, "--plate-space", ctx.colors);
+      }
+      if (!alpha.empty()) {
+        // Premultiplied in linear light, as the composite works: a PNG's or TIFF's unassociated
+        // colour times its alpha; an OpenEXR's colour is premultiplied already.
+        const bool straight = plate.info.unassociatedAlpha;
+        Image rgba(linear.width, linear.height, 4, {"R", "G", "B", "A"});
+        rgba.colorSpace = linear.colorSpace;
+        parallelFor(0, linear.height, [&](int64_t y) {
+          for (int x = 0; x < linear.width; ++x) {
+            const size_t i = size_t(y) * size_t(linear.width) + size_t(x);
+            const float* c = linear.at(x, int(y));
+            float* o = rgba.at(x, int(y));
+            const float k = straight ? alpha[i] : 1.0f;
+            o[0] = c[0] * k;
+            o[1] = c[1] * k;
+            o[2] = c[2] * k;
+            o[3] = alpha[i];
+          }
+        });
+        linear = std::move(rgba);
+        ctx.note("the plate " + ctx.job.plate.filename().string() + " has an alpha channel (" +
+                 (straight ? "unassociated: premultiplied in linear light" : "premultiplied") +
+                 "): the composite keeps it (the object over the plate, alpha = the object's + (1 "
+                 "- the object's) x the plate's); the display image shows it over black");
       }
       ctx.artefacts.plateLinear = std::move(linear);
     }

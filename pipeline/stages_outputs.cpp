@@ -53,7 +53,10 @@ ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLigh
   for (int y = step / 2; y < plateLinear.height; y += step) {
     for (int x = step / 2; x < plateLinear.width; x += step) {
       const float* p = plateLinear.at(x, y);
-      logSum += std::log(std::max(kFloor, luma.x * p[0] + luma.y * p[1] + luma.z * p[2]));
+      // A plate with alpha: its visible pixels, their colour unpremultiplied.
+      const double a = plateLinear.channels == 4 ? double(p[3]) : 1.0;
+      if (!(a >= 0.01)) continue;
+      logSum += std::log(std::max(kFloor, (luma.x * p[0] + luma.y * p[1] + luma.z * p[2]) / a));
       ++count;
     }
   }
@@ -611,14 +614,19 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const fs::path& displayPath) {
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
-  COMPOSE_CHECK(composite.channels == 3 && rendered.beauty.channels == 4);
+  COMPOSE_CHECK((composite.channels == 3 || composite.channels == 4) &&
+                rendered.beauty.channels == 4);
   // The parts are written from the images as they are, without interleaving them into new ones
   // first: the composite's RGB with an opaque alpha added on the way, the object's RGBA followed
   // by its AOVs.
   ingest::ExrPart compositePart{"composite",     &composite,       0, 0,
                                 composite.width, composite.height, {}};
-  compositePart.channelNames = {"R", "G", "B"};
-  compositePart.constantChannels = {{"A", 1.0f}};
+  if (composite.channels == 4) {
+    compositePart.channelNames = {"R", "G", "B", "A"};  // a plate with alpha
+  } else {
+    compositePart.channelNames = {"R", "G", "B"};
+    compositePart.constantChannels = {{"A", 1.0f}};
+  }
   compositePart.colorSpace = working;
   compositePart.options.depth = ingest::WriteOptions::Depth::Half;
   compositePart.options.alphaChannel = 3;
@@ -657,7 +665,9 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   // between blocks of rows, and the JPEG encoder runs on one core.
   std::future<std::vector<std::string>> displayed = std::async(std::launch::async, [&] {
     std::vector<std::string> displayNotes;
-    const Image shown = colors.toDisplay(composite, display, view);
+    // A composite with alpha is shown over black: its premultiplied colour.
+    Image shown = colors.toDisplay(composite, display, view);
+    if (shown.channels == 4) shown = toRgb(shown);
     if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
       displayNotes.push_back(*n);
     ingest::WriteOptions displayOptions;

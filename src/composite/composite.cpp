@@ -94,6 +94,7 @@ Image holdout(const Image& comp, const Image& plate, const Image& mask) {
       float* o = out.at(x, int(y));
       const float* p = plate.at(x, int(y));
       for (int c = 0; c < 3; ++c) o[c] = m * p[c] + (1.0f - m) * o[c];
+      if (comp.channels >= 4) o[3] = m * (plate.channels >= 4 ? p[3] : 1.0f) + (1.0f - m) * o[3];
     }
   });
   return out;

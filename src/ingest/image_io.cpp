@@ -196,6 +196,7 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
     }
     if (info.fileColorSpace != "sRGB") info.colorSpaceByConvention = false;
   }
+  info.unassociatedAlpha = h.integer("oiio:UnassociatedAlpha", 0) != 0;
   info.exifUncalibrated = info.iccProfile.empty() && h.integer("Exif:ColorSpace", 1) == 65535;
   if (const std::string named = h.text("colorSpace"); !named.empty()) {
     info.exifUncalibrated = false;

@@ -99,6 +99,8 @@ struct CaptureInfo {
   // EXIF ColorSpace 65535 ("uncalibrated", how cameras set to Adobe RGB mark their JPEGs) and no
   // profile that says more.
   bool exifUncalibrated = false;
+  // The alpha channel is unassociated (a PNG's, a TIFF's so marked): colour not multiplied by it.
+  bool unassociatedAlpha = false;
   // 8- or 16-bit integer samples (display-encoded unless the file says otherwise).
   bool integerSamples() const { return sampleType == "uint8" || sampleType == "uint16"; }
   // CIE xy of red, green, blue, white from an OpenEXR `chromaticities` attribute, if present.

@@ -756,6 +756,67 @@ TEST_F(ComposeOutputs, AutoExposureFollowsTheLightOnTheObject) {
   EXPECT_LT(sum / double(covered), 0.95);
 }
 
+// A plate with unassociated alpha (a PNG): its colour is premultiplied in linear light and its
+// alpha is the composite's where the object is not; under the object the composite is opaque; the
+// automatic exposure reads the visible pixels only. (Alpha was multiplied into the sRGB codes
+// before decoding: 0.044 for 0.09 at half alpha; the composite said alpha 1.)
+TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
+  const int w = 320, h = 240;
+  {
+    std::vector<float> px(size_t(w) * size_t(h) * 4);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        float* p = &px[(size_t(y) * size_t(w) + size_t(x)) * 4];
+        p[0] = p[1] = p[2] = 0.5f;  // sRGB code 128: 0.2158 linear
+        p[3] = x < w / 3 ? 1.0f : x < 2 * w / 3 ? 0.5f : 0.0f;
+      }
+    OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
+    spec.attribute("oiio:UnassociatedAlpha", 1);
+    auto out = OIIO::ImageOutput::create((dir_ / "input-alpha.png").string());
+    ASSERT_TRUE(out->open((dir_ / "input-alpha.png").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  std::string a = args((dir_ / "alpha").string()) + " --place 0.16,0.9 --scale 0.3";
+  a.replace(a.find(quote((dir_ / "input-plate.png").string())),
+            quote((dir_ / "input-plate.png").string()).size(),
+            quote((dir_ / "input-alpha.png").string()));
+  const auto r = runCompose(a, dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("has an alpha channel (unassociated"), std::string::npos) << r.err;
+  const Raster e = readRaster(dir_ / "alpha.exr");
+  const int R = e.channel("R"), A = e.channel("A"), objectA = e.channel("object.A");
+  ASSERT_GE(A, 0);
+  ASSERT_GE(objectA, 0);
+  const float grey = 0.2158605f;  // sRGB 128/255 decoded; ACEScg keeps greys
+  auto expectAt = [&](int x, int y, float alpha) {
+    if (e.at(x, y, objectA) != 0.0f) return;  // under the object
+    EXPECT_NEAR(e.at(x, y, A), alpha, 1e-3) << x << "," << y;
+    EXPECT_NEAR(e.at(x, y, R), grey * alpha, 2e-3) << x << "," << y;
+  };
+  for (const int y : {10, 120})
+    for (const int x : {20, 150, 300})
+      expectAt(x, y, x < w / 3 ? 1.0f : x < 2 * w / 3 ? 128.0f / 255.0f : 0.0f);
+  // Under the object (it stands in the opaque third): opaque.
+  int covered = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w / 3; ++x)
+      if (e.at(x, y, objectA) == 1.0f) {
+        ++covered;
+        EXPECT_NEAR(e.at(x, y, A), 1.0f, 1e-3);
+      }
+  EXPECT_GT(covered, 50);
+  // The exposure matches the visible grey: as on the opaque grey plate of the same code.
+  const auto opaque =
+      runCompose(args((dir_ / "opaque").string()) + " --place 0.16,0.9 --scale 0.3", dir_.path());
+  ASSERT_EQ(opaque.status, 0) << opaque.err;
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  EXPECT_NEAR(stops(r.err), stops(opaque.err), 0.02);
+}
+
 // The automatic exposure's grey ball stands where the object does: the same mesh with its
 // vertices moved away from the file's origin (placed the same, since placement takes its bounds)
 // gets the same exposure (it got +0.13 to +0.34 stops for one the +0.14 of the original).
