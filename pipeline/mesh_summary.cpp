@@ -21,7 +21,7 @@ namespace {
 // repairs) or when the convexity test (render::isConvex) changes: an entry kept by an older
 // compose would otherwise stand for a different mesh, or skip the self-shadowing wrongly.
 constexpr uint32_t kMeshVersion = 1;
-constexpr uint32_t kConvexityVersion = 1;
+constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
   return StageCache(cacheRoot / "meshes", "mesh", contentKey.hex());

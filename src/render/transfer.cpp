@@ -621,12 +621,18 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
 }
 
 bool isConvex(const Mesh& mesh) {
-  // Corners identified by position, so that vertices split by normals count as one.
-  std::map<std::array<float, 3>, uint32_t> ids;
+  // Corners identified by position, so that vertices split by normals or texture seams count as
+  // one: positions snapped to a millionth of the object's size (an exporter's seam vertices differ
+  // in the last bits; a pair the snapping splits leaves the mesh "open", which is the safe answer).
+  const glm::vec3 size = mesh.boundsMax() - mesh.boundsMin();
+  const double snap = std::max(1e-30, 1e-6 * double(std::max({size.x, size.y, size.z})));
+  std::map<std::array<int64_t, 3>, uint32_t> ids;
   std::vector<uint32_t> id(mesh.positions.size());
   for (size_t i = 0; i < mesh.positions.size(); ++i) {
     const glm::vec3& p = mesh.positions[i];
-    id[i] = ids.try_emplace({p.x, p.y, p.z}, uint32_t(ids.size())).first->second;
+    auto cell = [&](float v) { return std::llround(std::clamp(double(v) / snap, -4e18, 4e18)); };
+    const std::array<int64_t, 3> key = {cell(p.x), cell(p.y), cell(p.z)};
+    id[i] = ids.try_emplace(key, uint32_t(ids.size())).first->second;
   }
   // Each undirected edge → the triangles on it and their third corners.
   struct Side {
