@@ -393,10 +393,10 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
       return (size_t(t[0]) * 73856093u) ^ (size_t(t[1]) * 19349663u) ^ (size_t(t[2]) * 83492791u);
     }
   };
-  std::unordered_set<std::array<uint32_t, 3>, TripleHash> seen;
+  std::unordered_map<std::array<uint32_t, 3>, uint32_t, TripleHash> seen;  // → first triangle
   const size_t remaining = mesh.triangleCount();
   keep.assign(remaining, 1);
-  size_t degenerate = 0, duplicate = 0;
+  size_t degenerate = 0, duplicate = 0, otherSide = 0;
   for (size_t t = 0; t < remaining; ++t) {
     const uint32_t* v = &mesh.indices[3 * t];
     std::array<uint32_t, 3> ids = {positionId[v[0]], positionId[v[1]], positionId[v[2]]};
@@ -409,9 +409,14 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
       continue;
     }
     std::sort(ids.begin(), ids.end());
-    if (!seen.insert(ids).second) {
+    const auto [first, inserted] = seen.try_emplace(ids, uint32_t(t));
+    if (!inserted) {
       ++duplicate;
       keep[t] = 0;
+      // The other side of a two-sided card: another material on the same triangle.
+      if (!mesh.triangleMaterial.empty() &&
+          mesh.triangleMaterial[t] != mesh.triangleMaterial[first->second])
+        ++otherSide;
     }
   }
   if (degenerate + duplicate == remaining) {
@@ -429,7 +434,12 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
   }
   if (duplicate) {
     mesh.warnings.push_back("dropped " + std::to_string(duplicate) + " of " +
-                            std::to_string(total) + " triangles that repeat another one");
+                            std::to_string(total) + " triangles that repeat another one" +
+                            (otherSide ? " (" + std::to_string(otherSide) +
+                                             " of them with another material: the back of a "
+                                             "two-sided card, whose material is lost; give the "
+                                             "card some thickness to keep both sides)"
+                                       : std::string()));
   }
   if (degenerate + duplicate) {
     keepTriangles(loaded, keep);

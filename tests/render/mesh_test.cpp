@@ -380,6 +380,22 @@ TEST(Mesh, AMaterialLibraryWhoseNameHasSpaces) {
   EXPECT_EQ(two.materials.size(), 2u);
 }
 
+// A two-sided card (the same triangle twice, back to back, another material on each side): one is
+// dropped as a repeat, and the warning says a material was lost with it.
+TEST(Mesh, ATwoSidedCardSaysItsBackMaterialIsLost) {
+  TempDir dir;
+  writeText(dir / "card.mtl", "newmtl front\nKd 1 0 0\nnewmtl back\nKd 0 0 1\n");
+  writeText(dir / "card.obj",
+            "mtllib card.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 0 0\nv 6 0 0\nv 5 1 0\n"
+            "usemtl front\nf 1 2 3\nf 4 5 6\nusemtl back\nf 1 3 2\n");
+  const Mesh m = loadMesh(dir / "card.obj");
+  bool said = false;
+  for (const std::string& w : m.warnings)
+    said = said || w.find("1 of them with another material: the back of a two-sided card") !=
+                       std::string::npos;
+  EXPECT_TRUE(said) << (m.warnings.empty() ? "no warning" : m.warnings[0]);
+}
+
 // Vertex colours (v x y z r g b) are not the albedo: a note says they were ignored.
 TEST(Mesh, ObjVertexColoursAreSaidToBeIgnored) {
   TempDir dir;
