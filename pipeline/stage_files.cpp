@@ -104,9 +104,27 @@ nlohmann::json lightingParameters(const ComposeJob& job) {
 }  // namespace
 
 void savePrecompute(const Context& ctx, const fs::path& file) {
+  // The lighting file never replaces what it was made from.
+  std::error_code ec;
+  if (fs::exists(file, ec)) {
+    for (const fs::path& input : ctx.environmentInput.files) {
+      std::error_code same;
+      if (fs::equivalent(file, input, same) && !same)
+        throw Error("precompute",
+                    "the output would replace an input (" + input.string() +
+                        "): choose another output path",
+                    file);
+    }
+  }
   StageCache entry = StageCache::atFile(file, "precompute");
   entry.meta()["parameters"] = lightingParameters(ctx.job);
   entry.meta()["environment"] = fs::absolute(ctx.environmentInput.path).string();
+  // The working space its numbers are in: a render under another colour config must not read
+  // them as its own.
+  entry.meta()["workingSpace"] = ctx.colors.workingSpace();
+  entry.meta()["colorConfig"] = ctx.colors.source();
+  if (const auto c = ctx.colors.chromaticities(ctx.colors.workingSpace()))
+    entry.meta()["chromaticities"] = std::vector<double>(c->begin(), c->end());
   if (!findStage("precompute").store(ctx, entry)) {
     if (!entry.error().empty())
       throw Error("precompute", "cannot write the lighting file: " + entry.error(), file);
@@ -148,6 +166,36 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   in.stages = {"precompute"};
   in.file = file;
   in.load = [entry, file](Context& ctx) {
+    // Made in another working space (another $OCIO): its numbers are not this run's.
+    const nlohmann::json& made = entry->meta();
+    const std::string working = ctx.colors.workingSpace();
+    if (made.contains("workingSpace") && made["workingSpace"].is_string()) {
+      const std::string space = made["workingSpace"].get<std::string>();
+      bool same = space == working;
+      const auto here = ctx.colors.chromaticities(working);
+      if (here && made.contains("chromaticities") && made["chromaticities"].is_array() &&
+          made["chromaticities"].size() == 8) {
+        same = true;
+        for (size_t i = 0; i < 8; ++i) {
+          const nlohmann::json& v = made["chromaticities"][i];
+          same = same && v.is_number() && std::abs(v.get<double>() - (*here)[i]) < 1e-3;
+        }
+      }
+      if (!same) {
+        throw Error("render",
+                    "the lighting file was made in the working space '" + space +
+                        "' (config: " + made.value("colorConfig", std::string("?")) +
+                        "); this run's is '" + working + "' (config: " + ctx.colors.source() +
+                        "): precompute again under this config, or render under that one (the "
+                        "same $OCIO)",
+                    file);
+      }
+    } else {
+      ctx.note("the lighting file " + file.filename().string() +
+               " does not say which working space it was made in (an older compose): taken as "
+               "this run's, '" +
+               working + "'");
+    }
     std::vector<std::string> outputs = {kLighting};
     if (entry->meta().contains("shadowLighting")) {
       outputs.push_back(kShadowLighting);
@@ -334,6 +382,15 @@ StageInput objectLayerInput(const fs::path& file) {
       r.beauty = Image(layer.width, layer.height, 4, beautyNames);
       r.aovs = Image(layer.width, layer.height, int(aovNames.size()), aovNames);
       r.beauty.colorSpace = rj.at("colorSpace").get<std::string>();
+      if (r.beauty.colorSpace != ctx.colors.workingSpace()) {
+        throw Error("composite",
+                    "the object layer was rendered in the working space '" + r.beauty.colorSpace +
+                        "'; this run's is '" + ctx.colors.workingSpace() +
+                        "' (config: " + ctx.colors.source() +
+                        "): composite under the colour config the layer was rendered with (the "
+                        "same $OCIO)",
+                    file);
+      }
       // OpenEXR keeps channels in its own order: find each by the name it was written under
       // (object.R ...; R ... in layers written before the names followed the one-shot EXR's).
       std::vector<std::string> written = {"object.R", "object.G", "object.B", "object.A"};

@@ -220,6 +220,8 @@ class IngestStage final : public Stage {
       reason += "; the environment's pixels are not needed (everything made from them is cached)";
     }
     report(ctx.progress, "ingest", 1.0);
+    if (reason.rfind(", ", 0) == 0) reason.erase(0, 2);  // no plate (compose precompute)
+    if (reason.rfind("; ", 0) == 0) reason.erase(0, 2);
     return "read " + reason;
   }
 };

@@ -113,6 +113,29 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
   return [o, out, &cmd, &globals]() -> int {
     o->apply(cmd);
     OutputFiles::check(*out, "precompute");
+    // The lighting file keeps the bright sources for both shadows or for neither: one option
+    // alone would change nothing in it.
+    if (o->job.shadows != o->job.groundShadow)
+      throw UsageError(
+          "precompute takes --shadows off together with --no-shadow (a lighting file without the "
+          "bright light sources the shadows need); either alone changes nothing in the file: the "
+          "render decides which shadows it draws");
+    // Lighting kept as a file needs a basis with state to save.
+    if (o->job.lighting == "sh" || o->job.lighting == "mc" || o->job.lighting == "exact")
+      throw UsageError("--lighting " + o->job.lighting +
+                       " is not kept in lighting files (sh projects in milliseconds; mc and exact "
+                       "read the environment while shading): precompute takes cheb-local (the "
+                       "default), cheb-latlong or cheb-face; the one-shot command takes every "
+                       "basis");
+    {
+      std::error_code ec;
+      const fs::path env = o->job.environment;
+      if (!env.empty() && fs::exists(*out, ec) && fs::equivalent(*out, env, ec))
+        throw Error(
+            "precompute",
+            "the output would replace an input (" + env.string() + "): choose another output path",
+            *out);
+    }
     pipeline::RunRequest request;
     request.targets = {pipeline::artefact::kLighting};
     if (o->job.shadows || o->job.groundShadow)

@@ -403,6 +403,57 @@ TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
   EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
 }
 
+// precompute never replaces its environment, refuses options that would change nothing in its
+// file and bases it cannot keep (exit 2); a lighting file or an object layer made under another
+// colour config ($OCIO, another working space) is refused naming the file, not read as this run's
+// numbers.
+TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
+  const fs::path env = dir_ / "env.exr";
+  fs::copy_file(samples_ / "forest.exr", env);
+  const std::string before = slurp(env);
+  RunResult r =
+      run("precompute --env " + quote(env) + " --out " + quote(env) + " --no-cache", dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("the output would replace an input"), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(env), before) << "the environment was overwritten";
+  for (const std::string option : {"--shadows off", "--no-shadow", "--lighting sh"}) {
+    r = run(
+        "precompute --env " + quote(env) + " --out " + quote(dir_ / "x.lighting") + " " + option,
+        dir_.path());
+    EXPECT_EQ(r.status, 2) << option << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "x.lighting")) << option;
+  }
+
+  const fs::path blender = samples_ / "ocio" / "blender" / "config.ocio";
+  ASSERT_TRUE(fs::exists(blender)) << blender;
+  const fs::path lighting = dir_ / "forest.lighting";
+  r = run("precompute --env " + quote(env) + " --out " + quote(lighting) + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string render = "render --plate " + quote(plate_) + " " + objectOptions() +
+                             " --no-cache --lighting-file " + quote(lighting) + " --out ";
+  r = run(render + quote(dir_ / "layer.exr"), dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  ::setenv("OCIO", blender.c_str(), 1);
+  r = run(render + quote(dir_ / "other.exr"), dir_.path());
+  const RunResult composite = run("composite --no-cache --plate " + quote(plate_) + " --layer " +
+                                      quote(dir_ / "layer.exr") + " --out " + quote(dir_ / "final"),
+                                  dir_.path());
+  ::unsetenv("OCIO");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("the lighting file was made in the working space 'ACEScg'"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("forest.lighting"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "other.exr"));
+  EXPECT_EQ(composite.status, 1);
+  EXPECT_NE(composite.err.find("the object layer was rendered in the working space 'ACEScg'"),
+            std::string::npos)
+      << composite.err;
+  EXPECT_NE(composite.err.find("layer.exr"), std::string::npos) << composite.err;
+  EXPECT_FALSE(fs::exists(dir_ / "final.exr"));
+}
+
 // Bare file names, as one types them in the folder one works in: written there.
 TEST_F(StageCommands, BareFileNamesAreWrittenInTheWorkingFolder) {
   const fs::path work = dir_ / "work";
