@@ -1,4 +1,5 @@
 #include "pipeline/stage_cache.h"
+#include "core/output_files.h"
 
 #include <unistd.h>
 
@@ -180,6 +181,7 @@ bool StageCache::write() const {
   const std::string text = header.dump();
   const auto sum = checksum(text, arrays_);
   static std::atomic<int> serial{0};
+  removeStalePartials(path_.parent_path(), path_.filename().string() + ".partial-");
   fs::path temp = path_;
   temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(serial++);
   {

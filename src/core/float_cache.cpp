@@ -1,4 +1,5 @@
 #include "core/float_cache.h"
+#include "core/output_files.h"
 
 #include <unistd.h>
 
@@ -139,6 +140,7 @@ bool FloatCache::store(const std::string& key, const std::string& description,
   if (ec) return fail("cannot create the cache folder: " + ec.message());
   const fs::path final = pathFor(key);
   static std::atomic<unsigned> counter{0};
+  removeStalePartials(folder_, final.filename().string() + ".partial-");
   fs::path temp = final;
   temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
   {

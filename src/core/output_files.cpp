@@ -1,13 +1,16 @@
 #include "core/output_files.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -79,6 +82,28 @@ std::optional<fs::path> protectedInputAt(const fs::path& destination) {
 }
 
 }  // namespace
+
+void removeStalePartials(const fs::path& folder, const std::string& prefix) {
+  std::error_code ec;
+  const auto now = fs::file_time_type::clock::now();
+  for (fs::directory_iterator it(folder.empty() ? fs::path(".") : folder, ec), end;
+       !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
+    // The writer's process id, then '-'.
+    size_t digits = prefix.size();
+    while (digits < name.size() && std::isdigit(static_cast<unsigned char>(name[digits]))) ++digits;
+    if (digits == prefix.size() || digits >= name.size() || name[digits] != '-') continue;
+    const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+    if (pid <= 0 || pid == long(::getpid())) continue;
+    if (!(::kill(pid_t(pid), 0) != 0 && errno == ESRCH)) continue;  // running (or not ours)
+    std::error_code e;
+    if (!it->is_regular_file(e)) continue;
+    const auto changed = fs::last_write_time(it->path(), e);
+    if (e || now - changed < std::chrono::minutes(1)) continue;
+    fs::remove(it->path(), e);
+  }
+}
 
 void protectInput(const fs::path& file) {
   if (file.empty()) return;
@@ -157,6 +182,7 @@ fs::path OutputFiles::add(const fs::path& destination) {
         "the output would replace an input (" + input->string() + "): choose another output path",
         destination);
   }
+  removeStalePartials(dir, "." + destination.stem().string() + ".partial-");
   Entry e{temporaryNear(destination, "partial"), destination};
   const std::lock_guard<std::mutex> lock(mutex_);
   entries_.push_back(e);

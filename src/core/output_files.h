@@ -56,6 +56,11 @@ class OutputFiles {
 // anything that precedes reading them (a scene file saved from the command line).
 void protectInput(const std::filesystem::path& file);
 
+// Removes what a killed run left in `folder`: files named `prefix` + "<pid>-..." (the temporary
+// names writers here give files before renaming them into place) whose process no longer runs and
+// which have not changed for a minute. Errors are ignored: it only tidies.
+void removeStalePartials(const std::filesystem::path& folder, const std::string& prefix);
+
 // Forgets every protected input: for a process that runs one job after another (a fuzz target
 // writes a file, reads it, and writes it again for the next input).
 void forgetProtectedInputs();

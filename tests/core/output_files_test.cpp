@@ -1,5 +1,9 @@
 #include "core/output_files.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <fstream>
 #include <sstream>
 
@@ -83,6 +87,35 @@ TEST(OutputFiles, UncommittedTemporariesAreRemoved) {
     writeText(out.add(dir / "x.png"), "partial");
   }
   EXPECT_EQ(fileCount(dir.path()), 0u);
+}
+
+// What a killed run left (its temporaries, named for its process id) is removed by the next
+// writer into the same folder; a running process's, a recent one and other files are kept.
+TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {
+  TempDir dir;
+  // A process id that no process has now: a child that has exited and been waited for.
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ::waitpid(child, nullptr, 0);
+  const std::string dead = std::to_string(child), alive = std::to_string(::getppid());
+  const auto old = std::filesystem::file_time_type::clock::now() - std::chrono::minutes(5);
+  auto make = [&](const std::string& name, bool aged) {
+    writeText(dir / name, "x");
+    if (aged) std::filesystem::last_write_time(dir / name, old);
+  };
+  make(".out.partial-" + dead + "-0.exr", true);    // removed
+  make(".out.partial-" + dead + "-1.exr", false);   // too recent: kept
+  make(".out.partial-" + alive + "-0.exr", true);   // its process runs: kept
+  make(".other.partial-" + dead + "-0.exr", true);  // another output's: kept
+  make("out.exr", true);                            // kept
+  OutputFiles files("test");
+  files.add(dir / "out.exr");
+  EXPECT_FALSE(std::filesystem::exists(dir / (".out.partial-" + dead + "-0.exr")));
+  EXPECT_TRUE(std::filesystem::exists(dir / (".out.partial-" + dead + "-1.exr")));
+  EXPECT_TRUE(std::filesystem::exists(dir / (".out.partial-" + alive + "-0.exr")));
+  EXPECT_TRUE(std::filesystem::exists(dir / (".other.partial-" + dead + "-0.exr")));
+  EXPECT_TRUE(std::filesystem::exists(dir / "out.exr"));
 }
 
 TEST(OutputFiles, RefusesAFolderAsDestination) {
