@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <unordered_map>
 
 #include <glm/common.hpp>
@@ -107,7 +108,8 @@ void TransferParams::validate() const {
 std::string TransferParams::key() const {
   return "grid=" + std::to_string(grid) + " order=" + std::to_string(order) +
          " boundary=" + std::to_string(boundaryRays) + " sh=" + std::to_string(shBands) +
-         " seed=" + std::to_string(seed) + " lift=1e-4 frame=longitude";
+         " seed=" + std::to_string(seed) + " lift=1e-4 frame=longitude" +
+         (shBands > 0 ? " sh-projection=cells" : "");
 }
 
 std::vector<float> VertexTransfer::exportState() const {
@@ -307,6 +309,147 @@ void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint3
   }
 }
 
+namespace {
+
+// SH transfer projected cell by cell (computeTransfer): each cell's ∫ cos θ Y_lm dω in a point's
+// own frame (x east, y north, z the normal) is the same for every point, so it is integrated once,
+// finely; a point's transfer is its cells' visible fractions times those integrals, as the
+// Chebyshev side pairs the fractions with the lighting's integrals over each cell; it is then
+// turned into the object's frame. The turn works band by band: a band-l function is known
+// exactly from its values at enough directions, so the turned coefficients are the least-squares
+// fit (here exact) of the local function's values at fixed directions seen from the point's frame.
+class CellHarmonics {
+ public:
+  CellHarmonics(int order, int s, const std::vector<double>& cosBound) : order_(order) {
+    nsh_ = lighting::shCount(order);
+    const size_t cells = size_t(s) * size_t(s);
+    local_.assign(cells * size_t(nsh_), 0.0);
+    std::vector<double> y(static_cast<size_t>(nsh_));
+    constexpr int kSub = 16;  // per cell, in cos θ and in φ: uniform in solid angle
+    for (int i = 0; i < s; ++i) {
+      const double a = cosBound[size_t(i)], b = cosBound[size_t(i) + 1];
+      const double weight = (a - b) / kSub * (2.0 * kPi / s) / kSub;  // dω of a sub-cell
+      for (int j = 0; j < s; ++j) {
+        double* w = local_.data() + (size_t(i) * size_t(s) + size_t(j)) * size_t(nsh_);
+        for (int u = 0; u < kSub; ++u) {
+          const double c = a - (u + 0.5) / kSub * (a - b), sn = std::sqrt(std::max(0.0, 1 - c * c));
+          for (int v = 0; v < kSub; ++v) {
+            const double phi = 2.0 * kPi * (j + (v + 0.5) / kSub) / s;
+            lighting::evalSh(order, glm::dvec3(sn * std::cos(phi), sn * std::sin(phi), c),
+                             y.data());
+            for (int m = 0; m < nsh_; ++m) w[m] += weight * c * y[size_t(m)];
+          }
+        }
+      }
+    }
+    // Fixed directions (a Fibonacci sphere) and, per band, the least-squares solver of the
+    // band's coefficients from values there: (AᵀA)⁻¹Aᵀ with A[i][m] = Y_lm(u_i).
+    const int n = kDirections;
+    for (int i = 0; i < n; ++i) {
+      const double z = 1.0 - (2.0 * i + 1.0) / n, r = std::sqrt(std::max(0.0, 1.0 - z * z));
+      const double phi = double(i) * 2.399963229728653;
+      directions_.push_back({r * std::cos(phi), r * std::sin(phi), z});
+    }
+    std::vector<double> all(size_t(n) * size_t(nsh_));
+    for (int i = 0; i < n; ++i)
+      lighting::evalSh(order, directions_[size_t(i)], &all[size_t(i) * size_t(nsh_)]);
+    for (int l = 0; l <= order; ++l) {
+      const int w = 2 * l + 1, first = l * l;
+      std::vector<double> ata(size_t(w) * size_t(w), 0.0);
+      for (int i = 0; i < n; ++i)
+        for (int p = 0; p < w; ++p)
+          for (int q = 0; q < w; ++q)
+            ata[size_t(p * w + q)] += all[size_t(i) * size_t(nsh_) + size_t(first + p)] *
+                                      all[size_t(i) * size_t(nsh_) + size_t(first + q)];
+      const std::vector<double> inv = inverse(ata, w);
+      std::vector<double> solve(size_t(w) * size_t(n), 0.0);  // w x n
+      for (int p = 0; p < w; ++p)
+        for (int i = 0; i < n; ++i)
+          for (int q = 0; q < w; ++q)
+            solve[size_t(p) * size_t(n) + size_t(i)] +=
+                inv[size_t(p * w + q)] * all[size_t(i) * size_t(nsh_) + size_t(first + q)];
+      solvers_.push_back(std::move(solve));
+    }
+  }
+
+  int count() const { return nsh_; }
+
+  // The transfer in the object's frame from the cells' visible fractions, for a point whose frame
+  // is (east, north, n); `local`, `values` and `y` are scratch (nsh, kDirections, nsh).
+  void transfer(const float* visible, size_t cells, const glm::dvec3& east, const glm::dvec3& north,
+                const glm::dvec3& n, double* local, double* values, double* y, float* out) const {
+    std::fill(local, local + nsh_, 0.0);
+    for (size_t c = 0; c < cells; ++c) {
+      const double f = visible[c];
+      if (f == 0.0) continue;
+      const double* w = local_.data() + c * size_t(nsh_);
+      for (int m = 0; m < nsh_; ++m) local[m] += f * w[m];
+    }
+    const int nd = kDirections;
+    // values[l][i]: band l of the local function at direction i, seen from the point's frame.
+    for (int i = 0; i < nd; ++i) {
+      const glm::dvec3& u = directions_[size_t(i)];
+      lighting::evalSh(order_, glm::dvec3(glm::dot(u, east), glm::dot(u, north), glm::dot(u, n)),
+                       y);
+      for (int l = 0; l <= order_; ++l) {
+        double sum = 0.0;
+        for (int m = l * l; m < (l + 1) * (l + 1); ++m) sum += local[m] * y[m];
+        values[size_t(l) * size_t(nd) + size_t(i)] = sum;
+      }
+    }
+    for (int l = 0; l <= order_; ++l) {
+      const std::vector<double>& solve = solvers_[size_t(l)];
+      const double* v = values + size_t(l) * size_t(nd);
+      for (int p = 0; p < 2 * l + 1; ++p) {
+        double sum = 0.0;
+        const double* row = solve.data() + size_t(p) * size_t(nd);
+        for (int i = 0; i < nd; ++i) sum += row[i] * v[i];
+        out[l * l + p] = float(sum);
+      }
+    }
+  }
+
+  static constexpr int kDirections = 64;  // ≥ 2 (2l + 1) for every band up to 8: well posed
+
+ private:
+  // Inverse of a small symmetric positive definite matrix (Gauss-Jordan with partial pivoting).
+  static std::vector<double> inverse(std::vector<double> a, int w) {
+    std::vector<double> inv(size_t(w) * size_t(w), 0.0);
+    for (int i = 0; i < w; ++i) inv[size_t(i * w + i)] = 1.0;
+    for (int c = 0; c < w; ++c) {
+      int pivot = c;
+      for (int r = c + 1; r < w; ++r)
+        if (std::abs(a[size_t(r * w + c)]) > std::abs(a[size_t(pivot * w + c)])) pivot = r;
+      for (int k = 0; k < w; ++k) {
+        std::swap(a[size_t(c * w + k)], a[size_t(pivot * w + k)]);
+        std::swap(inv[size_t(c * w + k)], inv[size_t(pivot * w + k)]);
+      }
+      const double d = a[size_t(c * w + c)];
+      for (int k = 0; k < w; ++k) {
+        a[size_t(c * w + k)] /= d;
+        inv[size_t(c * w + k)] /= d;
+      }
+      for (int r = 0; r < w; ++r) {
+        if (r == c) continue;
+        const double f = a[size_t(r * w + c)];
+        if (f == 0.0) continue;
+        for (int k = 0; k < w; ++k) {
+          a[size_t(r * w + k)] -= f * a[size_t(c * w + k)];
+          inv[size_t(r * w + k)] -= f * inv[size_t(c * w + k)];
+        }
+      }
+    }
+    return inv;
+  }
+
+  int order_ = 0, nsh_ = 1;
+  std::vector<double> local_;                 // cells x nsh: ∫_cell cos θ Y_lm dω, local frame
+  std::vector<glm::dvec3> directions_;        // kDirections fixed directions
+  std::vector<std::vector<double>> solvers_;  // per band: (2l+1) x kDirections
+};
+
+}  // namespace
+
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress) {
   const EmbreeScene scene(mesh.positions, mesh.indices);
@@ -351,6 +494,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     omega[size_t(i)] = 2.0 * kPi / s * (a - b);     // the cell's solid angle
     cosine[size_t(i)] = kPi / s * (a * a - b * b);  // ∫_cell cos θ dω
   }
+  // SH transfer above band 0: projected cell by cell (CellHarmonics), not from the rays.
+  std::optional<CellHarmonics> cellHarmonics;
+  if (nsh > 1) cellHarmonics.emplace(params.shBands, s, cosBound);
   // The same in float for the rays' directions, and each column's first azimuth.
   const std::vector<float> cosBoundF(cosBound.begin(), cosBound.end());
   std::vector<float> colStartCos(static_cast<size_t>(s)), colStartSin(static_cast<size_t>(s));
@@ -393,10 +539,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
 
   // Per-thread scratch, so that no point allocates.
   struct Scratch {
-    std::vector<float> visible;      // per cell: the visible fraction
-    std::vector<double> y, shSum;    // SH basis values of a ray; the SH integral
-    std::vector<glm::vec3> dirs;     // the first pass' direction per cell
-    std::vector<float> cosines;      // the first pass' cos θ per cell
+    std::vector<float> visible;             // per cell: the visible fraction
+    std::vector<double> y, shSum;           // SH basis values of a ray; the SH integral
+    std::vector<double> shLocal, shValues;  // CellHarmonics::transfer's scratch
+    std::vector<glm::vec3> dirs;            // the first pass' direction per cell
+    std::vector<float> cosines;             // the first pass' cos θ per cell
     std::vector<uint8_t> stratum;    // the first pass' ray's stratum a·r + b within its cell
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
@@ -411,6 +558,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.visible.resize(cells);
     sc.y.resize(size_t(nsh));
     sc.shSum.resize(size_t(nsh));
+    sc.shLocal.resize(size_t(nsh));
+    sc.shValues.resize(size_t(params.shBands + 1) * size_t(CellHarmonics::kDirections));
     sc.dirs.resize(cells);
     sc.cosines.resize(cells);
     sc.stratum.resize(cells);
@@ -463,12 +612,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         auto seen = [&](int cell, const glm::vec3& d, float cosT, float share) {
           sc.visible[size_t(cell)] += share;
           const double weight = double(cosT) * double(share) * omega[size_t(cell / s)];
-          if (nsh == 1) {
-            sc.shSum[0] += y00 * weight;
-            return;
-          }
-          lighting::evalSh(params.shBands, glm::dvec3(d), sc.y.data());
-          for (int c = 0; c < nsh; ++c) sc.shSum[size_t(c)] += sc.y[size_t(c)] * weight;
+          if (nsh == 1) sc.shSum[0] += y00 * weight;  // above band 0: cell by cell, below
+          (void)d;
         };
         // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
@@ -607,8 +752,13 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
             for (int c = 0; c < k; ++c) tm[c] += pi * gi[c];
           }
         }
-        for (int c = 0; c < nsh; ++c)
-          out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
+        if (cellHarmonics) {
+          cellHarmonics->transfer(sc.visible.data(), cells, east, north, n, sc.shLocal.data(),
+                                  sc.shValues.data(), sc.y.data(), &out.sh[v * size_t(nsh)]);
+        } else {
+          for (int c = 0; c < nsh; ++c)
+            out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
+        }
         out.ao[v] = float(ao / kPi);
         rays += traced;
         const size_t d = ++done;

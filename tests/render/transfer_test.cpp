@@ -270,6 +270,24 @@ TEST(Transfer, AConvexObjectSeesEverything) {
     for (int i = 1; i < 64; ++i) EXPECT_NEAR(t.cheb[v * 64 + size_t(i)], 0.0f, 1e-5f);
   }
   EXPECT_EQ(t.rays, int64_t(box.positions.size()) * 64) << "no boundary cells: one ray each";
+  // SH transfer of a point that sees its whole hemisphere: the clamped cosine around its normal,
+  // A_l Y_lm(n), in every band up to 8 (projected cell by cell and turned into the object's frame;
+  // projected from the rays, one per cell, band 8 was off by more than its own size).
+  p.shBands = 8;
+  const VertexTransfer sh = computeTransfer(box, surfacePoints(box, 10.0f), p);
+  const int nsh = lighting::shCount(8);
+  std::vector<double> y(static_cast<size_t>(nsh));
+  double worst = 0.0;
+  for (size_t v = 0; v < sh.vertexCount; ++v) {
+    lighting::evalSh(8, glm::dvec3(glm::normalize(box.normals[v])), y.data());
+    for (int l = 0; l <= 8; ++l)
+      for (int m = l * l; m < (l + 1) * (l + 1); ++m)
+        worst = std::max(worst, std::abs(double(sh.sh[v * size_t(nsh) + size_t(m)]) -
+                                         lighting::shCosineLobe(l) * y[size_t(m)]));
+  }
+  std::printf("SH transfer of an unoccluded point, bands 0-8: largest coefficient error %.2e\n",
+              worst);
+  EXPECT_LT(worst, 2e-3) << "largest coefficient error";
 }
 
 TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
