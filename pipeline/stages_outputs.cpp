@@ -598,6 +598,10 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
   header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
   header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
   header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
+  // How the environment is turned in the world (--env-yaw): a direction in the world is looked up
+  // in the environment map at envFromWorld times it.
+  header.matrices.emplace_back("compose:envFromWorld",
+                               asImath(glm::dmat4(glm::dmat3(geometry.envFromWorld))));
   if (!meshFile.empty()) header.strings.emplace_back("compose:object", meshFile);
   if (lens.hasDistortion()) {
     header.strings.emplace_back("compose:lens",

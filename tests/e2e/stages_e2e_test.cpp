@@ -135,7 +135,8 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
     auto layerIn = OIIO::ImageInput::open(layer.string());
     auto oneIn = OIIO::ImageInput::open((dir_ / "one" / "compose.exr").string());
     ASSERT_TRUE(layerIn && oneIn);
-    for (const char* attribute : {"worldToCamera", "worldToNDC", "compose:worldFromObject"}) {
+    for (const char* attribute :
+         {"worldToCamera", "worldToNDC", "compose:worldFromObject", "compose:envFromWorld"}) {
       SCOPED_TRACE(attribute);
       const OIIO::ParamValue* mine = layerIn->spec().find_attribute(attribute);
       const OIIO::ParamValue* theirs = oneIn->spec().find_attribute(attribute);
@@ -143,6 +144,17 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
       ASSERT_EQ(mine->type(), OIIO::TypeMatrix44);
       ASSERT_EQ(theirs->type(), OIIO::TypeMatrix44);
       EXPECT_EQ(std::memcmp(mine->data(), theirs->data(), 16 * sizeof(float)), 0);
+    }
+    // The environment's turn: --env-yaw 70 about the vertical.
+    {
+      const OIIO::ParamValue* turn = oneIn->spec().find_attribute("compose:envFromWorld");
+      ASSERT_TRUE(turn);
+      const float* m = static_cast<const float*>(turn->data());
+      const double yaw = 70.0 * 3.14159265358979 / 180.0;
+      EXPECT_NEAR(m[5], 1.0, 1e-6);
+      EXPECT_NEAR(std::abs(m[0]), std::cos(yaw), 1e-5);
+      EXPECT_NEAR(std::abs(m[2]), std::sin(yaw), 1e-5);
+      EXPECT_NEAR(m[15], 1.0, 1e-6);
     }
     const auto& names = layerIn->spec().channelnames;
     EXPECT_NE(std::find(names.begin(), names.end(), "object.A"), names.end());
