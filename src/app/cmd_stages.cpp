@@ -113,6 +113,11 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
   return [o, out, &cmd, &globals]() -> int {
     o->apply(cmd);
     OutputFiles::check(*out, "precompute");
+    // A lighting file is not an image: an image's name would mislead every tool that opens it.
+    if (ingest::looksLikeImageFile(*out))
+      throw UsageError("--out " + *out +
+                       ": a lighting file is not an image; give it another name (such as "
+                       "forest.lighting)");
     // The lighting file keeps the bright sources for both shadows or for neither: one option
     // alone would change nothing in it.
     if (o->job.shadows != o->job.groundShadow)

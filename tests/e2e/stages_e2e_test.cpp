@@ -423,8 +423,16 @@ TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
   const fs::path env = dir_ / "env.exr";
   fs::copy_file(samples_ / "forest.exr", env);
   const std::string before = slurp(env);
+  // The environment under an image's name is refused as a lighting file's name (exit 2); by
+  // another name (a link to it), as the input it is.
   RunResult r =
       run("precompute --env " + quote(env) + " --out " + quote(env) + " --no-cache", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("a lighting file is not an image"), std::string::npos) << r.err;
+  fs::create_symlink(env, dir_ / "env.lighting");
+  r = run(
+      "precompute --env " + quote(env) + " --out " + quote(dir_ / "env.lighting") + " --no-cache",
+      dir_.path());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("the output would replace an input"), std::string::npos) << r.err;
   EXPECT_EQ(slurp(env), before) << "the environment was overwritten";
