@@ -115,6 +115,9 @@ class Context {
   const color::ColorConfig& colors;
   Progress progress;
 
+  // Planning only (--explain): stages read what they must to say what would run, and write
+  // nothing, not even to the cache.
+  bool planning = false;
   // Filled in before any stage runs (runner.cpp).
   EnvironmentInput environmentInput;
   std::map<std::string, Hash128> keys;  // per artefact

@@ -70,6 +70,7 @@ const StageInput* inputFor(const RunRequest& request, const Stage& stage) {
 // Prepares and keys every stage, then decides backwards from the wanted artefacts what runs,
 // what is reused (`load`: restored now; otherwise only looked up) and what is skipped.
 Planned planJob(Context& ctx, bool load, const RunRequest& request) {
+  ctx.planning = !load;
   const auto& list = stages();
   Planned p;
   p.records.resize(list.size());

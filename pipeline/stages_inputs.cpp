@@ -144,7 +144,8 @@ class IngestStage final : public Stage {
       } else {
         ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
         ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
-        if (!storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
+        if (!ctx.planning &&
+            !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
           ctx.note("the object as read was not cached (" + problem + ")");
       }
       for (const std::string& n : ctx.meshSummary->notes) ctx.note(n);

@@ -516,6 +516,13 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
   EXPECT_NE(r.out.find("merge      skipped the environment is an image"), std::string::npos)
       << r.out;
   EXPECT_FALSE(fs::exists(dir_ / "l.lighting"));
+  // The one-shot command's --explain reads the mesh and writes nothing, not even to the cache.
+  const fs::path cache = dir_ / "explain-cache";
+  const RunResult one =
+      run("--explain --plate " + quote(plate_) + " " + objectOptions() + " --cache " + quote(cache),
+          dir_.path());
+  ASSERT_EQ(one.status, 0) << one.err;
+  EXPECT_TRUE(!fs::exists(cache) || fs::is_empty(cache)) << "--explain wrote into the cache";
 }
 
 // compose --pose: the object stands on the chessboard's plane, seen from where the pose puts the
