@@ -94,13 +94,16 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
   for (const StageInput& in : request.inputs) {
     const auto start = std::chrono::steady_clock::now();
     in.load(ctx);
+    const double seconds = secondsSince(start);
+    bool first = true;  // the file is read once: its time counts once, with its first stage
     for (const std::string& name : in.stages) {
       const Stage& stage = findStage(name);
       for (size_t i = 0; i < list.size(); ++i) {
         if (list[i].get() != &stage) continue;
         p.records[i].state = StageState::Reused;
         p.records[i].reason = "read from " + in.file.string();
-        p.records[i].seconds = secondsSince(start);
+        p.records[i].seconds = first ? seconds : 0.0;
+        first = false;
       }
       for (const std::string& o : stage.outputs()) ctx.provided.insert(o);
     }
