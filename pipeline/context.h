@@ -83,6 +83,7 @@ struct RenderedObject {
   float exposure = 1.0f;
   std::vector<std::string> notes;  // how the exposure was chosen
   std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
+  glm::dvec3 fileOrigin{0.0};      // render::Mesh::fileOrigin of that mesh
   // Read from an object layer (compose render): the plate it was rendered on (absolute) and the
   // hash of that plate's bytes (contentKey); empty for a layer that does not say.
   std::string layerPlateFile, layerPlateKey;

@@ -20,7 +20,7 @@ namespace {
 // Raise when reading a mesh file gives anything different (the loaders, the normals, the
 // repairs) or when the convexity test (render::isConvex) changes: an entry kept by an older
 // compose would otherwise stand for a different mesh, or skip the self-shadowing wrongly.
-constexpr uint32_t kMeshVersion = 1;
+constexpr uint32_t kMeshVersion = 2;       // 2: a mesh far from its file's origin is moved to it
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
@@ -122,6 +122,12 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   render::Mesh& mesh = out.mesh;
   mesh.normalsFromFile = m["normalsFromFile"].get<bool>();
   mesh.normalsSource = m["normalsSource"].get<std::string>();
+  if (const auto o = m.find("fileOrigin"); o != m.end()) {
+    if (!o->is_array() || o->size() != 3 || !(*o)[0].is_number() || !(*o)[1].is_number() ||
+        !(*o)[2].is_number())
+      return std::nullopt;
+    mesh.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
+  }
   for (const nlohmann::json& w : m["warnings"]) {
     if (!w.is_string()) return std::nullopt;
     mesh.warnings.push_back(w.get<std::string>());
@@ -178,6 +184,7 @@ bool storeMesh(const fs::path& cacheRoot, const Hash128& contentKey, const rende
   entry.meta()["normalsFromFile"] = mesh.normalsFromFile;
   entry.meta()["normalsSource"] = mesh.normalsSource;
   entry.meta()["warnings"] = mesh.warnings;
+  entry.meta()["fileOrigin"] = {mesh.fileOrigin.x, mesh.fileOrigin.y, mesh.fileOrigin.z};
   const auto floats = [](const auto& v, size_t per) {
     std::vector<float> out(v.size() * per);
     if (!v.empty()) std::memcpy(out.data(), &v[0].x, out.size() * sizeof(float));

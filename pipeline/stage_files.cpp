@@ -247,25 +247,27 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   std::vector<ingest::ExrPart> parts = {
       {"object", &layer, r.x0, r.y0, g.camera.width, g.camera.height, options}};
 
-  nlohmann::json header = {{"format", kLayerFormat},
-                           {"render",
-                            {{"x0", r.x0},
-                             {"y0", r.y0},
-                             {"x1", r.x1},
-                             {"y1", r.y1},
-                             {"rays", r.rays},
-                             {"coverage", r.coverage},
-                             {"exposure", object.exposure},
-                             {"notes", object.notes},
-                             {"mesh", object.meshFile},
-                             {"beautyChannels", r.beauty.channelNames},
-                             {"aovChannels", r.aovs.channelNames},
-                             {"colorSpace", r.beauty.colorSpace}}},
-                           {"geometry", geometryToJson(g)},
-                           {"plate",
-                            {{"file", fs::absolute(ctx.job.plate).string()},
-                             {"content", contentKey(ctx.job.plate, "render")}}},
-                           {"ground", nullptr}};
+  nlohmann::json header = {
+      {"format", kLayerFormat},
+      {"render",
+       {{"x0", r.x0},
+        {"y0", r.y0},
+        {"x1", r.x1},
+        {"y1", r.y1},
+        {"rays", r.rays},
+        {"coverage", r.coverage},
+        {"exposure", object.exposure},
+        {"notes", object.notes},
+        {"mesh", object.meshFile},
+        {"fileOrigin", {object.fileOrigin.x, object.fileOrigin.y, object.fileOrigin.z}},
+        {"beautyChannels", r.beauty.channelNames},
+        {"aovChannels", r.aovs.channelNames},
+        {"colorSpace", r.beauty.colorSpace}}},
+      {"geometry", geometryToJson(g)},
+      {"plate",
+       {{"file", fs::absolute(ctx.job.plate).string()},
+        {"content", contentKey(ctx.job.plate, "render")}}},
+      {"ground", nullptr}};
   const GroundShadowResult* ground =
       ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
           ? &*ctx.artefacts.groundShadow
@@ -287,7 +289,7 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   }
   // The camera and placement as the one-shot command's EXR carries them (for Nuke and other
   // tools), and in full for compose composite.
-  ingest::ExrHeader exrHeader = sceneHeader(g, object.meshFile);
+  ingest::ExrHeader exrHeader = sceneHeader(g, object.meshFile, object.fileOrigin);
   exrHeader.strings.emplace_back(kLayerAttribute, header.dump());
   OutputFiles outputs("render");
   ingest::writeExrParts(outputs, file, parts, exrHeader);
@@ -368,6 +370,8 @@ StageInput objectLayerInput(const fs::path& file) {
       object.exposure = rj.at("exposure");
       object.notes = rj.at("notes").get<std::vector<std::string>>();
       object.meshFile = rj.value("mesh", "");
+      if (const auto o = rj.find("fileOrigin"); o != rj.end() && o->is_array() && o->size() == 3)
+        object.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
       if (const auto plate = header.find("plate"); plate != header.end() && plate->is_object()) {
         object.layerPlateFile = plate->value("file", "");
         object.layerPlateKey = plate->value("content", "");

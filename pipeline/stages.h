@@ -36,17 +36,17 @@ color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::file
 // the scene: worldToCamera and worldToNDC (OpenEXR's standard attributes; the pinhole part of a
 // distorted lens, said in compose:lens), compose:worldFromObject (the mesh file's coordinates to
 // world space) and compose:object (the mesh file).
-ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile);
+// `fileOrigin` is the mesh's render::Mesh::fileOrigin.
+ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile,
+                              const glm::dvec3& fileOrigin);
 
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
 // not at all. Returns notes for the user.
-std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
-                                           const Geometry& geometry, const Image& composite,
-                                           const render::RenderOutput& rendered,
-                                           const GroundShadowResult* ground,
-                                           const std::string& meshFile,
-                                           const std::filesystem::path& exrPath,
-                                           const std::filesystem::path& displayPath);
+std::vector<std::string> writeComposeFiles(
+    const color::ColorConfig& colors, const ComposeJob& job, const Geometry& geometry,
+    const Image& composite, const render::RenderOutput& rendered, const GroundShadowResult* ground,
+    const std::string& meshFile, const glm::dvec3& fileOrigin, const std::filesystem::path& exrPath,
+    const std::filesystem::path& displayPath);
 
 }  // namespace compose::pipeline

@@ -345,6 +345,8 @@ class RenderStage final : public Stage {
       return false;
     r.notes = m.value("notes", std::vector<std::string>());
     r.meshFile = m.value("mesh", "");
+    if (const auto o = m.find("fileOrigin"); o != m.end() && o->is_array() && o->size() == 3)
+      r.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
     for (const auto& n : r.notes) ctx.note(n);
     ctx.artefacts.object = std::move(r);
     return true;
@@ -352,9 +354,11 @@ class RenderStage final : public Stage {
   bool store(const Context& ctx, StageCache& cache) const override {
     const RenderedObject& r = *ctx.artefacts.object;
     cache.meta() = {
-        {"x0", r.output.x0},      {"y0", r.output.y0},     {"x1", r.output.x1},
-        {"y1", r.output.y1},      {"rays", r.output.rays}, {"coverage", r.output.coverage},
-        {"exposure", r.exposure}, {"notes", r.notes},      {"mesh", r.meshFile}};
+        {"x0", r.output.x0},      {"y0", r.output.y0},
+        {"x1", r.output.x1},      {"y1", r.output.y1},
+        {"rays", r.output.rays},  {"coverage", r.output.coverage},
+        {"exposure", r.exposure}, {"notes", r.notes},
+        {"mesh", r.meshFile},     {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}};
     cache.putImage("beauty", r.output.beauty);
     cache.putImage("aovs", r.output.aovs);
     return cache.write();
@@ -414,6 +418,7 @@ class RenderStage final : public Stage {
     }
     r.exposure = settings.exposure;
     r.meshFile = fs::absolute(job.object).string();
+    r.fileOrigin = ctx.mesh().fileOrigin;
     const auto start = std::chrono::steady_clock::now();
     r.output = render::renderDiffuse(ctx.mesh(), ctx.objectScene(), g.worldFromObject, g.camera,
                                      *ctx.artefacts.lighting, settings, ctx.progress);
@@ -560,7 +565,7 @@ class OutputStage final : public Stage {
             : nullptr;
     const std::vector<std::string> notes =
         writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output,
-                          ground, object.meshFile, exrPath, displayPath);
+                          ground, object.meshFile, object.fileOrigin, exrPath, displayPath);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
     const std::string ext = ingest::lowerExtension(displayPath);
@@ -573,7 +578,8 @@ class OutputStage final : public Stage {
 
 }  // namespace
 
-ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile) {
+ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile,
+                              const glm::dvec3& fileOrigin) {
   ingest::ExrHeader header;
   auto asImath = [](const glm::dmat4& m) {
     // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
@@ -597,7 +603,10 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
   ndcFromCamera[2][3] = -1.0;
   header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
   header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
-  header.matrices.emplace_back("compose:worldFromObject", asImath(geometry.worldFromObject));
+  // From the mesh file's own coordinates: the object's, moved by its file origin.
+  header.matrices.emplace_back(
+      "compose:worldFromObject",
+      asImath(geometry.worldFromObject * glm::translate(glm::dmat4(1.0), -fileOrigin)));
   // How the environment is turned in the world (--env-yaw): a direction in the world is looked up
   // in the environment map at envFromWorld times it.
   header.matrices.emplace_back("compose:envFromWorld",
@@ -614,7 +623,8 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const Geometry& geometry, const Image& composite,
                                            const render::RenderOutput& rendered,
                                            const GroundShadowResult* ground,
-                                           const std::string& meshFile, const fs::path& exrPath,
+                                           const std::string& meshFile,
+                                           const glm::dvec3& fileOrigin, const fs::path& exrPath,
                                            const fs::path& displayPath) {
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
@@ -649,7 +659,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                     ") does not say what the primaries of the working space '" + working +
                     "' are: the EXR carries its name but no chromaticities");
   }
-  ingest::ExrHeader header = sceneHeader(geometry, meshFile);
+  ingest::ExrHeader header = sceneHeader(geometry, meshFile, fileOrigin);
 
   const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
   const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;

@@ -84,7 +84,10 @@ struct Material {
 inline constexpr float kDefaultAlbedo = 0.5f;
 
 struct Mesh {
-  std::vector<glm::vec3> positions;   // object space
+  std::vector<glm::vec3> positions;  // object space
+  // Where the object space's origin lies in the mesh file's own coordinates (file = positions +
+  // fileOrigin): zero unless the loader moved a mesh lying far from its file's origin.
+  glm::dvec3 fileOrigin{0.0};
   std::vector<glm::vec3> normals;     // unit, one per position
   std::vector<uint32_t> indices;      // three per triangle, counter-clockwise seen from outside
   bool normalsFromFile = false;       // every normal came from the file

@@ -3,7 +3,9 @@
 // its users; images are decoded by our ingest (OpenImageIO), not by tinygltf's stb_image.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -174,6 +176,7 @@ class GltfReader {
   size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
   size_t colours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0, missingMaterials_ = 0;
   bool noMaterial_ = false, someMaterial_ = false;
+  std::vector<glm::dvec3> exact_;  // the positions in double, before rounding (recentre())
 };
 
 const unsigned char* GltfReader::viewBytes(int view, size_t offset, size_t count,
@@ -585,7 +588,8 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
   const uint32_t base = uint32_t(mesh_.positions.size());
   for (size_t i = 0; i < n; ++i) {
     const glm::dvec3 p(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
-    mesh_.positions.emplace_back(objectFromNode * glm::dvec4(p, 1.0));
+    exact_.emplace_back(objectFromNode * glm::dvec4(p, 1.0));
+    mesh_.positions.emplace_back(exact_.back());
     if (!normals.empty()) {
       const glm::dvec3 nn =
           normalFromNode * glm::dvec3(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]);
@@ -703,6 +707,31 @@ void GltfReader::read() {
                              std::to_string(triangles_) +
                              " triangles whose indices refer to vertices the primitive does not "
                              "have");
+  }
+  // A mesh far from its file's origin (a scene exported in place, georeferenced): float positions
+  // there are coarse on the object's scale (a 1-unit sphere 5000 units out rounds to 0.0005,
+  // enough for its shadows to speckle). Moved to its own middle in double first.
+  if (!exact_.empty()) {
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (const glm::dvec3& p : exact_) {
+      if (!std::isfinite(p.x + p.y + p.z)) continue;
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+    const glm::dvec3 middle = 0.5 * (lo + hi);
+    const double size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    const double far = std::max({std::abs(middle.x), std::abs(middle.y), std::abs(middle.z)});
+    if (lo.x <= hi.x && size > 0.0 && far > 100.0 * size) {
+      for (size_t i = 0; i < exact_.size(); ++i) mesh_.positions[i] = glm::vec3(exact_[i] - middle);
+      mesh_.fileOrigin = middle;
+      char line[240];
+      std::snprintf(line, sizeof line,
+                    "the mesh lies %.4g units from its file's origin (%.4g times its size): moved "
+                    "to its own middle before rounding its positions to float "
+                    "(compose:worldFromObject still maps the file's coordinates)",
+                    far, far / size);
+      mesh_.warnings.push_back(line);
+    }
   }
   if (colours_) {
     mesh_.warnings.push_back("ignored the vertex colours (COLOR_0) of " +

@@ -242,6 +242,40 @@ TEST(Gltf, TheNodeHierarchyIsFlattenedIntoObjectSpace) {
   EXPECT_EQ(loadMesh(dir / "noscene.gltf").triangleCount(), 2u);
 }
 
+// A small mesh far from the file's origin (a node translation of 5000 for a 1 mm triangle pair):
+// moved to its own middle in double before its positions become float, so that its shape keeps
+// float's precision on its own scale (at 5000, float's step is half a millimetre), and the file
+// origin says where it was.
+TEST(Gltf, AMeshFarFromTheOriginKeepsItsShape) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 0.001f, 0, 0, 0, 0.001f, 0, 0.001f, 0.001f, 0.0005f});
+  const int idx = b.accessor(std::vector<uint32_t>{0, 1, 2, 1, 3, 2}, 5125, "SCALAR", 6);
+  b.scene({b.node({{"translation", {5000.0, -3000.0, 2000.0}},
+                   {"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", idx}})}})});
+  writeText(dir / "far.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "far.gltf");
+  ASSERT_EQ(m.positions.size(), 4u);
+  EXPECT_NEAR(m.fileOrigin.x, 5000.0005, 1e-9);
+  EXPECT_NEAR(m.fileOrigin.y, -2999.9995, 1e-9);
+  EXPECT_NEAR(m.fileOrigin.z, 2000.00025, 1e-9);
+  bool said = false;
+  for (const std::string& w : m.warnings)
+    said = said || w.find("from its file's origin") != std::string::npos;
+  EXPECT_TRUE(said);
+  // Every corner where the file puts it, to float's precision at the mesh's own scale.
+  const glm::dvec3 expected[] = {{5000, -3000, 2000},
+                                 {5000.001, -3000, 2000},
+                                 {5000, -2999.999, 2000},
+                                 {5000.001, -2999.999, 2000.0005}};
+  for (const glm::dvec3& e : expected) {
+    double nearest = 1e30;
+    for (const glm::vec3& p : m.positions)
+      nearest = std::min(nearest, glm::length(glm::dvec3(p) + m.fileOrigin - e));
+    EXPECT_LT(nearest, 1e-9) << e.x << " " << e.y << " " << e.z;
+  }
+}
+
 TEST(Gltf, AMirroringNodeKeepsTrianglesWoundOutwards) {
   TempDir dir;
   // A tetrahedron with flat outward normals, unindexed, under a scale of -1 in x.
