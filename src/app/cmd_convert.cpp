@@ -228,6 +228,17 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         if (!declared.empty())
           notes.push_back("read as '" + declared + "' (by the chromaticities in its header)");
       }
+      const bool codesRead = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
+      if (!file.info.chromaticities && !codesRead) {
+        // Floats with no primaries in the header: the space the config takes them as (OpenEXR's
+        // convention, linear Rec.709 with the built-in config), written by its name and with its
+        // chromaticities rather than OpenImageIO's generic 'Linear'.
+        declared = colors
+                       .inputSpace(file.files.front(), file.info.fileColorSpace,
+                                   file.info.colorSpaceByConvention, false)
+                       .space;
+        if (!write.chromaticities) write.chromaticities = colors.chromaticities(declared);
+      }
       file.image.colorSpace = declared;
       for (Image& face : file.faces) face.colorSpace = declared;
       // Codes of an 8- or 16-bit picture (an sRGB JPEG, a PNG) written into a format of floats

@@ -81,6 +81,15 @@ TEST(ConvertCommand, LatLongToEveryLayoutAndBackKeepsTheEnergy) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("aspect 2:1"), std::string::npos) << "the detection is reported";
   EXPECT_EQ(cubemap::exrEnvmapLayout(dir / "cube.exr"), cubemap::Layout::Cube);
+  // The HDRI says no primaries (OpenEXR's convention: Rec.709): the cube says them, with the
+  // config's name for that space, not OpenImageIO's generic 'Linear'.
+  {
+    const ingest::CaptureInfo info = ingest::readCaptureInfo(dir / "cube.exr");
+    ASSERT_TRUE(info.chromaticities.has_value());
+    EXPECT_NEAR((*info.chromaticities)[0], 0.64, 1e-6);
+    EXPECT_NEAR((*info.chromaticities)[3], 0.60, 1e-6);
+    EXPECT_EQ(info.fileColorSpace, "Linear Rec.709 (sRGB)");
+  }
   for (const char* layout : {"hcross", "vcross"}) {
     r = run(std::string("convert ") + q(dir / "cube.exr") + " --to " + layout + " --out " +
                 q(dir / (std::string(layout) + ".exr")),
