@@ -64,6 +64,8 @@ const std::vector<Command>& commands() {
       {"composite", "Composite an object's layer into the plate: EXR and JPEG", setupComposite},
       {"run", "Run the job a scene file (JSON) describes", setupRun},
       {"bench", "Time a job stage by stage, cold and warm, with peak memory", setupBench},
+      {"cache", "Show what the caches hold; remove old entries (--older-than, --max-size)",
+       setupCache},
   };
   return list;
 }

@@ -75,6 +75,7 @@ Runner setupRender(CLI::App& command, const Globals& globals);
 Runner setupComposite(CLI::App& command, const Globals& globals);
 Runner setupRun(CLI::App& command, const Globals& globals);
 Runner setupBench(CLI::App& command, const Globals& globals);
+Runner setupCache(CLI::App& command, const Globals& globals);
 
 // "X,Y" → two numbers; throws UsageError naming `option`.
 glm::dvec2 parsePair(const std::string& text, const std::string& option);

@@ -3,6 +3,7 @@
 // same job; --explain and the stage files' errors.
 #include <sys/wait.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -472,6 +473,47 @@ TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
       << composite.err;
   EXPECT_NE(composite.err.find("layer.exr"), std::string::npos) << composite.err;
   EXPECT_FALSE(fs::exists(dir_ / "final.exr"));
+}
+
+// compose cache shows what the caches hold and removes old entries, never the samples or the
+// stored camera responses that share the default folder.
+TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
+  const fs::path cache = dir_ / "cache";
+  RunResult r = run("precompute --env " + quote(samples_ / "forest.exr") + " --out " +
+                        quote(dir_ / "f.lighting") + " --cache " + quote(cache),
+                    dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  fs::create_directories(cache / "samples");
+  fs::create_directories(cache / "responses");
+  compose::testing::writeText(cache / "samples" / "forest.exr", "not an entry");
+  compose::testing::writeText(cache / "responses" / "camera.json", "not an entry");
+  r = run("cache --cache " + quote(cache), dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("stages/precompute"), std::string::npos) << r.out;
+  // Every entry written 40 days ago, but one.
+  std::vector<fs::path> entries;
+  for (const auto& e : fs::recursive_directory_iterator(cache / "stages"))
+    if (e.is_regular_file()) entries.push_back(e.path());
+  ASSERT_FALSE(entries.empty());
+  const auto old = fs::file_time_type::clock::now() - std::chrono::hours(24 * 40);
+  for (const fs::path& e : entries) fs::last_write_time(e, old);
+  fs::last_write_time(cache / "samples" / "forest.exr", old);
+  compose::testing::writeText(cache / "stages" / "precompute" / "recent.stage", "x");
+  r = run("cache --cache " + quote(cache) + " --older-than 30 --dry-run", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  for (const fs::path& e : entries) EXPECT_TRUE(fs::exists(e)) << "--dry-run removed " << e;
+  r = run("cache --cache " + quote(cache) + " --older-than 30", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  for (const fs::path& e : entries) EXPECT_FALSE(fs::exists(e)) << e;
+  EXPECT_TRUE(fs::exists(cache / "stages" / "precompute" / "recent.stage"));
+  EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
+  EXPECT_TRUE(fs::exists(cache / "responses" / "camera.json"));
+  r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_FALSE(fs::exists(cache / "stages" / "precompute" / "recent.stage"));
+  EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
+  r = run("cache --cache " + quote(cache) + " --max-size lots", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
 }
 
 // Bare file names, as one types them in the folder one works in: written there.
