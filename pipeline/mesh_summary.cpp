@@ -62,6 +62,10 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.floats(t.image.pixels);
   }
   h.bytes(mesh.colorSpace);
+  // Where the file puts the object (a far mesh moved to its middle): the header maps from there.
+  h.number(mesh.fileOrigin.x);
+  h.number(mesh.fileOrigin.y);
+  h.number(mesh.fileOrigin.z);
   return h;
 }
 

@@ -513,11 +513,18 @@ class ColorStage final : public Stage {
       // pixels become the linear plate. An 8-bit RGB plate (a JPEG) is converted from its codes
       // into a new float image; any other RGB plate is converted in place.
       ingest::LoadedImage& plate = *ctx.artefacts.plate;
-      // A plate's alpha (the last of 2 or 4 channels), kept when it is not 1 everywhere.
+      // A plate's alpha (its channel named A or Alpha), kept when it is not 1 everywhere.
       std::vector<float> alpha;
-      if (plate.image.channels == 2 || plate.image.channels == 4) {
+      int alphaChannel = -1;
+      for (size_t c = 0; c < plate.image.channelNames.size(); ++c) {
+        std::string name = plate.image.channelNames[c];
+        std::transform(name.begin(), name.end(), name.begin(),
+                       [](unsigned char ch) { return char(std::tolower(ch)); });
+        if (c > 0 && (name == "a" || name == "alpha")) alphaChannel = int(c);
+      }
+      if (alphaChannel > 0 && alphaChannel < plate.image.channels) {
         const size_t n = size_t(plate.image.width) * size_t(plate.image.height);
-        const size_t stride = size_t(plate.image.channels), at = stride - 1;
+        const size_t stride = size_t(plate.image.channels), at = size_t(alphaChannel);
         alpha.resize(n);
         bool opaque = true;
         for (size_t i = 0; i < n; ++i) {

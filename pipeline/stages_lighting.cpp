@@ -327,8 +327,8 @@ class ShadowsStage final : public Stage {
   // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast;
   // 4: refined points in the order of their triangles (entries of 3 held their values in another
   // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its
-  // strata.
-  static constexpr int kVersion = 5;
+  // strata; 6: SH transfer projected cell by cell.
+  static constexpr int kVersion = 6;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -33,6 +34,15 @@ struct Entry {
   fs::file_time_type written;
   bool orphan = false;  // a temporary a killed run left (its process is gone)
 };
+
+// Whether a file is one compose wrote into its cache: a key of 32 hexadecimal digits, a dot and
+// the entry's kind (ABCD....stage, ....visibility, ....lighting), or such a file's temporary.
+bool isEntryName(const std::string& name) {
+  if (name.size() < 34 || name[32] != '.') return false;
+  for (int i = 0; i < 32; ++i)
+    if (!std::isxdigit(static_cast<unsigned char>(name[size_t(i)]))) return false;
+  return true;
+}
 
 // A temporary's writer process from its name (NAME.partial-PID-N), or 0.
 long partialOwner(const std::string& name) {
@@ -121,10 +131,12 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
     std::vector<Entry> entries;
     for (const char* folder : kCacheFolders) {
       const fs::path dir = root / folder;
-      if (!fs::is_directory(dir, ec)) continue;
+      // A folder of compose's, not a link to one elsewhere.
+      if (fs::is_symlink(dir, ec) || !fs::is_directory(dir, ec)) continue;
       for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
         std::error_code e;
-        if (!it->is_regular_file(e)) continue;
+        if (!it->is_regular_file(e) || it->is_symlink(e)) continue;
+        if (!isEntryName(it->path().filename().string())) continue;  // not an entry of compose's
         Entry entry;
         entry.path = it->path();
         const fs::path relative = fs::relative(entry.path.parent_path(), root, e);
@@ -132,8 +144,11 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
         entry.bytes = it->file_size(e);
         entry.written = fs::last_write_time(entry.path, e);
         const long owner = partialOwner(entry.path.filename().string());
+        // A temporary whose writer is gone (and which has not changed for a minute: a process
+        // on another machine sharing the folder is not seen here).
         entry.orphan = owner > 0 && owner != long(::getpid()) && ::kill(pid_t(owner), 0) != 0 &&
-                       errno == ESRCH;
+                       errno == ESRCH &&
+                       fs::file_time_type::clock::now() - entry.written > std::chrono::minutes(1);
         entries.push_back(std::move(entry));
       }
       if (ec) throw Error("cache", "cannot list the folder: " + ec.message(), dir);
@@ -145,11 +160,9 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
     std::vector<bool> remove(entries.size(), false);
     if (pruning) {
       for (size_t i = 0; i < entries.size(); ++i) {
-        remove[i] = entries[i].orphan ||
-                    (o->olderThanDays >= 0.0 &&
-                     now - entries[i].written >
-                         std::chrono::duration_cast<fs::file_time_type::duration>(
-                             std::chrono::duration<double, std::ratio<86400>>(o->olderThanDays)));
+        const double days =
+            std::chrono::duration<double, std::ratio<86400>>(now - entries[i].written).count();
+        remove[i] = entries[i].orphan || (o->olderThanDays >= 0.0 && days > o->olderThanDays);
       }
       uintmax_t kept = 0;
       for (size_t i = 0; i < entries.size(); ++i)
@@ -188,7 +201,8 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
       }
       if (remove[i] && !o->dryRun) {
         std::error_code r;
-        if (!fs::remove(e.path, r) || r) ++failed;
+        fs::remove(e.path, r);  // one gone already (renamed by its writer) is as good as removed
+        if (r && fs::exists(e.path)) ++failed;
       }
     }
     if (!globals.quiet) {

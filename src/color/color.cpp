@@ -370,9 +370,9 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
     r.how = onlyDefault ? "the config's default rule" : "the config's file rule for it";
     if (!declared.empty() && !declaredByConvention)
       r.how = "the file says '" + declared + "', which the config does not know; " + r.how;
-    r.assumed = onlyDefault || !declared.empty();
+    r.assumed = onlyDefault || (!declared.empty() && !declaredByConvention);
   }
-  if (integerData && (r.assumed || declaredByConvention) && isLinearOrData(r.space)) {
+  if (integerData && r.assumed && isLinearOrData(r.space)) {
     // 8- and 16-bit images hold display-encoded values (a linear 16-bit TIFF says so in its
     // header or capture description), as Nuke and Blender read them.
     const std::string srgb = srgbEncodedSpace();

@@ -283,8 +283,11 @@ ExrReader::ExrReader(const fs::path& file, const std::string& stage)
       if (w <= 0 || hgt <= 0 || w > INT32_MAX || hgt > INT32_MAX || fw <= 0 || fh <= 0 ||
           fw > INT32_MAX || fh > INT32_MAX)
         throw Error(stage, "image has no pixels (its data or display window is empty)", file);
-      out.x = dw.min.x - display.min.x;
-      out.y = dw.min.y - display.min.y;
+      const int64_t dx = int64_t(dw.min.x) - display.min.x, dy = int64_t(dw.min.y) - display.min.y;
+      if (dx < INT32_MIN || dx > INT32_MAX || dy < INT32_MIN || dy > INT32_MAX)
+        throw Error(stage, "its data window lies too far from its display window", file);
+      out.x = int(dx);
+      out.y = int(dy);
       out.width = int(w);
       out.height = int(hgt);
       out.fullWidth = int(fw);

@@ -255,8 +255,9 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   }
 }
 
+// The size is the display window's: readExr() returns that frame (a data window is put in it).
 FileHeader headerOf(const ExrPartHeader& part) {
-  return {part.width,      part.height,     int(part.channelNames.size()),
+  return {part.fullWidth,  part.fullHeight, int(part.channelNames.size()),
           "openexr",       part.sampleType, part.sampleType == "half" ? 16 : 32,
           &part.attributes};
 }
@@ -345,13 +346,17 @@ LoadedImage readExr(const fs::path& path, const std::string& stage) {
   out.image = reader.read(0);
   if (part.x != 0 || part.y != 0 || part.width != part.fullWidth ||
       part.height != part.fullHeight) {
+    // In 64 bits: a crafted header's offsets and sizes may each fit an int and not their sum.
+    const int64_t right = int64_t(part.x) + part.width, bottom = int64_t(part.y) + part.height;
     // The image is the display window (OpenEXR's frame, as Nuke keeps it): the stored pixels go
     // where the data window says, pixels outside it are 0 and overscan beyond the frame is not
     // kept.
     checkImageSize(part.fullWidth, part.fullHeight, int(part.channelNames.size()), stage, path);
     Image framed(part.fullWidth, part.fullHeight, out.image.channels, out.image.channelNames);
-    const int x0 = std::max(0, part.x), x1 = std::min(part.fullWidth, part.x + part.width);
-    const int y0 = std::max(0, part.y), y1 = std::min(part.fullHeight, part.y + part.height);
+    const int x0 = int(std::clamp<int64_t>(part.x, 0, part.fullWidth));
+    const int x1 = int(std::clamp<int64_t>(right, 0, part.fullWidth));
+    const int y0 = int(std::clamp<int64_t>(part.y, 0, part.fullHeight));
+    const int y1 = int(std::clamp<int64_t>(bottom, 0, part.fullHeight));
     const size_t c = size_t(out.image.channels);
     for (int y = y0; y < y1 && x0 < x1; ++y) {
       std::copy_n(out.image.at(x0 - part.x, y - part.y), size_t(x1 - x0) * c, framed.at(x0, y));
@@ -365,8 +370,7 @@ LoadedImage readExr(const fs::path& path, const std::string& stage) {
                   (x0 > 0 || y0 > 0 || x1 < part.fullWidth || y1 < part.fullHeight)
                       ? ", 0 where no pixel is stored"
                       : "",
-                  (part.x < 0 || part.y < 0 || part.x + part.width > part.fullWidth ||
-                   part.y + part.height > part.fullHeight)
+                  (part.x < 0 || part.y < 0 || right > part.fullWidth || bottom > part.fullHeight)
                       ? ", the overscan outside it left out"
                       : "");
     out.notes.push_back(line);

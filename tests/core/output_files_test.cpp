@@ -1,5 +1,6 @@
 #include "core/output_files.h"
 
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -98,7 +99,14 @@ TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {
   if (child == 0) ::_exit(0);
   ASSERT_GT(child, 0);
   ::waitpid(child, nullptr, 0);
-  const std::string dead = std::to_string(child), alive = std::to_string(::getppid());
+  // A process that runs for the length of the test.
+  const pid_t sleeper = ::fork();
+  if (sleeper == 0) {
+    ::sleep(60);
+    ::_exit(0);
+  }
+  ASSERT_GT(sleeper, 0);
+  const std::string dead = std::to_string(child), alive = std::to_string(sleeper);
   const auto old = std::filesystem::file_time_type::clock::now() - std::chrono::minutes(5);
   auto make = [&](const std::string& name, bool aged) {
     writeText(dir / name, "x");
@@ -116,6 +124,8 @@ TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {
   EXPECT_TRUE(std::filesystem::exists(dir / (".out.partial-" + alive + "-0.exr")));
   EXPECT_TRUE(std::filesystem::exists(dir / (".other.partial-" + dead + "-0.exr")));
   EXPECT_TRUE(std::filesystem::exists(dir / "out.exr"));
+  ::kill(sleeper, SIGKILL);
+  ::waitpid(sleeper, nullptr, 0);
 }
 
 TEST(OutputFiles, RefusesAFolderAsDestination) {

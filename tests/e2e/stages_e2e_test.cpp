@@ -498,19 +498,25 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
   const auto old = fs::file_time_type::clock::now() - std::chrono::hours(24 * 40);
   for (const fs::path& e : entries) fs::last_write_time(e, old);
   fs::last_write_time(cache / "samples" / "forest.exr", old);
-  compose::testing::writeText(cache / "stages" / "precompute" / "recent.stage", "x");
+  compose::testing::writeText(
+      cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage", "x");
   r = run("cache --cache " + quote(cache) + " --older-than 30 --dry-run", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   for (const fs::path& e : entries) EXPECT_TRUE(fs::exists(e)) << "--dry-run removed " << e;
   r = run("cache --cache " + quote(cache) + " --older-than 30", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   for (const fs::path& e : entries) EXPECT_FALSE(fs::exists(e)) << e;
-  EXPECT_TRUE(fs::exists(cache / "stages" / "precompute" / "recent.stage"));
+  EXPECT_TRUE(
+      fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
   EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
   EXPECT_TRUE(fs::exists(cache / "responses" / "camera.json"));
+  // A file of the user's in those folders is not an entry: kept.
+  compose::testing::writeText(cache / "stages" / "precompute" / "notes.txt", "mine");
   r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_FALSE(fs::exists(cache / "stages" / "precompute" / "recent.stage"));
+  EXPECT_TRUE(fs::exists(cache / "stages" / "precompute" / "notes.txt"));
+  EXPECT_FALSE(
+      fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
   EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
   r = run("cache --cache " + quote(cache) + " --max-size lots", dir_.path());
   EXPECT_EQ(r.status, 2) << r.err;
