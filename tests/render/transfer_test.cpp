@@ -290,6 +290,69 @@ TEST(Transfer, AConvexObjectSeesEverything) {
   EXPECT_LT(worst, 2e-3) << "largest coefficient error";
 }
 
+// SH transfer at points a wall half hides, on a floor tilted so that no normal lies along an axis:
+// the cell-by-cell projection, turned from each point's frame into the object's, against
+// T_lm = ∫ V max(0, n·ω) Y_lm dω summed over 256 x 512 directions with a ray each. The occluder
+// sits to one side, so every m of every band carries weight: a frame turned or mirrored the wrong
+// way moves it and the coefficients with m ≠ 0 come out wrong.
+TEST(Transfer, HarmonicTransferOfAPartlyHiddenTiltedPoint) {
+  Mesh m = floorAndWall(9);
+  const glm::dmat4 tilt =
+      glm::rotate(glm::rotate(glm::dmat4(1.0), 0.5, glm::dvec3(1, 0, 0)), 0.3, glm::dvec3(0, 0, 1));
+  for (glm::vec3& p : m.positions) p = glm::vec3(tilt * glm::dvec4(glm::dvec3(p), 1.0));
+  for (glm::vec3& n : m.normals) n = glm::normalize(glm::vec3(glm::dmat3(tilt) * glm::dvec3(n)));
+  TransferParams p;
+  p.grid = 16;
+  p.order = 1;
+  p.shBands = 8;
+  const SurfacePoints points = surfacePoints(m, 10.0f);
+  const VertexTransfer t = computeTransfer(m, points, p);
+  const EmbreeScene scene(m.positions, m.indices);
+  const int nsh = lighting::shCount(8);
+  std::vector<double> y(static_cast<size_t>(nsh));
+  const float size = 2.0f;
+  double worst = 0.0, scale = 0.0;
+  int checked = 0;
+  // Floor vertices beside the wall (x between -0.75 and -0.25 before the tilt): partly hidden.
+  for (size_t v = 0; v < 81; ++v) {
+    const int i = int(v % 9);
+    if (i != 1 && i != 2 && i != 3) continue;
+    const glm::dvec3 n = glm::normalize(glm::dvec3(m.normals[v]));
+    const glm::vec3 origin = m.positions[v] + 1e-4f * size * glm::vec3(n);
+    std::vector<double> truth(static_cast<size_t>(nsh), 0.0);
+    constexpr int kRows = 256, kCols = 512;
+    for (int a = 0; a < kRows; ++a) {
+      const double z = 1.0 - (a + 0.5) / kRows * 2.0;  // uniform in solid angle over the sphere
+      const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+      for (int b = 0; b < kCols; ++b) {
+        const double phi = 2.0 * kPi * (b + 0.5) / kCols;
+        const glm::dvec3 d(r * std::cos(phi), z, r * std::sin(phi));
+        const double c = glm::dot(d, n);
+        if (c <= 0.0) continue;
+        if (scene.occluded(origin, glm::vec3(d), 1e-5f * size)) continue;
+        lighting::evalSh(8, d, y.data());
+        const double w = c * 4.0 * kPi / (double(kRows) * kCols);
+        for (int k = 0; k < nsh; ++k) truth[size_t(k)] += w * y[size_t(k)];
+      }
+    }
+    bool hidden = false;
+    for (int k = 0; k < nsh; ++k) {
+      worst =
+          std::max(worst, std::abs(double(t.sh[v * size_t(nsh) + size_t(k)]) - truth[size_t(k)]));
+      scale = std::max(scale, std::abs(truth[size_t(k)]));
+    }
+    lighting::evalSh(8, n, y.data());
+    hidden = std::abs(truth[0] - kPi * y[0]) > 0.05 * kPi * y[0];  // the wall takes light away
+    checked += hidden;
+  }
+  std::printf("SH transfer, tilted points beside a wall: largest coefficient error %.4f of %.3f\n",
+              worst, scale);
+  EXPECT_GT(checked, 5) << "points the wall hides";
+  // The cells' visible fractions are estimated with a ray or four per cell: a few percent of the
+  // largest coefficient; a frame turned the wrong way is off by a large part of it.
+  EXPECT_LT(worst, 0.05 * scale);
+}
+
 TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
   Mesh m;
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
