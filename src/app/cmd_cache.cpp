@@ -1,12 +1,9 @@
 // compose cache: what the caches hold, and removing old entries. Only compose's own cache folders
 // (stages, meshes, visibility, lighting) are looked at; the samples and the stored camera
 // responses beside them in the default folder are never touched.
-#include <signal.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +13,7 @@
 
 #include "app/cli.h"
 #include "core/error.h"
+#include "core/output_files.h"
 #include "pipeline/compose_job.h"
 
 namespace compose::app {
@@ -42,13 +40,6 @@ bool isEntryName(const std::string& name) {
   for (int i = 0; i < 32; ++i)
     if (!std::isxdigit(static_cast<unsigned char>(name[size_t(i)]))) return false;
   return true;
-}
-
-// A temporary's writer process from its name (NAME.partial-PID-N), or 0.
-long partialOwner(const std::string& name) {
-  const size_t at = name.find(".partial-");
-  if (at == std::string::npos) return 0;
-  return std::strtol(name.c_str() + at + 9, nullptr, 10);
 }
 
 // "500M", "2G", "1.5G", "800000" (bytes; K, M, G, T are powers of 1000).
@@ -143,12 +134,7 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
         entry.group = e ? std::string(folder) : relative.generic_string();
         entry.bytes = it->file_size(e);
         entry.written = fs::last_write_time(entry.path, e);
-        const long owner = partialOwner(entry.path.filename().string());
-        // A temporary whose writer is gone (and which has not changed for a minute: a process
-        // on another machine sharing the folder is not seen here).
-        entry.orphan = owner > 0 && owner != long(::getpid()) && ::kill(pid_t(owner), 0) != 0 &&
-                       errno == ESRCH &&
-                       fs::file_time_type::clock::now() - entry.written > std::chrono::minutes(1);
+        entry.orphan = isAbandonedTemporary(entry.path);
         entries.push_back(std::move(entry));
       }
       if (ec) throw Error("cache", "cannot list the folder: " + ec.message(), dir);

@@ -83,25 +83,32 @@ std::optional<fs::path> protectedInputAt(const fs::path& destination) {
 
 }  // namespace
 
+bool isAbandonedTemporary(const fs::path& file) {
+  const std::string name = file.filename().string();
+  const size_t at = name.rfind(".partial-");
+  if (at == std::string::npos) return false;
+  // The writer's process id, then '-'.
+  const size_t from = at + 9;
+  size_t digits = from;
+  while (digits < name.size() && std::isdigit(static_cast<unsigned char>(name[digits]))) ++digits;
+  if (digits == from || digits >= name.size() || name[digits] != '-') return false;
+  const long pid = std::strtol(name.c_str() + from, nullptr, 10);
+  if (pid <= 0 || pid == long(::getpid())) return false;
+  if (!(::kill(pid_t(pid), 0) != 0 && errno == ESRCH)) return false;  // running (or not ours)
+  std::error_code e;
+  if (!fs::is_regular_file(file, e)) return false;
+  const auto changed = fs::last_write_time(file, e);
+  return !e && fs::file_time_type::clock::now() - changed >= std::chrono::minutes(1);
+}
+
 void removeStalePartials(const fs::path& folder, const std::string& prefix) {
   std::error_code ec;
-  const auto now = fs::file_time_type::clock::now();
   for (fs::directory_iterator it(folder.empty() ? fs::path(".") : folder, ec), end;
        !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
-    // The writer's process id, then '-'.
-    size_t digits = prefix.size();
-    while (digits < name.size() && std::isdigit(static_cast<unsigned char>(name[digits]))) ++digits;
-    if (digits == prefix.size() || digits >= name.size() || name[digits] != '-') continue;
-    const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
-    if (pid <= 0 || pid == long(::getpid())) continue;
-    if (!(::kill(pid_t(pid), 0) != 0 && errno == ESRCH)) continue;  // running (or not ours)
     std::error_code e;
-    if (!it->is_regular_file(e)) continue;
-    const auto changed = fs::last_write_time(it->path(), e);
-    if (e || now - changed < std::chrono::minutes(1)) continue;
-    fs::remove(it->path(), e);
+    if (isAbandonedTemporary(it->path())) fs::remove(it->path(), e);
   }
 }
 

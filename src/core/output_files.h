@@ -60,6 +60,9 @@ void protectInput(const std::filesystem::path& file);
 // names writers here give files before renaming them into place) whose process no longer runs and
 // which have not changed for a minute. Errors are ignored: it only tidies.
 void removeStalePartials(const std::filesystem::path& folder, const std::string& prefix);
+// Whether `file` is such a temporary (a name with ".partial-<pid>-"): its process gone, unchanged
+// for a minute.
+bool isAbandonedTemporary(const std::filesystem::path& file);
 
 // Forgets every protected input: for a process that runs one job after another (a fuzz target
 // writes a file, reads it, and writes it again for the next input).

@@ -540,9 +540,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
   // Per-thread scratch, so that no point allocates.
   struct Scratch {
     std::vector<float> visible;             // per cell: the visible fraction
-    std::vector<double> y, shSum;           // SH basis values of a ray; the SH integral
+    std::vector<double> y, shSum;           // SH basis values (CellHarmonics); band 0 integral
     std::vector<double> shLocal, shValues;  // CellHarmonics::transfer's scratch
-    std::vector<glm::vec3> dirs;            // the first pass' direction per cell
     std::vector<float> cosines;             // the first pass' cos θ per cell
     std::vector<uint8_t> stratum;    // the first pass' ray's stratum a·r + b within its cell
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
@@ -560,7 +559,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.shSum.resize(size_t(nsh));
     sc.shLocal.resize(size_t(nsh));
     sc.shValues.resize(size_t(params.shBands + 1) * size_t(CellHarmonics::kDirections));
-    sc.dirs.resize(cells);
     sc.cosines.resize(cells);
     sc.stratum.resize(cells);
     sc.coneCos.resize(size_t(s));
@@ -607,13 +605,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           const float sn = colStartSin[size_t(j)] * cd + colStartCos[size_t(j)] * sd;
           return (sinT * c) * eastF + (sinT * sn) * northF + cosT * nf;
         };
-        // A ray that reaches the environment: its share of the cell and of the SH integral
-        // (band 0 alone, the ground's transfer, needs only the ray's cos θ).
-        auto seen = [&](int cell, const glm::vec3& d, float cosT, float share) {
+        // A ray that reaches the environment: its share of the cell and, for band 0 alone (the
+        // ground's transfer), of the SH integral; higher bands are projected cell by cell below.
+        auto seen = [&](int cell, float cosT, float share) {
           sc.visible[size_t(cell)] += share;
-          const double weight = double(cosT) * double(share) * omega[size_t(cell / s)];
-          if (nsh == 1) sc.shSum[0] += y00 * weight;  // above band 0: cell by cell, below
-          (void)d;
+          if (nsh == 1) sc.shSum[0] += y00 * double(cosT) * double(share) * omega[size_t(cell / s)];
         };
         // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
@@ -652,19 +648,13 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.cosines[size_t(cell)] = cosT;
           sc.stratum[size_t(cell)] =
               uint8_t(std::min(r - 1, int(u * float(r))) * r + std::min(r - 1, int(w * float(r))));
-          // Wholly outside the cone: cannot see the object; its direction is needed only for
-          // the SH integral above band 0.
+          // Wholly outside the cone: cannot see the object.
           if (outside) {
             const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
                                rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
-            if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) {
-              if (nsh > 1) sc.dirs[size_t(cell)] = direction(j, cosT, w);
-              continue;
-            }
+            if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) continue;
           }
-          const glm::vec3 d = direction(j, cosT, w);
-          sc.dirs[size_t(cell)] = d;
-          sc.batch.push_back(d);
+          sc.batch.push_back(direction(j, cosT, w));
           sc.batchCell.push_back(cell);
         }
         traceBatch([&](size_t index, bool occluded) {
@@ -699,10 +689,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
             const int cell = i * s + j;
             const bool blocked = ((row >> j) & 1u) != 0;
             if (!((edge >> j) & 1u)) {
-              if (!blocked) seen(cell, sc.dirs[size_t(cell)], sc.cosines[size_t(cell)], 1.0f);
+              if (!blocked) seen(cell, sc.cosines[size_t(cell)], 1.0f);
               continue;
             }
-            if (!blocked) seen(cell, sc.dirs[size_t(cell)], sc.cosines[size_t(cell)], share);
+            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share);
             const int own = sc.stratum[size_t(cell)];
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
@@ -717,7 +707,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           }
         }
         traceBatch([&](size_t index, bool occluded) {
-          if (!occluded) seen(sc.batchCell[index], sc.batch[index], sc.batchCos[index], share);
+          if (!occluded) seen(sc.batchCell[index], sc.batchCos[index], share);
         });
 
         // AO from the visible fractions and each cell's exact cosine integral, so that a fully
