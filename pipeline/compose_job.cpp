@@ -128,6 +128,8 @@ void validate(const ComposeJob& job) {
   std::string why;
   if (!ingest::parseExrCompression(job.exrCompression, &why))
     throw UsageError("--compression: " + why);
+  if (job.exrDepth != "auto" && job.exrDepth != "half" && job.exrDepth != "float")
+    throw UsageError("--depth must be auto, half or float; got '" + job.exrDepth + "'");
   if (job.jpegQuality < 1 || job.jpegQuality > 100)
     throw UsageError("--jpeg-quality must be in 1..100, got " + std::to_string(job.jpegQuality));
   if (job.threads < 0 || job.threads > 4096)

@@ -58,6 +58,9 @@ struct ComposeJob {
   // default, of OpenImageIO's codecs the cheapest on these images (a photograph's noise in half
   // floats: about half ZIP's time, files about a fifth larger; compose-bench-pipeline, README).
   std::string exrCompression = "piz";
+  // The EXR's sample type: "half", "float", or "auto" (float when the plate is stored as 32-bit
+  // float, half otherwise, as Nuke writes; a part with values beyond half's range is float).
+  std::string exrDepth = "auto";
   int jpegQuality = 95;  // of the display image when it is a JPEG, 1-100
 
   std::string lighting = "cheb-local";

@@ -540,6 +540,10 @@ class OutputStage final : public Stage {
             textParameter("compression",
                           std::string("the EXR's compression: ") + ingest::kExrCompressionNames,
                           &ComposeJob::exrCompression),
+            textParameter("depth",
+                          "the EXR's samples: half, float, or auto (float for a 32-bit float "
+                          "plate, else half)",
+                          &ComposeJob::exrDepth),
             {"jpeg-quality", "quality of the display image when it is a JPEG, 1-100",
              [](const ComposeJob& j) { return nlohmann::json(j.jpegQuality); },
              [](ComposeJob& j, const nlohmann::json& v) {
@@ -563,15 +567,20 @@ class OutputStage final : public Stage {
         ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
             ? &*ctx.artefacts.groundShadow
             : nullptr;
-    const std::vector<std::string> notes =
-        writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output,
-                          ground, object.meshFile, object.fileOrigin, exrPath, displayPath);
+    // A plate stored as 32-bit float keeps its precision (half would round it to 11 bits).
+    const bool floatPlate =
+        ctx.artefacts.plate && (ctx.artefacts.plate->info.sampleType == "float" ||
+                                ctx.artefacts.plate->info.sampleType == "double");
+    const bool floatSamples = job.exrDepth == "float" || (job.exrDepth == "auto" && floatPlate);
+    const std::vector<std::string> notes = writeComposeFiles(
+        ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output, ground,
+        object.meshFile, object.fileOrigin, exrPath, displayPath, floatSamples);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
     const std::string ext = ingest::lowerExtension(displayPath);
     const bool jpeg = ext == ".jpg" || ext == ".jpeg";
-    return "wrote " + exrPath.string() + " (" + job.exrCompression + ") and " +
-           displayPath.string() +
+    return "wrote " + exrPath.string() + " (" + (floatSamples ? "float, " : "half, ") +
+           job.exrCompression + ") and " + displayPath.string() +
            (jpeg ? " (JPEG quality " + std::to_string(job.jpegQuality) + ")" : std::string());
   }
 };
@@ -625,7 +634,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const GroundShadowResult* ground,
                                            const std::string& meshFile,
                                            const glm::dvec3& fileOrigin, const fs::path& exrPath,
-                                           const fs::path& displayPath) {
+                                           const fs::path& displayPath, bool floatSamples) {
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
   COMPOSE_CHECK((composite.channels == 3 || composite.channels == 4) &&
@@ -642,7 +651,8 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     compositePart.constantChannels = {{"A", 1.0f}};
   }
   compositePart.colorSpace = working;
-  compositePart.options.depth = ingest::WriteOptions::Depth::Half;
+  compositePart.options.depth =
+      floatSamples ? ingest::WriteOptions::Depth::Float : ingest::WriteOptions::Depth::Half;
   compositePart.options.alphaChannel = 3;
   compositePart.options.chromaticities = colors.chromaticities(working);
   compositePart.options.exrCompression = job.exrCompression;

@@ -144,6 +144,11 @@ void ComposeOptions::addOutput(CLI::App& app) {
                  "OpenColorIO display for the JPEG/PNG [default: the config's]");
   app.add_option("--view", job.view, "OpenColorIO view for the JPEG/PNG [default: the config's]");
   addCompressionOption(app, job.exrCompression);
+  app.add_option("--depth", job.exrDepth,
+                 "The EXR's samples: half, float, or auto (float for a 32-bit float plate, "
+                 "else half; float where a value exceeds half's range)")
+      ->check(CLI::IsMember({"auto", "half", "float"}))
+      ->capture_default_str();
   app.add_option("--jpeg-quality", job.jpegQuality, "Quality of the JPEG display image, 1-100")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();

@@ -602,8 +602,8 @@ class ComposeOutputs : public ::testing::Test {
       GTEST_FAIL() << "sample data missing in " << samples_ << ": run samples/fetch.sh";
     writeGreyPlate(dir_ / "input-plate.png", 320, 240, 0.5f);
   }
-  std::string args(const std::string& out) const {
-    return "--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
+  std::string args(const std::string& out, const std::string& plate = "input-plate.png") const {
+    return "--plate " + quote((dir_ / plate).string()) + " --object " +
            quote((samples_ / "bunny.obj").string()) +
            " --samples 1 --shadows off --no-shadow --no-cache --out " + quote(out);
   }
@@ -676,6 +676,45 @@ TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
     }
   }
   EXPECT_GT(largest, 1e28) << "the object's radiance is kept, not clamped";
+}
+
+// The EXR's samples follow the plate: a 32-bit float plate gives float parts, whose untouched
+// pixels keep the plate's value to float precision (half rounds 0.1234567 to 0.12341); any other
+// plate gives half; --depth says otherwise either way.
+TEST_F(ComposeOutputs, AFloatPlateGivesAFloatExr) {
+  constexpr float kValue = 0.1234567f;
+  writeExr(dir_ / "input-float.exr", 320, 240,
+           [](float* p, int, int) { p[0] = p[1] = p[2] = kValue; });
+  auto partTypes = [](const fs::path& exr) {
+    std::vector<std::string> types;
+    auto in = OIIO::ImageInput::open(exr.string());
+    if (!in) return types;
+    for (int part = 0; in->seek_subimage(part, 0); ++part)
+      types.push_back(in->spec().format.c_str());
+    return types;
+  };
+  const std::string floatPlate = " --plate-space lin_rec709";
+  auto r = runCompose(args((dir_ / "f").string(), "input-float.exr") + floatPlate, dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(partTypes(dir_ / "f.exr"), (std::vector<std::string>{"float", "float"}));
+  // A corner far from the object: the plate as it was, in ACEScg (a grey stays a grey).
+  const Raster f = readRaster(dir_ / "f.exr");
+  EXPECT_NEAR(f.at(2, 2, f.channel("R")), kValue, 2e-6);
+  r = runCompose(args((dir_ / "h").string(), "input-float.exr") + floatPlate + " --depth half",
+                 dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(partTypes(dir_ / "h.exr"), (std::vector<std::string>{"half", "half"}));
+  const Raster h = readRaster(dir_ / "h.exr");
+  EXPECT_GT(std::abs(h.at(2, 2, h.channel("R")) - kValue), 1e-5) << "half cannot hold it";
+  r = runCompose(args((dir_ / "p").string()), dir_.path());  // the 8-bit PNG plate
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(partTypes(dir_ / "p.exr"), (std::vector<std::string>{"half", "half"}));
+  r = runCompose(args((dir_ / "q").string()) + " --depth float", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(partTypes(dir_ / "q.exr"), (std::vector<std::string>{"float", "float"}));
+  r = runCompose(args((dir_ / "z").string()) + " --depth double", dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "z.exr"));
 }
 
 // An object burnt to white is warned about in the default view too: Soft Clip rolls the
