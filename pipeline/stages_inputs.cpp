@@ -589,7 +589,8 @@ class ColorStage final : public Stage {
         ctx.note("the plate " + ctx.job.plate.filename().string() + " has an alpha channel (" +
                  (straight ? "unassociated: premultiplied in linear light" : "premultiplied") +
                  "): the composite keeps it (the object over the plate, alpha = the object's + (1 "
-                 "- the object's) x the plate's); the display image shows it over black");
+                 "- the object's) x the plate's); a PNG display image keeps it, a JPEG shows it "
+                 "over black");
       }
       ctx.artefacts.plateLinear = std::move(linear);
     }

@@ -689,13 +689,34 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   // between blocks of rows, and the JPEG encoder runs on one core.
   std::future<std::vector<std::string>> displayed = std::async(std::launch::async, [&] {
     std::vector<std::string> displayNotes;
-    // A composite with alpha is shown over black: its premultiplied colour.
-    Image shown = colors.toDisplay(composite, display, view);
-    if (shown.channels == 4) shown = toRgb(shown);
+    // A composite with alpha: a PNG keeps it, as PNG stores it (the colour unpremultiplied in
+    // linear light, then through the view); a JPEG, which has none, shows it over black (its
+    // premultiplied colour).
+    const bool keepAlpha = composite.channels == 4 && ingest::lowerExtension(displayPath) == ".png";
+    Image shown;
+    if (keepAlpha) {
+      Image straight = composite;
+      parallelFor(0, int64_t(straight.height), [&](int64_t y) {
+        for (int x = 0; x < straight.width; ++x) {
+          float* p = straight.at(x, int(y));
+          if (p[3] > 0.0f && p[3] < 1.0f)
+            for (int c = 0; c < 3; ++c) p[c] /= p[3];
+        }
+      });
+      shown = colors.toDisplay(std::move(straight), display, view);
+    } else {
+      shown = colors.toDisplay(composite, display, view);
+      if (shown.channels == 4) shown = toRgb(shown);
+    }
     if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
       displayNotes.push_back(*n);
     ingest::WriteOptions displayOptions;
     displayOptions.jpegQuality = job.jpegQuality;
+    if (keepAlpha) {
+      displayOptions.alphaChannel = 3;
+      // The colour is unassociated already: OpenImageIO is not to divide it by alpha again.
+      displayOptions.attributes.push_back({"oiio:UnassociatedAlpha", 1});
+    }
     ingest::writeImage(outputs, displayPath, shown, displayOptions);
     return displayNotes;
   });

@@ -855,6 +855,31 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
   };
   ASSERT_LT(stops(r.err), 50.0) << "no automatic exposure in: " << r.err;
   EXPECT_NEAR(stops(r.err), stops(opaque.err), 0.02);
+
+  // A PNG display image keeps the alpha, as PNG stores it: the half-transparent grey is the same
+  // code as the opaque grey, its alpha 128; the JPEG, which has no alpha, shows it over black.
+  std::string p = a;
+  p.replace(p.find(quote((dir_ / "alpha").string())), quote((dir_ / "alpha").string()).size(),
+            quote((dir_ / "alpha.png").string()));
+  const auto png = runCompose(p, dir_.path());
+  ASSERT_EQ(png.status, 0) << png.err;
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open((dir_ / "alpha.png").string(), &config);
+  ASSERT_TRUE(in);
+  ASSERT_EQ(in->spec().nchannels, 4);
+  std::vector<uint8_t> codes(size_t(w) * size_t(h) * 4);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 4, OIIO::TypeDesc::UINT8, codes.data()));
+  auto code = [&](int x, int y, int c) {
+    return int(codes[(size_t(y) * size_t(w) + size_t(x)) * 4 + size_t(c)]);
+  };
+  const Raster jpeg = readRaster(dir_ / "alpha.jpg");
+  const int y = 10;
+  EXPECT_EQ(code(20, y, 3), 255);
+  EXPECT_NEAR(code(150, y, 3), 128, 1);
+  EXPECT_EQ(code(300, y, 3), 0);
+  EXPECT_NEAR(code(150, y, 0), code(20, y, 0), 1) << "the colour is not darkened by its alpha";
+  EXPECT_LT(jpeg.at(150, y, 0) * 255.0f, float(code(20, y, 0)) - 20.0f) << "the JPEG: over black";
 }
 
 // The automatic exposure's grey ball stands where the object does: the same mesh with its
