@@ -2,6 +2,7 @@
 #include <chrono>
 #include <exception>
 #include <fstream>
+#include <future>
 #include <map>
 #include <optional>
 #include <string>
@@ -230,6 +231,19 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   Planned p = planJob(ctx, true, request);
   const auto& list = stages();
   std::map<std::string, std::vector<std::string>> unstored;  // why -> stages not cached
+  auto stored = [&](size_t i, bool ok) {
+    StageRecord& r = p.records[i];
+    if (ok) {
+      r.cacheEntry = p.entries[i]->path().string();
+      r.reason += "; cached in " + r.cacheEntry;
+    } else if (!p.entries[i]->error().empty()) {
+      unstored[p.entries[i]->error()].push_back(list[i]->name());
+    }
+  };
+  // Cache entries written while the later stages run (the render's: tens of megabytes at 1080p),
+  // by stage index. Declared after the context and the plan, so that on an exception they are
+  // waited for (a std::async future's destructor waits) before what they read goes.
+  std::vector<std::pair<size_t, std::future<bool>>> storing;
   for (size_t i = 0; i < list.size(); ++i) {
     StageRecord& r = p.records[i];
     if (r.state != StageState::Run) continue;
@@ -238,16 +252,19 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     const auto start = std::chrono::steady_clock::now();
     r.reason = stage.run(ctx);
     if (p.entries[i]) {
-      if (stage.store(ctx, *p.entries[i])) {
-        r.cacheEntry = p.entries[i]->path().string();
-        r.reason += "; cached in " + r.cacheEntry;
-      } else if (!p.entries[i]->error().empty()) {
-        unstored[p.entries[i]->error()].push_back(stage.name());
+      StageCache& entry = *p.entries[i];
+      if (stage.storesWhileLaterStagesRun()) {
+        storing.emplace_back(i, std::async(std::launch::async, [&stage, &ctx, &entry] {
+                               return stage.store(ctx, entry);
+                             }));
+      } else {
+        stored(i, stage.store(ctx, entry));
       }
     }
     r.seconds += secondsSince(start);
     r.peakBytes = peakResidentBytes();
   }
+  for (auto& [i, done] : storing) stored(i, done.get());
   if (request.finish) request.finish(ctx);
   // A cache folder that cannot be written (read-only, full) is one note per reason, not one per
   // stage: the run goes on without caching.

@@ -75,6 +75,9 @@ class Stage {
   virtual std::string run(Context& context) const = 0;
   // Writes the outputs into the entry and the entry to disk; false if that failed.
   virtual bool store(const Context& /*context*/, StageCache& /*cache*/) const { return false; }
+  // Whether store() may run on a thread of its own while the later stages run: only for a stage
+  // whose outputs no later stage changes or moves (they are read, never written, once made).
+  virtual bool storesWhileLaterStagesRun() const { return false; }
 };
 
 // The registry: every stage, in pipeline order.

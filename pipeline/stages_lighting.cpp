@@ -533,6 +533,8 @@ class GroundStage final : public Stage {
     ctx.keys[kGroundShadow] = h;
   }
   bool cached() const override { return true; }
+  // Its outputs are only read once made (by the composite and the output stages).
+  bool storesWhileLaterStagesRun() const override { return true; }
   bool load(Context& ctx, StageCache& cache) const override {
     GroundShadowResult r;
     const nlohmann::json& m = cache.meta();

@@ -321,6 +321,8 @@ class RenderStage final : public Stage {
     ctx.keys[kObject] = h;
   }
   bool cached() const override { return true; }
+  // Its outputs are only read once made (by the composite and the output stages).
+  bool storesWhileLaterStagesRun() const override { return true; }
   bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& m = cache.meta();
     const auto x0 = wholeMember(m, "x0"), y0 = wholeMember(m, "y0"), x1 = wholeMember(m, "x1"),
