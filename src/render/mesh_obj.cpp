@@ -4,9 +4,11 @@
 #include <charconv>
 #include <climits>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -248,22 +250,50 @@ LoadedMesh loadObj(const fs::path& path) {
     return it->second;
   };
 
+  // A mesh far from its file's origin (a scene exported in place, georeferenced): float
+  // positions there are coarse on the object's scale (a 1-unit sphere 5000 units out rounds to
+  // 0.0005, enough for its shadows to speckle). The file is parsed in double and the mesh moved
+  // to its own middle before its positions are rounded to float, as for glTF.
+  {
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (size_t v = 0; v < vertexCount; ++v) {
+      const glm::dvec3 p(attrib.vertices[3 * v], attrib.vertices[3 * v + 1],
+                         attrib.vertices[3 * v + 2]);
+      if (!std::isfinite(p.x + p.y + p.z)) continue;
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+    const glm::dvec3 middle = 0.5 * (lo + hi);
+    const double size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    const double far = std::max({std::abs(middle.x), std::abs(middle.y), std::abs(middle.z)});
+    if (lo.x <= hi.x && size > 0.0 && far > 100.0 * size) {
+      mesh.fileOrigin = middle;
+      char line[240];
+      std::snprintf(line, sizeof line,
+                    "the mesh lies %.4g units from its file's origin (%.4g times its size): moved "
+                    "to its own middle before rounding its positions to float "
+                    "(compose:worldFromObject still maps the file's coordinates)",
+                    far, far / size);
+      mesh.warnings.push_back(line);
+    }
+  }
+
   std::unordered_map<CornerKey, uint32_t, CornerHash> vertexOf;
   auto vertex = [&](const CornerKey& key) {
     const auto [it, inserted] = vertexOf.try_emplace(key, uint32_t(mesh.positions.size()));
     if (inserted) {
-      const float* p = &attrib.vertices[3 * size_t(key.v)];
-      mesh.positions.emplace_back(p[0], p[1], p[2]);
+      const tinyobj::real_t* p = &attrib.vertices[3 * size_t(key.v)];
+      mesh.positions.emplace_back(glm::dvec3(p[0], p[1], p[2]) - mesh.fileOrigin);
       if (key.vn >= 0) {
-        const float* n = &attrib.normals[3 * size_t(key.vn)];
-        mesh.normals.emplace_back(n[0], n[1], n[2]);
+        const tinyobj::real_t* n = &attrib.normals[3 * size_t(key.vn)];
+        mesh.normals.emplace_back(float(n[0]), float(n[1]), float(n[2]));
       } else {
         mesh.normals.emplace_back(0.0f);
       }
       loaded.hasNormal.push_back(key.vn >= 0 ? 1 : 0);
       if (key.vt >= 0) {
-        const float* t = &attrib.texcoords[2 * size_t(key.vt)];
-        mesh.texcoords.emplace_back(t[0], t[1]);
+        const tinyobj::real_t* t = &attrib.texcoords[2 * size_t(key.vt)];
+        mesh.texcoords.emplace_back(float(t[0]), float(t[1]));
       } else {
         mesh.texcoords.emplace_back(0.0f);
       }
@@ -352,7 +382,8 @@ LoadedMesh loadObj(const fs::path& path) {
       }
       const tinyobj::material_t& om = objMaterials[size_t(id)];
       material.name = om.name;
-      material.baseColor = glm::vec3(om.diffuse[0], om.diffuse[1], om.diffuse[2]);
+      material.baseColor =
+          glm::vec3(float(om.diffuse[0]), float(om.diffuse[1]), float(om.diffuse[2]));
       if (!libraries.withKd.count(om.name)) {
         // No Kd: the texture alone, or the default grey.
         material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
@@ -386,8 +417,9 @@ LoadedMesh loadObj(const fs::path& path) {
         material.texture = it->second;
         // map_Kd -s and -o: uv' = uv * scale + offset.
         const tinyobj::texture_option_t& o = om.diffuse_texopt;
-        material.uvTransform = glm::mat3(o.scale[0], 0.0f, 0.0f, 0.0f, o.scale[1], 0.0f,
-                                         o.origin_offset[0], o.origin_offset[1], 1.0f);
+        material.uvTransform =
+            glm::mat3(float(o.scale[0]), 0.0f, 0.0f, 0.0f, float(o.scale[1]), 0.0f,
+                      float(o.origin_offset[0]), float(o.origin_offset[1]), 1.0f);
       }
       mesh.materials.push_back(material);
     }

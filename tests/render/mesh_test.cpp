@@ -47,6 +47,40 @@ glm::vec3 faceNormal(const Mesh& m, size_t t) {
   return glm::normalize(glm::cross(b - a, c - a));
 }
 
+// An OBJ far from its file's origin (a 1 mm quad 5000 units out, exported in place): parsed in
+// double and moved to its own middle before its positions become float, as a glTF is, so that
+// its shape keeps float's precision on its own scale (parsed as float, 5000.001 was 5000.00098
+// and 2000.0005 was 2000.0: a step of a quarter of the quad's size); the file origin says where
+// it was.
+TEST(Mesh, AnObjFarFromTheOriginKeepsItsShape) {
+  TempDir dir;
+  writeText(dir / "far.obj",
+            "v 5000 -3000 2000\nv 5000.001 -3000 2000\nv 5000 -2999.999 2000\n"
+            "v 5000.001 -2999.999 2000.0005\nf 1 2 3\nf 2 4 3\n");
+  const Mesh m = loadMesh(dir / "far.obj");
+  ASSERT_EQ(m.positions.size(), 4u);
+  EXPECT_NEAR(m.fileOrigin.x, 5000.0005, 1e-9);
+  EXPECT_NEAR(m.fileOrigin.y, -2999.9995, 1e-9);
+  EXPECT_NEAR(m.fileOrigin.z, 2000.00025, 1e-9);
+  bool said = false;
+  for (const std::string& w : m.warnings)
+    said = said || w.find("from its file's origin") != std::string::npos;
+  EXPECT_TRUE(said);
+  const glm::dvec3 expected[] = {{5000, -3000, 2000},
+                                 {5000.001, -3000, 2000},
+                                 {5000, -2999.999, 2000},
+                                 {5000.001, -2999.999, 2000.0005}};
+  for (const glm::dvec3& e : expected) {
+    double nearest = 1e30;
+    for (const glm::vec3& p : m.positions)
+      nearest = std::min(nearest, glm::length(glm::dvec3(p) + m.fileOrigin - e));
+    EXPECT_LT(nearest, 1e-9) << e.x << " " << e.y << " " << e.z;
+  }
+  // Near its origin, a mesh stays where the file puts it.
+  writeText(dir / "near.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_EQ(loadMesh(dir / "near.obj").fileOrigin, glm::dvec3(0.0));
+}
+
 TEST(Mesh, CreaseAngleSplitsVerticesWhereFacesMeetSharply) {
   TempDir dir;
   writeText(dir / "cube.obj", kCube);
