@@ -25,10 +25,6 @@ using namespace artefact;
 
 namespace {
 
-bool isHdrFormat(const std::string& format) {
-  return format == "openexr" || format == "hdr" || format == "tiff" || format == "raw";
-}
-
 std::string plural(size_t n, const std::string& word) {
   return std::to_string(n) + " " + word + (n == 1 ? "" : "s");
 }
@@ -208,7 +204,7 @@ class IngestStage final : public Stage {
           cubemap::loadEnvironment(ctx.environmentInput.path, {}, ctx.progress);
       const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
       for (const std::string& n : env.notes) ctx.note(n);
-      if (!isHdrFormat(env.info.format)) {
+      if (env.info.integerSamples() && env.info.format != "raw") {
         ctx.note("the environment is a " + env.info.format +
                  " file, not HDR: bright light sources are clipped and the lighting will be too "
                  "dark");

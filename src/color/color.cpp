@@ -384,6 +384,14 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
       r.how += "; the config has no sRGB-encoded space for this 8- or 16-bit image";
     }
     r.assumed = true;
+  } else if (!integerData && r.assumed && !isLinearOrData(r.space)) {
+    // Float samples (a float TIFF, a PFM) are scene-linear, never display-encoded, as Nuke and
+    // Blender read them: a rule meant for 8-bit images would decode them with the sRGB curve.
+    std::string linear = spaceWithChromaticities(kRec709Chromaticities);
+    if (linear.empty()) linear = resolve(OCIO::ROLE_SCENE_LINEAR, "the scene_linear role");
+    r.how =
+        "float samples, taken as linear (" + r.how + " gave '" + r.space + "', display-encoded)";
+    r.space = linear;
   }
   return r;
 }

@@ -67,7 +67,8 @@ class ColorConfig {
   // format's convention when `declaredByConvention`: OpenImageIO's "sRGB" for a JPEG, "Linear"
   // for an OpenEXR) if the config knows it, else the config's file rules (its default rule
   // last). An 8- or 16-bit image (`integerData`) that this makes linear or data is taken as
-  // sRGB-encoded (srgbEncodedSpace()) when the config has such a space.
+  // sRGB-encoded (srgbEncodedSpace()) when the config has such a space; a float one that this
+  // makes display-encoded is taken as linear (the config's linear Rec.709, else scene_linear).
   InputSpace inputSpace(const std::filesystem::path& file, const std::string& declared,
                         bool declaredByConvention, bool integerData) const;
   // inputSpace(...).space, an image being 8- or 16-bit when its extension is a JPEG's or a PNG's.

@@ -203,7 +203,7 @@ colorspaces:
 
 // 8- and 16-bit images are display-encoded: where the config's rules would make them linear
 // (a studio config's default rule), they are read as its sRGB-encoded space, found by what its
-// conversion does (the gamma-2.2 role before it is passed over); float images keep the rules.
+// conversion does (the gamma-2.2 role before it is passed over); float images keep linear rules.
 TEST(ColorConfig, IntegerImagesAreReadAsSrgbWhereTheRulesMakeThemLinear) {
   compose::testing::TempDir dir;
   const auto file = dir.path() / "studio.ocio";
@@ -231,6 +231,16 @@ TEST(ColorConfig, IntegerImagesAreReadAsSrgbWhereTheRulesMakeThemLinear) {
   EXPECT_EQ(builtin.srgbEncodedSpace(), "sRGB - Texture");
   EXPECT_EQ(builtin.inputSpace("plate.tif", "", false, true).space, "sRGB - Texture");
   EXPECT_EQ(builtin.inputSpace("sky.exr", "Linear", true, false).space, "Linear Rec.709 (sRGB)");
+  // Float samples are linear where the rules would decode them with the sRGB curve (the built-in
+  // default rule, for a float TIFF or a PFM: the sky read 555 times too bright); an explicit
+  // declaration still wins.
+  for (const char* name : {"sky.tif", "sky.pfm"}) {
+    s = builtin.inputSpace(name, "", false, false);
+    EXPECT_EQ(s.space, "Linear Rec.709 (sRGB)") << name;
+    EXPECT_TRUE(s.assumed);
+    EXPECT_NE(s.how.find("float samples, taken as linear"), std::string::npos) << s.how;
+  }
+  EXPECT_EQ(builtin.inputSpace("sky.tif", "sRGB - Texture", false, false).space, "sRGB - Texture");
 }
 
 // The built-in config reads photos with a Display P3 or Adobe RGB profile: their reds are

@@ -717,6 +717,32 @@ TEST_F(ComposeOutputs, AFloatPlateGivesAFloatExr) {
   EXPECT_FALSE(fs::exists(dir_ / "z.exr"));
 }
 
+// A float TIFF environment holds the same linear radiance as an OpenEXR one: it lights the object
+// the same (the built-in config's default rule, meant for 8-bit images, decoded it with the sRGB
+// curve: 555 times too bright for one texel of 100, -3.10 stops of exposure against +6.02).
+TEST_F(ComposeOutputs, AFloatTiffEnvironmentIsLinearAsAnExrIs) {
+  auto sky = [](float* p, int x, int y) {
+    p[0] = p[1] = p[2] = (x == 20 && y == 6) ? 100.0f : 0.02f;
+  };
+  writeExr(dir_ / "input-sky.exr", 64, 32, sky);
+  writeExr(dir_ / "input-sky.tif", 64, 32, sky);
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  const auto exr =
+      runCompose(args((dir_ / "e").string()) + " --env " + quote((dir_ / "input-sky.exr").string()),
+                 dir_.path());
+  const auto tif =
+      runCompose(args((dir_ / "t").string()) + " --env " + quote((dir_ / "input-sky.tif").string()),
+                 dir_.path());
+  ASSERT_EQ(exr.status, 0) << exr.err;
+  ASSERT_EQ(tif.status, 0) << tif.err;
+  ASSERT_LT(stops(exr.err), 50.0) << exr.err;
+  EXPECT_NEAR(stops(tif.err), stops(exr.err), 0.01) << tif.err;
+  EXPECT_EQ(tif.err.find("not HDR"), std::string::npos) << tif.err;
+}
+
 // An object burnt to white is warned about in the default view too: Soft Clip rolls the
 // highlights off towards white without reaching it, so "clipped" is the last two 8-bit codes,
 // where no shading is left. The share the warning gives is the share of the JPEG's object pixels
