@@ -71,9 +71,17 @@ ObjScan scanObj(const fs::path& path) {
       }
       for (size_t f = 1; f < fields.size(); ++f) {
         const std::string text(fields[f]);
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end != text.c_str() + text.size() || !std::isfinite(v)) {
+        // Decimal only, as the OBJ parser reads numbers (strtod's hexadecimal "0x2" passed here
+        // and was read as 0 there); a leading '+' is allowed.
+        std::string_view digits = fields[f];
+        if (digits.size() > 1 && digits[0] == '+') digits.remove_prefix(1);
+        double v = 0.0;
+        const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), v,
+                                               std::chars_format::general);
+        if (ec == std::errc::result_out_of_range)
+          v = std::strtod(text.c_str(), nullptr);  // a subnormal stays; an overflow is infinite
+        if (end != digits.data() + digits.size() ||
+            (ec != std::errc() && ec != std::errc::result_out_of_range) || !std::isfinite(v)) {
           fail(std::string(key == "v"    ? "vertex coordinate"
                            : key == "vn" ? "normal component"
                                          : "texture coordinate") +

@@ -201,6 +201,10 @@ TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
       {"v 0 0 0\nv 1 0 0\nv 0 1\nf 1 2 3\n", "line 3: 'v' needs 3 numbers, has 2"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 two 3\n", "line 4: face corner 'two'"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "line 4: face corner '0'"},
+      // Hexadecimal, which strtod reads and tinyobjloader does not (it read 0x2 as 0).
+      {"v 0 0 0\nv 1 0 0\nv 0 0x2 0\nf 1 2 3\n", "line 3: vertex coordinate '0x2'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0x1p-1 0\nf 1/1 2/1 3/1\n",
+       "line 4: texture coordinate '0x1p-1'"},
   };
   for (const auto& [text, message] : cases) {
     writeText(dir / "bad.obj", text);
@@ -208,7 +212,7 @@ TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
   }
   // Valid forms still load: exponents, signs, relative indices, v/vt/vn corners.
   writeText(dir / "ok.obj",
-            "v 0 0 0\nv 1e0 -0 +0\nv 0 1.0E+0 0\nvt 0 0\nvn 0 0 1\nf -3/1/1 -2/1/1 -1/1/1\n");
+            "v 0 0 0\nv 1e0 -0 +0\nv 0 1.0E+0 1e-320\nvt 0 0\nvn 0 0 +1\nf -3/1/1 -2/1/1 -1/1/1\n");
   EXPECT_EQ(loadMesh(dir / "ok.obj").triangleCount(), 1u);
 }
 
