@@ -172,6 +172,7 @@ class IngestStage final : public Stage {
       // them to the working space in one pass.
       ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest", {.codesForEightBit = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
+      ingest::requireColourChannels(p.image, ctx.job.plate, "ingest", "the plate");
       for (const std::string& n : p.notes) ctx.note("the plate " + n);
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
       if (!ctx.job.holdout.empty()) {

@@ -89,6 +89,7 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   for (int f = 0; f < kCubeFaces; ++f) files[size_t(f)] = *byFace[size_t(f)];
   for (int f = 0; f < kCubeFaces; ++f) {
     ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest");
+    ingest::requireColourChannels(img.image, files[size_t(f)], "ingest", "the environment's face");
     out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
     checkShape(Layout::Faces, img.image.width, img.image.height, files[size_t(f)]);
@@ -356,6 +357,7 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
 
   EnvironmentFile out;
   ingest::LoadedImage img = ingest::readImage(path, "ingest");
+  ingest::requireColourChannels(img.image, path, "ingest", "the environment");
   out.notes = img.notes;
   const int w = img.image.width, h = img.image.height;
   const std::optional<Layout> declared = exrEnvmapLayout(path);

@@ -337,13 +337,44 @@ void fromCodes(std::vector<uint8_t>&& codes, int width, int height, int channels
   });
 }
 
+// The part of a multi-part OpenEXR that holds the picture: the first with R, G and B, else the
+// first with Y (luminance), else the first; and a note saying which when there is a choice.
+int pictureExrPart(const ExrReader& reader, const fs::path& path, std::vector<std::string>& notes) {
+  auto has = [](const ExrPartHeader& h, const char* name) {
+    return std::find(h.channelNames.begin(), h.channelNames.end(), name) != h.channelNames.end();
+  };
+  int chosen = -1;
+  std::string why = "the first with R, G and B";
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p) {
+    const ExrPartHeader& h = reader.header(p);
+    if (has(h, "R") && has(h, "G") && has(h, "B")) chosen = p;
+  }
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p) {
+    if (has(reader.header(p), "Y")) chosen = p, why = "the first with Y (none has R, G and B)";
+  }
+  if (chosen < 0) chosen = 0, why = "the first (none has R, G and B or Y)";
+  if (reader.parts() > 1) {
+    std::string names;
+    for (int p = 0; p < reader.parts(); ++p) {
+      const std::string& n = reader.header(p).name;
+      names += (p ? ", " : "") + (n.empty() ? "(unnamed)" : "'" + n + "'");
+    }
+    const std::string& n = reader.header(chosen).name;
+    notes.push_back(path.filename().string() + ": an OpenEXR of " + std::to_string(reader.parts()) +
+                    " parts (" + names + "): read part " + std::to_string(chosen) +
+                    (n.empty() ? "" : " '" + n + "'") + ", " + why);
+  }
+  return chosen;
+}
+
 LoadedImage readExr(const fs::path& path, const std::string& stage) {
   ExrReader reader(path, stage);
-  const ExrPartHeader& part = reader.header(0);
   LoadedImage out;
+  const int chosen = pictureExrPart(reader, path, out.notes);
+  const ExrPartHeader& part = reader.header(chosen);
   fillCaptureInfo(headerOf(part), out.info);
   checkImageSize(part.width, part.height, int(part.channelNames.size()), stage, path);
-  out.image = reader.read(0);
+  out.image = reader.read(chosen);
   if (part.x != 0 || part.y != 0 || part.width != part.fullWidth ||
       part.height != part.fullHeight) {
     // In 64 bits: a crafted header's offsets and sizes may each fit an int and not their sum.
@@ -468,13 +499,35 @@ bool looksLikeImageFile(const fs::path& path) {
   return false;
 }
 
+void requireColourChannels(const Image& image, const fs::path& file, const std::string& stage,
+                           const std::string& what) {
+  if (image.channelNames.empty()) return;
+  std::string names;
+  for (const std::string& n : image.channelNames) {
+    std::string upper = n;
+    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+    // A layer's colour counts too (beauty.R); a layer's Y does not (N.Y is a normal's).
+    const size_t dot = upper.rfind('.');
+    const std::string base = dot == std::string::npos ? upper : upper.substr(dot + 1);
+    if (base == "R" || base == "G" || base == "B" || base == "RED" || base == "GREEN" ||
+        base == "BLUE" || upper == "Y")
+      return;
+    names += (names.empty() ? "" : ", ") + n;
+  }
+  throw Error(stage,
+              what + " has no colour channel (R, G, B or Y): its channels are " + names +
+                  " (a depth or data image?)",
+              file);
+}
+
 CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   checkInputFile(path, stage);
   CaptureInfo info;
   switch (kindOf(path, stage)) {
     case Kind::Exr: {
       ExrReader reader(path, stage);
-      fillCaptureInfo(headerOf(reader.header(0)), info);
+      std::vector<std::string> notes;  // said when the pixels are read
+      fillCaptureInfo(headerOf(reader.header(pictureExrPart(reader, path, notes))), info);
       return info;
     }
     case Kind::Jpeg: {

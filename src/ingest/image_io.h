@@ -160,6 +160,13 @@ struct ReadOptions {
 LoadedImage readImage(const std::filesystem::path& path, const std::string& stage = "ingest",
                       const ReadOptions& options = {});
 
+// Throws compose::Error (`stage`, naming `file`) when `image` names its channels and none is a
+// colour one (R, G, B, a layer's R, G, B, or Y for grey): a depth or data image (Z, depth, N.X)
+// taken for a
+// picture would be read as grey. `what`: "the plate", "the environment".
+void requireColourChannels(const Image& image, const std::filesystem::path& file,
+                           const std::string& stage, const std::string& what);
+
 // Throws compose::Error (`stage`, naming `file`) when a value of `image` is NaN or infinite,
 // saying where: "NaN in the plate at pixel (12, 7)" for what = "the plate". Float files can hold
 // them; every stage downstream needs light, which is finite.

@@ -382,6 +382,28 @@ TEST_F(ComposeErrors, CorruptPlate) {
   expectNothingWritten();
 }
 
+// A depth pass given as the plate (one channel, Z) is a named error, not a grey plate.
+TEST_F(ComposeErrors, APlateWithoutColourChannelsIsANamedError) {
+  const fs::path depth = dir_ / "input-depth.exr";
+  {
+    OIIO::ImageSpec spec(64, 48, 1, OIIO::TypeDesc::FLOAT);
+    spec.channelnames = {"Z"};
+    std::vector<float> z(64 * 48, 3.0f);
+    auto out = OIIO::ImageOutput::create(depth.string());
+    ASSERT_TRUE(out->open(depth.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, z.data()));
+    out->close();
+  }
+  const auto r = runCompose(base(depth.string(), (samples_ / "bunny.obj").string()), dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(
+      r.err.find("ingest: the plate has no colour channel (R, G, B or Y): its channels are Z"),
+      std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find(depth.string()), std::string::npos) << r.err;
+  expectNothingWritten();
+}
+
 TEST_F(ComposeErrors, UnknownOption) {
   const auto r =
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "bunny.obj").string()) +

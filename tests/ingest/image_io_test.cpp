@@ -427,6 +427,42 @@ TEST(ImageIo, MultiPartExrReadsBackExactlyAsWritten) {
     ASSERT_EQ(parts[0].pixels[i * 4 + size_t(alpha)], 1.0f);
 }
 
+// A multi-part OpenEXR whose first part is not the picture (a depth pass first, as a renderer may
+// write it): the part with R, G and B is read, and a note says which; the header-only reading
+// agrees. (Part 0 was read: the depth as a grey plate, exit 0.)
+TEST(ImageIo, AMultiPartExrIsReadFromItsColourPart) {
+  TempDir dir;
+  Image depth(8, 4, 1, {"Z"});
+  std::fill(depth.pixels.begin(), depth.pixels.end(), 7.0f);
+  Image rgba(8, 4, 4, {"R", "G", "B", "A"});
+  std::fill(rgba.pixels.begin(), rgba.pixels.end(), 0.25f);
+  {
+    OutputFiles outputs("output");
+    writeExrParts(
+        outputs, dir / "mp.exr",
+        {ExrPart("depth", &depth, 0, 0, 8, 4, {}), ExrPart("rgba", &rgba, 0, 0, 8, 4, {})});
+    outputs.commit();
+  }
+  const LoadedImage loaded = readImage(dir / "mp.exr");
+  EXPECT_EQ(loaded.image.channels, 4);
+  EXPECT_EQ(loaded.image.pixels[0], 0.25f);
+  ASSERT_EQ(loaded.notes.size(), 1u);
+  EXPECT_NE(loaded.notes[0].find("an OpenEXR of 2 parts ('depth', 'rgba'): read part 1 'rgba'"),
+            std::string::npos)
+      << loaded.notes[0];
+  EXPECT_EQ(readCaptureInfo(dir / "mp.exr").channels, 4);
+  // A picture needs a colour channel: a depth pass alone, or normals, are named errors; a
+  // layer's colour and grey are pictures.
+  COMPOSE_EXPECT_ERROR(requireColourChannels(depth, "d.exr", "ingest", "the plate"),
+                       "the plate has no colour channel (R, G, B or Y): its channels are Z");
+  COMPOSE_EXPECT_ERROR(
+      requireColourChannels(Image(2, 2, 3, {"N.X", "N.Y", "N.Z"}), "n.exr", "ingest", "the plate"),
+      "its channels are N.X, N.Y, N.Z");
+  requireColourChannels(Image(2, 2, 3, {"beauty.R", "beauty.G", "beauty.B"}), "b.exr", "ingest",
+                        "the plate");
+  requireColourChannels(Image(2, 2, 2, {"Y", "A"}), "y.png", "ingest", "the plate");
+}
+
 TEST(ImageIo, EightBitWriteMatchesThePlainWrite) {
   // JPEG and PNG outputs are quantised by OpenImageIO's own conversion, a band of rows at a time:
   // the same codes as a plain write_image() of the floats.
