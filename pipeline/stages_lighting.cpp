@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/json_number.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 #include "core/params.h"
 #include "lighting/capture_volume.h"
@@ -277,6 +278,17 @@ class PrecomputeStage final : public Stage {
               (sanitized.negativeTexels > 0 ? " once its negative values are clamped" : "") +
               "; nothing would light the object",
           ctx.environmentInput.path);
+    }
+    // Light so dim that single precision loses it on the way (products of texels and weights fall
+    // below float's 1.2e-38): the object rendered black while the exposure said it matched.
+    constexpr float kDimmest = 1e-20f;
+    if (const float brightest = *std::max_element(texels.begin(), texels.end());
+        brightest < kDimmest) {
+      throw Error("lighting",
+                  "the environment's brightest texel is " + numberText(brightest) +
+                      ", too dim to light anything in single precision (below 1e-20: a scale "
+                      "lost on the way?); scale it up (oiiotool IN --mulc 1e20 -o OUT)",
+                  ctx.environmentInput.path);
     }
     if (const lighting::CaptureProxy proxy = ctx.captureProxy();
         proxy.shape != lighting::CaptureProxy::Shape::Distant) {

@@ -518,6 +518,27 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
     EXPECT_NE(r.err.find(env.string()), std::string::npos) << r.err;
     expectNothingWritten();
   }
+  // Light too dim for single precision (a uniform 1e-30, a subnormal 1e-44) rendered the object
+  // black while the exposure note said it matched the plate: refused. 1e-20 still renders.
+  for (const float value : {1e-30f, 1e-44f, 1e-20f}) {
+    const fs::path env = dir_ / "input-dim.exr";
+    {
+      std::vector<float> px(16 * 8 * 3, value);
+      auto out = OIIO::ImageOutput::create(env.string());
+      ASSERT_TRUE(out->open(env.string(), OIIO::ImageSpec(16, 8, 3, OIIO::TypeDesc::FLOAT)));
+      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+      out->close();
+    }
+    const auto r =
+        runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
+                       " --env " + quote(env.string()),
+                   dir_.path());
+    const bool dim = value < 1e-20f;
+    EXPECT_EQ(r.status, dim ? 1 : 0) << value << ": " << r.err;
+    EXPECT_EQ(r.err.find("too dim to light anything in single precision") != std::string::npos, dim)
+        << r.err;
+    if (dim) expectNothingWritten();
+  }
 }
 
 // A holdout of the wrong size was found by the composite, after the whole render: its header is
