@@ -102,8 +102,10 @@ void validate(const ComposeJob& job) {
     // The name of an image format compose does not write here would end up inside the names
     // (shot.tif.exr, shot.tif.jpg).
     const std::string ext = ingest::lowerExtension(job.output);
-    for (const char* other : {".tif", ".tiff", ".hdr", ".pfm", ".ppm", ".pgm", ".bmp", ".webp",
-                              ".gif", ".tga", ".dpx", ".cin", ".jp2", ".psd", ".heic", ".avif"}) {
+    for (const char* other :
+         {".tif", ".tiff", ".hdr", ".pfm", ".ppm", ".pgm", ".bmp",  ".webp", ".gif",
+          ".tga", ".dpx",  ".cin", ".jp2", ".jxl", ".psd", ".heic", ".heif", ".avif",
+          ".sxr", ".rgbe", ".gz",  ".bz2", ".xz",  ".zst", ".zip"}) {
       if (ext != other) continue;
       throw UsageError("--out " + job.output.string() +
                        ": compose writes BASE.exr and BASE.jpg (or BASE.png); give a base name, or "

@@ -435,7 +435,7 @@ TEST_F(ComposeErrors, AnOutputCodecOrQualityItDoesNotKnowIsAUsageError) {
 // --out names a base: one ending in an image format compose does not write there would have
 // ended inside the names (x.tif.exr, x.tif.jpg).
 TEST_F(ComposeErrors, AnOutputNamedForAnotherImageFormatIsAUsageError) {
-  for (const char* name : {"x.tif", "x.HDR"}) {
+  for (const char* name : {"x.tif", "x.HDR", "x.jxl", "x.exr.gz"}) {
     const auto r = runCompose("--plate " + quote((samples_ / "meadow.jpg").string()) +
                                   " --object " + quote((samples_ / "bunny.obj").string()) +
                                   " --no-cache --out " + quote((dir_ / name).string()),
