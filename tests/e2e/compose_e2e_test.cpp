@@ -170,10 +170,10 @@ TEST_F(ComposeEndToEnd, WritesBothOutputsAtThePlateSizeAndPrintsTheirPaths) {
   EXPECT_EQ(j.height, plate.height);
   for (const char* c : {"R", "G", "B", "A", "object.A", "N.X", "N.Y", "N.Z"})
     EXPECT_GE(e.channel(c), 0);
-  // What it wrote, with the codec and the JPEG's quality (the defaults here).
-  EXPECT_NE(
-      run_.err.find("wrote " + exr.string() + " (piz) and " + jpg.string() + " (JPEG quality 95)"),
-      std::string::npos)
+  // What it wrote, with the sample type, the codec and the JPEG's quality (the defaults here).
+  EXPECT_NE(run_.err.find("wrote " + exr.string() + " (half, piz) and " + jpg.string() +
+                          " (JPEG quality 95)"),
+            std::string::npos)
       << run_.err;
 }
 
