@@ -166,10 +166,12 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     if (envSpace.empty() && env.info.chromaticities && byPrimaries.empty()) {
       colors.convertFromChromaticities(env.image, *env.info.chromaticities, cameraSpace);
     } else {
-      env.image.colorSpace = !envSpace.empty() ? envSpace
-                             : !byPrimaries.empty()
-                                 ? byPrimaries
-                                 : colors.inputSpaceFor(o->env, env.info.fileColorSpace);
+      env.image.colorSpace =
+          !envSpace.empty() ? envSpace
+          : !byPrimaries.empty()
+              ? byPrimaries
+              : colors.inputSpace(o->env, env.info.fileColorSpace, false, env.info.integerSamples())
+                    .space;
       colors.convert(env.image, cameraSpace);
     }
     lighting::SanitizeReport sanitize;

@@ -178,7 +178,10 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       }
       rgb.colorSpace = !o->photoSpace.empty()
                            ? colors.resolve(o->photoSpace, "--photo-space")
-                           : colors.inputSpaceFor(inputs.front(), photo.info.fileColorSpace);
+                           : colors
+                                 .inputSpace(inputs.front(), photo.info.fileColorSpace, false,
+                                             photo.info.integerSamples())
+                                 .space;
       notes.push_back("mirror ball read as '" + rgb.colorSpace + "', unwrapped in '" + target +
                       "'");
       colors.convert(rgb, target);
@@ -254,8 +257,10 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         const bool byMatrix = file.info.chromaticities && declared.empty();
         const std::string source =
             byMatrix ? std::string("the RGB space of the chromaticities in its header")
-            : file.info.chromaticities ? declared
-                                       : colors.inputSpaceFor(file.files.front(), declared);
+            : file.info.chromaticities
+                ? declared
+                : colors.inputSpace(file.files.front(), declared, false, file.info.integerSamples())
+                      .space;
         const std::string target = colors.inputSpaceFor(o->out, "");
         if (source != target) {
           auto linearise = [&](Image& image) {

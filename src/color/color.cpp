@@ -344,7 +344,8 @@ std::string ColorConfig::srgbEncodedSpace() const {
 }
 
 InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std::string& declared,
-                                   bool declaredByConvention, bool integerData) const {
+                                   bool declaredByConvention, bool integerData,
+                                   bool samplesKnown) const {
   InputSpace r;
   // The names an embedded ICC profile's space goes by in other configs (ingest::CaptureInfo).
   std::string known = declared;
@@ -384,7 +385,7 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
       r.how += "; the config has no sRGB-encoded space for this 8- or 16-bit image";
     }
     r.assumed = true;
-  } else if (!integerData && r.assumed && !isLinearOrData(r.space)) {
+  } else if (samplesKnown && !integerData && r.assumed && !isLinearOrData(r.space)) {
     // Float samples (a float TIFF, a PFM) are scene-linear, never display-encoded, as Nuke and
     // Blender read them: a rule meant for 8-bit images would decode them with the sRGB curve.
     std::string linear = spaceWithChromaticities(kRec709Chromaticities);
@@ -401,8 +402,11 @@ std::string ColorConfig::inputSpaceFor(const std::filesystem::path& file,
   std::string ext = file.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return std::tolower(c); });
+  // Integer samples for a JPEG or a PNG, float for OpenEXR, Radiance and PFM; a TIFF may be
+  // either, and is left to the rules.
   const bool integer = ext == ".jpg" || ext == ".jpeg" || ext == ".png";
-  return inputSpace(file, declared, false, integer).space;
+  const bool known = integer || ext == ".exr" || ext == ".hdr" || ext == ".pfm";
+  return inputSpace(file, declared, false, integer, known).space;
 }
 
 Image ColorConfig::convertCodes(std::span<const uint8_t> codes, int width, int height, int channels,

@@ -69,9 +69,12 @@ class ColorConfig {
   // last). An 8- or 16-bit image (`integerData`) that this makes linear or data is taken as
   // sRGB-encoded (srgbEncodedSpace()) when the config has such a space; a float one that this
   // makes display-encoded is taken as linear (the config's linear Rec.709, else scene_linear).
+  // `samplesKnown` false: whether the samples are integer or float is not known (no float rule).
   InputSpace inputSpace(const std::filesystem::path& file, const std::string& declared,
-                        bool declaredByConvention, bool integerData) const;
-  // inputSpace(...).space, an image being 8- or 16-bit when its extension is a JPEG's or a PNG's.
+                        bool declaredByConvention, bool integerData,
+                        bool samplesKnown = true) const;
+  // inputSpace(...).space, an image being 8- or 16-bit when its extension is a JPEG's or a PNG's,
+  // float when it is an OpenEXR's, a Radiance file's or a PFM's (a TIFF may be either).
   std::string inputSpaceFor(const std::filesystem::path& file, const std::string& declared) const;
   // The config's space for sRGB-encoded images (display-referred sRGB codes of Rec.709 colours):
   // the first of the roles default_byte, matte_paint, texture_paint, color_picking and the spaces

@@ -241,6 +241,10 @@ TEST(ColorConfig, IntegerImagesAreReadAsSrgbWhereTheRulesMakeThemLinear) {
     EXPECT_NE(s.how.find("float samples, taken as linear"), std::string::npos) << s.how;
   }
   EXPECT_EQ(builtin.inputSpace("sky.tif", "sRGB - Texture", false, false).space, "sRGB - Texture");
+  // By extension alone a TIFF may be 8-bit or float: the rules decide (an 8-bit texture stays
+  // sRGB); a PFM is float.
+  EXPECT_EQ(builtin.inputSpaceFor("texture.tif", ""), "sRGB - Texture");
+  EXPECT_EQ(builtin.inputSpaceFor("sky.pfm", ""), "Linear Rec.709 (sRGB)");
 }
 
 // The built-in config reads photos with a Display P3 or Adobe RGB profile: their reds are
