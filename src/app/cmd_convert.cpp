@@ -164,6 +164,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     lighting::CubeMap cube;
     glm::dvec3 energyIn(0.0);
     lighting::SanitizeReport sanitized;
+    sanitized.keepNegative = true;  // a conversion of layouts changes no value
     if (from == Layout::MirrorBall) {
       ingest::LoadedImage photo = ingest::readImage(inputs.front(), "ingest");
       // Unwrapping averages pixels: it happens on linear radiance.

@@ -118,6 +118,7 @@ CubeMap CubeMap::fromFaces(const std::array<const Image*, kCubeFaces>& faces,
   CubeMap cube(n);
   cube.colorSpace = faces[0]->colorSpace;
   SanitizeReport local;
+  local.keepNegative = report && report->keepNegative;
   for (int f = 0; f < kCubeFaces; ++f) {
     const Image& img = *faces[size_t(f)];
     for (int y = 0; y < n; ++y) {

@@ -48,7 +48,7 @@ bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
     if (v < 0.0f) {
       mostNegative = std::min(mostNegative, v);
       negative = true;
-      v = 0.0f;
+      if (!keepNegative) v = 0.0f;
     }
     dst[c] = v;
   }
@@ -59,7 +59,9 @@ bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
 std::string SanitizeReport::negativeNote(const std::string& kind) const {
   if (negativeTexels == 0) return {};
   return std::to_string(negativeTexels) + " " + kind + (negativeTexels == 1 ? "texel" : "texels") +
-         " had negative values (as low as " + numberText(mostNegative) + "): clamped to 0";
+         " had negative values (as low as " + numberText(mostNegative) + ")" +
+         (keepNegative ? ": kept (out-of-gamut colours; light is clamped at 0 where it is used)"
+                       : ": clamped to 0");
 }
 
 std::string SanitizeReport::badRadiance(float value, const std::string& where) {
@@ -89,6 +91,7 @@ Environment Environment::fromLatLong(const Image& image, const std::filesystem::
   env.colorSpace_ = image.colorSpace;
   env.texels_.resize(image.pixelCount() * 3);
   SanitizeReport local;
+  local.keepNegative = report && report->keepNegative;
   for (int y = 0; y < image.height; ++y) {
     for (int x = 0; x < image.width; ++x) {
       const float* src = image.at(x, y);

@@ -36,6 +36,9 @@ inline constexpr float kMaxRadiance = 1e32f;
 struct SanitizeReport {
   int64_t negativeTexels = 0;  // texels with a negative channel, clamped to 0
   float mostNegative = 0.0f;
+  // Set by the caller: negative values are counted but kept (a conversion between layouts,
+  // which changes no value: out-of-gamut colours keep their negative channels).
+  bool keepNegative = false;
 
   // Copies one texel's RGB `src` to `dst`, a negative value clamped to 0 and counted. False,
   // with the value in `bad`, when a value cannot be radiance (NaN, infinite, beyond

@@ -390,7 +390,11 @@ Environment latLongFromCube(const CubeMap& cube, int width, const Progress& prog
     for (int c = 0; c < 3; ++c)
       img.pixels[3 * i + size_t(c)] = area > 0.0 ? float(sum[4 * i + size_t(c)] / area) : 0.0f;
   }
-  return Environment::fromLatLong(img);
+  // Resampling changes no value's validity: negative values of the input (kept by a conversion of
+  // layouts) stay, clamped where light is used.
+  SanitizeReport keep;
+  keep.keepNegative = true;
+  return Environment::fromLatLong(img, {}, &keep);
 }
 
 namespace {
@@ -522,7 +526,11 @@ Environment resizeLatLong(const Environment& env, int width) {
       for (int c = 0; c < 3; ++c) img.at(x, y)[c] = float(acc[c] / total);
     }
   });
-  return Environment::fromLatLong(img);
+  // Resampling changes no value's validity: negative values of the input (kept by a conversion of
+  // layouts) stay, clamped where light is used.
+  SanitizeReport keep;
+  keep.keepNegative = true;
+  return Environment::fromLatLong(img, {}, &keep);
 }
 
 }  // namespace compose::lighting

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -783,6 +784,70 @@ TEST(ConvertCommand, CodesBecomeLinearLightInAnExrAndComeBack) {
     moved = std::max(moved,
                      int(std::lround(std::abs(back.image.pixels[i] - codes.pixels[i]) * 255.0f)));
   EXPECT_EQ(moved, 0) << "codes that moved";
+}
+
+// 8- and 16-bit TIFFs are codes as PNGs are: convert linearises them the same way (a rule for
+// float images must not take them for linear light); a float TIFF is linear light already.
+TEST(ConvertCommand, IntegerTiffsAreCodesAndFloatTiffsAreLight) {
+  TempDir dir;
+  Image codes(64, 32, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < codes.pixels.size(); ++i) codes.pixels[i] = float(i % 256) / 255.0f;
+  ingest::writeImage(dir / "codes.png", codes);
+  ingest::WriteOptions sixteen;
+  sixteen.depth = ingest::WriteOptions::Depth::UInt16;
+  ingest::writeImage(dir / "codes8.tif", codes);
+  ingest::writeImage(dir / "codes16.tif", codes, sixteen);
+  ingest::WriteOptions floats;
+  floats.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "light.tif", codes, floats);
+  std::map<std::string, Pixels> out;
+  for (const char* name : {"codes.png", "codes8.tif", "codes16.tif", "light.tif"}) {
+    const RunResult r = run(
+        "convert " + q(dir / name) + " --to latlong --out " + q(dir / (std::string(name) + ".exr")),
+        dir);
+    ASSERT_EQ(r.status, 0) << name << ": " << r.err;
+    out[name] = ingest::readImage(dir / (std::string(name) + ".exr")).image.pixels;
+  }
+  for (const char* name : {"codes8.tif", "codes16.tif"}) {
+    ASSERT_EQ(out[name].size(), out["codes.png"].size());
+    double worst = 0.0;
+    for (size_t i = 0; i < out[name].size(); ++i)
+      worst = std::max(worst, double(std::abs(out[name][i] - out["codes.png"][i])));
+    EXPECT_LT(worst, 1e-4) << name;
+  }
+  // Code 128 is 0.2158 once decoded; as light it stays 0.502.
+  EXPECT_NEAR(out["codes.png"][128], 0.2158605f, 1e-4);
+  EXPECT_NEAR(out["light.tif"][128], 128.0f / 255.0f, 1e-4);
+}
+
+// A conversion of layouts changes no value: negative texels (the ringing of a resize around the
+// sun, out-of-gamut colours) are kept, with a note, through the cube and back, and the energy
+// with them (they were clamped: the map came back brighter).
+TEST(ConvertCommand, NegativeTexelsAreKept) {
+  TempDir dir;
+  Image map(64, 32, 3, {"R", "G", "B"});
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 64; ++x)
+      for (int c = 0; c < 3; ++c)
+        map.at(x, y)[c] = (x / 8 + y / 8) % 2 ? 1.0f : (c == 0 ? -0.25f : 0.5f);
+  ingest::WriteOptions floats;
+  floats.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "neg.exr", map, floats);
+  RunResult r =
+      run("convert " + q(dir / "neg.exr") + " --to cube --size 16 --out " + q(dir / "c.exr"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("had negative values (as low as -0.25): kept"), std::string::npos) << r.err;
+  r = run("convert " + q(dir / "c.exr") + " --to latlong --out " + q(dir / "back.exr"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Image back = ingest::readImage(dir / "back.exr").image;
+  float lowest = 0.0f;
+  for (float v : back.pixels) lowest = std::min(lowest, v);
+  EXPECT_LT(lowest, -0.1f) << "the negative red is kept";
+  lighting::SanitizeReport keep;
+  keep.keepNegative = true;
+  EXPECT_LT(relativeEnergy(lighting::integral(Environment::fromLatLong(back, {}, &keep)),
+                           lighting::integral(Environment::fromLatLong(map, {}, &keep))),
+            1e-4);
 }
 
 // An OpenEXR that says its primaries by chromaticities only (no colorSpace attribute; OpenImageIO
