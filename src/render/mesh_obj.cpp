@@ -74,7 +74,9 @@ ObjScan scanObj(const fs::path& path) {
         // Decimal only, as the OBJ parser reads numbers (strtod's hexadecimal "0x2" passed here
         // and was read as 0 there); a leading '+' is allowed.
         std::string_view digits = fields[f];
-        if (digits.size() > 1 && digits[0] == '+') digits.remove_prefix(1);
+        if (digits.size() > 1 && digits[0] == '+' &&
+            (std::isdigit(static_cast<unsigned char>(digits[1])) || digits[1] == '.'))
+          digits.remove_prefix(1);
         double v = 0.0;
         const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), v,
                                                std::chars_format::general);

@@ -203,6 +203,7 @@ TEST(Mesh, MalformedNumbersAreErrorsNamingTheLine) {
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "line 4: face corner '0'"},
       // Hexadecimal, which strtod reads and tinyobjloader does not (it read 0x2 as 0).
       {"v 0 0 0\nv 1 0 0\nv 0 0x2 0\nf 1 2 3\n", "line 3: vertex coordinate '0x2'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 +-1 0\nf 1 2 3\n", "line 3: vertex coordinate '+-1'"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0x1p-1 0\nf 1/1 2/1 3/1\n",
        "line 4: texture coordinate '0x1p-1'"},
   };
