@@ -170,7 +170,8 @@ class IngestStage final : public Stage {
     if (ctx.needs(kPlate)) {
       // An 8-bit plate stays as its codes, a quarter of the memory: the colour stage converts
       // them to the working space in one pass.
-      ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest", {.codesForEightBit = true});
+      ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest",
+                                              {.codesForEightBit = true, .picturePart = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
       ingest::requireColourChannels(p.image, ctx.job.plate, "ingest", "the plate");
       for (const std::string& n : p.notes) ctx.note("the plate " + n);

@@ -88,7 +88,7 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   std::array<fs::path, kCubeFaces> files;
   for (int f = 0; f < kCubeFaces; ++f) files[size_t(f)] = *byFace[size_t(f)];
   for (int f = 0; f < kCubeFaces; ++f) {
-    ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest");
+    ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest", {.picturePart = true});
     ingest::requireColourChannels(img.image, files[size_t(f)], "ingest", "the environment's face");
     out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
@@ -356,7 +356,7 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
   }
 
   EnvironmentFile out;
-  ingest::LoadedImage img = ingest::readImage(path, "ingest");
+  ingest::LoadedImage img = ingest::readImage(path, "ingest", {.picturePart = true});
   ingest::requireColourChannels(img.image, path, "ingest", "the environment");
   out.notes = img.notes;
   const int w = img.image.width, h = img.image.height;

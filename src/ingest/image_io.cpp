@@ -337,8 +337,20 @@ void fromCodes(std::vector<uint8_t>&& codes, int width, int height, int channels
   });
 }
 
+// Whether `name` is a colour channel: R, G, B (or red, green, blue), a layer's (beauty.R), or Y
+// for grey (a layer's Y is not: N.Y is a normal's).
+bool isColourChannel(const std::string& name) {
+  std::string upper = name;
+  for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+  const size_t dot = upper.rfind('.');
+  const std::string base = dot == std::string::npos ? upper : upper.substr(dot + 1);
+  return base == "R" || base == "G" || base == "B" || base == "RED" || base == "GREEN" ||
+         base == "BLUE" || upper == "Y";
+}
+
 // The part of a multi-part OpenEXR that holds the picture: the first with R, G and B, else the
-// first with Y (luminance), else the first; and a note saying which when there is a choice.
+// first with a colour channel of a layer (beauty.R) or Y, else the first; and a note saying which
+// when there is a choice.
 int pictureExrPart(const ExrReader& reader, const fs::path& path, std::vector<std::string>& notes) {
   auto has = [](const ExrPartHeader& h, const char* name) {
     return std::find(h.channelNames.begin(), h.channelNames.end(), name) != h.channelNames.end();
@@ -350,9 +362,11 @@ int pictureExrPart(const ExrReader& reader, const fs::path& path, std::vector<st
     if (has(h, "R") && has(h, "G") && has(h, "B")) chosen = p;
   }
   for (int p = 0; p < reader.parts() && chosen < 0; ++p) {
-    if (has(reader.header(p), "Y")) chosen = p, why = "the first with Y (none has R, G and B)";
+    const std::vector<std::string>& names = reader.header(p).channelNames;
+    if (std::any_of(names.begin(), names.end(), isColourChannel))
+      chosen = p, why = "the first with a colour channel (none has R, G and B)";
   }
-  if (chosen < 0) chosen = 0, why = "the first (none has R, G and B or Y)";
+  if (chosen < 0) chosen = 0, why = "the first (none has a colour channel)";
   if (reader.parts() > 1) {
     std::string names;
     for (int p = 0; p < reader.parts(); ++p) {
@@ -367,10 +381,10 @@ int pictureExrPart(const ExrReader& reader, const fs::path& path, std::vector<st
   return chosen;
 }
 
-LoadedImage readExr(const fs::path& path, const std::string& stage) {
+LoadedImage readExr(const fs::path& path, const std::string& stage, bool picturePart) {
   ExrReader reader(path, stage);
   LoadedImage out;
-  const int chosen = pictureExrPart(reader, path, out.notes);
+  const int chosen = picturePart ? pictureExrPart(reader, path, out.notes) : 0;
   const ExrPartHeader& part = reader.header(chosen);
   fillCaptureInfo(headerOf(part), out.info);
   checkImageSize(part.width, part.height, int(part.channelNames.size()), stage, path);
@@ -504,14 +518,7 @@ void requireColourChannels(const Image& image, const fs::path& file, const std::
   if (image.channelNames.empty()) return;
   std::string names;
   for (const std::string& n : image.channelNames) {
-    std::string upper = n;
-    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
-    // A layer's colour counts too (beauty.R); a layer's Y does not (N.Y is a normal's).
-    const size_t dot = upper.rfind('.');
-    const std::string base = dot == std::string::npos ? upper : upper.substr(dot + 1);
-    if (base == "R" || base == "G" || base == "B" || base == "RED" || base == "GREEN" ||
-        base == "BLUE" || upper == "Y")
-      return;
+    if (isColourChannel(n)) return;
     names += (names.empty() ? "" : ", ") + n;
   }
   throw Error(stage,
@@ -526,8 +533,7 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
   switch (kindOf(path, stage)) {
     case Kind::Exr: {
       ExrReader reader(path, stage);
-      std::vector<std::string> notes;  // said when the pixels are read
-      fillCaptureInfo(headerOf(reader.header(pictureExrPart(reader, path, notes))), info);
+      fillCaptureInfo(headerOf(reader.header(0)), info);
       return info;
     }
     case Kind::Jpeg: {
@@ -563,7 +569,7 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   protectInput(path);
   switch (kindOf(path, stage)) {
     case Kind::Exr:
-      return readExr(path, stage);
+      return readExr(path, stage, options.picturePart);
     case Kind::Jpeg: {
       jpeg::Decoded decoded = jpeg::readFile(path, false, stage);
       if (decoded.header.native) return fromJpeg(std::move(decoded), options);

@@ -152,6 +152,10 @@ struct ReadOptions {
   // An 8-bit file is returned as its codes (LoadedImage::codes) instead of floats: a quarter of
   // the memory, and no conversion for stages that work on codes (exposure merging).
   bool codesForEightBit = false;
+  // A multi-part OpenEXR is read from the part that holds the picture (the first with R, G and
+  // B, else with a layer's colour or Y), with a note naming it, instead of its first part (as
+  // masks are read): for plates and environments, whose depth or data passes may come first.
+  bool picturePart = false;
 };
 
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.

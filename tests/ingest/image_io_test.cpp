@@ -443,14 +443,30 @@ TEST(ImageIo, AMultiPartExrIsReadFromItsColourPart) {
         {ExrPart("depth", &depth, 0, 0, 8, 4, {}), ExrPart("rgba", &rgba, 0, 0, 8, 4, {})});
     outputs.commit();
   }
-  const LoadedImage loaded = readImage(dir / "mp.exr");
+  const LoadedImage loaded = readImage(dir / "mp.exr", "ingest", {.picturePart = true});
   EXPECT_EQ(loaded.image.channels, 4);
   EXPECT_EQ(loaded.image.pixels[0], 0.25f);
   ASSERT_EQ(loaded.notes.size(), 1u);
   EXPECT_NE(loaded.notes[0].find("an OpenEXR of 2 parts ('depth', 'rgba'): read part 1 'rgba'"),
             std::string::npos)
       << loaded.notes[0];
-  EXPECT_EQ(readCaptureInfo(dir / "mp.exr").channels, 4);
+  // A mask is read from the first part, as before (a matte written before the picture).
+  EXPECT_EQ(readImage(dir / "mp.exr").image.channels, 1);
+  EXPECT_EQ(readCaptureInfo(dir / "mp.exr").channels, 1);
+  // A layer's colour is a picture too: a depth part first, then beauty.R/G/B.
+  Image beauty(8, 4, 3, {"beauty.R", "beauty.G", "beauty.B"});
+  std::fill(beauty.pixels.begin(), beauty.pixels.end(), 0.5f);
+  Image layeredDepth(8, 4, 1, {"depth.Z"});
+  {
+    OutputFiles outputs("output");
+    writeExrParts(outputs, dir / "layers.exr",
+                  {ExrPart("depth", &layeredDepth, 0, 0, 8, 4, {}),
+                   ExrPart("beauty", &beauty, 0, 0, 8, 4, {})});
+    outputs.commit();
+  }
+  const LoadedImage layers = readImage(dir / "layers.exr", "ingest", {.picturePart = true});
+  EXPECT_EQ(layers.image.channelNames,
+            (std::vector<std::string>{"beauty.R", "beauty.G", "beauty.B"}));
   // A picture needs a colour channel: a depth pass alone, or normals, are named errors; a
   // layer's colour and grey are pictures.
   COMPOSE_EXPECT_ERROR(requireColourChannels(depth, "d.exr", "ingest", "the plate"),
