@@ -1,6 +1,7 @@
 // The stages that make the picture: render (the object and its AOVs), composite (the plate
 // darkened by the ground shadow, the object over it, the holdout in front), output (the files).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <future>
 #include <numbers>
@@ -698,13 +699,25 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     Image shown;
     if (keepAlpha) {
       Image straight = composite;
+      std::atomic<int64_t> glow{0};  // light with alpha 0 (additive): straight alpha loses it
       parallelFor(0, int64_t(straight.height), [&](int64_t y) {
+        int64_t row = 0;
         for (int x = 0; x < straight.width; ++x) {
           float* p = straight.at(x, int(y));
           if (p[3] > 0.0f && p[3] < 1.0f)
             for (int c = 0; c < 3; ++c) p[c] /= p[3];
+          else if (p[3] <= 0.0f && (p[0] > 0.0f || p[1] > 0.0f || p[2] > 0.0f))
+            ++row;
         }
+        glow += row;
       });
+      if (glow > 0) {
+        displayNotes.push_back(
+            std::to_string(glow.load()) +
+            " pixels carry light with alpha 0 (additive, as a glow): the PNG's straight alpha "
+            "cannot hold them (they are transparent in " +
+            displayPath.filename().string() + "); the EXR keeps them, and a JPEG shows them");
+      }
       shown = colors.toDisplay(std::move(straight), display, view);
     } else {
       shown = colors.toDisplay(composite, display, view);

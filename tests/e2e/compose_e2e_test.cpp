@@ -721,6 +721,40 @@ TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
   EXPECT_GT(largest, 1e28) << "the object's radiance is kept, not clamped";
 }
 
+// An OpenEXR plate's premultiplied pixels with alpha 0 and light (a glow, added over what is
+// behind) cannot be held by a PNG's straight alpha: they are transparent there, and a note says
+// so; the EXR keeps them.
+TEST_F(ComposeOutputs, AGlowWithAlphaZeroIsNotedInAPng) {
+  {
+    std::vector<float> px(size_t(320) * 240 * 4);
+    for (size_t i = 0; i < px.size() / 4; ++i) {
+      const bool glow = (i % 320) >= 240;
+      px[4 * i] = px[4 * i + 1] = px[4 * i + 2] = glow ? 0.5f : 0.2f;
+      px[4 * i + 3] = glow ? 0.0f : 1.0f;
+    }
+    OIIO::ImageSpec spec(320, 240, 4, OIIO::TypeDesc::HALF);
+    spec.alpha_channel = 3;
+    auto out = OIIO::ImageOutput::create((dir_ / "input-glow.exr").string());
+    ASSERT_TRUE(out->open((dir_ / "input-glow.exr").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  const auto r = runCompose(args((dir_ / "g.png").string(), "input-glow.exr") +
+                                " --plate-space lin_rec709 --place 0.3,0.9",
+                            dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("19200 pixels carry light with alpha 0 (additive, as a glow)"),
+            std::string::npos)
+      << r.err;
+  const Raster e = readRaster(dir_ / "g.exr");
+  EXPECT_NEAR(e.at(300, 10, e.channel("R")), 0.5f, 1e-3) << "the EXR keeps the glow";
+  EXPECT_EQ(e.at(300, 10, e.channel("A")), 0.0f);
+  // An opaque plate has none to note.
+  const auto opaque = runCompose(args((dir_ / "o.png").string()), dir_.path());
+  ASSERT_EQ(opaque.status, 0) << opaque.err;
+  EXPECT_EQ(opaque.err.find("alpha 0"), std::string::npos) << opaque.err;
+}
+
 // The EXR's samples follow the plate: a 32-bit float plate gives float parts, whose untouched
 // pixels keep the plate's value to float precision (half rounds 0.1234567 to 0.12341); any other
 // plate gives half; --depth says otherwise either way.
