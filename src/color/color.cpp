@@ -385,9 +385,11 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
       r.how += "; the config has no sRGB-encoded space for this 8- or 16-bit image";
     }
     r.assumed = true;
-  } else if (samplesKnown && !integerData && r.assumed && !isLinearOrData(r.space)) {
-    // Float samples (a float TIFF, a PFM) are scene-linear, never display-encoded, as Nuke and
-    // Blender read them: a rule meant for 8-bit images would decode them with the sRGB curve.
+  } else if (samplesKnown && !integerData && r.assumed && r.space == srgbEncodedSpace()) {
+    // Float samples (a float TIFF, a PFM) are scene-linear, not sRGB codes, as Nuke and Blender
+    // read them: a rule meant for 8-bit images would decode them with the sRGB curve. (Only the
+    // sRGB-encoded space, whose primaries are Rec.709's, is replaced: a log space such as
+    // ACEScct is a float encoding of its own.)
     std::string linear = spaceWithChromaticities(kRec709Chromaticities);
     if (linear.empty()) linear = resolve(OCIO::ROLE_SCENE_LINEAR, "the scene_linear role");
     r.how =

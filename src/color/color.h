@@ -68,7 +68,7 @@ class ColorConfig {
   // for an OpenEXR) if the config knows it, else the config's file rules (its default rule
   // last). An 8- or 16-bit image (`integerData`) that this makes linear or data is taken as
   // sRGB-encoded (srgbEncodedSpace()) when the config has such a space; a float one that this
-  // makes display-encoded is taken as linear (the config's linear Rec.709, else scene_linear).
+  // makes sRGB-encoded is taken as linear (the config's linear Rec.709, else scene_linear).
   // `samplesKnown` false: whether the samples are integer or float is not known (no float rule).
   InputSpace inputSpace(const std::filesystem::path& file, const std::string& declared,
                         bool declaredByConvention, bool integerData,
