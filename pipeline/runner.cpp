@@ -231,19 +231,28 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   Planned p = planJob(ctx, true, request);
   const auto& list = stages();
   std::map<std::string, std::vector<std::string>> unstored;  // why -> stages not cached
-  auto stored = [&](size_t i, bool ok) {
+  // `why`: nothing when the entry was written, else why not (the entry's own error, or what a
+  // store on its own thread threw: the cache is a convenience, its failure not the run's; empty:
+  // nothing to say).
+  using Stored = std::optional<std::string>;
+  auto stored = [&](size_t i, const Stored& why) {
     StageRecord& r = p.records[i];
-    if (ok) {
+    if (!why) {
       r.cacheEntry = p.entries[i]->path().string();
       r.reason += "; cached in " + r.cacheEntry;
-    } else if (!p.entries[i]->error().empty()) {
-      unstored[p.entries[i]->error()].push_back(list[i]->name());
+    } else if (!why->empty()) {
+      unstored[*why].push_back(list[i]->name());
     }
+  };
+  auto store = [&p](const Stage& stage, const Context& context, size_t i) -> Stored {
+    StageCache& entry = *p.entries[i];
+    if (stage.store(context, entry)) return std::nullopt;
+    return entry.error();
   };
   // Cache entries written while the later stages run (the render's: tens of megabytes at 1080p),
   // by stage index. Declared after the context and the plan, so that on an exception they are
   // waited for (a std::async future's destructor waits) before what they read goes.
-  std::vector<std::pair<size_t, std::future<bool>>> storing;
+  std::vector<std::pair<size_t, std::future<Stored>>> storing;
   for (size_t i = 0; i < list.size(); ++i) {
     StageRecord& r = p.records[i];
     if (r.state != StageState::Run) continue;
@@ -252,13 +261,16 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     const auto start = std::chrono::steady_clock::now();
     r.reason = stage.run(ctx);
     if (p.entries[i]) {
-      StageCache& entry = *p.entries[i];
       if (stage.storesWhileLaterStagesRun()) {
-        storing.emplace_back(i, std::async(std::launch::async, [&stage, &ctx, &entry] {
-                               return stage.store(ctx, entry);
+        storing.emplace_back(i, std::async(std::launch::async, [&store, &stage, &ctx, i] {
+                               try {
+                                 return store(stage, ctx, i);
+                               } catch (const std::exception& e) {
+                                 return Stored(e.what());
+                               }
                              }));
       } else {
-        stored(i, stage.store(ctx, entry));
+        stored(i, store(stage, ctx, i));
       }
     }
     r.seconds += secondsSince(start);

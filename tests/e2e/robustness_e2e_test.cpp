@@ -332,6 +332,12 @@ TEST_F(Robustness, AReadOnlyCacheFolderIsANoteAndTheRunGoesOn) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("cannot be written ("), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("were not cached"), std::string::npos) << r.err;
+  // Those written while the later stages run (the render's, the ground shadow's) are named too.
+  const size_t note = r.err.find("cannot be written (");
+  const std::string line =
+      note == std::string::npos ? "" : r.err.substr(note, r.err.find('\n', note) - note);
+  EXPECT_NE(line.find("render"), std::string::npos) << line;
+  EXPECT_NE(line.find("ground"), std::string::npos) << line;
   EXPECT_TRUE(fs::exists(dir / "ro.exr"));
   EXPECT_TRUE(fs::exists(dir / "ro.jpg"));
 }
