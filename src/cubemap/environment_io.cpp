@@ -12,6 +12,7 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
@@ -282,9 +283,14 @@ std::string EnvironmentFile::describe() const {
 std::optional<Layout> exrEnvmapLayout(const fs::path& file) {
   if (!hasExrMagic(file)) return std::nullopt;
   try {
-    Imf::InputFile in(file.c_str());
-    if (!Imf::hasEnvmap(in.header())) return std::nullopt;
-    return Imf::envmap(in.header()) == Imf::ENVMAP_CUBE ? Layout::Cube : Layout::LatLong;
+    // Of a multi-part file, the first part that says (the picture's, which the reader takes).
+    Imf::MultiPartInputFile in(file.c_str());
+    for (int p = 0; p < in.parts(); ++p) {
+      const Imf::Header& header = in.header(p);
+      if (!Imf::hasEnvmap(header)) continue;
+      return Imf::envmap(header) == Imf::ENVMAP_CUBE ? Layout::Cube : Layout::LatLong;
+    }
+    return std::nullopt;
   } catch (const std::exception&) {
     return std::nullopt;  // unreadable: the image reader reports it properly
   }

@@ -6,6 +6,14 @@
 #include <cstdlib>
 #include <numbers>
 
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfEnvmapAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfMultiPartOutputFile.h>
+#include <OpenEXR/ImfOutputPart.h>
+#include <OpenEXR/ImfPartType.h>
+#include <OpenEXR/ImfStandardAttributes.h>
 #include <glm/geometric.hpp>
 
 #include "core/numbers.h"
@@ -259,6 +267,46 @@ TEST(ExrenvmapCrossCheck, ReadsOurCubeFiles) {
   // exrenvmap's lat-long pixel centres sit half a texel from ours and it filters over about a
   // texel: within two lat-long texels (1.4°).
   EXPECT_LT(angleDegrees(brightestDirection(back), sun), 1.5);
+}
+
+// A multi-part OpenEXR whose envmap attribute is on its picture's part, not its first (a data
+// part written first): the layout is still read from the file.
+TEST(Layouts, TheEnvmapAttributeOfAMultiPartFileIsFoundOnAnyPart) {
+  compose::testing::TempDir dir;
+  const fs::path file = dir / "mp.exr";
+  {
+    Imf::Header depth(8, 4);
+    depth.setName("depth");
+    depth.setType(Imf::SCANLINEIMAGE);
+    depth.channels().insert("Z", Imf::Channel(Imf::FLOAT));
+    Imf::Header picture(8, 4);
+    picture.setName("rgba");
+    picture.setType(Imf::SCANLINEIMAGE);
+    for (const char* c : {"R", "G", "B"}) picture.channels().insert(c, Imf::Channel(Imf::FLOAT));
+    Imf::addEnvmap(picture, Imf::ENVMAP_LATLONG);
+    const Imf::Header headers[2] = {depth, picture};
+    std::vector<float> z(32, 1.0f), rgb(32 * 3, 0.5f);
+    Imf::MultiPartOutputFile out(file.c_str(), headers, 2);
+    {
+      Imf::OutputPart part(out, 0);
+      Imf::FrameBuffer fb;
+      fb.insert("Z", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(z.data()), sizeof(float),
+                                8 * sizeof(float)));
+      part.setFrameBuffer(fb);
+      part.writePixels(4);
+    }
+    {
+      Imf::OutputPart part(out, 1);
+      Imf::FrameBuffer fb;
+      for (int c = 0; c < 3; ++c)
+        fb.insert(std::string(1, "RGB"[c]),
+                  Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(rgb.data() + c), 3 * sizeof(float),
+                             24 * sizeof(float)));
+      part.setFrameBuffer(fb);
+      part.writePixels(4);
+    }
+  }
+  EXPECT_EQ(exrEnvmapLayout(file), Layout::LatLong);
 }
 
 TEST(EnvironmentFiles, BadInputIsNamed) {
