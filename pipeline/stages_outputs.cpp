@@ -31,37 +31,51 @@ namespace {
 
 // Automatic exposure: a mid-grey ball standing where the object stands, lit by the environment,
 // should look as bright in the composite as middle grey looks in the plate. The plate's middle
-// grey is its log-average (the key that a camera's reflected-light meter exposes for); the ball's
+// grey is the log-average of its ground, below the horizon, where the object stands and which the
+// same light falls on (the key that a camera's reflected-light meter exposes for, without the sky
+// that would pull it up: a bright overcast sky put the object a stop too bright); of the whole
+// plate when less than a tenth of it lies below the horizon. The ball's
 // brightness is the mean radiance of its visible half, each normal weighted by its projected
 // area towards the camera. Unlike matching what the environment shows in the camera's field of
 // view, this follows the light that falls on the object, wherever it comes from (a softbox behind
 // the camera, a dark backdrop in view).
 struct ExposureMatch {
   double scale = 1.0;         // plate units per environment unit
-  double plateKey = 0.0;      // log-average of the plate's luminance
+  double plateKey = 0.0;      // log-average of the plate's luminance (of its ground)
+  double groundShare = 0.0;   // of the plate's pixels, the share the key was taken over
   double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
 };
 
-ExposureMatch autoExposure(const Image& plateLinear, const lighting::DiffuseLighting& lighting,
+ExposureMatch autoExposure(const Image& plateLinear, double horizonRow,
+                           const lighting::DiffuseLighting& lighting,
                            const glm::dvec3& towardCamera, const glm::mat3& envFromWorld,
                            const glm::dvec3& luma) {
   ExposureMatch m;
-  // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level.
+  // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level;
+  // of the rows below the horizon (a margin of 2 % of the height below it) when they are at
+  // least a tenth of the plate.
   constexpr double kFloor = 1e-4;
-  double logSum = 0.0;
-  int64_t count = 0;
   const int step = std::max(1, int(std::sqrt(double(plateLinear.pixelCount()) / 65536.0)));
+  const double groundFrom = horizonRow + 0.02 * plateLinear.height;
+  double logSum[2] = {0.0, 0.0};  // the whole plate, its ground
+  int64_t count[2] = {0, 0};
   for (int y = step / 2; y < plateLinear.height; y += step) {
+    const bool ground = !(double(y) <= groundFrom);  // a NaN horizon: the whole plate
     for (int x = step / 2; x < plateLinear.width; x += step) {
       const float* p = plateLinear.at(x, y);
       // A plate with alpha: its visible pixels, their colour unpremultiplied.
       const double a = plateLinear.channels == 4 ? double(p[3]) : 1.0;
       if (!(a >= 0.01)) continue;
-      logSum += std::log(std::max(kFloor, (luma.x * p[0] + luma.y * p[1] + luma.z * p[2]) / a));
-      ++count;
+      const double v =
+          std::log(std::max(kFloor, (luma.x * p[0] + luma.y * p[1] + luma.z * p[2]) / a));
+      logSum[0] += v;
+      ++count[0];
+      if (ground) logSum[1] += v, ++count[1];
     }
   }
-  m.plateKey = std::exp(logSum / double(std::max<int64_t>(count, 1)));
+  const int use = count[1] >= count[0] / 10 && count[1] > 0 ? 1 : 0;
+  m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
+  m.groundShare = double(count[use]) / double(std::max<int64_t>(count[0], 1));
   // Ball: normals on the hemisphere facing the camera (a Fibonacci spiral, evenly spread).
   const glm::dvec3 c = glm::normalize(towardCamera);
   const glm::dvec3 helper = std::abs(c.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
@@ -210,8 +224,8 @@ class RenderStage final : public Stage {
  public:
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
   // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
-  // middle
-  static constexpr int kVersion = 5;
+  // middle; 6: the plate's key is taken below the horizon
+  static constexpr int kVersion = 6;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -391,9 +405,21 @@ class RenderStage final : public Stage {
       const glm::dvec3 middle =
           0.5 * (glm::dvec3(ctx.mesh().boundsMin()) + glm::dvec3(ctx.mesh().boundsMax()));
       const glm::dvec3 objectCentre(g.worldFromObject * glm::dvec4(middle, 1.0));
-      const ExposureMatch match = autoExposure(
-          *ctx.artefacts.plateLinear, *ctx.artefacts.lighting, g.camera.position() - objectCentre,
-          settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
+      // The horizon: where the camera's level view direction meets the plate (the ground is
+      // y = 0). Looking straight down, every row is ground; straight up, none.
+      const glm::dmat3 cameraFromWorld(g.camera.cameraFromWorld());
+      glm::dvec3 level = glm::transpose(cameraFromWorld) * glm::dvec3(0.0, 0.0, -1.0);
+      const bool down = level.y < 0.0;
+      level.y = 0.0;
+      double horizonRow = down ? -1e300 : 1e300;
+      glm::dvec2 pixel;
+      if (glm::length(level) > 1e-6 &&
+          g.camera.lens.project(cameraFromWorld * glm::normalize(level), pixel))
+        horizonRow = pixel.y;
+      const ExposureMatch match =
+          autoExposure(*ctx.artefacts.plateLinear, horizonRow, *ctx.artefacts.lighting,
+                       g.camera.position() - objectCentre, settings.envFromWorld,
+                       ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
       if (const std::optional<double> exif = exifExposure(ctx, why)) {
         settings.exposure = float(*exif);
@@ -408,14 +434,18 @@ class RenderStage final : public Stage {
             *info.iso, std::log2(match.scale)));
       } else {
         settings.exposure = float(match.scale);
-        ctx.note(
-            format("auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
-                   "environment's units) matched to the plate's log-average (%.4g)%s; override "
-                   "with --exposure",
-                   std::log2(match.scale), match.ballRadiance, match.plateKey,
-                   ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
-                       ? (" (not from EXIF: " + why + ")").c_str()
-                       : ""));
+        ctx.note(format(
+            "auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
+            "environment's units) matched to the plate's log-average (%.4g)%s%s; "
+            "override with --exposure",
+            std::log2(match.scale), match.ballRadiance, match.plateKey,
+            match.groundShare < 0.999
+                ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
+                      .c_str()
+                : "",
+            ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
+                ? (" (not from EXIF: " + why + ")").c_str()
+                : ""));
       }
       r.notes.push_back(ctx.notes.back());
     }

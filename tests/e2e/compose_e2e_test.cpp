@@ -721,6 +721,41 @@ TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
   EXPECT_GT(largest, 1e28) << "the object's radiance is kept, not clamped";
 }
 
+// The plate's middle grey is taken from its ground, below the horizon: a bright sky above it
+// does not change the exposure (it pulled the object a stop too bright on the sample meadow);
+// with the camera pitched down so far that the horizon is above the frame, the whole plate is
+// the ground.
+TEST_F(ComposeOutputs, AutoExposureReadsThePlatesGroundNotItsSky) {
+  writeExr(dir_ / "input-sky.exr", 320, 240,
+           [](float* p, int, int y) { p[0] = p[1] = p[2] = y < 120 ? 0.9f : 0.1f; });
+  writeExr(dir_ / "input-ground.exr", 320, 240,
+           [](float* p, int, int) { p[0] = p[1] = p[2] = 0.1f; });
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  const std::string linear = " --plate-space lin_rec709";
+  const auto sky = runCompose(args((dir_ / "a").string(), "input-sky.exr") + linear, dir_.path());
+  const auto ground =
+      runCompose(args((dir_ / "b").string(), "input-ground.exr") + linear, dir_.path());
+  ASSERT_EQ(sky.status, 0) << sky.err;
+  ASSERT_EQ(ground.status, 0) << ground.err;
+  ASSERT_LT(stops(ground.err), 50.0) << ground.err;
+  EXPECT_NEAR(stops(sky.err), stops(ground.err), 0.01) << sky.err;
+  EXPECT_NE(sky.err.find("below the horizon (48 % of the plate)"), std::string::npos) << sky.err;
+  // Pitched down 60°: no horizon in the frame, the key of the whole plate (half 0.9, half 0.1:
+  // a log-average 1.58 stops above 0.1).
+  const auto pitched = runCompose(
+      args((dir_ / "c").string(), "input-sky.exr") + linear + " --pitch 60", dir_.path());
+  const auto pitchedGround = runCompose(
+      args((dir_ / "d").string(), "input-ground.exr") + linear + " --pitch 60", dir_.path());
+  ASSERT_EQ(pitched.status, 0) << pitched.err;
+  ASSERT_EQ(pitchedGround.status, 0) << pitchedGround.err;
+  EXPECT_NEAR(stops(pitched.err) - stops(pitchedGround.err), 0.5 * std::log2(9.0), 0.02)
+      << pitched.err;
+  EXPECT_EQ(pitched.err.find("below the horizon"), std::string::npos) << pitched.err;
+}
+
 // An OpenEXR plate's premultiplied pixels with alpha 0 and light (a glow, added over what is
 // behind) cannot be held by a PNG's straight alpha: they are transparent there, and a note says
 // so; the EXR keeps them.
