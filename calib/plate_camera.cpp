@@ -39,7 +39,7 @@ void CameraOptions::validate() const {
     throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
                      numberText(height));
   }
-  if (!(std::abs(pitchDegrees) < 89.0)) {
+  if (!(std::abs(pitchDegrees) <= 89.0)) {
     throw UsageError("--pitch must be within ±89 degrees, got " + numberText(pitchDegrees));
   }
   // Below 1 mm a rectilinear view is wider than 172 degrees: no camera's plate.

@@ -4,6 +4,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/error.h"
 #include "test_util.h"
 
 namespace compose::calib {
@@ -47,6 +48,18 @@ TEST(PlateCamera, RayAndProjectAreInverse) {
   EXPECT_NEAR(d.z, -1.0, 1e-12);
   ASSERT_TRUE(cam.ray(320, 240, o, d));
   EXPECT_NEAR(std::asin(-d.y), 10.0 * std::numbers::pi / 180.0, 1e-12);
+}
+
+// The limit is what the message says: ±89 degrees are accepted, beyond them refused.
+TEST(PlateCamera, PitchUpTo89DegreesEitherWay) {
+  for (const double pitch : {89.0, -89.0}) {
+    CameraOptions opt;
+    opt.pitchDegrees = pitch;
+    EXPECT_NO_THROW(opt.validate()) << pitch;
+  }
+  CameraOptions opt;
+  opt.pitchDegrees = 89.5;
+  EXPECT_THROW(opt.validate(), compose::UsageError);
 }
 
 TEST(PlateCamera, PlacementStandsOnTheGroundPointAtTheRequestedSize) {
