@@ -246,7 +246,11 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   };
   auto store = [&p](const Stage& stage, const Context& context, size_t i) -> Stored {
     StageCache& entry = *p.entries[i];
-    if (stage.store(context, entry)) return std::nullopt;
+    try {
+      if (stage.store(context, entry)) return std::nullopt;
+    } catch (const std::exception& e) {
+      return Stored(e.what());
+    }
     return entry.error();
   };
   // Cache entries written while the later stages run (the render's: tens of megabytes at 1080p),
@@ -263,11 +267,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     if (p.entries[i]) {
       if (stage.storesWhileLaterStagesRun()) {
         storing.emplace_back(i, std::async(std::launch::async, [&store, &stage, &ctx, i] {
-                               try {
-                                 return store(stage, ctx, i);
-                               } catch (const std::exception& e) {
-                                 return Stored(e.what());
-                               }
+                               return store(stage, ctx, i);
                              }));
       } else {
         stored(i, store(stage, ctx, i));

@@ -31,10 +31,10 @@ namespace {
 
 // Automatic exposure: a mid-grey ball standing where the object stands, lit by the environment,
 // should look as bright in the composite as middle grey looks in the plate. The plate's middle
-// grey is the log-average of its ground, below the horizon, where the object stands and which the
-// same light falls on (the key that a camera's reflected-light meter exposes for, without the sky
-// that would pull it up: a bright overcast sky put the object a stop too bright); of the whole
-// plate when less than a tenth of it lies below the horizon. The ball's
+// grey is the log-average of its ground, the pixels whose rays look below the horizon, where the
+// object stands and which the same light falls on (the key that a camera's reflected-light meter
+// exposes for, without the sky that would pull it up: a bright overcast sky put the object a stop
+// too bright); of the whole plate when almost none of it does. The ball's
 // brightness is the mean radiance of its visible half, each normal weighted by its projected
 // area towards the camera. Unlike matching what the environment shows in the camera's field of
 // view, this follows the light that falls on the object, wherever it comes from (a softbox behind
@@ -42,26 +42,31 @@ namespace {
 struct ExposureMatch {
   double scale = 1.0;         // plate units per environment unit
   double plateKey = 0.0;      // log-average of the plate's luminance (of its ground)
-  double groundShare = 0.0;   // of the plate's pixels, the share the key was taken over
+  double groundShare = 0.0;   // of the plate's pixels, the share whose rays look below the horizon
+  bool wholePlate = false;    // too little ground in view: the key is the whole plate's
   double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
 };
 
-ExposureMatch autoExposure(const Image& plateLinear, double horizonRow,
+ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& camera,
                            const lighting::DiffuseLighting& lighting,
                            const glm::dvec3& towardCamera, const glm::mat3& envFromWorld,
                            const glm::dvec3& luma) {
   ExposureMatch m;
   // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level;
-  // of the rows below the horizon (a margin of 2 % of the height below it) when they are at
-  // least a tenth of the plate.
+  // of those whose camera ray looks down by more than a degree (the ground is y = 0: rows are
+  // not the horizon for a rolled camera or a distorting lens), unless fewer than 1 % do.
   constexpr double kFloor = 1e-4;
+  const double below = -std::sin(std::numbers::pi / 180.0);
+  const double sx = double(camera.width) / plateLinear.width,
+               sy = double(camera.height) / plateLinear.height;
   const int step = std::max(1, int(std::sqrt(double(plateLinear.pixelCount()) / 65536.0)));
-  const double groundFrom = horizonRow + 0.02 * plateLinear.height;
   double logSum[2] = {0.0, 0.0};  // the whole plate, its ground
   int64_t count[2] = {0, 0};
   for (int y = step / 2; y < plateLinear.height; y += step) {
-    const bool ground = !(double(y) <= groundFrom);  // a NaN horizon: the whole plate
     for (int x = step / 2; x < plateLinear.width; x += step) {
+      glm::dvec3 origin, direction;
+      const bool ground =
+          camera.ray((x + 0.5) * sx, (y + 0.5) * sy, origin, direction) && direction.y < below;
       const float* p = plateLinear.at(x, y);
       // A plate with alpha: its visible pixels, their colour unpremultiplied.
       const double a = plateLinear.channels == 4 ? double(p[3]) : 1.0;
@@ -73,9 +78,10 @@ ExposureMatch autoExposure(const Image& plateLinear, double horizonRow,
       if (ground) logSum[1] += v, ++count[1];
     }
   }
-  const int use = count[1] >= count[0] / 10 && count[1] > 0 ? 1 : 0;
+  const int use = count[1] > 0 && count[1] >= count[0] / 100 ? 1 : 0;
   m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
-  m.groundShare = double(count[use]) / double(std::max<int64_t>(count[0], 1));
+  m.groundShare = double(count[1]) / double(std::max<int64_t>(count[0], 1));
+  m.wholePlate = use == 0;
   // Ball: normals on the hemisphere facing the camera (a Fibonacci spiral, evenly spread).
   const glm::dvec3 c = glm::normalize(towardCamera);
   const glm::dvec3 helper = std::abs(c.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
@@ -115,7 +121,7 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
     for (const fs::path& file : ctx.environmentInput.files) {
       std::error_code ec;
       if (!fs::is_regular_file(file, ec)) continue;
-      const ingest::CaptureInfo info = ingest::readCaptureInfo(file);
+      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, "ingest", true);
       if (first) {
         env = info;
         first = false;
@@ -405,19 +411,8 @@ class RenderStage final : public Stage {
       const glm::dvec3 middle =
           0.5 * (glm::dvec3(ctx.mesh().boundsMin()) + glm::dvec3(ctx.mesh().boundsMax()));
       const glm::dvec3 objectCentre(g.worldFromObject * glm::dvec4(middle, 1.0));
-      // The horizon: where the camera's level view direction meets the plate (the ground is
-      // y = 0). Looking straight down, every row is ground; straight up, none.
-      const glm::dmat3 cameraFromWorld(g.camera.cameraFromWorld());
-      glm::dvec3 level = glm::transpose(cameraFromWorld) * glm::dvec3(0.0, 0.0, -1.0);
-      const bool down = level.y < 0.0;
-      level.y = 0.0;
-      double horizonRow = down ? -1e300 : 1e300;
-      glm::dvec2 pixel;
-      if (glm::length(level) > 1e-6 &&
-          g.camera.lens.project(cameraFromWorld * glm::normalize(level), pixel))
-        horizonRow = pixel.y;
       const ExposureMatch match =
-          autoExposure(*ctx.artefacts.plateLinear, horizonRow, *ctx.artefacts.lighting,
+          autoExposure(*ctx.artefacts.plateLinear, g.camera, *ctx.artefacts.lighting,
                        g.camera.position() - objectCentre, settings.envFromWorld,
                        ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
@@ -439,7 +434,8 @@ class RenderStage final : public Stage {
             "environment's units) matched to the plate's log-average (%.4g)%s%s; "
             "override with --exposure",
             std::log2(match.scale), match.ballRadiance, match.plateKey,
-            match.groundShare < 0.999
+            match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
+            : match.groundShare < 0.999
                 ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
                       .c_str()
                 : "",

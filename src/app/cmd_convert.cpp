@@ -210,7 +210,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         std::string make = file.info.cameraMake, model = file.info.cameraModel,
                     unit = file.info.exposureUnit;
         for (size_t f = 1; f < file.files.size(); ++f) {
-          const ingest::CaptureInfo other = ingest::readCaptureInfo(file.files[f]);
+          const ingest::CaptureInfo other = ingest::readCaptureInfo(file.files[f], "ingest", true);
           if (other.cameraMake != make || other.cameraModel != model) make = model = unit = "";
           if (other.exposureUnit != unit) unit.clear();
         }

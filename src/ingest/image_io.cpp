@@ -527,13 +527,15 @@ void requireColourChannels(const Image& image, const fs::path& file, const std::
               file);
 }
 
-CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage) {
+CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage, bool picturePart) {
   checkInputFile(path, stage);
   CaptureInfo info;
   switch (kindOf(path, stage)) {
     case Kind::Exr: {
       ExrReader reader(path, stage);
-      fillCaptureInfo(headerOf(reader.header(0)), info);
+      std::vector<std::string> notes;  // said when the pixels are read
+      fillCaptureInfo(
+          headerOf(reader.header(picturePart ? pictureExrPart(reader, path, notes) : 0)), info);
       return info;
     }
     case Kind::Jpeg: {

@@ -124,7 +124,10 @@ struct CaptureInfo {
 
 // Reads only the header of an image file (no pixels are decoded): size, pixel type, colour space
 // and EXIF. Fast enough to scan a folder of photos. Errors as readImage().
-CaptureInfo readCaptureInfo(const std::filesystem::path& path, const std::string& stage = "ingest");
+// `picturePart`: of a multi-part OpenEXR, the part that holds the picture (ReadOptions), as the
+// pixels of a plate or an environment are read; else the first.
+CaptureInfo readCaptureInfo(const std::filesystem::path& path, const std::string& stage = "ingest",
+                            bool picturePart = false);
 
 // Whether `path` has the extension of an image format readImage() is meant for (JPEG, PNG, TIFF,
 // OpenEXR, Radiance HDR, and camera raw formats), for scanning folders.

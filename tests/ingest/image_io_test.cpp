@@ -453,6 +453,7 @@ TEST(ImageIo, AMultiPartExrIsReadFromItsColourPart) {
   // A mask is read from the first part, as before (a matte written before the picture).
   EXPECT_EQ(readImage(dir / "mp.exr").image.channels, 1);
   EXPECT_EQ(readCaptureInfo(dir / "mp.exr").channels, 1);
+  EXPECT_EQ(readCaptureInfo(dir / "mp.exr", "ingest", true).channels, 4);  // the pixels' part
   // A layer's colour is a picture too: a depth part first, then beauty.R/G/B.
   Image beauty(8, 4, 3, {"beauty.R", "beauty.G", "beauty.B"});
   std::fill(beauty.pixels.begin(), beauty.pixels.end(), 0.5f);
