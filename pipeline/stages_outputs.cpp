@@ -29,27 +29,26 @@ using namespace artefact;
 
 namespace {
 
-// Automatic exposure: a mid-grey ball standing where the object stands, lit by the environment,
-// should look as bright in the composite as middle grey looks in the plate. The plate's middle
-// grey is the log-average of its ground, the pixels whose rays look below the horizon, where the
-// object stands and which the same light falls on (the key that a camera's reflected-light meter
-// exposes for, without the sky that would pull it up: a bright overcast sky put the object a stop
-// too bright); of the whole plate when almost none of it does. The ball's
-// brightness is the mean radiance of its visible half, each normal weighted by its projected
-// area towards the camera. Unlike matching what the environment shows in the camera's field of
-// view, this follows the light that falls on the object, wherever it comes from (a softbox behind
-// the camera, a dark backdrop in view).
+// Automatic exposure: a mid-grey card lying on the ground, lit by the environment, should look as
+// bright in the composite as the plate's ground looks in the plate. The plate's middle grey is
+// the log-average of its ground, the pixels whose rays look below the horizon, where the object
+// stands and which the same light falls on (the key that a camera's reflected-light meter exposes
+// for, without the sky that would pull it up: a bright overcast sky put the object a stop too
+// bright); of the whole plate when almost none of it does. The card faces up: its radiance,
+// 0.18 E(up)/π, does not change when the environment turns about the vertical, as the plate's
+// exposure does not, so that a backlit object is darker than a front-lit one, as in a photograph
+// (a ball facing the camera, before, raised the exposure of a backlit object by 3 stops and
+// cancelled the turn).
 struct ExposureMatch {
   double scale = 1.0;         // plate units per environment unit
   double plateKey = 0.0;      // log-average of the plate's luminance (of its ground)
   double groundShare = 0.0;   // of the plate's pixels, the share whose rays look below the horizon
   bool wholePlate = false;    // too little ground in view: the key is the whole plate's
-  double ballRadiance = 0.0;  // 0.18 × mean E/π over the ball's visible half (environment units)
+  double cardRadiance = 0.0;  // 0.18 × E(up)/π (environment units)
 };
 
 ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& camera,
-                           const lighting::DiffuseLighting& lighting,
-                           const glm::dvec3& towardCamera, const glm::mat3& envFromWorld,
+                           const lighting::DiffuseLighting& lighting, const glm::mat3& envFromWorld,
                            const glm::dvec3& luma) {
   ExposureMatch m;
   // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level;
@@ -82,23 +81,11 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
   m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
   m.groundShare = double(count[1]) / double(std::max<int64_t>(count[0], 1));
   m.wholePlate = use == 0;
-  // Ball: normals on the hemisphere facing the camera (a Fibonacci spiral, evenly spread).
-  const glm::dvec3 c = glm::normalize(towardCamera);
-  const glm::dvec3 helper = std::abs(c.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
-  const glm::dvec3 u = glm::normalize(glm::cross(helper, c)), v = glm::cross(c, u);
-  constexpr int kNormals = 256;
-  double weighted = 0.0, weights = 0.0;
-  for (int i = 0; i < kNormals; ++i) {
-    const double z = 1.0 - (i + 0.5) / kNormals;  // cos of the angle to the camera, (0, 1]
-    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
-    const double phi = double(i) * 2.399963229728653;  // golden angle
-    const glm::dvec3 n = z * c + r * std::cos(phi) * u + r * std::sin(phi) * v;
-    const glm::vec3 e = glm::max(lighting.irradiance(envFromWorld * glm::vec3(n)), glm::vec3(0.0f));
-    weighted += z * (luma.x * e.x + luma.y * e.y + luma.z * e.z);
-    weights += z;
-  }
-  m.ballRadiance = 0.18 * weighted / weights / std::numbers::pi;
-  if (m.ballRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.ballRadiance;
+  // The card: the unshadowed irradiance from above.
+  const glm::vec3 e =
+      glm::max(lighting.irradiance(envFromWorld * glm::vec3(0.0f, 1.0f, 0.0f)), glm::vec3(0.0f));
+  m.cardRadiance = 0.18 * (luma.x * e.x + luma.y * e.y + luma.z * e.z) / std::numbers::pi;
+  if (m.cardRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.cardRadiance;
   return m;
 }
 
@@ -230,8 +217,8 @@ class RenderStage final : public Stage {
  public:
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
   // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
-  // middle; 6: the plate's key is taken below the horizon
-  static constexpr int kVersion = 6;
+  // middle; 6: the plate's key is taken below the horizon; 7: matched by a card on the ground
+  static constexpr int kVersion = 7;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -406,15 +393,9 @@ class RenderStage final : public Stage {
     if (job.exposureStops) {
       settings.exposure = float(std::exp2(*job.exposureStops));
     } else {
-      // The ball stands where the object does (the middle of its bounds), wherever the mesh
-      // file puts its own origin.
-      const glm::dvec3 middle =
-          0.5 * (glm::dvec3(ctx.mesh().boundsMin()) + glm::dvec3(ctx.mesh().boundsMax()));
-      const glm::dvec3 objectCentre(g.worldFromObject * glm::dvec4(middle, 1.0));
       const ExposureMatch match =
           autoExposure(*ctx.artefacts.plateLinear, g.camera, *ctx.artefacts.lighting,
-                       g.camera.position() - objectCentre, settings.envFromWorld,
-                       ctx.colors.lumaWeights(ctx.colors.workingSpace()));
+                       settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
       if (const std::optional<double> exif = exifExposure(ctx, why)) {
         settings.exposure = float(*exif);
@@ -430,10 +411,10 @@ class RenderStage final : public Stage {
       } else {
         settings.exposure = float(match.scale);
         ctx.note(format(
-            "auto exposure: %+.2f stops: a mid-grey ball at the object (%.4g in the "
-            "environment's units) matched to the plate's log-average (%.4g)%s%s; "
+            "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
+            "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
             "override with --exposure",
-            std::log2(match.scale), match.ballRadiance, match.plateKey,
+            std::log2(match.scale), match.cardRadiance, match.plateKey,
             match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
             : match.groundShare < 0.999
                 ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)

@@ -908,10 +908,12 @@ TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   EXPECT_FALSE(fs::exists(dir_ / "n.exr"));
 }
 
-// A studio: a dark backdrop fills the camera's view (-Z), a bright softbox hangs behind the
-// camera (+Z) and lights the object's front. Matching what lies in view would push the exposure
-// up by many stops and burn the object to a white silhouette; the grey-ball match must not.
-TEST_F(ComposeOutputs, AutoExposureFollowsTheLightOnTheObject) {
+// The automatic exposure matches a mid-grey card on the ground to the plate's ground: it does not
+// change when the environment turns about the vertical (the plate's exposure does not), so a
+// studio softbox behind the camera lights the object's front brightly (without clipping it) and,
+// turned behind the object, leaves its visible side dark, as a photograph would (a ball facing
+// the camera raised a backlit object's exposure by 3 stops and cancelled the turn).
+TEST_F(ComposeOutputs, AutoExposureIsTheSameWhicheverWayTheEnvironmentTurns) {
   const int w = 256, h = 128;
   writeExr(dir_ / "input-studio.exr", w, h, [&](float* p, int x, int y) {
     const double lon = kPi * (1.0 - 2.0 * (x + 0.5) / w), lat = kPi * (0.5 - (y + 0.5) / h);
@@ -920,30 +922,46 @@ TEST_F(ComposeOutputs, AutoExposureFollowsTheLightOnTheObject) {
     const bool softbox = dz > 0.85 && dy > 0.1;
     p[0] = p[1] = p[2] = softbox ? 40.0f : 0.01f;
   });
-  const auto r = runCompose(
-      args((dir_ / "s").string()) + " --env " + quote((dir_ / "input-studio.exr").string()),
-      dir_.path());
-  ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_EQ(r.err.find("clipped to white"), std::string::npos) << r.err;
-  const Raster e = readRaster(dir_ / "s.exr"), j = readRaster(dir_ / "s.jpg");
-  const int a = e.channel("object.A");
-  int64_t covered = 0, white = 0;
-  double sum = 0.0;
-  for (int y = 0; y < e.height; ++y) {
-    for (int x = 0; x < e.width; ++x) {
-      if (e.at(x, y, a) < 1.0f) continue;
-      ++covered;
-      const double v = (j.at(x, y, 0) + j.at(x, y, 1) + j.at(x, y, 2)) / 3.0;
-      sum += v;
-      if (v >= 254.5 / 255.0) ++white;
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  // The object's mean display value and its share of white pixels.
+  auto look = [&](const std::string& name, double& mean, double& white) {
+    const Raster e = readRaster(dir_ / (name + ".exr")), j = readRaster(dir_ / (name + ".jpg"));
+    const int a = e.channel("object.A");
+    int64_t covered = 0, whites = 0;
+    double sum = 0.0;
+    for (int y = 0; y < e.height; ++y) {
+      for (int x = 0; x < e.width; ++x) {
+        if (e.at(x, y, a) < 1.0f) continue;
+        ++covered;
+        const double v = (j.at(x, y, 0) + j.at(x, y, 1) + j.at(x, y, 2)) / 3.0;
+        sum += v;
+        if (v >= 254.5 / 255.0) ++whites;
+      }
     }
+    ASSERT_GT(covered, 500);
+    mean = sum / double(covered);
+    white = double(whites) / double(covered);
+  };
+  double front = 0.0, back = 0.0, frontWhite = 0.0, backWhite = 0.0, turned = 99.0;
+  for (const int yaw : {0, 90, 180}) {
+    const std::string name = "s" + std::to_string(yaw);
+    const auto r = runCompose(args((dir_ / name).string()) + " --env " +
+                                  quote((dir_ / "input-studio.exr").string()) + " --env-yaw " +
+                                  std::to_string(yaw),
+                              dir_.path());
+    ASSERT_EQ(r.status, 0) << r.err;
+    ASSERT_LT(stops(r.err), 50.0) << r.err;
+    if (yaw == 0) turned = stops(r.err);
+    EXPECT_NEAR(stops(r.err), turned, 0.005) << "--env-yaw " << yaw << ": " << r.err;
+    if (yaw == 0) look(name, front, frontWhite);
+    if (yaw == 180) look(name, back, backWhite);
   }
-  ASSERT_GT(covered, 500);
-  // The plate is mid-grey (sRGB 0.5): the clay object (albedo 0.5) sits near it, neither a white
-  // silhouette nor black.
-  EXPECT_LT(double(white) / double(covered), 0.02);
-  EXPECT_GT(sum / double(covered), 0.25);
-  EXPECT_LT(sum / double(covered), 0.95);
+  EXPECT_LT(frontWhite, 0.02) << "lit from the front, not a white silhouette";
+  EXPECT_GT(front, 0.25);
+  EXPECT_LT(back, 0.5 * front) << "lit from behind, its visible side is darker";
 }
 
 // A plate with unassociated alpha (a PNG): its colour is premultiplied in linear light and its
