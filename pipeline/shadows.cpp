@@ -74,9 +74,13 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
     plan.sources = p.getInt("sources", 64, "shadows");
     plan.refine.spread = float(p.getDouble("refine", plan.refine.spread, "shadows"));
     plan.refine.budget = float(p.getDouble("refine-budget", plan.refine.budget, "shadows"));
+    const std::string ground = p.getString("ground", "on");
+    if (ground != "on" && ground != "off")
+      throw UsageError("ground must be on or off, got '" + ground + "'", "shadows");
+    plan.ground = ground == "on";
     p.requireAllUsed("shadows",
                      "--shadow-params (method, order, grid, boundary, sources, refine, "
-                     "refine-budget)");
+                     "refine-budget, ground)");
   } catch (const UsageError&) {
     throw;
   } catch (const Error& e) {
@@ -121,6 +125,7 @@ std::string ShadowPlan::describe() const {
   }
   if (sources > 0 && method != render::ShadowMethod::AmbientOcclusion)
     s += ", " + std::to_string(sources) + " bright sources by rays";
+  if (ground) s += ", the ground beneath it darkened";
   if (refine.spread > 0.0f) {
     char line[120];
     std::snprintf(line, sizeof line,
@@ -210,12 +215,14 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   h.bytes(render::meshHash(mesh));
   h.bytes(plan.transfer.key());
   h.bytes(plan.refine.key());
+  const std::string groundKey = plan.ground ? plan.groundParams.key() : "no ground";
+  h.bytes(groundKey);
   h.word(uint32_t(out.points.count()));
   const std::string key = h.hex();
   const FloatCache cache(visibilityCacheFolder(cacheRoot), render::kTransferCacheMagic,
                          ".visibility");
   const std::string description = "transfer " + plan.transfer.key() + " " + plan.refine.key() +
-                                  " points " + std::to_string(out.points.count());
+                                  " " + groundKey + " points " + std::to_string(out.points.count());
   const size_t triangles = mesh.triangleCount();
   if (!cacheRoot.empty()) {
     FloatCache::Read r = cache.read(key, description);
@@ -245,9 +252,11 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   }
   if (!reused) {
     const size_t base = out.points.count();
-    transfer =
-        render::computeRefinedTransfer(mesh, out.points, plan.transfer, plan.refine, progress);
-    char line[240];
+    render::GroundContact ground;
+    if (plan.ground) ground = render::groundContact(mesh, scene, plan.groundParams);
+    transfer = render::computeRefinedTransfer(mesh, out.points, plan.transfer, plan.refine,
+                                              progress, &ground);
+    char line[320];
     std::snprintf(line, sizeof line,
                   "visibility pass at %zu points (%zu vertices, %zu more where visibility changes "
                   "fast): %lld rays (%.0f per point) in %.2f s",
@@ -255,6 +264,11 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
                   static_cast<long long>(transfer.rays),
                   double(transfer.rays) / double(out.points.count()), seconds(start));
     out.reason = line;
+    if (!ground.empty()) {
+      std::snprintf(line, sizeof line, ", the ground beneath it from %dx%d points (%lld rays)",
+                    ground.columns, ground.rows, static_cast<long long>(ground.rays));
+      out.reason += line;
+    }
     std::string problem;
     if (!cacheRoot.empty()) {
       std::vector<float> state = transfer.exportState();

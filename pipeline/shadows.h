@@ -33,6 +33,10 @@ struct ShadowPlan {
   int lightingOrder = 16;  // cheb: k; sh: bands
   int sources = 64;
   render::RefineParams refine;  // refine (0.35: the spread), refine-budget (1: as many again)
+  // ground=on|off: the ground the object stands on darkens the light its underside gets from
+  // below (render::GroundContact); on by default.
+  bool ground = true;
+  render::GroundContactParams groundParams;
 
   // Throws compose::UsageError (stage "shadows") naming the bad parameter; unknown ones list the
   // valid ones.

@@ -91,9 +91,11 @@ void ComposeOptions::addShadows(CLI::App& app, bool parameters) {
                  "convex object) or off")
       ->capture_default_str();
   if (parameters) {
-    app.add_option("--shadow-params", job.shadowParams,
-                   "Self-shadowing parameters as key=value,...: method=cheb|sh|ao, order, grid, "
-                   "boundary, sources, refine, refine-budget");
+    app.add_option(
+        "--shadow-params", job.shadowParams,
+        "Self-shadowing parameters as key=value,...: method=cheb|sh|ao, order, grid, "
+        "boundary, sources, refine, refine-budget, ground=on|off (the ground beneath the "
+        "object darkens its underside)");
   }
   app.add_flag("--no-shadow", noShadow,
                "No shadow on the plate's ground (the object's own shadowing stays)");

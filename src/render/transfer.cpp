@@ -259,9 +259,9 @@ void VertexTransfer::append(const VertexTransfer& more) {
 
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
-                                      const Progress& progress) {
+                                      const Progress& progress, const GroundContact* ground) {
   const EmbreeScene scene(mesh.positions, mesh.indices);
-  VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress);
+  VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress, ground);
   const size_t first = refineSurfacePoints(mesh, points, transfer.ao, refine);
   if (first == points.count()) return transfer;
   SurfacePoints extra;
@@ -270,8 +270,82 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   extra.radius = points.radius;
   extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
   extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
-  transfer.append(computeTransfer(mesh, scene, extra, params, progress));
+  transfer.append(computeTransfer(mesh, scene, extra, params, progress, ground));
   return transfer;
+}
+
+void GroundContactParams::validate() const {
+  if (resolution < 2 || resolution > 1024)
+    throw UsageError("ground resolution must be in 2..1024, got " + std::to_string(resolution),
+                     "shadows");
+  if (!(reach >= 0.0f && reach <= 100.0f))
+    throw UsageError("ground reach must be in 0..100 object sizes", "shadows");
+}
+
+std::string GroundContactParams::key() const {
+  char text[64];
+  std::snprintf(text, sizeof text, "ground %d %.6g", resolution, double(reach));
+  return text;
+}
+
+float GroundContact::openAt(float x, float z) const {
+  // Clamped to the grid; beyond it the edge's shortfall falls off as 1/d³ from the centre.
+  const float xmax = x0 + float(columns - 1) * step, zmax = z0 + float(rows - 1) * step;
+  const float cx = std::clamp(x, x0, xmax), cz = std::clamp(z, z0, zmax);
+  const float fa = (cx - x0) / step, fb = (cz - z0) / step;
+  const int a = std::min(columns - 2, std::max(0, int(fa)));
+  const int b = std::min(rows - 2, std::max(0, int(fb)));
+  const float u = std::clamp(fa - float(a), 0.0f, 1.0f), w = std::clamp(fb - float(b), 0.0f, 1.0f);
+  const float* row0 = open.data() + size_t(b) * size_t(columns) + size_t(a);
+  const float* row1 = row0 + columns;
+  const float value =
+      (1.0f - w) * ((1.0f - u) * row0[0] + u * row0[1]) + w * ((1.0f - u) * row1[0] + u * row1[1]);
+  if (cx == x && cz == z) return value;
+  const float edge = std::hypot(cx - centreX, cz - centreZ);
+  const float far = std::hypot(x - centreX, z - centreZ);
+  if (!(far > edge) || edge <= 0.0f) return value;
+  const float ratio = edge / far;
+  return 1.0f - (1.0f - value) * ratio * ratio * ratio;
+}
+
+GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
+                            const GroundContactParams& params) {
+  params.validate();
+  GroundContact out;
+  if (mesh.positions.empty()) return out;
+  const glm::vec3 lo = mesh.boundsMin(), hi = mesh.boundsMax();
+  const float size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  if (!(size > 0.0f)) return out;
+  out.height = lo.y;
+  const float margin = params.reach * size;
+  const float width = hi.x - lo.x + 2.0f * margin, depth = hi.z - lo.z + 2.0f * margin;
+  out.step = std::max(width, depth) / float(params.resolution - 1);
+  out.columns = std::max(2, int(std::ceil(width / out.step)) + 1);
+  out.rows = std::max(2, int(std::ceil(depth / out.step)) + 1);
+  out.x0 = 0.5f * (lo.x + hi.x) - 0.5f * out.step * float(out.columns - 1);
+  out.z0 = 0.5f * (lo.z + hi.z) - 0.5f * out.step * float(out.rows - 1);
+  out.centreX = 0.5f * (lo.x + hi.x);
+  out.centreZ = 0.5f * (lo.z + hi.z);
+  // The nodes as surface points facing +Y; their visibility pass' ambient occlusion is open(g).
+  SurfacePoints nodes;
+  nodes.size = size;
+  nodes.centre = 0.5f * (lo + hi);
+  nodes.radius = 0.5f * glm::length(hi - lo);
+  const size_t count = size_t(out.columns) * size_t(out.rows);
+  nodes.positions.reserve(count);
+  nodes.normals.assign(count, glm::vec3(0.0f, 1.0f, 0.0f));
+  for (int b = 0; b < out.rows; ++b)
+    for (int a = 0; a < out.columns; ++a)
+      nodes.positions.emplace_back(out.x0 + float(a) * out.step, out.height,
+                                   out.z0 + float(b) * out.step);
+  TransferParams tp;
+  tp.order = 1;
+  tp.shBands = 0;
+  tp.boundaryRays = 2;
+  VertexTransfer t = computeTransfer(mesh, scene, nodes, tp);
+  out.open = std::move(t.ao);
+  out.rays = t.rays;
+  return out;
 }
 
 void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
@@ -458,7 +532,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
 
 VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
                                const SurfacePoints& points, const TransferParams& params,
-                               const Progress& progress) {
+                               const Progress& progress, const GroundContact* ground) {
+  if (ground && ground->empty()) ground = nullptr;
   params.validate();
   COMPOSE_CHECK(mesh.normals.size() == mesh.positions.size());
   const int s = params.grid, k = params.order, r = params.boundaryRays;
@@ -544,6 +619,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<double> shLocal, shValues;  // CellHarmonics::transfer's scratch
     std::vector<float> cosines;             // the first pass' cos θ per cell
     std::vector<uint8_t> stratum;    // the first pass' ray's stratum a·r + b within its cell
+    std::vector<float> weight;       // the first pass' ray's ground weight (1 without a ground)
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
     std::vector<float> projected;    // s x k: the visible fractions projected on the columns
@@ -561,6 +637,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.shValues.resize(size_t(params.shBands + 1) * size_t(CellHarmonics::kDirections));
     sc.cosines.resize(cells);
     sc.stratum.resize(cells);
+    sc.weight.assign(cells, 1.0f);
     sc.coneCos.resize(size_t(s));
     sc.occluded.resize(size_t(s));
     sc.projected.resize(size_t(s) * size_t(k));
@@ -648,6 +725,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.cosines[size_t(cell)] = cosT;
           sc.stratum[size_t(cell)] =
               uint8_t(std::min(r - 1, int(u * float(r))) * r + std::min(r - 1, int(w * float(r))));
+          if (ground) sc.weight[size_t(cell)] = ground->weight(origin, direction(j, cosT, w));
           // Wholly outside the cone: cannot see the object.
           if (outside) {
             const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
@@ -688,11 +766,12 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           for (int j = 0; j < s; ++j) {
             const int cell = i * s + j;
             const bool blocked = ((row >> j) & 1u) != 0;
+            const float weight = sc.weight[size_t(cell)];
             if (!((edge >> j) & 1u)) {
-              if (!blocked) seen(cell, sc.cosines[size_t(cell)], 1.0f);
+              if (!blocked) seen(cell, sc.cosines[size_t(cell)], weight);
               continue;
             }
-            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share);
+            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share * weight);
             const int own = sc.stratum[size_t(cell)];
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
@@ -707,7 +786,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           }
         }
         traceBatch([&](size_t index, bool occluded) {
-          if (!occluded) seen(sc.batchCell[index], sc.batchCos[index], share);
+          if (occluded) return;
+          const float weight = ground ? ground->weight(origin, sc.batch[index]) : 1.0f;
+          seen(sc.batchCell[index], sc.batchCos[index], share * weight);
         });
 
         // AO from the visible fractions and each cell's exact cosine integral, so that a fully

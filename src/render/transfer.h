@@ -37,6 +37,7 @@
 // same point on two triangles gets the same answer).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -135,24 +136,68 @@ struct VertexTransfer {
   bool importState(const TransferParams& params, size_t vertexCount, FloatBuffer in);
 };
 
+// The ground the object stands on, as the object's own points see it (docs/design.md §10). Below
+// their horizon the environment shows that ground, lit as it was without the object; but the
+// object hides part of the sky from the ground next to it, which then lights the object's
+// underside less (what makes a bunny's chin and belly darker where they meet the floor). The
+// ground is the plane y = `height` of the object's frame (its lowest point: the pipeline stands
+// every object on the ground, turned only about +Y). A ray from a surface point that misses the
+// object and meets the plane at g counts open(g), the ground point's (1/π) ∫ V cos θ dω past the
+// object, instead of 1: the ground's radiance scaled by the share of its light the object leaves
+// it, that share taken from a uniform sky (it does not depend on the lighting, so the pass stays
+// cached per mesh). open(g) is computed on a grid of ground points around the object's footprint
+// and interpolated bilinearly; beyond the grid the edge's shortfall falls off as the inverse
+// cube of the distance from the footprint's centre (as a sphere's form factor does).
+struct GroundContact {
+  float height = 0.0f;                      // object space
+  float x0 = 0.0f, z0 = 0.0f, step = 1.0f;  // node (a, b) at (x0 + a·step, height, z0 + b·step)
+  int columns = 0, rows = 0;
+  std::vector<float> open;               // per node, row-major (b, then a)
+  float centreX = 0.0f, centreZ = 0.0f;  // the footprint's centre
+  int64_t rays = 0;
+  bool empty() const { return open.empty(); }
+  // open(g) at the plane point (x, height, z).
+  float openAt(float x, float z) const;
+  // The weight of a ray from `origin` along unit `direction` that misses the object: 1 when it
+  // does not go down; a ray from below the plane (rounding) meets it at once.
+  float weight(const glm::vec3& origin, const glm::vec3& direction) const {
+    if (direction.y >= 0.0f || open.empty()) return 1.0f;
+    const float t = std::max(0.0f, (height - origin.y) / direction.y);
+    return openAt(origin.x + t * direction.x, origin.z + t * direction.z);
+  }
+};
+// The plane under the mesh's lowest point, over its footprint widened by `reach` times the
+// object's size on every side, `resolution` nodes along the longer side.
+struct GroundContactParams {
+  int resolution = 128;
+  float reach = 2.0f;
+  void validate() const;  // compose::UsageError (stage "shadows")
+  std::string key() const;
+};
+class EmbreeScene;
+GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
+                            const GroundContactParams& params = {});
+
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
 inline constexpr char kTransferCacheMagic[] = "COMPVIS7";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own
-// (EmbreeScene(mesh.positions, mesh.indices)); without it one is built.
-class EmbreeScene;
+// (EmbreeScene(mesh.positions, mesh.indices)); without it one is built. With `ground`, rays that
+// miss the object and go down count the ground's open(g) (GroundContact).
 VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
                                const SurfacePoints& points, const TransferParams& params,
-                               const Progress& progress = {});
+                               const Progress& progress = {},
+                               const GroundContact* ground = nullptr);
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress = {});
 // The visibility pass, then refineSurfacePoints() and the pass again at the new points: `points`
 // gets them, the transfer covers them all.
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
-                                      const Progress& progress = {});
+                                      const Progress& progress = {},
+                                      const GroundContact* ground = nullptr);
 
 // True when the mesh is closed and convex: every edge joins exactly two triangles and no
 // triangle's far corner lies above its neighbour's plane. A convex solid cannot shadow itself,

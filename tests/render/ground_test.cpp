@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "core/numbers.h"
 #include "lighting/exact.h"
 #include "lighting/monte_carlo.h"
 #include "pipeline/shadows.h"
@@ -324,6 +325,57 @@ TEST(GroundShadow, ARegionReachingBehindTheCameraCoversOnlyWhatTheFrameShows) {
   }
   EXPECT_GT(inside, 100);
   EXPECT_EQ(outsideShowingRegion, 0);
+}
+
+// The ground the object stands on lights its underside less next to it (GroundContact): under a
+// uniform sky, a side face's lowest points receive less than its highest, which see the ground
+// further out; the top sees no ground and is unchanged; ground=off is the object alone.
+TEST(ShadowPlan, TheGroundBeneathTheObjectDarkensItsLowerSides) {
+  const Mesh box = cube();
+  const EmbreeScene scene(box.positions, box.indices);
+  const lighting::Environment sky = lighting::Environment::constant(glm::vec3(1.0f), 64);
+  const glm::mat3 identity(1.0f);
+  const pipeline::ShadowPlan on = pipeline::ShadowPlan::parse("");
+  const pipeline::ShadowPlan off = pipeline::ShadowPlan::parse("ground=off");
+  EXPECT_TRUE(on.ground);
+  EXPECT_FALSE(off.ground);
+  EXPECT_NE(on.describe(), off.describe());  // the stages' cache keys tell them apart
+  const pipeline::ShadowLighting lighting = pipeline::prepareShadowLighting(sky, on, {});
+  const pipeline::ShadowResult a =
+      pipeline::computeSelfShadowing(box, scene, lighting, identity, on, {});
+  const pipeline::ShadowResult b =
+      pipeline::computeSelfShadowing(box, scene, lighting, identity, off, {});
+  ASSERT_EQ(a.points.count(), b.points.count());
+  double low = 0.0, high = 0.0, lowAlone = 0.0;
+  int lows = 0, highs = 0, tops = 0;
+  for (size_t p = 0; p < a.points.count(); ++p) {
+    const glm::vec3 n = a.points.normals[p], x = a.points.positions[p];
+    const double e = a.irradiance.shadowed[p].y, alone = b.irradiance.shadowed[p].y;
+    if (n.y > 0.99f) {
+      EXPECT_NEAR(e, alone, 1e-4 * alone);
+      ++tops;
+    } else if (std::abs(n.y) < 0.01f && x.y < 0.05f) {
+      low += e;
+      lowAlone += alone;
+      ++lows;
+    } else if (std::abs(n.y) < 0.01f && x.y > 0.95f) {
+      high += e;
+      ++highs;
+    }
+  }
+  ASSERT_GT(lows, 10);
+  ASSERT_GT(highs, 10);
+  EXPECT_GT(tops, 10);
+  low /= lows, high /= highs, lowAlone /= lows;
+  // Alone, a side point sees the whole hemisphere of a uniform sky: π. On the ground, its lower
+  // half (π/2 of it) sees ground darkened next to the box, fully so at the contact.
+  EXPECT_NEAR(lowAlone, kPi, 0.01 * kPi);
+  EXPECT_LT(low, 0.85 * lowAlone);
+  EXPECT_LT(low, high - 0.05 * kPi);
+  EXPECT_LT(high, lowAlone);
+  EXPECT_GT(low, 0.5 * lowAlone);  // the upper half of the hemisphere is open sky
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("ground=maybe"),
+                       "ground must be on or off, got 'maybe'");
 }
 
 // A grid out of range is named as the grid (grid=0 was reported as an order out of 1..0).

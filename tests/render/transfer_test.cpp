@@ -616,6 +616,110 @@ TEST(SurfacePoints, RestoredLevelsGiveTheRefinedPointsInTheirOrder) {
   EXPECT_EQ(restored.first, points.first);
 }
 
+// A UV sphere of radius 1 about the origin with exact normals: its lowest point is y = -1.
+Mesh unitSphere(int rings, int segments) {
+  Mesh m;
+  for (int r = 0; r <= rings; ++r) {
+    const double theta = std::numbers::pi * r / rings;
+    for (int s = 0; s <= segments; ++s) {
+      const double phi = 2.0 * std::numbers::pi * s / segments;
+      const glm::vec3 p(float(std::sin(theta) * std::cos(phi)), float(std::cos(theta)),
+                        float(std::sin(theta) * std::sin(phi)));
+      m.positions.push_back(p);
+      m.normals.push_back(p);
+    }
+  }
+  const int row = segments + 1;
+  for (int r = 0; r < rings; ++r)
+    for (int s = 0; s < segments; ++s) {
+      const uint32_t a = uint32_t(r * row + s), b = a + 1, c = a + uint32_t(row), d = c + 1;
+      m.indices.insert(m.indices.end(), {a, b, c, b, d, c});
+    }
+  m.normalsFromFile = true;
+  return m;
+}
+
+// The share of a point's cosine-weighted sky that a unit sphere resting on its plane leaves
+// open, x from the contact point: 1 minus the sphere's form factor (1/D)² cos θ = 1/D³, D the
+// distance to its centre.
+double sphereOpen(double x) {
+  const double d = std::sqrt(x * x + 1.0);
+  return 1.0 - 1.0 / (d * d * d);
+}
+
+TEST(GroundContact, TheGroundBesideASphereSeesWhatItsFormFactorLeaves) {
+  const Mesh sphere = unitSphere(48, 96);
+  const EmbreeScene scene(sphere.positions, sphere.indices);
+  const GroundContact ground = groundContact(sphere, scene);
+  ASSERT_FALSE(ground.empty());
+  EXPECT_NEAR(ground.height, -1.0f, 1e-6f);
+  EXPECT_LT(ground.openAt(0.0f, 0.0f), 0.05f);  // under the contact: the sphere hides the sky
+  // On the grid (it reaches 2 sizes, 4 radii, beyond the footprint) and beyond it.
+  for (const double x : {0.3, 0.7, 1.5, 3.0, 4.5, 8.0, 20.0}) {
+    for (const double angle : {0.0, 2.0}) {
+      const float gx = float(x * std::cos(angle)), gz = float(x * std::sin(angle));
+      EXPECT_NEAR(ground.openAt(gx, gz), sphereOpen(x), 0.01) << "at " << x;
+    }
+  }
+}
+
+TEST(GroundContact, RaysThatMeetTheGroundCountWhatItsPointLeavesOpen) {
+  // A sphere cannot shadow itself: without the ground every point sees its whole hemisphere
+  // (AO 1); with it, a point whose hemisphere reaches below the horizon sees the ground, dark
+  // beneath the sphere. Against a fine quadrature of the same integral with the form factor.
+  const Mesh sphere = unitSphere(48, 96);
+  const EmbreeScene scene(sphere.positions, sphere.indices);
+  const GroundContact ground = groundContact(sphere, scene);
+  SurfacePoints points;
+  points.size = 2.0f;
+  points.radius = 1.0f;
+  const std::vector<glm::vec3> normals = {
+      glm::normalize(glm::vec3(1.0f, 0.3f, 0.0f)), glm::vec3(0.0f, 0.0f, 1.0f),
+      glm::normalize(glm::vec3(1.0f, -1.0f, 0.5f)), glm::normalize(glm::vec3(-0.2f, -3.0f, 0.3f)),
+      glm::vec3(0.0f, 1.0f, 0.0f)};
+  for (const glm::vec3& n : normals) {
+    points.positions.push_back(n);
+    points.normals.push_back(n);
+  }
+  TransferParams params;
+  params.order = 4;
+  params.shBands = 2;
+  const VertexTransfer alone = computeTransfer(sphere, scene, points, params);
+  const VertexTransfer onGround = computeTransfer(sphere, scene, points, params, {}, &ground);
+  for (size_t i = 0; i < normals.size(); ++i) {
+    const glm::dvec3 n(normals[i]);
+    glm::dvec3 east, north;
+    east = glm::normalize(
+        glm::cross(std::abs(n.y) < 0.9 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0), n));
+    north = glm::cross(n, east);
+    // (1/π) ∫ w(ω) cos θ dω over the hemisphere, w = 1 above the plane y = -1, the form factor's
+    // open share where the ray meets it.
+    const int rows = 400, cols = 800;
+    double sum = 0.0;
+    for (int a = 0; a < rows; ++a) {
+      const double c = (a + 0.5) / rows, sn = std::sqrt(1.0 - c * c);  // cos θ, uniform in cos
+      for (int b = 0; b < cols; ++b) {
+        const double phi = 2.0 * kPi * (b + 0.5) / cols;
+        const glm::dvec3 d = sn * std::cos(phi) * east + sn * std::sin(phi) * north + c * n;
+        double w = 1.0;
+        if (d.y < 0.0) {
+          const double t = (-1.0 - n.y) / d.y;
+          const glm::dvec3 g = n + t * d;
+          w = sphereOpen(std::hypot(g.x, g.z));
+        }
+        sum += w * c;
+      }
+    }
+    const double expected = sum / (rows * cols) * 2.0;  // dω = d(cos θ) dφ; (1/π)·2π/(rows·cols)
+    EXPECT_NEAR(alone.ao[i], 1.0, 0.002) << "normal " << i;
+    EXPECT_NEAR(onGround.ao[i], expected, 0.01) << "normal " << i;
+  }
+  // The upward point sees no ground: its transfer is the same either way.
+  for (int m = 0; m < 16; ++m)
+    EXPECT_EQ(alone.cheb[4 * 16 + size_t(m)], onGround.cheb[4 * 16 + size_t(m)]);
+  EXPECT_LT(onGround.ao[3], 0.5);  // facing almost straight down, near the contact
+}
+
 TEST(Transfer, ParametersAreValidated) {
   TransferParams p;
   p.order = 20;
