@@ -202,8 +202,10 @@ render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
 ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
                                   const ShadowLighting& lighting, const glm::mat3& envFromObject,
                                   const ShadowPlan& plan, const fs::path& cacheRoot,
-                                  const Progress& progress) {
+                                  const Progress& progress, bool convex) {
   ShadowResult out;
+  render::TransferParams transferParams = plan.transfer;
+  transferParams.selfOcclusion = !convex;
   out.points = render::surfacePoints(mesh);
   // The visibility pass, cached by the mesh's content and the parameters. The entry holds the
   // transfer of every point, then the triangles' levels (the points refined where visibility
@@ -213,7 +215,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   bool reused = false;
   Hash128 h;
   h.bytes(render::meshHash(mesh));
-  h.bytes(plan.transfer.key());
+  h.bytes(transferParams.key());
   h.bytes(plan.refine.key());
   const std::string groundKey = plan.ground ? plan.groundParams.key() : "no ground";
   h.bytes(groundKey);
@@ -221,7 +223,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
   const std::string key = h.hex();
   const FloatCache cache(visibilityCacheFolder(cacheRoot), render::kTransferCacheMagic,
                          ".visibility");
-  const std::string description = "transfer " + plan.transfer.key() + " " + plan.refine.key() +
+  const std::string description = "transfer " + transferParams.key() + " " + plan.refine.key() +
                                   " " + groundKey + " points " + std::to_string(out.points.count());
   const size_t triangles = mesh.triangleCount();
   if (!cacheRoot.empty()) {
@@ -240,7 +242,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
       render::SurfacePoints refined = out.points;
       if (levels.size() == triangles && render::restoreLevels(mesh, refined, levels)) {
         r.values.resize(values - triangles);
-        reused = transfer.importState(plan.transfer, refined.count(), std::move(r.values));
+        reused = transfer.importState(transferParams, refined.count(), std::move(r.values));
         if (reused) out.points = std::move(refined);
       }
       if (!reused) problem = "does not fit the mesh (" + std::to_string(values) + " values)";
@@ -254,7 +256,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     const size_t base = out.points.count();
     render::GroundContact ground;
     if (plan.ground) ground = render::groundContact(mesh, scene, plan.groundParams);
-    transfer = render::computeRefinedTransfer(mesh, out.points, plan.transfer, plan.refine,
+    transfer = render::computeRefinedTransfer(mesh, out.points, transferParams, plan.refine,
                                               progress, &ground);
     char line[320];
     std::snprintf(line, sizeof line,
@@ -264,6 +266,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
                   static_cast<long long>(transfer.rays),
                   double(transfer.rays) / double(out.points.count()), seconds(start));
     out.reason = line;
+    if (convex) out.reason += " (closed and convex: no rays to the object itself)";
     if (!ground.empty()) {
       std::snprintf(line, sizeof line, ", the ground beneath it from %dx%d points (%lld rays)",
                     ground.columns, ground.rows, static_cast<long long>(ground.rays));

@@ -77,10 +77,12 @@ ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
 // cache under `cacheRoot` when it holds this mesh with these parameters (an empty root: no
 // cache), then their shadowed and unshadowed irradiance. `envFromObject` turns the mesh into the
 // environment's frame (a yaw).
+// `convex`: the mesh is closed and convex (render::isConvex): it cannot hide itself, so no ray is
+// traced to it and only the ground beneath (plan.ground) weighs the directions.
 ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::EmbreeScene& scene,
                                   const ShadowLighting& lighting, const glm::mat3& envFromObject,
                                   const ShadowPlan& plan, const std::filesystem::path& cacheRoot,
-                                  const Progress& progress = {});
+                                  const Progress& progress = {}, bool convex = false);
 
 // The shadow the object casts on the ground (render/ground.h): the ratio E_with / E_without over
 // the plate pixels where it can fall, by the same transfer at ground points.

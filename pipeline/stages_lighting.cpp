@@ -350,7 +350,9 @@ class ShadowsStage final : public Stage {
   std::vector<std::string> inputs() const override { return {kMesh, kPlate, kShadowLighting}; }
   std::vector<std::string> outputs() const override { return {kSelfShadowing}; }
   std::vector<StageParameter> parameters() const override {
-    return {{"shadows", "self (the object shadows itself; skipped when it is convex) or off",
+    return {{"shadows",
+             "self (the object shadows itself and the ground beneath darkens it; skipped when it "
+             "is convex and ground=off) or off",
              [](const ComposeJob& j) { return nlohmann::json(j.shadows ? "self" : "off"); },
              [](ComposeJob& j, const nlohmann::json& v) {
                if (!v.is_string() || (v != "self" && v != "off"))
@@ -367,8 +369,9 @@ class ShadowsStage final : public Stage {
 
   std::string skip(const Context& ctx) const override {
     if (!ctx.job.shadows) return "--shadows off";
-    if (ctx.meshSummary && ctx.meshSummary->convex)
-      return "the object is closed and convex: it cannot shadow itself";
+    if (ctx.meshSummary && ctx.meshSummary->convex &&
+        !ShadowPlan::parse(ctx.job.shadowParams).ground)
+      return "the object is closed and convex: it cannot shadow itself (and ground=off)";
     return {};
   }
   void keys(Context& ctx) const override {
@@ -446,9 +449,9 @@ class ShadowsStage final : public Stage {
 
   std::string run(Context& ctx) const override {
     const ShadowPlan plan = ShadowPlan::parse(ctx.job.shadowParams);
-    ShadowResult r =
-        computeSelfShadowing(ctx.mesh(), ctx.objectScene(), *ctx.artefacts.shadowLighting,
-                             ctx.geometry().envFromObject, plan, ctx.job.cache, ctx.progress);
+    ShadowResult r = computeSelfShadowing(
+        ctx.mesh(), ctx.objectScene(), *ctx.artefacts.shadowLighting, ctx.geometry().envFromObject,
+        plan, ctx.job.cache, ctx.progress, ctx.meshSummary && ctx.meshSummary->convex);
     for (std::string& n : r.notes) ctx.note(std::move(n));
     r.notes.clear();
     if (r.irradiance.clamped > 0) {

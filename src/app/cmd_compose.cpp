@@ -87,8 +87,8 @@ void ComposeOptions::addLighting(CLI::App& app) {
 
 void ComposeOptions::addShadows(CLI::App& app, bool parameters) {
   app.add_option("--shadows", shadows,
-                 "Self-shadowing of the object: self (by precomputed transfer; skipped for a "
-                 "convex object) or off")
+                 "Self-shadowing of the object: self (by precomputed transfer, with the ground "
+                 "beneath darkening it; a convex object only by the ground) or off")
       ->capture_default_str();
   if (parameters) {
     app.add_option(

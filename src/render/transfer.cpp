@@ -109,7 +109,7 @@ std::string TransferParams::key() const {
   return "grid=" + std::to_string(grid) + " order=" + std::to_string(order) +
          " boundary=" + std::to_string(boundaryRays) + " sh=" + std::to_string(shBands) +
          " seed=" + std::to_string(seed) + " lift=1e-4 frame=longitude" +
-         (shBands > 0 ? " sh-projection=cells" : "");
+         (shBands > 0 ? " sh-projection=cells" : "") + (selfOcclusion ? "" : " no-self-occlusion");
 }
 
 std::vector<float> VertexTransfer::exportState() const {
@@ -690,10 +690,12 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         };
         // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
-          sc.hits.resize(sc.batch.size());
-          scene.occludedStream(origin, sc.batch.data(), sc.batch.size(), tnear, sc.hits.data());
+          sc.hits.assign(sc.batch.size(), 0);
+          if (params.selfOcclusion) {
+            scene.occludedStream(origin, sc.batch.data(), sc.batch.size(), tnear, sc.hits.data());
+            traced += int64_t(sc.batch.size());
+          }
           for (size_t b = 0; b < sc.batch.size(); ++b) answer(b, sc.hits[b] != 0);
-          traced += int64_t(sc.batch.size());
         };
 
         // A point outside the object's bounding sphere (a ground point) can only be shadowed

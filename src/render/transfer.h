@@ -62,6 +62,9 @@ struct TransferParams {
   int boundaryRays = 3;
   int shBands = 4;  // SH transfer up to band 4: 25 coefficients per vertex
   uint32_t seed = 1;
+  // False for an object that cannot hide any of itself (closed and convex): no ray is traced to
+  // it and every direction counts as open (only a GroundContact then weighs the rays).
+  bool selfOcclusion = true;
 
   // Throws compose::UsageError (stage "shadows") naming the parameter.
   void validate() const;

@@ -203,8 +203,13 @@ TEST_F(RegistrySkips, ShadowsOffOrAConvexObjectNeedNoVisibilityPass) {
   EXPECT_EQ(p["shadows"].state, StageState::Skipped);
   EXPECT_EQ(p["shadows"].reason, "--shadows off");
 
+  // A convex object cannot shadow itself, but the ground beneath it darkens its underside: the
+  // pass runs (without rays to the object) unless that is off too.
   ComposeJob convex = job_;
   convex.object = dir_ / "convex.obj";
+  p = planned(convex);
+  EXPECT_EQ(p["shadows"].state, StageState::Run) << p["shadows"].reason;
+  convex.shadowParams = "ground=off";
   p = planned(convex);
   EXPECT_EQ(p["shadows"].state, StageState::Skipped);
   EXPECT_NE(p["shadows"].reason.find("convex"), std::string::npos) << p["shadows"].reason;

@@ -686,6 +686,14 @@ TEST(GroundContact, RaysThatMeetTheGroundCountWhatItsPointLeavesOpen) {
   params.shBands = 2;
   const VertexTransfer alone = computeTransfer(sphere, scene, points, params);
   const VertexTransfer onGround = computeTransfer(sphere, scene, points, params, {}, &ground);
+  // Convex: the same without a ray to the object.
+  TransferParams untraced = params;
+  untraced.selfOcclusion = false;
+  const VertexTransfer convex = computeTransfer(sphere, scene, points, untraced, {}, &ground);
+  EXPECT_EQ(convex.rays, 0);
+  EXPECT_GT(onGround.rays, 0);
+  EXPECT_NE(untraced.key(), params.key());
+  for (size_t i = 0; i < normals.size(); ++i) EXPECT_EQ(convex.ao[i], onGround.ao[i]) << i;
   for (size_t i = 0; i < normals.size(); ++i) {
     const glm::dvec3 n(normals[i]);
     glm::dvec3 east, north;
