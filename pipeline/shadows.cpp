@@ -136,6 +136,12 @@ std::string ShadowPlan::describe() const {
   return s;
 }
 
+std::string ShadowPlan::describeLighting() const {
+  ShadowPlan plan = *this;
+  plan.ground = false;
+  return plan.describe();
+}
+
 ShadowLighting shadowLightingFor(const ShadowPlan& plan) {
   ShadowLighting out;
   if (plan.method == render::ShadowMethod::Chebyshev) {
@@ -268,8 +274,11 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     out.reason = line;
     if (convex) out.reason += " (closed and convex: no rays to the object itself)";
     if (!ground.empty()) {
-      std::snprintf(line, sizeof line, ", the ground beneath it from %dx%d points (%lld rays)",
-                    ground.columns, ground.rows, static_cast<long long>(ground.rays));
+      std::snprintf(line, sizeof line,
+                    ", the ground beneath it from %zu points (%dx%d near it, %dx%d around; %lld "
+                    "rays)",
+                    ground.nodes(), ground.fine.columns, ground.fine.rows, ground.coarse.columns,
+                    ground.coarse.rows, static_cast<long long>(ground.rays));
       out.reason += line;
     }
     std::string problem;

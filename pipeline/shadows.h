@@ -42,6 +42,9 @@ struct ShadowPlan {
   // valid ones.
   static ShadowPlan parse(const std::string& params);
   std::string describe() const;
+  // What the shadow lighting and the plate's ground shadow depend on: describe() without the
+  // ground beneath the object (which changes only the object's own shading).
+  std::string describeLighting() const;
 };
 
 struct ShadowResult {

@@ -206,7 +206,7 @@ class PrecomputeStage final : public Stage {
       s.bytes("shadow-lighting");
       s.word(lighting::LightingCache::kProjectionVersion);
       s.combine(ctx.key(kEnvironment));
-      s.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+      s.bytes(ShadowPlan::parse(ctx.job.shadowParams).describeLighting());
       hashProxy(ctx, s);
       ctx.keys[kShadowLighting] = s;
     }
@@ -543,7 +543,7 @@ class GroundStage final : public Stage {
     h.bytes("ground-shadow");
     h.word(kVersion);
     h.combine(ctx.key(kShadowLighting));
-    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describeLighting());
     h.combine(ctx.geometryKey());
     ctx.keys[kGroundShadow] = h;
   }

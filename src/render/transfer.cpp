@@ -253,6 +253,7 @@ void VertexTransfer::append(const VertexTransfer& more) {
   cheb.insert(cheb.end(), more.cheb.begin(), more.cheb.end());
   sh.insert(sh.end(), more.sh.begin(), more.sh.end());
   ao.insert(ao.end(), more.ao.begin(), more.ao.end());
+  aoSelf.insert(aoSelf.end(), more.aoSelf.begin(), more.aoSelf.end());
   vertexCount += more.vertexCount;
   rays += more.rays;
 }
@@ -262,7 +263,9 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const Progress& progress, const GroundContact* ground) {
   const EmbreeScene scene(mesh.positions, mesh.indices);
   VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress, ground);
-  const size_t first = refineSurfacePoints(mesh, points, transfer.ao, refine);
+  // Refined where the object's own shadowing changes fast: the ground's darkening is smooth.
+  const size_t first = refineSurfacePoints(
+      mesh, points, transfer.aoSelf.empty() ? transfer.ao : transfer.aoSelf, refine);
   if (first == points.count()) return transfer;
   SurfacePoints extra;
   extra.size = points.size;
@@ -275,38 +278,72 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
 }
 
 void GroundContactParams::validate() const {
+  auto fail = [](const std::string& what) { throw UsageError(what, "shadows"); };
   if (resolution < 2 || resolution > 1024)
-    throw UsageError("ground resolution must be in 2..1024, got " + std::to_string(resolution),
-                     "shadows");
-  if (!(reach >= 0.0f && reach <= 100.0f))
-    throw UsageError("ground reach must be in 0..100 object sizes", "shadows");
+    fail("ground resolution must be in 2..1024, got " + std::to_string(resolution));
+  if (!(reach > 0.0f && reach <= 100.0f)) fail("ground reach must be in (0, 100] object sizes");
+  if (!(fineReach > 0.0f && fineReach <= 10.0f))
+    fail("ground fine reach must be in (0, 10] object heights");
+  if (fineSteps < 1 || fineSteps > 1024) fail("ground fine steps must be in 1..1024");
+  if (fineBudget < 4 || fineBudget > (size_t(1) << 22)) fail("ground fine budget out of range");
 }
 
 std::string GroundContactParams::key() const {
-  char text[64];
-  std::snprintf(text, sizeof text, "ground %d %.6g", resolution, double(reach));
+  char text[128];
+  std::snprintf(text, sizeof text, "ground v2 %d %.6g fine %.6g %d %zu", resolution, double(reach),
+                double(fineReach), fineSteps, fineBudget);
   return text;
 }
 
-float GroundContact::openAt(float x, float z) const {
-  // Clamped to the grid; beyond it the edge's shortfall falls off as 1/d³ from the centre.
-  const float xmax = x0 + float(columns - 1) * step, zmax = z0 + float(rows - 1) * step;
-  const float cx = std::clamp(x, x0, xmax), cz = std::clamp(z, z0, zmax);
+float GroundGridLevel::at(float x, float z) const {
+  const float cx = std::clamp(x, x0, x0 + float(columns - 1) * step);
+  const float cz = std::clamp(z, z0, z0 + float(rows - 1) * step);
   const float fa = (cx - x0) / step, fb = (cz - z0) / step;
   const int a = std::min(columns - 2, std::max(0, int(fa)));
   const int b = std::min(rows - 2, std::max(0, int(fb)));
   const float u = std::clamp(fa - float(a), 0.0f, 1.0f), w = std::clamp(fb - float(b), 0.0f, 1.0f);
   const float* row0 = open.data() + size_t(b) * size_t(columns) + size_t(a);
   const float* row1 = row0 + columns;
-  const float value =
-      (1.0f - w) * ((1.0f - u) * row0[0] + u * row0[1]) + w * ((1.0f - u) * row1[0] + u * row1[1]);
-  if (cx == x && cz == z) return value;
+  const float value[4] = {row0[0], row0[1], row1[0], row1[1]};
+  const float weight[4] = {(1.0f - u) * (1.0f - w), u * (1.0f - w), (1.0f - u) * w, u * w};
+  float sum = 0.0f, total = 0.0f;
+  for (int i = 0; i < 4; ++i) {
+    if (value[i] <= 0.0f) continue;  // covered by the object
+    sum += weight[i] * value[i];
+    total += weight[i];
+  }
+  return total > 0.0f ? sum / total : 0.0f;
+}
+
+float GroundContact::openAt(float x, float z) const {
+  if (!std::isfinite(x) || !std::isfinite(z) || coarse.empty()) return 1.0f;
+  if (!fine.empty() && fine.contains(x, z)) return fine.at(x, z);
+  const float value = coarse.at(x, z);
+  if (coarse.contains(x, z)) return value;
+  // Beyond the grid: the shortfall at the nearest edge point falls off as 1/d³ from the centre.
+  const float cx = std::clamp(x, coarse.x0, coarse.x0 + float(coarse.columns - 1) * coarse.step);
+  const float cz = std::clamp(z, coarse.z0, coarse.z0 + float(coarse.rows - 1) * coarse.step);
   const float edge = std::hypot(cx - centreX, cz - centreZ);
   const float far = std::hypot(x - centreX, z - centreZ);
-  if (!(far > edge) || edge <= 0.0f) return value;
+  if (!(far > edge) || !(edge > 0.0f)) return value;
   const float ratio = edge / far;
   return 1.0f - (1.0f - value) * ratio * ratio * ratio;
 }
+
+namespace {
+
+// A grid of `step` over [lo, hi] (x and z), centred on it.
+GroundGridLevel groundLevel(float loX, float hiX, float loZ, float hiZ, float step) {
+  GroundGridLevel level;
+  level.step = step;
+  level.columns = std::max(2, int(std::ceil((hiX - loX) / step)) + 1);
+  level.rows = std::max(2, int(std::ceil((hiZ - loZ) / step)) + 1);
+  level.x0 = 0.5f * (loX + hiX) - 0.5f * step * float(level.columns - 1);
+  level.z0 = 0.5f * (loZ + hiZ) - 0.5f * step * float(level.rows - 1);
+  return level;
+}
+
+}  // namespace
 
 GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
                             const GroundContactParams& params) {
@@ -315,35 +352,51 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   if (mesh.positions.empty()) return out;
   const glm::vec3 lo = mesh.boundsMin(), hi = mesh.boundsMax();
   const float size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-  if (!(size > 0.0f)) return out;
+  if (!(size > 0.0f) || !std::isfinite(size)) return out;
   out.height = lo.y;
-  const float margin = params.reach * size;
-  const float width = hi.x - lo.x + 2.0f * margin, depth = hi.z - lo.z + 2.0f * margin;
-  out.step = std::max(width, depth) / float(params.resolution - 1);
-  out.columns = std::max(2, int(std::ceil(width / out.step)) + 1);
-  out.rows = std::max(2, int(std::ceil(depth / out.step)) + 1);
-  out.x0 = 0.5f * (lo.x + hi.x) - 0.5f * out.step * float(out.columns - 1);
-  out.z0 = 0.5f * (lo.z + hi.z) - 0.5f * out.step * float(out.rows - 1);
   out.centreX = 0.5f * (lo.x + hi.x);
   out.centreZ = 0.5f * (lo.z + hi.z);
+  const float margin = params.reach * size;
+  const float width = hi.x - lo.x + 2.0f * margin, depth = hi.z - lo.z + 2.0f * margin;
+  out.coarse = groundLevel(lo.x - margin, hi.x + margin, lo.z - margin, hi.z + margin,
+                           std::max(width, depth) / float(params.resolution - 1));
+  // The fine grid, where the ground's darkening changes over a fraction of the height (a flat
+  // object has none: its own size sets the scale then).
+  const float objectHeight = hi.y - lo.y > 1e-3f * size ? hi.y - lo.y : size;
+  const float fineMargin = params.fineReach * objectHeight;
+  const float fineWidth = hi.x - lo.x + 2.0f * fineMargin;
+  const float fineDepth = hi.z - lo.z + 2.0f * fineMargin;
+  const float fineStep =
+      std::max(objectHeight / float(params.fineSteps),
+               std::sqrt(fineWidth * fineDepth / float(params.fineBudget)) * 1.01f);
+  if (fineStep < 0.75f * out.coarse.step) {
+    out.fine = groundLevel(lo.x - fineMargin, hi.x + fineMargin, lo.z - fineMargin,
+                           hi.z + fineMargin, fineStep);
+  }
   // The nodes as surface points facing +Y; their visibility pass' ambient occlusion is open(g).
   SurfacePoints nodes;
   nodes.size = size;
   nodes.centre = 0.5f * (lo + hi);
   nodes.radius = 0.5f * glm::length(hi - lo);
-  const size_t count = size_t(out.columns) * size_t(out.rows);
-  nodes.positions.reserve(count);
-  nodes.normals.assign(count, glm::vec3(0.0f, 1.0f, 0.0f));
-  for (int b = 0; b < out.rows; ++b)
-    for (int a = 0; a < out.columns; ++a)
-      nodes.positions.emplace_back(out.x0 + float(a) * out.step, out.height,
-                                   out.z0 + float(b) * out.step);
+  for (const GroundGridLevel* level : {&out.fine, &out.coarse}) {
+    for (int b = 0; b < level->rows; ++b)
+      for (int a = 0; a < level->columns; ++a)
+        nodes.positions.emplace_back(level->x0 + float(a) * level->step, out.height,
+                                     level->z0 + float(b) * level->step);
+  }
+  nodes.normals.assign(nodes.positions.size(), glm::vec3(0.0f, 1.0f, 0.0f));
   TransferParams tp;
   tp.order = 1;
   tp.shBands = 0;
   tp.boundaryRays = 2;
-  VertexTransfer t = computeTransfer(mesh, scene, nodes, tp);
-  out.open = std::move(t.ao);
+  const VertexTransfer t = computeTransfer(mesh, scene, nodes, tp);
+  const size_t fineCount = size_t(out.fine.columns) * size_t(out.fine.rows);
+  out.fine.open.assign(t.ao.begin(), t.ao.begin() + ptrdiff_t(fineCount));
+  out.coarse.open.assign(t.ao.begin() + ptrdiff_t(fineCount), t.ao.end());
+  // A node that sees no sky at all is under the object (or shut in by it): no ray that misses
+  // the object reaches it. 0 marks it; a node that sees a little keeps that (> 0).
+  for (GroundGridLevel* level : {&out.fine, &out.coarse})
+    for (float& v : level->open) v = v > 0.0f ? std::max(v, 1e-6f) : 0.0f;
   out.rays = t.rays;
   return out;
 }
@@ -548,6 +601,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
   out.cheb.assign(count * kk, 0.0f);
   out.sh.assign(count * size_t(nsh), 0.0f);
   out.ao.assign(count, 0.0f);
+  if (ground) out.aoSelf.assign(count, 0.0f);
 
   // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
   // closer than that: enough for float positions, far below any feature that casts a shadow.
@@ -618,8 +672,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<double> y, shSum;           // SH basis values (CellHarmonics); band 0 integral
     std::vector<double> shLocal, shValues;  // CellHarmonics::transfer's scratch
     std::vector<float> cosines;             // the first pass' cos θ per cell
-    std::vector<uint8_t> stratum;    // the first pass' ray's stratum a·r + b within its cell
-    std::vector<float> weight;       // the first pass' ray's ground weight (1 without a ground)
+    std::vector<uint8_t> stratum;       // the first pass' ray's stratum a·r + b within its cell
+    std::vector<glm::vec3> directions;  // the first pass' ray per cell (with a ground)
+    std::vector<float> visibleSelf;     // per cell: the visible fraction without the ground
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
     std::vector<float> projected;    // s x k: the visible fractions projected on the columns
@@ -637,7 +692,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.shValues.resize(size_t(params.shBands + 1) * size_t(CellHarmonics::kDirections));
     sc.cosines.resize(cells);
     sc.stratum.resize(cells);
-    sc.weight.assign(cells, 1.0f);
+    if (ground) {
+      sc.directions.resize(cells);
+      sc.visibleSelf.resize(cells);
+    }
     sc.coneCos.resize(size_t(s));
     sc.occluded.resize(size_t(s));
     sc.projected.resize(size_t(s) * size_t(k));
@@ -660,6 +718,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         const glm::vec3 nf(n), eastF(east), northF(north);
         const glm::vec3 origin = points.positions[v] + lift * nf;
         std::fill(sc.visible.begin(), sc.visible.end(), 0.0f);
+        if (ground) std::fill(sc.visibleSelf.begin(), sc.visibleSelf.end(), 0.0f);
         std::fill(sc.shSum.begin(), sc.shSum.end(), 0.0);
         int64_t traced = 0;
         // The jitter depends on where the point is, not on its index: a point shared by two
@@ -684,9 +743,12 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         };
         // A ray that reaches the environment: its share of the cell and, for band 0 alone (the
         // ground's transfer), of the SH integral; higher bands are projected cell by cell below.
-        auto seen = [&](int cell, float cosT, float share) {
-          sc.visible[size_t(cell)] += share;
-          if (nsh == 1) sc.shSum[0] += y00 * double(cosT) * double(share) * omega[size_t(cell / s)];
+        // With a ground, `weight` is what the ray's ground point leaves open (1 above the horizon).
+        auto seen = [&](int cell, float cosT, float share, float weight) {
+          sc.visible[size_t(cell)] += share * weight;
+          if (ground) sc.visibleSelf[size_t(cell)] += share;
+          if (nsh == 1)
+            sc.shSum[0] += y00 * double(cosT) * double(share * weight) * omega[size_t(cell / s)];
         };
         // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
         auto traceBatch = [&](auto&& answer) {
@@ -727,14 +789,14 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.cosines[size_t(cell)] = cosT;
           sc.stratum[size_t(cell)] =
               uint8_t(std::min(r - 1, int(u * float(r))) * r + std::min(r - 1, int(w * float(r))));
-          if (ground) sc.weight[size_t(cell)] = ground->weight(origin, direction(j, cosT, w));
+          if (ground) sc.directions[size_t(cell)] = direction(j, cosT, w);
           // Wholly outside the cone: cannot see the object.
           if (outside) {
             const glm::dvec3 c(rowSin[size_t(i)] * colCos[size_t(j)],
                                rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
             if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) continue;
           }
-          sc.batch.push_back(direction(j, cosT, w));
+          sc.batch.push_back(ground ? sc.directions[size_t(cell)] : direction(j, cosT, w));
           sc.batchCell.push_back(cell);
         }
         traceBatch([&](size_t index, bool occluded) {
@@ -768,12 +830,13 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           for (int j = 0; j < s; ++j) {
             const int cell = i * s + j;
             const bool blocked = ((row >> j) & 1u) != 0;
-            const float weight = sc.weight[size_t(cell)];
+            const float weight =
+                ground && !blocked ? ground->weight(origin, sc.directions[size_t(cell)]) : 1.0f;
             if (!((edge >> j) & 1u)) {
-              if (!blocked) seen(cell, sc.cosines[size_t(cell)], weight);
+              if (!blocked) seen(cell, sc.cosines[size_t(cell)], 1.0f, weight);
               continue;
             }
-            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share * weight);
+            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share, weight);
             const int own = sc.stratum[size_t(cell)];
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
@@ -790,7 +853,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         traceBatch([&](size_t index, bool occluded) {
           if (occluded) return;
           const float weight = ground ? ground->weight(origin, sc.batch[index]) : 1.0f;
-          seen(sc.batchCell[index], sc.batchCos[index], share * weight);
+          seen(sc.batchCell[index], sc.batchCos[index], share, weight);
         });
 
         // AO from the visible fractions and each cell's exact cosine integral, so that a fully
@@ -833,6 +896,15 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
             out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
         }
         out.ao[v] = float(ao / kPi);
+        if (ground) {
+          double self = 0.0;
+          for (int i = 0; i < s; ++i) {
+            double rowVisible = 0.0;
+            for (int j = 0; j < s; ++j) rowVisible += double(sc.visibleSelf[size_t(i * s + j)]);
+            self += rowVisible * cosine[size_t(i)];
+          }
+          out.aoSelf[v] = float(self / kPi);
+        }
         rays += traced;
         const size_t d = ++done;
         if (d % 1024 == 0) report(progress, "shadows", double(d) / double(count));

@@ -128,6 +128,8 @@ struct VertexTransfer {
   FloatBuffer cheb;       // k² per vertex: moments of V on the local grid
   std::vector<float> sh;  // (shBands + 1)² per vertex: Sloan's transfer vector
   std::vector<float> ao;  // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
+  // The same without the ground (GroundContact), to refine by; empty without one. Not cached.
+  std::vector<float> aoSelf;
   int64_t rays = 0;
 
   size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
@@ -148,32 +150,53 @@ struct VertexTransfer {
 // object and meets the plane at g counts open(g), the ground point's (1/π) ∫ V cos θ dω past the
 // object, instead of 1: the ground's radiance scaled by the share of its light the object leaves
 // it, that share taken from a uniform sky (it does not depend on the lighting, so the pass stays
-// cached per mesh). open(g) is computed on a grid of ground points around the object's footprint
-// and interpolated bilinearly; beyond the grid the edge's shortfall falls off as the inverse
-// cube of the distance from the footprint's centre (as a sphere's form factor does).
-struct GroundContact {
-  float height = 0.0f;                      // object space
+// cached per mesh). open(g) is computed on two grids of ground points, a fine one over the
+// footprint and just beyond it (where the ground's darkening changes over a fraction of the
+// object's height) and a coarse one further out, and interpolated bilinearly between the nodes
+// that the object does not cover (a node under the object sees nothing: no ray that misses the
+// object reaches it, and it would darken the ground at the object's foot); beyond the coarse grid
+// the edge's shortfall falls off as the inverse cube of the distance from the footprint's centre
+// (as a sphere's form factor does).
+struct GroundGridLevel {
   float x0 = 0.0f, z0 = 0.0f, step = 1.0f;  // node (a, b) at (x0 + a·step, height, z0 + b·step)
   int columns = 0, rows = 0;
-  std::vector<float> open;               // per node, row-major (b, then a)
+  std::vector<float> open;  // per node, row-major (b, then a); 0: covered by the object
+  bool empty() const { return open.empty(); }
+  bool contains(float x, float z) const {
+    return x >= x0 && z >= z0 && x <= x0 + float(columns - 1) * step &&
+           z <= z0 + float(rows - 1) * step;
+  }
+  // Bilinear between the cell's uncovered nodes (0 when all four are covered), at a point
+  // clamped to the grid.
+  float at(float x, float z) const;
+};
+struct GroundContact {
+  float height = 0.0f;                   // object space
+  GroundGridLevel fine, coarse;          // fine may be empty (a coarse step already fine enough)
   float centreX = 0.0f, centreZ = 0.0f;  // the footprint's centre
   int64_t rays = 0;
-  bool empty() const { return open.empty(); }
-  // open(g) at the plane point (x, height, z).
+  bool empty() const { return coarse.empty(); }
+  size_t nodes() const { return fine.open.size() + coarse.open.size(); }
+  // open(g) at the plane point (x, height, z); 1 for a point that is not finite.
   float openAt(float x, float z) const;
   // The weight of a ray from `origin` along unit `direction` that misses the object: 1 when it
   // does not go down; a ray from below the plane (rounding) meets it at once.
   float weight(const glm::vec3& origin, const glm::vec3& direction) const {
-    if (direction.y >= 0.0f || open.empty()) return 1.0f;
+    if (direction.y >= 0.0f || coarse.empty()) return 1.0f;
     const float t = std::max(0.0f, (height - origin.y) / direction.y);
     return openAt(origin.x + t * direction.x, origin.z + t * direction.z);
   }
 };
-// The plane under the mesh's lowest point, over its footprint widened by `reach` times the
-// object's size on every side, `resolution` nodes along the longer side.
+// The coarse grid: the footprint widened by `reach` times the object's size on every side,
+// `resolution` nodes along its longer side. The fine grid: the footprint widened by `fineReach`
+// times the object's height, nodes `fineSteps` to the height apart, or further apart to keep
+// within `fineBudget` nodes.
 struct GroundContactParams {
   int resolution = 128;
   float reach = 2.0f;
+  float fineReach = 0.5f;
+  int fineSteps = 48;
+  size_t fineBudget = 16384;
   void validate() const;  // compose::UsageError (stage "shadows")
   std::string key() const;
 };

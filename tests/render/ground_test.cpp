@@ -340,6 +340,8 @@ TEST(ShadowPlan, TheGroundBeneathTheObjectDarkensItsLowerSides) {
   EXPECT_TRUE(on.ground);
   EXPECT_FALSE(off.ground);
   EXPECT_NE(on.describe(), off.describe());  // the stages' cache keys tell them apart
+  // ... but the shadow lighting and the plate's ground shadow do not depend on it.
+  EXPECT_EQ(on.describeLighting(), off.describeLighting());
   const pipeline::ShadowLighting lighting = pipeline::prepareShadowLighting(sky, on, {});
   const pipeline::ShadowResult a =
       pipeline::computeSelfShadowing(box, scene, lighting, identity, on, {});
