@@ -77,7 +77,8 @@ struct RenderSettings {
 //   irradiance        unshadowed irradiance E x exposure (so that the object layer is
 //                     albedo x shadowed / π)
 //   irradianceShadowed  the same with self-shadowing
-//   AO     ambient occlusion, (1/π) ∫ V cos θ dω (1 without the visibility pass)
+//   AO     ambient occlusion, (1/π) ∫ V cos θ dω, V weighted by the ground beneath where the pass
+//          had one (transfer.h's GroundContact); 1 without the visibility pass
 const std::vector<std::string>& aovChannelNames();
 
 struct RenderOutput {
