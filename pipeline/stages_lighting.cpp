@@ -359,7 +359,9 @@ class ShadowsStage final : public Stage {
                  throw UsageError("shadows must be \"self\" or \"off\"");
                j.shadows = v == "self";
              }},
-            {"shadow-params", "method=cheb|sh|ao, order, grid, boundary, sources",
+            {"shadow-params",
+             "method=cheb|sh|ao, order, grid, boundary, sources, refine, refine-budget, "
+             "ground=on|off",
              [](const ComposeJob& j) { return nlohmann::json(j.shadowParams); },
              [](ComposeJob& j, const nlohmann::json& v) {
                if (!v.is_string()) throw UsageError("shadow-params must be a string");
