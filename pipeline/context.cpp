@@ -103,7 +103,7 @@ const render::Mesh& Context::mesh() {
 const render::EmbreeScene& Context::objectScene() {
   if (!objectScene_) {
     const render::Mesh& m = mesh();
-    objectScene_ = std::make_unique<render::EmbreeScene>(m.positions, m.indices);
+    objectScene_ = std::make_unique<render::EmbreeScene>(m);
   }
   return *objectScene_;
 }

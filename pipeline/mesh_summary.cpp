@@ -49,6 +49,8 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.floats(std::span<const float>(&m.baseColor.x, 3));
     h.word(uint32_t(m.texture));
     h.floats(std::span<const float>(&m.uvTransform[0][0], 9));
+    h.floats(std::span<const float>(&m.alphaCutoff, 1));
+    h.floats(std::span<const float>(&m.baseAlpha, 1));
   }
   for (const render::Texture& t : mesh.textures) {
     h.word(uint32_t(t.image.width));
@@ -60,6 +62,7 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.word(uint32_t(t.wrapV));
     h.word(t.srgbByFormat ? 1u : 0u);
     h.floats(t.image.pixels);
+    h.floats(t.alpha.pixels);
   }
   h.bytes(mesh.colorSpace);
   // Where the file puts the object (a far mesh moved to its middle): the header maps from there.

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "core/error.h"
+#include "render/mesh.h"
 
 namespace compose::render {
 
@@ -18,8 +19,29 @@ struct EmbreeScene::Impl {
   }
 };
 
+namespace {
+
+// Rejects hits where the mesh is cut away (the geometry's user data is the Mesh).
+void cutoutFilter(const RTCFilterFunctionNArguments* args) {
+  const auto* mesh = static_cast<const Mesh*>(args->geometryUserPtr);
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] != -1) continue;
+    const unsigned triangle = RTCHitN_primID(args->hit, args->N, i);
+    if (mesh->cutAway(triangle, RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i)))
+      args->valid[i] = 0;
+  }
+}
+
+}  // namespace
+
+EmbreeScene::EmbreeScene(const Mesh& mesh) : EmbreeScene(mesh.positions, mesh.indices, &mesh) {}
+
 EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
                          const std::vector<uint32_t>& indices)
+    : EmbreeScene(positions, indices, nullptr) {}
+
+EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
+                         const std::vector<uint32_t>& indices, const Mesh* cutouts)
     : impl_(std::make_unique<Impl>()) {
   COMPOSE_CHECK(!indices.empty() && indices.size() % 3 == 0);
   impl_->device = rtcNewDevice(nullptr);
@@ -41,6 +63,11 @@ EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
     vertices[3 * i + 2] = positions[i].z;
   }
   std::copy(indices.begin(), indices.end(), triangles);
+  if (cutouts && cutouts->hasCutouts()) {
+    rtcSetGeometryUserData(geom, const_cast<Mesh*>(cutouts));
+    rtcSetGeometryIntersectFilterFunction(geom, &cutoutFilter);
+    rtcSetGeometryOccludedFilterFunction(geom, &cutoutFilter);
+  }
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl_->scene, geom);
   rtcReleaseGeometry(geom);

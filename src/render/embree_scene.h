@@ -10,11 +10,16 @@
 
 namespace compose::render {
 
+struct Mesh;
+
 class EmbreeScene {
  public:
   // Builds a scene of the triangles `indices` (three per triangle) over `positions`. Throws
   // compose::Error (stage "render") if Embree cannot build it.
   EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices);
+  // The mesh's triangles; where its materials cut it out (Mesh::cutAway) every ray passes
+  // through (Embree's filter functions). `mesh` must outlive the scene.
+  explicit EmbreeScene(const Mesh& mesh);
   ~EmbreeScene();
   EmbreeScene(const EmbreeScene&) = delete;
   EmbreeScene& operator=(const EmbreeScene&) = delete;
@@ -50,6 +55,8 @@ class EmbreeScene {
                       float tnear, uint8_t* occluded, float tfar = 1e30f) const;
 
  private:
+  EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices,
+              const Mesh* cutouts);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

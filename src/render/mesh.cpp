@@ -69,6 +69,44 @@ int wrapIndex(int i, int n, Texture::Wrap wrap) {
 
 }  // namespace
 
+bool Mesh::hasCutouts() const {
+  return std::any_of(materials.begin(), materials.end(),
+                     [](const Material& m) { return m.cutOut(); });
+}
+
+bool Mesh::cutAway(uint32_t triangle, float u, float v) const {
+  if (materials.empty()) return false;
+  const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
+  const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
+  if (!mat.cutOut()) return false;
+  float alpha = mat.baseAlpha;
+  if (mat.texture >= 0 && !texcoords.empty()) {
+    const Texture& tex = textures[size_t(mat.texture)];
+    const Image& img = tex.alpha;
+    if (!img.empty()) {
+      const uint32_t* c = &indices[3 * size_t(triangle)];
+      const glm::vec2 interpolated =
+          (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
+      const glm::vec3 uv = mat.uvTransform * glm::vec3(interpolated, 1.0f);
+      if (std::isfinite(uv.x) && std::isfinite(uv.y)) {
+        // Bilinear, as the colour (albedoAt).
+        const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
+        const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
+        const float fx = std::floor(x), fy = std::floor(y);
+        const float ax = x - fx, ay = y - fy;
+        auto texel = [&](int ix, int iy) {
+          return img.at(wrapIndex(ix, img.width, tex.wrapU),
+                        wrapIndex(iy, img.height, tex.wrapV))[0];
+        };
+        const int x0 = int(fx), y0 = int(fy);
+        alpha *= (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
+                 (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
+      }
+    }
+  }
+  return alpha < mat.alphaCutoff;
+}
+
 glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
   const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
   const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
@@ -104,7 +142,21 @@ std::string count(size_t n, const std::string& singular, const std::string& plur
   return std::to_string(n) + " " + (n == 1 ? singular : plural);
 }
 
-Image textureImage(Image decoded, const std::string& fallbackSpace) {
+Image textureImage(Image decoded, const std::string& fallbackSpace, Image* alpha) {
+  if (alpha) {
+    *alpha = Image();
+    const int channels = decoded.channels;
+    if (channels == 2 || channels == 4) {
+      Image a(decoded.width, decoded.height, 1, {"A"});
+      bool partial = false;
+      for (size_t i = 0; i < a.pixelCount(); ++i) {
+        const float value = decoded.pixels[i * size_t(channels) + size_t(channels - 1)];
+        a.pixels[i] = value;
+        partial = partial || !(value >= 1.0f);
+      }
+      if (partial) *alpha = std::move(a);
+    }
+  }
   Image out(decoded.width, decoded.height, 3, {"R", "G", "B"});
   out.colorSpace = decoded.colorSpace.empty() ? fallbackSpace : decoded.colorSpace;
   const int channels = decoded.channels;
@@ -122,12 +174,12 @@ Image textureImage(Image decoded, const std::string& fallbackSpace) {
   return out;
 }
 
-Image readTextureFile(const fs::path& file, const std::string& fallbackSpace) {
+Image readTextureFile(const fs::path& file, const std::string& fallbackSpace, Image* alpha) {
   std::error_code ec;
   const fs::file_status status = fs::status(file, ec);
   if (fs::exists(status) && !fs::is_regular_file(status) && !fs::is_directory(status))
     throw Error("mesh", "not a regular file", file);
-  return textureImage(ingest::readImage(file, "mesh").image, fallbackSpace);
+  return textureImage(ingest::readImage(file, "mesh").image, fallbackSpace, alpha);
 }
 
 }  // namespace detail

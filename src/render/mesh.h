@@ -19,7 +19,9 @@
 //    integers included, as KHR_mesh_quantization writes them) and with sparse accessors. The
 //    metallic-roughness material gives the base colour: `baseColorFactor` (linear Rec.709) times
 //    `baseColorTexture` (sRGB unless its image declares otherwise), with the texture's sampler
-//    wrap modes and KHR_texture_transform. A file that requires an extension compose cannot honour
+//    wrap modes and KHR_texture_transform; alphaMode MASK cuts the surface away where the base
+//    colour's alpha is below alphaCutoff (Material::alphaCutoff; BLEND is drawn opaque with a
+//    warning). A file that requires an extension compose cannot honour
 //    (Draco or meshopt compression, ...) is an error naming it. Vertex colours, skins and morph
 //    targets are ignored with a warning (skinned meshes render in their bind pose).
 //  * Geomview bicubic Bézier patches (.bez), tessellated (see mesh.cpp).
@@ -62,6 +64,9 @@ struct Texture {
   enum class Wrap { Repeat, Clamp, Mirror };
   std::filesystem::path file;  // the image file, or a description of where an embedded one was
   Image image;
+  // The file's alpha (straight, one channel, the image's size): empty when it has none or it is
+  // 1 everywhere. Only a cut-out material (Material::alphaCutoff) reads it.
+  Image alpha;
   Wrap wrapU = Wrap::Repeat, wrapV = Wrap::Repeat;
   // The format says the colour is sRGB-encoded whatever the image file says (glTF's base colour
   // textures): the file's own tag (a PNG's gAMA) is not followed.
@@ -77,6 +82,12 @@ struct Material {
   // Applied to (u, v, 1) before the texture is sampled (OBJ's -s/-o, glTF's
   // KHR_texture_transform), in this file's convention (v up).
   glm::mat3 uvTransform{1.0f};
+  // A cut-out (glTF's alphaMode MASK): where baseAlpha times the texture's alpha is below
+  // alphaCutoff the surface is not there (rays pass through it: the camera's, the shadows').
+  // Negative: opaque.
+  float alphaCutoff = -1.0f;
+  float baseAlpha = 1.0f;
+  bool cutOut() const { return alphaCutoff >= 0.0f; }
 };
 
 // The albedo of faces that have no material in a mesh where others have one (and the default of
@@ -114,6 +125,11 @@ struct Mesh {
   // its material's base colour times its texture at the interpolated texture coordinates. Only
   // meaningful when hasMaterials().
   glm::vec3 albedoAt(uint32_t triangle, float u, float v) const;
+  // Some material is a cut-out (Material::cutOut()).
+  bool hasCutouts() const;
+  // Whether the point at barycentrics (u, v) of `triangle` is cut away: its material is a
+  // cut-out and its alpha there is below the cutoff.
+  bool cutAway(uint32_t triangle, float u, float v) const;
 };
 
 struct MeshOptions {

@@ -31,10 +31,12 @@ std::string count(size_t n, const std::string& singular, const std::string& plur
 
 // Reads an image file as an albedo texture (textureImage()); throws compose::Error (stage "mesh")
 // when it cannot: missing, not a regular file (a device would never end), undecodable.
-Image readTextureFile(const std::filesystem::path& file, const std::string& fallbackSpace);
+Image readTextureFile(const std::filesystem::path& file, const std::string& fallbackSpace,
+                      Image* alpha = nullptr);
 
-// An albedo texture from a decoded image: RGB (grey replicated, alpha dropped), tagged with the
-// colour space the image declared, or `fallbackSpace` when it declared none.
-Image textureImage(Image decoded, const std::string& fallbackSpace);
+// An albedo texture from a decoded image: RGB (grey replicated), tagged with the colour space the
+// image declared, or `fallbackSpace` when it declared none. The alpha channel goes to `alpha`
+// (one channel) when asked and the image has one that is not 1 everywhere, else it is emptied.
+Image textureImage(Image decoded, const std::string& fallbackSpace, Image* alpha = nullptr);
 
 }  // namespace compose::render::detail

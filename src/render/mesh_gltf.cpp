@@ -164,7 +164,7 @@ class GltfReader {
   // The pixels of image `imageIndex`. Before decoding, `file` is set to its file, or for an
   // embedded image to a name that says where it is (with the extension of its format, for the
   // colour config's file rules), and `where` to a description for messages.
-  Image decodeImage(int imageIndex, fs::path& file, std::string& where);
+  Image decodeImage(int imageIndex, fs::path& file, std::string& where, Image* alpha);
 
   const tinygltf::Model& model_;
   const fs::path& path_;
@@ -335,7 +335,7 @@ glm::dmat4 GltfReader::localTransform(const tinygltf::Node& node, int index) con
   return m;
 }
 
-Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where) {
+Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where, Image* alpha) {
   if (imageIndex < 0 || size_t(imageIndex) >= model_.images.size()) {
     throw Error("mesh", "refers to image " + std::to_string(imageIndex) + ", the file has " +
                             std::to_string(model_.images.size()));
@@ -357,7 +357,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
     file = path_.parent_path() / decoded;
     mesh_.otherFiles.push_back(file);
     where = file.string();
-    return readTextureFile(file, "sRGB");
+    return readTextureFile(file, "sRGB", alpha);
   }
   std::span<const unsigned char> bytes(image.image);
   where = "image " + std::to_string(imageIndex) + ", embedded";
@@ -390,7 +390,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
   }
   if (!mime.empty()) where += ", " + mime;
   file = path_.string() + " (" + where + ")" + ext;
-  return textureImage(ingest::readImageFromMemory(bytes, file, "mesh").image, "sRGB");
+  return textureImage(ingest::readImageFromMemory(bytes, file, "mesh").image, "sRGB", alpha);
 }
 
 int GltfReader::texture(int gltfTexture, const std::string& materialName) {
@@ -404,7 +404,7 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
     }
     const tinygltf::Texture& t = model_.textures[size_t(gltfTexture)];
     Texture texture;
-    texture.image = decodeImage(t.source, texture.file, where);
+    texture.image = decodeImage(t.source, texture.file, where, &texture.alpha);
     texture.srgbByFormat = true;  // glTF: base colour textures are sRGB-encoded
     if (t.sampler >= 0 && size_t(t.sampler) < model_.samplers.size()) {
       auto wrap = [](int mode) {
@@ -473,10 +473,14 @@ uint32_t GltfReader::material(int gltfMaterial) {
               t.Get("extensions").Get("KHR_texture_transform");
       }
     }
-    if (gm.alphaMode == "MASK" || gm.alphaMode == "BLEND") {
-      mesh_.warnings.push_back("material '" + m.name + "' is alphaMode " + gm.alphaMode +
-                               ": its transparency is not rendered (drawn opaque, with the "
-                               "colour where alpha is 0)");
+    if (gm.alphaMode == "MASK") {
+      // A cut-out: alpha is the base colour factor's fourth component times the texture's.
+      m.alphaCutoff = std::isfinite(gm.alphaCutoff) ? float(std::max(0.0, gm.alphaCutoff)) : 0.5f;
+      m.baseAlpha = f.size() >= 4 && std::isfinite(f[3]) ? float(f[3]) : 1.0f;
+    } else if (gm.alphaMode == "BLEND") {
+      mesh_.warnings.push_back("material '" + m.name +
+                               "' is alphaMode BLEND: its transparency is not rendered (drawn "
+                               "opaque, with the colour where alpha is 0; MASK is)");
     }
     if (info.index >= 0) {
       m.texture = texture(info.index, m.name);

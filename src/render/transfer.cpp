@@ -261,7 +261,7 @@ void VertexTransfer::append(const VertexTransfer& more) {
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress, const GroundContact* ground) {
-  const EmbreeScene scene(mesh.positions, mesh.indices);
+  const EmbreeScene scene(mesh);
   VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress, ground);
   // Refined where the object's own shadowing changes fast: the ground's darkening is smooth.
   const size_t first = refineSurfacePoints(
@@ -579,7 +579,7 @@ class CellHarmonics {
 
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress) {
-  const EmbreeScene scene(mesh.positions, mesh.indices);
+  const EmbreeScene scene(mesh);
   return computeTransfer(mesh, scene, points, params, progress);
 }
 
@@ -916,6 +916,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
 }
 
 bool isConvex(const Mesh& mesh) {
+  if (mesh.hasCutouts()) return false;  // seen through its holes, its inside can be shadowed
   // Corners identified by position, so that vertices split by normals or texture seams count as
   // one: positions snapped to a millionth of the object's size (an exporter's seam vertices differ
   // in the last bits; a pair the snapping splits leaves the mesh "open", which is the safe answer).
@@ -981,6 +982,26 @@ std::string meshHash(const Mesh& mesh) {
   h.floats(std::span<const float>(&mesh.positions[0].x, 3 * mesh.positions.size()));
   h.floats(std::span<const float>(&mesh.normals[0].x, 3 * mesh.normals.size()));
   for (uint32_t i : mesh.indices) h.word(i);
+  // Where it is cut out, what cuts it (the rest of the materials does not change visibility).
+  if (mesh.hasCutouts()) {
+    h.bytes("cutouts");
+    if (!mesh.texcoords.empty())
+      h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
+    for (uint32_t m : mesh.triangleMaterial) h.word(m);
+    for (const Material& m : mesh.materials) {
+      h.floats(std::span<const float>(&m.alphaCutoff, 1));
+      h.floats(std::span<const float>(&m.baseAlpha, 1));
+      h.word(uint32_t(m.texture));
+      h.floats(std::span<const float>(&m.uvTransform[0][0], 9));
+    }
+    for (const Texture& t : mesh.textures) {
+      h.word(uint32_t(t.alpha.width));
+      h.word(uint32_t(t.alpha.height));
+      h.word(uint32_t(t.wrapU));
+      h.word(uint32_t(t.wrapV));
+      h.floats(t.alpha.pixels);
+    }
+  }
   return h.hex();
 }
 

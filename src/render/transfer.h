@@ -227,7 +227,7 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
 
 // True when the mesh is closed and convex: every edge joins exactly two triangles and no
 // triangle's far corner lies above its neighbour's plane. A convex solid cannot shadow itself,
-// so the visibility pass is skipped for it.
+// so the visibility pass is skipped for it. A mesh with cut-outs (Mesh::hasCutouts) is not.
 bool isConvex(const Mesh& mesh);
 
 // A 128-bit hash of the mesh's positions, normals and triangles (for cache keys).

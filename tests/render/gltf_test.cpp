@@ -361,7 +361,8 @@ TEST(Gltf, BaseColourFactorsAndTexturesFromDataUris) {
 
 // A base colour texture's alpha is not its colour: transparent and half-transparent texels keep
 // the colour they store (alpha is not multiplied into it), and the texture is sRGB by glTF's
-// rule. A MASK material says its transparency is not rendered.
+// rule. Without alphaMode MASK it cuts nothing; a BLEND material says its transparency is not
+// rendered.
 TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   TempDir dir;
   const std::vector<uint8_t> png = quadrantPngWithAlpha();
@@ -374,13 +375,53 @@ TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   expectPaintedPair(m);
   ASSERT_EQ(m.textures.size(), 1u);
   EXPECT_TRUE(m.textures[0].srgbByFormat);
-  b.json["materials"][0]["alphaMode"] = "MASK";
-  writeBytes(dir / "mask.glb", b.glb());
-  const Mesh masked = loadMesh(dir / "mask.glb");
-  ASSERT_EQ(masked.warnings.size(), 1u);
-  EXPECT_NE(masked.warnings[0].find("alphaMode MASK: its transparency is not rendered"),
+  EXPECT_FALSE(m.hasCutouts());  // alpha alone (OPAQUE) cuts nothing
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  EXPECT_FALSE(m.cutAway(first, 1, 0));
+  // BLEND is drawn opaque, and says so.
+  b.json["materials"][0]["alphaMode"] = "BLEND";
+  writeBytes(dir / "blend.glb", b.glb());
+  const Mesh blended = loadMesh(dir / "blend.glb");
+  ASSERT_EQ(blended.warnings.size(), 1u);
+  EXPECT_NE(blended.warnings[0].find("alphaMode BLEND: its transparency is not rendered"),
             std::string::npos)
-      << masked.warnings[0];
+      << blended.warnings[0];
+  EXPECT_FALSE(blended.hasCutouts());
+}
+
+// alphaMode MASK cuts the surface away where alpha (the base colour factor's times the
+// texture's) is below alphaCutoff (0.5 by default): red alpha 1, green 0, blue 128/255.
+TEST(Gltf, MaskMaterialsCutTheSurfaceWhereAlphaIsBelowTheCutoff) {
+  TempDir dir;
+  const std::vector<uint8_t> png = quadrantPngWithAlpha();
+  GltfBuilder b = texturedPair(json::object());
+  const int view = b.view(png.data(), png.size());
+  b.json["images"][0] = {{"bufferView", view}, {"mimeType", "image/png"}};
+  b.json["materials"][0]["alphaMode"] = "MASK";
+  auto load = [&](const std::string& name) {
+    writeBytes(dir / name, b.glb());
+    return loadMesh(dir / name);
+  };
+  const Mesh masked = load("mask.glb");
+  EXPECT_TRUE(masked.warnings.empty()) << masked.warnings[0];
+  expectPaintedPair(masked);  // the colour is unchanged
+  ASSERT_TRUE(masked.hasCutouts());
+  EXPECT_FLOAT_EQ(masked.materials[0].alphaCutoff, 0.5f);
+  EXPECT_FALSE(masked.materials[1].cutOut());
+  const uint32_t first = masked.positions[masked.indices[0]].x < 1.5f ? 0u : 1u;
+  EXPECT_FALSE(masked.cutAway(first, 0, 0)) << "red, opaque";
+  EXPECT_TRUE(masked.cutAway(first, 1, 0)) << "green, transparent";
+  EXPECT_FALSE(masked.cutAway(first, 0, 1)) << "blue, alpha 0.502";
+  EXPECT_FALSE(masked.cutAway(1 - first, 0.3f, 0.3f)) << "the plain material is opaque";
+  b.json["materials"][0]["alphaCutoff"] = 0.6;
+  const Mesh higher = load("cutoff.glb");
+  EXPECT_TRUE(higher.cutAway(first, 0, 1)) << "blue, below 0.6";
+  EXPECT_FALSE(higher.cutAway(first, 0, 0));
+  b.json["materials"][0].erase("alphaCutoff");
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {0.5, 1, 1, 0.5};
+  const Mesh faded = load("faded.glb");
+  EXPECT_FALSE(faded.cutAway(first, 0, 0)) << "red, 0.5 x 1: at the cutoff";
+  EXPECT_TRUE(faded.cutAway(first, 0, 1)) << "blue, 0.5 x 0.502";
 }
 
 // KHR_materials_pbrSpecularGlossiness: the diffuse factor is the base colour.
