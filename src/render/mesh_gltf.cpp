@@ -449,11 +449,17 @@ uint32_t GltfReader::material(int gltfMaterial) {
                                "' has no valid baseColorFactor: using white");
     }
     tinygltf::TextureInfo info = gm.pbrMetallicRoughness.baseColorTexture;
+    double factorAlpha = f.size() >= 4 && std::isfinite(f[3]) ? f[3] : 1.0;
     // Older exporters' KHR_materials_pbrSpecularGlossiness: its diffuse colour and texture are
     // the albedo (the metallic-roughness fallback, when there is one, is left for it).
     if (const auto sg = gm.extensions.find("KHR_materials_pbrSpecularGlossiness");
         sg != gm.extensions.end() && sg->second.IsObject()) {
       const tinygltf::Value& d = sg->second.Get("diffuseFactor");
+      // Its alpha is the diffuse factor's (1 when absent) times the diffuse texture's.
+      factorAlpha = d.IsArray() && d.ArrayLen() >= 4 && d.Get(3).IsNumber() &&
+                            std::isfinite(d.Get(3).GetNumberAsDouble())
+                        ? d.Get(3).GetNumberAsDouble()
+                        : 1.0;
       if (d.IsArray() && d.ArrayLen() >= 3 && d.Get(0).IsNumber() && d.Get(1).IsNumber() &&
           d.Get(2).IsNumber()) {
         m.baseColor =
@@ -476,7 +482,7 @@ uint32_t GltfReader::material(int gltfMaterial) {
     if (gm.alphaMode == "MASK") {
       // A cut-out: alpha is the base colour factor's fourth component times the texture's.
       m.alphaCutoff = std::isfinite(gm.alphaCutoff) ? float(std::max(0.0, gm.alphaCutoff)) : 0.5f;
-      m.baseAlpha = f.size() >= 4 && std::isfinite(f[3]) ? float(f[3]) : 1.0f;
+      m.baseAlpha = float(factorAlpha);
     } else if (gm.alphaMode == "BLEND") {
       mesh_.warnings.push_back("material '" + m.name +
                                "' is alphaMode BLEND: its transparency is not rendered (drawn "

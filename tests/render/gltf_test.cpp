@@ -439,6 +439,20 @@ TEST(Gltf, SpecularGlossinessDiffuseIsTheBaseColour) {
   const Mesh m = loadMesh(dir / "sg.gltf");
   ASSERT_EQ(m.materials.size(), 1u);
   EXPECT_EQ(m.materials[0].baseColor, glm::vec3(0.8f, 0.1f, 0.2f));
+  // As a cut-out, its alpha is the diffuse factor's, not the metallic-roughness fallback's.
+  b.json["materials"][0]["alphaMode"] = "MASK";
+  b.json["materials"][0]["extensions"]["KHR_materials_pbrSpecularGlossiness"]["diffuseFactor"] = {
+      0.8, 0.1, 0.2, 0.2};
+  b.json["materials"][0]["pbrMetallicRoughness"] = {{"baseColorFactor", {1, 1, 1, 1}}};
+  writeText(dir / "sg-mask.gltf", b.gltf());
+  const Mesh cut = loadMesh(dir / "sg-mask.gltf");
+  EXPECT_FLOAT_EQ(cut.materials[0].baseAlpha, 0.2f);
+  EXPECT_TRUE(cut.cutAway(0, 0.3f, 0.3f));
+  b.json["materials"][0]["extensions"]["KHR_materials_pbrSpecularGlossiness"]["diffuseFactor"] = {
+      0.8, 0.1, 0.2, 1};
+  b.json["materials"][0]["pbrMetallicRoughness"] = {{"baseColorFactor", {1, 1, 1, 0.2}}};
+  writeText(dir / "sg-opaque.gltf", b.gltf());
+  EXPECT_FALSE(loadMesh(dir / "sg-opaque.gltf").cutAway(0, 0.3f, 0.3f));
 }
 
 TEST(Gltf, JpegTexturesAreDecodedToo) {

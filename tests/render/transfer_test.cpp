@@ -873,6 +873,18 @@ TEST(Cutouts, RaysPassWhereTheMaterialCutsTheSurfaceAway) {
   EXPECT_GT(t.ao[0], t.ao[1] + 0.15f);
   // Not convex, and a different visibility cache entry from the same triangles uncut.
   EXPECT_FALSE(isConvex(roof));
+  // A closed cube is convex until a material cuts it.
+  Mesh cube;
+  addBox(cube, {0.0f, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f});
+  ASSERT_TRUE(isConvex(cube));
+  cube.materials.push_back(Material{});
+  EXPECT_TRUE(isConvex(cube));
+  cube.materials[0].alphaCutoff = 0.5f;
+  cube.materials[0].baseAlpha = 0.2f;
+  EXPECT_FALSE(isConvex(cube));
+  Mesh fainter = roof;
+  fainter.materials[0].baseAlpha = 0.7f;
+  EXPECT_NE(meshHash(roof), meshHash(fainter));
   Mesh opaque = roof;
   opaque.materials[0].alphaCutoff = -1.0f;
   EXPECT_NE(meshHash(roof), meshHash(opaque));
