@@ -8,34 +8,13 @@
 
 #include "lighting/exact.h"
 #include "lighting/sh.h"
+#include "test_meshes.h"
 #include "test_util.h"
 
 namespace compose::render {
 namespace {
 
-// A UV sphere of radius 1 with exact normals.
-Mesh uvSphere(int rings, int segments) {
-  Mesh m;
-  for (int r = 0; r <= rings; ++r) {
-    const double theta = std::numbers::pi * r / rings;
-    for (int s = 0; s <= segments; ++s) {
-      const double phi = 2.0 * std::numbers::pi * s / segments;
-      const glm::vec3 p(float(std::sin(theta) * std::cos(phi)), float(std::cos(theta)),
-                        float(std::sin(theta) * std::sin(phi)));
-      m.positions.push_back(p);
-      m.normals.push_back(p);
-    }
-  }
-  const int row = segments + 1;
-  for (int r = 0; r < rings; ++r) {
-    for (int s = 0; s < segments; ++s) {
-      const uint32_t a = uint32_t(r * row + s), b = a + 1, c = a + uint32_t(row), d = c + 1;
-      m.indices.insert(m.indices.end(), {a, b, c, b, d, c});
-    }
-  }
-  m.normalsFromFile = true;
-  return m;
-}
+using testing::uvSphere;
 
 struct Scene {
   Mesh sphere = uvSphere(64, 128);

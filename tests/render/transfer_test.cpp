@@ -14,6 +14,7 @@
 #include "lighting/sources.h"
 #include "render/embree_scene.h"
 #include "render/renderer.h"
+#include "test_meshes.h"
 #include "test_util.h"
 
 namespace compose::render {
@@ -616,28 +617,7 @@ TEST(SurfacePoints, RestoredLevelsGiveTheRefinedPointsInTheirOrder) {
   EXPECT_EQ(restored.first, points.first);
 }
 
-// A UV sphere of radius 1 about the origin with exact normals: its lowest point is y = -1.
-Mesh unitSphere(int rings, int segments) {
-  Mesh m;
-  for (int r = 0; r <= rings; ++r) {
-    const double theta = std::numbers::pi * r / rings;
-    for (int s = 0; s <= segments; ++s) {
-      const double phi = 2.0 * std::numbers::pi * s / segments;
-      const glm::vec3 p(float(std::sin(theta) * std::cos(phi)), float(std::cos(theta)),
-                        float(std::sin(theta) * std::sin(phi)));
-      m.positions.push_back(p);
-      m.normals.push_back(p);
-    }
-  }
-  const int row = segments + 1;
-  for (int r = 0; r < rings; ++r)
-    for (int s = 0; s < segments; ++s) {
-      const uint32_t a = uint32_t(r * row + s), b = a + 1, c = a + uint32_t(row), d = c + 1;
-      m.indices.insert(m.indices.end(), {a, b, c, b, d, c});
-    }
-  m.normalsFromFile = true;
-  return m;
-}
+using testing::uvSphere;
 
 // The share of a point's cosine-weighted sky that a unit sphere resting on its plane leaves
 // open, x from the contact point: 1 minus the sphere's form factor (1/D)² cos θ = 1/D³, D the
@@ -648,7 +628,7 @@ double sphereOpen(double x) {
 }
 
 TEST(GroundContact, TheGroundBesideASphereSeesWhatItsFormFactorLeaves) {
-  const Mesh sphere = unitSphere(48, 96);
+  const Mesh sphere = uvSphere(48, 96);
   const EmbreeScene scene(sphere.positions, sphere.indices);
   const GroundContact ground = groundContact(sphere, scene);
   ASSERT_FALSE(ground.empty());
@@ -668,7 +648,7 @@ TEST(GroundContact, RaysThatMeetTheGroundCountWhatItsPointLeavesOpen) {
   // A sphere cannot shadow itself: without the ground every point sees its whole hemisphere
   // (AO 1); with it, a point whose hemisphere reaches below the horizon sees the ground, dark
   // beneath the sphere. Against a fine quadrature of the same integral with the form factor.
-  const Mesh sphere = unitSphere(48, 96);
+  const Mesh sphere = uvSphere(48, 96);
   const EmbreeScene scene(sphere.positions, sphere.indices);
   const GroundContact ground = groundContact(sphere, scene);
   SurfacePoints points;
