@@ -83,8 +83,7 @@ std::vector<std::string> meshNotes(const render::Mesh& mesh) {
 MeshSummary summarize(const render::Mesh& mesh, double creaseDegrees) {
   MeshSummary s;
   s.key = meshKey(mesh, creaseDegrees);
-  s.boundsMin = mesh.boundsMin();
-  s.boundsMax = mesh.boundsMax();
+  mesh.keptBounds(s.boundsMin, s.boundsMax);  // without what cut-outs take away
   s.triangles = mesh.triangleCount();
   s.convex = render::isConvex(mesh);
   s.notes = meshNotes(mesh);
@@ -165,8 +164,7 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   MeshSummary& s = out.summary;
   s.key = meshKey(mesh, creaseDegrees);
   if (s.key.a != *a || s.key.b != *b) return std::nullopt;
-  s.boundsMin = mesh.boundsMin();
-  s.boundsMax = mesh.boundsMax();
+  mesh.keptBounds(s.boundsMin, s.boundsMax);
   s.triangles = mesh.triangleCount();
   s.convex = m["convex"].get<bool>();
   s.notes = meshNotes(mesh);

@@ -23,7 +23,7 @@ namespace compose::pipeline {
 
 struct MeshSummary {
   Hash128 key;  // meshKey(): everything of the mesh later stages read
-  glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};
+  glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};  // Mesh::keptBounds: what cut-outs keep
   size_t triangles = 0;
   bool convex = false;
   std::vector<std::string> notes;  // what reading the mesh said (normals, repairs), for the user

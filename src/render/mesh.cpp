@@ -74,53 +74,24 @@ bool Mesh::hasCutouts() const {
                      [](const Material& m) { return m.cutOut(); });
 }
 
-bool Mesh::cutAway(uint32_t triangle, float u, float v) const {
-  if (materials.empty()) return false;
-  const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
-  const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
-  if (!mat.cutOut()) return false;
-  float alpha = mat.baseAlpha;
-  if (mat.texture >= 0 && !texcoords.empty()) {
-    const Texture& tex = textures[size_t(mat.texture)];
-    const Image& img = tex.alpha;
-    if (!img.empty()) {
-      const uint32_t* c = &indices[3 * size_t(triangle)];
-      const glm::vec2 interpolated =
-          (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
-      const glm::vec3 uv = mat.uvTransform * glm::vec3(interpolated, 1.0f);
-      if (std::isfinite(uv.x) && std::isfinite(uv.y)) {
-        // Bilinear, as the colour (albedoAt).
-        const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
-        const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
-        const float fx = std::floor(x), fy = std::floor(y);
-        const float ax = x - fx, ay = y - fy;
-        auto texel = [&](int ix, int iy) {
-          return img.at(wrapIndex(ix, img.width, tex.wrapU),
-                        wrapIndex(iy, img.height, tex.wrapV))[0];
-        };
-        const int x0 = int(fx), y0 = int(fy);
-        alpha *= (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
-                 (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
-      }
-    }
-  }
-  return alpha < mat.alphaCutoff;
+namespace {
+
+// The texture coordinates of barycentrics (u, v) of `triangle` through `mat`'s transform; false
+// where they are not finite.
+bool materialUv(const Mesh& mesh, const Material& mat, uint32_t triangle, float u, float v,
+                glm::vec2& uv) {
+  const uint32_t* c = &mesh.indices[3 * size_t(triangle)];
+  const glm::vec2 interpolated =
+      (1.0f - u - v) * mesh.texcoords[c[0]] + u * mesh.texcoords[c[1]] + v * mesh.texcoords[c[2]];
+  const glm::vec3 t = mat.uvTransform * glm::vec3(interpolated, 1.0f);
+  uv = glm::vec2(t);
+  return std::isfinite(t.x) && std::isfinite(t.y);
 }
 
-glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
-  const uint32_t m = triangleMaterial.empty() ? 0u : triangleMaterial[triangle];
-  const Material& mat = materials[std::min<size_t>(m, materials.size() - 1)];
-  if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
-  const Texture& tex = textures[size_t(mat.texture)];
-  const Image& img = tex.image;
-  if (img.empty()) return mat.baseColor;
-  const uint32_t* c = &indices[3 * size_t(triangle)];
-  const glm::vec2 interpolated =
-      (1.0f - u - v) * texcoords[c[0]] + u * texcoords[c[1]] + v * texcoords[c[2]];
-  const glm::vec3 uv = mat.uvTransform * glm::vec3(interpolated, 1.0f);
-  if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) return mat.baseColor;
-  // Texel centres at (i + 0.5) / width; v = 0 is the bottom row (OBJ and glTF flip differently:
-  // loaders store v so that this holds).
+// The first `channels` (1 or 3) channels of `img` at texture coordinates `uv`, bilinear with the
+// texture's wrap modes. Texel centres lie at (i + 0.5) / width; v = 0 is the bottom row (OBJ and
+// glTF flip differently: loaders store v so that this holds).
+glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv) {
   const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
   const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
@@ -131,9 +102,103 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
     return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
   };
   const int x0 = int(fx), y0 = int(fy);
-  const glm::vec3 t = (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
-                      (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
-  return mat.baseColor * t;
+  return (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
+         (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
+}
+
+const Material& materialOf(const Mesh& mesh, uint32_t triangle) {
+  const uint32_t m = mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[triangle];
+  return mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)];
+}
+
+}  // namespace
+
+bool Mesh::cutAway(uint32_t triangle, float u, float v) const {
+  if (materials.empty()) return false;
+  const Material& mat = materialOf(*this, triangle);
+  if (!mat.cutOut()) return false;
+  float alpha = mat.baseAlpha;
+  glm::vec2 uv;
+  if (mat.texture >= 0 && !texcoords.empty()) {
+    const Texture& tex = textures[size_t(mat.texture)];
+    if (!tex.alpha.empty() && materialUv(*this, mat, triangle, u, v, uv))
+      alpha *= bilinear(tex, tex.alpha, uv).x;  // bilinear, as the colour (albedoAt)
+  }
+  return alpha < mat.alphaCutoff;
+}
+
+glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
+  const Material& mat = materialOf(*this, triangle);
+  if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
+  const Texture& tex = textures[size_t(mat.texture)];
+  glm::vec2 uv;
+  if (tex.image.empty() || !materialUv(*this, mat, triangle, u, v, uv)) return mat.baseColor;
+  return mat.baseColor * bilinear(tex, tex.image, uv);
+}
+
+void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
+  lo = glm::vec3(std::numeric_limits<float>::max());
+  hi = glm::vec3(-std::numeric_limits<float>::max());
+  if (!hasCutouts()) {
+    lo = boundsMin();
+    hi = boundsMax();
+    return;
+  }
+  // Per cut-out triangle, the steps of its test grid: about two per texel of its alpha along
+  // its longest edge in texture space (one when only the material's own alpha cuts it).
+  const size_t triangles = triangleCount();
+  std::vector<int> steps(triangles, 0);
+  double points = 0.0;
+  for (size_t t = 0; t < triangles; ++t) {
+    const Material& mat = materialOf(*this, uint32_t(t));
+    if (!mat.cutOut()) continue;
+    int n = 1;
+    if (mat.texture >= 0 && !texcoords.empty() && !textures[size_t(mat.texture)].alpha.empty()) {
+      const Image& alpha = textures[size_t(mat.texture)].alpha;
+      const uint32_t* c = &indices[3 * t];
+      double longest = 0.0;
+      for (int e = 0; e < 3; ++e) {
+        const glm::vec3 a = mat.uvTransform * glm::vec3(texcoords[c[e]], 1.0f);
+        const glm::vec3 b = mat.uvTransform * glm::vec3(texcoords[c[(e + 1) % 3]], 1.0f);
+        longest = std::max({longest, std::abs(double(b.x - a.x)) * alpha.width,
+                            std::abs(double(b.y - a.y)) * alpha.height});
+      }
+      n = std::isfinite(longest) ? int(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0)) : 1;
+    }
+    steps[t] = n;
+    points += 0.5 * double(n + 1) * double(n + 2);
+  }
+  // Over the budget: every grid coarsened by the same factor.
+  const double coarsen = points > double(budget) ? std::sqrt(double(budget) / points) : 1.0;
+  for (size_t t = 0; t < triangles; ++t) {
+    const uint32_t* c = &indices[3 * t];
+    if (steps[t] == 0) {  // not a cut-out: its corners
+      for (int k = 0; k < 3; ++k) {
+        lo = glm::min(lo, positions[c[k]]);
+        hi = glm::max(hi, positions[c[k]]);
+      }
+      continue;
+    }
+    // Barycentric grid points (i, j) / n, drawn a tenth of a step towards the centre: exactly
+    // on an edge, a repeating texture's bilinear alpha mixes in the far side's texels (a card
+    // whose transparent bottom rows meet opaque top rows would keep its bottom edge, alone).
+    const int n = std::max(1, int(double(steps[t]) * coarsen));
+    const float shrink = 1.0f - 0.1f / float(n), third = 1.0f / 3.0f;
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; i + j <= n; ++j) {
+        const float u = third + (float(i) / float(n) - third) * shrink;
+        const float v = third + (float(j) / float(n) - third) * shrink;
+        if (cutAway(uint32_t(t), u, v)) continue;
+        const glm::vec3 p =
+            (1.0f - u - v) * positions[c[0]] + u * positions[c[1]] + v * positions[c[2]];
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
+      }
+  }
+  if (!(lo.x <= hi.x)) {  // everything cut away: nothing is drawn, the whole mesh stands in
+    lo = boundsMin();
+    hi = boundsMax();
+  }
 }
 
 namespace detail {

@@ -290,7 +290,7 @@ void GroundContactParams::validate() const {
 
 std::string GroundContactParams::key() const {
   char text[128];
-  std::snprintf(text, sizeof text, "ground v2 %d %.6g fine %.6g %d %zu", resolution, double(reach),
+  std::snprintf(text, sizeof text, "ground v3 %d %.6g fine %.6g %d %zu", resolution, double(reach),
                 double(fineReach), fineSteps, fineBudget);
   return text;
 }
@@ -350,7 +350,9 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   params.validate();
   GroundContact out;
   if (mesh.positions.empty()) return out;
-  const glm::vec3 lo = mesh.boundsMin(), hi = mesh.boundsMax();
+  // The surface that is there: a cut-out's lower part does not reach the ground.
+  glm::vec3 lo, hi;
+  mesh.keptBounds(lo, hi);
   const float size = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
   if (!(size > 0.0f) || !std::isfinite(size)) return out;
   out.height = lo.y;

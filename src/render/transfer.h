@@ -145,8 +145,8 @@ struct VertexTransfer {
 // their horizon the environment shows that ground, lit as it was without the object; but the
 // object hides part of the sky from the ground next to it, which then lights the object's
 // underside less (what makes a bunny's chin and belly darker where they meet the floor). The
-// ground is the plane y = `height` of the object's frame (its lowest point: the pipeline stands
-// every object on the ground, turned only about +Y). A ray from a surface point that misses the
+// ground is the plane y = `height` of the object's frame (its lowest point, cut-outs left out
+// (Mesh::keptBounds): the pipeline stands every object on the ground, turned only about +Y). A ray from a surface point that misses the
 // object and meets the plane at g counts open(g), the ground point's (1/π) ∫ V cos θ dω past the
 // object, instead of 1: the ground's radiance scaled by the share of its light the object leaves
 // it, that share taken from a uniform sky (it does not depend on the lighting, so the pass stays

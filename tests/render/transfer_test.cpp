@@ -12,6 +12,7 @@
 #include "lighting/monte_carlo.h"
 #include "lighting/sh.h"
 #include "lighting/sources.h"
+#include "pipeline/mesh_summary.h"
 #include "render/embree_scene.h"
 #include "render/renderer.h"
 #include "test_meshes.h"
@@ -828,6 +829,21 @@ TEST(Cutouts, RaysPassWhereTheMaterialCutsTheSurfaceAway) {
       EXPECT_EQ(hit[1], open ? 0 : 1);
     }
   }
+  // The camera's packets: sixteen rays down across both halves, every other one active.
+  glm::vec3 origins[16], downs[16];
+  for (int i = 0; i < 16; ++i) {
+    origins[i] = {-0.45f + 0.06f * float(i), 2.0f, 0.1f};
+    downs[i] = down;
+  }
+  EmbreeScene::Hit found[16];
+  cut.intersect16(origins, downs, 0x5555u, found);
+  for (int i = 0; i < 16; ++i) {
+    const bool expected = i % 2 == 0 && origins[i].x > 0.0f;
+    EXPECT_EQ(found[i].found, expected) << "ray " << i << " at x = " << origins[i].x;
+    if (expected) {
+      EXPECT_NEAR(found[i].distance, 1.5f, 1e-4f);
+    }
+  }
   // The shadows see the holes: a floor point under the open half sees more sky.
   SurfacePoints floor;
   floor.size = 1.0f;
@@ -871,6 +887,76 @@ TEST(Cutouts, RaysPassWhereTheMaterialCutsTheSurfaceAway) {
   Mesh other = roof;
   other.textures[0].alpha.pixels = {1.0f, 0.0f};
   EXPECT_NE(meshHash(roof), meshHash(other));
+}
+
+// An upright card (x in [-0.5, 0.5], y in [0, 1]) whose alpha texture has eight rows, the lowest
+// `clear` of them transparent: bilinear alpha crosses the cutoff (0.5) half a texel above them.
+Mesh cutCard(int clear) {
+  Mesh m;
+  for (const glm::vec2 c : {glm::vec2(-0.5f, 0.0f), glm::vec2(0.5f, 0.0f), glm::vec2(0.5f, 1.0f),
+                            glm::vec2(-0.5f, 1.0f)}) {
+    m.positions.emplace_back(c.x, c.y, 0.0f);
+    m.normals.emplace_back(0.0f, 0.0f, 1.0f);
+    m.texcoords.emplace_back(c.x + 0.5f, c.y);  // v up: row 7 of the image is the bottom
+  }
+  m.indices = {0, 1, 2, 0, 2, 3};
+  m.normalsFromFile = true;
+  Texture t;
+  t.image = Image(1, 8, 3, {"R", "G", "B"});
+  t.alpha = Image(1, 8, 1, {"A"});
+  for (int row = 0; row < 8; ++row) t.alpha.pixels[size_t(row)] = row >= 8 - clear ? 0.0f : 1.0f;
+  t.wrapU = t.wrapV = Texture::Wrap::Clamp;
+  m.textures.push_back(std::move(t));
+  Material mat;
+  mat.texture = 0;
+  mat.alphaCutoff = 0.5f;
+  m.materials.push_back(mat);
+  return m;
+}
+
+TEST(Cutouts, TheObjectStandsOnWhatItsCutoutsKeep) {
+  // The lowest quarter cut away: what is kept starts at y = 0.25 (alpha 0.5 there, at the
+  // cutoff: kept). Tested on a grid of 16 steps up the card (two per texel).
+  // The grid points are drawn a tenth of a step (1/160) towards each triangle's centre.
+  const Mesh card = cutCard(2);
+  glm::vec3 lo, hi;
+  card.keptBounds(lo, hi);
+  EXPECT_NEAR(lo.y, 0.25f, 0.005f);
+  EXPECT_NEAR(hi.y, 1.0f, 0.005f);
+  EXPECT_NEAR(lo.x, -0.5f, 0.005f);
+  EXPECT_NEAR(hi.x, 0.5f, 0.005f);
+  // A repeating texture: on the card's bottom edge itself bilinear alpha mixes the transparent
+  // bottom row with the opaque top row (0.5, at the cutoff); the edge is no more kept than
+  // anything around it.
+  Mesh repeating = cutCard(2);
+  repeating.textures[0].wrapU = repeating.textures[0].wrapV = Texture::Wrap::Repeat;
+  repeating.keptBounds(lo, hi);
+  EXPECT_NEAR(lo.y, 0.25f, 0.005f);
+  EXPECT_EQ(card.boundsMin().y, 0.0f);  // the whole mesh's bounds are unchanged
+  // Three rows cut: the kept bottom between grid points is found to the next one up.
+  const Mesh higher = cutCard(3);
+  higher.keptBounds(lo, hi);
+  EXPECT_GE(lo.y, 0.375f - 1e-4f);
+  EXPECT_LE(lo.y, 0.375f + 1.0f / 16.0f + 0.005f);
+  // A budget too small for two points a texel: coarser grids, never below what is kept.
+  card.keptBounds(lo, hi, 60);
+  EXPECT_GE(lo.y, 0.25f - 1e-4f);
+  EXPECT_LE(lo.y, 0.25f + 0.25f);
+  // Nothing cut: the mesh's own bounds; everything cut: the same (nothing is drawn).
+  Mesh opaque = card;
+  opaque.materials[0].alphaCutoff = -1.0f;
+  opaque.keptBounds(lo, hi);
+  EXPECT_EQ(lo, opaque.boundsMin());
+  EXPECT_EQ(hi, opaque.boundsMax());
+  const Mesh gone = cutCard(8);
+  gone.keptBounds(lo, hi);
+  EXPECT_EQ(lo, gone.boundsMin());
+  // The ground beneath lies at the kept bottom, and the placement stands the card there.
+  const EmbreeScene scene(card);
+  EXPECT_NEAR(groundContact(card, scene).height, 0.25f, 0.005f);
+  const pipeline::MeshSummary summary = pipeline::summarize(card, 60.0);
+  EXPECT_NEAR(summary.boundsMin.y, 0.25f, 0.005f);
+  EXPECT_NEAR(summary.boundsMax.y, 1.0f, 0.005f);
 }
 
 TEST(Transfer, ParametersAreValidated) {
