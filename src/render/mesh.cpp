@@ -147,7 +147,7 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
   // Per cut-out triangle, the steps of its test grid: about two per texel of its alpha along
   // its longest edge in texture space (one when only the material's own alpha cuts it).
   const size_t triangles = triangleCount();
-  std::vector<int> steps(triangles, 0);
+  std::vector<uint16_t> steps(triangles, 0);
   double points = 0.0;
   for (size_t t = 0; t < triangles; ++t) {
     const Material& mat = materialOf(*this, uint32_t(t));
@@ -165,7 +165,7 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
       }
       n = std::isfinite(longest) ? int(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0)) : 1;
     }
-    steps[t] = n;
+    steps[t] = uint16_t(n);
     points += 0.5 * double(n + 1) * double(n + 2);
   }
   // Over the budget: every grid coarsened by the same factor.

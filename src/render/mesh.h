@@ -132,8 +132,9 @@ struct Mesh {
   bool cutAway(uint32_t triangle, float u, float v) const;
   // The bounds of the surface that is there: boundsMin/Max, but with cut-outs those of what they
   // keep, each cut-out triangle tested on a grid of about two points per texel of its alpha
-  // along its longest edge (at most about `budget` points in all; a point cut away between two
-  // grid points is not seen). The object stands on, and is sized by, these bounds.
+  // along its longest edge (grids coarsened to keep to about `budget` points in all, but never
+  // below a triangle's corners; what is kept between grid points is not seen). The object stands
+  // on, and is sized by, these bounds.
   void keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget = 1u << 20) const;
 };
 
