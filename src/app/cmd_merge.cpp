@@ -79,7 +79,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       "Merge a bracket of exposures (8-bit JPEGs, 16-bit TIFFs, ...) into scene-linear radiance "
       "in the working colour space, written as float OpenEXR with a 'clipped' mask channel.\n"
       "The camera's response is recovered with OpenCV and kept per camera (Make/Model) in "
-      "$COMPOSE_RESPONSE_DIR, else ~/.cache/compose/responses; later merges reuse it.\n\n"
+      "$COMPOSE_RESPONSE_DIR, else $XDG_CACHE_HOME/compose/responses, else "
+      "~/.cache/compose/responses (--response-dir); later merges reuse it.\n\n"
       "Examples:\n  compose merge --out hdr.exr IMG_0101.jpg IMG_0102.jpg IMG_0103.jpg\n"
       "  compose merge --out hdr.exr --exposures 0.25,1,4 --align a.jpg b.jpg c.jpg\n"
       "  compose merge --capture capture.json --out merged/     # every view, one exposure scale");

@@ -173,7 +173,10 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--lighting-file", *lightingFile, "Lighting file (compose precompute)")
       ->required();
   cmd.add_option("--out", *out, "Object layer to write (OpenEXR)")->required();
-  addCompressionOption(cmd, *compression);
+  addCompressionOption(cmd, *compression)
+      ->description(
+          "OpenEXR compression of the layer, lossless (compose composite reads its numbers "
+          "back): none, rle, zips, zip, piz (zip:0..9, zips:0..9)");
   return [o, out, lightingFile, compression, &cmd, &globals]() -> int {
     o->apply(cmd);
     requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
