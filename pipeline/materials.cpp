@@ -17,21 +17,31 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     const glm::vec3& c = mesh.materials[i].baseColor;
     std::copy_n(&c.x, 3, base.pixels.data() + 3 * i);
   }
+  // Base colours and vertex colours are linear in the mesh's colour space.
   std::string baseRead;
-  if (colors.has(mesh.colorSpace)) {
-    base.colorSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
-    baseRead = "'" + base.colorSpace + "'";
-    colors.convert(base, working);
-  } else if (mesh.colorSpace == "lin_rec709" && colors.chromaticities(working)) {
-    colors.convertFromChromaticities(base, color::kRec709Chromaticities, working);
-    baseRead = "linear Rec.709 (by its primaries)";
-  } else {
-    baseRead = "the working space's own (the config knows neither '" + mesh.colorSpace +
-               "' nor the working space's primaries)";
-  }
+  auto toWorking = [&](Image& row) {
+    if (colors.has(mesh.colorSpace)) {
+      row.colorSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
+      baseRead = "'" + row.colorSpace + "'";
+      colors.convert(row, working);
+    } else if (mesh.colorSpace == "lin_rec709" && colors.chromaticities(working)) {
+      colors.convertFromChromaticities(row, color::kRec709Chromaticities, working);
+      baseRead = "linear Rec.709 (by its primaries)";
+    } else {
+      baseRead = "the working space's own (the config knows neither '" + mesh.colorSpace +
+                 "' nor the working space's primaries)";
+    }
+  };
+  toWorking(base);
   for (size_t i = 0; i < mesh.materials.size(); ++i) {
     const float* p = base.pixels.data() + 3 * i;
     mesh.materials[i].baseColor = glm::vec3(p[0], p[1], p[2]);
+  }
+  if (!mesh.colors.empty()) {
+    Image row(int(mesh.colors.size()), 1, 3, {"R", "G", "B"});
+    std::copy_n(&mesh.colors[0].x, 3 * mesh.colors.size(), row.pixels.data());
+    toWorking(row);
+    std::copy_n(row.pixels.data(), 3 * mesh.colors.size(), &mesh.colors[0].x);
   }
   mesh.colorSpace = working;
 
@@ -50,7 +60,9 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     colors.convert(texture.image, working);
   }
   std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
-                     (mesh.materials.size() == 1 ? "" : "s") + ", base colours read as " + baseRead;
+                     (mesh.materials.size() == 1 ? "" : "s") +
+                     (mesh.colors.empty() ? "" : " and vertex colours") +
+                     ", base colours read as " + baseRead;
   if (!textureSpaces.empty()) {
     std::string read;
     for (const auto& [space, n] : textureSpaces)

@@ -45,6 +45,10 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
   h.number(creaseDegrees);
   if (!mesh.texcoords.empty())
     h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
+  if (!mesh.colors.empty()) {
+    h.bytes("colours");
+    h.floats(std::span<const float>(&mesh.colors[0].x, 3 * mesh.colors.size()));
+  }
   for (uint32_t m : mesh.triangleMaterial) h.word(m);
   for (const render::Material& m : mesh.materials) {
     h.floats(std::span<const float>(&m.baseColor.x, 3));

@@ -129,11 +129,18 @@ bool Mesh::cutAway(uint32_t triangle, float u, float v) const {
 
 glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
   const Material& mat = materialOf(*this, triangle);
-  if (mat.texture < 0 || texcoords.empty()) return mat.baseColor;
-  const Texture& tex = textures[size_t(mat.texture)];
-  glm::vec2 uv;
-  if (tex.image.empty() || !materialUv(*this, mat, triangle, u, v, uv)) return mat.baseColor;
-  return mat.baseColor * bilinear(tex, tex.image, uv);
+  glm::vec3 albedo = mat.baseColor;
+  if (mat.texture >= 0 && !texcoords.empty()) {
+    const Texture& tex = textures[size_t(mat.texture)];
+    glm::vec2 uv;
+    if (!tex.image.empty() && materialUv(*this, mat, triangle, u, v, uv))
+      albedo *= bilinear(tex, tex.image, uv);
+  }
+  if (!colors.empty()) {
+    const uint32_t* c = &indices[3 * size_t(triangle)];
+    albedo *= (1.0f - u - v) * colors[c[0]] + u * colors[c[1]] + v * colors[c[2]];
+  }
+  return albedo;
 }
 
 void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
@@ -408,6 +415,7 @@ NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
     if (inserted) {
       mesh.positions.push_back(mesh.positions[v]);
       if (!mesh.texcoords.empty()) mesh.texcoords.push_back(mesh.texcoords[v]);
+      if (!mesh.colors.empty()) mesh.colors.push_back(mesh.colors[v]);
       mesh.normals.push_back(fanNormal(root, c));
       fromFile.push_back(0);
       ++stats.added;
@@ -446,12 +454,14 @@ void dropUnusedVertices(detail::LoadedMesh& loaded) {
     mesh.positions[next] = mesh.positions[v];
     if (v < mesh.normals.size()) mesh.normals[next] = mesh.normals[v];
     if (!mesh.texcoords.empty()) mesh.texcoords[next] = mesh.texcoords[v];
+    if (!mesh.colors.empty()) mesh.colors[next] = mesh.colors[v];
     if (!loaded.hasNormal.empty()) loaded.hasNormal[next] = loaded.hasNormal[v];
     ++next;
   }
   mesh.positions.resize(next);
   if (mesh.normals.size() > next) mesh.normals.resize(next);
   if (!mesh.texcoords.empty()) mesh.texcoords.resize(next);
+  if (!mesh.colors.empty()) mesh.colors.resize(next);
   if (!loaded.hasNormal.empty()) loaded.hasNormal.resize(next);
   for (uint32_t& i : mesh.indices) i = remap[i];
 }
@@ -573,6 +583,7 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
   COMPOSE_CHECK(mesh.triangleMaterial.empty() ||
                 mesh.triangleMaterial.size() == mesh.triangleCount());
   COMPOSE_CHECK(mesh.texcoords.empty() || mesh.texcoords.size() == mesh.positions.size());
+  COMPOSE_CHECK(mesh.colors.empty() || mesh.colors.size() == mesh.positions.size());
   loaded.hasNormal.resize(mesh.positions.size(), 0);
   mesh.normals.resize(mesh.positions.size(), glm::vec3(0.0f));
 
@@ -653,6 +664,13 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
                             " added where sharper edges meet)";
     }
     if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
+  }
+  if (!mesh.colors.empty() && mesh.materials.empty()) {
+    // The colours alone give the albedo.
+    Material white;
+    white.name = "vertex colours";
+    mesh.materials.push_back(white);
+    mesh.triangleMaterial.assign(mesh.triangleCount(), 0u);
   }
   if (mesh.materials.empty()) {
     mesh.triangleMaterial.clear();

@@ -110,6 +110,10 @@ struct Mesh {
 
   // Materials: empty when the file has none (the renderer then uses --albedo everywhere).
   std::vector<glm::vec2> texcoords;        // one per position, or empty
+  // Vertex colours (glTF's COLOR_0, OBJ's `v x y z r g b`), linear in `colorSpace`, one per
+  // position or empty: they multiply the material's albedo. A mesh with colours and no
+  // materials gets one white material, so that its colours are its albedo.
+  std::vector<glm::vec3> colors;
   std::vector<uint32_t> triangleMaterial;  // one per triangle, or empty (all material 0)
   std::vector<Material> materials;
   std::vector<Texture> textures;
@@ -122,8 +126,8 @@ struct Mesh {
   glm::vec3 boundsMax() const;
   bool hasMaterials() const { return !materials.empty(); }
   // The albedo at barycentrics (u, v) of `triangle` (Embree's: u for corner 1, v for corner 2):
-  // its material's base colour times its texture at the interpolated texture coordinates. Only
-  // meaningful when hasMaterials().
+  // its material's base colour times its texture at the interpolated texture coordinates, times
+  // the interpolated vertex colour. Only meaningful when hasMaterials().
   glm::vec3 albedoAt(uint32_t triangle, float u, float v) const;
   // Some material is a cut-out (Material::cutOut()).
   bool hasCutouts() const;

@@ -174,7 +174,8 @@ class GltfReader {
   std::map<int, int> textures_;        // glTF texture → Mesh::textures (-1: unreadable)
   std::vector<int> texCoordSet_;       // per Mesh material: the TEXCOORD set its texture uses
   size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
-  size_t colours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0, missingMaterials_ = 0;
+  size_t colours_ = 0, clampedColours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0,
+         missingMaterials_ = 0;
   bool noMaterial_ = false, someMaterial_ = false;
   std::vector<glm::dvec3> exact_;  // the positions in double, before rounding (recentre())
 };
@@ -565,7 +566,34 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
       ++missingTexcoords_;
     }
   }
-  if (attribute("COLOR_0") >= 0) ++colours_;
+  // COLOR_0 (linear RGB or RGBA, float or normalised integers) multiplies the base colour; its
+  // alpha is not read. A colour outside 0..1 or not finite is clamped and counted.
+  std::vector<double> colours;
+  if (const int a = attribute("COLOR_0"); a >= 0) {
+    const bool rgba = size_t(a) < model_.accessors.size() &&
+                      componentCount(model_.accessors[size_t(a)].type) == 4;
+    const int components = rgba ? 4 : 3;
+    colours = accessor(a, components, "COLOR_0");
+    if (colours.size() != size_t(components) * n)
+      throw PrimitiveError{"COLOR_0 and POSITION have different counts"};
+    const tinygltf::Accessor& acc = model_.accessors[size_t(a)];
+    // Integers must be normalised (glTF 2.0 §3.7.2.1): one that is not says so in range anyway.
+    double scale = 1.0;
+    if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE)
+      scale = 255.0;
+    if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT)
+      scale = 65535.0;
+    std::vector<double> rgb(3 * n);
+    for (size_t i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const double e = colours[i * size_t(components) + size_t(c)] / scale;
+        const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
+        if (inRange != e) ++clampedColours_;
+        rgb[3 * i + size_t(c)] = inRange;
+      }
+    colours = std::move(rgb);
+    ++colours_;
+  }
   if (!primitive.targets.empty()) ++morphs_;
 
   std::vector<uint32_t> order;
@@ -611,6 +639,10 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
     mesh_.texcoords.emplace_back(
         texcoords.empty() ? glm::vec2(0.0f)
                           : glm::vec2(float(texcoords[2 * i]), float(1.0 - texcoords[2 * i + 1])));
+    mesh_.colors.push_back(colours.empty()
+                               ? glm::vec3(1.0f)
+                               : glm::vec3(float(colours[3 * i]), float(colours[3 * i + 1]),
+                                           float(colours[3 * i + 2])));
   }
   for (size_t t = 0; t + 2 < corners.size(); t += 3) {
     uint32_t c[3] = {corners[t], corners[t + 1], corners[t + 2]};
@@ -743,10 +775,10 @@ void GltfReader::read() {
       mesh_.warnings.push_back(line);
     }
   }
-  if (colours_) {
-    mesh_.warnings.push_back("ignored the vertex colours (COLOR_0) of " +
-                             count(colours_, "primitive", "primitives") +
-                             ": the albedo is the material's base colour");
+  if (colours_ == 0) mesh_.colors.clear();  // white everywhere: nothing to multiply
+  if (clampedColours_ > 0) {
+    mesh_.warnings.push_back(count(clampedColours_, "COLOR_0 component", "COLOR_0 components") +
+                             " outside 0..1 (or not finite) clamped");
   }
   if (morphs_) {
     mesh_.warnings.push_back("ignored the morph targets of " +

@@ -242,10 +242,25 @@ LoadedMesh loadObj(const fs::path& path) {
   Mesh& mesh = loaded.mesh;
   for (const std::string& w : libraries.unreadable)
     mesh.warnings.push_back(w + ": its materials render with the default albedo");
-  if (!attrib.colors.empty()) {
-    mesh.warnings.push_back("ignored the vertex colours (v x y z r g b) of " +
-                            count(attrib.colors.size() / 3, "vertex", "vertices") +
-                            ": the albedo is the material's colour (or --albedo)");
+  // Vertex colours (`v x y z r g b`, as MeshLab and Blender write them: sRGB-encoded, 0..1),
+  // decoded to linear; a colour outside 0..1 or not finite is clamped and counted.
+  std::vector<glm::vec3> colours;
+  if (!attrib.colors.empty() && attrib.colors.size() == attrib.vertices.size()) {
+    colours.resize(vertexCount);
+    size_t clamped = 0;
+    for (size_t v = 0; v < vertexCount; ++v) {
+      for (int c = 0; c < 3; ++c) {
+        const double e = double(attrib.colors[3 * v + size_t(c)]);
+        const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
+        if (inRange != e) ++clamped;
+        colours[v][c] =
+            float(inRange <= 0.04045 ? inRange / 12.92 : std::pow((inRange + 0.055) / 1.055, 2.4));
+      }
+    }
+    if (clamped > 0)
+      mesh.warnings.push_back(
+          count(clamped, "vertex colour component", "vertex colour components") +
+          " outside 0..1 (or not finite) clamped");
   }
   mesh.otherFiles = libraries.looked;
 
@@ -301,6 +316,7 @@ LoadedMesh loadObj(const fs::path& path) {
         mesh.normals.emplace_back(0.0f);
       }
       loaded.hasNormal.push_back(key.vn >= 0 ? 1 : 0);
+      if (!colours.empty()) mesh.colors.push_back(colours[size_t(key.v)]);
       if (key.vt >= 0) {
         const tinyobj::real_t* t = &attrib.texcoords[2 * size_t(key.vt)];
         mesh.texcoords.emplace_back(float(t[0]), float(t[1]));

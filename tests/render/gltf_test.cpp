@@ -692,15 +692,57 @@ TEST(Gltf, NormalsVertexColoursAndPrimitivesWithoutMaterial) {
   writeText(dir / "colours.gltf", b.gltf());
   const Mesh mesh = loadMesh(dir / "colours.gltf");
   const std::vector<std::string> expected = {
-      "ignored the vertex colours (COLOR_0) of 1 primitive: the albedo is the material's base "
-      "colour",
       "some primitives have no material: rendered with the default albedo"};
   EXPECT_EQ(mesh.warnings, expected);
   ASSERT_EQ(mesh.materials.size(), 2u);
   EXPECT_EQ(mesh.materials[1].baseColor, glm::vec3(kDefaultAlbedo));
+  // COLOR_0 multiplies the base colour (red x red, red x green); the primitive without it is
+  // white there (the default grey material alone).
+  ASSERT_EQ(mesh.colors.size(), mesh.positions.size());
+  for (uint32_t t = 0; t < mesh.triangleCount(); ++t) {
+    const glm::vec3 at0 = mesh.albedoAt(t, 0.0f, 0.0f);
+    if (mesh.triangleMaterial[t] == 1) {
+      EXPECT_EQ(at0, glm::vec3(kDefaultAlbedo));
+      continue;
+    }
+    const glm::vec3 colour = mesh.colors[mesh.indices[3 * t]];
+    EXPECT_EQ(at0, glm::vec3(1, 0, 0) * colour);
+  }
   EXPECT_FALSE(mesh.normalsFromFile);
   EXPECT_NE(mesh.normalsSource.find("from the file for 3 of 6 vertices"), std::string::npos);
   for (const glm::vec3& n : mesh.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
+}
+
+// COLOR_0 as normalised unsigned bytes in RGBA (alpha not read), with no material: the colours
+// are the albedo (glTF's default material is white). Components that are not finite are clamped
+// and counted.
+TEST(Gltf, VertexColoursAsNormalisedBytesWithoutAMaterial) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int col = b.accessor(std::vector<uint8_t>{255, 0, 0, 10, 0, 51, 0, 255, 0, 0, 255, 128},
+                             5121, "VEC4", 3, true);
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "bytes.gltf", b.gltf());
+  const Mesh mesh = loadMesh(dir / "bytes.gltf");
+  EXPECT_TRUE(mesh.warnings.empty()) << mesh.warnings[0];
+  ASSERT_TRUE(mesh.hasMaterials());
+  ASSERT_EQ(mesh.colors.size(), 3u);
+  const glm::vec3 want[3] = {{1, 0, 0}, {0, 0.2f, 0}, {0, 0, 1}};
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t v = mesh.indices[size_t(k)];
+    const glm::vec3 p = mesh.positions[v];
+    const int file = p.x > 0.5f ? 1 : p.y > 0.5f ? 2 : 0;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(mesh.colors[v][c], want[file][c], 1e-6f);
+  }
+  const int nan = b.vec3({std::numeric_limits<float>::quiet_NaN(), 0, 0, 2, 0, 0, 0, 0, 1});
+  GltfBuilder c = b;
+  c.json["meshes"][size_t(m)]["primitives"][0]["attributes"]["COLOR_0"] = nan;
+  writeText(dir / "nan.gltf", c.gltf());
+  const Mesh clamped = loadMesh(dir / "nan.gltf");
+  EXPECT_EQ(clamped.warnings,
+            std::vector<std::string>{"2 COLOR_0 components outside 0..1 (or not finite) clamped"});
 }
 
 // A primitive naming a material the file lacks is said once, as such: not also as a primitive

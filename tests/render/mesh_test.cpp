@@ -436,18 +436,55 @@ TEST(Mesh, ATwoSidedCardSaysItsBackMaterialIsLost) {
 }
 
 // Vertex colours (v x y z r g b) are not the albedo: a note says they were ignored.
-TEST(Mesh, ObjVertexColoursAreSaidToBeIgnored) {
+// OBJ vertex colours (v x y z r g b, sRGB-encoded as MeshLab and Blender write them) are decoded
+// to linear and multiply the albedo; without materials they are the albedo (a white material).
+TEST(Mesh, ObjVertexColoursAreTheAlbedo) {
   TempDir dir;
-  writeText(dir / "c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
+  writeText(dir / "c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 0.5\nf 1 2 3\n");
   const Mesh m = loadMesh(dir / "c.obj");
   ASSERT_EQ(m.triangleCount(), 1u);
-  bool said = false;
-  for (const std::string& w : m.warnings)
-    said = said || w.find("ignored the vertex colours (v x y z r g b) of 3 vertices") == 0;
-  EXPECT_TRUE(said) << (m.warnings.empty() ? "no warning" : m.warnings[0]);
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  ASSERT_TRUE(m.hasMaterials());
+  ASSERT_EQ(m.colors.size(), 3u);
+  EXPECT_EQ(m.materials[0].baseColor, glm::vec3(1.0f));
+  const float half = std::pow((0.5f + 0.055f) / 1.055f, 2.4f);  // sRGB 0.5 in linear light
+  // At each corner its own colour (corner 0 at barycentrics (0, 0), 1 at u = 1, 2 at v = 1).
+  const glm::vec3 corner[3] = {m.albedoAt(0, 0, 0), m.albedoAt(0, 1, 0), m.albedoAt(0, 0, 1)};
+  const glm::vec3 expected[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, half}};
+  for (int c = 0; c < 3; ++c) {
+    const uint32_t v = m.indices[size_t(c)];
+    const glm::vec3 p = m.positions[v];
+    const int file = p.x > 0.5f ? 1 : p.y > 0.5f ? 2 : 0;  // the file's vertex at this corner
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(corner[c][k], expected[file][k], 1e-6f) << c;
+  }
+  // Halfway along an edge: the mean of its corners' linear colours.
+  const glm::vec3 mid = m.albedoAt(0, 0.5f, 0.0f);
+  const glm::vec3 a = m.colors[m.indices[0]], b = m.colors[m.indices[1]];
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(mid[k], 0.5f * (a[k] + b[k]), 1e-6f);
+  // Out of range: clamped and counted; a plain file has neither colours nor materials.
+  writeText(dir / "over.obj", "v 0 0 0 1.5 0 0\nv 1 0 0 0 -1 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
+  const Mesh over = loadMesh(dir / "over.obj");
+  ASSERT_EQ(over.warnings.size(), 1u);
+  EXPECT_EQ(over.warnings[0], "2 vertex colour components outside 0..1 (or not finite) clamped");
   writeText(dir / "plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-  for (const std::string& w : loadMesh(dir / "plain.obj").warnings)
-    EXPECT_EQ(w.find("vertex colours"), std::string::npos) << w;
+  const Mesh plain = loadMesh(dir / "plain.obj");
+  EXPECT_TRUE(plain.colors.empty());
+  EXPECT_FALSE(plain.hasMaterials());
+  // With a material: its Kd times the colours; the colours follow vertices split at creases.
+  writeText(dir / "m.mtl", "newmtl grey\nKd 0.5 0.5 0.5\n");
+  writeText(dir / "box.obj",
+            "mtllib m.mtl\nusemtl grey\n"
+            "v 0 0 0 1 0 0\nv 1 0 0 1 0 0\nv 1 1 0 1 0 0\nv 0 1 0 1 0 0\n"
+            "v 0 0 1 0 1 0\nv 1 0 1 0 1 0\nv 1 1 1 0 1 0\nv 0 1 1 0 1 0\n"
+            "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n");
+  const Mesh box = loadMesh(dir / "box.obj");
+  ASSERT_EQ(box.colors.size(), box.positions.size());
+  EXPECT_GT(box.positions.size(), 8u);  // split at the 90° edges
+  for (size_t v = 0; v < box.positions.size(); ++v) {
+    const glm::vec3 want = box.positions[v].z < 0.5f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0);
+    EXPECT_EQ(box.colors[v], want) << v;
+  }
+  EXPECT_NEAR(box.albedoAt(0, 0.0f, 0.0f).x, 0.5f * box.colors[box.indices[0]].x, 1e-6f);
 }
 
 TEST(Mesh, MissingMaterialLibrariesAndTexturesAreWarningsNamingThem) {
