@@ -96,8 +96,9 @@ std::string Board::name() const {
 }
 
 void Board::validate() const {
-  if (columns < 2 || rows < 2 || columns > 100 || rows > 100)
-    throw Error(kStage, "a chessboard needs 2 to 100 inner corners each way, got " + name());
+  // OpenCV's detector needs more than two inner corners each way.
+  if (columns < 3 || rows < 3 || columns > 100 || rows > 100)
+    throw Error(kStage, "a chessboard needs 3 to 100 inner corners each way, got " + name());
   if (!(square > 0.0) || !std::isfinite(square))
     throw Error(kStage, "the chessboard's square size must be positive");
 }

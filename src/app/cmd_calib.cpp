@@ -64,6 +64,11 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
   pose->add_option("--out", o->poseOut, "Pose file (JSON)")->required();
 
   return [o, lens, &globals]() -> int {
+    const std::string out = (lens->parsed() ? o->lensOut : o->poseOut).string();
+    if (ingest::lowerExtension(out) != ".json")
+      throw UsageError("--out must name a JSON file (.json): the " +
+                       std::string(lens->parsed() ? "lens" : "pose") + " file is JSON ('" + out +
+                       "' is not one)");
     if (lens->parsed()) {
       calib::Board board;
       calib::CalibrationParams params;

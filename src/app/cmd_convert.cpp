@@ -7,6 +7,7 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "cubemap/environment_io.h"
 #include "cubemap/mirror_ball.h"
@@ -110,12 +111,23 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                          o->from + "'");
       }
     }
-    const bool sizeGiven = o->sizeOption->count() > 0, widthGiven = o->widthOption->count() > 0;
+    const bool sizeGiven = o->sizeOption->count() > 0;
+    bool widthGiven = o->widthOption->count() > 0;
     if (sizeGiven && (o->size < 1 || o->size > 16384))
       throw UsageError("--size must be 1..16384 texels; got " + std::to_string(o->size));
     if (widthGiven && (o->width < 2 || o->width > 65536 || o->width % 2 != 0)) {
       throw UsageError("--width must be an even number of texels, 2..65536; got " +
                        std::to_string(o->width));
+    }
+    // --width is a lat-long's; --size a cube's faces, or for a lat-long 4 x size wide.
+    if (widthGiven && *to != Layout::LatLong)
+      throw UsageError("--width is the width of a lat-long output; the faces of --to " + o->to +
+                       " take --size");
+    if (*to == Layout::LatLong && sizeGiven) {
+      if (widthGiven)
+        throw UsageError("--size and --width both set the lat-long's width: give one of them");
+      o->width = 4 * o->size;  // at most 65536, as --width
+      widthGiven = true;
     }
     // The size asked for is held to the pixel limit like an input's (a 40000-wide lat-long is
     // 800 megapixels, 13 GB of float RGBA with its working copies).
@@ -297,6 +309,20 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       }
     }
     if (sanitized.negativeTexels > 0) notes.push_back(sanitized.negativeNote(""));
+    // Negative texels are kept (out-of-gamut colours, ringing of a resampling), but light that
+    // sums to less than nothing is no environment.
+    for (int c = 0; c < 3; ++c) {
+      if (!(energyIn[c] < 0.0)) continue;
+      throw Error("ingest",
+                  std::string("the environment's ") +
+                      (c == 0   ? "red"
+                       : c == 1 ? "green"
+                                : "blue") +
+                      " radiance sums to " + numberText(energyIn[c]) +
+                      " over the sphere: its negative texels outweigh its light, which no "
+                      "environment does",
+                  inputs.front());
+    }
 
     // Convert.
     OutputFiles outputs("output");

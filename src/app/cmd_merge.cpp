@@ -66,6 +66,12 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
                     [&](const ingest::Shot& s) { return s.info.orientation == turn; });
     if (same && turn != 1) a.push_back({"compose:sensorOrientation", turn});
   }
+  // The lens of the view's photos (focal length, its 35 mm equivalent, the focal plane's
+  // resolution): stitch finds its intrinsics in the merged view as in the photos.
+  if (source && !source->shots.empty()) {
+    for (ingest::ImageAttribute& e : ingest::exifAttributes(source->shots.front().info))
+      if (e.name.rfind("Exif:Focal", 0) == 0) a.push_back(std::move(e));
+  }
   if (!capture.cameraMake.empty()) a.push_back({"Make", capture.cameraMake});
   if (!capture.cameraModel.empty()) a.push_back({"Model", capture.cameraModel});
   return a;

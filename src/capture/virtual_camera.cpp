@@ -18,6 +18,7 @@
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/capture.h"
+#include "ingest/exif.h"
 
 namespace compose::capture {
 
@@ -554,6 +555,10 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
         w.depth = ingest::WriteOptions::Depth::UInt16;
         Image linear = s.linear16;
         linear.colorSpace = options.linearSpace;
+        // A TIFF names no colour space of its own: an ICC profile of linear light says that its
+        // codes are not sRGB-encoded (to compose, and to other readers).
+        const std::vector<unsigned char> profile = ingest::exif::linearRec709Profile();
+        w.attributes.push_back({"ICCProfile", std::string(profile.begin(), profile.end())});
         ingest::writeImage(outputs, dst, linear, w);
         files.photos.push_back(dst);
         tv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.linearSpace});

@@ -132,18 +132,35 @@ std::vector<fs::path> facesInFolder(const fs::path& folder) {
 std::vector<fs::path> facesOfPattern(const fs::path& pattern) {
   const std::string text = pattern.string();
   const size_t at = text.find('%');
+  if (text.find('%', at + 1) != std::string::npos)
+    throw Error("ingest", "a face pattern holds one '%' (it stands for px, nx, ...)", pattern);
   std::string tried;
+  // The naming family with the most of its files there, for saying which face is missing.
+  std::vector<fs::path> nearest;
+  int nearestCount = 0;
   for (int family = 0; family < 6; ++family) {
     for (const char* like : {"px", "PX"}) {
       std::vector<fs::path> files;
       for (int f = 0; f < kCubeFaces; ++f)
         files.push_back(text.substr(0, at) + faceNameIn(family, f, like) + text.substr(at + 1));
       std::error_code ec;
-      const bool all = std::all_of(files.begin(), files.end(),
-                                   [&](const fs::path& p) { return fs::is_regular_file(p, ec); });
-      if (all) return files;
+      const int present = int(std::count_if(files.begin(), files.end(), [&](const fs::path& p) {
+        return fs::is_regular_file(p, ec);
+      }));
+      if (present == kCubeFaces) return files;
+      if (present > nearestCount) nearestCount = present, nearest = files;
       tried += (tried.empty() ? "" : ", ") + files.front().filename().string();
     }
+  }
+  if (nearestCount > 0) {
+    std::error_code ec;
+    for (int f = 0; f < kCubeFaces; ++f)
+      if (!fs::is_regular_file(nearest[size_t(f)], ec))
+        throw Error("ingest",
+                    std::string("missing cube face ") + lighting::faceName(f) + ": expected " +
+                        nearest[size_t(f)].filename().string() + " beside the pattern's " +
+                        std::to_string(nearestCount) + " other faces",
+                    pattern);
   }
   throw Error("ingest", "no six face files match the pattern (tried " + tried + ", ...)", pattern);
 }
@@ -247,8 +264,12 @@ void writeAny(const fs::path& temporary, const fs::path& destination, const Imag
                     above, double(most), destination.filename().c_str());
       notes.push_back(line);
     } else if (most > 1.0f) {
+      // Said in the file's own encoding (the caller has encoded linear light for it).
+      const std::string in =
+          rgb.colorSpace.empty() ? std::string() : " (in '" + rgb.colorSpace + "', as written)";
       throw Error("output",
-                  "the environment holds values up to " + numberText(most) + ", which a " + ext +
+                  "the environment holds values up to " + numberText(most) + in + ", which a " +
+                      ext +
                       " file of 8- or 16-bit codes would clip to 1: write OpenEXR (.exr) or "
                       "Radiance (.hdr)",
                   destination);
@@ -559,6 +580,8 @@ std::array<fs::path, kCubeFaces> facePaths(const fs::path& path, int faceNaming)
   std::array<fs::path, kCubeFaces> out;
   const std::string text = path.string();
   const size_t at = text.find('%');
+  if (at != std::string::npos && text.find('%', at + 1) != std::string::npos)
+    throw Error("output", "a face pattern holds one '%' (it stands for px, nx, ...)", path);
   for (int f = 0; f < kCubeFaces; ++f) {
     const std::string token = faceNameIn(faceNaming, f, "px");
     if (at != std::string::npos) {

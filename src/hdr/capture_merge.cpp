@@ -118,7 +118,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
   // Colour space of every shot, and which views are 8-bit.
   std::vector<std::vector<std::string>> spaces(capture.views.size());
   std::vector<char> eightBit(capture.views.size(), 0);
-  std::string firstEightBitSpace;
+  std::string firstEightBitSpace, deepByRule;
   for (size_t v = 0; v < capture.views.size(); ++v) {
     const ingest::View& view = capture.views[v];
     COMPOSE_CHECK(photos[v].size() == view.shots.size());
@@ -151,11 +151,21 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                     .inputSpace(shot.file, shot.info.fileColorSpace,
                                 shot.info.colorSpaceByConvention, shot.info.integerSamples())
                     .space;
+        // Deeper integer photos (16-bit TIFF, PNG) whose file names no colour space: decoded
+        // by the config's rules, which a linear file (a raw converter's linear output) defeats.
+        if (!eightBit[v] && shot.info.integerSamples() && deepByRule.empty() &&
+            !colors.isLinearOrData(space))
+          deepByRule = "16-bit photos such as " + shot.file.filename().string() + " read as '" +
+                       space +
+                       "' by the config's rules (the files name no colour space); linear ones "
+                       "(a raw converter's linear output, compose capture-sim --tiff) need "
+                       "--input-space 'Linear Rec.709 (sRGB)' or their capture description";
       }
       spaces[v].push_back(space);
       if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;
     }
   }
+  if (!deepByRule.empty()) result.notes.push_back(deepByRule);
 
   // 8-bit codes of the 8-bit views, made once for recovery and merging.
   std::vector<std::vector<Codes8>> codes(capture.views.size());

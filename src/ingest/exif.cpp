@@ -363,4 +363,93 @@ std::string iccDescription(std::span<const unsigned char> p) {
   return {};
 }
 
+std::vector<unsigned char> linearRec709Profile() {
+  std::vector<unsigned char> out(128, 0);  // the header, filled in below
+  auto put32 = [](std::vector<unsigned char>& v, size_t at, uint32_t x) {
+    v[at] = uint8_t(x >> 24), v[at + 1] = uint8_t(x >> 16), v[at + 2] = uint8_t(x >> 8),
+    v[at + 3] = uint8_t(x);
+  };
+  auto append32 = [](std::vector<unsigned char>& v, uint32_t x) {
+    for (int s = 24; s >= 0; s -= 8) v.push_back(uint8_t(x >> s));
+  };
+  auto appendText = [](std::vector<unsigned char>& v, const char* four) {
+    v.insert(v.end(), four, four + 4);
+  };
+  auto s15 = [](double x) { return uint32_t(int32_t(std::lround(x * 65536.0))); };
+  // The tagged elements, each 4-byte aligned.
+  struct Element {
+    const char* signature;
+    std::vector<unsigned char> data;
+  };
+  std::vector<Element> elements;
+  auto xyz = [&](const char* signature, double x, double y, double z) {
+    Element e{signature, {}};
+    appendText(e.data, "XYZ ");
+    append32(e.data, 0);
+    for (double c : {x, y, z}) append32(e.data, s15(c));
+    elements.push_back(std::move(e));
+  };
+  {
+    Element e{"desc", {}};  // textDescriptionType: ASCII, then empty Unicode and ScriptCode
+    appendText(e.data, "desc");
+    append32(e.data, 0);
+    const std::string text = kLinearRec709Profile;
+    append32(e.data, uint32_t(text.size() + 1));
+    e.data.insert(e.data.end(), text.begin(), text.end());
+    e.data.push_back(0);
+    append32(e.data, 0);                         // Unicode language code
+    append32(e.data, 0);                         // Unicode count
+    e.data.insert(e.data.end(), 2 + 1 + 67, 0);  // ScriptCode code, count, 67 bytes
+    elements.push_back(std::move(e));
+  }
+  {
+    Element e{"cprt", {}};
+    appendText(e.data, "text");
+    append32(e.data, 0);
+    const std::string text = "No copyright, use freely";
+    e.data.insert(e.data.end(), text.begin(), text.end());
+    e.data.push_back(0);
+    elements.push_back(std::move(e));
+  }
+  xyz("wtpt", 0.9505, 1.0, 1.0891);  // D65, as sRGB's v2 profiles give it
+  xyz("rXYZ", 0.4361, 0.2225, 0.0139);
+  xyz("gXYZ", 0.3851, 0.7169, 0.0971);
+  xyz("bXYZ", 0.1431, 0.0606, 0.7141);
+  for (const char* trc : {"rTRC", "gTRC", "bTRC"}) {
+    Element e{trc, {}};  // curveType with no entries: the identity
+    appendText(e.data, "curv");
+    append32(e.data, 0);
+    append32(e.data, 0);
+    elements.push_back(std::move(e));
+  }
+  // The tag table, then the elements.
+  const size_t tableEnd = 128 + 4 + 12 * elements.size();
+  append32(out, uint32_t(elements.size()));
+  size_t at = tableEnd;
+  std::vector<unsigned char> body;
+  for (const Element& e : elements) {
+    appendText(out, e.signature);
+    append32(out, uint32_t(at));
+    append32(out, uint32_t(e.data.size()));
+    body.insert(body.end(), e.data.begin(), e.data.end());
+    at += e.data.size();
+    while (at % 4) body.push_back(0), ++at;
+  }
+  out.insert(out.end(), body.begin(), body.end());
+  // The header (ICC.1:2001-04, version 2.1).
+  put32(out, 0, uint32_t(out.size()));
+  put32(out, 8, 0x02100000);
+  std::memcpy(out.data() + 12, "mntrRGB XYZ ", 12);  // class, colour space, connection space
+  const uint16_t date[6] = {2026, 1, 1, 0, 0, 0};
+  for (int i = 0; i < 6; ++i)
+    out[24 + 2 * i] = uint8_t(date[i] >> 8), out[25 + 2 * i] = uint8_t(date[i]);
+  std::memcpy(out.data() + 36, "acsp", 4);
+  put32(out, 44, 1);            // flags: embedded in a file
+  put32(out, 64, 0);            // perceptual rendering intent
+  put32(out, 68, s15(0.9642));  // the connection space's illuminant, D50
+  put32(out, 72, s15(1.0));
+  put32(out, 76, s15(0.8249));
+  return out;
+}
+
 }  // namespace compose::ingest::exif

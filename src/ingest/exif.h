@@ -44,4 +44,12 @@ std::vector<unsigned char> encode(const std::vector<ImageAttribute>& attributes)
 // is malformed.
 std::string iccDescription(std::span<const unsigned char> profile);
 
+// A small ICC v2 display profile (monitor class, RGB to XYZ) for linear light with the sRGB /
+// Rec.709 primaries and D65 white (the primaries adapted to D50 by Bradford, as sRGB's own
+// profiles give them), its tone curves the identity, its description `kLinearRec709Profile`.
+// Embedded in a linear 16-bit TIFF it tells compose and other readers that the file is not
+// sRGB-encoded.
+inline constexpr const char* kLinearRec709Profile = "Linear Rec.709 (sRGB primaries)";
+std::vector<unsigned char> linearRec709Profile();
+
 }  // namespace compose::ingest::exif

@@ -186,7 +186,12 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
     std::string lower = info.iccProfile;
     std::transform(lower.begin(), lower.end(), lower.begin(),
                    [](unsigned char c) { return std::tolower(c); });
-    if (lower.find("p3") != std::string::npos) {
+    const bool linear = lower.find("linear") != std::string::npos ||
+                        lower.find("g10") != std::string::npos;  // as "sRGB-elle-V4-g10"
+    if (linear &&
+        (lower.find("srgb") != std::string::npos || lower.find("709") != std::string::npos)) {
+      info.fileColorSpace = "Linear Rec.709 (sRGB)";  // compose capture-sim --tiff, linear exports
+    } else if (lower.find("p3") != std::string::npos) {
       info.fileColorSpace = "Display P3";
     } else if (lower.find("adobe rgb") != std::string::npos ||
                lower.find("adobergb") != std::string::npos) {

@@ -184,7 +184,10 @@ class OiioModule final : public Module {
       } else if (const double* d = std::get_if<double>(&a.value)) {
         spec.attribute(a.name, float(*d));
       } else if (const std::string* t = std::get_if<std::string>(&a.value)) {
-        spec.attribute(a.name, *t);
+        if (a.name == "ICCProfile")  // the profile's bytes, as OpenImageIO's writers take them
+          spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::UINT8, int(t->size())), t->data());
+        else
+          spec.attribute(a.name, *t);
       } else {
         const auto& v = std::get<std::vector<float>>(a.value);
         spec.attribute(a.name, OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, int(v.size())), v.data());

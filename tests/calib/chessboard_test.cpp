@@ -178,7 +178,10 @@ TEST(Chessboard, BoardSizeIsParsedStrictly) {
   EXPECT_EQ(Board::parse("9x6").rows, 6);
   COMPOSE_EXPECT_ERROR(Board::parse("9"), "COLUMNSxROWS");
   COMPOSE_EXPECT_ERROR(Board::parse("9x6x2"), "COLUMNSxROWS");
-  COMPOSE_EXPECT_ERROR(Board::parse("1x6"), "2 to 100");
+  COMPOSE_EXPECT_ERROR(Board::parse("1x6"), "3 to 100");
+  // OpenCV's detector refuses two corners a side: refused here first, in our words.
+  COMPOSE_EXPECT_ERROR(Board::parse("2x2"), "3 to 100 inner corners each way, got 2x2");
+  EXPECT_EQ(Board::parse("3x3").rows, 3);
 }
 
 // A photo of a 9x6 board (squares of `square` metres, a white margin) lying on grey ground in

@@ -747,6 +747,45 @@ TEST(ConvertCommand, RadianceGoesToFormatsOfFloatsOnly) {
   EXPECT_TRUE(fs::is_empty(outs)) << "nothing written";
 }
 
+// Face files: a missing face is named with the file it expected; a pattern holds one '%'. Sizes:
+// --width is a lat-long's, --size a cube's faces (or a lat-long 4 x size wide).
+TEST(ConvertCommand, FacePatternsAndSizesSayWhatIsWrong) {
+  if (!fs::exists(sample("forest.exr"))) GTEST_SKIP() << "samples missing: run samples/fetch.sh";
+  TempDir dir;
+  ASSERT_EQ(run("convert " + q(sample("forest.exr")) + " --to faces --size 16 --out " +
+                    q(dir / "f_%.exr"),
+                dir)
+                .status,
+            0);
+  fs::remove(dir / "f_ny.exr");
+  RunResult r =
+      run("convert " + q(dir / "f_%.exr") + " --to latlong --out " + q(dir / "l.exr"), dir);
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("missing cube face -Y: expected f_ny.exr beside the pattern's 5 other "
+                       "faces"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir / "l.exr"));
+  r = run("convert " + q(sample("forest.exr")) + " --to faces --size 8 --out " + q(dir / "%_%.exr"),
+          dir);
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("a face pattern holds one '%'"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "px_%.exr"));
+  r = run("convert " + q(sample("forest.exr")) + " --to cube --width 64 --out " + q(dir / "c.exr"),
+          dir);
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("--width is the width of a lat-long output"), std::string::npos) << r.err;
+  r = run("convert " + q(sample("forest.exr")) + " --to latlong --size 16 --width 64 --out " +
+              q(dir / "l.exr"),
+          dir);
+  EXPECT_EQ(r.status, 2) << r.err;
+  r = run(
+      "convert " + q(sample("forest.exr")) + " --to latlong --size 16 --out " + q(dir / "l16.exr"),
+      dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(ingest::readImage(dir / "l16.exr").image.width, 64);
+}
+
 // A picture of 8-bit codes (an sRGB PNG) written as OpenEXR holds linear light: the sRGB curve
 // undone, as compose reads that picture with --env and as other tools read an EXR; written back
 // as a PNG it is encoded again, and every code comes back.
@@ -848,6 +887,15 @@ TEST(ConvertCommand, NegativeTexelsAreKept) {
   EXPECT_LT(relativeEnergy(lighting::integral(Environment::fromLatLong(back, {}, &keep)),
                            lighting::integral(Environment::fromLatLong(map, {}, &keep))),
             1e-4);
+  // Red mostly negative: more negative light than light is no environment.
+  for (float& v : map.pixels) v = v < 0.0f ? -2.0f : v;
+  ingest::writeImage(dir / "worse.exr", map, floats);
+  r = run("convert " + q(dir / "worse.exr") + " --to cube --size 16 --out " + q(dir / "w.exr"),
+          dir);
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("the environment's red radiance sums to -"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("its negative texels outweigh its light"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "w.exr"));
 }
 
 // An OpenEXR that says its primaries by chromaticities only (no colorSpace attribute; OpenImageIO

@@ -425,6 +425,69 @@ TEST_F(PhotoStages, TheVirtualCameraTakesACubeMap) {
   EXPECT_LT(sum / double(a.pixels.size()), 0.01) << "mean code difference (of 1)";
 }
 
+// A merged view keeps its photos' lens (EXIF focal length, 35 mm equivalent, focal plane): a stitch
+// of merged views finds its intrinsics as it does in the photos. 16-bit photos whose files name no
+// colour space are read by the config's rules, and the merge says so.
+TEST_F(PhotoStages, MergedViewsKeepTheLensAndDeepPhotosSayTheirSpace) {
+  TempDir dir;
+  CommandRun r =
+      compose("capture-sim --env " + q(pipeline::samplesDirectory() / "interior.exr") + " --out " +
+                  q(dir / "shots") + " --size 160x120 --views 6 --brackets 3 --tiff --seed 4",
+              dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = compose("merge --capture " + q(dir / "shots" / "capture.json") + " --out " +
+                  q(dir / "merged") + "/ --response-dir " + q(dir / "responses"),
+              dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const ingest::CaptureInfo photo = ingest::readCaptureInfo(dir / "shots" / "px_1.jpg", "test");
+  const ingest::CaptureInfo merged = ingest::readCaptureInfo(dir / "merged" / "px.exr", "test");
+  ASSERT_TRUE(photo.focalLength35mm && photo.focalLengthMm);
+  ASSERT_TRUE(merged.focalLength35mm && merged.focalLengthMm);
+  EXPECT_NEAR(*merged.focalLength35mm, *photo.focalLength35mm, 1e-4);  // float in the EXR
+  EXPECT_NEAR(*merged.focalLengthMm, *photo.focalLengthMm, 1e-4);
+  std::string views;
+  for (const char* v : {"px", "nx", "py", "ny", "pz", "nz"})
+    views += " " + q(dir / "merged" / (std::string(v) + ".exr"));
+  r = compose("stitch --size 32 --out " + q(dir / "env.exr") + views, dir);
+  EXPECT_EQ(r.status, 0) << r.err;
+  // The virtual camera's linear TIFFs alone, named one by one: their ICC profile says linear
+  // light, and they merge as with the linear space given (they were read as sRGB codes, 4 times
+  // too dark in the mean).
+  auto tiffs = [&](const std::string& stem) {
+    return q(dir / "shots" / (stem + "_1.tif")) + " " + q(dir / "shots" / (stem + "_2.tif")) + " " +
+           q(dir / "shots" / (stem + "_3.tif"));
+  };
+  r = compose("merge --out " + q(dir / "tif.exr") + " " + tiffs("px"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("16-bit photos such as"), std::string::npos) << r.err;
+  r = compose("merge --input-space 'Linear Rec.709 (sRGB)' --out " + q(dir / "given.exr") + " " +
+                  tiffs("px"),
+              dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Image byProfile = ingest::readImage(dir / "tif.exr").image,
+              given = ingest::readImage(dir / "given.exr").image;
+  ASSERT_EQ(byProfile.pixels.size(), given.pixels.size());
+  for (size_t i = 0; i < given.pixels.size(); ++i)
+    ASSERT_EQ(byProfile.pixels[i], given.pixels[i]) << i;
+  // Without the profile a 16-bit TIFF names no colour space: read as the rules say, and said.
+  for (int b = 1; b <= 3; ++b) {
+    Image plain = ingest::readImage(dir / "shots" / ("px_" + std::to_string(b) + ".tif")).image;
+    ingest::WriteOptions w;
+    w.depth = ingest::WriteOptions::Depth::UInt16;
+    const ingest::CaptureInfo info =
+        ingest::readCaptureInfo(dir / "shots" / ("px_" + std::to_string(b) + ".tif"), "test");
+    w.attributes = ingest::exifAttributes(info);
+    plain.colorSpace.clear();
+    ingest::writeImage(dir / "shots" / ("plain_" + std::to_string(b) + ".tif"), plain, w);
+  }
+  r = compose("merge --out " + q(dir / "plain.exr") + " " + tiffs("plain"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("16-bit photos such as plain_1.tif read as 'sRGB - Texture' by the "
+                       "config's rules (the files name no colour space); linear ones"),
+            std::string::npos)
+      << r.err;
+}
+
 TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
   TempDir dir;
   EXPECT_FAILS_WITH(compose("merge " + q(shot("yaw000_1.jpg")), dir), 2, "--out is required");
@@ -436,6 +499,13 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
                     "--exposures expects a number");
   EXPECT_FAILS_WITH(compose("capture-sim --env e.exr --out d --brackets 0", dir), 2, "brackets");
   EXPECT_FAILS_WITH(compose("calib lens --board 9by6 --out c.json a.jpg", dir), 2, "9by6");
+  // OpenCV finds no board of two corners a side: said in our words; a lens or pose file is JSON.
+  EXPECT_FAILS_WITH(compose("calib lens --board 2x2 --out c.json a.jpg", dir), 2,
+                    "a chessboard needs 3 to 100 inner corners each way, got 2x2");
+  EXPECT_FAILS_WITH(compose("calib lens --board 9x6 --out c.exr a.jpg", dir), 2,
+                    "--out must name a JSON file (.json): the lens file is JSON");
+  EXPECT_FAILS_WITH(compose("calib pose --board 9x6 --out p.exr plate.jpg", dir), 2,
+                    "--out must name a JSON file (.json): the pose file is JSON");
   EXPECT_FAILS_WITH(compose("ingest --max-gap -1 a.jpg", dir), 2, "time gap");
   // Zero is not "not given"; extremes are named; options of a step that does not run are refused.
   EXPECT_FAILS_WITH(compose("ingest --brackets 0 a.jpg", dir), 2, "--brackets");

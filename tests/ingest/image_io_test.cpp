@@ -187,6 +187,43 @@ TEST(ImageIo, AnEmbeddedIccProfileNamesTheColourSpace) {
   }
 }
 
+// A linear 16-bit TIFF says so by its profile (exif::linearRec709Profile, as compose capture-sim
+// writes it; a linear export's "sRGB-elle-V4-g10" likewise): read as linear Rec.709, where a
+// TIFF without one is left to the config's rules (sRGB codes).
+TEST(ImageIo, ALinearIccProfileMakesATiffLinear) {
+  const std::vector<unsigned char> profile = exif::linearRec709Profile();
+  EXPECT_EQ(exif::iccDescription(profile), exif::kLinearRec709Profile);
+  const uint32_t declared = (uint32_t(profile[0]) << 24) | (uint32_t(profile[1]) << 16) |
+                            (uint32_t(profile[2]) << 8) | uint32_t(profile[3]);
+  EXPECT_EQ(declared, profile.size());
+  EXPECT_EQ(profile.size() % 4, 0u);
+  TempDir dir;
+  Image img(8, 4, 3, {"R", "G", "B"});
+  for (float& v : img.pixels) v = 0.25f;
+  WriteOptions w;
+  w.depth = WriteOptions::Depth::UInt16;
+  writeImage(dir / "plain.tif", img, w);
+  w.attributes.push_back({"ICCProfile", std::string(profile.begin(), profile.end())});
+  writeImage(dir / "linear.tif", img, w);
+  const CaptureInfo linear = readCaptureInfo(dir / "linear.tif");
+  EXPECT_EQ(linear.iccProfile, exif::kLinearRec709Profile);
+  EXPECT_EQ(linear.fileColorSpace, "Linear Rec.709 (sRGB)");
+  EXPECT_FALSE(linear.colorSpaceByConvention);
+  EXPECT_TRUE(readCaptureInfo(dir / "plain.tif").iccProfile.empty());
+  // Another linear description, through OpenImageIO's reader of JPEG profiles as above.
+  const std::vector<unsigned char> elle = iccProfileDescribed("sRGB-elle-V4-g10.icc", false);
+  OIIO::ImageSpec spec(8, 4, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("ICCProfile", OIIO::TypeDesc(OIIO::TypeDesc::UINT8, int(elle.size())),
+                 elle.data());
+  std::vector<unsigned char> px(8 * 4 * 3, 128);
+  const std::filesystem::path file = dir.path() / "elle.jpg";
+  auto out = OIIO::ImageOutput::create(file.string());
+  ASSERT_TRUE(out && out->open(file.string(), spec));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+  out->close();
+  EXPECT_EQ(readCaptureInfo(file).fileColorSpace, "Linear Rec.709 (sRGB)");
+}
+
 TEST(ImageIo, ReadErrorsNameTheFile) {
   TempDir dir;
   COMPOSE_EXPECT_ERROR(readImage(dir / "missing.jpg"), "ingest: file not found");
