@@ -239,6 +239,16 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
     }
     out.photoRms.push_back(std::sqrt(sum / double(projected.size())));
   }
+  // Zhang's method needs at least three views of a plane to fix the focal lengths, the principal
+  // point and the distortion together (--min-photos may allow fewer).
+  if (out.used.size() < 3) {
+    out.notes.push_back(
+        "calibrated from " + std::to_string(out.used.size()) + " photo" +
+        (out.used.size() == 1 ? "" : "s") +
+        ": fewer than three views of the board do not fix the focal lengths, the principal point "
+        "and the distortion together (a low reprojection error does not say they are right); "
+        "photograph the board from more directions");
+  }
   if (!out.rejected.empty()) {
     std::string names;
     for (const auto& f : out.rejected) names += (names.empty() ? "" : ", ") + f.filename().string();

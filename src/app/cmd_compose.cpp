@@ -131,7 +131,7 @@ void ComposeOptions::addObject(CLI::App& app) {
                  "--camera-height and --pitch; lengths in the board's square units)");
   app.add_option("--albedo", albedo,
                  "Object albedo, one value or R,G,B in the working space, instead of the "
-                 "mesh's materials [default: the materials, else 0.5]");
+                 "mesh's materials and vertex colours [default: the materials, else 0.5]");
   app.add_option("--exposure", exposure,
                  "Exposure of the object in stops, or 'auto': match the environment to the plate")
       ->capture_default_str();

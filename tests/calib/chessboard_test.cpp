@@ -150,6 +150,18 @@ TEST(Chessboard, WrongBoardSizeNamesTheBoardAndThePhotos) {
   COMPOSE_EXPECT_ERROR(
       calibrateLens(photosOf(files, images), Board::parse("9x6"), many),
       "3 photos were given, and the calibration asks for at least 100 with the board");
+  // One photo allowed: a result, but a note that one view does not fix the lens; three: none.
+  CalibrationParams one;
+  one.minPhotos = 1;
+  std::vector<std::filesystem::path> first(files.begin(), files.begin() + 1);
+  const LensCalibration single = calibrateLens(photosOf(first, images), Board::parse("9x6"), one);
+  ASSERT_EQ(single.used.size(), 1u);
+  bool said = false;
+  for (const std::string& n : single.notes)
+    said = said || n.find("calibrated from 1 photo: fewer than three views") == 0;
+  EXPECT_TRUE(said);
+  const LensCalibration three = calibrateLens(photosOf(files, images), Board::parse("9x6"), {});
+  for (const std::string& n : three.notes) EXPECT_EQ(n.find("fewer than three"), std::string::npos);
 }
 
 TEST(Chessboard, PhotosWithoutABoardAreListedNotFatal) {
