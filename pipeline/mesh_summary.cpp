@@ -20,8 +20,9 @@ namespace {
 // Raise when reading a mesh file gives anything different (the loaders, the normals, the
 // repairs) or when the convexity test (render::isConvex) changes: an entry kept by an older
 // compose would otherwise stand for a different mesh, or skip the self-shadowing wrongly.
-constexpr uint32_t kMeshVersion =
-    3;  // 2: a mesh far from its file's origin is moved to it; 3: OBJs too
+// 2: a mesh far from its file's origin is moved to it; 3: OBJs too; 4: OBJ vertex colours are
+// read (such a file has a material now, and is no longer kept).
+constexpr uint32_t kMeshVersion = 4;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
