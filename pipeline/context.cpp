@@ -32,7 +32,9 @@ const Hash128& Context::key(const std::string& name) const {
 Hash128 Context::geometryKey() const {
   Hash128 h;
   h.bytes("geometry");
-  h.word(2);  // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it
+  // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it; 3: a cut-out
+  // object stands on what its cut-outs keep (Mesh::keptBounds)
+  h.word(3);
   h.combine(key(artefact::kPlate));
   h.combine(key(artefact::kMesh));
   if (!job.lensFile.empty()) hashFile(h, job.lensFile, "camera");

@@ -340,7 +340,7 @@ class ShadowsStage final : public Stage {
   // 4: refined points in the order of their triangles (entries of 3 held their values in another
   // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its
   // strata; 6: SH transfer projected cell by cell.
-  static constexpr int kVersion = 6;
+  static constexpr int kVersion = 7;  // 7: the ground beneath a cut-out at what it keeps
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {

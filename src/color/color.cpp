@@ -352,11 +352,19 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
   if (!has(known)) {
     static const std::vector<std::pair<std::string, std::vector<std::string>>> kSynonyms = {
         {"Display P3", {"sRGB Encoded P3-D65", "srgb_encoded_p3d65", "Display P3 - Texture"}},
-        {"Adobe RGB (1998)", {"Adobe RGB", "AdobeRGB", "adobe_rgb"}}};
+        {"Adobe RGB (1998)", {"Adobe RGB", "AdobeRGB", "adobe_rgb"}},
+        {"Linear Rec.709 (sRGB)",
+         {"lin_rec709", "Linear Rec.709", "Linear", "linear", "Utility - Linear - sRGB",
+          "lin_srgb"}}};
     for (const auto& [name, others] : kSynonyms)
       if (declared == name)
         for (const std::string& o : others)
           if (known == declared && has(o)) known = o;
+    // Linear light with the sRGB primaries, by the primaries where the config can tell them.
+    if (!has(known) && declared == "Linear Rec.709 (sRGB)") {
+      const std::string byPrimaries = spaceWithChromaticities(kRec709Chromaticities);
+      if (!byPrimaries.empty()) known = byPrimaries;
+    }
   }
   if (has(known)) {
     r.space = resolve(known, file.string());

@@ -154,12 +154,13 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         // Deeper integer photos (16-bit TIFF, PNG) whose file names no colour space: decoded
         // by the config's rules, which a linear file (a raw converter's linear output) defeats.
         if (!eightBit[v] && shot.info.integerSamples() && deepByRule.empty() &&
-            !colors.isLinearOrData(space))
+            shot.info.iccProfile.empty() && !colors.isLinearOrData(space))
           deepByRule = "16-bit photos such as " + shot.file.filename().string() + " read as '" +
                        space +
                        "' by the config's rules (the files name no colour space); linear ones "
-                       "(a raw converter's linear output, compose capture-sim --tiff) need "
-                       "--input-space 'Linear Rec.709 (sRGB)' or their capture description";
+                       "(a raw converter's linear output) need --input-space '" +
+                       linearSpaceFor(colors, space, "", nullptr) +
+                       "' or a capture description that says so";
       }
       spaces[v].push_back(space);
       if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;

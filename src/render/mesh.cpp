@@ -152,54 +152,63 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
     return;
   }
   // Per cut-out triangle, the steps of its test grid: about two per texel of its alpha along
-  // its longest edge in texture space (one when only the material's own alpha cuts it).
+  // its longest edge in texture space; 0 where its alpha cannot vary (no alpha texture, or
+  // texture coordinates that do not move across it): one test then says whether it is there.
   const size_t triangles = triangleCount();
+  enum : uint8_t { kWhole, kUniform, kGrid };
+  std::vector<uint8_t> kind(triangles, kWhole);
   std::vector<uint16_t> steps(triangles, 0);
   double points = 0.0;
   for (size_t t = 0; t < triangles; ++t) {
     const Material& mat = materialOf(*this, uint32_t(t));
     if (!mat.cutOut()) continue;
-    int n = 1;
-    if (mat.texture >= 0 && !texcoords.empty() && !textures[size_t(mat.texture)].alpha.empty()) {
-      const Image& alpha = textures[size_t(mat.texture)].alpha;
-      const uint32_t* c = &indices[3 * t];
-      double longest = 0.0;
-      for (int e = 0; e < 3; ++e) {
-        const glm::vec3 a = mat.uvTransform * glm::vec3(texcoords[c[e]], 1.0f);
-        const glm::vec3 b = mat.uvTransform * glm::vec3(texcoords[c[(e + 1) % 3]], 1.0f);
-        longest = std::max({longest, std::abs(double(b.x - a.x)) * alpha.width,
-                            std::abs(double(b.y - a.y)) * alpha.height});
-      }
-      n = std::isfinite(longest) ? int(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0)) : 1;
+    kind[t] = kUniform;
+    if (mat.texture < 0 || texcoords.empty() || textures[size_t(mat.texture)].alpha.empty())
+      continue;
+    const Image& alpha = textures[size_t(mat.texture)].alpha;
+    const uint32_t* c = &indices[3 * t];
+    double longest = 0.0;
+    for (int e = 0; e < 3; ++e) {
+      const glm::vec3 a = mat.uvTransform * glm::vec3(texcoords[c[e]], 1.0f);
+      const glm::vec3 b = mat.uvTransform * glm::vec3(texcoords[c[(e + 1) % 3]], 1.0f);
+      longest = std::max({longest, std::abs(double(b.x - a.x)) * alpha.width,
+                          std::abs(double(b.y - a.y)) * alpha.height});
     }
-    steps[t] = uint16_t(n);
-    points += 0.5 * double(n + 1) * double(n + 2);
+    if (!(longest > 1e-6) || !std::isfinite(longest)) continue;
+    kind[t] = kGrid;
+    steps[t] = uint16_t(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0));
+    points += 0.5 * double(steps[t] + 1) * double(steps[t] + 2);
   }
   // Over the budget: every grid coarsened by the same factor.
   const double coarsen = points > double(budget) ? std::sqrt(double(budget) / points) : 1.0;
+  const float third = 1.0f / 3.0f;
+  auto add = [&](const uint32_t* c, float u, float v) {
+    const glm::vec3 p =
+        (1.0f - u - v) * positions[c[0]] + u * positions[c[1]] + v * positions[c[2]];
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  };
   for (size_t t = 0; t < triangles; ++t) {
     const uint32_t* c = &indices[3 * t];
-    if (steps[t] == 0) {  // not a cut-out: its corners
-      for (int k = 0; k < 3; ++k) {
-        lo = glm::min(lo, positions[c[k]]);
-        hi = glm::max(hi, positions[c[k]]);
-      }
+    if (kind[t] == kWhole || (kind[t] == kUniform && !cutAway(uint32_t(t), third, third))) {
+      for (int k = 0; k < 3; ++k) add(c, k == 1 ? 1.0f : 0.0f, k == 2 ? 1.0f : 0.0f);
       continue;
     }
-    // Barycentric grid points (i, j) / n, drawn a tenth of a step towards the centre: exactly
-    // on an edge, a repeating texture's bilinear alpha mixes in the far side's texels (a card
-    // whose transparent bottom rows meet opaque top rows would keep its bottom edge, alone).
+    if (kind[t] == kUniform) continue;  // wholly cut away
+    // Barycentric grid points (i, j) / n. One on the triangle's edge must also be kept just
+    // inside it: exactly on an edge a repeating texture's bilinear alpha mixes in the far side's
+    // texels (a card whose transparent bottom rows meet opaque top rows would keep its bottom
+    // edge, alone).
     const int n = std::max(1, int(double(steps[t]) * coarsen));
-    const float shrink = 1.0f - 0.1f / float(n), third = 1.0f / 3.0f;
     for (int i = 0; i <= n; ++i)
       for (int j = 0; i + j <= n; ++j) {
-        const float u = third + (float(i) / float(n) - third) * shrink;
-        const float v = third + (float(j) / float(n) - third) * shrink;
+        const float u = float(i) / float(n), v = float(j) / float(n);
         if (cutAway(uint32_t(t), u, v)) continue;
-        const glm::vec3 p =
-            (1.0f - u - v) * positions[c[0]] + u * positions[c[1]] + v * positions[c[2]];
-        lo = glm::min(lo, p);
-        hi = glm::max(hi, p);
+        if (i == 0 || j == 0 || i + j == n) {
+          constexpr float kInside = 1e-4f;
+          if (cutAway(uint32_t(t), u + (third - u) * kInside, v + (third - v) * kInside)) continue;
+        }
+        add(c, u, v);
       }
   }
   if (!(lo.x <= hi.x)) {  // everything cut away: nothing is drawn, the whole mesh stands in
@@ -665,6 +674,10 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
     }
     if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
   }
+  // Colours that are white wherever they are left (the coloured triangles dropped) say nothing.
+  if (std::all_of(mesh.colors.begin(), mesh.colors.end(),
+                  [](const glm::vec3& c) { return c == glm::vec3(1.0f); }))
+    mesh.colors.clear();
   if (!mesh.colors.empty() && mesh.materials.empty()) {
     // The colours alone give the albedo.
     Material white;

@@ -109,7 +109,7 @@ struct Mesh {
   std::vector<std::filesystem::path> otherFiles;
 
   // Materials: empty when the file has none (the renderer then uses --albedo everywhere).
-  std::vector<glm::vec2> texcoords;        // one per position, or empty
+  std::vector<glm::vec2> texcoords;  // one per position, or empty
   // Vertex colours (glTF's COLOR_0, OBJ's `v x y z r g b`), linear in `colorSpace`, one per
   // position or empty: they multiply the material's albedo. A mesh with colours and no
   // materials gets one white material, so that its colours are its albedo.
@@ -135,10 +135,11 @@ struct Mesh {
   // cut-out and its alpha there is below the cutoff.
   bool cutAway(uint32_t triangle, float u, float v) const;
   // The bounds of the surface that is there: boundsMin/Max, but with cut-outs those of what they
-  // keep, each cut-out triangle tested on a grid of about two points per texel of its alpha
-  // along its longest edge (grids coarsened to keep to about `budget` points in all, but never
-  // below a triangle's corners; what is kept between grid points is not seen). The object stands
-  // on, and is sized by, these bounds.
+  // keep. A cut-out triangle whose alpha cannot vary (no alpha texture, texture coordinates that
+  // do not move) is there whole or not at all; another is tested on a grid of about two points
+  // per texel of its alpha along its longest edge (grids coarsened to keep to about `budget`
+  // points in all, but never below a triangle's corners; what is kept between grid points is not
+  // seen). The object stands on, and is sized by, these bounds.
   void keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget = 1u << 20) const;
 };
 

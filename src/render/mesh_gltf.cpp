@@ -159,7 +159,9 @@ class GltfReader {
 
   glm::dmat4 localTransform(const tinygltf::Node& node, int index) const;
   void addPrimitive(const tinygltf::Primitive& primitive, const glm::dmat4& objectFromNode);
-  uint32_t material(int gltfMaterial);
+  // The mesh's material for glTF material `gltfMaterial` (-1: none); a primitive with vertex
+  // colours and no material gets glTF's default, white, so that its colours are its albedo.
+  uint32_t material(int gltfMaterial, bool coloured = false);
   int texture(int gltfTexture, const std::string& materialName);
   // The pixels of image `imageIndex`. Before decoding, `file` is set to its file, or for an
   // embedded image to a name that says where it is (with the extension of its format, for the
@@ -426,17 +428,21 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
   return it->second;
 }
 
-uint32_t GltfReader::material(int gltfMaterial) {
+uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
   if (gltfMaterial >= 0 && size_t(gltfMaterial) >= model_.materials.size()) {
     ++missingMaterials_;
     gltfMaterial = -1;
   }
+  if (gltfMaterial < 0 && coloured) gltfMaterial = -2;
   const auto [it, inserted] =
       materials_.try_emplace(gltfMaterial, uint32_t(mesh_.materials.size()));
   if (!inserted) return it->second;
   Material m;
   int set = 0;
-  if (gltfMaterial < 0) {
+  if (gltfMaterial == -2) {
+    m.name = "(default: the vertex colours)";
+    m.baseColor = glm::vec3(1.0f);
+  } else if (gltfMaterial < 0) {
     m.name = "(default)";
     m.baseColor = glm::vec3(kDefaultAlbedo);
   } else {
@@ -548,10 +554,43 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
     if (normals.size() != positions.size())
       throw PrimitiveError{"NORMAL and POSITION have different counts"};
   }
-  const uint32_t materialIndex = material(primitive.material);
+  // COLOR_0 (linear RGB or RGBA, float or normalised integers) multiplies the base colour; its
+  // alpha is not read. A colour outside 0..1 or not finite is clamped and counted; colours that
+  // cannot be read are left out with a warning (the geometry stays).
+  std::vector<double> colours;
+  if (const int a = attribute("COLOR_0"); a >= 0) {
+    try {
+      const bool rgba = size_t(a) < model_.accessors.size() &&
+                        componentCount(model_.accessors[size_t(a)].type) == 4;
+      const int components = rgba ? 4 : 3;
+      colours = accessor(a, components, "COLOR_0");
+      if (colours.size() != size_t(components) * n)
+        throw PrimitiveError{"COLOR_0 and POSITION have different counts"};
+      const tinygltf::Accessor& acc = model_.accessors[size_t(a)];
+      // Integers must be normalised (glTF 2.0 §3.7.2.1): one that is not says so in range anyway.
+      double scale = 1.0;
+      if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE)
+        scale = 255.0;
+      if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT)
+        scale = 65535.0;
+      std::vector<double> rgb(3 * n);
+      for (size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) {
+          const double e = colours[i * size_t(components) + size_t(c)] / scale;
+          const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
+          if (inRange != e) ++clampedColours_;
+          rgb[3 * i + size_t(c)] = inRange;
+        }
+      colours = std::move(rgb);
+    } catch (const PrimitiveError& e) {
+      colours.clear();
+      mesh_.warnings.push_back("ignored the vertex colours of a primitive: " + e.what);
+    }
+  }
+  const uint32_t materialIndex = material(primitive.material, !colours.empty());
   // A primitive naming a material the file lacks is counted by material() and said once: it is
   // neither a primitive with a material nor one without.
-  if (primitive.material < 0)
+  if (primitive.material < 0 && colours.empty())
     noMaterial_ = true;
   else if (size_t(primitive.material) < model_.materials.size())
     someMaterial_ = true;
@@ -566,34 +605,7 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
       ++missingTexcoords_;
     }
   }
-  // COLOR_0 (linear RGB or RGBA, float or normalised integers) multiplies the base colour; its
-  // alpha is not read. A colour outside 0..1 or not finite is clamped and counted.
-  std::vector<double> colours;
-  if (const int a = attribute("COLOR_0"); a >= 0) {
-    const bool rgba = size_t(a) < model_.accessors.size() &&
-                      componentCount(model_.accessors[size_t(a)].type) == 4;
-    const int components = rgba ? 4 : 3;
-    colours = accessor(a, components, "COLOR_0");
-    if (colours.size() != size_t(components) * n)
-      throw PrimitiveError{"COLOR_0 and POSITION have different counts"};
-    const tinygltf::Accessor& acc = model_.accessors[size_t(a)];
-    // Integers must be normalised (glTF 2.0 §3.7.2.1): one that is not says so in range anyway.
-    double scale = 1.0;
-    if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE)
-      scale = 255.0;
-    if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT)
-      scale = 65535.0;
-    std::vector<double> rgb(3 * n);
-    for (size_t i = 0; i < n; ++i)
-      for (int c = 0; c < 3; ++c) {
-        const double e = colours[i * size_t(components) + size_t(c)] / scale;
-        const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
-        if (inRange != e) ++clampedColours_;
-        rgb[3 * i + size_t(c)] = inRange;
-      }
-    colours = std::move(rgb);
-    ++colours_;
-  }
+
   if (!primitive.targets.empty()) ++morphs_;
 
   std::vector<uint32_t> order;
@@ -644,6 +656,7 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
                                : glm::vec3(float(colours[3 * i]), float(colours[3 * i + 1]),
                                            float(colours[3 * i + 2])));
   }
+  if (!colours.empty()) ++colours_;
   for (size_t t = 0; t + 2 < corners.size(); t += 3) {
     uint32_t c[3] = {corners[t], corners[t + 1], corners[t + 2]};
     if (c[0] >= n || c[1] >= n || c[2] >= n) {

@@ -395,14 +395,16 @@ LoadedMesh loadObj(const fs::path& path) {
     if (noMaterial) {
       mesh.warnings.push_back(count(noMaterial, "face has", "faces have") +
                               " no material (or one no material library defines): rendered "
-                              "with the default albedo");
+                              "with " +
+                              (colours.empty() ? "the default albedo" : "their vertex colours"));
     }
     std::map<fs::path, int> textureOf;
     for (int id : usedMaterials) {
       Material material;
       if (id < 0) {
-        material.name = "(default)";
-        material.baseColor = glm::vec3(kDefaultAlbedo);
+        // With vertex colours, glTF's default (white): the colours are the albedo.
+        material.name = colours.empty() ? "(default)" : "(default: the vertex colours)";
+        material.baseColor = glm::vec3(colours.empty() ? kDefaultAlbedo : 1.0f);
         mesh.materials.push_back(material);
         continue;
       }

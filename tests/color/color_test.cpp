@@ -315,6 +315,21 @@ TEST(ColorConfig, HonoursOcioEnvironmentVariable) {
   img.colorSpace = "sRGB";
   c.convert(img, c.workingSpace());
   EXPECT_NEAR(img.pixels[0], srgbToLinear(0.5), 1e-3);  // Blender's sRGB may be a LUT: 1e-3
+  // A linear ICC profile's space (ingest names it 'Linear Rec.709 (sRGB)', the built-in
+  // config's name) is this config's linear Rec.709, not the rules' sRGB.
+  const InputSpace linear = c.inputSpace("photo.tif", "Linear Rec.709 (sRGB)", false, true);
+  EXPECT_TRUE(c.isLinearOrData(linear.space)) << linear.space;
+  EXPECT_FALSE(linear.assumed) << linear.how;
+  Image one(1, 1, 3);
+  one.pixels = {0.5f, 0.25f, 0.125f};
+  one.colorSpace = linear.space;
+  c.convert(one, c.workingSpace());
+  EXPECT_NEAR(one.pixels[0], 0.5f, 1e-3);
+  EXPECT_NEAR(one.pixels[2], 0.125f, 1e-3);
+  // The built-in config knows the name itself.
+  const ColorConfig builtin = ColorConfig::builtin();
+  EXPECT_TRUE(builtin.isLinearOrData(
+      builtin.inputSpace("photo.tif", "Linear Rec.709 (sRGB)", false, true).space));
 }
 
 }  // namespace

@@ -745,6 +745,42 @@ TEST(Gltf, VertexColoursAsNormalisedBytesWithoutAMaterial) {
             std::vector<std::string>{"2 COLOR_0 components outside 0..1 (or not finite) clamped"});
 }
 
+// A coloured primitive without a material beside one with a material is coloured by its colours
+// alone (glTF's default material is white; it had half of them, the grey default). Colours that
+// cannot be read are left out with a warning; the primitive's triangles stay.
+TEST(Gltf, ColouredPrimitivesWithoutAMaterialAndUnreadableColours) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int pos2 = b.vec3({0, 0, 1, 1, 0, 1, 0, 1, 1});
+  const int pos3 = b.vec3({0, 0, 2, 1, 0, 2, 0, 1, 2});
+  const int green = b.vec3({0, 1, 0, 0, 1, 0, 0, 1, 0});
+  const int flat = b.vec2({1, 0, 1, 0, 1, 0});
+  b.json["materials"] =
+      json::array({{{"pbrMetallicRoughness", {{"baseColorFactor", {1, 0, 0, 1}}}}}});
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}}}, {"material", 0}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos2}, {"COLOR_0", green}}}});
+  b.json["meshes"][size_t(m)]["primitives"].push_back(
+      {{"attributes", {{"POSITION", pos3}, {"COLOR_0", flat}}}, {"material", 0}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "mixed.gltf", b.gltf());
+  const Mesh mesh = loadMesh(dir / "mixed.gltf");
+  ASSERT_EQ(mesh.triangleCount(), 3u) << "the primitive with unreadable colours keeps its triangle";
+  ASSERT_EQ(mesh.warnings.size(), 1u);
+  EXPECT_EQ(mesh.warnings[0].find("ignored the vertex colours of a primitive: COLOR_0"), 0u)
+      << mesh.warnings[0];
+  for (uint32_t t = 0; t < 3; ++t) {
+    const float z = mesh.positions[mesh.indices[3 * t]].z;
+    const glm::vec3 albedo = mesh.albedoAt(t, 0.2f, 0.3f);
+    if (z > 0.5f && z < 1.5f) {
+      EXPECT_EQ(albedo, glm::vec3(0, 1, 0)) << "coloured, no material";
+    } else {
+      EXPECT_EQ(albedo, glm::vec3(1, 0, 0)) << "the material, no colours (white there)";
+    }
+  }
+}
+
 // A primitive naming a material the file lacks is said once, as such: not also as a primitive
 // without a material. When it is the only one, nothing has a material and --albedo applies.
 TEST(Gltf, AMissingMaterialIsSaidOnce) {

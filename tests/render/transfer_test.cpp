@@ -917,7 +917,6 @@ Mesh cutCard(int clear) {
 TEST(Cutouts, TheObjectStandsOnWhatItsCutoutsKeep) {
   // The lowest quarter cut away: what is kept starts at y = 0.25 (alpha 0.5 there, at the
   // cutoff: kept). Tested on a grid of 16 steps up the card (two per texel).
-  // The grid points are drawn a tenth of a step (1/160) towards each triangle's centre.
   const Mesh card = cutCard(2);
   glm::vec3 lo, hi;
   card.keptBounds(lo, hi);
@@ -942,6 +941,22 @@ TEST(Cutouts, TheObjectStandsOnWhatItsCutoutsKeep) {
   card.keptBounds(lo, hi, 60);
   EXPECT_GE(lo.y, 0.25f - 1e-4f);
   EXPECT_LE(lo.y, 0.25f + 0.25f);
+  // A cut-out material whose alpha is 1 everywhere (its factor alone, or a texture of 1): the
+  // triangles' own corners, to the last bit.
+  Mesh untextured = card;
+  untextured.materials[0].texture = -1;
+  untextured.keptBounds(lo, hi);
+  EXPECT_EQ(lo, untextured.boundsMin());
+  EXPECT_EQ(hi, untextured.boundsMax());
+  Mesh solid = cutCard(0);
+  solid.keptBounds(lo, hi);
+  EXPECT_EQ(lo, solid.boundsMin());
+  EXPECT_EQ(hi, solid.boundsMax());
+  Mesh faded = card;  // the factor alone below the cutoff: nothing is there
+  faded.materials[0].texture = -1;
+  faded.materials[0].baseAlpha = 0.2f;
+  faded.keptBounds(lo, hi);
+  EXPECT_EQ(lo, faded.boundsMin()) << "everything cut: the whole mesh stands in";
   // Nothing cut: the mesh's own bounds; everything cut: the same (nothing is drawn).
   Mesh opaque = card;
   opaque.materials[0].alphaCutoff = -1.0f;
