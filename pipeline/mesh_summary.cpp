@@ -37,6 +37,14 @@ std::optional<uint64_t> hexWord(const nlohmann::json& value) {
   return std::strtoull(s.c_str(), nullptr, 16);
 }
 
+// The mesh's one material is the white one its vertex colours brought, with no texture.
+bool colouredOnly(const render::Mesh& mesh) {
+  if (mesh.colors.empty() || mesh.materials.size() != 1 || !mesh.textures.empty()) return false;
+  const render::Material& m = mesh.materials[0];
+  return m.baseColor == glm::vec3(1.0f) && m.texture < 0 && !m.cutOut() &&
+         m.uvTransform == glm::mat3(1.0f);
+}
+
 }  // namespace
 
 Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
@@ -148,9 +156,12 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   const std::span<const float> normals = entry.get("normals");
   const std::span<const float> indices = entry.get("indices");
   const std::span<const float> texcoords = entry.get("texcoords");
+  const std::span<const float> colours = entry.get("colours");
   const size_t n = positions.size() / 3;
   if (n == 0 || positions.size() != 3 * n || normals.size() != 3 * n || indices.empty() ||
-      indices.size() % 3 != 0 || (!texcoords.empty() && texcoords.size() != 2 * n))
+      indices.size() % 3 != 0 || (!texcoords.empty() && texcoords.size() != 2 * n) ||
+      (!colours.empty() &&
+       (colours.size() != 3 * n || !m.contains("colourSpace") || !m["colourSpace"].is_string())))
     return std::nullopt;
   for (const float i : indices)
     if (!(i >= 0.0f && i < float(n) && i == std::floor(i))) return std::nullopt;
@@ -164,6 +175,15 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   if (!texcoords.empty()) {
     mesh.texcoords.resize(n);
     std::memcpy(&mesh.texcoords[0].x, texcoords.data(), texcoords.size() * sizeof(float));
+  }
+  if (!colours.empty()) {  // with the white material they bring (render::loadMesh)
+    mesh.colors.resize(n);
+    std::memcpy(&mesh.colors[0].x, colours.data(), colours.size() * sizeof(float));
+    mesh.colorSpace = m["colourSpace"].get<std::string>();
+    render::Material white;
+    white.name = "vertex colours";
+    mesh.materials.push_back(white);
+    mesh.triangleMaterial.assign(mesh.triangleCount(), 0u);
   }
   // What the entry says of the mesh must be the mesh it holds.
   MeshSummary& s = out.summary;
@@ -181,9 +201,11 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
 bool storeMesh(const fs::path& cacheRoot, const Hash128& contentKey, const render::Mesh& mesh,
                const MeshSummary& summary, std::string& problem) {
   problem.clear();
-  // Indices are kept as floats: exact below 2^24.
+  // Indices are kept as floats: exact below 2^24. A mesh whose only material is the white one
+  // its vertex colours brought (render::loadMesh) is kept with its colours.
   if (cacheRoot.empty() || contentKey == Hash128{} || !mesh.otherFiles.empty() ||
-      mesh.hasMaterials() || mesh.positions.empty() || mesh.positions.size() >= (size_t(1) << 24))
+      (mesh.hasMaterials() && !colouredOnly(mesh)) || mesh.positions.empty() ||
+      mesh.positions.size() >= (size_t(1) << 24))
     return true;
   StageCache entry = meshEntry(cacheRoot, contentKey);
   char word[17];
@@ -205,6 +227,10 @@ bool storeMesh(const fs::path& cacheRoot, const Hash128& contentKey, const rende
   entry.put("normals", floats(mesh.normals, 3));
   entry.put("indices", std::vector<float>(mesh.indices.begin(), mesh.indices.end()));
   if (!mesh.texcoords.empty()) entry.put("texcoords", floats(mesh.texcoords, 2));
+  if (!mesh.colors.empty()) {
+    entry.put("colours", floats(mesh.colors, 3));
+    entry.meta()["colourSpace"] = mesh.colorSpace;
+  }
   if (entry.write()) return true;
   problem = entry.error();
   return false;

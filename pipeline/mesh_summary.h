@@ -6,7 +6,8 @@
 // file takes both from there.
 //
 // Only a mesh that its file alone gives is kept this way: one that reads material libraries,
-// textures or glTF buffers beside it (or has materials to convert) is always read.
+// textures or glTF buffers beside it (or has materials to convert, but for the white one that
+// vertex colours alone bring) is always read.
 #pragma once
 
 #include <filesystem>

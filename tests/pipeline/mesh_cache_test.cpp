@@ -75,6 +75,26 @@ TEST_F(MeshCache, ASecondRunTakesTheSameMeshAndSummaryFromTheCache) {
   EXPECT_TRUE(problem.empty());
 }
 
+// A mesh whose vertex colours are its albedo (an OBJ's v x y z r g b, no material library) is
+// kept with them and the white material they bring: read back, the same key and albedo.
+TEST_F(MeshCache, VertexColoursAreKeptWithTheMesh) {
+  writeText(file_,
+            "v -1 0 -1 1 0 0\nv 1 0 -1 0 1 0\nv 1 0 1 0 0 1\nv -1 0 1 1 1 0\n"
+            "v 0 1.5 0 0.5 0.5 0.5\nf 1 2 3\nf 1 3 4\nf 1 5 2\nf 2 5 3\nf 3 5 4\nf 4 5 1\n");
+  readAndStore();
+  ASSERT_FALSE(read_.colors.empty());
+  Hash128 key;
+  std::string problem;
+  const std::optional<CachedMesh> cached = cachedMesh(cache_, file_, 60.0, key, problem);
+  ASSERT_TRUE(cached) << problem;
+  EXPECT_EQ(cached->summary.key, summary_.key);
+  EXPECT_EQ(cached->mesh.colors, read_.colors);
+  EXPECT_EQ(cached->mesh.colorSpace, read_.colorSpace);
+  ASSERT_EQ(cached->mesh.materials.size(), 1u);
+  for (uint32_t t = 0; t < read_.triangleCount(); ++t)
+    EXPECT_EQ(cached->mesh.albedoAt(t, 0.25f, 0.5f), read_.albedoAt(t, 0.25f, 0.5f)) << t;
+}
+
 // Whatever changes the object's look changes its key (and so every stage after it): a texture's
 // wrap modes and a material's texture-coordinate transform too (an edited .mtl's -s, a glTF's
 // KHR_texture_transform or sampler), with the same geometry and texels.
