@@ -146,17 +146,17 @@ struct VertexTransfer {
 // object hides part of the sky from the ground next to it, which then lights the object's
 // underside less (what makes a bunny's chin and belly darker where they meet the floor). The
 // ground is the plane y = `height` of the object's frame (its lowest point, cut-outs left out
-// (Mesh::keptBounds): the pipeline stands every object on the ground, turned only about +Y). A ray from a surface point that misses the
-// object and meets the plane at g counts open(g), the ground point's (1/π) ∫ V cos θ dω past the
-// object, instead of 1: the ground's radiance scaled by the share of its light the object leaves
-// it, that share taken from a uniform sky (it does not depend on the lighting, so the pass stays
-// cached per mesh). open(g) is computed on two grids of ground points, a fine one over the
-// footprint and just beyond it (where the ground's darkening changes over a fraction of the
-// object's height) and a coarse one further out, and interpolated bilinearly between the nodes
-// that the object does not cover (a node under the object sees nothing: no ray that misses the
-// object reaches it, and it would darken the ground at the object's foot); beyond the coarse grid
-// the edge's shortfall falls off as the inverse cube of the distance from the footprint's centre
-// (as a sphere's form factor does).
+// (Mesh::keptBounds): the pipeline stands every object on the ground, turned only about +Y). A ray
+// from a surface point that misses the object and meets the plane at g counts open(g), the ground
+// point's (1/π) ∫ V cos θ dω past the object, instead of 1: the ground's radiance scaled by the
+// share of its light the object leaves it, that share taken from a uniform sky (it does not depend
+// on the lighting, so the pass stays cached per mesh). open(g) is computed on two grids of ground
+// points, a fine one over the footprint and just beyond it (where the ground's darkening changes
+// over a fraction of the object's height) and a coarse one further out, and interpolated bilinearly
+// between the nodes that the object does not cover (a node under the object sees nothing: no ray
+// that misses the object reaches it, and it would darken the ground at the object's foot); beyond
+// the coarse grid the edge's shortfall falls off as the inverse cube of the distance from the
+// footprint's centre (as a sphere's form factor does).
 struct GroundGridLevel {
   float x0 = 0.0f, z0 = 0.0f, step = 1.0f;  // node (a, b) at (x0 + a·step, height, z0 + b·step)
   int columns = 0, rows = 0;
