@@ -29,13 +29,6 @@ namespace {
 constexpr const char* kStage = "capture-sim";
 constexpr double kFullFrameDiagonalMm = 43.266615305567875;
 
-double srgbEncode(double x) {
-  return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
-}
-double srgbDecode(double v) {
-  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
-}
-
 // Counter-based random numbers: splitmix64 of a key.
 inline uint64_t mix(uint64_t z) {
   z += 0x9E3779B97F4A7C15ull;

@@ -16,6 +16,7 @@
 #include "color/builtin_config.h"
 #include "color/separable_table.h"
 #include "core/error.h"
+#include "core/numbers.h"
 #include "core/parallel.h"
 
 namespace OCIO = OCIO_NAMESPACE;
@@ -246,15 +247,6 @@ std::string ColorConfig::resolve(const std::string& name, const std::string& wha
   }
   return cs->getName();
 }
-
-namespace {
-
-// The sRGB transfer function, code (0..1) to linear.
-double srgbDecode(double c) {
-  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
-}
-
-}  // namespace
 
 bool ColorConfig::isLinearOrData(const std::string& space) const {
   const OCIO::ConstConfigRcPtr& config = impl_->config;

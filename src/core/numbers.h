@@ -1,6 +1,7 @@
 // Constants shared by the numeric code.
 #pragma once
 
+#include <cmath>
 #include <cstdio>
 #include <numbers>
 #include <string>
@@ -13,6 +14,14 @@ inline std::string numberText(double value) {
   char text[32];
   std::snprintf(text, sizeof text, "%g", value);
   return text;
+}
+
+// The sRGB transfer function (IEC 61966-2-1): a code in 0..1 to linear light, and back.
+inline double srgbDecode(double code) {
+  return code <= 0.04045 ? code / 12.92 : std::pow((code + 0.055) / 1.055, 2.4);
+}
+inline double srgbEncode(double linear) {
+  return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
 }
 
 inline constexpr double kPi = std::numbers::pi;

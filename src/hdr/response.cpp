@@ -36,10 +36,6 @@ std::string utcNow() {
   return text;
 }
 
-double srgbDecode(double v) {
-  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
-}
-
 // Makes a recovered curve usable: positive and non-decreasing, working outwards from the middle
 // (the ends rest on few samples and may wiggle).
 void makeMonotone(std::vector<float>& curve) {

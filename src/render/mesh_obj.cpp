@@ -19,6 +19,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "render/mesh_formats.h"
 
@@ -253,8 +254,7 @@ LoadedMesh loadObj(const fs::path& path) {
         const double e = double(attrib.colors[3 * v + size_t(c)]);
         const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
         if (inRange != e) ++clamped;
-        colours[v][c] =
-            float(inRange <= 0.04045 ? inRange / 12.92 : std::pow((inRange + 0.055) / 1.055, 2.4));
+        colours[v][c] = float(srgbDecode(inRange));
       }
     }
     if (clamped > 0)
