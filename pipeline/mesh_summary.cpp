@@ -65,6 +65,7 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.floats(std::span<const float>(&m.uvTransform[0][0], 9));
     h.floats(std::span<const float>(&m.alphaCutoff, 1));
     h.floats(std::span<const float>(&m.baseAlpha, 1));
+    if (m.blend) h.bytes("blend");
   }
   for (const render::Texture& t : mesh.textures) {
     h.word(uint32_t(t.image.width));

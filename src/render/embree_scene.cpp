@@ -3,9 +3,12 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "core/error.h"
+#include "core/hash.h"
 #include "render/mesh.h"
 
 namespace compose::render {
@@ -21,13 +24,75 @@ struct EmbreeScene::Impl {
 
 namespace {
 
-// Rejects hits where the mesh is cut away (the geometry's user data is the Mesh).
+uint32_t mix(uint32_t h, uint32_t x) {
+  h ^= x + 0x9e3779b9u + (h << 6) + (h >> 2);
+  return h;
+}
+
+uint32_t bitsOf(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, sizeof u);
+  return u;
+}
+
+// The ray id of the camera's rays, which go on through semi-transparent surfaces themselves.
+constexpr uint32_t kLayered = 0x4c415952u;
+// Rays whose transmittance is wanted: the tag in the id's top byte, the ray's index into
+// TransmitContext::transmitted below it.
+constexpr uint32_t kTransmitTag = 0x54u;
+constexpr float kLeastTransmitted = 1e-4f;
+struct TransmitContext {
+  RTCIntersectContext base;  // first: Embree hands the filter a pointer to it
+  float* transmitted;
+};
+
+// Rejects hits where the mesh is cut away, or where a semi-transparent surface lets this ray
+// through or turns its back to it (the geometry's user data is the Mesh). A ray's random number
+// for a semi-transparent triangle is hashed from the ray's origin, direction and the triangle
+// (independent between rays and between the layers one ray meets); a kLayered ray meets it
+// wherever its alpha is above 0.
 void cutoutFilter(const RTCFilterFunctionNArguments* args) {
   const auto* mesh = static_cast<const Mesh*>(args->geometryUserPtr);
-  for (unsigned i = 0; i < args->N; ++i) {
+  const unsigned n = args->N;
+  for (unsigned i = 0; i < n; ++i) {
     if (args->valid[i] != -1) continue;
-    const unsigned triangle = RTCHitN_primID(args->hit, args->N, i);
-    if (mesh->cutAway(triangle, RTCHitN_u(args->hit, args->N, i), RTCHitN_v(args->hit, args->N, i)))
+    const unsigned triangle = RTCHitN_primID(args->hit, n, i);
+    if (mesh->oneSided(triangle) &&
+        RTCHitN_Ng_x(args->hit, n, i) * RTCRayN_dir_x(args->ray, n, i) +
+                RTCHitN_Ng_y(args->hit, n, i) * RTCRayN_dir_y(args->ray, n, i) +
+                RTCHitN_Ng_z(args->hit, n, i) * RTCRayN_dir_z(args->ray, n, i) >
+            0.0f) {
+      args->valid[i] = 0;  // its back: the triangle of the other side is met instead
+      continue;
+    }
+    const uint32_t id = RTCRayN_id(args->ray, n, i);
+    if ((id >> 24) == kTransmitTag) {
+      // Through semi-transparent surfaces the ray's transmittance falls by each one's 1 - alpha
+      // and the ray goes on, until almost nothing is left; anything else opaque stops it.
+      float& left =
+          reinterpret_cast<const TransmitContext*>(args->context)->transmitted[id & 0xffffffu];
+      const float u = RTCHitN_u(args->hit, n, i), v = RTCHitN_v(args->hit, n, i);
+      if (mesh->cutAway(triangle, u, v)) {
+        args->valid[i] = 0;
+      } else if (mesh->oneSided(triangle)) {
+        left *= 1.0f - std::clamp(mesh->alphaAt(triangle, u, v), 0.0f, 1.0f);
+        if (left > kLeastTransmitted) args->valid[i] = 0;
+      }
+      continue;
+    }
+    float xi;
+    if (id == kLayered) {
+      xi = 0.0f;  // met wherever it is there at all
+    } else {
+      uint32_t h = mix(triangle, bitsOf(RTCRayN_org_x(args->ray, n, i)));
+      h = mix(h, bitsOf(RTCRayN_org_y(args->ray, n, i)));
+      h = mix(h, bitsOf(RTCRayN_org_z(args->ray, n, i)));
+      h = mix(h, bitsOf(RTCRayN_dir_x(args->ray, n, i)));
+      h = mix(h, bitsOf(RTCRayN_dir_y(args->ray, n, i)));
+      h = mix(h, bitsOf(RTCRayN_dir_z(args->ray, n, i)));
+      xi = hash01(h);
+    }
+    if (mesh->passes(triangle, RTCHitN_u(args->hit, n, i), RTCHitN_v(args->hit, n, i), xi))
       args->valid[i] = 0;
   }
 }
@@ -79,7 +144,7 @@ EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
 EmbreeScene::~EmbreeScene() = default;
 
 EmbreeScene::Hit EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
-                                        float tfar) const {
+                                        float tfar, bool layered) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh{};
@@ -92,6 +157,7 @@ EmbreeScene::Hit EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, 
   rh.ray.tnear = tnear;
   rh.ray.tfar = tfar;
   rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = layered ? kLayered : 0u;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(impl_->scene, &context, &rh);
   Hit hit;
@@ -106,7 +172,16 @@ EmbreeScene::Hit EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, 
 }
 
 void EmbreeScene::intersect16(const glm::vec3* origins, const glm::vec3* directions,
-                              uint32_t active, Hit* hits, float tnear, float tfar) const {
+                              uint32_t active, Hit* hits, float tnear, float tfar,
+                              bool layered) const {
+  float tnears[16];
+  std::fill(tnears, tnears + 16, tnear);
+  intersect16(origins, directions, active, hits, tnears, tfar, layered);
+}
+
+void EmbreeScene::intersect16(const glm::vec3* origins, const glm::vec3* directions,
+                              uint32_t active, Hit* hits, const float* tnears, float tfar,
+                              bool layered) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
@@ -123,9 +198,10 @@ void EmbreeScene::intersect16(const glm::vec3* origins, const glm::vec3* directi
     rh.ray.dir_x[i] = d.x;
     rh.ray.dir_y[i] = d.y;
     rh.ray.dir_z[i] = d.z;
-    rh.ray.tnear[i] = tnear;
+    rh.ray.tnear[i] = valid[i] ? tnears[i] : 0.0f;
     rh.ray.tfar[i] = tfar;
     rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = layered ? kLayered : 0u;
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
   }
   rtcIntersect16(valid, impl_->scene, &context, &rh);
@@ -211,6 +287,64 @@ void EmbreeScene::occludedStream(const glm::vec3& o, const glm::vec3* d, size_t 
   rtcInitIntersectContext(&context);
   rtcOccluded1M(impl_->scene, &context, rays.data(), unsigned(count), sizeof(RTCRay));
   for (size_t i = 0; i < count; ++i) occluded[i] = rays[i].tfar < 0.0f ? 1 : 0;
+}
+
+void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, size_t count,
+                                      float tnear, float* transmitted, float tfar) const {
+  if (count == 0) return;
+  COMPOSE_CHECK(count <= 0xffffffu);
+  thread_local std::vector<RTCRay> rays;
+  rays.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    RTCRay& ray = rays[i];
+    ray.org_x = o.x;
+    ray.org_y = o.y;
+    ray.org_z = o.z;
+    ray.tnear = tnear;
+    ray.dir_x = d[i].x;
+    ray.dir_y = d[i].y;
+    ray.dir_z = d[i].z;
+    ray.time = 0.0f;
+    ray.tfar = tfar;
+    ray.mask = 0xFFFFFFFFu;
+    ray.id = (kTransmitTag << 24) | uint32_t(i);
+    ray.flags = 0;
+    transmitted[i] = 1.0f;
+  }
+  TransmitContext context;
+  rtcInitIntersectContext(&context.base);
+  context.transmitted = transmitted;
+  rtcOccluded1M(impl_->scene, &context.base, rays.data(), unsigned(count), sizeof(RTCRay));
+  for (size_t i = 0; i < count; ++i)
+    if (rays[i].tfar < 0.0f) transmitted[i] = 0.0f;
+}
+
+void EmbreeScene::transmittance16(const glm::vec3& o, const glm::vec3* d, uint32_t active,
+                                  float tnear, float* transmitted, float tfar) const {
+  alignas(64) int valid[16];
+  alignas(64) RTCRay16 rays{};
+  for (int i = 0; i < 16; ++i) {
+    valid[i] = (active >> i) & 1u ? -1 : 0;
+    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
+    rays.org_x[i] = o.x;
+    rays.org_y[i] = o.y;
+    rays.org_z[i] = o.z;
+    rays.dir_x[i] = dir.x;
+    rays.dir_y[i] = dir.y;
+    rays.dir_z[i] = dir.z;
+    rays.tnear[i] = tnear;
+    rays.tfar[i] = tfar;
+    rays.mask[i] = 0xFFFFFFFFu;
+    rays.id[i] = (kTransmitTag << 24) | uint32_t(i);
+  }
+  float left[16];
+  std::fill(left, left + 16, 1.0f);
+  TransmitContext context;
+  rtcInitIntersectContext(&context.base);
+  context.transmitted = left;
+  rtcOccluded16(valid, impl_->scene, &context.base, &rays);
+  for (int i = 0; i < 16; ++i)
+    if (valid[i]) transmitted[i] = rays.tfar[i] < 0.0f ? 0.0f : left[i];
 }
 
 }  // namespace compose::render

@@ -18,8 +18,11 @@ class EmbreeScene {
   // compose::Error (stage "render") if Embree cannot build it.
   EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices);
   // The mesh's triangles; where its materials cut it out (Mesh::cutAway) every ray passes
-  // through (Embree's filter functions). `mesh` must outlive the scene.
+  // through, where they are semi-transparent a ray passes with a probability of 1 - alpha
+  // (Mesh::passes; Embree's filter functions) unless it is `layered` (below). `mesh` must
+  // outlive the scene.
   explicit EmbreeScene(const Mesh& mesh);
+  EmbreeScene(const Mesh&& mesh) = delete;  // the scene keeps a pointer to it
   ~EmbreeScene();
   EmbreeScene(const EmbreeScene&) = delete;
   EmbreeScene& operator=(const EmbreeScene&) = delete;
@@ -34,12 +37,18 @@ class EmbreeScene {
 
   // Closest hit along origin + t·direction, t in [tnear, tfar].
   Hit intersect(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
-                float tfar = 1e30f) const;
+                float tfar = 1e30f, bool layered = false) const;
   // Closest hits of up to 16 rays at once, those whose bit is set in `active` (only their
   // origins and directions are read; the others' hits are not found). For rays that stay close
   // together, such as the samples of one pixel: Embree traces them as one coherent packet.
+  // `layered`: the rays are the camera's, which go on through semi-transparent surfaces
+  // themselves (Mesh::alphaAt): such a surface is met wherever its alpha is above 0, by these
+  // and by intersect()'s. Other rays find it with a probability of its alpha.
   void intersect16(const glm::vec3* origins, const glm::vec3* directions, uint32_t active,
-                   Hit* hits, float tnear = 0.0f, float tfar = 1e30f) const;
+                   Hit* hits, float tnear = 0.0f, float tfar = 1e30f, bool layered = false) const;
+  // The same with each ray's own tnear.
+  void intersect16(const glm::vec3* origins, const glm::vec3* directions, uint32_t active,
+                   Hit* hits, const float* tnears, float tfar, bool layered) const;
   // Whether anything lies along origin + t·direction, t in [tnear, tfar].
   bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tnear = 0.0f,
                 float tfar = 1e30f) const;
@@ -53,6 +62,16 @@ class EmbreeScene {
   // which Embree sorts into coherent groups itself, faster than fixed packets of 16.
   void occludedStream(const glm::vec3& origin, const glm::vec3* directions, size_t count,
                       float tnear, uint8_t* occluded, float tfar = 1e30f) const;
+  // What each of `count` rays from one origin carries through the mesh (1: nothing in the way;
+  // 0: something opaque; the product of 1 - alpha over the semi-transparent surfaces met
+  // otherwise), into transmitted[i]. For a mesh without semi-transparent surfaces, 1 or 0 as
+  // occludedStream says.
+  void transmittanceStream(const glm::vec3& origin, const glm::vec3* directions, size_t count,
+                           float tnear, float* transmitted, float tfar = 1e30f) const;
+  // The same for up to 16 rays, those whose bit is set in `active` (only their directions are
+  // read and their transmitted[] written).
+  void transmittance16(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,
+                       float tnear, float* transmitted, float tfar = 1e30f) const;
 
  private:
   EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices,

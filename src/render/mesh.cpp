@@ -111,20 +111,40 @@ const Material& materialOf(const Mesh& mesh, uint32_t triangle) {
   return mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)];
 }
 
+// The alpha of `mat` at barycentrics (u, v) of `triangle`: its base alpha times its texture's.
+float materialAlpha(const Mesh& mesh, const Material& mat, uint32_t triangle, float u, float v) {
+  float alpha = mat.baseAlpha;
+  glm::vec2 uv;
+  if (mat.texture >= 0 && !mesh.texcoords.empty()) {
+    const Texture& tex = mesh.textures[size_t(mat.texture)];
+    if (!tex.alpha.empty() && materialUv(mesh, mat, triangle, u, v, uv))
+      alpha *= bilinear(tex, tex.alpha, uv).x;  // bilinear, as the colour (albedoAt)
+  }
+  return alpha;
+}
+
 }  // namespace
 
 bool Mesh::cutAway(uint32_t triangle, float u, float v) const {
+  return passes(triangle, u, v, 0.0f);
+}
+
+float Mesh::alphaAt(uint32_t triangle, float u, float v) const {
+  if (materials.empty()) return 1.0f;
+  const Material& mat = materialOf(*this, triangle);
+  return mat.cutOut() ? materialAlpha(*this, mat, triangle, u, v) : 1.0f;
+}
+
+bool Mesh::oneSided(uint32_t triangle) const {
+  return !materials.empty() && materialOf(*this, triangle).blend;
+}
+
+bool Mesh::passes(uint32_t triangle, float u, float v, float xi) const {
   if (materials.empty()) return false;
   const Material& mat = materialOf(*this, triangle);
   if (!mat.cutOut()) return false;
-  float alpha = mat.baseAlpha;
-  glm::vec2 uv;
-  if (mat.texture >= 0 && !texcoords.empty()) {
-    const Texture& tex = textures[size_t(mat.texture)];
-    if (!tex.alpha.empty() && materialUv(*this, mat, triangle, u, v, uv))
-      alpha *= bilinear(tex, tex.alpha, uv).x;  // bilinear, as the colour (albedoAt)
-  }
-  return alpha < mat.alphaCutoff;
+  const float alpha = materialAlpha(*this, mat, triangle, u, v);
+  return mat.blend ? !(alpha > xi) : alpha < mat.alphaCutoff;
 }
 
 glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
@@ -584,6 +604,36 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
 }
 
 // Validation and normals shared by every format (see the header comment).
+}  // namespace
+
+void addBackSides(Mesh& mesh) {
+  if (std::none_of(mesh.materials.begin(), mesh.materials.end(),
+                   [](const Material& m) { return m.blend; }))
+    return;
+  const size_t triangles = mesh.triangleCount();
+  std::vector<uint32_t> copyOf(mesh.positions.size(), UINT32_MAX);
+  for (size_t t = 0; t < triangles; ++t) {
+    const uint32_t m = mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[t];
+    if (!mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)].blend) continue;
+    uint32_t c[3];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = mesh.indices[3 * t + size_t(k)];
+      if (copyOf[v] == UINT32_MAX) {
+        copyOf[v] = uint32_t(mesh.positions.size());
+        mesh.positions.push_back(mesh.positions[v]);
+        mesh.normals.push_back(-mesh.normals[v]);
+        if (!mesh.texcoords.empty()) mesh.texcoords.push_back(mesh.texcoords[v]);
+        if (!mesh.colors.empty()) mesh.colors.push_back(mesh.colors[v]);
+      }
+      c[k] = copyOf[v];
+    }
+    mesh.indices.insert(mesh.indices.end(), {c[0], c[2], c[1]});
+    if (!mesh.triangleMaterial.empty()) mesh.triangleMaterial.push_back(m);
+  }
+}
+
+namespace {
+
 Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::path& path) {
   Mesh& mesh = loaded.mesh;
   if (mesh.indices.empty()) throw Error("mesh", "mesh has no triangles", path);
@@ -692,6 +742,7 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
   bool textured = false;
   for (const Material& m : mesh.materials) textured = textured || m.texture >= 0;
   if (!textured) mesh.texcoords.clear();
+  addBackSides(mesh);
   return std::move(loaded.mesh);
 }
 

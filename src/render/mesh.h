@@ -20,8 +20,8 @@
 //    metallic-roughness material gives the base colour: `baseColorFactor` (linear Rec.709) times
 //    `baseColorTexture` (sRGB unless its image declares otherwise), with the texture's sampler
 //    wrap modes and KHR_texture_transform; alphaMode MASK cuts the surface away where the base
-//    colour's alpha is below alphaCutoff (Material::alphaCutoff; BLEND is drawn opaque with a
-//    warning). A file that requires an extension compose cannot honour
+//    colour's alpha is below alphaCutoff (Material::alphaCutoff); BLEND makes it
+//    semi-transparent (Material::blend). A file that requires an extension compose cannot honour
 //    (Draco or meshopt compression, ...) is an error naming it. Vertex colours, skins and morph
 //    targets are ignored with a warning (skinned meshes render in their bind pose).
 //  * Geomview bicubic Bézier patches (.bez), tessellated (see mesh.cpp).
@@ -87,7 +87,14 @@ struct Material {
   // Negative: opaque.
   float alphaCutoff = -1.0f;
   float baseAlpha = 1.0f;
-  bool cutOut() const { return alphaCutoff >= 0.0f; }
+  // Semi-transparent (glTF's alphaMode BLEND): the surface covers alpha (baseAlpha times the
+  // texture's) of what lies behind it. The camera's rays go on through it layer by layer, the
+  // bright sources' rays carry 1 - alpha through it, and other rays find it with a probability
+  // of alpha (Mesh::passes; embree_scene.h). Where alpha is 0 it is not there at all. Seen from
+  // both sides: loading gives each of its triangles a back side of its own (Mesh::oneSided).
+  bool blend = false;
+  // Rays can pass through the surface somewhere (MASK or BLEND).
+  bool cutOut() const { return alphaCutoff >= 0.0f || blend; }
 };
 
 // The albedo of faces that have no material in a mesh where others have one (and the default of
@@ -129,11 +136,21 @@ struct Mesh {
   // its material's base colour times its texture at the interpolated texture coordinates, times
   // the interpolated vertex colour. Only meaningful when hasMaterials().
   glm::vec3 albedoAt(uint32_t triangle, float u, float v) const;
-  // Some material is a cut-out (Material::cutOut()).
+  // Some material is a cut-out or semi-transparent (Material::cutOut()).
   bool hasCutouts() const;
   // Whether the point at barycentrics (u, v) of `triangle` is cut away: its material is a
-  // cut-out and its alpha there is below the cutoff.
+  // cut-out and its alpha there is below the cutoff, or semi-transparent and its alpha is 0.
   bool cutAway(uint32_t triangle, float u, float v) const;
+  // Whether a ray whose random number (uniform in [0, 1)) is `xi` passes through the point:
+  // cutAway() for a cut-out; for a semi-transparent material, where alpha <= xi (with
+  // probability 1 - alpha).
+  bool passes(uint32_t triangle, float u, float v, float xi) const;
+  // The alpha at the point: its material's base alpha times its texture's (1 for a material
+  // that is neither a cut-out nor semi-transparent, and where there are no materials).
+  float alphaAt(uint32_t triangle, float u, float v) const;
+  // Rays meet the triangle from its front only: it is semi-transparent, and loading gave its
+  // back side a triangle of its own (wound the other way, with its normals turned round).
+  bool oneSided(uint32_t triangle) const;
   // The bounds of the surface that is there: boundsMin/Max, but with cut-outs those of what they
   // keep. A cut-out triangle whose alpha cannot vary (no alpha texture, texture coordinates that
   // do not move) is there whole or not at all; another is tested on a grid of about two points
@@ -156,6 +173,13 @@ Mesh loadMesh(const std::filesystem::path& path, const MeshOptions& options = {}
 // edges meet. Positions are welded by value first, so that vertices split by texture seams are
 // smoothed as one.
 void computeVertexNormals(Mesh& mesh, double creaseDegrees = 180.0);
+
+// A semi-transparent surface (Material::blend) is seen from both sides: through it, the inside
+// of a glass box faces the camera. Gives each of its triangles a back side of its own, with its
+// own vertices (normals turned round) and wound the other way, so that each side has its own
+// surface points and its own shadows; rays meet only the side that faces them
+// (Mesh::oneSided). loadMesh() does this; for meshes built otherwise.
+void addBackSides(Mesh& mesh);
 
 // Winds every connected piece of the mesh one way (each triangle against its neighbours across
 // shared edges), then outwards (a positive signed volume about the piece's centre). Used for

@@ -491,9 +491,9 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
       m.alphaCutoff = std::isfinite(gm.alphaCutoff) ? float(std::max(0.0, gm.alphaCutoff)) : 0.5f;
       m.baseAlpha = float(factorAlpha);
     } else if (gm.alphaMode == "BLEND") {
-      mesh_.warnings.push_back("material '" + m.name +
-                               "' is alphaMode BLEND: its transparency is not rendered (drawn "
-                               "opaque, with the colour where alpha is 0; MASK is)");
+      // Semi-transparent, with the same alpha.
+      m.blend = true;
+      m.baseAlpha = float(factorAlpha);
     }
     if (info.index >= 0) {
       m.texture = texture(info.index, m.name);
@@ -522,6 +522,11 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
       }
     }
   }
+  // BLEND with nothing below alpha 1 (exporters often mark every material BLEND) is opaque:
+  // no ray needs to ask it.
+  if (m.blend && !(m.baseAlpha < 1.0f) &&
+      (m.texture < 0 || mesh_.textures[size_t(m.texture)].alpha.empty()))
+    m.blend = false;
   mesh_.materials.push_back(m);
   texCoordSet_.push_back(set);
   return it->second;

@@ -253,9 +253,9 @@ class SourceEdges {
     int owner[16];
     int m = 0;
     auto flush = [&] {
-      const uint32_t hit = scene.occluded16(origin, batch, (1u << m) - 1u, tnear_);
-      for (int b = 0; b < m; ++b)
-        if (!((hit >> b) & 1u)) taken[owner[b]].visible += 1.0f / float(raysPerSample_);
+      float through[16];  // a semi-transparent surface lets 1 - alpha by
+      scene.transmittance16(origin, batch, (1u << m) - 1u, tnear_, through);
+      for (int b = 0; b < m; ++b) taken[owner[b]].visible += through[b] / float(raysPerSample_);
       rays += m;
       m = 0;
     };
@@ -354,9 +354,17 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   const float invSamples = 1.0f / float(n * n);
   const float invPi = float(1.0 / std::numbers::pi);
   const bool materials = mesh.hasMaterials() && !settings.overrideMaterials;
+  // Semi-transparent surfaces: a camera ray goes on through them, each layer taking its alpha of
+  // what the layers in front left of the sample, up to kMaxLayers of them or until less than
+  // kLeastLeft is left (the last layer met takes it all).
+  const bool translucent = std::any_of(mesh.materials.begin(), mesh.materials.end(),
+                                       [](const Material& m) { return m.blend; });
+  constexpr int kMaxLayers = 16;
+  constexpr float kLeastLeft = 1.0f / 256.0f;
   const float reflect = settings.exposure * invPi;
   std::atomic<int> rowsDone{0};
-  std::atomic<int64_t> hitsTotal{0}, sourceRays{0};
+  std::atomic<double> hitsTotal{0.0};
+  std::atomic<int64_t> sourceRays{0};
   std::optional<SourceEdges> edges;
   if (SourceEdges::wanted(settings)) {
     COMPOSE_CHECK(settings.sources->size() <= 64);  // one bit each
@@ -434,7 +442,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   std::atomic<int64_t> cameraRaysTotal{0};
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
-    int64_t rowHits = 0, rowSourceRays = 0, rowCameraRays = 0;
+    double rowHits = 0.0;
+    int64_t rowSourceRays = 0, rowCameraRays = 0;
     const uint8_t* coverableRow =
         coverable.empty() ? nullptr : coverable.data() + size_t(y - out.y0) * size_t(w);
     // A pixel's hits, then grouped by the surface cell they landed in (triangle and the three
@@ -448,6 +457,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       glm::vec3 at, geometricNormal;
       uint32_t seed;
       int group;
+      float cover;  // of the sample: 1, or what a semi-transparent layer takes of it
     };
     std::vector<SampleHit> samples;
     samples.reserve(size_t(n) * size_t(n));
@@ -477,27 +487,53 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           active |= 1u << b;
         }
         if (active == 0) continue;
+        // Through semi-transparent layers, front to back: each takes its alpha of what the
+        // layers in front of it left of the sample; the rays that go on are traced again, from
+        // just past their last hit.
         EmbreeScene::Hit found[16];
-        scene.intersect16(oObj, dObj, active, found);
-        for (int b = 0; b < count; ++b) {
-          const EmbreeScene::Hit& hit = found[b];
-          if (!hit.found) continue;
-          SampleHit sample;
-          sample.triangle = hit.triangle;
-          sample.u = hit.u;
-          sample.v = hit.v;
-          sample.distance = hit.distance;
-          sample.near[0] = sample.near[1] = sample.near[2] = 0;
-          sample.weight[0] = sample.weight[1] = sample.weight[2] = 0.0f;
-          if (settings.points)
-            settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
-          sample.dir = dirs[b];
-          sample.at = oObj[b] + dObj[b] * hit.distance;
-          sample.geometricNormal = hit.geometricNormal;
-          sample.seed = (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
-                        uint32_t(first + b);
-          sample.group = -1;
-          samples.push_back(sample);
+        float tnear[16], left[16];
+        int layer[16];
+        std::fill(tnear, tnear + 16, 0.0f);
+        std::fill(left, left + 16, 1.0f);
+        std::fill(layer, layer + 16, 0);
+        for (uint32_t tracing = active; tracing != 0;) {
+          scene.intersect16(oObj, dObj, tracing, found, tnear, 1e30f, translucent);
+          uint32_t further = 0;
+          for (int b = 0; b < count; ++b) {
+            const EmbreeScene::Hit& hit = found[b];
+            if (!((tracing >> b) & 1u) || !hit.found) continue;
+            float cover = left[b];
+            if (translucent && layer[b] < kMaxLayers && left[b] > kLeastLeft) {
+              cover *= std::clamp(mesh.alphaAt(hit.triangle, hit.u, hit.v), 0.0f, 1.0f);
+              left[b] -= cover;
+            } else {
+              left[b] = 0.0f;
+            }
+            SampleHit sample;
+            sample.triangle = hit.triangle;
+            sample.u = hit.u;
+            sample.v = hit.v;
+            sample.distance = hit.distance;
+            sample.near[0] = sample.near[1] = sample.near[2] = 0;
+            sample.weight[0] = sample.weight[1] = sample.weight[2] = 0.0f;
+            if (settings.points)
+              settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
+            sample.dir = dirs[b];
+            sample.at = oObj[b] + dObj[b] * hit.distance;
+            sample.geometricNormal = hit.geometricNormal;
+            sample.seed = (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
+                          uint32_t(first + b);
+            sample.group = -1;
+            sample.cover = cover;
+            samples.push_back(sample);
+            if (left[b] > 0.0f) {
+              tnear[b] = hit.distance * 1.00001f;
+              ++layer[b];
+              further |= 1u << b;
+            }
+          }
+          rowCameraRays += std::popcount(further);
+          tracing = further;
         }
       }
       const int hits = int(samples.size());
@@ -515,6 +551,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         if (a.group >= 0) continue;
         a.group = i;
         int members = 1;
+        float cover = a.cover;
         glm::dvec3 dirSum = a.dir;
         double uSum = a.u, vSum = a.v;
         for (int j = i + 1; j < hits; ++j) {
@@ -524,6 +561,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             continue;
           b.group = i;
           ++members;
+          cover += b.cover;
           dirSum += b.dir;
           uSum += b.u;
           vSum += b.v;
@@ -545,9 +583,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             const Shaded r = shade(b.triangle, b.u, b.v, b.near, b.weight, b.dir, b.at,
                                    b.geometricNormal, b.seed, true, rowSourceRays);
             const glm::vec3 albedo =
-                materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo;
+                b.cover * (materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo);
             albedoSum += albedo;
-            accumulate(r, albedo, 1.0f);
+            accumulate(r, albedo, b.cover);
           }
           continue;
         }
@@ -562,22 +600,25 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         for (int j = i; j < hits; ++j) {
           const SampleHit& b = samples[size_t(j)];
           if (b.group != i) continue;
-          albedo += materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo;
+          albedo += b.cover * (materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo);
         }
         albedoSum += albedo;
-        accumulate(r, albedo, float(members));
+        accumulate(r, albedo, cover);
       }
-      for (const SampleHit& sample : samples)
-        positionSum += origin + sample.dir * double(sample.distance);
-      if (hits == 0) continue;
-      rowHits += hits;
+      double covered = 0.0;
+      for (const SampleHit& sample : samples) {
+        positionSum += double(sample.cover) * (origin + sample.dir * double(sample.distance));
+        covered += double(sample.cover);
+      }
+      if (!(covered > 0.0)) continue;
+      rowHits += covered;
       float* b = out.beauty.at(x - out.x0, y - out.y0);
       b[0] = colour.x * invSamples;
       b[1] = colour.y * invSamples;
       b[2] = colour.z * invSamples;
-      b[3] = float(hits) * invSamples;
+      b[3] = float(covered) * invSamples;
       float* a = out.aovs.at(x - out.x0, y - out.y0);
-      const float inv = 1.0f / float(hits);
+      const float inv = float(1.0 / covered);
       const float len = glm::length(normalSum);
       if (len > 0.0f) {
         a[kN] = normalSum.x / len;
@@ -585,13 +626,13 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         a[kN + 2] = normalSum.z / len;
       }
       for (int c = 0; c < 3; ++c) {
-        a[kP + c] = float(positionSum[c] / hits);
+        a[kP + c] = float(positionSum[c] / covered);
         a[kAlbedo + c] = albedoSum[c] * inv;
         a[kIrradiance + c] = irradianceSum[c] * inv * settings.exposure;
         a[kShadowed + c] = shadowedSum[c] * inv * settings.exposure;
       }
       // Depth is linear in the position: the mean position's depth is the samples' mean depth.
-      a[kDepth] = float(-(cameraFromWorld * glm::dvec4(positionSum / double(hits), 1.0)).z);
+      a[kDepth] = float(-(cameraFromWorld * glm::dvec4(positionSum / covered, 1.0)).z);
       a[kAo] = aoSum * inv;
     }
     hitsTotal += rowHits;
@@ -601,7 +642,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
   });
   out.rays = cameraRaysTotal + sourceRays;
-  out.coverage = double(hitsTotal) * double(invSamples);
+  out.coverage = hitsTotal * double(invSamples);
   report(progress, "render", 1.0);
   return out;
 }

@@ -992,6 +992,7 @@ std::string meshHash(const Mesh& mesh) {
     for (uint32_t m : mesh.triangleMaterial) h.word(m);
     for (const Material& m : mesh.materials) {
       h.floats(std::span<const float>(&m.alphaCutoff, 1));
+      h.word(m.blend ? 1u : 0u);
       h.floats(std::span<const float>(&m.baseAlpha, 1));
       h.word(uint32_t(m.texture));
       h.floats(std::span<const float>(&m.uvTransform[0][0], 9));
@@ -1077,7 +1078,7 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         // The point's rays, traced together as one stream at the end.
         thread_local std::vector<glm::vec3> batch;
         thread_local std::vector<uint32_t> index;
-        thread_local std::vector<uint8_t> hit;
+        thread_local std::vector<float> through;
         batch.clear();
         index.clear();
         float* seen = out.visible.data() + v * sources.size();
@@ -1121,10 +1122,10 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
             index.push_back(i);
           }
         }
-        hit.resize(batch.size());
-        scene.occludedStream(origin, batch.data(), batch.size(), tnear, hit.data());
-        for (size_t b = 0; b < batch.size(); ++b)
-          if (!hit[b]) seen[index[b]] += 1.0f / float(kPerSource);
+        // What gets through: a semi-transparent surface lets 1 - alpha of the source by.
+        through.resize(batch.size());
+        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data());
+        for (size_t b = 0; b < batch.size(); ++b) seen[index[b]] += through[b] / float(kPerSource);
         rays += int64_t(batch.size());
       },
       256);

@@ -378,15 +378,33 @@ TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   EXPECT_FALSE(m.hasCutouts());  // alpha alone (OPAQUE) cuts nothing
   const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
   EXPECT_FALSE(m.cutAway(first, 1, 0));
-  // BLEND is drawn opaque, and says so.
+  // BLEND: semi-transparent by the texture's alpha (green 0: not there; blue 128/255: found by
+  // rays whose random number is below it).
   b.json["materials"][0]["alphaMode"] = "BLEND";
   writeBytes(dir / "blend.glb", b.glb());
   const Mesh blended = loadMesh(dir / "blend.glb");
-  ASSERT_EQ(blended.warnings.size(), 1u);
-  EXPECT_NE(blended.warnings[0].find("alphaMode BLEND: its transparency is not rendered"),
-            std::string::npos)
-      << blended.warnings[0];
-  EXPECT_FALSE(blended.hasCutouts());
+  EXPECT_TRUE(blended.warnings.empty()) << blended.warnings[0];
+  ASSERT_TRUE(blended.hasCutouts());
+  EXPECT_TRUE(blended.materials[0].blend);
+  ASSERT_EQ(blended.triangleCount(), 3u) << "the semi-transparent triangle's back side added";
+  EXPECT_TRUE(blended.oneSided(2));
+  EXPECT_FALSE(blended.oneSided(1 - first));
+  EXPECT_FALSE(blended.materials[1].cutOut()) << "the plain material is opaque";
+  EXPECT_FALSE(blended.cutAway(first, 0, 0)) << "red, opaque";
+  EXPECT_TRUE(blended.cutAway(first, 1, 0)) << "green, transparent";
+  EXPECT_FALSE(blended.passes(first, 0, 1, 0.45f)) << "blue, alpha 0.502";
+  EXPECT_TRUE(blended.passes(first, 0, 1, 0.55f)) << "blue, alpha 0.502";
+  EXPECT_FALSE(blended.passes(first, 0, 0, 0.999f)) << "red, opaque";
+  // The factor's alpha multiplies the texture's; BLEND with alpha 1 everywhere is opaque.
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 0.5};
+  writeBytes(dir / "blend-faded.glb", b.glb());
+  const Mesh faded = loadMesh(dir / "blend-faded.glb");
+  EXPECT_FALSE(faded.passes(first, 0, 0, 0.45f)) << "red, 0.5 x 1";
+  EXPECT_TRUE(faded.passes(first, 0, 0, 0.55f)) << "red, 0.5 x 1";
+  b.json["materials"][0]["pbrMetallicRoughness"].erase("baseColorTexture");
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 1};
+  writeBytes(dir / "blend-opaque.glb", b.glb());
+  EXPECT_FALSE(loadMesh(dir / "blend-opaque.glb").hasCutouts());
 }
 
 // alphaMode MASK cuts the surface away where alpha (the base colour factor's times the

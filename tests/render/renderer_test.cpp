@@ -64,6 +64,46 @@ TEST(Renderer, WhiteFurnaceGivesTheAlbedo) {
   EXPECT_NEAR(alphaSum, disc, 0.05 * disc);
 }
 
+// A semi-transparent sphere (glTF's BLEND, alpha 0.3 everywhere, its back side added as loading
+// adds it) in the white furnace: where the opaque sphere covers a pixel, the camera's rays meet
+// its front (0.3 of the pixel) and the inside of its back (0.3 of the 0.7 left): 0.51, without
+// noise, each layer shaded as the furnace shades it.
+TEST(Renderer, SemiTransparentLayersCoverTheirAlphaFrontToBack) {
+  Scene scene;
+  lighting::ShLighting sh(2);
+  sh.project(lighting::Environment::constant(glm::vec3(1.0f), 64));
+  RenderSettings settings;
+  settings.exposure = 2.0f;
+  const RenderOutput opaque =
+      renderDiffuse(scene.sphere, scene.bvh, scene.worldFromObject, scene.camera, sh, settings);
+  Mesh glass = scene.sphere;
+  Material mat;
+  mat.baseColor = glm::vec3(0.5f);
+  mat.blend = true;
+  mat.baseAlpha = 0.3f;
+  glass.materials.push_back(mat);
+  addBackSides(glass);
+  ASSERT_EQ(glass.triangleCount(), 2 * scene.sphere.triangleCount());
+  const EmbreeScene bvh(glass);
+  const RenderOutput out =
+      renderDiffuse(glass, bvh, scene.worldFromObject, scene.camera, sh, settings);
+  ASSERT_EQ(out.beauty.width, opaque.beauty.width);
+  int inside = 0;
+  for (int y = 0; y < out.beauty.height; ++y)
+    for (int x = 0; x < out.beauty.width; ++x) {
+      const float* p = out.beauty.at(x, y);
+      if (opaque.beauty.at(x, y)[3] < 1.0f) {
+        EXPECT_LE(p[3], opaque.beauty.at(x, y)[3] + 1e-6f);
+        continue;
+      }
+      ++inside;
+      EXPECT_NEAR(p[3], 0.51f, 1e-4f) << x << ", " << y;
+      EXPECT_NEAR(p[1], 0.51f, 1e-4f) << x << ", " << y;
+    }
+  EXPECT_GT(inside, 3000);
+  EXPECT_NEAR(out.coverage, 0.51 * opaque.coverage, 0.02 * opaque.coverage);
+}
+
 // Under L(ω) = 1 + b·ω the outgoing radiance is ρ (1 + (2/3) b·n): checks normals, their frame
 // and the environment rotation together.
 TEST(Renderer, ShadingFollowsTheNormalAov) {

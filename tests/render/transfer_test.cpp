@@ -1,5 +1,6 @@
 #include "render/transfer.h"
 
+#include <bit>
 #include <cmath>
 #include <numbers>
 
@@ -972,6 +973,177 @@ TEST(Cutouts, TheObjectStandsOnWhatItsCutoutsKeep) {
   const pipeline::MeshSummary summary = pipeline::summarize(card, 60.0);
   EXPECT_NEAR(summary.boundsMin.y, 0.25f, 0.005f);
   EXPECT_NEAR(summary.boundsMax.y, 1.0f, 0.005f);
+}
+
+// A square roof at y = `height` over [-0.5, 0.5]², facing up, semi-transparent (glTF's BLEND)
+// with alpha `alpha` everywhere (its factor; no texture), with its back side as loading gives it.
+Mesh blendRoof(float height, float alpha, bool backSides = true) {
+  Mesh m;
+  for (const glm::vec2 c : {glm::vec2(-0.5f, -0.5f), glm::vec2(0.5f, -0.5f), glm::vec2(0.5f, 0.5f),
+                            glm::vec2(-0.5f, 0.5f)}) {
+    m.positions.emplace_back(c.x, height, c.y);
+    m.normals.emplace_back(0.0f, 1.0f, 0.0f);
+  }
+  m.indices = {0, 2, 1, 0, 3, 2};
+  m.normalsFromFile = true;
+  Material mat;
+  mat.blend = true;
+  mat.baseAlpha = alpha;
+  m.materials.push_back(mat);
+  if (backSides) addBackSides(m);
+  return m;
+}
+
+// Rays from the origin up through the roof (|x|, |z| < 0.36 at y = 0.5), n x n of them, none
+// exactly through the diagonal its two triangles share (Embree finds both there).
+std::vector<glm::vec3> raysThroughTheRoof(int n) {
+  std::vector<glm::vec3> dirs;
+  for (int a = 0; a < n; ++a)
+    for (int b = 0; b < n; ++b)
+      dirs.push_back(
+          glm::normalize(glm::vec3(0.7f * ((float(a) + 0.5f) / float(n) - 0.5f) + 0.0031f, 0.5f,
+                                   0.7f * ((float(b) + 0.5f) / float(n) - 0.5f))));
+  return dirs;
+}
+
+TEST(SemiTransparent, RaysFindTheSurfaceWithAProbabilityOfItsAlpha) {
+  const Mesh roof = blendRoof(0.5f, 0.3f);
+  ASSERT_TRUE(roof.hasCutouts());
+  EXPECT_FALSE(roof.cutAway(0, 0.3f, 0.3f));  // there, in part
+  EXPECT_TRUE(roof.passes(0, 0.3f, 0.3f, 0.3f));
+  EXPECT_FALSE(roof.passes(0, 0.3f, 0.3f, 0.29f));
+  const EmbreeScene scene(roof);
+  // Each ray its own random number: about 30 % of 4,096 are stopped (binomial sigma 0.7 %),
+  // by every kind of query.
+  const std::vector<glm::vec3> dirs = raysThroughTheRoof(64);
+  std::vector<uint8_t> hit(dirs.size());
+  scene.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
+  int stream = 0, single = 0, found = 0, packets = 0;
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    stream += hit[i];
+    single += scene.occluded(glm::vec3(0.0f), dirs[i]) ? 1 : 0;
+    found += scene.intersect(glm::vec3(0.0f), dirs[i]).found ? 1 : 0;
+  }
+  for (size_t i = 0; i < dirs.size(); i += 16)
+    packets += std::popcount(scene.occluded16(glm::vec3(0.0f), &dirs[i], 0xFFFFu, 0.0f));
+  for (const int stopped : {stream, single, found, packets})
+    EXPECT_NEAR(double(stopped) / double(dirs.size()), 0.3, 0.03);
+  // Each side is met from its front only: the roof's back side is its own (four triangles, the
+  // second two wound the other way, normals down); without it, rays from below pass.
+  ASSERT_EQ(roof.triangleCount(), 4u);
+  EXPECT_EQ(roof.normals[4], glm::vec3(0.0f, -1.0f, 0.0f));
+  const Mesh front = blendRoof(0.5f, 0.3f, false);
+  const EmbreeScene frontOnly(front);
+  frontOnly.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
+  EXPECT_EQ(std::count(hit.begin(), hit.end(), uint8_t(1)), 0);
+  int fromAbove = 0;
+  for (const glm::vec3& d : dirs)
+    fromAbove += frontOnly.intersect(glm::vec3(0.0f, 1.0f, 0.0f), -d).found ? 1 : 0;
+  EXPECT_NEAR(double(fromAbove) / double(dirs.size()), 0.3, 0.03);
+  // Two layers of alpha 0.5 stop 75 %: a ray's chances at each are independent.
+  Mesh two = blendRoof(0.5f, 0.5f);
+  const Mesh upper = blendRoof(0.7f, 0.5f);
+  const uint32_t offset = uint32_t(two.positions.size());
+  for (const uint32_t i : upper.indices) two.indices.push_back(i + offset);
+  two.positions.insert(two.positions.end(), upper.positions.begin(), upper.positions.end());
+  two.normals.insert(two.normals.end(), upper.normals.begin(), upper.normals.end());
+  const EmbreeScene layers(two);
+  layers.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
+  int both = 0;
+  for (const uint8_t h : hit) both += h;
+  EXPECT_NEAR(double(both) / double(dirs.size()), 0.75, 0.03);
+  // What gets through, for the bright sources' rays: exactly 1 - alpha per layer, by its side
+  // facing the ray; nothing through an opaque surface; everything beside the roof.
+  std::vector<float> through(dirs.size());
+  layers.transmittanceStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, through.data());
+  for (const float t : through) EXPECT_NEAR(t, 0.25f, 1e-6f);
+  scene.transmittanceStream(glm::vec3(0.0f, 1.0f, 0.0f), dirs.data(), dirs.size(), 0.0f,
+                            through.data());
+  for (const float t : through) EXPECT_EQ(t, 1.0f);  // above the roof, rays going up
+  float packet[16];
+  scene.transmittance16(glm::vec3(0.0f), dirs.data(), 0xFFFFu, 0.0f, packet);
+  for (const float t : packet) EXPECT_NEAR(t, 0.7f, 1e-6f);
+  const EmbreeScene solid(roof.positions, roof.indices);
+  solid.transmittance16(glm::vec3(0.0f), dirs.data(), 0x00FFu, 0.0f, packet);
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(packet[i], 0.0f);
+  // Alpha 0: not there; alpha 1: opaque.
+  for (const float alpha : {0.0f, 1.0f}) {
+    const Mesh roofAt = blendRoof(0.5f, alpha);
+    const EmbreeScene edge(roofAt);
+    edge.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
+    int stopped = 0;
+    for (const uint8_t h : hit) stopped += h;
+    EXPECT_EQ(stopped, alpha > 0.0f ? int(dirs.size()) : 0) << alpha;
+  }
+}
+
+TEST(SemiTransparent, TheCamerasRaysMeetEveryLayerFromTheFront) {
+  // The camera's rays (layered) meet a semi-transparent surface wherever its alpha is above 0,
+  // by its side facing them; where alpha is 0 they pass.
+  for (const float alpha : {0.3f, 0.0f}) {
+    const Mesh roof = blendRoof(0.5f, alpha);
+    const EmbreeScene scene(roof);
+    glm::vec3 origins[16], downs[16];
+    for (int i = 0; i < 16; ++i) {
+      origins[i] = {-0.4f + 0.05f * float(i), 2.0f, 0.1f};
+      downs[i] = {0.0f, -1.0f, 0.0f};
+    }
+    EmbreeScene::Hit found[16];
+    scene.intersect16(origins, downs, 0xFFFFu, found, 0.0f, 1e30f, true);
+    for (int i = 0; i < 16; ++i) {
+      EXPECT_EQ(found[i].found, alpha > 0.0f) << alpha << ", ray " << i;
+      if (found[i].found) {
+        EXPECT_LT(found[i].triangle, 2u) << "the side facing up";
+      }
+    }
+    const EmbreeScene::Hit below = scene.intersect({0.1f, -1.0f, 0.1f}, {0, 1, 0}, 0, 1e30f, true);
+    EXPECT_EQ(below.found, alpha > 0.0f);
+    if (below.found) {
+      EXPECT_GE(below.triangle, 2u) << "the side facing down";
+    }
+  }
+}
+
+TEST(SemiTransparent, ShadowsAreAsDarkAsTheAlpha) {
+  // A floor point under the roof: with alpha 0.4 it loses 0.4 of what the opaque roof takes
+  // from its ambient occlusion. The opaque roof's own figure is the reference.
+  SurfacePoints floor;
+  floor.size = 1.0f;
+  floor.radius = 0.8f;
+  floor.positions = {{0.0f, 0.0f, 0.0f}, {0.2f, 0.0f, -0.1f}};
+  floor.normals = {{0.0f, 1.0f, 0.0f}, {0.0f, 1.0f, 0.0f}};
+  TransferParams params;
+  params.order = 2;
+  Mesh opaque = blendRoof(0.5f, 1.0f);
+  opaque.materials[0].blend = false;
+  const VertexTransfer solid = computeTransfer(opaque, floor, params);
+  const VertexTransfer faint = computeTransfer(blendRoof(0.5f, 0.4f), floor, params);
+  for (size_t p = 0; p < 2; ++p) {
+    ASSERT_LT(solid.ao[p], 0.8f) << "the roof shadows the point";
+    EXPECT_NEAR(faint.ao[p], 1.0f - 0.4f * (1.0f - solid.ao[p]), 0.02f) << p;
+  }
+  // Its own cache entry, and never taken for convex.
+  EXPECT_NE(meshHash(opaque), meshHash(blendRoof(0.5f, 1.0f)));
+  Mesh cube;
+  addBox(cube, {0.0f, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f});
+  cube.materials.push_back(Material{});
+  cube.materials[0].blend = true;
+  cube.materials[0].baseAlpha = 0.5f;
+  EXPECT_FALSE(isConvex(cube));
+  // Sized and stood on the ground by what is there at all: alpha above 0.
+  Mesh card = cutCard(2);
+  card.materials[0].alphaCutoff = -1.0f;
+  card.materials[0].blend = true;
+  glm::vec3 lo, hi;
+  card.keptBounds(lo, hi);
+  EXPECT_GE(lo.y, 0.1875f);  // alpha is 0 up to the centre of the second row from the bottom
+  EXPECT_LE(lo.y, 0.25f + 0.005f);
+  Mesh pale = card;  // faint everywhere, but there: the whole card (a cut-out would be gone)
+  pale.materials[0].texture = -1;
+  pale.materials[0].baseAlpha = 0.2f;
+  pale.keptBounds(lo, hi);
+  EXPECT_EQ(lo, pale.boundsMin());
+  EXPECT_FALSE(pale.cutAway(0, 0.3f, 0.3f));
 }
 
 TEST(Transfer, ParametersAreValidated) {
