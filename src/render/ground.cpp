@@ -265,7 +265,8 @@ bool refineGroundGrid(GroundGrid& grid, const EmbreeScene& scene, const glm::dma
     }
     return false;
   };
-  // Whether the object hides the plate pixel of lattice position (a, b) from the camera.
+  // Whether the object hides the plate pixel of lattice position (a, b) from the camera: less
+  // than 1/512 of it shows through (a semi-transparent object lets the plate show).
   grid.hidden.resize(grid.node.size(), -1);
   auto hiddenAt = [&](int a, int b) {
     int8_t& h = grid.hidden[nodeAt(a, b)];
@@ -275,7 +276,10 @@ bool refineGroundGrid(GroundGrid& grid, const EmbreeScene& scene, const glm::dma
       if (camera.ray(grid.x0 + a * grid.unit + 0.5, grid.y0 + b * grid.unit + 0.5, origin, dir)) {
         const glm::dvec3 o = glm::dvec3(objectFromWorld * glm::dvec4(origin, 1.0));
         const glm::dvec3 d = glm::dvec3(objectFromWorld * glm::dvec4(dir, 0.0));
-        h = scene.occluded(glm::vec3(o), glm::vec3(glm::normalize(d))) ? 1 : 0;
+        const glm::vec3 direction(glm::normalize(d));
+        float through = 1.0f;
+        scene.transmittanceStream(glm::vec3(o), &direction, 1, 0.0f, &through);
+        h = through < 1.0f / 512.0f ? 1 : 0;
       }
     }
     return h == 1;
