@@ -88,9 +88,9 @@ struct Material {
   float alphaCutoff = -1.0f;
   float baseAlpha = 1.0f;
   // Semi-transparent (glTF's alphaMode BLEND): the surface covers alpha (baseAlpha times the
-  // texture's) of what lies behind it. The camera's rays go on through it layer by layer, the
-  // bright sources' rays carry 1 - alpha through it, and other rays find it with a probability
-  // of alpha (Mesh::passes; embree_scene.h). Where alpha is 0 it is not there at all. Seen from
+  // texture's) of what lies behind it. The camera's rays go on through it layer by layer, shadow
+  // rays carry 1 - alpha through it, and boolean queries find it with a probability of alpha
+  // (Mesh::passes; embree_scene.h). Where alpha is 0 it is not there at all. Seen from
   // both sides: loading gives each of its triangles a back side of its own (Mesh::oneSided).
   bool blend = false;
   // Rays can pass through the surface somewhere (MASK or BLEND).

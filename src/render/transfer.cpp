@@ -679,9 +679,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<float> visibleSelf;     // per cell: the visible fraction without the ground
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
-    std::vector<float> projected;    // s x k: the visible fractions projected on the columns
-    std::vector<glm::vec3> batch;    // rays of one trace call
-    std::vector<uint8_t> hits;       // their answers
+    std::vector<float> firstThrough;  // per cell: what its first ray carries through the object
+    std::vector<float> projected;     // s x k: the visible fractions projected on the columns
+    std::vector<glm::vec3> batch;     // rays of one trace call
+    std::vector<float> through;       // their answers: what each carries through the object
     std::vector<int> batchCell;
     std::vector<float> batchCos;
   };
@@ -700,10 +701,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     }
     sc.coneCos.resize(size_t(s));
     sc.occluded.resize(size_t(s));
+    sc.firstThrough.resize(cells);
     sc.projected.resize(size_t(s) * size_t(k));
     const size_t most = cells * size_t(r) * size_t(r);
     sc.batch.reserve(most);
-    sc.hits.reserve(most);
+    sc.through.reserve(most);
     sc.batchCell.reserve(most);
     sc.batchCos.reserve(most);
     return sc;
@@ -752,14 +754,17 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           if (nsh == 1)
             sc.shSum[0] += y00 * double(cosT) * double(share * weight) * omega[size_t(cell / s)];
         };
-        // Traces sc.batch (any length) as one stream; calls answer(index, occluded).
+        // Traces sc.batch (any length) as one stream; calls answer(index, through), `through`
+        // what the ray carries through the object: 0 where it is blocked, 1 where nothing is in
+        // the way, 1 - alpha through each semi-transparent layer.
         auto traceBatch = [&](auto&& answer) {
-          sc.hits.assign(sc.batch.size(), 0);
+          sc.through.assign(sc.batch.size(), 1.0f);
           if (params.selfOcclusion) {
-            scene.occludedStream(origin, sc.batch.data(), sc.batch.size(), tnear, sc.hits.data());
+            scene.transmittanceStream(origin, sc.batch.data(), sc.batch.size(), tnear,
+                                      sc.through.data());
             traced += int64_t(sc.batch.size());
           }
-          for (size_t b = 0; b < sc.batch.size(); ++b) answer(b, sc.hits[b] != 0);
+          for (size_t b = 0; b < sc.batch.size(); ++b) answer(b, sc.through[b]);
         };
 
         // A point outside the object's bounding sphere (a ground point) can only be shadowed
@@ -783,6 +788,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         const uint32_t firstSample = sample;
         sample += uint32_t(s * s);
         std::fill(sc.occluded.begin(), sc.occluded.end(), uint64_t(0));
+        std::fill(sc.firstThrough.begin(), sc.firstThrough.end(), 1.0f);
         for (const int cell : firstPassOrder) {
           const int i = cell / s, j = cell % s;
           const uint32_t at = firstSample + uint32_t(cell);
@@ -801,9 +807,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.batch.push_back(ground ? sc.directions[size_t(cell)] : direction(j, cosT, w));
           sc.batchCell.push_back(cell);
         }
-        traceBatch([&](size_t index, bool occluded) {
+        // A cell counts as blocked for finding shadow edges when its ray carries less than half.
+        traceBatch([&](size_t index, float through) {
           const int cell = sc.batchCell[index];
-          if (occluded) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
+          sc.firstThrough[size_t(cell)] = through;
+          if (through < 0.5f) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
         });
 
         // Cells whose ray disagrees with one of its eight neighbours' (the azimuth wraps around)
@@ -831,14 +839,15 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           if (r == 1) edge = 0;
           for (int j = 0; j < s; ++j) {
             const int cell = i * s + j;
-            const bool blocked = ((row >> j) & 1u) != 0;
-            const float weight =
-                ground && !blocked ? ground->weight(origin, sc.directions[size_t(cell)]) : 1.0f;
+            const float through = sc.firstThrough[size_t(cell)];
+            const float weight = ground && through > 0.0f
+                                     ? ground->weight(origin, sc.directions[size_t(cell)])
+                                     : 1.0f;
             if (!((edge >> j) & 1u)) {
-              if (!blocked) seen(cell, sc.cosines[size_t(cell)], 1.0f, weight);
+              if (through > 0.0f) seen(cell, sc.cosines[size_t(cell)], through, weight);
               continue;
             }
-            if (!blocked) seen(cell, sc.cosines[size_t(cell)], share, weight);
+            if (through > 0.0f) seen(cell, sc.cosines[size_t(cell)], share * through, weight);
             const int own = sc.stratum[size_t(cell)];
             for (int a = 0; a < r; ++a) {
               for (int b = 0; b < r; ++b, ++sample) {
@@ -852,10 +861,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
             }
           }
         }
-        traceBatch([&](size_t index, bool occluded) {
-          if (occluded) return;
+        traceBatch([&](size_t index, float through) {
+          if (!(through > 0.0f)) return;
           const float weight = ground ? ground->weight(origin, sc.batch[index]) : 1.0f;
-          seen(sc.batchCell[index], sc.batchCos[index], share, weight);
+          seen(sc.batchCell[index], sc.batchCos[index], share * through, weight);
         });
 
         // AO from the visible fractions and each cell's exact cosine integral, so that a fully

@@ -1106,7 +1106,8 @@ TEST(SemiTransparent, TheCamerasRaysMeetEveryLayerFromTheFront) {
 
 TEST(SemiTransparent, ShadowsAreAsDarkAsTheAlpha) {
   // A floor point under the roof: with alpha 0.4 it loses 0.4 of what the opaque roof takes
-  // from its ambient occlusion. The opaque roof's own figure is the reference.
+  // from its ambient occlusion. The opaque roof's own figure is the reference. (Without
+  // transmittance, stochastically: within 0.02.)
   SurfacePoints floor;
   floor.size = 1.0f;
   floor.radius = 0.8f;
@@ -1120,7 +1121,10 @@ TEST(SemiTransparent, ShadowsAreAsDarkAsTheAlpha) {
   const VertexTransfer faint = computeTransfer(blendRoof(0.5f, 0.4f), floor, params);
   for (size_t p = 0; p < 2; ++p) {
     ASSERT_LT(solid.ao[p], 0.8f) << "the roof shadows the point";
-    EXPECT_NEAR(faint.ao[p], 1.0f - 0.4f * (1.0f - solid.ao[p]), 0.02f) << p;
+    // Each ray carries 0.6 through the roof; the two differ only in how the cells on the
+    // roof's rim are sampled (the opaque roof's rim is an edge and gets more rays): 0.0003 and
+    // 0.0026 apart.
+    EXPECT_NEAR(faint.ao[p], 1.0f - 0.4f * (1.0f - solid.ao[p]), 0.005f) << p;
   }
   // Its own cache entry, and never taken for convex.
   EXPECT_NE(meshHash(opaque), meshHash(blendRoof(0.5f, 1.0f)));
