@@ -70,7 +70,20 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     line += ", " + std::to_string(mesh.textures.size()) + " texture" +
             (mesh.textures.size() == 1 ? "" : "s") + " (" + read + ")";
   }
-  return line + ", converted to '" + working + "'";
+  line += ", converted to '" + working + "'";
+  // How light goes through them, where it does.
+  const auto cut = std::count_if(mesh.materials.begin(), mesh.materials.end(),
+                                 [](const render::Material& m) { return m.alphaCutoff >= 0.0f; });
+  const auto clear = std::count_if(mesh.materials.begin(), mesh.materials.end(),
+                                   [](const render::Material& m) { return m.blend; });
+  if (cut > 0)
+    line += "; " + std::to_string(cut) + (cut == 1 ? " is" : " are") +
+            " cut out where alpha is below the cutoff (MASK)";
+  if (clear > 0)
+    line += "; " + std::to_string(clear) + (clear == 1 ? " is" : " are") +
+            " semi-transparent (BLEND): seen through and from both sides, shadows letting 1 - "
+            "alpha through";
+  return line;
 }
 
 }  // namespace compose::pipeline

@@ -48,6 +48,20 @@ render::Mesh twoMaterials() {
 // different ways; 1e-3 is a tenth of what a missed conversion (or one applied twice) changes.
 constexpr float kTolerance = 1e-3f;
 
+// The note says which materials let light through, and how.
+TEST(MaterialColour, TheNoteNamesCutOutsAndSemiTransparentMaterials) {
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  render::Mesh mesh = twoMaterials();
+  mesh.materials[0].alphaCutoff = 0.5f;
+  mesh.materials[1].blend = true;
+  const std::string line = materialsToWorkingSpace(mesh, colors);
+  EXPECT_NE(line.find("; 1 is cut out where alpha is below the cutoff (MASK)"), std::string::npos)
+      << line;
+  EXPECT_NE(line.find("; 1 is semi-transparent (BLEND): seen through and from both sides"),
+            std::string::npos)
+      << line;
+}
+
 TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
   const color::ColorConfig colors = color::ColorConfig::builtin();
   render::Mesh mesh = twoMaterials();
@@ -56,6 +70,7 @@ TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
       << line;
   EXPECT_NE(line.find("1 texture (1 as 'sRGB"), std::string::npos) << line;
   EXPECT_NE(line.find("converted to 'ACEScg'"), std::string::npos) << line;
+  EXPECT_EQ(line.find("MASK"), std::string::npos) << line;
   EXPECT_EQ(mesh.colorSpace, "ACEScg");
   for (int m = 0; m < 2; ++m) {
     const glm::vec3 expected = toAp1(twoMaterials().materials[size_t(m)].baseColor);
