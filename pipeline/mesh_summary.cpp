@@ -58,6 +58,10 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.bytes("colours");
     h.floats(std::span<const float>(&mesh.colors[0].x, 3 * mesh.colors.size()));
   }
+  if (!mesh.alphas.empty()) {
+    h.bytes("alphas");
+    h.floats(std::span<const float>(mesh.alphas.data(), mesh.alphas.size()));
+  }
   for (uint32_t m : mesh.triangleMaterial) h.word(m);
   for (const render::Material& m : mesh.materials) {
     h.floats(std::span<const float>(&m.baseColor.x, 3));

@@ -114,6 +114,10 @@ const Material& materialOf(const Mesh& mesh, uint32_t triangle) {
 // The alpha of `mat` at barycentrics (u, v) of `triangle`: its base alpha times its texture's.
 float materialAlpha(const Mesh& mesh, const Material& mat, uint32_t triangle, float u, float v) {
   float alpha = mat.baseAlpha;
+  if (!mesh.alphas.empty()) {
+    const uint32_t* c = &mesh.indices[3 * size_t(triangle)];
+    alpha *= (1.0f - u - v) * mesh.alphas[c[0]] + u * mesh.alphas[c[1]] + v * mesh.alphas[c[2]];
+  }
   glm::vec2 uv;
   if (mat.texture >= 0 && !mesh.texcoords.empty()) {
     const Texture& tex = mesh.textures[size_t(mat.texture)];
@@ -183,10 +187,18 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
     const Material& mat = materialOf(*this, uint32_t(t));
     if (!mat.cutOut()) continue;
     kind[t] = kUniform;
-    if (mat.texture < 0 || texcoords.empty() || textures[size_t(mat.texture)].alpha.empty())
-      continue;
-    const Image& alpha = textures[size_t(mat.texture)].alpha;
     const uint32_t* c = &indices[3 * t];
+    // Vertex alphas that differ across the triangle: alpha is linear over it, cut along a line
+    // found to a sixteenth of the triangle.
+    if (!alphas.empty() && (alphas[c[0]] != alphas[c[1]] || alphas[c[0]] != alphas[c[2]])) {
+      kind[t] = kGrid;
+      steps[t] = 16;
+    }
+    if (mat.texture < 0 || texcoords.empty() || textures[size_t(mat.texture)].alpha.empty()) {
+      if (kind[t] == kGrid) points += 0.5 * double(steps[t] + 1) * double(steps[t] + 2);
+      continue;
+    }
+    const Image& alpha = textures[size_t(mat.texture)].alpha;
     double longest = 0.0;
     for (int e = 0; e < 3; ++e) {
       const glm::vec3 a = mat.uvTransform * glm::vec3(texcoords[c[e]], 1.0f);
@@ -194,10 +206,11 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
       longest = std::max({longest, std::abs(double(b.x - a.x)) * alpha.width,
                           std::abs(double(b.y - a.y)) * alpha.height});
     }
-    if (!(longest > 1e-6) || !std::isfinite(longest)) continue;
-    kind[t] = kGrid;
-    steps[t] = uint16_t(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0));
-    points += 0.5 * double(steps[t] + 1) * double(steps[t] + 2);
+    if (longest > 1e-6 && std::isfinite(longest)) {
+      kind[t] = kGrid;
+      steps[t] = std::max(steps[t], uint16_t(std::clamp(std::ceil(2.0 * longest), 1.0, 4096.0)));
+    }
+    if (kind[t] == kGrid) points += 0.5 * double(steps[t] + 1) * double(steps[t] + 2);
   }
   // Over the budget: every grid coarsened by the same factor.
   const double coarsen = points > double(budget) ? std::sqrt(double(budget) / points) : 1.0;
@@ -445,6 +458,7 @@ NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
       mesh.positions.push_back(mesh.positions[v]);
       if (!mesh.texcoords.empty()) mesh.texcoords.push_back(mesh.texcoords[v]);
       if (!mesh.colors.empty()) mesh.colors.push_back(mesh.colors[v]);
+      if (!mesh.alphas.empty()) mesh.alphas.push_back(mesh.alphas[v]);
       mesh.normals.push_back(fanNormal(root, c));
       fromFile.push_back(0);
       ++stats.added;
@@ -484,6 +498,7 @@ void dropUnusedVertices(detail::LoadedMesh& loaded) {
     if (v < mesh.normals.size()) mesh.normals[next] = mesh.normals[v];
     if (!mesh.texcoords.empty()) mesh.texcoords[next] = mesh.texcoords[v];
     if (!mesh.colors.empty()) mesh.colors[next] = mesh.colors[v];
+    if (!mesh.alphas.empty()) mesh.alphas[next] = mesh.alphas[v];
     if (!loaded.hasNormal.empty()) loaded.hasNormal[next] = loaded.hasNormal[v];
     ++next;
   }
@@ -491,6 +506,7 @@ void dropUnusedVertices(detail::LoadedMesh& loaded) {
   if (mesh.normals.size() > next) mesh.normals.resize(next);
   if (!mesh.texcoords.empty()) mesh.texcoords.resize(next);
   if (!mesh.colors.empty()) mesh.colors.resize(next);
+  if (!mesh.alphas.empty()) mesh.alphas.resize(next);
   if (!loaded.hasNormal.empty()) loaded.hasNormal.resize(next);
   for (uint32_t& i : mesh.indices) i = remap[i];
 }
@@ -624,6 +640,7 @@ void addBackSides(Mesh& mesh) {
         mesh.normals.push_back(-mesh.normals[v]);
         if (!mesh.texcoords.empty()) mesh.texcoords.push_back(mesh.texcoords[v]);
         if (!mesh.colors.empty()) mesh.colors.push_back(mesh.colors[v]);
+        if (!mesh.alphas.empty()) mesh.alphas.push_back(mesh.alphas[v]);
       }
       c[k] = copyOf[v];
     }
@@ -643,6 +660,7 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
                 mesh.triangleMaterial.size() == mesh.triangleCount());
   COMPOSE_CHECK(mesh.texcoords.empty() || mesh.texcoords.size() == mesh.positions.size());
   COMPOSE_CHECK(mesh.colors.empty() || mesh.colors.size() == mesh.positions.size());
+  COMPOSE_CHECK(mesh.alphas.empty() || mesh.alphas.size() == mesh.positions.size());
   loaded.hasNormal.resize(mesh.positions.size(), 0);
   mesh.normals.resize(mesh.positions.size(), glm::vec3(0.0f));
 
@@ -742,6 +760,10 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
   bool textured = false;
   for (const Material& m : mesh.materials) textured = textured || m.texture >= 0;
   if (!textured) mesh.texcoords.clear();
+  // Vertex alpha matters to cut-out and semi-transparent materials only, and only below 1.
+  if (!mesh.hasCutouts() ||
+      std::all_of(mesh.alphas.begin(), mesh.alphas.end(), [](float a) { return a == 1.0f; }))
+    mesh.alphas.clear();
   addBackSides(mesh);
   return std::move(loaded.mesh);
 }

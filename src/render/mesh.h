@@ -20,10 +20,11 @@
 //    metallic-roughness material gives the base colour: `baseColorFactor` (linear Rec.709) times
 //    `baseColorTexture` (sRGB unless its image declares otherwise), with the texture's sampler
 //    wrap modes and KHR_texture_transform; alphaMode MASK cuts the surface away where the base
-//    colour's alpha is below alphaCutoff (Material::alphaCutoff); BLEND makes it
-//    semi-transparent (Material::blend). A file that requires an extension compose cannot honour
-//    (Draco or meshopt compression, ...) is an error naming it. Vertex colours, skins and morph
-//    targets are ignored with a warning (skinned meshes render in their bind pose).
+//    colour's alpha (factor x texture x COLOR_0's alpha) is below alphaCutoff
+//    (Material::alphaCutoff); BLEND makes it semi-transparent (Material::blend). COLOR_0
+//    multiplies the base colour. A file that requires an extension compose cannot honour
+//    (Draco or meshopt compression, ...) is an error naming it. Skins and morph targets are
+//    ignored with a warning (skinned meshes render in their bind pose).
 //  * Geomview bicubic Bézier patches (.bez), tessellated (see mesh.cpp).
 //
 // Normals. Normals in the file are kept (normalised). Vertices without one get smooth normals:
@@ -121,6 +122,10 @@ struct Mesh {
   // position or empty: they multiply the material's albedo. A mesh with colours and no
   // materials gets one white material, so that its colours are its albedo.
   std::vector<glm::vec3> colors;
+  // Their alpha (glTF's COLOR_0 RGBA), one per position or empty: it multiplies the alpha of a
+  // cut-out or semi-transparent material (Material::cutOut()); empty when no such material
+  // uses it or it is 1 everywhere.
+  std::vector<float> alphas;
   std::vector<uint32_t> triangleMaterial;  // one per triangle, or empty (all material 0)
   std::vector<Material> materials;
   std::vector<Texture> textures;

@@ -522,11 +522,6 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
       }
     }
   }
-  // BLEND with nothing below alpha 1 (exporters often mark every material BLEND) is opaque:
-  // no ray needs to ask it.
-  if (m.blend && !(m.baseAlpha < 1.0f) &&
-      (m.texture < 0 || mesh_.textures[size_t(m.texture)].alpha.empty()))
-    m.blend = false;
   mesh_.materials.push_back(m);
   texCoordSet_.push_back(set);
   return it->second;
@@ -559,10 +554,11 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
     if (normals.size() != positions.size())
       throw PrimitiveError{"NORMAL and POSITION have different counts"};
   }
-  // COLOR_0 (linear RGB or RGBA, float or normalised integers) multiplies the base colour; its
-  // alpha is not read. A colour outside 0..1 or not finite is clamped and counted; colours that
-  // cannot be read are left out with a warning (the geometry stays).
-  std::vector<double> colours;
+  // COLOR_0 (linear RGB or RGBA, float or normalised integers) multiplies the base colour, its
+  // alpha the base colour's alpha (glTF 2.0 §3.9.2; it matters to MASK and BLEND materials
+  // only). A component outside 0..1 or not finite is clamped and counted; colours that cannot be
+  // read are left out with a warning (the geometry stays).
+  std::vector<double> colours, alphas;
   if (const int a = attribute("COLOR_0"); a >= 0) {
     try {
       const bool rgba = size_t(a) < model_.accessors.size() &&
@@ -579,16 +575,18 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
       if (!acc.normalized && acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT)
         scale = 65535.0;
       std::vector<double> rgb(3 * n);
+      if (rgba) alphas.resize(n);
       for (size_t i = 0; i < n; ++i)
-        for (int c = 0; c < 3; ++c) {
+        for (int c = 0; c < components; ++c) {
           const double e = colours[i * size_t(components) + size_t(c)] / scale;
           const double inRange = std::isfinite(e) ? std::clamp(e, 0.0, 1.0) : 0.0;
           if (inRange != e) ++clampedColours_;
-          rgb[3 * i + size_t(c)] = inRange;
+          (c < 3 ? rgb[3 * i + size_t(c)] : alphas[i]) = inRange;
         }
       colours = std::move(rgb);
     } catch (const PrimitiveError& e) {
       colours.clear();
+      alphas.clear();
       mesh_.warnings.push_back("ignored the vertex colours of a primitive: " + e.what);
     }
   }
@@ -662,6 +660,7 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
                                            float(colours[3 * i + 2])));
   }
   if (!colours.empty()) ++colours_;
+  for (size_t i = 0; i < n; ++i) mesh_.alphas.push_back(alphas.empty() ? 1.0f : float(alphas[i]));
   for (size_t t = 0; t + 2 < corners.size(); t += 3) {
     uint32_t c[3] = {corners[t], corners[t + 1], corners[t + 2]};
     if (c[0] >= n || c[1] >= n || c[2] >= n) {
@@ -794,6 +793,19 @@ void GltfReader::read() {
     }
   }
   if (colours_ == 0) mesh_.colors.clear();  // white everywhere: nothing to multiply
+  // BLEND with nothing below alpha 1 (exporters often mark every material BLEND) is opaque: no
+  // ray needs to ask it.
+  std::vector<uint8_t> fades(mesh_.materials.size(), 0);  // some vertex alpha below 1
+  for (size_t t = 0; t < mesh_.triangleMaterial.size(); ++t)
+    for (int k = 0; k < 3; ++k)
+      if (mesh_.alphas[mesh_.indices[3 * t + size_t(k)]] < 1.0f)
+        fades[mesh_.triangleMaterial[t]] = 1;
+  for (size_t i = 0; i < mesh_.materials.size(); ++i) {
+    Material& m = mesh_.materials[i];
+    if (m.blend && !(m.baseAlpha < 1.0f) && !fades[i] &&
+        (m.texture < 0 || mesh_.textures[size_t(m.texture)].alpha.empty()))
+      m.blend = false;
+  }
   if (clampedColours_ > 0) {
     mesh_.warnings.push_back(count(clampedColours_, "COLOR_0 component", "COLOR_0 components") +
                              " outside 0..1 (or not finite) clamped");

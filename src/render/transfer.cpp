@@ -996,6 +996,10 @@ std::string meshHash(const Mesh& mesh) {
   // Where it is cut out, what cuts it (the rest of the materials does not change visibility).
   if (mesh.hasCutouts()) {
     h.bytes("cutouts");
+    if (!mesh.alphas.empty()) {
+      h.bytes("vertex alphas");
+      h.floats(std::span<const float>(mesh.alphas.data(), mesh.alphas.size()));
+    }
     if (!mesh.texcoords.empty())
       h.floats(std::span<const float>(&mesh.texcoords[0].x, 2 * mesh.texcoords.size()));
     for (uint32_t m : mesh.triangleMaterial) h.word(m);

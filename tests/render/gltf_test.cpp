@@ -763,6 +763,44 @@ TEST(Gltf, VertexColoursAsNormalisedBytesWithoutAMaterial) {
             std::vector<std::string>{"2 COLOR_0 components outside 0..1 (or not finite) clamped"});
 }
 
+// COLOR_0's alpha multiplies the base colour's alpha, which MASK and BLEND materials read: alphas
+// 0.2, 0.2, 1 at the corners of a triangle over (0, 0), (1, 0), (0, 1): 0.2 + 0.8 y.
+TEST(Gltf, VertexAlphaMultipliesTheAlphaOfMaskAndBlendMaterials) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int col =
+      b.accessor(std::vector<float>{1, 1, 1, 0.2f, 1, 1, 1, 0.2f, 1, 1, 1, 1}, 5126, "VEC4", 3);
+  b.json["materials"] = json::array({{{"alphaMode", "MASK"}}});
+  const int m = b.mesh({{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}, {"material", 0}});
+  b.scene({b.node({{"mesh", m}})});
+  writeText(dir / "mask.gltf", b.gltf());
+  const Mesh mask = loadMesh(dir / "mask.gltf");
+  EXPECT_TRUE(mask.warnings.empty()) << mask.warnings[0];
+  ASSERT_EQ(mask.alphas.size(), mask.positions.size());
+  // Which corner is which: by position.
+  float u = 0.0f, v = 0.0f;  // barycentrics of (0, 0.5)
+  const uint32_t* c = &mask.indices[0];
+  for (int k = 1; k < 3; ++k)
+    if (mask.positions[c[k]].y > 0.5f) (k == 1 ? u : v) = 0.5f;
+  EXPECT_NEAR(mask.alphaAt(0, u, v), 0.6f, 1e-6f);
+  EXPECT_FALSE(mask.cutAway(0, u, v)) << "0.6, above the cutoff";
+  // Stood on what is kept: y >= 0.375 (alpha 0.5), found to a sixteenth of the triangle.
+  glm::vec3 lo, hi;
+  mask.keptBounds(lo, hi);
+  EXPECT_GE(lo.y, 0.375f - 1e-5f);
+  EXPECT_LE(lo.y, 0.375f + 1.0f / 16.0f + 1e-5f);
+  // BLEND reads it too; an opaque material does not keep it.
+  b.json["materials"][0]["alphaMode"] = "BLEND";
+  writeText(dir / "blend.gltf", b.gltf());
+  const Mesh blend = loadMesh(dir / "blend.gltf");
+  ASSERT_TRUE(blend.materials[0].blend) << "vertex alpha below 1: semi-transparent";
+  EXPECT_NEAR(blend.alphaAt(0, u, v), 0.6f, 1e-6f);
+  b.json["materials"][0].erase("alphaMode");
+  writeText(dir / "opaque.gltf", b.gltf());
+  EXPECT_TRUE(loadMesh(dir / "opaque.gltf").alphas.empty());
+}
+
 // A coloured primitive without a material beside one with a material is coloured by its colours
 // alone (glTF's default material is white; it had half of them, the grey default). Colours that
 // cannot be read are left out with a warning; the primitive's triangles stay.
