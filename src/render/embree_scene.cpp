@@ -44,7 +44,11 @@ constexpr float kLeastTransmitted = 1e-4f;
 struct TransmitContext {
   RTCIntersectContext base;  // first: Embree hands the filter a pointer to it
   float* transmitted;
+  // Per ray, the distances of the first kCounted layers counted: where a ray crosses an edge two
+  // triangles share, Embree reports both, and the layer is counted once.
+  float* counted;
 };
+constexpr int kCounted = 4;
 
 // Rejects hits where the mesh is cut away, or where a semi-transparent surface lets this ray
 // through or turns its back to it (the geometry's user data is the Mesh). A ray's random number
@@ -69,14 +73,27 @@ void cutoutFilter(const RTCFilterFunctionNArguments* args) {
     if ((id >> 24) == kTransmitTag) {
       // Through semi-transparent surfaces the ray's transmittance falls by each one's 1 - alpha
       // and the ray goes on, until almost nothing is left; anything else opaque stops it.
-      float& left =
-          reinterpret_cast<const TransmitContext*>(args->context)->transmitted[id & 0xffffffu];
+      const auto* context = reinterpret_cast<const TransmitContext*>(args->context);
+      const uint32_t ray = id & 0xffffffu;
+      float& left = context->transmitted[ray];
       const float u = RTCHitN_u(args->hit, n, i), v = RTCHitN_v(args->hit, n, i);
       if (mesh->cutAway(triangle, u, v)) {
         args->valid[i] = 0;
       } else if (mesh->oneSided(triangle)) {
+        args->valid[i] = 0;
+        // The hit's distance (Embree puts it in tfar while the filter decides).
+        const float t = RTCRayN_tfar(args->ray, n, i);
+        float* seen = context->counted + size_t(ray) * kCounted;
+        bool again = false;
+        for (int k = 0; k < kCounted && !again; ++k) again = std::abs(seen[k] - t) <= 1e-5f * t;
+        if (again) continue;
+        for (int k = 0; k < kCounted; ++k)
+          if (seen[k] < 0.0f) {
+            seen[k] = t;
+            break;
+          }
         left *= 1.0f - std::clamp(mesh->alphaAt(triangle, u, v), 0.0f, 1.0f);
-        if (left > kLeastTransmitted) args->valid[i] = 0;
+        if (!(left > kLeastTransmitted)) args->valid[i] = -1;
       }
       continue;
     }
@@ -294,7 +311,9 @@ void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, si
   if (count == 0) return;
   COMPOSE_CHECK(count <= 0xffffffu);
   thread_local std::vector<RTCRay> rays;
+  thread_local std::vector<float> counted;
   rays.resize(count);
+  counted.assign(count * kCounted, -1.0f);
   for (size_t i = 0; i < count; ++i) {
     RTCRay& ray = rays[i];
     ray.org_x = o.x;
@@ -314,6 +333,7 @@ void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, si
   TransmitContext context;
   rtcInitIntersectContext(&context.base);
   context.transmitted = transmitted;
+  context.counted = counted.data();
   rtcOccluded1M(impl_->scene, &context.base, rays.data(), unsigned(count), sizeof(RTCRay));
   for (size_t i = 0; i < count; ++i)
     if (rays[i].tfar < 0.0f) transmitted[i] = 0.0f;
@@ -337,11 +357,13 @@ void EmbreeScene::transmittance16(const glm::vec3& o, const glm::vec3* d, uint32
     rays.mask[i] = 0xFFFFFFFFu;
     rays.id[i] = (kTransmitTag << 24) | uint32_t(i);
   }
-  float left[16];
+  float left[16], counted[16 * kCounted];
   std::fill(left, left + 16, 1.0f);
+  std::fill(counted, counted + 16 * kCounted, -1.0f);
   TransmitContext context;
   rtcInitIntersectContext(&context.base);
   context.transmitted = left;
+  context.counted = counted;
   rtcOccluded16(valid, impl_->scene, &context.base, &rays);
   for (int i = 0; i < 16; ++i)
     if (valid[i]) transmitted[i] = rays.tfar[i] < 0.0f ? 0.0f : left[i];

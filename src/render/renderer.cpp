@@ -503,7 +503,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             const EmbreeScene::Hit& hit = found[b];
             if (!((tracing >> b) & 1u) || !hit.found) continue;
             float cover = left[b];
-            if (translucent && layer[b] < kMaxLayers && left[b] > kLeastLeft) {
+            if (translucent && mesh.oneSided(hit.triangle) && layer[b] < kMaxLayers &&
+                left[b] > kLeastLeft) {
               cover *= std::clamp(mesh.alphaAt(hit.triangle, hit.u, hit.v), 0.0f, 1.0f);
               left[b] -= cover;
             } else {

@@ -680,6 +680,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<double> coneCos;     // per row: cos of the cone's half angle plus the cell's radius
     std::vector<uint64_t> occluded;  // per row: bit j set when the first ray of cell j was blocked
     std::vector<float> firstThrough;  // per cell: what its first ray carries through the object
+    std::vector<uint64_t> dimmed;     // per row: bit j set when that ray lost more than a tenth
     std::vector<float> projected;     // s x k: the visible fractions projected on the columns
     std::vector<glm::vec3> batch;     // rays of one trace call
     std::vector<float> through;       // their answers: what each carries through the object
@@ -702,6 +703,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.coneCos.resize(size_t(s));
     sc.occluded.resize(size_t(s));
     sc.firstThrough.resize(cells);
+    sc.dimmed.resize(size_t(s));
     sc.projected.resize(size_t(s) * size_t(k));
     const size_t most = cells * size_t(r) * size_t(r);
     sc.batch.reserve(most);
@@ -789,6 +791,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         sample += uint32_t(s * s);
         std::fill(sc.occluded.begin(), sc.occluded.end(), uint64_t(0));
         std::fill(sc.firstThrough.begin(), sc.firstThrough.end(), 1.0f);
+        std::fill(sc.dimmed.begin(), sc.dimmed.end(), uint64_t(0));
         for (const int cell : firstPassOrder) {
           const int i = cell / s, j = cell % s;
           const uint32_t at = firstSample + uint32_t(cell);
@@ -807,11 +810,14 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.batch.push_back(ground ? sc.directions[size_t(cell)] : direction(j, cosT, w));
           sc.batchCell.push_back(cell);
         }
-        // A cell counts as blocked for finding shadow edges when its ray carries less than half.
+        // For finding shadow edges a cell is blocked when its ray carries less than half, and
+        // dimmed when it carries less than 0.9 (behind a faint semi-transparent surface): a
+        // change of either between neighbours is an edge. (On an opaque object both are the same.)
         traceBatch([&](size_t index, float through) {
           const int cell = sc.batchCell[index];
           sc.firstThrough[size_t(cell)] = through;
           if (through < 0.5f) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
+          if (through < 0.9f) sc.dimmed[size_t(cell / s)] |= uint64_t(1) << (cell % s);
         });
 
         // Cells whose ray disagrees with one of its eight neighbours' (the azimuth wraps around)
@@ -829,13 +835,15 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         sc.batchCos.clear();
         const float share = 1.0f / float(r * r);
         for (int i = 0; i < s; ++i) {
-          const uint64_t row = sc.occluded[size_t(i)];
+          const uint64_t row = sc.occluded[size_t(i)], dim = sc.dimmed[size_t(i)];
           uint64_t edge = 0;
           for (int ii = std::max(0, i - 1); ii <= std::min(s - 1, i + 1); ++ii) {
-            const uint64_t other = sc.occluded[size_t(ii)];
+            const uint64_t other = sc.occluded[size_t(ii)], otherDim = sc.dimmed[size_t(ii)];
             edge |= (row ^ other) | (row ^ rotateUp(other)) | (row ^ rotateDown(other));
+            edge |= (dim ^ otherDim) | (dim ^ rotateUp(otherDim)) | (dim ^ rotateDown(otherDim));
           }
-          if (i == 0 && row != 0 && row != fullRow) edge = fullRow;
+          if (i == 0 && ((row != 0 && row != fullRow) || (dim != 0 && dim != fullRow)))
+            edge = fullRow;
           if (r == 1) edge = 0;
           for (int j = 0; j < s; ++j) {
             const int cell = i * s + j;

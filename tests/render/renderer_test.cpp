@@ -102,6 +102,23 @@ TEST(Renderer, SemiTransparentLayersCoverTheirAlphaFrontToBack) {
     }
   EXPECT_GT(inside, 3000);
   EXPECT_NEAR(out.coverage, 0.51 * opaque.coverage, 0.02 * opaque.coverage);
+  // A cut-out material (alpha 0.8, above its cutoff) in a mesh that also has a semi-transparent
+  // one is there whole: the camera does not see through it.
+  Mesh cut = scene.sphere;
+  Material leaf;
+  leaf.alphaCutoff = 0.5f;
+  leaf.baseAlpha = 0.8f;
+  cut.materials = {leaf, mat};
+  cut.triangleMaterial.assign(cut.triangleCount(), 0u);
+  const EmbreeScene cutBvh(cut);
+  const RenderOutput mixed =
+      renderDiffuse(cut, cutBvh, scene.worldFromObject, scene.camera, sh, settings);
+  for (int y = 0; y < mixed.beauty.height; ++y)
+    for (int x = 0; x < mixed.beauty.width; ++x) {
+      if (opaque.beauty.at(x, y)[3] >= 1.0f) {
+        EXPECT_EQ(mixed.beauty.at(x, y)[3], 1.0f) << x << ", " << y;
+      }
+    }
 }
 
 // Under L(ω) = 1 + b·ω the outgoing radiance is ρ (1 + (2/3) b·n): checks normals, their frame
