@@ -731,9 +731,9 @@ TEST(Gltf, NormalsVertexColoursAndPrimitivesWithoutMaterial) {
   for (const glm::vec3& n : mesh.normals) EXPECT_NEAR(n.z, 1.0f, 1e-6f);
 }
 
-// COLOR_0 as normalised unsigned bytes in RGBA (alpha not read), with no material: the colours
-// are the albedo (glTF's default material is white). Components that are not finite are clamped
-// and counted.
+// COLOR_0 as normalised unsigned bytes in RGBA (its alpha unused: no material reads it), with no
+// material: the colours are the albedo (glTF's default material is white). Components that are
+// not finite are clamped and counted.
 TEST(Gltf, VertexColoursAsNormalisedBytesWithoutAMaterial) {
   TempDir dir;
   GltfBuilder b;
