@@ -114,6 +114,49 @@ void cutoutFilter(const RTCFilterFunctionNArguments* args) {
   }
 }
 
+// Rays from `o` along each of d[0..count), for a stream query; ids 0, or tagged with the
+// transmittance tag and their index.
+void streamRays(const glm::vec3& o, const glm::vec3* d, size_t count, float tnear, float tfar,
+                bool transmit, std::vector<RTCRay>& rays) {
+  rays.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    RTCRay& ray = rays[i];
+    ray.org_x = o.x;
+    ray.org_y = o.y;
+    ray.org_z = o.z;
+    ray.tnear = tnear;
+    ray.dir_x = d[i].x;
+    ray.dir_y = d[i].y;
+    ray.dir_z = d[i].z;
+    ray.time = 0.0f;
+    ray.tfar = tfar;
+    ray.mask = 0xFFFFFFFFu;
+    ray.id = transmit ? (kTransmitTag << 24) | uint32_t(i) : 0u;
+    ray.flags = 0;
+  }
+}
+
+// A packet of up to 16 rays from `o`, those whose bit is set in `active` valid. Only the active
+// directions are read: a batch of fewer than 16 ends before the inactive ones (reading them
+// overflowed the caller's array, found by AddressSanitizer).
+void packetRays(const glm::vec3& o, const glm::vec3* d, uint32_t active, float tnear, float tfar,
+                bool transmit, int* valid, RTCRay16& rays) {
+  for (int i = 0; i < 16; ++i) {
+    valid[i] = (active >> i) & 1u ? -1 : 0;
+    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
+    rays.org_x[i] = o.x;
+    rays.org_y[i] = o.y;
+    rays.org_z[i] = o.z;
+    rays.dir_x[i] = dir.x;
+    rays.dir_y[i] = dir.y;
+    rays.dir_z[i] = dir.z;
+    rays.tnear[i] = tnear;
+    rays.tfar[i] = tfar;
+    rays.mask[i] = 0xFFFFFFFFu;
+    rays.id[i] = transmit ? (kTransmitTag << 24) | uint32_t(i) : 0u;
+  }
+}
+
 }  // namespace
 
 EmbreeScene::EmbreeScene(const Mesh& mesh) : EmbreeScene(mesh.positions, mesh.indices, &mesh) {}
@@ -258,21 +301,7 @@ uint32_t EmbreeScene::occluded16(const glm::vec3& o, const glm::vec3* d, uint32_
   rtcInitIntersectContext(&context);
   alignas(64) int valid[16];
   alignas(64) RTCRay16 rays{};
-  for (int i = 0; i < 16; ++i) {
-    valid[i] = (active >> i) & 1u ? -1 : 0;
-    // Only the active directions are read: a batch of fewer than 16 ends before the inactive
-    // ones (reading them overflowed the caller's array, found by AddressSanitizer).
-    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
-    rays.org_x[i] = o.x;
-    rays.org_y[i] = o.y;
-    rays.org_z[i] = o.z;
-    rays.dir_x[i] = dir.x;
-    rays.dir_y[i] = dir.y;
-    rays.dir_z[i] = dir.z;
-    rays.tnear[i] = tnear;
-    rays.tfar[i] = tfar;
-    rays.mask[i] = 0xFFFFFFFFu;
-  }
+  packetRays(o, d, active, tnear, tfar, false, valid, rays);
   rtcOccluded16(valid, impl_->scene, &context, &rays);
   uint32_t hits = 0;
   for (int i = 0; i < 16; ++i)
@@ -284,22 +313,7 @@ void EmbreeScene::occludedStream(const glm::vec3& o, const glm::vec3* d, size_t 
                                  uint8_t* occluded, float tfar) const {
   if (count == 0) return;
   thread_local std::vector<RTCRay> rays;  // per thread, so that no call allocates once warm
-  rays.resize(count);
-  for (size_t i = 0; i < count; ++i) {
-    RTCRay& ray = rays[i];
-    ray.org_x = o.x;
-    ray.org_y = o.y;
-    ray.org_z = o.z;
-    ray.tnear = tnear;
-    ray.dir_x = d[i].x;
-    ray.dir_y = d[i].y;
-    ray.dir_z = d[i].z;
-    ray.time = 0.0f;
-    ray.tfar = tfar;
-    ray.mask = 0xFFFFFFFFu;
-    ray.id = 0;
-    ray.flags = 0;
-  }
+  streamRays(o, d, count, tnear, tfar, false, rays);
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   rtcOccluded1M(impl_->scene, &context, rays.data(), unsigned(count), sizeof(RTCRay));
@@ -312,24 +326,9 @@ void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, si
   COMPOSE_CHECK(count <= 0xffffffu);
   thread_local std::vector<RTCRay> rays;
   thread_local std::vector<float> counted;
-  rays.resize(count);
+  streamRays(o, d, count, tnear, tfar, true, rays);
   counted.assign(count * kCounted, -1.0f);
-  for (size_t i = 0; i < count; ++i) {
-    RTCRay& ray = rays[i];
-    ray.org_x = o.x;
-    ray.org_y = o.y;
-    ray.org_z = o.z;
-    ray.tnear = tnear;
-    ray.dir_x = d[i].x;
-    ray.dir_y = d[i].y;
-    ray.dir_z = d[i].z;
-    ray.time = 0.0f;
-    ray.tfar = tfar;
-    ray.mask = 0xFFFFFFFFu;
-    ray.id = (kTransmitTag << 24) | uint32_t(i);
-    ray.flags = 0;
-    transmitted[i] = 1.0f;
-  }
+  std::fill(transmitted, transmitted + count, 1.0f);
   TransmitContext context;
   rtcInitIntersectContext(&context.base);
   context.transmitted = transmitted;
@@ -343,20 +342,7 @@ void EmbreeScene::transmittance16(const glm::vec3& o, const glm::vec3* d, uint32
                                   float tnear, float* transmitted, float tfar) const {
   alignas(64) int valid[16];
   alignas(64) RTCRay16 rays{};
-  for (int i = 0; i < 16; ++i) {
-    valid[i] = (active >> i) & 1u ? -1 : 0;
-    const glm::vec3 dir = valid[i] ? d[i] : glm::vec3(0.0f, 1.0f, 0.0f);
-    rays.org_x[i] = o.x;
-    rays.org_y[i] = o.y;
-    rays.org_z[i] = o.z;
-    rays.dir_x[i] = dir.x;
-    rays.dir_y[i] = dir.y;
-    rays.dir_z[i] = dir.z;
-    rays.tnear[i] = tnear;
-    rays.tfar[i] = tfar;
-    rays.mask[i] = 0xFFFFFFFFu;
-    rays.id[i] = (kTransmitTag << 24) | uint32_t(i);
-  }
+  packetRays(o, d, active, tnear, tfar, true, valid, rays);
   float left[16], counted[16 * kCounted];
   std::fill(left, left + 16, 1.0f);
   std::fill(counted, counted + 16 * kCounted, -1.0f);
