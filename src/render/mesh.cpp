@@ -340,7 +340,77 @@ struct CornerSets {
 struct NormalStats {
   size_t computed = 0;  // vertices whose normal was computed
   size_t added = 0;     // vertices added by splitting at sharp edges
+  size_t ridges = 0;    // edges sharper than the crease angle shaded smooth (danglingRidges)
 };
+
+// More faces than this on one edge: a pathological fin, left sharp rather than compared
+// pairwise.
+constexpr size_t kMaxFacesOnEdge = 8;
+
+// The edges sharper than the crease angle that do not belong to a crease line: marked 1 at the
+// first entry of their run in `edges` (sorted edge keys of welded positions, one entry per corner
+// that starts the edge). On a piecewise-smooth surface sharp edges form lines that close on
+// themselves, meet other sharp lines, or run to the mesh's boundary; a line of sharp edges that
+// stops in the middle of a smooth surface is a ridge of a scan or of coarse tessellation (the
+// Stanford bunny's ear has such a chain of seven edges of 61-71°), and split normals along it
+// show as a stair-stepped line that ends abruptly. Such lines are removed edge by edge from their
+// free ends (what remains is the 2-core of the graph of sharp edges, with the mesh's boundary and
+// non-manifold edges as anchors). `comparable(a, b)` says whether the angle decides between two
+// faces (the same smoothing group, not flat), `smooth(a, b)` whether the angle is within the
+// crease; edges that smoothing groups make sharp stay sharp and anchor the lines that reach them.
+template <class Comparable, class Smooth>
+std::vector<uint8_t> danglingRidges(const std::vector<std::pair<uint64_t, uint32_t>>& edges,
+                                    uint32_t positions, Comparable comparable, Smooth smooth) {
+  std::vector<uint32_t> degree(positions, 0);
+  std::vector<uint8_t> anchored(positions, 0);
+  std::vector<uint32_t> candidates;  // first entries of the runs of edges sharp by angle alone
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    const uint32_t a = uint32_t(edges[i].first >> 32), b = uint32_t(edges[i].first);
+    const size_t ta = edges[i].second / 3, tb = j - i == 2 ? edges[i + 1].second / 3 : ta;
+    if (j - i != 2 || ta == tb) {
+      anchored[a] = anchored[b] = 1;  // boundary or non-manifold
+    } else if (!smooth(ta, tb)) {
+      ++degree[a];
+      ++degree[b];
+      if (comparable(ta, tb)) candidates.push_back(uint32_t(i));
+    }
+    i = j;
+  }
+  // Each position's candidate edges, to find a free end's edge.
+  std::vector<uint32_t> start(size_t(positions) + 1, 0), incident(2 * candidates.size());
+  for (uint32_t i : candidates) {
+    ++start[edges[i].first >> 32];
+    ++start[uint32_t(edges[i].first)];
+  }
+  for (size_t v = 0; v < positions; ++v) start[v + 1] += start[v];
+  for (uint32_t i : candidates) {
+    incident[--start[edges[i].first >> 32]] = i;
+    incident[--start[uint32_t(edges[i].first)]] = i;
+  }
+  std::vector<uint8_t> ridge(edges.size(), 0), removed(edges.size(), 0);
+  std::vector<uint32_t> free;
+  for (size_t v = 0; v < positions; ++v)
+    if (degree[v] == 1 && !anchored[v]) free.push_back(uint32_t(v));
+  while (!free.empty()) {
+    const uint32_t v = free.back();
+    free.pop_back();
+    if (degree[v] != 1 || anchored[v]) continue;
+    for (uint32_t k = start[v]; k < start[v + 1]; ++k) {
+      const uint32_t i = incident[k];
+      if (removed[i]) continue;
+      removed[i] = ridge[i] = 1;
+      const uint32_t a = uint32_t(edges[i].first >> 32), b = uint32_t(edges[i].first);
+      --degree[a];
+      --degree[b];
+      const uint32_t other = a == v ? b : a;
+      if (degree[other] == 1 && !anchored[other]) free.push_back(other);
+      break;
+    }
+  }
+  return ridge;
+}
 
 // Normals for every vertex with fromFile[v] == 0: the corners around a position are joined into
 // smooth fans across edges whose faces differ by at most `creaseDegrees` (and, with smoothing
@@ -394,9 +464,13 @@ NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
     edges[c] = {(uint64_t(std::min(a, b)) << 32) | std::max(a, b), uint32_t(c)};
   }
   std::sort(edges.begin(), edges.end());
-  // More faces than this on one edge: a pathological fin, left sharp rather than compared
-  // pairwise.
-  constexpr size_t kMaxFacesOnEdge = 8;
+  std::vector<uint8_t> ridge;
+  if (creaseDegrees > 0.0 && !fullySmooth) {
+    const uint32_t positions = pid.empty() ? 0 : *std::max_element(pid.begin(), pid.end()) + 1;
+    auto comparable = [&](size_t a, size_t b) { return group(a) == group(b) && group(a) != 0; };
+    ridge = danglingRidges(edges, positions, comparable, smooth);
+  }
+  stats.ridges = size_t(std::count(ridge.begin(), ridge.end(), uint8_t(1)));
   for (size_t i = 0; i < edges.size();) {
     size_t j = i;
     while (j < edges.size() && edges[j].first == edges[i].first) ++j;
@@ -404,7 +478,8 @@ NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
       for (size_t a = i; a < j; ++a) {
         for (size_t b = a + 1; b < j; ++b) {
           const size_t ca = edges[a].second, cb = edges[b].second;
-          if (ca / 3 == cb / 3 || !smooth(ca / 3, cb / 3)) continue;
+          if (ca / 3 == cb / 3 || (!smooth(ca / 3, cb / 3) && !(ridge.size() && ridge[i])))
+            continue;
           // Join the corners that sit at the same end of the shared edge.
           if (cornerPid(ca) == cornerPid(cb)) {
             sets.join(uint32_t(ca), uint32_t(cb));
@@ -739,6 +814,10 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
     if (stats.added > 0) {
       mesh.normalsSource += " (" + detail::count(stats.added, "vertex", "vertices") +
                             " added where sharper edges meet)";
+    }
+    if (stats.ridges > 0) {
+      mesh.normalsSource += "; " + detail::count(stats.ridges, "sharper edge", "sharper edges") +
+                            " on lines that end in a smooth surface shaded smooth";
     }
     if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
   }

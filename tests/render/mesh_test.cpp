@@ -111,6 +111,54 @@ TEST(Mesh, CreaseAngleSplitsVerticesWhereFacesMeetSharply) {
   EXPECT_NE(sharp.normalsSource.find("2 vertices added"), std::string::npos) << sharp.normalsSource;
 }
 
+// A 7 × 5 grid of unit squares in the plane y = 0 with a ridge along z = 2: the ridge's
+// vertices x = lo..hi raised to y = 1, so that the faces meet at 77-90° along it.
+std::string ridgeGrid(int lo, int hi) {
+  std::string obj;
+  for (int z = 0; z < 5; ++z)
+    for (int x = 0; x < 7; ++x)
+      obj += "v " + std::to_string(x) + (z == 2 && x >= lo && x <= hi ? " 1 " : " 0 ") +
+             std::to_string(z) + "\n";
+  for (int z = 0; z < 4; ++z)
+    for (int x = 0; x < 6; ++x) {
+      const int a = 7 * z + x + 1;
+      obj += "f " + std::to_string(a) + " " + std::to_string(a + 7) + " " + std::to_string(a + 8) +
+             " " + std::to_string(a + 1) + "\n";
+    }
+  return obj;
+}
+
+TEST(Mesh, SharpRidgesThatEndInASmoothSurfaceAreShadedSmooth) {
+  TempDir dir;
+  // Across the whole grid the ridge is a crease line: its 7 vertices split in two.
+  writeText(dir / "through.obj", ridgeGrid(0, 6));
+  const Mesh through = loadMesh(dir / "through.obj");
+  EXPECT_EQ(through.positions.size(), 35u + 7u);
+  EXPECT_EQ(through.normalsSource.find("shaded smooth"), std::string::npos)
+      << through.normalsSource;
+  // A ridge that starts and stops inside the surface (x = 2..4) is not a crease: every vertex
+  // keeps one normal, and the note counts the sharp edges shaded smooth.
+  writeText(dir / "inside.obj", ridgeGrid(2, 4));
+  const Mesh inside = loadMesh(dir / "inside.obj");
+  EXPECT_EQ(inside.positions.size(), 35u);
+  EXPECT_NE(inside.normalsSource.find(
+                " sharper edges on lines that end in a smooth surface shaded smooth"),
+            std::string::npos)
+      << inside.normalsSource;
+  // The ridge's top vertex (x = 3) gets the mean of both slopes: its normal points up.
+  int tops = 0;
+  for (size_t v = 0; v < inside.positions.size(); ++v) {
+    if (inside.positions[v] != glm::vec3(3.0f, 1.0f, 2.0f)) continue;
+    EXPECT_GT(inside.normals[v].y, 0.99f);
+    ++tops;
+  }
+  EXPECT_EQ(tops, 1);
+  // Flat shading asked for stays flat; within one smoothing group the ridge is smooth too.
+  EXPECT_GT(loadMesh(dir / "inside.obj", {.creaseDegrees = 0.0}).positions.size(), 35u + 20u);
+  writeText(dir / "groups.obj", ridgeGrid(2, 4).insert(0, "s 1\n"));
+  EXPECT_EQ(loadMesh(dir / "groups.obj").positions.size(), 35u);
+}
+
 TEST(Mesh, SmoothingGroupsOfTheFileSplitComputedNormals) {
   TempDir dir;
   // The folded strip again, each face in its own smoothing group: sharp even at 180°. With
