@@ -345,6 +345,8 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
     static const std::vector<std::pair<std::string, std::vector<std::string>>> kSynonyms = {
         {"Display P3", {"sRGB Encoded P3-D65", "srgb_encoded_p3d65", "Display P3 - Texture"}},
         {"Adobe RGB (1998)", {"Adobe RGB", "AdobeRGB", "adobe_rgb"}},
+        {"Linear P3-D65", {"lin_p3d65", "Utility - Linear - P3-D65"}},
+        {"Linear Adobe RGB (1998)", {"lin_adobergb", "Utility - Linear - Adobe RGB"}},
         {"Linear Rec.709 (sRGB)",
          {"lin_rec709", "Linear Rec.709", "Linear", "linear", "Utility - Linear - sRGB",
           "lin_srgb"}}};
@@ -352,9 +354,10 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
       if (declared == name)
         for (const std::string& o : others)
           if (known == declared && has(o)) known = o;
-    // Linear light with the sRGB primaries, by the primaries where the config can tell them.
-    if (!has(known) && declared == "Linear Rec.709 (sRGB)") {
-      const std::string byPrimaries = spaceWithChromaticities(kRec709Chromaticities);
+    // Linear light on known primaries, by the primaries where the config can tell them.
+    if (!has(known) && (declared == "Linear Rec.709 (sRGB)" || declared == "Linear P3-D65")) {
+      const std::string byPrimaries =
+          spaceWithChromaticities(declared == "Linear P3-D65" ? kP3D65 : kRec709Chromaticities);
       if (!byPrimaries.empty()) known = byPrimaries;
     }
   }

@@ -188,13 +188,21 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
                    [](unsigned char c) { return std::tolower(c); });
     const bool linear = lower.find("linear") != std::string::npos ||
                         lower.find("g10") != std::string::npos;  // as "sRGB-elle-V4-g10"
-    if (linear &&
-        (lower.find("srgb") != std::string::npos || lower.find("709") != std::string::npos)) {
+    const bool p3 = lower.find("p3") != std::string::npos;
+    const bool adobe =
+        lower.find("adobe rgb") != std::string::npos || lower.find("adobergb") != std::string::npos;
+    if (linear && p3) {
+      info.fileColorSpace = "Linear P3-D65";
+    } else if (linear && adobe) {
+      info.fileColorSpace = "Linear Adobe RGB (1998)";
+    } else if (linear && (lower.find("srgb") != std::string::npos ||
+                          lower.find("709") != std::string::npos)) {
       info.fileColorSpace = "Linear Rec.709 (sRGB)";  // compose capture-sim --tiff, linear exports
-    } else if (lower.find("p3") != std::string::npos) {
+    } else if (linear) {
+      info.fileColorSpace = info.iccProfile;  // linear on primaries no config names
+    } else if (p3) {
       info.fileColorSpace = "Display P3";
-    } else if (lower.find("adobe rgb") != std::string::npos ||
-               lower.find("adobergb") != std::string::npos) {
+    } else if (adobe) {
       info.fileColorSpace = "Adobe RGB (1998)";
     } else if (lower.find("srgb") == std::string::npos) {
       info.fileColorSpace = info.iccProfile;  // ProPhoto, a camera's own: not a config's name

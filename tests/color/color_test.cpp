@@ -247,20 +247,25 @@ TEST(ColorConfig, IntegerImagesAreReadAsSrgbWhereTheRulesMakeThemLinear) {
   EXPECT_EQ(builtin.inputSpaceFor("sky.pfm", ""), "Linear Rec.709 (sRGB)");
 }
 
-// The built-in config reads photos with a Display P3 or Adobe RGB profile: their reds are
-// Rec.709's reds and more (P3's red in linear Rec.709 is 1.2249, -0.0421, -0.0196).
+// The built-in config reads photos with a Display P3 or Adobe RGB profile, encoded or linear:
+// their reds are Rec.709's reds and more (P3's red in linear Rec.709 is 1.2249, -0.0421,
+// -0.0196).
 TEST(ColorConfig, DisplayP3AndAdobeRgbPhotos) {
   const ColorConfig c = ColorConfig::builtin();
   for (const auto& [space, expected] : std::vector<std::pair<std::string, glm::vec3>>{
            {"Display P3", {1.2249402f, -0.0420570f, -0.0196376f}},
-           {"Adobe RGB (1998)", {1.3983557f, 0.0f, 0.0f}}}) {
+           {"Adobe RGB (1998)", {1.3983557f, 0.0f, 0.0f}},
+           {"Linear P3-D65", {1.2249402f, -0.0420570f, -0.0196376f}},
+           {"Linear Adobe RGB (1998)", {1.3983557f, 0.0f, 0.0f}}}) {
     Image red(2, 1, 3, {"R", "G", "B"});
     red.pixels = {1, 0, 0, 0.5f, 0.5f, 0.5f};
     red.colorSpace = space;
     c.convert(red, "Linear Rec.709 (sRGB)");
     for (int k = 0; k < 3; ++k) EXPECT_NEAR(red.pixels[size_t(k)], expected[k], 1e-4) << space;
     // Grey stays grey: 0.5 through the space's curve.
-    const float grey = space == "Display P3" ? 0.2140411f : float(std::pow(0.5, 2.19921875));
+    const float grey = space == "Display P3"         ? 0.2140411f
+                       : space == "Adobe RGB (1998)" ? float(std::pow(0.5, 2.19921875))
+                                                     : 0.5f;
     for (int k = 3; k < 6; ++k) EXPECT_NEAR(red.pixels[size_t(k)], grey, 1e-4) << space;
   }
 }

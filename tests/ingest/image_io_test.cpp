@@ -155,8 +155,9 @@ std::vector<unsigned char> iccProfileDescribed(const std::string& text, bool v4)
   return p;
 }
 
-// A photo's embedded ICC profile names its colour space: Display P3 (an iPhone's), Adobe RGB; an
-// sRGB profile changes nothing, and another is named as it is (no config knows it: a note).
+// A photo's embedded ICC profile names its colour space: Display P3 (an iPhone's), Adobe RGB, and
+// their linear forms; an sRGB profile changes nothing, and another is named as it is (no config
+// knows it: a note).
 TEST(ImageIo, AnEmbeddedIccProfileNamesTheColourSpace) {
   EXPECT_EQ(exif::iccDescription(iccProfileDescribed("Display P3", false)), "Display P3");
   EXPECT_EQ(exif::iccDescription(iccProfileDescribed("Adobe RGB (1998)", true)),
@@ -165,11 +166,14 @@ TEST(ImageIo, AnEmbeddedIccProfileNamesTheColourSpace) {
   broken.resize(150);
   EXPECT_EQ(exif::iccDescription(broken), "");
   TempDir dir;
-  for (const auto& [description, space] :
-       std::vector<std::pair<std::string, std::string>>{{"Display P3", "Display P3"},
-                                                        {"Adobe RGB (1998)", "Adobe RGB (1998)"},
-                                                        {"sRGB IEC61966-2.1", "sRGB"},
-                                                        {"ProPhoto RGB", "ProPhoto RGB"}}) {
+  for (const auto& [description, space] : std::vector<std::pair<std::string, std::string>>{
+           {"Display P3", "Display P3"},
+           {"Adobe RGB (1998)", "Adobe RGB (1998)"},
+           {"sRGB IEC61966-2.1", "sRGB"},
+           {"Linear Display P3", "Linear P3-D65"},
+           {"Adobe RGB (1998) Linear", "Linear Adobe RGB (1998)"},
+           {"Linear ProPhoto", "Linear ProPhoto"},
+           {"ProPhoto RGB", "ProPhoto RGB"}}) {
     const std::vector<unsigned char> icc = iccProfileDescribed(description, description[0] == 'A');
     const std::filesystem::path file = dir.path() / "photo.jpg";
     OIIO::ImageSpec spec(8, 4, 3, OIIO::TypeDesc::UINT8);
