@@ -494,6 +494,10 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
       // Semi-transparent, with the same alpha.
       m.blend = true;
       m.baseAlpha = float(factorAlpha);
+    } else if (gm.alphaMode != "OPAQUE") {
+      mesh_.warnings.push_back("material '" + m.name + "' has alphaMode '" + gm.alphaMode +
+                               "', which glTF does not define (OPAQUE, MASK or BLEND): drawn "
+                               "opaque, its alpha ignored");
     }
     if (info.index >= 0) {
       m.texture = texture(info.index, m.name);

@@ -361,8 +361,8 @@ TEST(Gltf, BaseColourFactorsAndTexturesFromDataUris) {
 
 // A base colour texture's alpha is not its colour: transparent and half-transparent texels keep
 // the colour they store (alpha is not multiplied into it), and the texture is sRGB by glTF's
-// rule. Without alphaMode MASK it cuts nothing; a BLEND material says its transparency is not
-// rendered.
+// rule. Without alphaMode MASK it cuts nothing; a BLEND material is semi-transparent by it; an
+// alphaMode glTF does not define is opaque, with a warning.
 TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   TempDir dir;
   const std::vector<uint8_t> png = quadrantPngWithAlpha();
@@ -405,6 +405,15 @@ TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 1};
   writeBytes(dir / "blend-opaque.glb", b.glb());
   EXPECT_FALSE(loadMesh(dir / "blend-opaque.glb").hasCutouts());
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 0.5};
+  b.json["materials"][0]["alphaMode"] = "blend";  // glTF's names are upper case
+  writeBytes(dir / "lower-case.glb", b.glb());
+  const Mesh unknown = loadMesh(dir / "lower-case.glb");
+  EXPECT_FALSE(unknown.hasCutouts());
+  ASSERT_EQ(unknown.warnings.size(), 1u);
+  EXPECT_NE(unknown.warnings[0].find("alphaMode 'blend', which glTF does not define"),
+            std::string::npos)
+      << unknown.warnings[0];
 }
 
 // alphaMode MASK cuts the surface away where alpha (the base colour factor's times the
