@@ -347,20 +347,28 @@ struct NormalStats {
 // pairwise.
 constexpr size_t kMaxFacesOnEdge = 8;
 
+// How much sharper than the crease angle an edge may be and still be taken for a ridge of the
+// surface's sampling rather than a crease (danglingRidges).
+constexpr double kRidgeMarginDegrees = 25.0;
+
 // The edges sharper than the crease angle that do not belong to a crease line: marked 1 at the
 // first entry of their run in `edges` (sorted edge keys of welded positions, one entry per corner
 // that starts the edge). On a piecewise-smooth surface sharp edges form lines that close on
-// themselves, meet other sharp lines, or run to the mesh's boundary; a line of sharp edges that
-// stops in the middle of a smooth surface is a ridge of a scan or of coarse tessellation (the
-// Stanford bunny's ear has such a chain of seven edges of 61-71°), and split normals along it
-// show as a stair-stepped line that ends abruptly. Such lines are removed edge by edge from their
-// free ends (what remains is the 2-core of the graph of sharp edges, with the mesh's boundary and
-// non-manifold edges as anchors). `comparable(a, b)` says whether the angle decides between two
-// faces (the same smoothing group, not flat), `smooth(a, b)` whether the angle is within the
-// crease; edges that smoothing groups make sharp stay sharp and anchor the lines that reach them.
-template <class Comparable, class Smooth>
+// themselves, meet other sharp lines, or run to the mesh's boundary; a line of edges barely
+// sharper than the crease that stops in the middle of a smooth surface is a ridge of a scan or of
+// coarse tessellation (the Stanford bunny's ear has such a chain of seven edges of 61-71°), and
+// split normals along it show as a stair-stepped line that ends abruptly. Such edges are removed
+// one at a time from a free end (a position with one sharp edge, not on the mesh's boundary or a
+// non-manifold edge) until none is left: a line with a free end goes back to where it meets
+// lines that stay. `comparable(a, b)` says whether the angle decides between two faces (the same
+// smoothing group, not flat), `smooth(a, b)` whether their angle is within the crease and
+// `slight(a, b)` whether it is within kRidgeMarginDegrees beyond it. Edges that smoothing groups
+// make sharp and edges sharper than the margin (a blade's cutting edge, a box's edge) are never
+// removed, and anchor the lines that reach them.
+template <class Comparable, class Smooth, class Slight>
 std::vector<uint8_t> danglingRidges(const std::vector<std::pair<uint64_t, uint32_t>>& edges,
-                                    uint32_t positions, Comparable comparable, Smooth smooth) {
+                                    uint32_t positions, Comparable comparable, Smooth smooth,
+                                    Slight slight) {
   std::vector<uint32_t> degree(positions, 0);
   std::vector<uint8_t> anchored(positions, 0);
   std::vector<uint32_t> candidates;  // first entries of the runs of edges sharp by angle alone
@@ -374,7 +382,7 @@ std::vector<uint8_t> danglingRidges(const std::vector<std::pair<uint64_t, uint32
     } else if (!smooth(ta, tb)) {
       ++degree[a];
       ++degree[b];
-      if (comparable(ta, tb)) candidates.push_back(uint32_t(i));
+      if (comparable(ta, tb) && slight(ta, tb)) candidates.push_back(uint32_t(i));
     }
     i = j;
   }
@@ -468,9 +476,21 @@ NormalStats computeNormals(Mesh& mesh, std::vector<uint8_t>& fromFile,
   if (creaseDegrees > 0.0 && !fullySmooth) {
     const uint32_t positions = pid.empty() ? 0 : *std::max_element(pid.begin(), pid.end()) + 1;
     auto comparable = [&](size_t a, size_t b) { return group(a) == group(b) && group(a) != 0; };
-    ridge = danglingRidges(edges, positions, comparable, smooth);
+    const double cosMargin =
+        std::cos(std::min(creaseDegrees + kRidgeMarginDegrees, 180.0) * std::numbers::pi / 180.0);
+    auto slight = [&](size_t a, size_t b) {
+      return glm::dot(faceNormal[a], faceNormal[b]) >= cosMargin;
+    };
+    ridge = danglingRidges(edges, positions, comparable, smooth, slight);
   }
-  stats.ridges = size_t(std::count(ridge.begin(), ridge.end(), uint8_t(1)));
+  // The ridges that change a normal: those with a computed normal at an end.
+  for (size_t i = 0; i < ridge.size(); ++i) {
+    if (!ridge[i]) continue;
+    const size_t c = edges[i].second, d = edges[i + 1].second;
+    if (!fromFile[mesh.indices[c]] || !fromFile[mesh.indices[next(c)]] ||
+        !fromFile[mesh.indices[d]] || !fromFile[mesh.indices[next(d)]])
+      ++stats.ridges;
+  }
   for (size_t i = 0; i < edges.size();) {
     size_t j = i;
     while (j < edges.size() && edges[j].first == edges[i].first) ++j;
@@ -815,11 +835,11 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
       mesh.normalsSource += " (" + detail::count(stats.added, "vertex", "vertices") +
                             " added where sharper edges meet)";
     }
+    if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
     if (stats.ridges > 0) {
       mesh.normalsSource += "; " + detail::count(stats.ridges, "sharper edge", "sharper edges") +
                             " on lines that end in a smooth surface shaded smooth";
     }
-    if (!loaded.smoothingGroup.empty()) mesh.normalsSource += " and the file's smoothing groups";
   }
   // Colours that are white wherever they are left (the coloured triangles dropped) say nothing.
   if (std::all_of(mesh.colors.begin(), mesh.colors.end(),

@@ -30,10 +30,12 @@
 // Normals. Normals in the file are kept (normalised). Vertices without one get smooth normals:
 // the angle-weighted mean of the faces around the vertex that are joined to it by edges no
 // sharper than MeshOptions::creaseDegrees (the angle between the two faces' normals); a vertex
-// where sharper edges meet is split, one copy per smooth fan. 0° gives flat faces (what the glTF
-// specification asks for when a primitive has no normals), 180° one smooth normal per position.
-// Before normals are computed for a mesh that has none, every connected piece is wound one way
-// and outwards (orientConsistently()).
+// where sharper edges meet is split, one copy per smooth fan. Sharper edges split only along
+// crease lines: a line of edges less than 25° sharper than the crease that stops in the middle of
+// a smooth surface (a ridge of a scan) is shaded smooth (mesh.cpp). 0° gives flat faces (what the
+// glTF specification asks for when a primitive has no normals), 180° one smooth normal per
+// position. Before normals are computed for a mesh that has none, every connected piece is wound
+// one way and outwards (orientConsistently()).
 //
 // Robustness. Real files are untrusted input. What can be dropped is dropped with a warning that
 // counts it (Mesh::warnings; loading never prints): faces that refer to vertices the file does not
@@ -175,8 +177,8 @@ Mesh loadMesh(const std::filesystem::path& path, const MeshOptions& options = {}
 
 // Smooth vertex normals for every vertex (see the header comment): the angle-weighted mean of the
 // adjacent face normals across edges of at most `creaseDegrees`, vertices split where sharper
-// edges meet. Positions are welded by value first, so that vertices split by texture seams are
-// smoothed as one.
+// edges meet on crease lines. Positions are welded by value first, so that vertices split by
+// texture seams are smoothed as one.
 void computeVertexNormals(Mesh& mesh, double creaseDegrees = 180.0);
 
 // A semi-transparent surface (Material::blend) is seen from both sides: through it, the inside

@@ -112,16 +112,20 @@ TEST(Mesh, CreaseAngleSplitsVerticesWhereFacesMeetSharply) {
 }
 
 // A 7 × 5 grid of unit squares in the plane y = 0 with a ridge along z = 2: the ridge's
-// vertices x = lo..hi raised to y = 1, so that the faces meet at 77-90° along it.
-std::string ridgeGrid(int lo, int hi) {
+// vertices x = lo..hi raised to y = `height` (0.8: the faces meet at 70-77° along it, a little
+// sharper than the default crease of 60°; 3: at about 140°). With `groupFrom` >= 0 the faces at
+// x >= groupFrom are in smoothing group 2, the others in group 1.
+std::string ridgeGrid(int lo, int hi, double height = 0.8, int groupFrom = -1) {
   std::string obj;
   for (int z = 0; z < 5; ++z)
     for (int x = 0; x < 7; ++x)
-      obj += "v " + std::to_string(x) + (z == 2 && x >= lo && x <= hi ? " 1 " : " 0 ") +
-             std::to_string(z) + "\n";
+      obj += "v " + std::to_string(x) + " " +
+             std::to_string(z == 2 && x >= lo && x <= hi ? height : 0.0) + " " + std::to_string(z) +
+             "\n";
   for (int z = 0; z < 4; ++z)
     for (int x = 0; x < 6; ++x) {
       const int a = 7 * z + x + 1;
+      if (groupFrom >= 0) obj += x >= groupFrom ? "s 2\n" : "s 1\n";
       obj += "f " + std::to_string(a) + " " + std::to_string(a + 7) + " " + std::to_string(a + 8) +
              " " + std::to_string(a + 1) + "\n";
     }
@@ -130,33 +134,42 @@ std::string ridgeGrid(int lo, int hi) {
 
 TEST(Mesh, SharpRidgesThatEndInASmoothSurfaceAreShadedSmooth) {
   TempDir dir;
+  auto load = [&](const std::string& name, const std::string& obj, MeshOptions options = {}) {
+    writeText(dir / name, obj);
+    return loadMesh(dir / name, options);
+  };
+  const std::string smoothed = " sharper edges on lines that end in a smooth surface shaded smooth";
   // Across the whole grid the ridge is a crease line: its 7 vertices split in two.
-  writeText(dir / "through.obj", ridgeGrid(0, 6));
-  const Mesh through = loadMesh(dir / "through.obj");
+  const Mesh through = load("through.obj", ridgeGrid(0, 6));
   EXPECT_EQ(through.positions.size(), 35u + 7u);
-  EXPECT_EQ(through.normalsSource.find("shaded smooth"), std::string::npos)
-      << through.normalsSource;
+  EXPECT_EQ(through.normalsSource.find(smoothed), std::string::npos) << through.normalsSource;
   // A ridge that starts and stops inside the surface (x = 2..4) is not a crease: every vertex
   // keeps one normal, and the note counts the sharp edges shaded smooth.
-  writeText(dir / "inside.obj", ridgeGrid(2, 4));
-  const Mesh inside = loadMesh(dir / "inside.obj");
+  const Mesh inside = load("inside.obj", ridgeGrid(2, 4));
   EXPECT_EQ(inside.positions.size(), 35u);
-  EXPECT_NE(inside.normalsSource.find(
-                " sharper edges on lines that end in a smooth surface shaded smooth"),
-            std::string::npos)
-      << inside.normalsSource;
+  EXPECT_NE(inside.normalsSource.find(smoothed), std::string::npos) << inside.normalsSource;
   // The ridge's top vertex (x = 3) gets the mean of both slopes: its normal points up.
   int tops = 0;
   for (size_t v = 0; v < inside.positions.size(); ++v) {
-    if (inside.positions[v] != glm::vec3(3.0f, 1.0f, 2.0f)) continue;
+    if (inside.positions[v] != glm::vec3(3.0f, 0.8f, 2.0f)) continue;
     EXPECT_GT(inside.normals[v].y, 0.99f);
     ++tops;
   }
   EXPECT_EQ(tops, 1);
-  // Flat shading asked for stays flat; within one smoothing group the ridge is smooth too.
-  EXPECT_GT(loadMesh(dir / "inside.obj", {.creaseDegrees = 0.0}).positions.size(), 35u + 20u);
-  writeText(dir / "groups.obj", ridgeGrid(2, 4).insert(0, "s 1\n"));
-  EXPECT_EQ(loadMesh(dir / "groups.obj").positions.size(), 35u);
+  // From the boundary to a free end inside (x = 0..4): removed back to the boundary, five edges
+  // one after the other.
+  EXPECT_EQ(load("half.obj", ridgeGrid(0, 4)).positions.size(), 35u);
+  // Much sharper than the crease (about 140°), a line is a crease even where it stops.
+  EXPECT_GT(load("blade.obj", ridgeGrid(2, 4, 3.0)).positions.size(), 35u);
+  // Flat shading asked for stays flat; within one smoothing group the ridge is smooth as without
+  // groups; a line that runs from the boundary to the edge between two smoothing groups (x = 4)
+  // ends on both sides, and stays.
+  EXPECT_GT(load("flat.obj", ridgeGrid(2, 4), {.creaseDegrees = 0.0}).positions.size(), 35u + 20u);
+  EXPECT_EQ(load("one-group.obj", ridgeGrid(2, 4).insert(0, "s 1\n")).positions.size(), 35u);
+  const Mesh grouped = load("groups.obj", ridgeGrid(0, 4, 0.8, 4));
+  EXPECT_EQ(load("no-groups.obj", ridgeGrid(0, 4)).positions.size(), 35u);
+  EXPECT_GE(grouped.positions.size(), 35u + 5u + 4u) << "5 on the groups' edge, 4 on the ridge";
+  EXPECT_EQ(grouped.normalsSource.find(smoothed), std::string::npos) << grouped.normalsSource;
 }
 
 TEST(Mesh, SmoothingGroupsOfTheFileSplitComputedNormals) {
