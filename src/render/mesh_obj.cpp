@@ -35,6 +35,8 @@ struct ObjScan {
   size_t linesAndPoints = 0;     // `l` and `p` elements (not rendered)
   // What follows each `mtllib`, whole: one file whose name has spaces, or several names.
   std::vector<std::string> materialLines;
+  // Each face's number of corners, in the file's order (tinyobjloader keeps them in 8 bits).
+  std::vector<uint32_t> faceCorners;
 };
 
 // tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so, and an
@@ -95,6 +97,7 @@ ObjScan scanObj(const fs::path& path) {
       if (fields.size() < 4) fail("a face needs at least 3 corners");
       triangles += int64_t(fields.size()) - 3;  // a polygon of n corners makes n - 2 triangles
       checkTriangleCount(triangles, path);
+      scan.faceCorners.push_back(uint32_t(fields.size() - 1));
       for (size_t f = 1; f < fields.size(); ++f) {
         // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
         const std::string_view corner = fields[f];
@@ -330,11 +333,17 @@ LoadedMesh loadObj(const fs::path& path) {
   size_t faces = 0, outOfRange = 0, noMaterial = 0;
   std::vector<uint32_t> polygon;
   std::vector<glm::vec3> corners;
+  size_t fileFace = 0;
   for (const tinyobj::shape_t& shape : shapes) {
     const tinyobj::mesh_t& m = shape.mesh;
     size_t offset = 0;
-    for (size_t f = 0; f < m.num_face_vertices.size(); ++f) {
-      const size_t n = m.num_face_vertices[f];
+    for (size_t f = 0; f < m.num_face_vertices.size(); ++f, ++fileFace) {
+      // tinyobjloader counts a face's corners modulo 256; its indices are all there.
+      size_t n = m.num_face_vertices[f];
+      if (fileFace < scan.faceCorners.size() && scan.faceCorners[fileFace] % 256 == n)
+        n = scan.faceCorners[fileFace];
+      else
+        throw Error("mesh", "the OBJ parser's faces do not match the file's", path);
       const size_t first = offset;
       offset += n;
       ++faces;

@@ -1,6 +1,7 @@
 #include "render/mesh.h"
 
 #include <cmath>
+#include <numbers>
 
 #include <glm/geometric.hpp>
 
@@ -342,6 +343,34 @@ std::pair<float, bool> areaFacingZ(const Mesh& m) {
     up = up && n.z > 0.0f;
   }
   return {area, up};
+}
+
+// Polygons of 256 corners and more (a CAD disc's cap): tinyobjloader counts a face's corners in
+// 8 bits; every corner is kept, in a file with other faces and groups before and after it.
+TEST(Mesh, PolygonsOfManyCornersAreWhole) {
+  TempDir dir;
+  for (const int n : {255, 256, 257, 300, 1000}) {
+    std::string obj = "v 0 0 -1\nv 1 0 -1\nv 0 1 -1\ng before\nf 1 2 3\ng disc\n";
+    for (int i = 0; i < n; ++i) {
+      const double a = 2.0 * std::numbers::pi * i / n;
+      obj += "v " + std::to_string(std::cos(a)) + " " + std::to_string(std::sin(a)) + " 0\n";
+    }
+    obj += "f";
+    for (int i = 0; i < n; ++i) obj += " " + std::to_string(4 + i);
+    obj += "\ng after\nf 3 2 1\n";
+    writeText(dir / "disc.obj", obj);
+    const Mesh m = loadMesh(dir / "disc.obj");
+    // The disc's n - 2 triangles and the two small ones (one a duplicate of the other: dropped).
+    EXPECT_EQ(m.triangleCount(), size_t(n - 2 + 1)) << n;
+    const double disc = 0.5 * n * std::sin(2.0 * std::numbers::pi / n);
+    double area = 0.0;
+    for (size_t t = 0; t < m.triangleCount(); ++t) {
+      const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                      c = m.positions[m.indices[3 * t + 2]];
+      area += 0.5 * double(glm::length(glm::cross(b - a, c - a)));
+    }
+    EXPECT_NEAR(area, disc + 0.5, 1e-3) << n;
+  }
 }
 
 TEST(Mesh, ConcavePolygonsAreTriangulatedInsideTheirOutline) {
