@@ -79,6 +79,15 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
 }
 
 void saveScene(const ComposeJob& job, const fs::path& file) {
+  // The scene is written before the inputs are read (a mesh's material library and textures
+  // among them): an older scene file may be replaced, nothing else.
+  requireReplaceable(
+      file, "compose scene file",
+      [](std::istream& in) {
+        const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+        return j.is_object() && j.contains("compose") && j["compose"] == "scene";
+      },
+      "scene");
   const std::string text = sceneFromJob(job, file.parent_path()).dump(2) + "\n";
   OutputFiles outputs("scene");
   const fs::path temp = outputs.add(file);

@@ -260,6 +260,24 @@ void OutputFiles::commit() {
   }
 }
 
+void requireReplaceable(const fs::path& file, const std::string& kind,
+                        const std::function<bool(std::istream&)>& ours, const std::string& stage) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return;  // nothing there, or what OutputFiles refuses
+  std::ifstream in(file, std::ios::binary);
+  bool replaceable = false;
+  try {
+    replaceable = in && ours(in);
+  } catch (const std::exception&) {
+    replaceable = false;
+  }
+  if (!replaceable) {
+    throw Error(stage,
+                "is not a " + kind + " and would be replaced: choose another path, or remove it",
+                file);
+  }
+}
+
 void writeTextFile(const fs::path& file, const std::string& text, const std::string& stage) {
   OutputFiles outputs(stage);
   const fs::path temp = outputs.add(file);

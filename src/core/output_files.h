@@ -13,6 +13,8 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
+#include <istream>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -67,6 +69,13 @@ bool isAbandonedTemporary(const std::filesystem::path& file);
 // Forgets every protected input: for a process that runs one job after another (a fuzz target
 // writes a file, reads it, and writes it again for the next input).
 void forgetProtectedInputs();
+
+// For outputs that are documents of one kind (a scene file, a capture description): an existing
+// regular file at `file` may be replaced only when `ours` says it is such a document (an older
+// one); anything else there (a photo, a material library, a texture given by mistake) is an
+// error naming the file and `kind`, and nothing is written.
+void requireReplaceable(const std::filesystem::path& file, const std::string& kind,
+                        const std::function<bool(std::istream&)>& ours, const std::string& stage);
 
 // Writes `text` to `file` atomically (temporary + rename). Throws compose::Error (stage `stage`).
 void writeTextFile(const std::filesystem::path& file, const std::string& text,

@@ -433,6 +433,14 @@ std::string captureDescriptionText(const fs::path& file, const Capture& capture)
 }
 
 void writeCaptureDescription(const fs::path& file, const Capture& capture) {
+  // An older description may be replaced, nothing else (a photo named by mistake).
+  requireReplaceable(
+      file, "capture description",
+      [](std::istream& in) {
+        const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+        return j.is_object() && j.value("format", std::string()) == "compose-capture";
+      },
+      kStage);
   writeTextFile(file, captureDescriptionText(file, capture), kStage);
 }
 

@@ -542,6 +542,7 @@ void requireColourChannels(const Image& image, const fs::path& file, const std::
 
 CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage, bool picturePart) {
   checkInputFile(path, stage);
+  protectInput(path);
   CaptureInfo info;
   switch (kindOf(path, stage)) {
     case Kind::Exr: {

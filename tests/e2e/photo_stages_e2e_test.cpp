@@ -103,6 +103,17 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     ASSERT_EQ(described.views.size(), 2u);
     EXPECT_EQ(described.views[0].name, "nz");
     EXPECT_EQ(described.views[1].name, "pz");
+    // --json may replace an older description, never a photo named by mistake.
+    const std::string photo = slurp(dir / "named" / "room_pz_3.jpg");
+    const CommandRun over = compose(
+        "ingest --json " + q(dir / "named" / "room_pz_3.jpg") + " " + q(dir / "named"), dir);
+    EXPECT_EQ(over.status, 1);
+    EXPECT_NE(over.err.find("is not a capture description and would be replaced"),
+              std::string::npos)
+        << over.err;
+    EXPECT_EQ(slurp(dir / "named" / "room_pz_3.jpg"), photo);
+    EXPECT_EQ(
+        compose("ingest --json " + q(dir / "named.json") + " " + q(dir / "named"), dir).status, 0);
   }
   // merge recovers the response once and reuses it.
   {

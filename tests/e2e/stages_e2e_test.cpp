@@ -315,6 +315,22 @@ TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
       dir_.path());
   ASSERT_EQ(moved.status, 0) << moved.err;
   EXPECT_NE(slurp(dir_ / "a" / "compose.jpg"), slurp(dir_ / "c" / "compose.jpg"));
+
+  // The scene is written before the inputs are read: it may replace an older scene (above,
+  // again), never a file of another kind, such as the mesh's material library.
+  const fs::path mtl = dir_ / "red.mtl", obj = dir_ / "red.obj";
+  compose::testing::writeText(mtl, "newmtl red\nKd 1 0 0\n");
+  compose::testing::writeText(obj,
+                              "mtllib red.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n");
+  const RunResult overMtl =
+      run("--plate " + quote(plate_) + " --object " + quote(obj) + " --save-scene " + quote(mtl),
+          dir_.path());
+  EXPECT_EQ(overMtl.status, 1);
+  EXPECT_NE(overMtl.err.find("is not a compose scene file and would be replaced"),
+            std::string::npos)
+      << overMtl.err;
+  EXPECT_EQ(slurp(mtl), "newmtl red\nKd 1 0 0\n");
+  EXPECT_EQ(run(common + " --save-scene " + quote(scene), dir_.path()).status, 0);
 }
 
 TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
