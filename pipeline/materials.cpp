@@ -1,6 +1,7 @@
 #include "pipeline/materials.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 
 #include "core/error.h"
@@ -46,6 +47,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
   mesh.colorSpace = working;
 
   std::map<std::string, int> textureSpaces;
+  size_t clampedTexels = 0;
   for (render::Texture& texture : mesh.textures) {
     if (texture.srgbByFormat && texture.image.colorSpace != working) {
       // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
@@ -58,6 +60,12 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     }
     ++textureSpaces["'" + texture.image.colorSpace + "'"];
     colors.convert(texture.image, working);
+    // Albedos, 0..1 as base colours are: a float texture may hold anything.
+    for (float& v : texture.image.pixels) {
+      const float kept = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f;
+      if (!(std::abs(kept - v) <= 1e-4f)) ++clampedTexels;
+      v = kept;
+    }
   }
   std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
                      (mesh.materials.size() == 1 ? "" : "s") +
@@ -71,6 +79,11 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
             (mesh.textures.size() == 1 ? "" : "s") + " (" + read + ")";
   }
   line += ", converted to '" + working + "'";
+  if (clampedTexels > 0) {
+    line += "; " + std::to_string(clampedTexels) + " texture value" +
+            (clampedTexels == 1 ? "" : "s") +
+            " outside 0..1 clamped (an albedo reflects at most the light it gets; not a number: 0)";
+  }
   // How light goes through them, where it does.
   const auto cut = std::count_if(mesh.materials.begin(), mesh.materials.end(),
                                  [](const render::Material& m) { return m.alphaCutoff >= 0.0f; });

@@ -374,7 +374,11 @@ class StitchStage final : public Stage {
         rgb = ctx.colors.convertCodes(img.codes, img.image.width, img.image.height,
                                       img.image.channels, space, working);
       } else {
-        if (!img.hasPixels()) ingest::floatsFromCodes(img);
+        if (img.hasPixels())
+          ingest::requireFinite(img.image, shot.file, "stitch", "the photo",
+                                ingest::kMaxPhotoValue);
+        else
+          ingest::floatsFromCodes(img);
         rgb = toRgb(img.image);
         rgb.colorSpace = space;
         ctx.colors.convert(rgb, working);

@@ -162,6 +162,7 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
 // management: it is data).
 Image loadHoldout(const fs::path& file, int width, int height) {
   ingest::LoadedImage m = ingest::readImage(file, "composite");
+  if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
   if (m.image.width != width || m.image.height != height) {
     throw Error("composite",
                 "the holdout mask is " + std::to_string(m.image.width) + "x" +

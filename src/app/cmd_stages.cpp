@@ -54,6 +54,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     });
     ingest::LoadedImage loaded = ingest::readImage(o->in, "color");
     Image& image = loaded.image;
+    ingest::requireFinite(image, o->in, "color", "the image");
     if (image.channels < 3) {
       Image rgb(image.width, image.height, 3, {"R", "G", "B"});
       for (size_t i = 0; i < image.pixelCount(); ++i)

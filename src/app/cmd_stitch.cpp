@@ -285,7 +285,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       if (!img.hasPixels())
         ingest::floatsFromCodes(img);
       else
-        ingest::requireFinite(img.image, args[size_t(i)].file, "ingest", "the photo");
+        ingest::requireFinite(img.image, args[size_t(i)].file, "ingest", "the photo",
+                              ingest::kMaxPhotoValue);
       Image rgb;
       if (img.image.channels == 3) {
         rgb = std::move(img.image);

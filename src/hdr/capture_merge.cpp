@@ -371,7 +371,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         COMPOSE_CHECK(photos[v][s].hasPixels());
         Image img = photos[v][s].image;
         if (img.channels < 3) throw Error(kStage, "merging needs RGB photos", view.shots[s].file);
-        ingest::requireFinite(img, view.shots[s].file, kStage, "the photo");
+        ingest::requireFinite(img, view.shots[s].file, kStage, "the photo", ingest::kMaxPhotoValue);
         img.colorSpace = spaces[v][s];
         colors.convert(img, working);
         converted.push_back(std::move(img));

@@ -601,17 +601,26 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
 }
 
 void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,
-                   const std::string& what) {
+                   const std::string& what, float limit) {
   const auto bad = std::find_if(image.pixels.begin(), image.pixels.end(),
-                                [](float v) { return !std::isfinite(v); });
+                                [limit](float v) { return !std::isfinite(v) || std::abs(v) > limit; });
   if (bad == image.pixels.end()) return;
   const size_t at = size_t(bad - image.pixels.begin()) / size_t(std::max(1, image.channels));
   const size_t width = size_t(std::max(1, image.width));
-  throw Error(stage,
-              std::string(std::isnan(*bad) ? "NaN" : "infinity") + " in " + what + " at pixel (" +
-                  std::to_string(at % width) + ", " + std::to_string(at / width) +
-                  "): its values must be finite",
-              file);
+  const std::string where = " in " + what + " at pixel (" + std::to_string(at % width) + ", " +
+                            std::to_string(at / width) + ")";
+  if (std::isfinite(*bad)) {
+    char text[96];
+    std::snprintf(text, sizeof text, "value %g", double(*bad));
+    std::string message = text + where;
+    std::snprintf(text, sizeof text, " is beyond any light (more than %g): a damaged file?",
+                  double(limit));
+    throw Error(stage, message + text, file);
+  }
+  throw Error(
+      stage,
+      std::string(std::isnan(*bad) ? "NaN" : "infinity") + where + ": its values must be finite",
+      file);
 }
 
 LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::path& name,

@@ -40,6 +40,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -174,11 +175,16 @@ LoadedImage readImage(const std::filesystem::path& path, const std::string& stag
 void requireColourChannels(const Image& image, const std::filesystem::path& file,
                            const std::string& stage, const std::string& what);
 
-// Throws compose::Error (`stage`, naming `file`) when a value of `image` is NaN or infinite,
-// saying where: "NaN in the plate at pixel (12, 7)" for what = "the plate". Float files can hold
-// them; every stage downstream needs light, which is finite.
+// Throws compose::Error (`stage`, naming `file`) when a value of `image` is NaN or infinite, or
+// larger in magnitude than `limit`, saying where: "NaN in the plate at pixel (12, 7)" for
+// what = "the plate". Float files can hold them; every stage downstream needs light, which is
+// finite, and sums of it (a stitch's blend, a merge's average) must stay finite too.
 void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,
-                   const std::string& what);
+                   const std::string& what, float limit = std::numeric_limits<float>::infinity());
+
+// The largest radiance a photo or environment may hold: beyond it a file is damaged (the largest
+// half float is 65504; a sun in absolute units about 1e9).
+inline constexpr float kMaxPhotoValue = 1e32f;
 
 // Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
 // stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).

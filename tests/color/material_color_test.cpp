@@ -48,6 +48,29 @@ render::Mesh twoMaterials() {
 // different ways; 1e-3 is a tenth of what a missed conversion (or one applied twice) changes.
 constexpr float kTolerance = 1e-3f;
 
+// A float texture is an albedo like a base colour: what lies outside 0..1 is clamped and counted,
+// a value that is not a number becomes 0 (it reached the composite as NaN, a huge one as
+// infinity).
+TEST(MaterialColour, FloatTexturesAreClampedToAlbedos) {
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  render::Mesh mesh = twoMaterials();
+  render::Texture& t = mesh.textures[0];
+  t.file = "paint.exr";
+  t.image = Image(2, 1, 3, {"R", "G", "B"});
+  t.image.pixels = {0.5f, 0.5f, 0.5f, 3.4e38f, -2.0f, std::nanf("")};
+  t.image.colorSpace = "lin_rec709";
+  const std::string line = materialsToWorkingSpace(mesh, colors);
+  for (const float v : t.image.pixels) {
+    EXPECT_GE(v, 0.0f);
+    EXPECT_LE(v, 1.0f);
+  }
+  EXPECT_NEAR(t.image.pixels[0], 0.5f, kTolerance) << "grey stays grey";
+  EXPECT_NE(line.find("; 3 texture values outside 0..1 clamped"), std::string::npos) << line;
+  // An 8-bit texture in range is left alone, and nothing is said.
+  render::Mesh plain = twoMaterials();
+  EXPECT_EQ(materialsToWorkingSpace(plain, colors).find("clamped"), std::string::npos);
+}
+
 // The note says which materials let light through, and how.
 TEST(MaterialColour, TheNoteNamesCutOutsAndSemiTransparentMaterials) {
   const color::ColorConfig colors = color::ColorConfig::builtin();

@@ -564,6 +564,36 @@ TEST_F(ComposeErrors, AHoldoutOfTheWrongSizeStopsTheJobBeforeTheRender) {
   expectNothingWritten();
 }
 
+// A holdout mask is data, but NaN in it put NaN in the composite: it is refused, naming the pixel.
+TEST_F(ComposeErrors, AHoldoutWithNaNIsRefused) {
+  const fs::path mask = dir_ / "input-mask.exr";
+  {
+    std::vector<float> px(64 * 48, 0.0f);
+    px[7 * 64 + 5] = std::nanf("");
+    auto out = OIIO::ImageOutput::create(mask.string());
+    ASSERT_TRUE(out->open(mask.string(), OIIO::ImageSpec(64, 48, 1, OIIO::TypeDesc::FLOAT)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  {
+    const std::string file = (dir_ / "input-plate.png").string();
+    std::vector<float> px(64 * 48 * 3, 0.4f);
+    auto out = OIIO::ImageOutput::create(file);
+    ASSERT_TRUE(out->open(file, OIIO::ImageSpec(64, 48, 3, OIIO::TypeDesc::UINT8)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  const auto r =
+      runCompose(base((dir_ / "input-plate.png").string(), (samples_ / "monkey.obj").string()) +
+                     " --holdout " + quote(mask.string()),
+                 dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("composite: NaN in the holdout mask at pixel (5, 7)"), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("input-mask.exr"), std::string::npos) << r.err;
+  expectNothingWritten();
+}
+
 // A plate whose header names a colour space the config does not have was read as the default
 // space without a word: the stage line says what it assumed and how to say otherwise.
 TEST_F(ComposeErrors, APlateInAnUnknownSpaceSaysWhatWasAssumed) {

@@ -155,6 +155,34 @@ std::vector<unsigned char> iccProfileDescribed(const std::string& text, bool v4)
   return p;
 }
 
+// Values a stage cannot sum: NaN, infinity, and (with a limit) a finite value no light has, such
+// as the largest float (a stitch's blend of it overflowed to infinity).
+TEST(ImageIo, RequireFiniteNamesThePixel) {
+  Image image(3, 2, 3, {"R", "G", "B"});
+  for (float& v : image.pixels) v = 0.5f;
+  EXPECT_NO_THROW(requireFinite(image, "a.exr", "stitch", "the photo", kMaxPhotoValue));
+  image.pixels[3 * (1 * 3 + 2) + 1] = 3.4e38f;
+  EXPECT_NO_THROW(requireFinite(image, "a.exr", "stitch", "the photo"));
+  try {
+    requireFinite(image, "a.exr", "stitch", "the photo", kMaxPhotoValue);
+    ADD_FAILURE() << "3.4e38 passed";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("value 3.4e+38 in the photo at pixel (2, 1) is beyond any "
+                                         "light (more than 1e+32)"),
+              std::string::npos)
+        << e.what();
+  }
+  image.pixels[0] = -std::numeric_limits<float>::infinity();
+  try {
+    requireFinite(image, "a.exr", "stitch", "the photo");
+    ADD_FAILURE() << "infinity passed";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("infinity in the photo at pixel (0, 0)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // A photo's embedded ICC profile names its colour space: Display P3 (an iPhone's), Adobe RGB, and
 // their linear forms; an sRGB profile changes nothing, and another is named as it is (no config
 // knows it: a note).
