@@ -4,6 +4,7 @@
 #include <fstream>
 #include <future>
 #include <map>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -263,7 +264,16 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     const Stage& stage = *list[i];
     if (i > 0) resetPeak();
     const auto start = std::chrono::steady_clock::now();
-    r.reason = stage.run(ctx);
+    try {
+      r.reason = stage.run(ctx);
+    } catch (const std::bad_alloc&) {
+      // Named like any other failure, with the stage that ran out.
+      throw Error(stage.name(),
+                  "out of memory (" + std::to_string(peakResidentBytes() >> 20) +
+                      " MB in use at the peak): the machine or its limits (ulimit -v) allow less "
+                      "than this job needs; a smaller plate or --max-pixels, which refuses larger "
+                      "images before they are read, keep it within bounds");
+    }
     if (p.entries[i]) {
       if (stage.storesWhileLaterStagesRun()) {
         storing.emplace_back(i, std::async(std::launch::async, [&store, &stage, &ctx, i] {

@@ -130,7 +130,8 @@ std::vector<double> parseList(const std::string& text, const std::string& option
 
 void printNotes(const Globals& globals, const std::vector<std::string>& notes) {
   if (globals.quiet) return;
-  for (const auto& note : notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
+  for (const auto& note : notes)
+    std::fprintf(stderr, "compose: note: %s\n", printable(note).c_str());
 }
 
 std::string join(const std::vector<std::string>& items, const std::string& separator) {

@@ -159,7 +159,8 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     // as compose --env reads it (an OpenEXR's chromaticities first).
     cubemap::LoadedEnvironment env = cubemap::loadEnvironment(o->env, {});
     if (!globals.quiet)
-      for (const std::string& n : env.notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
+      for (const std::string& n : env.notes)
+        std::fprintf(stderr, "compose: note: %s\n", printable(n).c_str());
     const std::string byPrimaries = envSpace.empty() && env.info.chromaticities
                                         ? colors.spaceWithChromaticities(*env.info.chromaticities)
                                         : std::string();

@@ -20,7 +20,8 @@ namespace {
 // the peak memory during it.
 void printStages(const pipeline::ComposeResult& result, bool quiet, bool timings) {
   if (!quiet) {
-    for (const auto& note : result.notes) std::fprintf(stderr, "compose: note: %s\n", note.c_str());
+    for (const auto& note : result.notes)
+      std::fprintf(stderr, "compose: note: %s\n", printable(note).c_str());
   }
   double total = 0.0;
   int64_t peak = 0;

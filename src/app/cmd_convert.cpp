@@ -364,7 +364,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                   energyDifference(energyIn, energyOut));
     notes.push_back(energy);
     if (!globals.quiet) {
-      for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
+      for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", printable(n).c_str());
     }
     for (const auto& w : written) std::printf("%s\n", w.c_str());
     return 0;

@@ -117,7 +117,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
       std::vector<std::filesystem::path> leftOut;
       auto shots = ingest::scanShots(o->paths, "ingest", &leftOut);
       if (!leftOut.empty() && !globals.quiet)
-        std::fprintf(stderr, "compose: note: %s\n", leftOutNote(leftOut).c_str());
+        std::fprintf(stderr, "compose: note: %s\n", printable(leftOutNote(leftOut)).c_str());
       capture = group == "pattern" ? ingest::groupByPattern(std::move(shots), o->pattern)
                                    : ingest::groupByExif(std::move(shots), exif);
     }
@@ -128,7 +128,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
       }
       ingest::setExposures(capture.views[0], exposures, "--exposures");
       if (const std::string w = ingest::exposureContradiction(capture.views[0]); !w.empty())
-        std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
+        std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
     }
 
     // The table: one line per photo, as found.

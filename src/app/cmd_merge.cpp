@@ -238,7 +238,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       for (const auto& s : ingest::scanShots(o->images, "merge", &leftOut))
         capture.views[0].shots.push_back(s);
       if (!leftOut.empty() && !globals.quiet)
-        std::fprintf(stderr, "compose: note: %s\n", leftOutNote(leftOut).c_str());
+        std::fprintf(stderr, "compose: note: %s\n", printable(leftOutNote(leftOut)).c_str());
       if (capture.views[0].shots.size() != o->images.size() && !exposures.empty())
         throw UsageError("--exposures needs one value per photo; folders were given");
       if (!exposures.empty()) ingest::setExposures(capture.views[0], exposures, "--exposures");
@@ -247,7 +247,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     ingest::resolveExposures(capture);  // checks too that the photos are one camera's
     for (const ingest::View& v : capture.views)
       if (const std::string w = ingest::exposureContradiction(v); !w.empty())
-        std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
+        std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
     if (o->capture.empty()) {
       for (const ingest::Shot& s : capture.views[0].shots) {  // the first photo that names one
         if (s.info.camera().empty()) continue;

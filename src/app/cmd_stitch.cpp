@@ -394,9 +394,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       char w[64];
       std::snprintf(w, sizeof w, ", write %.2f s", writeSeconds);
       notes.push_back("time: " + timing + w);
-      for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", n.c_str());
+      for (const auto& n : notes) std::fprintf(stderr, "compose: note: %s\n", printable(n).c_str());
     }
-    for (const auto& w : result.warnings) std::fprintf(stderr, "compose: warning: %s\n", w.c_str());
+    for (const auto& w : result.warnings)
+      std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
     for (const auto& w : written) std::printf("%s\n", w.c_str());
     return 0;
   };

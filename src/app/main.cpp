@@ -5,6 +5,7 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -123,13 +124,18 @@ int main(int argc, char** argv) {
     return oneShot();
   } catch (const compose::UsageError& e) {
     std::fprintf(stderr, "compose: error: %s\n(run compose --help for usage)\n",
-                 e.describe().c_str());
+                 compose::printable(e.describe()).c_str());
     return 2;
   } catch (const compose::Error& e) {
-    std::fprintf(stderr, "compose: error: %s\n", e.describe().c_str());
+    std::fprintf(stderr, "compose: error: %s\n", compose::printable(e.describe()).c_str());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr,
+                 "compose: error: out of memory: the machine or its limits (ulimit -v) allow less "
+                 "than this job needs\n");
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "compose: error: %s\n", e.what());
+    std::fprintf(stderr, "compose: error: %s\n", compose::printable(e.what()).c_str());
     return 1;
   }
 }

@@ -15,6 +15,26 @@
 
 namespace compose {
 
+// `text` with the control characters a file can smuggle into a message (ESC sequences that
+// retitle or recolour a terminal, a carriage return that overwrites the line) written as \xNN;
+// newlines and tabs are kept. For messages and notes printed to a terminal, which quote names
+// and text from untrusted files.
+inline std::string printable(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char ch : text) {
+    const unsigned char c = static_cast<unsigned char>(ch);
+    if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7f) {
+      char escaped[8];
+      std::snprintf(escaped, sizeof escaped, "\\x%02x", unsigned(c));
+      out += escaped;
+    } else {
+      out += ch;
+    }
+  }
+  return out;
+}
+
 class Error : public std::runtime_error {
  public:
   // `stage` is a short lower-case name ("ingest", "color", "lighting", "render", "composite",

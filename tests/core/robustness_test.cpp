@@ -43,6 +43,29 @@ class ScopedLimits {
 };
 
 // ---------------------------------------------------------------------------------------------
+// Messages quote untrusted text
+
+// A file's bytes reach error messages and notes (an OBJ line, a glTF material name): control
+// characters are written out, so that an ESC sequence cannot recolour or retitle the terminal.
+TEST(Printable, ControlCharactersAreWrittenOut) {
+  EXPECT_EQ(printable("face corner '\x1b[31mRED\x1b]0;pwned\x07'"),
+            "face corner '\\x1b[31mRED\\x1b]0;pwned\\x07'");
+  EXPECT_EQ(printable("a\rb\x7f"), "a\\x0db\\x7f");
+  EXPECT_EQ(printable("two\nlines\tand tabs, caf\xc3\xa9"), "two\nlines\tand tabs, caf\xc3\xa9");
+  // The error itself: an OBJ face corner with an escape sequence, named as it is in the file.
+  TempDir dir;
+  writeBytes(dir / "esc.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \x1b[2J\n");
+  try {
+    (void)render::loadMesh(dir / "esc.obj");
+    ADD_FAILURE() << "loaded";
+  } catch (const Error& e) {
+    const std::string shown = printable(e.describe());
+    EXPECT_EQ(shown.find('\x1b'), std::string::npos) << shown;
+    EXPECT_NE(shown.find("'\\x1b[2J'"), std::string::npos) << shown;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Limits
 
 TEST(ResourceLimits, ImageSizesBeyondTheLimitAreRefusedWithTheOptionNamed) {
