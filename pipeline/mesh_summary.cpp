@@ -22,8 +22,9 @@ namespace {
 // compose would otherwise stand for a different mesh, or skip the self-shadowing wrongly.
 // 2: a mesh far from its file's origin is moved to it; 3: OBJs too; 4: OBJ vertex colours are
 // read (such a file has a material now, and is no longer kept); 5: sharp edges on lines that end
-// in a smooth surface are shaded smooth; 6: only those less than 25° sharper than the crease.
-constexpr uint32_t kMeshVersion = 6;
+// in a smooth surface are shaded smooth; 6: only those less than 25° sharper than the crease;
+// 7: OBJ faces of 256 corners and more kept whole, a Kd that is not a number the default grey.
+constexpr uint32_t kMeshVersion = 7;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {

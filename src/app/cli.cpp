@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <sstream>
 
 #include "core/error.h"
@@ -185,6 +186,32 @@ CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
           },
           "CODEC[:LEVEL]", "EXR compression"))
       ->capture_default_str();
+}
+
+namespace {
+
+CLI::Validator numberAtLeast(double least, bool strictly, const std::string& words) {
+  return CLI::Validator(
+      [least, strictly, words](std::string& text) {
+        double v = 0.0;
+        const char* begin = text.c_str();
+        char* end = nullptr;
+        v = std::strtod(begin, &end);
+        const bool number = end != begin && *end == '\0' && std::isfinite(v);
+        if (number && (strictly ? v > least : v >= least)) return std::string();
+        return "must be " + words + ", got " + text;
+      },
+      "NUMBER", words);
+}
+
+}  // namespace
+
+CLI::Validator positiveNumber() {
+  return numberAtLeast(0.0, true, "a number greater than 0");
+}
+
+CLI::Validator nonNegativeNumber() {
+  return numberAtLeast(0.0, false, "a finite number of 0 or more");
 }
 
 void requireLosslessCompression(const std::string& compression, const std::string& why) {

@@ -103,6 +103,11 @@ cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
 // --compression: the OpenEXR compression of the EXRs a command writes, as OpenImageIO and oiiotool
 // name it ("piz", "zip:4", "dwaa:45", "none"); a name it does not know is a bad command line.
 CLI::Option* addCompressionOption(CLI::App& command, std::string& compression);
+
+// Checks of a number option that say what is wanted in words ("must be a number greater than 0,
+// got 0"; CLI11's own print the largest double in full), and refuse NaN and infinities.
+CLI::Validator positiveNumber();
+CLI::Validator nonNegativeNumber();
 // Throws UsageError when `compression` (already checked by that option) loses information; `why`
 // says why the output must keep every value.
 void requireLosslessCompression(const std::string& compression, const std::string& why);

@@ -103,7 +103,7 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
                  "~/.cache/compose]");
   cmd.add_option("--older-than", o->olderThanDays,
                  "Remove entries written more than this many days ago")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   cmd.add_option("--max-size", o->maxSize,
                  "Then remove the oldest entries until the rest is at most this size (500M, 2G)");
   cmd.add_flag("--dry-run", o->dryRun, "Say what would be removed, and remove nothing");

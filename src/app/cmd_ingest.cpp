@@ -65,7 +65,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
       .add_option("--brackets", o->brackets,
                   "EXIF grouping: photos per view, when known (views are then runs of exactly "
                   "this many photos in capture order)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   command.add_option("--exposures", o->exposures,
                      "Relative exposures t1,t2,... overriding EXIF (one view only)");
   command.add_option("--json", o->json, "Write the grouping as a JSON capture description");

@@ -98,7 +98,8 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
       throw Error("ingest",
                   std::string("cube faces differ in size: ") + lighting::faceName(f) + " is " +
                       std::to_string(img.image.width) + "x" + std::to_string(img.image.height) +
-                      ", +X is " + std::to_string(out.faces[0].width) + "x" +
+                      ", +X (" + files[0].filename().string() + ") is " +
+                      std::to_string(out.faces[0].width) + "x" +
                       std::to_string(out.faces[0].height),
                   files[size_t(f)]);
     }

@@ -87,7 +87,7 @@ ObjScan scanObj(const fs::path& path) {
           v = std::strtod(text.c_str(), nullptr);  // a subnormal stays; an overflow is infinite
         if (end != digits.data() + digits.size() ||
             (ec != std::errc() && ec != std::errc::result_out_of_range) || !std::isfinite(v)) {
-          fail(std::string(key == "v"    ? "vertex coordinate"
+          fail(std::string(key == "v"    ? (f > 3 ? "vertex colour component" : "vertex coordinate")
                            : key == "vn" ? "normal component"
                                          : "texture coordinate") +
                " '" + text + "' is not a finite number");
@@ -161,6 +161,9 @@ class MaterialLibraries : public tinyobj::MaterialReader {
   std::vector<std::string> unreadable;
   std::vector<fs::path> looked;  // every library file asked for
   std::set<std::string> withKd;  // materials that give Kd
+  // Materials whose Kd holds something that is not a finite number (tinyobjloader reads "nan"
+  // as 0), with the Kd line as written.
+  std::map<std::string, std::string> badKd;
 
  private:
   fs::path folder_;
@@ -199,6 +202,16 @@ class MaterialLibraries : public tinyobj::MaterialReader {
           current.pop_back();
       } else if (key == "Kd") {
         withKd.insert(current);
+        std::string value, all;
+        bool finite = true;
+        while (fields >> value) {
+          char* end = nullptr;
+          const double v = std::strtod(value.c_str(), &end);
+          finite = finite && end != value.c_str() && *end == '\0' && std::isfinite(v) &&
+                   value.find_first_of("xX") == std::string::npos;
+          all += (all.empty() ? "" : " ") + value;
+        }
+        if (!finite) badKd[current] = all;
       }
     }
     std::istringstream stream(text);
@@ -425,7 +438,12 @@ LoadedMesh loadObj(const fs::path& path) {
         // No Kd: the texture alone, or the default grey.
         material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
       }
-      if (!std::isfinite(material.baseColor.x + material.baseColor.y + material.baseColor.z)) {
+      if (const auto bad = libraries.badKd.find(om.name); bad != libraries.badKd.end()) {
+        mesh.warnings.push_back("material '" + om.name + "' has a Kd that is not three numbers ('" +
+                                bad->second + "'): using the default");
+        material.baseColor = glm::vec3(kDefaultAlbedo);
+      } else if (!std::isfinite(material.baseColor.x + material.baseColor.y +
+                                material.baseColor.z)) {
         mesh.warnings.push_back("material '" + om.name +
                                 "' has a non-finite Kd: using the default");
         material.baseColor = glm::vec3(kDefaultAlbedo);

@@ -566,7 +566,7 @@ TEST_F(BadEnvironmentInput, FacesOfDifferentSizes) {
     write(std::string("a_") + f + ".exr", 16, 16);
   write("a_nz.exr", 32, 32);
   expectRefused("convert " + q(dir_ / "a_%.exr") + " --to latlong --out " + q(dir_ / "x.exr"), 1,
-                "cube faces differ in size: -Z is 32x32", "a_nz.exr");
+                "cube faces differ in size: -Z is 32x32, +X (a_px.exr) is 16x16", "a_nz.exr");
 }
 
 TEST_F(BadEnvironmentInput, NonSquareFace) {

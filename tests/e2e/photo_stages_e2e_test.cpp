@@ -519,7 +519,10 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
                     "--out must name a JSON file (.json): the pose file is JSON");
   EXPECT_FAILS_WITH(compose("ingest --max-gap -1 a.jpg", dir), 2, "time gap");
   // Zero is not "not given"; extremes are named; options of a step that does not run are refused.
-  EXPECT_FAILS_WITH(compose("ingest --brackets 0 a.jpg", dir), 2, "--brackets");
+  EXPECT_FAILS_WITH(compose("ingest --brackets 0 a.jpg", dir), 2,
+                    "--brackets: must be a number greater than 0, got 0");
+  EXPECT_FAILS_WITH(compose("cache --older-than nan", dir), 2,
+                    "--older-than: must be a finite number of 0 or more, got nan");
   EXPECT_FAILS_WITH(compose("merge --exposures 1e-300,1 --out h.exr a.jpg b.jpg", dir), 2,
                     "--exposures must be relative exposures between 1e-12 and 1e12");
   EXPECT_FAILS_WITH(compose("merge --exposures 4,4 --out h.exr a.jpg b.jpg", dir), 2,

@@ -226,6 +226,19 @@ TEST(Mesh, ErrorsNameTheFileAndTheProblem) {
   writeText(dir / "nan.obj", "v 0 0 0\nv 1e999 0 0\nv 0 1 0\nf 1 2 3\n");  // overflows to inf
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "nan.obj"),
                        "line 2: vertex coordinate '1e999' is not a finite");
+  writeText(dir / "colour.obj", "v 0 0 0 nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "colour.obj"),
+                       "line 1: vertex colour component 'nan' is not a finite");
+  // A material library's Kd that is not a number (tinyobjloader reads "nan" as 0): the default
+  // grey, said.
+  writeText(dir / "k.mtl", "newmtl a\nKd nan 1 1\n");
+  writeText(dir / "k.obj", "mtllib k.mtl\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const Mesh k = loadMesh(dir / "k.obj");
+  ASSERT_EQ(k.materials.size(), 1u);
+  EXPECT_EQ(k.materials[0].baseColor, glm::vec3(0.5f));
+  ASSERT_EQ(k.warnings.size(), 1u);
+  EXPECT_EQ(k.warnings[0],
+            "material 'a' has a Kd that is not three numbers ('nan 1 1'): using the default");
   writeText(dir / "point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "point.obj"), "zero size");
   writeText(dir / "model.stl", "solid x\n");
@@ -463,7 +476,8 @@ TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
 }
 
 // A base colour is an albedo: outside 0..1 (Kd 5 -1 0) it rendered as given without a word (and
-// --albedo 1.5 is refused). (tinyobjloader reads Kd nan as 0.)
+// --albedo 1.5 is refused). A Kd that is not a number (tinyobjloader reads nan as 0) is the
+// default grey, with a warning of its own.
 TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
   TempDir dir;
   writeText(dir / "k.mtl",
@@ -473,8 +487,10 @@ TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
             "mtllib k.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 1 0\nusemtl hot\nf 1 2 3\n"
             "usemtl bad\nf 2 4 3\nusemtl ok\nf 2 5 4\n");
   const Mesh m = loadMesh(dir / "k.obj");
-  ASSERT_EQ(m.warnings.size(), 1u) << m.warnings[0];
+  ASSERT_EQ(m.warnings.size(), 2u) << m.warnings[0];
   EXPECT_EQ(m.warnings[0],
+            "material 'bad' has a Kd that is not three numbers ('nan 0.2 0.3'): using the default");
+  EXPECT_EQ(m.warnings[1],
             "1 material has a base colour outside 0..1 ('hot': 5 -1 0.5): clamped to 0..1 (a "
             "value that is not a number: the default albedo)");
   for (const Material& material : m.materials) {
@@ -484,6 +500,9 @@ TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
     }
     if (material.name == "ok") {
       EXPECT_TRUE(near(material.baseColor, {0.1f, 0.2f, 0.3f}));
+    }
+    if (material.name == "bad") {
+      EXPECT_TRUE(near(material.baseColor, glm::vec3(kDefaultAlbedo)));
     }
   }
 }
