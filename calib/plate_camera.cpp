@@ -121,6 +121,13 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   if (!camera.ray(p.x * camera.width, p.y * camera.height, origin, dir)) {
     throw Error("camera", "--place is outside what the calibrated lens can see");
   }
+  if (!(origin.y > 0.0)) {
+    // Only a pose (a chessboard seen from behind, or the pose of another photo) puts it there.
+    throw Error("camera", "the camera is not above the ground plane (it is " +
+                              numberText(-origin.y) +
+                              " below it): the object would stand upside down behind the "
+                              "camera; the chessboard must face the camera");
+  }
   if (!(dir.y < -1e-6)) {
     throw Error(
         "camera",

@@ -81,8 +81,15 @@ const Geometry& Context::geometry() {
     }
   }();
   Geometry g{camera};
-  g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
-                                           glm::dvec3(mesh.boundsMax));
+  try {
+    g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
+                                             glm::dvec3(mesh.boundsMax));
+  } catch (const UsageError&) {
+    throw;
+  } catch (const Error& e) {
+    if (!e.file().empty() || job.poseFile.empty()) throw;
+    throw Error(e.stage(), e.what(), job.poseFile);  // the pose puts the ground there
+  }
   // Reduced to a turn first, as the object's yaw: any finite angle is an angle.
   const double envYaw = -std::fmod(job.environmentYawDegrees, 360.0) * std::numbers::pi / 180.0;
   g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));

@@ -434,6 +434,14 @@ class RenderStage final : public Stage {
     r.output = render::renderDiffuse(ctx.mesh(), ctx.objectScene(), g.worldFromObject, g.camera,
                                      *ctx.artefacts.lighting, settings, ctx.progress);
     r.output.beauty.colorSpace = ctx.colors.workingSpace();
+    if (!(r.output.coverage > 0.0) && !job.poseFile.empty()) {
+      throw Error("render",
+                  "the object covers no pixel of the plate: standing on the chessboard's plane "
+                  "where the pose file " +
+                      job.poseFile.filename().string() +
+                      " puts it, it is out of the camera's view (the pose of another photo?)",
+                  job.object);
+    }
     if (!(r.output.coverage > 0.0)) {
       throw Error("render",
                   "the object covers no pixel of the plate (--scale " +

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "core/error.h"
 #include "test_util.h"
@@ -113,6 +114,19 @@ TEST(PlateCamera, RejectsImpossiblePlacements) {
   bad.height = -1.0;
   COMPOSE_EXPECT_ERROR(plateCamera(10, 10, {}, bad), "--camera-height must be a positive");
   EXPECT_THROW(bad.validate(), UsageError) << "an option out of range is a usage error (exit 2)";
+  // A pose that puts the camera under the ground plane (a board seen from behind), looking
+  // down: the ground point lay behind the camera and the object was mirrored through it (an
+  // internal check failed later).
+  CameraOptions under;
+  glm::dmat4 pose(1.0);
+  pose = glm::rotate(pose, -0.3, glm::dvec3(1, 0, 0));  // pitched down
+  pose[3] = glm::dvec4(0.0, -0.3, 0.0, 1.0);
+  under.worldFromCamera = pose;
+  const PlateCamera below = plateCamera(1000, 800, {}, under);
+  Placement ground;
+  ground.imagePoint = {0.5, 0.8};
+  COMPOSE_EXPECT_ERROR(placeOnGround(below, ground, {0, 0, 0}, {1, 1, 1}),
+                       "the camera is not above the ground plane (it is 0.3 below it)");
 }
 
 }  // namespace
