@@ -62,7 +62,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     colors.convert(texture.image, working);
     // Albedos, 0..1 as base colours are: a float texture may hold anything.
     for (float& v : texture.image.pixels) {
-      const float kept = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f;
+      const float kept = std::isnan(v) ? 0.0f : std::clamp(v, 0.0f, 1.0f);
       if (!(std::abs(kept - v) <= 1e-4f)) ++clampedTexels;
       v = kept;
     }

@@ -386,6 +386,8 @@ class StitchStage final : public Stage {
       // Scaled by the shot's exposure, so that views of unequal exposure agree.
       const float scale = shot.exposure ? float(1.0 / *shot.exposure) : 1.0f;
       for (float& v : rgb.pixels) v *= scale;
+      ingest::requireFinite(rgb, shot.file, "stitch", "the photo over its exposure",
+                            ingest::kMaxPhotoValue);
       return rgb;
     };
 

@@ -34,12 +34,13 @@ void printStages(const pipeline::ComposeResult& result, bool quiet, bool timings
       if (s.peakBytes > 0)
         std::snprintf(memory, sizeof memory, "%7.0f MB", double(s.peakBytes) / 1e6);
       std::fprintf(stderr, "compose: %-10s %-7s %8.3f s %10s  %s\n", s.name.c_str(), state,
-                   s.seconds, memory, quiet ? "" : s.reason.c_str());
+                   s.seconds, memory, quiet ? "" : printable(s.reason).c_str());
     } else if (s.state == pipeline::StageState::Skipped) {
-      std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(), s.reason.c_str());
+      std::fprintf(stderr, "compose: %-10s skipped  %s\n", s.name.c_str(),
+                   printable(s.reason).c_str());
     } else {
       std::fprintf(stderr, "compose: %-10s %7.3f s  %s\n", s.name.c_str(), s.seconds,
-                   s.reason.c_str());
+                   printable(s.reason).c_str());
     }
   }
   if (timings)
@@ -108,7 +109,8 @@ void ComposeOptions::addObject(CLI::App& app) {
                  "materials) or Geomview bicubic patches (.bez)");
   app.add_option("--crease", job.creaseDegrees,
                  "Crease angle in degrees for normals computed where the mesh has none: edges "
-                 "sharper than this stay sharp (0 flat, 180 fully smooth)")
+                 "sharper than this stay sharp, but for lines less than 25 degrees sharper that "
+                 "end inside a smooth surface (ridges of a scan) (0 flat, 180 fully smooth)")
       ->capture_default_str();
   app.add_option("--place", place,
                  "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");

@@ -153,8 +153,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                     number(i.fNumber, "%.1f").c_str(), number(i.iso, "%.0f").c_str(),
                     rel ? number(std::log2(*rel), "%+.2f").c_str() : "-",
                     number(i.focalLengthMm, "%.1f mm").c_str(), f35.c_str(),
-                    i.camera().empty() ? "-" : i.camera().c_str(),
-                    i.dateTimeOriginal.empty() ? "-" : i.dateTimeOriginal.c_str());
+                    i.camera().empty() ? "-" : printable(i.camera()).c_str(),
+                    i.dateTimeOriginal.empty() ? "-" : printable(i.dateTimeOriginal).c_str());
         if (!i.focalLength35mm) {
           notes.push_back(s.file.filename().string() +
                           ": no 35 mm equivalent focal length (FocalLengthIn35mmFilm is 0 or "

@@ -74,8 +74,8 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     options.exrCompression = o->compression;
     const ingest::WriteReport report = ingest::writeImage(o->out, image, options);
     if (!globals.quiet) {
-      std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", o->in.c_str(), read.c_str(),
-                   target.c_str());
+      std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", printable(o->in).c_str(),
+                   printable(read).c_str(), target.c_str());
       if (!options.chromaticities)
         std::fprintf(stderr,
                      "compose: note: the config does not say what the primaries of '%s' are: the "

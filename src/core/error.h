@@ -16,20 +16,34 @@
 namespace compose {
 
 // `text` with the control characters a file can smuggle into a message (ESC sequences that
-// retitle or recolour a terminal, a carriage return that overwrites the line) written as \xNN;
-// newlines and tabs are kept. For messages and notes printed to a terminal, which quote names
-// and text from untrusted files.
+// retitle or recolour a terminal, a carriage return that overwrites the line, C1 controls such as
+// CSI, raw or UTF-8 encoded) written as \xNN; newlines and tabs are kept. For messages and notes
+// printed to a terminal, which quote names and text from untrusted files.
 inline std::string printable(const std::string& text) {
   std::string out;
   out.reserve(text.size());
-  for (const char ch : text) {
-    const unsigned char c = static_cast<unsigned char>(ch);
-    if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7f) {
-      char escaped[8];
-      std::snprintf(escaped, sizeof escaped, "\\x%02x", unsigned(c));
-      out += escaped;
+  auto escape = [&out](unsigned char c) {
+    char escaped[8];
+    std::snprintf(escaped, sizeof escaped, "\\x%02x", unsigned(c));
+    out += escaped;
+  };
+  for (size_t i = 0; i < text.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    const unsigned char next = i + 1 < text.size() ? static_cast<unsigned char>(text[i + 1]) : 0;
+    if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7f || (c >= 0x80 && c <= 0x9f)) {
+      escape(c);  // C0, DEL, and a C1 byte that is not inside a UTF-8 sequence
+    } else if (c == 0xc2 && next >= 0x80 && next <= 0x9f) {
+      escape(c);  // U+0080..U+009F, the C1 controls in UTF-8
+      escape(next);
+      ++i;
     } else {
-      out += ch;
+      out += char(c);
+      // The continuation bytes of a UTF-8 sequence (0x80..0xBF) are copied with their lead.
+      const int more = c >= 0xf0 ? 3 : c >= 0xe0 ? 2 : c >= 0xc0 ? 1 : 0;
+      for (int k = 0; k < more && i + 1 < text.size() &&
+                      (static_cast<unsigned char>(text[i + 1]) & 0xc0) == 0x80;
+           ++k)
+        out += text[++i];
     }
   }
   return out;

@@ -39,6 +39,29 @@ struct ObjScan {
   std::vector<uint32_t> faceCorners;
 };
 
+// One line of an OBJ or MTL file, split where tinyobjloader splits them: at "\n", "\r\n" or a
+// lone "\r" (classic Mac files), so that both passes see the same lines. False at the end.
+bool objLine(std::streambuf& in, std::string& line) {
+  using Traits = std::char_traits<char>;
+  line.clear();
+  int c = in.sbumpc();
+  if (c == Traits::eof()) return false;
+  for (; c != Traits::eof(); c = in.sbumpc()) {
+    if (c == '\n') break;
+    if (c == '\r') {
+      if (in.sgetc() == '\n') in.sbumpc();
+      break;
+    }
+    line += char(c);
+  }
+  return true;
+}
+
+// Fields of a line as tinyobjloader separates them: by spaces and tabs.
+bool objSpace(char c) {
+  return c == ' ' || c == '\t';
+}
+
 // tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so, and an
 // index beyond int's range wraps around. This pass over the text finds them first and names the
 // line: every field of v, vn and vt must be a finite number, and every corner of f an integer
@@ -54,13 +77,13 @@ ObjScan scanObj(const fs::path& path) {
   };
   std::vector<std::string_view> fields;
   int64_t triangles = 0;
-  while (std::getline(in, line)) {
+  while (objLine(*in.rdbuf(), line)) {
     ++lineNo;
     fields.clear();
     for (size_t i = 0; i < line.size();) {
-      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      while (i < line.size() && objSpace(line[i])) ++i;
       size_t j = i;
-      while (j < line.size() && !std::isspace(static_cast<unsigned char>(line[j]))) ++j;
+      while (j < line.size() && !objSpace(line[j])) ++j;
       if (j > i) fields.emplace_back(line.data() + i, j - i);
       i = j;
     }
@@ -87,7 +110,8 @@ ObjScan scanObj(const fs::path& path) {
           v = std::strtod(text.c_str(), nullptr);  // a subnormal stays; an overflow is infinite
         if (end != digits.data() + digits.size() ||
             (ec != std::errc() && ec != std::errc::result_out_of_range) || !std::isfinite(v)) {
-          fail(std::string(key == "v"    ? (f > 3 ? "vertex colour component" : "vertex coordinate")
+          fail(std::string(key == "v"    ? (f > 3 && fields.size() >= 7 ? "vertex colour component"
+                                                                        : "vertex coordinate")
                            : key == "vn" ? "normal component"
                                          : "texture coordinate") +
                " '" + text + "' is not a finite number");
@@ -164,6 +188,7 @@ class MaterialLibraries : public tinyobj::MaterialReader {
   // Materials whose Kd holds something that is not a finite number (tinyobjloader reads "nan"
   // as 0), with the Kd line as written.
   std::map<std::string, std::string> badKd;
+  std::map<std::string, double> greyKd;  // materials whose Kd gives one number: r = g = b
 
  private:
   fs::path folder_;
@@ -192,7 +217,7 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     // tinyobjloader gives a material without Kd a black one: remember which have it.
     std::istringstream lines(text);
     std::string line, current;
-    while (std::getline(lines, line)) {
+    while (objLine(*lines.rdbuf(), line)) {
       std::istringstream fields(line);
       std::string key;
       fields >> key;
@@ -202,16 +227,22 @@ class MaterialLibraries : public tinyobj::MaterialReader {
           current.pop_back();
       } else if (key == "Kd") {
         withKd.insert(current);
+        // Up to three numbers, as tinyobjloader reads them; a comment may follow.
         std::string value, all;
+        std::vector<double> numbers;
         bool finite = true;
-        while (fields >> value) {
+        while (numbers.size() < 3 && fields >> value && value[0] != '#') {
           char* end = nullptr;
           const double v = std::strtod(value.c_str(), &end);
           finite = finite && end != value.c_str() && *end == '\0' && std::isfinite(v) &&
                    value.find_first_of("xX") == std::string::npos;
+          numbers.push_back(v);
           all += (all.empty() ? "" : " ") + value;
         }
-        if (!finite) badKd[current] = all;
+        if (!finite || numbers.empty()) badKd[current] = all;
+        // "Kd r" alone is a grey (the MTL format: g and b are r when not given).
+        else if (numbers.size() == 1)
+          greyKd[current] = numbers[0];
       }
     }
     std::istringstream stream(text);
@@ -438,10 +469,14 @@ LoadedMesh loadObj(const fs::path& path) {
         // No Kd: the texture alone, or the default grey.
         material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
       }
+      if (const auto grey = libraries.greyKd.find(om.name); grey != libraries.greyKd.end())
+        material.baseColor = glm::vec3(float(grey->second));
       if (const auto bad = libraries.badKd.find(om.name); bad != libraries.badKd.end()) {
-        mesh.warnings.push_back("material '" + om.name + "' has a Kd that is not three numbers ('" +
-                                bad->second + "'): using the default");
-        material.baseColor = glm::vec3(kDefaultAlbedo);
+        // As if there were no Kd: the texture alone, or the default grey.
+        mesh.warnings.push_back(
+            "material '" + om.name + "' has a Kd that is not a colour ('" + bad->second +
+            "'): " + (om.diffuse_texname.empty() ? "using the default grey" : "its texture alone"));
+        material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
       } else if (!std::isfinite(material.baseColor.x + material.baseColor.y +
                                 material.baseColor.z)) {
         mesh.warnings.push_back("material '" + om.name +

@@ -52,6 +52,15 @@ TEST(Printable, ControlCharactersAreWrittenOut) {
             "face corner '\\x1b[31mRED\\x1b]0;pwned\\x07'");
   EXPECT_EQ(printable("a\rb\x7f"), "a\\x0db\\x7f");
   EXPECT_EQ(printable("two\nlines\tand tabs, caf\xc3\xa9"), "two\nlines\tand tabs, caf\xc3\xa9");
+  // C1 controls (CSI is 0x9b): raw, and as UTF-8 (U+009B); other UTF-8 stays whole.
+  EXPECT_EQ(printable("a\x9b"
+                      "31m"),
+            "a\\x9b"
+            "31m");
+  EXPECT_EQ(printable("a\xc2\x9b"
+                      "31m \xe2\x82\xac \xc2\xb0"),
+            "a\\xc2\\x9b"
+            "31m \xe2\x82\xac \xc2\xb0");
   // The error itself: an OBJ face corner with an escape sequence, named as it is in the file.
   TempDir dir;
   writeBytes(dir / "esc.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \x1b[2J\n");

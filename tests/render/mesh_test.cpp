@@ -233,12 +233,26 @@ TEST(Mesh, ErrorsNameTheFileAndTheProblem) {
   // grey, said.
   writeText(dir / "k.mtl", "newmtl a\nKd nan 1 1\n");
   writeText(dir / "k.obj", "mtllib k.mtl\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  // Line ends of every kind, as tinyobjloader splits lines (a classic Mac file ends its lines in
+  // a lone CR); a Kd followed by a comment, and a Kd of one number (a grey).
+  writeText(dir / "mac.mtl", "newmtl red\rKd 1 0 0 # pure red\rnewmtl grey\r\nKd 0.25\n");
+  writeText(dir / "mac.obj",
+            "# made on a Mac\rmtllib mac.mtl\rv 0 0 0\rv 1 0 0\rv 0 1 0\r\nv 1 1 0\r"
+            "usemtl red\rf 1 2 3\nusemtl grey\rf 2 4 3\r");
+  const Mesh mac = loadMesh(dir / "mac.obj");
+  EXPECT_EQ(mac.triangleCount(), 2u);
+  EXPECT_TRUE(mac.warnings.empty()) << mac.warnings[0];
+  ASSERT_EQ(mac.materials.size(), 2u);
+  for (const Material& material : mac.materials) {
+    const glm::vec3 expected = material.name == "red" ? glm::vec3(1, 0, 0) : glm::vec3(0.25f);
+    EXPECT_EQ(material.baseColor, expected) << material.name;
+  }
   const Mesh k = loadMesh(dir / "k.obj");
   ASSERT_EQ(k.materials.size(), 1u);
   EXPECT_EQ(k.materials[0].baseColor, glm::vec3(0.5f));
   ASSERT_EQ(k.warnings.size(), 1u);
   EXPECT_EQ(k.warnings[0],
-            "material 'a' has a Kd that is not three numbers ('nan 1 1'): using the default");
+            "material 'a' has a Kd that is not a colour ('nan 1 1'): using the default grey");
   writeText(dir / "point.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "point.obj"), "zero size");
   writeText(dir / "model.stl", "solid x\n");
@@ -489,7 +503,7 @@ TEST(Mesh, BaseColoursOutsideZeroToOneAreClampedWithAWarning) {
   const Mesh m = loadMesh(dir / "k.obj");
   ASSERT_EQ(m.warnings.size(), 2u) << m.warnings[0];
   EXPECT_EQ(m.warnings[0],
-            "material 'bad' has a Kd that is not three numbers ('nan 0.2 0.3'): using the default");
+            "material 'bad' has a Kd that is not a colour ('nan 0.2 0.3'): using the default grey");
   EXPECT_EQ(m.warnings[1],
             "1 material has a base colour outside 0..1 ('hot': 5 -1 0.5): clamped to 0..1 (a "
             "value that is not a number: the default albedo)");
