@@ -602,8 +602,9 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
 
 void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,
                    const std::string& what, float limit) {
-  const auto bad = std::find_if(image.pixels.begin(), image.pixels.end(),
-                                [limit](float v) { return !std::isfinite(v) || std::abs(v) > limit; });
+  const auto bad = std::find_if(image.pixels.begin(), image.pixels.end(), [limit](float v) {
+    return !std::isfinite(v) || std::abs(v) > limit;
+  });
   if (bad == image.pixels.end()) return;
   const size_t at = size_t(bad - image.pixels.begin()) / size_t(std::max(1, image.channels));
   const size_t width = size_t(std::max(1, image.width));

@@ -339,6 +339,15 @@ TEST(ComposeCache, AJobFromTheCacheGivesThePixelsOfTheSameJobWithout) {
 
 // --- error paths: clear message naming the file or option, non-zero exit, nothing written ---
 
+// Writes `px` (floats, `channels` per pixel) as an image file stored as `format`.
+void writePixels(const fs::path& path, int w, int h, int channels, OIIO::TypeDesc format,
+                 const std::vector<float>& px) {
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), OIIO::ImageSpec(w, h, channels, format)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+  out->close();
+}
+
 class ComposeErrors : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -474,10 +483,7 @@ TEST_F(ComposeErrors, NanEnvironmentIsRejectedAndOldOutputKept) {
   {
     std::vector<float> px(16 * 8 * 3, 1.0f);
     px[(2 * 16 + 5) * 3 + 1] = std::nanf("");
-    auto out = OIIO::ImageOutput::create(env.string());
-    ASSERT_TRUE(out->open(env.string(), OIIO::ImageSpec(16, 8, 3, OIIO::TypeDesc::FLOAT)));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-    out->close();
+    writePixels(env.string(), 16, 8, 3, OIIO::TypeDesc::FLOAT, px);
   }
   compose::testing::writeText(dir_ / "x.exr", "previous result");
   const auto r =
@@ -499,10 +505,7 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
     const fs::path env = dir_ / "input-dark.exr";
     {
       std::vector<float> px(16 * 8 * 3, value);
-      auto out = OIIO::ImageOutput::create(env.string());
-      ASSERT_TRUE(out->open(env.string(), OIIO::ImageSpec(16, 8, 3, OIIO::TypeDesc::FLOAT)));
-      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-      out->close();
+      writePixels(env.string(), 16, 8, 3, OIIO::TypeDesc::FLOAT, px);
     }
     const auto r =
         runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
@@ -524,10 +527,7 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
     const fs::path env = dir_ / "input-dim.exr";
     {
       std::vector<float> px(16 * 8 * 3, value);
-      auto out = OIIO::ImageOutput::create(env.string());
-      ASSERT_TRUE(out->open(env.string(), OIIO::ImageSpec(16, 8, 3, OIIO::TypeDesc::FLOAT)));
-      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-      out->close();
+      writePixels(env.string(), 16, 8, 3, OIIO::TypeDesc::FLOAT, px);
     }
     const auto r =
         runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
@@ -547,10 +547,7 @@ TEST_F(ComposeErrors, AHoldoutOfTheWrongSizeStopsTheJobBeforeTheRender) {
   {
     const std::string file = (dir_ / "input-mask.png").string();
     std::vector<float> px(40 * 30, 1.0f);
-    auto out = OIIO::ImageOutput::create(file);
-    ASSERT_TRUE(out->open(file, OIIO::ImageSpec(40, 30, 1, OIIO::TypeDesc::UINT8)));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-    out->close();
+    writePixels(file, 40, 30, 1, OIIO::TypeDesc::UINT8, px);
   }
   const auto r =
       runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
@@ -570,18 +567,12 @@ TEST_F(ComposeErrors, AHoldoutWithNaNIsRefused) {
   {
     std::vector<float> px(64 * 48, 0.0f);
     px[7 * 64 + 5] = std::nanf("");
-    auto out = OIIO::ImageOutput::create(mask.string());
-    ASSERT_TRUE(out->open(mask.string(), OIIO::ImageSpec(64, 48, 1, OIIO::TypeDesc::FLOAT)));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-    out->close();
+    writePixels(mask.string(), 64, 48, 1, OIIO::TypeDesc::FLOAT, px);
   }
   {
     const std::string file = (dir_ / "input-plate.png").string();
     std::vector<float> px(64 * 48 * 3, 0.4f);
-    auto out = OIIO::ImageOutput::create(file);
-    ASSERT_TRUE(out->open(file, OIIO::ImageSpec(64, 48, 3, OIIO::TypeDesc::UINT8)));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-    out->close();
+    writePixels(file, 64, 48, 3, OIIO::TypeDesc::UINT8, px);
   }
   const auto r =
       runCompose(base((dir_ / "input-plate.png").string(), (samples_ / "monkey.obj").string()) +
@@ -624,10 +615,7 @@ TEST_F(ComposeErrors, NonFinitePlateIsRejectedAndOldOutputKept) {
   for (const float bad : {std::nanf(""), std::numeric_limits<float>::infinity()}) {
     std::vector<float> px(64 * 48 * 3, 0.4f);
     px[(7 * 64 + 12) * 3 + 1] = bad;
-    auto out = OIIO::ImageOutput::create(plate.string());
-    ASSERT_TRUE(out->open(plate.string(), OIIO::ImageSpec(64, 48, 3, OIIO::TypeDesc::FLOAT)));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
-    out->close();
+    writePixels(plate.string(), 64, 48, 3, OIIO::TypeDesc::FLOAT, px);
     const auto r = runCompose(
         base(plate.string(), (samples_ / "monkey.obj").string()) + " --shadows off", dir_.path());
     EXPECT_EQ(r.status, 1);
