@@ -97,6 +97,9 @@ struct ComposeJob {
   // field of view is scaled to match the plate's mean linear value).
   std::optional<double> exposureStops;
   int samplesPerAxis = 4;
+  // Adaptive anti-aliasing (render::RenderSettings::adaptive): plain pixels from their four corner
+  // samples, the rest from all n x n. False: every pixel from all n x n.
+  bool adaptiveSampling = true;
 
   // Surroundings at a finite distance, for parallax (lighting/capture_volume.h): a room of
   // W x H x D metres standing on the ground, centred below the plate camera (x in [-W/2, W/2],

@@ -138,8 +138,15 @@ void ComposeOptions::addObject(CLI::App& app) {
   app.add_option("--exposure", exposure,
                  "Exposure of the object in stops, or 'auto': match the environment to the plate")
       ->capture_default_str();
-  app.add_option("--samples", job.samplesPerAxis, "Anti-aliasing: N x N samples per pixel")
+  app.add_option("--samples", job.samplesPerAxis,
+                 "Anti-aliasing: N x N samples per pixel (see --sampling)")
       ->capture_default_str();
+  app.add_option_function<std::string>(
+         "--sampling", [this](const std::string& v) { job.adaptiveSampling = v == "adaptive"; },
+         "adaptive: a pixel whose four corner samples find one smooth surface (no edge, crease, "
+         "texture or shadow edge in it) is shaded from them, every other pixel from all N x N; "
+         "full: every pixel from all N x N [default: adaptive]")
+      ->check(CLI::IsMember({"adaptive", "full"}));
 }
 
 void ComposeOptions::addOutput(CLI::App& app) {

@@ -104,9 +104,16 @@ class CameraRays {
 // Embree's test. A pixel no triangle reaches cannot be hit, so its rays need not be traced.
 // Empty (trace every pixel) when the lens bends straight edges or a corner is not in front of the
 // camera: a projected triangle is then not the triangle of its projected corners.
+//
+// With `nearest`, also the nearest surface of each pixel: the largest 1 / depth (depth along the
+// camera's axis) any triangle reaches within the pixel, 0 where none does. The inverse depth of a
+// plane is affine in the image, so a triangle's largest over a pixel is at one of the pixel's
+// corners, clamped to its corners' range (a sliver or a clipped span may reach past them).
 std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFromObject,
                                      const calib::PlateCamera& camera, const glm::vec3& rayOrigin,
-                                     int x0, int y0, int w, int h) {
+                                     int x0, int y0, int w, int h,
+                                     std::vector<float>* nearest = nullptr) {
+  if (nearest) nearest->clear();
   if (camera.lens.projection != calib::Projection::Rectilinear || camera.lens.hasDistortion() ||
       w <= 0 || h <= 0)
     return {};
@@ -119,17 +126,32 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
   // The corners projected as CameraRays inverts it: direction ∝ ((px - cx) / fx,
   // -(py - cy) / fy, -1).
   std::vector<glm::dvec2> projected(mesh.positions.size());
+  std::vector<double> inverseDepth(nearest ? mesh.positions.size() : 0);
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
     const glm::dvec3 c = cameraFromObject * (glm::dvec3(mesh.positions[v]) - origin);
     if (!(c.z < -1e-9)) return {};
     projected[v] = {lens.cx + lens.fx * c.x / -c.z, lens.cy - lens.fy * c.y / -c.z};
+    if (nearest) inverseDepth[v] = 1.0 / -c.z;
   }
+  if (nearest) nearest->assign(size_t(w) * size_t(h), 0.0f);
   constexpr double kPad = 0.05;
   constexpr int kSmall = 8;  // a triangle whose box is narrower and lower is marked by its box
   std::vector<uint8_t> mask(size_t(w) * size_t(h), 0);
+  // The triangle being marked: its inverse depth alongX·x + alongY·y + offset over the image
+  // (x, y the pixel coordinates), within [lowest, highest].
+  double alongX = 0.0, alongY = 0.0, offset = 0.0, lowest = 0.0, highest = 0.0;
   auto mark = [&](int y, int first, int last) {
     uint8_t* row = mask.data() + size_t(y - y0) * size_t(w) - x0;
     for (int x = first; x <= last; ++x) row[x] = 1;
+    if (!nearest) return;
+    float* near = nearest->data() + size_t(y - y0) * size_t(w) - x0;
+    const double rowPart = alongY * (double(y) + (alongY > 0.0 ? 1.0 : 0.0)) + offset;
+    const double corner = alongX > 0.0 ? 1.0 : 0.0;
+    for (int x = first; x <= last; ++x) {
+      const float value =
+          float(std::clamp(alongX * (double(x) + corner) + rowPart, lowest, highest));
+      near[x] = std::max(near[x], value);
+    }
   };
   // The first and last pixel (row or column) of [from, from + size) that [lo - pad, hi + pad]
   // reaches.
@@ -147,6 +169,24 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
     const int left = first(lo.x, x0, w), right = last(hi.x, x0, w);
     const int top = first(lo.y, y0, h), bottom = last(hi.y, y0, h);
     if (left > right || top > bottom) continue;  // outside the rectangle
+    if (nearest) {
+      const double q[3] = {inverseDepth[mesh.indices[t]], inverseDepth[mesh.indices[t + 1]],
+                           inverseDepth[mesh.indices[t + 2]]};
+      lowest = std::min({q[0], q[1], q[2]});
+      highest = std::max({q[0], q[1], q[2]});
+      // The plane through the three (x, y, 1 / depth); a triangle seen edge on has none: its
+      // nearest corner stands for all of it.
+      const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+      const double det = e1.x * e2.y - e1.y * e2.x;
+      if (std::abs(det) > 1e-9) {
+        alongX = ((q[1] - q[0]) * e2.y - (q[2] - q[0]) * e1.y) / det;
+        alongY = ((q[2] - q[0]) * e1.x - (q[1] - q[0]) * e2.x) / det;
+        offset = q[0] - alongX * p[0].x - alongY * p[0].y;
+      } else {
+        alongX = alongY = 0.0;
+        offset = highest;
+      }
+    }
     if (right - left < kSmall && bottom - top < kSmall) {
       // A small triangle: its bounding box (a few pixels more than it covers, at most).
       for (int y = top; y <= bottom; ++y) mark(y, left, right);
@@ -433,17 +473,35 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   };
 
   // Pixels no triangle reaches are not traced (they would be left empty all the same).
+  std::vector<float> nearest;  // per pixel: the nearest surface's 1 / depth (coverablePixels)
+  const bool adaptiveWanted = settings.adaptive && n >= 2 && !translucent;
   const std::vector<uint8_t> coverable =
       settings.skipUncoveredPixels
           ? coverablePixels(mesh, worldFromObject, camera,
                             glm::vec3(objectFromWorld * glm::dvec4(camera.position(), 1.0)), out.x0,
-                            out.y0, w, h)
+                            out.y0, w, h, adaptiveWanted ? &nearest : nullptr)
           : std::vector<uint8_t>{};
-  std::atomic<int64_t> cameraRaysTotal{0};
+  // Adaptive sampling (RenderSettings::adaptive) needs the nearest surface of each pixel.
+  const bool adaptive = adaptiveWanted && !nearest.empty();
+  // The camera's axis, for a hit's depth; the angle a pixel spans at the centre of the image.
+  const glm::dvec3 forward = -glm::dmat3(camera.worldFromCamera)[2];
+  const double pixelAngle = 1.0 / std::min(camera.lens.fx, camera.lens.fy);
+  // The four corner samples of the n x n grid: they stand for the pixel where it is plain.
+  const int probeSample[4] = {0, n - 1, n * (n - 1), n * n - 1};
+  const float probeCover = float(n * n) / 4.0f;
+  // What a plain pixel's shading must not depend on: a texture or a cut-out's edge between its
+  // samples.
+  auto plainMaterial = [&](uint32_t triangle) {
+    if (!materials || mesh.materials.empty()) return true;
+    const uint32_t m = mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[triangle];
+    const Material& material = mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)];
+    return material.texture < 0 && !material.cutOut();
+  };
+  std::atomic<int64_t> cameraRaysTotal{0}, plainPixels{0}, tracedPixels{0};
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
     double rowHits = 0.0;
-    int64_t rowSourceRays = 0, rowCameraRays = 0;
+    int64_t rowSourceRays = 0, rowCameraRays = 0, rowPlain = 0, rowTraced = 0;
     const uint8_t* coverableRow =
         coverable.empty() ? nullptr : coverable.data() + size_t(y - out.y0) * size_t(w);
     // A pixel's hits, then grouped by the surface cell they landed in (triangle and the three
@@ -461,31 +519,160 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     };
     std::vector<SampleHit> samples;
     samples.reserve(size_t(n) * size_t(n));
+    // Sample s of pixel x's n x n: its world direction, and its ray in the object's frame.
+    auto sampleRay = [&](int x, int s, glm::dvec3& dir, glm::vec3& o, glm::vec3& d) {
+      const uint32_t seed =
+          (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
+      const double jx = settings.jitter ? double(hash01(2 * seed)) : 0.5;
+      const double jy = settings.jitter ? double(hash01(2 * seed + 1)) : 0.5;
+      return cameraRays.ray(x + (s % n + jx) / n, y + (s / n + jy) / n, dir, o, d);
+    };
+    // Adaptive sampling: the corner samples of the row's pixels that a surface reaches, traced
+    // first, four pixels to a packet (Embree's cost is the packet's, however few rays it holds).
+    struct Probe {
+      EmbreeScene::Hit hit;
+      glm::dvec3 dir;
+      glm::vec3 o, d;
+      bool traced = false;
+    };
+    thread_local std::vector<Probe> probes;
+    const float* nearestRow = adaptive ? nearest.data() + size_t(y - out.y0) * size_t(w) : nullptr;
+    if (adaptive) {
+      probes.assign(size_t(w) * 4, Probe{});
+      int pending[4], count = 0;
+      auto flush = [&] {
+        glm::vec3 oObj[16], dObj[16];
+        EmbreeScene::Hit found[16];
+        uint32_t active = 0;
+        for (int q = 0; q < count; ++q) {
+          Probe* p = &probes[size_t(pending[q] - out.x0) * 4];
+          for (int b = 0; b < 4; ++b)
+            if (sampleRay(pending[q], probeSample[b], p[b].dir, oObj[4 * q + b], dObj[4 * q + b]))
+              active |= 1u << (4 * q + b);
+        }
+        if (active != 0) scene.intersect16(oObj, dObj, active, found, 0.0f, 1e30f, false);
+        rowCameraRays += std::popcount(active);
+        for (int q = 0; q < count; ++q) {
+          Probe* p = &probes[size_t(pending[q] - out.x0) * 4];
+          for (int b = 0; b < 4; ++b) {
+            p[b].traced = (active >> (4 * q + b)) & 1u;
+            p[b].hit = found[4 * q + b];
+            p[b].o = oObj[4 * q + b];
+            p[b].d = dObj[4 * q + b];
+          }
+        }
+        count = 0;
+      };
+      for (int x = out.x0; x < out.x1; ++x) {
+        if ((coverableRow && !coverableRow[x - out.x0]) || !(nearestRow[x - out.x0] > 0.0f))
+          continue;
+        pending[count++] = x;
+        if (count == 4) flush();
+      }
+      if (count > 0) flush();
+    }
     for (int x = out.x0; x < out.x1; ++x) {
       if (coverableRow && !coverableRow[x - out.x0]) continue;
-      rowCameraRays += n * n;
+      ++rowTraced;
       glm::vec3 colour(0.0f), normalSum(0.0f), irradianceSum(0.0f), shadowedSum(0.0f),
           albedoSum(0.0f);
       glm::dvec3 positionSum(0.0);
       float aoSum = 0.0f;
       samples.clear();
+      const uint32_t pixelSeed =
+          (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n);
+      auto addSample = [&](const EmbreeScene::Hit& hit, const glm::dvec3& dir, const glm::vec3& o,
+                           const glm::vec3& d, int s, float cover) {
+        SampleHit sample;
+        sample.triangle = hit.triangle;
+        sample.u = hit.u;
+        sample.v = hit.v;
+        sample.distance = hit.distance;
+        sample.near[0] = sample.near[1] = sample.near[2] = 0;
+        sample.weight[0] = sample.weight[1] = sample.weight[2] = 0.0f;
+        if (settings.points)
+          settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
+        sample.dir = dir;
+        sample.at = o + d * hit.distance;
+        sample.geometricNormal = hit.geometricNormal;
+        sample.seed = pixelSeed + uint32_t(s);
+        sample.group = -1;
+        sample.cover = cover;
+        samples.push_back(sample);
+      };
+      // A plain pixel: its four corner samples hit one smooth surface, with nothing nearer
+      // anywhere in the pixel, no texture or cut-out, no crease and no shadow edge of a bright
+      // source between them. They stand for all n x n samples: the shading is smooth across it.
+      bool plain = false;
+      const Probe* probe = adaptive ? &probes[size_t(x - out.x0) * 4] : nullptr;
+      if (probe && probe[0].traced && probe[1].traced && probe[2].traced && probe[3].traced) {
+        plain = true;
+        double nearDepth = std::numeric_limits<double>::max(), farDepth = 0.0;
+        glm::vec3 normals[4];
+        for (int b = 0; b < 4 && plain; ++b) {
+          const EmbreeScene::Hit& hit = probe[b].hit;
+          if (!hit.found || !plainMaterial(hit.triangle)) {
+            plain = false;
+            break;
+          }
+          const double depth = double(hit.distance) * glm::dot(probe[b].dir, forward);
+          nearDepth = std::min(nearDepth, depth);
+          farDepth = std::max(farDepth, depth);
+          const uint32_t* tri = &mesh.indices[3 * size_t(hit.triangle)];
+          normals[b] = (1.0f - hit.u - hit.v) * mesh.normals[tri[0]] +
+                       hit.u * mesh.normals[tri[1]] + hit.v * mesh.normals[tri[2]];
+          const float length = glm::length(normals[b]);
+          if (!(length > 1e-6f)) {
+            plain = false;
+            break;
+          }
+          normals[b] /= length;
+        }
+        // One surface: its depth changes across the samples at most as a surface turned 72°
+        // from the camera does (more is an occluding edge, or grazing), and no triangle in the
+        // pixel comes nearer than it by more than that slope over the pixel's border and two
+        // pixels' width of depth (a thin part in front that the samples missed).
+        if (plain) {
+          const double footprint = farDepth * pixelAngle;
+          const double spacing = std::sqrt(2.0) * double(n - 1) / double(n);
+          if (!(nearDepth > 0.0) || farDepth - nearDepth > 3.0 * spacing * footprint) {
+            plain = false;
+          } else {
+            const double inverseNear = 1.0 / nearDepth, inverseFar = 1.0 / farDepth;
+            const double allowed =
+                inverseNear + 0.5 * (inverseNear - inverseFar) + 2.0 * pixelAngle * inverseNear;
+            if (double(nearestRow[x - out.x0]) > allowed) plain = false;
+          }
+        }
+        // No crease between the samples (their normals within 25°).
+        for (int b = 0; b < 4 && plain; ++b)
+          for (int c = b + 1; c < 4 && plain; ++c)
+            if (glm::dot(normals[b], normals[c]) < 0.906f) plain = false;
+        if (plain) {
+          for (int b = 0; b < 4; ++b)
+            addSample(probe[b].hit, probe[b].dir, probe[b].o, probe[b].d, probeSample[b],
+                      probeCover);
+          // No bright source's shadow edge crosses their cells.
+          if (edges) {
+            const uint64_t* seen = settings.shadows->sourceSeen.data();
+            for (const SampleHit& sample : samples)
+              if (((seen[sample.near[0]] ^ seen[sample.near[1]]) |
+                   (seen[sample.near[0]] ^ seen[sample.near[2]])) != 0)
+                plain = false;
+          }
+          if (!plain) samples.clear();
+        }
+      }
+      if (plain) ++rowPlain;
       // The pixel's samples, sixteen at a time: one coherent packet for Embree.
-      for (int first = 0; first < n * n; first += 16) {
+      for (int first = 0; first < n * n && !plain; first += 16) {
         const int count = std::min(16, n * n - first);
         glm::dvec3 dirs[16];
         glm::vec3 oObj[16], dObj[16];
         uint32_t active = 0;
-        for (int b = 0; b < count; ++b) {
-          const int s = first + b;
-          const uint32_t seed =
-              (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) + uint32_t(s);
-          const double jx = settings.jitter ? double(hash01(2 * seed)) : 0.5;
-          const double jy = settings.jitter ? double(hash01(2 * seed + 1)) : 0.5;
-          if (!cameraRays.ray(x + (s % n + jx) / n, y + (s / n + jy) / n, dirs[b], oObj[b],
-                              dObj[b]))
-            continue;
-          active |= 1u << b;
-        }
+        for (int b = 0; b < count; ++b)
+          if (sampleRay(x, first + b, dirs[b], oObj[b], dObj[b])) active |= 1u << b;
+        rowCameraRays += std::popcount(active);
         if (active == 0) continue;
         // Through semi-transparent layers, front to back: each takes its alpha of what the
         // layers in front of it left of the sample; the rays that go on are traced again, from
@@ -510,23 +697,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             } else {
               left[b] = 0.0f;
             }
-            SampleHit sample;
-            sample.triangle = hit.triangle;
-            sample.u = hit.u;
-            sample.v = hit.v;
-            sample.distance = hit.distance;
-            sample.near[0] = sample.near[1] = sample.near[2] = 0;
-            sample.weight[0] = sample.weight[1] = sample.weight[2] = 0.0f;
-            if (settings.points)
-              settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
-            sample.dir = dirs[b];
-            sample.at = oObj[b] + dObj[b] * hit.distance;
-            sample.geometricNormal = hit.geometricNormal;
-            sample.seed = (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n) +
-                          uint32_t(first + b);
-            sample.group = -1;
-            sample.cover = cover;
-            samples.push_back(sample);
+            addSample(hit, dirs[b], oObj[b], dObj[b], first + b, cover);
             if (left[b] > 0.0f) {
               tnear[b] = hit.distance * 1.00001f;
               ++layer[b];
@@ -639,10 +810,14 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     hitsTotal += rowHits;
     sourceRays += rowSourceRays;
     cameraRaysTotal += rowCameraRays;
+    plainPixels += rowPlain;
+    tracedPixels += rowTraced;
     const int done = ++rowsDone;
     if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
   });
   out.rays = cameraRaysTotal + sourceRays;
+  out.pixelsTraced = tracedPixels;
+  out.pixelsPlain = plainPixels;
   out.coverage = hitsTotal * double(invSamples);
   report(progress, "render", 1.0);
   return out;

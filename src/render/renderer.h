@@ -66,6 +66,13 @@ struct RenderSettings {
   // is the same). With a distorted or non-rectilinear lens, or the object partly behind the
   // camera, every pixel of the rectangle is traced.
   bool skipUncoveredPixels = true;
+  // Adaptive sampling: the four corner samples of the n x n grid are traced first, and where they
+  // find one smooth surface (no silhouette, occluding edge or thinner part in front anywhere in
+  // the pixel, no crease, texture, cut-out or shadow edge of a bright source between them) they
+  // stand for all n x n; every other pixel gets all of them. Needs the pixels' nearest surfaces,
+  // hence a rectilinear lens without distortion and skipUncoveredPixels; off for semi-transparent
+  // meshes and n = 1.
+  bool adaptive = true;
 };
 
 // The AOV channels, in order (Nuke's layer.channel names). All are the mean over the pixel's
@@ -87,6 +94,8 @@ struct RenderOutput {
   Image aovs;                          // aovChannelNames(); (x1 - x0) x (y1 - y0)
   int64_t rays = 0;                    // camera rays traced and rays to the bright sources
   double coverage = 0.0;               // sum of alpha
+  int64_t pixelsTraced = 0;            // pixels whose rays were traced
+  int64_t pixelsPlain = 0;             // of those, shaded from their four corner samples
 };
 
 RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& objectScene,
