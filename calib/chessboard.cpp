@@ -391,7 +391,7 @@ PlatePose readPose(const fs::path& file) try {
   try {
     in >> j;
   } catch (const nlohmann::json::exception& e) {
-    throw Error(kStage, std::string("not a valid JSON pose file: ") + e.what(), file);
+    throw Error(kStage, std::string("not a valid JSON pose file: ") + jsonMessage(e.what()), file);
   }
   auto fail = [&](const std::string& what) { throw Error(kStage, what, file); };
   if (!j.is_object() || j.value("format", std::string()) != "compose-pose")
@@ -426,7 +426,7 @@ PlatePose readPose(const fs::path& file) try {
 } catch (const nlohmann::json::exception& e) {
   // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
   // exception; it is bad input like any other, named with its file.
-  throw Error(kStage, std::string("not a valid pose file: ") + e.what(), file);
+  throw Error(kStage, std::string("not a valid pose file: ") + jsonMessage(e.what()), file);
 }
 
 }  // namespace compose::calib

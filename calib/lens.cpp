@@ -12,6 +12,7 @@
 
 #include "calib/lens_json.h"
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/numbers.h"
 #include "core/output_files.h"
@@ -262,7 +263,7 @@ Lens lensFromJson(const nlohmann::json& j, const fs::path& file) try {
 } catch (const nlohmann::json::exception& e) {
   // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
   // exception; it is bad input like any other, named with its file.
-  throw Error("calib", std::string("not a valid lens file: ") + e.what(), file);
+  throw Error("calib", std::string("not a valid lens file: ") + jsonMessage(e.what()), file);
 }
 
 nlohmann::ordered_json lensToJson(const Lens& lens) {
@@ -290,7 +291,7 @@ Lens readLens(const fs::path& file) {
   try {
     in >> j;
   } catch (const nlohmann::json::exception& e) {
-    throw Error("calib", std::string("not a valid JSON lens file: ") + e.what(), file);
+    throw Error("calib", std::string("not a valid JSON lens file: ") + jsonMessage(e.what()), file);
   }
   return lensFromJson(j, file);
 }

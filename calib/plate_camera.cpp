@@ -37,26 +37,26 @@ bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
 void CameraOptions::validate() const {
   if (!(height > 0.0 && height <= 1e4)) {
     throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
-                     numberText(height));
+                     givenText(height));
   }
   if (!(std::abs(pitchDegrees) <= 89.0)) {
-    throw UsageError("--pitch must be within ±89 degrees, got " + numberText(pitchDegrees));
+    throw UsageError("--pitch must be within ±89 degrees, got " + givenText(pitchDegrees));
   }
   // Below 1 mm a rectilinear view is wider than 172 degrees: no camera's plate.
   if (focal35mm && !(*focal35mm >= 1.0 && *focal35mm <= 1e4)) {
     throw UsageError("--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm, got " +
-                     numberText(*focal35mm));
+                     givenText(*focal35mm));
   }
 }
 
 void Placement::validate() const {
   const glm::dvec2 p = imagePoint;
   if (!(p.x >= 0.0 && p.x <= 1.0 && p.y >= 0.0 && p.y <= 1.0)) {
-    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + numberText(p.x) +
-                     "," + numberText(p.y));
+    throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + givenText(p.x) +
+                     "," + givenText(p.y));
   }
   if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
-    throw UsageError("--scale must be in (0, 10], got " + numberText(heightFraction));
+    throw UsageError("--scale must be in (0, 10], got " + givenText(heightFraction));
   }
   if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
 }
@@ -119,7 +119,10 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   const glm::dvec2 p = placement.imagePoint;
   glm::dvec3 origin, dir;
   if (!camera.ray(p.x * camera.width, p.y * camera.height, origin, dir)) {
-    throw Error("camera", "--place is outside what the calibrated lens can see");
+    throw Error("camera",
+                "--place " + givenText(p.x) + "," + givenText(p.y) +
+                    " is outside what the calibrated lens can see (its distortion folds that part "
+                    "of the frame back: it maps no direction there)");
   }
   if (!(origin.y > 0.0)) {
     // Only a pose (a chessboard seen from behind, or the pose of another photo) puts it there.
@@ -131,7 +134,7 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   if (!(dir.y < -1e-6)) {
     throw Error(
         "camera",
-        "--place " + numberText(p.x) + "," + numberText(p.y) +
+        "--place " + givenText(p.x) + "," + givenText(p.y) +
             " is at or above the horizon, so it does not see the ground; choose a lower point"
             " or pitch the camera down");
   }

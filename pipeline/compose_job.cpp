@@ -119,11 +119,11 @@ void validate(const ComposeJob& job) {
     throw UsageError("--env-yaw must be a finite number of degrees");
   for (int c = 0; job.albedo && c < 3; ++c) {
     if (!((*job.albedo)[c] >= 0.0f && (*job.albedo)[c] <= 1.0f))
-      throw UsageError("--albedo must be within [0, 1], got " + numberText((*job.albedo)[c]));
+      throw UsageError("--albedo must be within [0, 1], got " + givenText((*job.albedo)[c]));
   }
   if (!(job.creaseDegrees >= 0.0 && job.creaseDegrees <= 180.0))
     throw UsageError("--crease must be an angle within [0, 180] degrees, got " +
-                     numberText(job.creaseDegrees));
+                     givenText(job.creaseDegrees));
   if (job.exposureStops && !(std::abs(*job.exposureStops) <= 64.0)) {
     throw UsageError("--exposure must be a number of stops within ±64");
   }

@@ -87,8 +87,12 @@ const Geometry& Context::geometry() {
   } catch (const UsageError&) {
     throw;
   } catch (const Error& e) {
-    if (!e.file().empty() || job.poseFile.empty()) throw;
-    throw Error(e.stage(), e.what(), job.poseFile);  // the pose puts the ground there
+    if (!e.file().empty()) throw;
+    // The pose puts the ground there; else the calibration's lens maps the point nowhere.
+    if (!job.poseFile.empty()) throw Error(e.stage(), e.what(), job.poseFile);
+    if (!job.lensFile.empty() && g.camera.lens.hasDistortion())
+      throw Error(e.stage(), e.what(), job.lensFile);
+    throw;
   }
   // Reduced to a turn first, as the object's yaw: any finite angle is an angle.
   const double envYaw = -std::fmod(job.environmentYawDegrees, 360.0) * std::numbers::pi / 180.0;

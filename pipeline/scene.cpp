@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
 #include "pipeline/stage.h"
@@ -133,7 +134,7 @@ ComposeJob loadScene(const fs::path& file) {
   try {
     scene = nlohmann::json::parse(text.str());
   } catch (const nlohmann::json::exception& e) {
-    throw Error("scene", std::string("not JSON: ") + e.what(), file);
+    throw Error("scene", std::string("not JSON: ") + jsonMessage(e.what()), file);
   }
   ComposeJob job;
   try {
@@ -141,7 +142,7 @@ ComposeJob loadScene(const fs::path& file) {
   } catch (const UsageError& e) {
     throw Error("scene", e.what(), file);
   } catch (const nlohmann::json::exception& e) {
-    throw Error("scene", std::string("a value does not fit: ") + e.what(), file);
+    throw Error("scene", std::string("a value does not fit: ") + jsonMessage(e.what()), file);
   }
   return job;
 }

@@ -1,5 +1,6 @@
 #include "pipeline/shadows.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -69,7 +70,9 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
                        "shadows");
     }
     plan.transfer.grid = p.getInt("grid", 16, "shadows");
-    plan.lightingOrder = p.getInt("order", sh ? 4 : 16, "shadows");
+    // The default Chebyshev order is 16, or the grid's size on a coarser grid (k <= s).
+    plan.lightingOrder =
+        p.getInt("order", sh ? 4 : std::clamp(plan.transfer.grid, 1, 16), "shadows");
     plan.transfer.boundaryRays = p.getInt("boundary", 2, "shadows");
     plan.sources = p.getInt("sources", 64, "shadows");
     plan.refine.spread = float(p.getDouble("refine", plan.refine.spread, "shadows"));

@@ -158,7 +158,8 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
     if (!std::isfinite(job.environmentYawDegrees))
       throw Error("render", "the lighting file's env-yaw is not a number of degrees", file);
   } catch (const nlohmann::json::exception& e) {
-    throw Error("render", std::string("the lighting file's parameters are damaged: ") + e.what(),
+    throw Error("render",
+                std::string("the lighting file's parameters are damaged: ") + jsonMessage(e.what()),
                 file);
   }
 
@@ -323,7 +324,8 @@ StageInput objectLayerInput(const fs::path& file) {
     try {
       geometry = geometryFromJson(header.at("geometry"), file);
     } catch (const nlohmann::json::exception& e) {
-      throw Error("composite", std::string("the object layer's header is damaged: ") + e.what(),
+      throw Error("composite",
+                  std::string("the object layer's header is damaged: ") + jsonMessage(e.what()),
                   file);
     }
     const int frameWidth = geometry.camera.width, frameHeight = geometry.camera.height;
@@ -441,7 +443,8 @@ StageInput objectLayerInput(const fs::path& file) {
       }
       ctx.setGeometry(geometry);
     } catch (const nlohmann::json::exception& e) {
-      throw Error("composite", std::string("the object layer's header is damaged: ") + e.what(),
+      throw Error("composite",
+                  std::string("the object layer's header is damaged: ") + jsonMessage(e.what()),
                   file);
     }
     keyFromFile(ctx, file, {kObject, kGroundShadow, kSelfShadowing}, "composite");

@@ -12,6 +12,7 @@
 #include "composite/composite.h"
 #include "core/error.h"
 #include "core/json_number.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
 #include "ingest/exr_io.h"
@@ -45,6 +46,7 @@ struct ExposureMatch {
   double groundShare = 0.0;   // of the plate's pixels, the share whose rays look below the horizon
   bool wholePlate = false;    // too little ground in view: the key is the whole plate's
   double cardRadiance = 0.0;  // 0.18 × E(up)/π (environment units)
+  bool nothingVisible = false;  // every pixel of the plate transparent: no key, scale 1
 };
 
 ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& camera,
@@ -76,6 +78,10 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
       ++count[0];
       if (ground) logSum[1] += v, ++count[1];
     }
+  }
+  if (count[0] == 0) {
+    m.nothingVisible = true;
+    return m;
   }
   const int use = count[1] > 0 && count[1] >= count[0] / 100 ? 1 : 0;
   m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
@@ -219,7 +225,7 @@ class RenderStage final : public Stage {
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
   // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
   // middle; 6: the plate's key is taken below the horizon; 7: matched by a card on the ground
-  static constexpr int kVersion = 7;
+  static constexpr int kVersion = 8;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -312,6 +318,17 @@ class RenderStage final : public Stage {
                const std::optional<int64_t> n = wholeNumber(v);
                if (!n) throw UsageError("samples must be a whole number");
                j.samplesPerAxis = int(*n);
+             }},
+            {"sampling",
+             "\"adaptive\" (plain pixels from their four corner samples) or \"full\" (every "
+             "pixel from all N x N)",
+             [](const ComposeJob& j) {
+               return nlohmann::json(j.adaptiveSampling ? "adaptive" : "full");
+             },
+             [](ComposeJob& j, const nlohmann::json& v) {
+               if (v != "adaptive" && v != "full")
+                 throw UsageError("sampling must be \"adaptive\" or \"full\"");
+               j.adaptiveSampling = v == "adaptive";
              }}};
   }
 
@@ -327,6 +344,7 @@ class RenderStage final : public Stage {
     if (ctx.job.albedo) h.floats(std::span<const float>(&ctx.job.albedo->x, 3));
     h.number(ctx.job.exposureStops.value_or(1e300));
     h.word(uint32_t(ctx.job.samplesPerAxis));
+    h.word(ctx.job.adaptiveSampling ? 1u : 0u);
     ctx.keys[kObject] = h;
   }
   bool cached() const override { return true; }
@@ -380,6 +398,7 @@ class RenderStage final : public Stage {
     const Geometry& g = ctx.geometry();
     render::RenderSettings settings;
     settings.samplesPerAxis = job.samplesPerAxis;
+    settings.adaptive = job.adaptiveSampling;
     settings.albedo = job.albedo.value_or(glm::vec3(render::kDefaultAlbedo));
     settings.overrideMaterials = job.albedo.has_value();
     settings.envFromWorld = g.envFromWorld;
@@ -409,6 +428,12 @@ class RenderStage final : public Stage {
             "stops); override with --exposure",
             std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
             *info.iso, std::log2(match.scale)));
+      } else if (match.nothingVisible) {
+        settings.exposure = 1.0f;
+        ctx.note(
+            "auto exposure: 0 stops (the environment's own units): the plate is transparent "
+            "everywhere (alpha below 0.01), so it has no brightness to match; override with "
+            "--exposure");
       } else {
         settings.exposure = float(match.scale);
         ctx.note(format(
@@ -445,15 +470,21 @@ class RenderStage final : public Stage {
     if (!(r.output.coverage > 0.0)) {
       throw Error("render",
                   "the object covers no pixel of the plate (--scale " +
-                      std::to_string(job.placement.heightFraction) + " of the plate height at " +
-                      "--place " + std::to_string(job.placement.imagePoint.x) + "," +
-                      std::to_string(job.placement.imagePoint.y) +
+                      givenText(job.placement.heightFraction) + " of the plate height at " +
+                      "--place " + givenText(job.placement.imagePoint.x) + "," +
+                      givenText(job.placement.imagePoint.y) +
                       "): make it larger or place it inside the frame",
                   job.object);
     }
+    std::string sampling;
+    if (r.output.pixelsPlain > 0) {
+      sampling = format(" (%.0f %% of the traced pixels plain, shaded from their 4 corner samples)",
+                        100.0 * double(r.output.pixelsPlain) /
+                            double(std::max<int64_t>(1, r.output.pixelsTraced)));
+    }
     const std::string reason =
-        format("%dx%d pixels at %d x %d samples: %lld rays in %.2f s", r.output.x1 - r.output.x0,
-               r.output.y1 - r.output.y0, job.samplesPerAxis, job.samplesPerAxis,
+        format("%dx%d pixels at %d x %d samples%s: %lld rays in %.2f s", r.output.x1 - r.output.x0,
+               r.output.y1 - r.output.y0, job.samplesPerAxis, job.samplesPerAxis, sampling.c_str(),
                static_cast<long long>(r.output.rays), secondsSince(start));
     ctx.artefacts.object = std::move(r);
     return reason;

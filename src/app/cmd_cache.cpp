@@ -42,25 +42,30 @@ bool isEntryName(const std::string& name) {
   return true;
 }
 
-// "500M", "2G", "1.5G", "800000" (bytes; K, M, G, T are powers of 1000).
+// "500M", "2G", "1.5G", "800000" (bytes; K, M, G, T and KB, MB, GB, TB are powers of 1000, KiB,
+// MiB, GiB, TiB powers of 1024; any case). A size beyond what a file system can hold keeps
+// everything.
 uintmax_t parseSize(const std::string& text) {
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
   double scale = 1.0;
   const std::string unit = end ? std::string(end) : std::string();
-  if (unit == "K" || unit == "k" || unit == "KB")
-    scale = 1e3;
-  else if (unit == "M" || unit == "MB")
-    scale = 1e6;
-  else if (unit == "G" || unit == "GB")
-    scale = 1e9;
-  else if (unit == "T" || unit == "TB")
-    scale = 1e12;
-  else if (!unit.empty())
+  std::string lower = unit;
+  for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+  const char* const prefixes = "kmgt";
+  for (int power = 1; power <= 4; ++power) {
+    const std::string p(1, prefixes[power - 1]);
+    if (lower == p || lower == p + "b") scale = std::pow(1000.0, power);
+    if (lower == p + "ib") scale = std::pow(1024.0, power);
+  }
+  if (scale == 1.0 && !unit.empty() && lower != "b")
     throw UsageError("--max-size expects a size such as 500M or 2G, got '" + text + "'");
   if (end == text.c_str() || !std::isfinite(v) || v < 0.0)
     throw UsageError("--max-size expects a size such as 500M or 2G, got '" + text + "'");
-  return uintmax_t(v * scale);
+  const double bytes = v * scale;
+  // 2^63 bytes and more: no file system holds that; converting it would overflow.
+  if (!(bytes < 9.2e18)) return std::numeric_limits<uintmax_t>::max();
+  return uintmax_t(bytes);
 }
 
 std::string megabytes(uintmax_t bytes) {

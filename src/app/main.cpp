@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <iostream>
 #include <new>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -18,6 +19,19 @@ namespace {
 
 // An option given an empty value (--yaw "", --env "") is a mistake, never "the default": CLI11
 // reads "" as 0 for numbers and keeps it as an empty path. Throws UsageError naming the option.
+// CLI11's wording of two common mistakes, in the user's terms.
+std::string cliMessage(const std::string& what) {
+  std::smatch m;
+  static const std::regex conversion(R"(^Could not convert: (\S+) = (.*)$)");
+  static const std::regex repeated(R"(^(\S+): At Most 1 required but received (\d+)$)");
+  if (std::regex_match(what, m, conversion))
+    return m[1].str() + " cannot take '" + m[2].str() +
+           "': not a number of the kind it takes, or out of its range";
+  if (std::regex_match(what, m, repeated))
+    return m[1].str() + " is given " + m[2].str() + " times: give it once";
+  return what;
+}
+
 void requireValues(const CLI::App& app) {
   for (const CLI::Option* option : app.get_options()) {
     if (option->count() == 0 || option->get_expected_min() == 0) continue;  // absent, or a flag
@@ -106,7 +120,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    std::cerr << "compose: error: cli: " << e.what() << "\n(run compose --help for usage)\n";
+    std::cerr << "compose: error: cli: " << compose::printable(cliMessage(e.what()))
+              << "\n(run compose --help for usage)\n";
     return 2;
   }
 

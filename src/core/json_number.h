@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
+#include <string>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
@@ -49,6 +51,35 @@ inline std::optional<int64_t> wholeMember(const nlohmann::json& j, const char* k
   const auto it = j.find(key);
   if (it == j.end()) return std::nullopt;
   return wholeNumber(*it, lo, hi);
+}
+
+// nlohmann::json's message for a user: without its "[json.exception.parse_error.101]" tag and
+// its "syntax error while parsing value -" preamble; an empty file said plainly; NaN and Infinity
+// (which Python's json.dumps writes, and JSON does not have) named as the likely cause.
+inline std::string jsonMessage(std::string_view what) {
+  std::string text(what);
+  if (const size_t tag = text.find("[json.exception."); tag != std::string::npos) {
+    const size_t close = text.find("] ", tag);
+    if (close != std::string::npos) text.erase(tag, close + 2 - tag);
+  }
+  if (text.find("attempting to parse an empty input") != std::string::npos ||
+      text.find("line 1, column 1: syntax error while parsing value - unexpected end of input") !=
+          std::string::npos)
+    return "the file is empty";
+  for (const char* preamble :
+       {"syntax error while parsing value - ", "syntax error while parsing object - ",
+        "syntax error while parsing array - "}) {
+    const size_t at = text.find(preamble);
+    if (at != std::string::npos) text.erase(at, std::string_view(preamble).size());
+  }
+  const size_t last = text.find("last read: '");
+  if (text.find("invalid literal") != std::string::npos && last != std::string::npos) {
+    // What was read up to the bad character: a value starting "N" or "I" was NaN or Infinity.
+    const size_t close = text.rfind('\'');
+    const char bad = close > last + 12 ? text[close - 1] : ' ';
+    if (bad == 'N' || bad == 'I') text += " (JSON has no NaN or Infinity: write a finite number)";
+  }
+  return text;
 }
 
 }  // namespace compose

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <numbers>
 #include <string>
 
@@ -13,6 +14,17 @@ namespace compose {
 inline std::string numberText(double value) {
   char text[32];
   std::snprintf(text, sizeof text, "%g", value);
+  return text;
+}
+
+// A value the user gave, as it reads back exactly: the shortest of %.6g .. %.17g that does, so
+// that a range error does not say "must be at most 10, got 10" of 10.0000001.
+inline std::string givenText(double value) {
+  char text[32];
+  for (int digits = 6; digits <= 17; ++digits) {
+    std::snprintf(text, sizeof text, "%.*g", digits, value);
+    if (!std::isfinite(value) || std::strtod(text, nullptr) == value) break;
+  }
   return text;
 }
 

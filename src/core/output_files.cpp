@@ -146,6 +146,12 @@ OutputFiles::~OutputFiles() {
   if (committed_) return;
   std::error_code ec;
   for (const Entry& e : entries_) fs::remove(e.temporary, ec);
+  // The folders made for the outputs, deepest first: removed when nothing else was put there.
+  std::vector<fs::path> folders = createdFolders_;
+  std::sort(folders.begin(), folders.end(), [](const fs::path& a, const fs::path& b) {
+    return a.native().size() > b.native().size();
+  });
+  for (const fs::path& dir : folders) fs::remove(dir, ec);
 }
 
 void OutputFiles::check(const fs::path& destination, const std::string& stage) {
@@ -178,8 +184,15 @@ fs::path OutputFiles::add(const fs::path& destination) {
   check(destination, stage_);
   const fs::path dir = destination.parent_path();
   if (!dir.empty() && !fs::exists(dir, ec)) {
+    std::vector<fs::path> missing;  // deepest first
+    for (fs::path d = dir; !d.empty() && !fs::exists(d, ec); d = d.parent_path()) {
+      missing.push_back(d);
+      if (d == d.parent_path()) break;
+    }
     fs::create_directories(dir, ec);
     if (ec) throw Error(stage_, "cannot create the output folder: " + ec.message(), dir);
+    const std::lock_guard<std::mutex> lock(mutex_);
+    createdFolders_.insert(createdFolders_.end(), missing.begin(), missing.end());
   }
   if (!dir.empty() && !fs::is_directory(dir, ec))
     throw Error(stage_, "cannot write into the output folder: it is a file, not a folder", dir);

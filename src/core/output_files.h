@@ -48,7 +48,8 @@ class OutputFiles {
   };
   std::string stage_;
   std::vector<Entry> entries_;
-  std::mutex mutex_;  // guards entries_ in add()
+  std::vector<std::filesystem::path> createdFolders_;  // by add(), to remove on failure
+  std::mutex mutex_;                                   // guards entries_ in add()
   bool committed_ = false;
 };
 

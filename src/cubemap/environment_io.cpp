@@ -588,8 +588,11 @@ std::array<fs::path, kCubeFaces> facePaths(const fs::path& path, int faceNaming)
     if (at != std::string::npos) {
       out[size_t(f)] = text.substr(0, at) + token + text.substr(at + 1);
     } else {
+      // A base name without an extension gets OpenEXR's, as the HDR default.
+      const std::string extension =
+          path.extension().empty() ? std::string(".exr") : path.extension().string();
       fs::path p = path;
-      p.replace_filename(path.stem().string() + "_" + token + path.extension().string());
+      p.replace_filename(path.stem().string() + "_" + token + extension);
       out[size_t(f)] = p;
     }
   }

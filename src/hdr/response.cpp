@@ -698,7 +698,8 @@ ResponseCurve readResponse(const fs::path& file) try {
   try {
     in >> j;
   } catch (const nlohmann::json::exception& e) {
-    throw Error(kStage, std::string("not a valid JSON response file: ") + e.what(), file);
+    throw Error(kStage, std::string("not a valid JSON response file: ") + jsonMessage(e.what()),
+                file);
   }
   if (!j.is_object() || j.value("format", std::string()) != "compose-response")
     throw Error(kStage, "not a response file (\"format\" must be \"compose-response\")", file);
@@ -745,7 +746,7 @@ ResponseCurve readResponse(const fs::path& file) try {
 } catch (const nlohmann::json::exception& e) {
   // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
   // exception; it is bad input like any other, named with its file.
-  throw Error(kStage, std::string("not a valid response file: ") + e.what(), file);
+  throw Error(kStage, std::string("not a valid response file: ") + jsonMessage(e.what()), file);
 }
 
 fs::path responseDirectory() {

@@ -285,7 +285,9 @@ Capture readCaptureDescription(const fs::path& file) try {
   try {
     in >> j;
   } catch (const nlohmann::json::exception& e) {
-    throw Error(kStage, std::string("not a valid JSON capture description: ") + e.what(), file);
+    throw Error(kStage,
+                std::string("not a valid JSON capture description: ") + jsonMessage(e.what()),
+                file);
   }
   auto fail = [&](const std::string& what) -> void { throw Error(kStage, what, file); };
   if (!j.is_object()) fail("a capture description must hold a JSON object");
@@ -388,7 +390,8 @@ Capture readCaptureDescription(const fs::path& file) try {
 } catch (const nlohmann::json::exception& e) {
   // A field of the wrong type (a number where text belongs, ...): nlohmann reports it by
   // exception; it is bad input like any other, named with its file.
-  throw Error(kStage, std::string("not a valid capture description: ") + e.what(), file);
+  throw Error(kStage, std::string("not a valid capture description: ") + jsonMessage(e.what()),
+              file);
 }
 
 std::string captureDescriptionText(const fs::path& file, const Capture& capture) {

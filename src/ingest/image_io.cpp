@@ -8,6 +8,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <set>
 
 #include <Imath/half.h>
 
@@ -309,6 +310,55 @@ Kind kindOf(const fs::path& file, const std::string& stage) {
   return kindOf({first, 4});
 }
 
+// A PNG's chunks walked before OpenImageIO decodes it (`size` bytes; `read` fills 8 bytes at an
+// offset): one that ends early, or a file without its IEND chunk, is a truncated file. (libpng
+// would say so too, but writes its own message to the terminal first.) Empty when the chunks are
+// whole or the file is not a PNG.
+template <class Read>
+std::string pngTruncation(uint64_t size, Read&& read) {
+  static constexpr unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  unsigned char bytes[8];
+  if (size < 8 || !read(0, bytes) || !std::equal(bytes, bytes + 8, kSignature)) return {};
+  uint64_t at = 8;
+  while (at + 8 <= size) {
+    if (!read(at, bytes)) return {};
+    const uint64_t length = (uint64_t(bytes[0]) << 24) | (uint64_t(bytes[1]) << 16) |
+                            (uint64_t(bytes[2]) << 8) | uint64_t(bytes[3]);
+    std::string type;
+    for (int i = 4; i < 8; ++i) type += std::isalpha(bytes[i]) ? char(bytes[i]) : '?';
+    if (at + 12 + length > size) {
+      return "the PNG ends inside its " + type + " chunk (" + std::to_string(size) +
+             " bytes, the chunk needs " + std::to_string(at + 12 + length) + ")";
+    }
+    if (type == "IEND") return {};
+    at += 12 + length;
+  }
+  return "the PNG ends before its IEND chunk (" + std::to_string(size) + " bytes)";
+}
+
+void checkPng(const fs::path& path, const std::string& stage) {
+  std::ifstream in(path, std::ios::binary);
+  std::error_code ec;
+  const uintmax_t size = fs::file_size(path, ec);
+  if (!in || ec) return;  // the reader says what is wrong
+  const std::string why = pngTruncation(size, [&](uint64_t at, unsigned char* out) {
+    in.seekg(std::streamoff(at));
+    in.read(reinterpret_cast<char*>(out), 8);
+    return in.gcount() == 8;
+  });
+  if (!why.empty()) throw Error(stage, "truncated file: " + why, path);
+}
+
+void checkPng(std::span<const unsigned char> bytes, const fs::path& name,
+              const std::string& stage) {
+  const std::string why = pngTruncation(bytes.size(), [&](uint64_t at, unsigned char* out) {
+    if (at + 8 > bytes.size()) return false;
+    std::copy_n(bytes.data() + at, 8, out);
+    return true;
+  });
+  if (!why.empty()) throw Error(stage, "truncated file: " + why, name);
+}
+
 void checkInputFile(const fs::path& path, const std::string& stage) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(stage, "file not found", path);
@@ -530,10 +580,37 @@ void requireColourChannels(const Image& image, const fs::path& file, const std::
                            const std::string& what) {
   if (image.channelNames.empty()) return;
   std::string names;
+  std::set<std::string> bases;  // R, G, B, Y, RY, BY present (the last part of a layered name)
   for (const std::string& n : image.channelNames) {
-    if (isColourChannel(n)) return;
     names += (names.empty() ? "" : ", ") + n;
+    std::string upper = n.substr(n.rfind('.') == std::string::npos ? 0 : n.rfind('.') + 1);
+    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+    bases.insert(upper);
   }
+  // Two of a colour's three channels: the third cannot be made up, nor the two taken for grey (R
+  // and G alone read as a grey R before). One alone is a grey image's channel, as some writers
+  // name it.
+  const size_t rgbCount = bases.count("R") + bases.count("G") + bases.count("B");
+  const bool someRgb = rgbCount > 0;
+  if (rgbCount == 2) {
+    throw Error(stage,
+                what +
+                    " has two of the colour channels R, G, B but not the third (its channels "
+                    "are " +
+                    names + ")",
+                file);
+  }
+  const bool someChroma = bases.count("RY") || bases.count("BY");
+  if (!someRgb && someChroma && !(bases.count("Y") && bases.count("RY") && bases.count("BY"))) {
+    throw Error(stage,
+                what +
+                    " has luminance-chroma channels without all of Y, RY and BY (its channels "
+                    "are " +
+                    names + ")",
+                file);
+  }
+  for (const std::string& n : image.channelNames)
+    if (isColourChannel(n)) return;
   throw Error(stage,
               what + " has no colour channel (R, G, B or Y): its channels are " + names +
                   " (a depth or data image?)",
@@ -592,6 +669,7 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
       break;  // CMYK: OpenImageIO converts it
     }
     case Kind::Other:
+      checkPng(path, stage);
       break;
   }
   std::string why;
@@ -631,6 +709,7 @@ LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::
     jpeg::Decoded decoded = jpeg::readMemory(bytes, name, false, stage);
     if (decoded.header.native) return fromJpeg(std::move(decoded), options);
   }
+  checkPng(bytes, name, stage);
   std::string why;
   auto reader =
       oiio::module(stage, name).openMemory(bytes.data(), bytes.size(), name.string(), why);

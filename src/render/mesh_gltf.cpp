@@ -14,6 +14,7 @@
 #include <glm/mat4x4.hpp>
 
 #include "core/error.h"
+#include "core/json_number.h"
 #include "core/limits.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
@@ -178,6 +179,9 @@ class GltfReader {
   size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
   size_t colours_ = 0, clampedColours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0,
          missingMaterials_ = 0;
+  // Triangle lists whose vertices (or indices) do not come in threes: the primitives, and the
+  // vertices left over at their ends.
+  size_t ragged_ = 0, leftOver_ = 0;
   bool noMaterial_ = false, someMaterial_ = false;
   std::vector<glm::dvec3> exact_;  // the positions in double, before rounding (recentre())
 };
@@ -626,6 +630,10 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
   std::vector<uint32_t> corners;
   if (mode == TINYGLTF_MODE_TRIANGLES) {
     corners.assign(order.begin(), order.begin() + std::ptrdiff_t(order.size() / 3 * 3));
+    if (order.size() % 3 != 0) {
+      ++ragged_;
+      leftOver_ += order.size() % 3;
+    }
   } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
     for (size_t i = 0; i + 2 < order.size(); ++i) {
       corners.insert(corners.end(), {order[i], order[i + 1 + i % 2], order[i + 2 - i % 2]});
@@ -814,6 +822,12 @@ void GltfReader::read() {
     mesh_.warnings.push_back(count(clampedColours_, "COLOR_0 component", "COLOR_0 components") +
                              " outside 0..1 (or not finite) clamped");
   }
+  if (ragged_) {
+    mesh_.warnings.push_back(
+        count(ragged_, "triangle list has", "triangle lists have") + " a number of " +
+        "vertices (indices, or vertices where it has none) that is not a multiple of 3: the " +
+        count(leftOver_, "vertex", "vertices") + " left over at the end ignored");
+  }
   if (morphs_) {
     mesh_.warnings.push_back("ignored the morph targets of " +
                              count(morphs_, "primitive", "primitives") +
@@ -911,7 +925,7 @@ LoadedMesh loadGltf(const fs::path& path) {
     while (start < text.size()) {
       size_t end = text.find('\n', start);
       if (end == std::string::npos) end = text.size();
-      std::string line = text.substr(start, end - start);
+      std::string line = jsonMessage(text.substr(start, end - start));
       while (!line.empty() && (line.back() == '\r' || line.back() == '.' || line.back() == ' '))
         line.pop_back();
       // tinygltf quotes what it could not read, a whole data: URI of megabytes included.
@@ -929,6 +943,12 @@ LoadedMesh loadGltf(const fs::path& path) {
     std::string joined;
     for (const std::string& w : why) joined += (joined.empty() ? "" : "; ") + w;
     throw Error("mesh", "cannot parse glTF: " + (joined.empty() ? "unknown reason" : joined), path);
+  }
+  // glTF 2.0 §3.2: a file of another major version is not to be read as this one.
+  if (const std::string& version = model.asset.version;
+      !version.empty() && version.substr(0, version.find('.')) != "2") {
+    throw Error("mesh", "glTF version " + version + ": this reader reads glTF 2.x (asset.version)",
+                path);
   }
   LoadedMesh loaded;
   loaded.mesh.otherFiles = seen.others;

@@ -40,4 +40,35 @@ TEST(JsonNumber, MembersAreLookedUpOnObjectsOnly) {
 }
 
 }  // namespace
+// The library's messages in a user's words: no "[json.exception...]" tag; an empty file, and NaN
+// or Infinity (Python's json.dumps writes them), said plainly. The messages come from the library
+// itself, so that a change in its wording shows here.
+TEST(JsonMessage, ReadsAsAnErrorForAUser) {
+  auto messageOf = [](const std::string& text) {
+    try {
+      const json parsed = json::parse(text);
+      return parsed.dump();
+    } catch (const json::exception& e) {
+      return jsonMessage(e.what());
+    }
+  };
+  EXPECT_EQ(messageOf(""), "the file is empty");
+  const std::string nan = messageOf(R"({"yaw": NaN})");
+  EXPECT_EQ(nan.find("[json.exception"), std::string::npos) << nan;
+  EXPECT_EQ(nan.find("syntax error while parsing"), std::string::npos) << nan;
+  EXPECT_NE(nan.find("line 1, column"), std::string::npos) << nan;
+  EXPECT_NE(nan.find("JSON has no NaN or Infinity"), std::string::npos) << nan;
+  EXPECT_NE(messageOf(R"({"yaw": Infinity})").find("JSON has no NaN or Infinity"),
+            std::string::npos);
+  const std::string comma = messageOf(R"({"yaw": 1,})");
+  EXPECT_EQ(comma.find("JSON has no NaN"), std::string::npos) << comma;
+  EXPECT_EQ(comma.find("[json.exception"), std::string::npos) << comma;
+  try {
+    const double v = json::parse(R"({"a": "text"})").at("a").get<double>();
+    ADD_FAILURE() << v;
+  } catch (const json::exception& e) {
+    EXPECT_EQ(jsonMessage(e.what()), "type must be number, but is string");
+  }
+}
+
 }  // namespace compose

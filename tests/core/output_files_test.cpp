@@ -90,6 +90,30 @@ TEST(OutputFiles, UncommittedTemporariesAreRemoved) {
   EXPECT_EQ(fileCount(dir.path()), 0u);
 }
 
+// The folders made for outputs that were not written go with them; a folder that was there, or
+// that holds another file by then, stays.
+TEST(OutputFiles, FoldersMadeForUncommittedOutputsAreRemoved) {
+  TempDir dir;
+  {
+    OutputFiles out;
+    writeText(out.add(dir / "new" / "deeper" / "x.exr"), "partial");
+    writeText(out.add(dir / "new" / "y.exr"), "partial");
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "new"));
+  {
+    OutputFiles out;
+    writeText(out.add(dir / "kept" / "x.exr"), "partial");
+    writeText(dir / "kept" / "mine.txt", "the user's");
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "kept" / "mine.txt"));
+  {
+    OutputFiles out;
+    writeText(out.add(dir / "done" / "x.exr"), "whole");
+    out.commit();
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "done" / "x.exr"));
+}
+
 // What a killed run left (its temporaries, named for its process id) is removed by the next
 // writer into the same folder; a running process's, a recent one and other files are kept.
 TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {

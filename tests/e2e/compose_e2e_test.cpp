@@ -672,6 +672,24 @@ class ComposeOutputs : public ::testing::Test {
   TempDir dir_;
 };
 
+// A lens whose distortion folds the frame where --place points: the error names the lens file
+// and the point (it named neither).
+TEST_F(ComposeOutputs, APlaceTheCalibratedLensCannotSeeNamesTheLensFile) {
+  compose::testing::writeText(dir_ / "folded.json",
+                              R"({"model": "rectilinear", "width": 320, "height": 240, "fx": 300,
+                                  "fy": 300, "cx": 159.5, "cy": 119.5,
+                                  "dist": [100, 100, 0, 0, 100], "rms": 0.1})");
+  const auto r = runCompose(
+      args((dir_ / "folded").string()) + " --calib " + quote((dir_ / "folded.json").string()),
+      dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("camera: --place 0.5,0.72 is outside what the calibrated lens can see"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("folded.json)"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "folded.exr"));
+}
+
 TEST_F(ComposeOutputs, AFailedDisplayWriteKeepsThePreviousExr) {
   compose::testing::writeText(dir_ / "x.exr", "previous result");
   fs::create_directory(dir_ / "x.jpg");  // the JPEG cannot be written: a folder has its name
@@ -1043,6 +1061,28 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
   ASSERT_LT(stops(r.err), 50.0) << "no automatic exposure in: " << r.err;
   EXPECT_NEAR(stops(r.err), stops(opaque.err), 0.02);
 
+  // A plate transparent everywhere has no brightness to match: 0 stops, said so (it said the
+  // placeholder key 1 was "the whole plate's" and put the object 2.4 stops up).
+  {
+    std::vector<float> clear(size_t(w) * size_t(h) * 4, 0.0f);
+    OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
+    spec.attribute("oiio:UnassociatedAlpha", 1);
+    auto out = OIIO::ImageOutput::create((dir_ / "input-clear.png").string());
+    ASSERT_TRUE(out->open((dir_ / "input-clear.png").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, clear.data()));
+    out->close();
+    std::string c = args((dir_ / "clear").string()) + " --place 0.16,0.9 --scale 0.3";
+    c.replace(c.find(quote((dir_ / "input-plate.png").string())),
+              quote((dir_ / "input-plate.png").string()).size(),
+              quote((dir_ / "input-clear.png").string()));
+    const auto clearRun = runCompose(c, dir_.path());
+    ASSERT_EQ(clearRun.status, 0) << clearRun.err;
+    EXPECT_NE(clearRun.err.find("auto exposure: 0 stops (the environment's own units): the plate "
+                                "is transparent everywhere"),
+              std::string::npos)
+        << clearRun.err;
+  }
+
   // A PNG display image keeps the alpha, as PNG stores it: the half-transparent grey is the same
   // code as the opaque grey, its alpha 128; the JPEG, which has no alpha, shows it over black.
   std::string p = a;
@@ -1108,6 +1148,11 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
       {"--samples 0", "--samples must be in 1..64"},
       {"--samples 65", "--samples must be in 1..64"},
       {"--scale 0", "--scale must be in (0, 10]"},
+      {"--scale 10.0000001", "--scale must be in (0, 10], got 10.0000001"},
+      {"--threads 99999999999",
+       "--threads cannot take '99999999999': not a number of the kind it takes, or out of its "
+       "range"},
+      {"--samples 4 --samples 2", "--samples is given 2 times: give it once"},
       {"--place 0.5,1.5", "--place must be within [0,1]"},
       {"--place 0.5", "--place expects two numbers"},
       {"--albedo 1.5", "--albedo must be within [0, 1], got 1.5"},

@@ -771,6 +771,19 @@ TEST(ConvertCommand, FacePatternsAndSizesSayWhatIsWrong) {
   EXPECT_EQ(r.status, 1) << r.err;
   EXPECT_NE(r.err.find("a face pattern holds one '%'"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir / "px_%.exr"));
+  // A base name without an extension, as the help has it: OpenEXR faces base_px.exr ...; a
+  // failed write into a new folder leaves no empty folder behind.
+  r = run("convert " + q(sample("forest.exr")) + " --to faces --size 8 --out " +
+              q(dir / "new" / "base"),
+          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "new" / "base_px.exr"));
+  EXPECT_TRUE(fs::exists(dir / "new" / "base_nz.exr"));
+  r = run("convert " + q(sample("forest.exr")) + " --to faces --size 8 --out " +
+              q(dir / "none" / "deeper" / "base.bmp"),
+          dir);
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "none")) << r.err;
   r = run("convert " + q(sample("forest.exr")) + " --to cube --width 64 --out " + q(dir / "c.exr"),
           dir);
   EXPECT_EQ(r.status, 2) << r.err;

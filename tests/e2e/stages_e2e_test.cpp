@@ -526,6 +526,15 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
       fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
   EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
   EXPECT_TRUE(fs::exists(cache / "responses" / "camera.json"));
+  // A size beyond any disk keeps every entry (it once overflowed to almost nothing); units in
+  // any case, decimal or binary.
+  for (const char* size : {"99999999999999999999G", "18446744073709551616", "5g", "2GiB"}) {
+    r = run("cache --cache " + quote(cache) + " --max-size " + size, dir_.path());
+    ASSERT_EQ(r.status, 0) << size << ": " << r.err;
+    EXPECT_TRUE(
+        fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"))
+        << size;
+  }
   // A file of the user's in those folders is not an entry: kept.
   compose::testing::writeText(cache / "stages" / "precompute" / "notes.txt", "mine");
   r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());

@@ -362,6 +362,20 @@ TEST(ImageIoTruncation, TruncatedJpegIsAnErrorNotAGreyPicture) {
     EXPECT_NE(e.describe().find("ingest: truncated file: "), std::string::npos) << e.describe();
     EXPECT_EQ(e.describe().find('\n'), std::string::npos) << e.describe();
   }
+  // Said before libpng reads it (libpng writes its own message to the terminal first): which
+  // chunk the file ends in; from memory (a glTF's embedded texture) too; and a PNG whose last
+  // chunk is whole but has no IEND after it.
+  COMPOSE_EXPECT_ERROR(readImage(dir / "cut.png"),
+                       "truncated file: the PNG ends inside its IDAT chunk (");
+  const std::span<const unsigned char> cut(reinterpret_cast<const unsigned char*>(pngBytes.data()),
+                                           pngBytes.size() / 2);
+  COMPOSE_EXPECT_ERROR(readImageFromMemory(cut, "texture.png", "mesh"),
+                       "mesh: truncated file: the PNG ends inside its IDAT chunk (");
+  const size_t iend = pngBytes.rfind("IEND");
+  ASSERT_NE(iend, std::string::npos);
+  compose::testing::writeText(dir / "noend.png", pngBytes.substr(0, iend - 4));
+  COMPOSE_EXPECT_ERROR(readImage(dir / "noend.png"),
+                       "truncated file: the PNG ends before its IEND chunk (");
 }
 
 }  // namespace

@@ -547,6 +547,16 @@ TEST(ImageIo, AMultiPartExrIsReadFromItsColourPart) {
   requireColourChannels(Image(2, 2, 3, {"beauty.R", "beauty.G", "beauty.B"}), "b.exr", "ingest",
                         "the plate");
   requireColourChannels(Image(2, 2, 2, {"Y", "A"}), "y.png", "ingest", "the plate");
+  // Part of a colour is not a colour (R and G alone were read as a grey R).
+  COMPOSE_EXPECT_ERROR(
+      requireColourChannels(Image(2, 2, 2, {"R", "G"}), "rg.exr", "ingest", "the environment"),
+      "the environment has two of the colour channels R, G, B but not the third (its channels "
+      "are R, G)");
+  requireColourChannels(Image(2, 2, 1, {"R"}), "r.exr", "ingest", "the environment");  // grey
+  COMPOSE_EXPECT_ERROR(
+      requireColourChannels(Image(2, 2, 2, {"Y", "RY"}), "yc.exr", "ingest", "the environment"),
+      "has luminance-chroma channels without all of Y, RY and BY");
+  requireColourChannels(Image(2, 2, 3, {"Y", "RY", "BY"}), "yc.exr", "ingest", "the environment");
 }
 
 TEST(ImageIo, EightBitWriteMatchesThePlainWrite) {

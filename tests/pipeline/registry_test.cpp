@@ -9,6 +9,7 @@
 #include "pipeline/scene.h"
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
+#include "pipeline/stage_util.h"
 #include "test_util.h"
 
 namespace compose::pipeline {
@@ -17,6 +18,35 @@ namespace {
 namespace fs = std::filesystem;
 using compose::testing::TempDir;
 using compose::testing::writeText;
+
+// An image made RGB by its channels' names: R, G, B wherever they are, a layer's too; grey from Y;
+// OpenEXR's luminance-chroma (Y, RY, BY) turned back into RGB (it was read as R, G, B).
+TEST(ToRgb, TakesTheChannelsByName) {
+  auto values = [](const Image& image) {
+    return std::vector<float>(image.pixels.begin(), image.pixels.end());
+  };
+  Image bgr(1, 1, 4, {"B", "A", "G", "R"});
+  bgr.pixels = {0.3f, 1.0f, 0.2f, 0.1f};
+  EXPECT_EQ(values(toRgb(bgr)), (std::vector<float>{0.1f, 0.2f, 0.3f}));
+  Image layer(1, 1, 3, {"beauty.R", "beauty.G", "beauty.B"});
+  layer.pixels = {0.1f, 0.2f, 0.3f};
+  EXPECT_EQ(values(toRgb(layer)), values(layer));
+  Image grey(1, 1, 2, {"A", "Y"});
+  grey.pixels = {1.0f, 0.4f};
+  EXPECT_EQ(values(toRgb(grey)), (std::vector<float>{0.4f, 0.4f, 0.4f}));
+  // R, G, B = 0.5, 0.25, 2: Y by Rec. 709's weights, RY = (R - Y) / Y, BY = (B - Y) / Y.
+  const float r = 0.5f, g = 0.25f, b = 2.0f;
+  const float y = 0.2126f * r + 0.7152f * g + 0.0722f * b;
+  Image yc(1, 1, 3, {"BY", "RY", "Y"});
+  yc.pixels = {(b - y) / y, (r - y) / y, y};
+  const Image back = toRgb(yc);
+  EXPECT_NEAR(back.pixels[0], r, 1e-5f);
+  EXPECT_NEAR(back.pixels[1], g, 1e-5f);
+  EXPECT_NEAR(back.pixels[2], b, 1e-5f);
+  Image unnamed(1, 1, 3);
+  unnamed.pixels = {0.1f, 0.2f, 0.3f};
+  EXPECT_EQ(values(toRgb(unnamed)), values(unnamed));
+}
 
 TEST(Registry, EveryInputIsMadeByAnEarlierStageAndEveryOutputByOne) {
   std::map<std::string, std::string> producer;

@@ -618,6 +618,22 @@ TEST(Gltf, BadIndicesNonFiniteCoordinatesAndDuplicatesAreDroppedWithCounts) {
   EXPECT_EQ(m.warnings, expected);
 }
 
+// A triangle list of 8 vertices and no indices (as "indices": -1 reads): two triangles, and the
+// two vertices left over are said, not dropped in silence.
+TEST(Gltf, VerticesLeftOverFromATriangleListAreSaid) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0, 2, 0, 0, 3, 0, 0, 2, 1, 0, 5, 5, 5, 6, 6, 6});
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"indices", -1}})}})});
+  writeText(dir / "ragged.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "ragged.gltf");
+  EXPECT_EQ(m.triangleCount(), 2u);
+  const std::vector<std::string> expected = {
+      "1 triangle list has a number of vertices (indices, or vertices where it has none) that is "
+      "not a multiple of 3: the 2 vertices left over at the end ignored"};
+  EXPECT_EQ(m.warnings, expected);
+}
+
 TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   TempDir dir;
   writeText(dir / "text.gltf", "this is not JSON");
@@ -671,6 +687,15 @@ TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   writeText(dir / "short.gltf", b.gltf());
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "short.gltf"), "node 0: translation has 2 numbers, not 3");
   b.json["nodes"][0].erase("translation");
+  // A glTF of another major version (glTF 2.0 §3.2: not to be read as 2.x).
+  b.json["asset"]["version"] = "3.0";
+  writeText(dir / "future.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "future.gltf"),
+                       "glTF version 3.0: this reader reads glTF 2.x (asset.version)");
+  b.json["asset"]["version"] = "2.1";
+  writeText(dir / "minor.gltf", b.gltf());
+  EXPECT_EQ(loadMesh(dir / "minor.gltf").triangleCount(), 1u);
+  b.json["asset"]["version"] = "2.0";
   // A required extension compose cannot honour.
   b.json["extensionsUsed"] = {"KHR_draco_mesh_compression"};
   b.json["extensionsRequired"] = {"KHR_draco_mesh_compression"};

@@ -387,6 +387,11 @@ TEST(ShadowPlan, TheGridIsCheckedBeforeTheOrderItBounds) {
   COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("grid=8,order=9"),
                        "order (k) must be in 1..min(grid, 32), got 9");
   EXPECT_EQ(pipeline::ShadowPlan::parse("grid=8,order=8").transfer.grid, 8);
+  // A coarser grid without an order takes the grid's size as its order (the default 16 was
+  // refused as if the user had given it).
+  EXPECT_EQ(pipeline::ShadowPlan::parse("grid=4").lightingOrder, 4);
+  EXPECT_EQ(pipeline::ShadowPlan::parse("grid=32").lightingOrder, 16);
+  EXPECT_EQ(pipeline::ShadowPlan::parse("").lightingOrder, 16);
   // A parameter the method does not take is refused, not ignored.
   COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("method=ao,order=99"),
                        "order does not apply to method=ao");
