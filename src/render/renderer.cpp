@@ -7,6 +7,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <tuple>
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -105,15 +106,90 @@ class CameraRays {
 // Empty (trace every pixel) when the lens bends straight edges or a corner is not in front of the
 // camera: a projected triangle is then not the triangle of its projected corners.
 //
-// With `nearest`, also the nearest surface of each pixel: the largest 1 / depth (depth along the
-// camera's axis) any triangle reaches within the pixel, 0 where none does. The inverse depth of a
-// plane is affine in the image, so a triangle's largest over a pixel is at one of the pixel's
-// corners, clamped to its corners' range (a sliver or a clipped span may reach past them).
+// What adaptive sampling needs to know of each pixel of the rectangle beyond its samples.
+struct PixelSurfaces {
+  // The nearest surface: the largest 1 / depth (depth along the camera's axis) any triangle
+  // reaches within the pixel, 0 where none does. The inverse depth of a plane is affine in the
+  // image, so a triangle's largest over a pixel is at one of the pixel's corners, clamped to its
+  // corners' range (a sliver or a clipped span may reach past them).
+  std::vector<float> nearest;
+  // 1 where a contour edge passes: an edge between a triangle that faces the camera and one that
+  // does not, or with one triangle (a boundary) or more than two, corners identified by position.
+  // Coverage changes only across such edges: a gap between parts, narrower than the corner
+  // samples' spacing, is bounded by them.
+  std::vector<uint8_t> contour;
+};
+
+// Marks the pixels of the contour edges (PixelSurfaces::contour): points every tenth of a pixel
+// along each, and the pixels within a twentieth of a pixel of each point.
+void markContours(const Mesh& mesh, const std::vector<glm::dvec2>& projected, int x0, int y0, int w,
+                  int h, std::vector<uint8_t>& contour) {
+  contour.assign(size_t(w) * size_t(h), 0);
+  // Corners by position (vertices split for normals or texture coordinates are one corner).
+  const size_t n = mesh.positions.size();
+  std::vector<uint32_t> order(n), corner(n);
+  for (size_t v = 0; v < n; ++v) order[v] = uint32_t(v);
+  auto key = [&](uint32_t v) {
+    const glm::vec3& p = mesh.positions[v];
+    return std::make_tuple(p.x, p.y, p.z);
+  };
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+  for (size_t i = 0; i < n; ++i)
+    corner[order[i]] =
+        i > 0 && key(order[i]) == key(order[i - 1]) ? corner[order[i - 1]] : order[i];
+  // Each triangle's edges, keyed by their corners, with the way the triangle faces.
+  struct Edge {
+    uint64_t corners;
+    uint32_t a, b;  // vertices, for the projection
+    bool front;
+  };
+  std::vector<Edge> edges;
+  edges.reserve(mesh.indices.size());
+  for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+    const uint32_t* v = &mesh.indices[t];
+    const glm::dvec2 e1 = projected[v[1]] - projected[v[0]], e2 = projected[v[2]] - projected[v[0]];
+    const bool front = e1.x * e2.y - e1.y * e2.x > 0.0;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t a = v[k], b = v[(k + 1) % 3];
+      const uint64_t ca = corner[a], cb = corner[b];
+      if (ca == cb) continue;
+      edges.push_back({std::min(ca, cb) << 32 | std::max(ca, cb), a, b, front});
+    }
+  }
+  std::sort(edges.begin(), edges.end(),
+            [](const Edge& p, const Edge& q) { return p.corners < q.corners; });
+  constexpr double kStep = 0.1, kPad = 0.05;
+  auto mark = [&](const glm::dvec2& a, const glm::dvec2& b) {
+    const int steps = int(std::min(1e6, std::ceil(glm::length(b - a) / kStep))) + 1;
+    for (int i = 0; i <= steps; ++i) {
+      const glm::dvec2 p = a + (b - a) * (double(i) / double(steps));
+      if (!(std::abs(p.x) < 1e7 && std::abs(p.y) < 1e7)) continue;
+      const int left = int(std::floor(p.x - kPad)) - x0, right = int(std::floor(p.x + kPad)) - x0;
+      const int top = int(std::floor(p.y - kPad)) - y0, bottom = int(std::floor(p.y + kPad)) - y0;
+      for (int y = std::max(top, 0); y <= std::min(bottom, h - 1); ++y)
+        for (int x = std::max(left, 0); x <= std::min(right, w - 1); ++x)
+          contour[size_t(y) * size_t(w) + size_t(x)] = 1;
+    }
+  };
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i + 1;
+    bool mixed = false;
+    while (j < edges.size() && edges[j].corners == edges[i].corners) {
+      mixed = mixed || edges[j].front != edges[i].front;
+      ++j;
+    }
+    if (j - i != 2 || mixed) mark(projected[edges[i].a], projected[edges[i].b]);
+    i = j;
+  }
+}
+
+// With `surfaces`, also each pixel's nearest surface and the contour edges' pixels.
 std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFromObject,
                                      const calib::PlateCamera& camera, const glm::vec3& rayOrigin,
                                      int x0, int y0, int w, int h,
-                                     std::vector<float>* nearest = nullptr) {
-  if (nearest) nearest->clear();
+                                     PixelSurfaces* surfaces = nullptr) {
+  std::vector<float>* nearest = surfaces ? &surfaces->nearest : nullptr;
+  if (surfaces) *surfaces = PixelSurfaces{};
   if (camera.lens.projection != calib::Projection::Rectilinear || camera.lens.hasDistortion() ||
       w <= 0 || h <= 0)
     return {};
@@ -133,7 +209,10 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
     projected[v] = {lens.cx + lens.fx * c.x / -c.z, lens.cy - lens.fy * c.y / -c.z};
     if (nearest) inverseDepth[v] = 1.0 / -c.z;
   }
-  if (nearest) nearest->assign(size_t(w) * size_t(h), 0.0f);
+  if (nearest) {
+    nearest->assign(size_t(w) * size_t(h), 0.0f);
+    markContours(mesh, projected, x0, y0, w, h, surfaces->contour);
+  }
   constexpr double kPad = 0.05;
   constexpr int kSmall = 8;  // a triangle whose box is narrower and lower is marked by its box
   std::vector<uint8_t> mask(size_t(w) * size_t(h), 0);
@@ -473,16 +552,16 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   };
 
   // Pixels no triangle reaches are not traced (they would be left empty all the same).
-  std::vector<float> nearest;  // per pixel: the nearest surface's 1 / depth (coverablePixels)
+  PixelSurfaces surfaces;  // per pixel: the nearest surface, and whether a contour passes
   const bool adaptiveWanted = settings.adaptive && n >= 2 && !translucent;
   const std::vector<uint8_t> coverable =
       settings.skipUncoveredPixels
           ? coverablePixels(mesh, worldFromObject, camera,
                             glm::vec3(objectFromWorld * glm::dvec4(camera.position(), 1.0)), out.x0,
-                            out.y0, w, h, adaptiveWanted ? &nearest : nullptr)
+                            out.y0, w, h, adaptiveWanted ? &surfaces : nullptr)
           : std::vector<uint8_t>{};
   // Adaptive sampling (RenderSettings::adaptive) needs the nearest surface of each pixel.
-  const bool adaptive = adaptiveWanted && !nearest.empty();
+  const bool adaptive = adaptiveWanted && !surfaces.nearest.empty();
   // The camera's axis, for a hit's depth; the angle a pixel spans at the centre of the image.
   const glm::dvec3 forward = -glm::dmat3(camera.worldFromCamera)[2];
   const double pixelAngle = 1.0 / std::min(camera.lens.fx, camera.lens.fy);
@@ -536,7 +615,10 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       bool traced = false;
     };
     thread_local std::vector<Probe> probes;
-    const float* nearestRow = adaptive ? nearest.data() + size_t(y - out.y0) * size_t(w) : nullptr;
+    const float* nearestRow =
+        adaptive ? surfaces.nearest.data() + size_t(y - out.y0) * size_t(w) : nullptr;
+    const uint8_t* contourRow =
+        adaptive ? surfaces.contour.data() + size_t(y - out.y0) * size_t(w) : nullptr;
     if (adaptive) {
       probes.assign(size_t(w) * 4, Probe{});
       int pending[4], count = 0;
@@ -564,8 +646,9 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         count = 0;
       };
       for (int x = out.x0; x < out.x1; ++x) {
-        if ((coverableRow && !coverableRow[x - out.x0]) || !(nearestRow[x - out.x0] > 0.0f))
-          continue;
+        if ((coverableRow && !coverableRow[x - out.x0]) || !(nearestRow[x - out.x0] > 0.0f) ||
+            contourRow[x - out.x0])
+          continue;  // traced in full
         pending[count++] = x;
         if (count == 4) flush();
       }

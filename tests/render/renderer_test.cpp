@@ -378,8 +378,8 @@ TEST(Renderer, AdaptiveSamplingLooksLikeFullSampling) {
 // A part thinner than the corner samples' spacing in front of a surface: a red strip a third of a
 // pixel wide, 1 unit in front of a grey wall 5 units away, lying between the corner samples of
 // the pixels it crosses. They all see the wall, but the strip is nearer in those pixels: they are
-// traced in full and show it as full sampling does.
-TEST(Renderer, AdaptiveSamplingKeepsAThinPartTheCornerSamplesMiss) {
+// traced in full and show it as full sampling does. And a gap as thin between two walls.
+TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   calib::CameraOptions options;
   options.height = 1e-3;
   calib::Lens lens;
@@ -424,6 +424,27 @@ TEST(Renderer, AdaptiveSamplingKeepsAThinPartTheCornerSamplesMiss) {
   float worst = 0.0f;
   for (size_t i = 0; i < a.beauty.pixels.size(); ++i)
     worst = std::max(worst, std::abs(a.beauty.pixels[i] - b.beauty.pixels[i]));
+  EXPECT_LT(worst, 1e-5f);
+
+  // The other way round: a gap a third of a pixel wide between two walls, nothing behind it. The
+  // corner samples all hit a wall and nothing is nearer; the gap's edges are the walls' open
+  // edges, a contour: those pixels are traced in full and let half their samples through.
+  Mesh gap;
+  gap.positions = {{-2, -1, 0},     {0.007f, -1, 0}, {0.007f, 1, 0}, {-2, 1, 0},
+                   {0.013f, -1, 0}, {2, -1, 0},      {2, 1, 0},      {0.013f, 1, 0}};
+  for (glm::vec3& p : gap.positions) p.z = 1.0f;  // 4 units away, as the strip
+  gap.normals.assign(8, glm::vec3(0, 0, 1));
+  gap.indices = {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7};
+  gap.normalsFromFile = true;
+  const EmbreeScene gapBvh(gap.positions, gap.indices);
+  const RenderOutput c = renderDiffuse(gap, gapBvh, worldFromObject, camera, sh, full);
+  const RenderOutput d = renderDiffuse(gap, gapBvh, worldFromObject, camera, sh, adaptive);
+  ASSERT_EQ(c.beauty.pixels.size(), d.beauty.pixels.size());
+  EXPECT_GT(d.pixelsPlain, d.pixelsTraced / 2);
+  EXPECT_NEAR(c.beauty.at(160 - c.x0, 120 - c.y0)[3], 0.5f, 1e-6f);
+  worst = 0.0f;
+  for (size_t i = 0; i < c.beauty.pixels.size(); ++i)
+    worst = std::max(worst, std::abs(c.beauty.pixels[i] - d.beauty.pixels[i]));
   EXPECT_LT(worst, 1e-5f);
 }
 
