@@ -113,19 +113,25 @@ struct PixelSurfaces {
   // image, so a triangle's largest over a pixel is at one of the pixel's corners, clamped to its
   // corners' range (a sliver or a clipped span may reach past them).
   std::vector<float> nearest;
-  // 1 where a contour edge passes: an edge between a triangle that faces the camera and one that
-  // does not, or with one triangle (a boundary) or more than two, corners identified by position.
-  // Coverage changes only across such edges: a gap between parts, narrower than the corner
-  // samples' spacing, is bounded by them.
-  std::vector<uint8_t> contour;
+  // 1 where an edge passes across which coverage or shading can jump (markEdges): a contour, a
+  // boundary, a change of material, a crease or seam, a fold of more than 25°. A gap between
+  // parts, or a groove, narrower than the corner samples' spacing is bounded by such edges.
+  std::vector<uint8_t> edges;
 };
 
-// Marks the pixels of the contour edges (PixelSurfaces::contour): points every tenth of a pixel
-// along each, and the pixels within a twentieth of a pixel of each point.
-void markContours(const Mesh& mesh, const std::vector<glm::dvec2>& projected, int x0, int y0, int w,
-                  int h, std::vector<uint8_t>& contour) {
-  contour.assign(size_t(w) * size_t(h), 0);
-  // Corners by position (vertices split for normals or texture coordinates are one corner).
+// Marks the pixels of the edges across which a pixel's coverage or shading can jump
+// (PixelSurfaces::edges), points every tenth of a pixel along each (clipped to the rectangle),
+// and the pixels within a twentieth of a pixel of each point. Corners are identified by position
+// (vertices split for normals or texture coordinates are one corner). An edge is marked when:
+// - it is a contour: its two triangles' third corners project on the same side of it (one folds
+//   behind the other as seen from the camera; this holds whatever their winding), or it has one
+//   triangle (a boundary) or more than two;
+// - its triangles have different materials, or split vertices there (a crease of the normals, a
+//   seam of texture coordinates or colours);
+// - its triangles meet at more than 25° (a groove or a ridge narrower than the samples' spacing).
+void markEdges(const Mesh& mesh, const std::vector<glm::dvec2>& projected, int x0, int y0, int w,
+               int h, std::vector<uint8_t>& marked) {
+  marked.assign(size_t(w) * size_t(h), 0);
   const size_t n = mesh.positions.size();
   std::vector<uint32_t> order(n), corner(n);
   for (size_t v = 0; v < n; ++v) order[v] = uint32_t(v);
@@ -137,53 +143,100 @@ void markContours(const Mesh& mesh, const std::vector<glm::dvec2>& projected, in
   for (size_t i = 0; i < n; ++i)
     corner[order[i]] =
         i > 0 && key(order[i]) == key(order[i - 1]) ? corner[order[i - 1]] : order[i];
-  // Each triangle's edges, keyed by their corners, with the way the triangle faces.
+  // The edges that reach the rectangle (widened by a pixel), keyed by their corners: triangle t's
+  // edge k runs from its vertex k to vertex k + 1.
   struct Edge {
     uint64_t corners;
-    uint32_t a, b;  // vertices, for the projection
-    bool front;
+    uint32_t triangle, k;
   };
+  const double left = x0 - 1.0, right = x0 + w + 1.0, top = y0 - 1.0, bottom = y0 + h + 1.0;
   std::vector<Edge> edges;
   edges.reserve(mesh.indices.size());
   for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
     const uint32_t* v = &mesh.indices[t];
-    const glm::dvec2 e1 = projected[v[1]] - projected[v[0]], e2 = projected[v[2]] - projected[v[0]];
-    const bool front = e1.x * e2.y - e1.y * e2.x > 0.0;
-    for (int k = 0; k < 3; ++k) {
+    for (uint32_t k = 0; k < 3; ++k) {
       const uint32_t a = v[k], b = v[(k + 1) % 3];
       const uint64_t ca = corner[a], cb = corner[b];
       if (ca == cb) continue;
-      edges.push_back({std::min(ca, cb) << 32 | std::max(ca, cb), a, b, front});
+      const glm::dvec2 pa = projected[a], pb = projected[b];
+      if (std::max(pa.x, pb.x) < left || std::min(pa.x, pb.x) > right ||
+          std::max(pa.y, pb.y) < top || std::min(pa.y, pb.y) > bottom)
+        continue;
+      edges.push_back({std::min(ca, cb) << 32 | std::max(ca, cb), uint32_t(t / 3), k});
     }
   }
-  std::sort(edges.begin(), edges.end(),
-            [](const Edge& p, const Edge& q) { return p.corners < q.corners; });
+  std::sort(edges.begin(), edges.end(), [](const Edge& p, const Edge& q) {
+    return p.corners != q.corners ? p.corners < q.corners : p.triangle < q.triangle;
+  });
+  auto vertex = [&](const Edge& e, uint32_t i) {
+    return mesh.indices[3 * size_t(e.triangle) + (e.k + i) % 3];
+  };
+  auto faceNormal = [&](uint32_t t) {
+    const glm::dvec3 a(mesh.positions[mesh.indices[3 * size_t(t)]]);
+    const glm::dvec3 b(mesh.positions[mesh.indices[3 * size_t(t) + 1]]);
+    const glm::dvec3 c(mesh.positions[mesh.indices[3 * size_t(t) + 2]]);
+    return glm::cross(b - a, c - a);
+  };
+  auto material = [&](uint32_t t) {
+    return mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[t];
+  };
+  const double creaseCos = std::cos(25.0 * std::numbers::pi / 180.0);
   constexpr double kStep = 0.1, kPad = 0.05;
-  auto mark = [&](const glm::dvec2& a, const glm::dvec2& b) {
-    const int steps = int(std::min(1e6, std::ceil(glm::length(b - a) / kStep))) + 1;
+  auto mark = [&](glm::dvec2 a, glm::dvec2 b) {
+    // Clipped to the widened rectangle first (Liang-Barsky): a long edge's steps stay fine.
+    double from = 0.0, to = 1.0;
+    const glm::dvec2 d = b - a;
+    const double p[4] = {-d.x, d.x, -d.y, d.y};
+    const double q[4] = {a.x - left, right - a.x, a.y - top, bottom - a.y};
+    for (int i = 0; i < 4; ++i) {
+      if (p[i] == 0.0) {
+        if (q[i] < 0.0) return;
+        continue;
+      }
+      const double r = q[i] / p[i];
+      if (p[i] < 0.0)
+        from = std::max(from, r);
+      else
+        to = std::min(to, r);
+    }
+    if (from > to) return;
+    const glm::dvec2 start = a + d * from, end = a + d * to;
+    const int steps = int(std::ceil(glm::length(end - start) / kStep)) + 1;
     for (int i = 0; i <= steps; ++i) {
-      const glm::dvec2 p = a + (b - a) * (double(i) / double(steps));
-      if (!(std::abs(p.x) < 1e7 && std::abs(p.y) < 1e7)) continue;
-      const int left = int(std::floor(p.x - kPad)) - x0, right = int(std::floor(p.x + kPad)) - x0;
-      const int top = int(std::floor(p.y - kPad)) - y0, bottom = int(std::floor(p.y + kPad)) - y0;
-      for (int y = std::max(top, 0); y <= std::min(bottom, h - 1); ++y)
-        for (int x = std::max(left, 0); x <= std::min(right, w - 1); ++x)
-          contour[size_t(y) * size_t(w) + size_t(x)] = 1;
+      const glm::dvec2 at = start + (end - start) * (double(i) / double(steps));
+      const int l = int(std::floor(at.x - kPad)) - x0, r = int(std::floor(at.x + kPad)) - x0;
+      const int t = int(std::floor(at.y - kPad)) - y0, u = int(std::floor(at.y + kPad)) - y0;
+      for (int y = std::max(t, 0); y <= std::min(u, h - 1); ++y)
+        for (int x = std::max(l, 0); x <= std::min(r, w - 1); ++x)
+          marked[size_t(y) * size_t(w) + size_t(x)] = 1;
     }
   };
   for (size_t i = 0; i < edges.size();) {
     size_t j = i + 1;
-    bool mixed = false;
-    while (j < edges.size() && edges[j].corners == edges[i].corners) {
-      mixed = mixed || edges[j].front != edges[i].front;
-      ++j;
+    while (j < edges.size() && edges[j].corners == edges[i].corners) ++j;
+    const Edge& e = edges[i];
+    bool jump = j - i != 2;
+    if (!jump) {
+      const Edge& f = edges[i + 1];
+      const glm::dvec2 pa = projected[vertex(e, 0)], pb = projected[vertex(e, 1)];
+      auto side = [&](uint32_t v) {
+        const glm::dvec2 pc = projected[v] - pa, ab = pb - pa;
+        return ab.x * pc.y - ab.y * pc.x;
+      };
+      const glm::dvec3 ne = faceNormal(e.triangle), nf = faceNormal(f.triangle);
+      const double lengths = glm::length(ne) * glm::length(nf);
+      jump = side(vertex(e, 2)) * side(vertex(f, 2)) >= 0.0 ||
+             material(e.triangle) != material(f.triangle) ||
+             !((vertex(e, 0) == vertex(f, 0) && vertex(e, 1) == vertex(f, 1)) ||
+               (vertex(e, 0) == vertex(f, 1) && vertex(e, 1) == vertex(f, 0))) ||
+             !(std::abs(glm::dot(ne, nf)) > creaseCos * lengths);
     }
-    if (j - i != 2 || mixed) mark(projected[edges[i].a], projected[edges[i].b]);
+    if (jump) mark(projected[vertex(e, 0)], projected[vertex(e, 1)]);
     i = j;
   }
 }
 
-// With `surfaces`, also each pixel's nearest surface and the contour edges' pixels.
+// With `surfaces`, also each pixel's nearest surface and the pixels of markEdges' edges.
 std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFromObject,
                                      const calib::PlateCamera& camera, const glm::vec3& rayOrigin,
                                      int x0, int y0, int w, int h,
@@ -211,7 +264,7 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
   }
   if (nearest) {
     nearest->assign(size_t(w) * size_t(h), 0.0f);
-    markContours(mesh, projected, x0, y0, w, h, surfaces->contour);
+    markEdges(mesh, projected, x0, y0, w, h, surfaces->edges);
   }
   constexpr double kPad = 0.05;
   constexpr int kSmall = 8;  // a triangle whose box is narrower and lower is marked by its box
@@ -552,8 +605,11 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   };
 
   // Pixels no triangle reaches are not traced (they would be left empty all the same).
-  PixelSurfaces surfaces;  // per pixel: the nearest surface, and whether a contour passes
-  const bool adaptiveWanted = settings.adaptive && n >= 2 && !translucent;
+  PixelSurfaces surfaces;  // per pixel: the nearest surface, and whether an edge passes
+  // Not for a mesh of more triangles than the rectangle has pixels: most pixels hold an edge of
+  // one, and finding the edges would cost more than the rays it saves.
+  const bool adaptiveWanted = settings.adaptive && n >= 2 && !translucent &&
+                              mesh.indices.size() / 3 <= size_t(w) * size_t(h);
   const std::vector<uint8_t> coverable =
       settings.skipUncoveredPixels
           ? coverablePixels(mesh, worldFromObject, camera,
@@ -568,6 +624,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
   // The four corner samples of the n x n grid: they stand for the pixel where it is plain.
   const int probeSample[4] = {0, n - 1, n * (n - 1), n * n - 1};
   const float probeCover = float(n * n) / 4.0f;
+  const float kPlainNormalCos = float(std::cos(10.0 * std::numbers::pi / 180.0));
   // What a plain pixel's shading must not depend on: a texture or a cut-out's edge between its
   // samples.
   auto plainMaterial = [&](uint32_t triangle) {
@@ -617,8 +674,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     thread_local std::vector<Probe> probes;
     const float* nearestRow =
         adaptive ? surfaces.nearest.data() + size_t(y - out.y0) * size_t(w) : nullptr;
-    const uint8_t* contourRow =
-        adaptive ? surfaces.contour.data() + size_t(y - out.y0) * size_t(w) : nullptr;
+    const uint8_t* edgeRow =
+        adaptive ? surfaces.edges.data() + size_t(y - out.y0) * size_t(w) : nullptr;
     if (adaptive) {
       probes.assign(size_t(w) * 4, Probe{});
       int pending[4], count = 0;
@@ -647,7 +704,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       };
       for (int x = out.x0; x < out.x1; ++x) {
         if ((coverableRow && !coverableRow[x - out.x0]) || !(nearestRow[x - out.x0] > 0.0f) ||
-            contourRow[x - out.x0])
+            edgeRow[x - out.x0])
           continue;  // traced in full
         pending[count++] = x;
         if (count == 4) flush();
@@ -727,34 +784,75 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             if (double(nearestRow[x - out.x0]) > allowed) plain = false;
           }
         }
-        // No crease between the samples (their normals within 25°).
+        // The shading nearly the same at the four: normals within 10°, ...
         for (int b = 0; b < 4 && plain; ++b)
           for (int c = b + 1; c < 4 && plain; ++c)
-            if (glm::dot(normals[b], normals[c]) < 0.906f) plain = false;
+            if (glm::dot(normals[b], normals[c]) < kPlainNormalCos) plain = false;
         if (plain) {
           for (int b = 0; b < 4; ++b)
             addSample(probe[b].hit, probe[b].dir, probe[b].o, probe[b].d, probeSample[b],
                       probeCover);
-          // No bright source's shadow edge crosses their cells.
+          // ... every surface point around them seeing the same bright sources (no shadow edge
+          // between or across their cells), the self-shadowing's ratio within 2 % ...
           if (edges) {
             const uint64_t* seen = settings.shadows->sourceSeen.data();
+            const uint64_t first = seen[samples[0].near[0]];
             for (const SampleHit& sample : samples)
-              if (((seen[sample.near[0]] ^ seen[sample.near[1]]) |
-                   (seen[sample.near[0]] ^ seen[sample.near[2]])) != 0)
-                plain = false;
+              for (int q = 0; q < 3; ++q)
+                if (seen[sample.near[q]] != first) plain = false;
+          }
+          if (plain && settings.shadows) {
+            const VertexIrradiance& vi = *settings.shadows;
+            float least = std::numeric_limits<float>::max(), most = 0.0f;
+            for (const SampleHit& sample : samples) {
+              float sh = 0.0f, un = 0.0f;
+              for (int q = 0; q < 3; ++q) {
+                sh += sample.weight[q] * luminance(vi.shadowed[sample.near[q]]);
+                un += sample.weight[q] * luminance(vi.unshadowed[sample.near[q]]);
+              }
+              const float ratio = un > 1e-20f ? std::clamp(sh / un, 0.0f, 1.0f) : 1.0f;
+              least = std::min(least, ratio);
+              most = std::max(most, ratio);
+            }
+            if (most - least > 0.02f * most) plain = false;
+          }
+          // ... and the albedo (vertex colours, base colours) within 1 %.
+          if (plain && materials) {
+            glm::vec3 least(std::numeric_limits<float>::max()), most(0.0f);
+            for (const SampleHit& sample : samples) {
+              const glm::vec3 a = mesh.albedoAt(sample.triangle, sample.u, sample.v);
+              least = glm::min(least, a);
+              most = glm::max(most, a);
+            }
+            for (int c = 0; c < 3; ++c)
+              if (most[c] - least[c] > 0.01f * most[c] + 1e-6f) plain = false;
           }
           if (!plain) samples.clear();
         }
       }
       if (plain) ++rowPlain;
+      // A pixel that is not plain keeps its corner samples' hits (an opaque mesh: their first
+      // hits are all there is) and traces the others.
+      const bool reuse = !plain && probe && probe[0].traced && probe[1].traced && probe[2].traced &&
+                         probe[3].traced;
+      if (reuse) {
+        for (int b = 0; b < 4; ++b)
+          if (probe[b].hit.found)
+            addSample(probe[b].hit, probe[b].dir, probe[b].o, probe[b].d, probeSample[b], 1.0f);
+      }
       // The pixel's samples, sixteen at a time: one coherent packet for Embree.
       for (int first = 0; first < n * n && !plain; first += 16) {
         const int count = std::min(16, n * n - first);
         glm::dvec3 dirs[16];
         glm::vec3 oObj[16], dObj[16];
         uint32_t active = 0;
-        for (int b = 0; b < count; ++b)
-          if (sampleRay(x, first + b, dirs[b], oObj[b], dObj[b])) active |= 1u << b;
+        for (int b = 0; b < count; ++b) {
+          const int s = first + b;
+          if (reuse && (s == probeSample[0] || s == probeSample[1] || s == probeSample[2] ||
+                        s == probeSample[3]))
+            continue;
+          if (sampleRay(x, s, dirs[b], oObj[b], dObj[b])) active |= 1u << b;
+        }
         rowCameraRays += std::popcount(active);
         if (active == 0) continue;
         // Through semi-transparent layers, front to back: each takes its alpha of what the

@@ -349,10 +349,16 @@ TEST(Renderer, AdaptiveSamplingLooksLikeFullSampling) {
   sh.project(lighting::Environment::fromLatLong(sky));
   RenderSettings full, adaptive;
   full.adaptive = false;
-  const RenderOutput a =
-      renderDiffuse(scene.sphere, scene.bvh, scene.worldFromObject, scene.camera, sh, full);
+  // Fewer triangles than the traced rectangle has pixels (a finer mesh is traced in full).
+  const Mesh sphere = uvSphere(32, 64);
+  const EmbreeScene bvh(sphere.positions, sphere.indices);
+  const RenderOutput a = renderDiffuse(sphere, bvh, scene.worldFromObject, scene.camera, sh, full);
   const RenderOutput b =
+      renderDiffuse(sphere, bvh, scene.worldFromObject, scene.camera, sh, adaptive);
+  ASSERT_LT(sphere.triangleCount(), size_t((b.x1 - b.x0) * (b.y1 - b.y0)));
+  const RenderOutput fine =
       renderDiffuse(scene.sphere, scene.bvh, scene.worldFromObject, scene.camera, sh, adaptive);
+  EXPECT_EQ(fine.pixelsPlain, 0) << "more triangles than pixels: traced in full";
   ASSERT_EQ(a.beauty.pixels.size(), b.beauty.pixels.size());
   EXPECT_EQ(a.pixelsPlain, 0);
   EXPECT_GT(b.pixelsPlain, b.pixelsTraced / 2);
@@ -445,6 +451,28 @@ TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   worst = 0.0f;
   for (size_t i = 0; i < c.beauty.pixels.size(); ++i)
     worst = std::max(worst, std::abs(c.beauty.pixels[i] - d.beauty.pixels[i]));
+  EXPECT_LT(worst, 1e-5f);
+
+  // A stripe of another material as thin, in the plane of one wall (three bands sharing their
+  // edges' vertices): the change of material is an edge, and the stripe shows.
+  Mesh bands;
+  bands.positions = {{-2, -1, 1}, {0.007f, -1, 1}, {0.013f, -1, 1}, {2, -1, 1},
+                     {-2, 1, 1},  {0.007f, 1, 1},  {0.013f, 1, 1},  {2, 1, 1}};
+  bands.normals.assign(8, glm::vec3(0, 0, 1));
+  bands.indices = {0, 1, 5, 0, 5, 4, 1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6};
+  bands.normalsFromFile = true;
+  bands.materials = {grey, red};
+  bands.triangleMaterial = {0, 0, 1, 1, 0, 0};
+  const EmbreeScene bandsBvh(bands.positions, bands.indices);
+  const RenderOutput e = renderDiffuse(bands, bandsBvh, worldFromObject, camera, sh, full);
+  const RenderOutput f = renderDiffuse(bands, bandsBvh, worldFromObject, camera, sh, adaptive);
+  ASSERT_EQ(e.beauty.pixels.size(), f.beauty.pixels.size());
+  EXPECT_GT(f.pixelsPlain, f.pixelsTraced / 2);
+  const float* striped = e.beauty.at(160 - e.x0, 120 - e.y0);
+  EXPECT_NEAR(striped[0] - striped[1], 0.5f, 1e-4f);
+  worst = 0.0f;
+  for (size_t i = 0; i < e.beauty.pixels.size(); ++i)
+    worst = std::max(worst, std::abs(e.beauty.pixels[i] - f.beauty.pixels[i]));
   EXPECT_LT(worst, 1e-5f);
 }
 
