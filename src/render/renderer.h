@@ -67,11 +67,13 @@ struct RenderSettings {
   // camera, every pixel of the rectangle is traced.
   bool skipUncoveredPixels = true;
   // Adaptive sampling: the four corner samples of the n x n grid are traced first, and where they
-  // find one smooth surface (no silhouette, occluding edge or thinner part in front anywhere in
-  // the pixel, no crease, texture, cut-out or shadow edge of a bright source between them) they
-  // stand for all n x n; every other pixel gets all of them. Needs the pixels' nearest surfaces,
-  // hence a rectilinear lens without distortion and skipUncoveredPixels; off for semi-transparent
-  // meshes and n = 1.
+  // find one smooth surface (no silhouette, occluding edge, gap, thinner part in front, change of
+  // material, crease or fold anywhere in the pixel; no texture, cut-out or shadow edge of a bright
+  // source, and nearly the same normal, self-shadowing and albedo at the four) they stand for all
+  // n x n; every other pixel keeps them and gets the rest. Needs the pixels' nearest surfaces and
+  // edges, hence a rectilinear lens without distortion and skipUncoveredPixels; off for
+  // semi-transparent meshes, meshes of more triangles than the traced rectangle has pixels, and
+  // n = 1 (docs/design.md, "Adaptive anti-aliasing").
   bool adaptive = true;
 };
 

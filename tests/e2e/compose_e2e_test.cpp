@@ -1064,18 +1064,11 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
   // A plate transparent everywhere has no brightness to match: 0 stops, said so (it said the
   // placeholder key 1 was "the whole plate's" and put the object 2.4 stops up).
   {
-    std::vector<float> clear(size_t(w) * size_t(h) * 4, 0.0f);
-    OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
-    spec.attribute("oiio:UnassociatedAlpha", 1);
-    auto out = OIIO::ImageOutput::create((dir_ / "input-clear.png").string());
-    ASSERT_TRUE(out->open((dir_ / "input-clear.png").string(), spec));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, clear.data()));
-    out->close();
-    std::string c = args((dir_ / "clear").string()) + " --place 0.16,0.9 --scale 0.3";
-    c.replace(c.find(quote((dir_ / "input-plate.png").string())),
-              quote((dir_ / "input-plate.png").string()).size(),
-              quote((dir_ / "input-clear.png").string()));
-    const auto clearRun = runCompose(c, dir_.path());
+    writePixels(dir_ / "input-clear.png", w, h, 4, OIIO::TypeDesc::UINT8,
+                std::vector<float>(size_t(w) * size_t(h) * 4, 0.0f));
+    const auto clearRun = runCompose(
+        args((dir_ / "clear").string(), "input-clear.png") + " --place 0.16,0.9 --scale 0.3",
+        dir_.path());
     ASSERT_EQ(clearRun.status, 0) << clearRun.err;
     EXPECT_NE(clearRun.err.find("auto exposure: 0 stops (the environment's own units): the plate "
                                 "is transparent everywhere"),

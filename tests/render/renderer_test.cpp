@@ -29,6 +29,30 @@ struct Scene {
   }
 };
 
+// A 320 x 240 camera at the ground's level looking along -Z, fx = fy = 200 at the centre, with
+// `k1` radial distortion (0: none).
+calib::PlateCamera levelCamera(double k1) {
+  calib::CameraOptions options;
+  options.height = 1e-3;
+  calib::Lens lens;
+  lens.width = 320;
+  lens.height = 240;
+  lens.fx = lens.fy = 200.0;
+  lens.cx = 160.0;
+  lens.cy = 120.0;
+  if (k1 != 0.0) lens.distortion = {k1, 0.0, 0.0, 0.0, 0.0};
+  options.lens = lens;
+  return calib::plateCamera(320, 240, {}, options);
+}
+
+// The largest difference between two renders' beauty values.
+float largestDifference(const RenderOutput& a, const RenderOutput& b) {
+  float worst = 0.0f;
+  for (size_t i = 0; i < a.beauty.pixels.size() && i < b.beauty.pixels.size(); ++i)
+    worst = std::max(worst, std::abs(a.beauty.pixels[i] - b.beauty.pixels[i]));
+  return worst;
+}
+
 // White furnace through the renderer: a Lambertian surface of albedo ρ under radiance 1 everywhere
 // reflects exactly ρ (E = π, divided by π), so any π slip shows as a factor of 3.
 TEST(Renderer, WhiteFurnaceGivesTheAlbedo) {
@@ -386,16 +410,7 @@ TEST(Renderer, AdaptiveSamplingLooksLikeFullSampling) {
 // the pixels it crosses. They all see the wall, but the strip is nearer in those pixels: they are
 // traced in full and show it as full sampling does. And a gap as thin between two walls.
 TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
-  calib::CameraOptions options;
-  options.height = 1e-3;
-  calib::Lens lens;
-  lens.width = 320;
-  lens.height = 240;
-  lens.fx = lens.fy = 200.0;
-  lens.cx = 160.0;
-  lens.cy = 120.0;
-  options.lens = lens;
-  const calib::PlateCamera camera = calib::plateCamera(320, 240, {}, options);
+  const calib::PlateCamera camera = levelCamera(0.0);
   // At 4 units from the camera a pixel is 0.02 units wide: the strip spans x = 160.35..160.65
   // in pixels (the corner samples of 4 x 4 lie at 160.125 and 160.875).
   Mesh m;
@@ -427,10 +442,7 @@ TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   ASSERT_TRUE(160 >= a.x0 && 160 < a.x1 && 120 >= a.y0 && 120 < a.y1);
   const float* middle = a.beauty.at(160 - a.x0, 120 - a.y0);
   EXPECT_NEAR(middle[0] - middle[1], 0.5f, 1e-4f);
-  float worst = 0.0f;
-  for (size_t i = 0; i < a.beauty.pixels.size(); ++i)
-    worst = std::max(worst, std::abs(a.beauty.pixels[i] - b.beauty.pixels[i]));
-  EXPECT_LT(worst, 1e-5f);
+  EXPECT_LT(largestDifference(a, b), 1e-5f);
 
   // The other way round: a gap a third of a pixel wide between two walls, nothing behind it. The
   // corner samples all hit a wall and nothing is nearer; the gap's edges are the walls' open
@@ -448,10 +460,7 @@ TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   ASSERT_EQ(c.beauty.pixels.size(), d.beauty.pixels.size());
   EXPECT_GT(d.pixelsPlain, d.pixelsTraced / 2);
   EXPECT_NEAR(c.beauty.at(160 - c.x0, 120 - c.y0)[3], 0.5f, 1e-6f);
-  worst = 0.0f;
-  for (size_t i = 0; i < c.beauty.pixels.size(); ++i)
-    worst = std::max(worst, std::abs(c.beauty.pixels[i] - d.beauty.pixels[i]));
-  EXPECT_LT(worst, 1e-5f);
+  EXPECT_LT(largestDifference(c, d), 1e-5f);
 
   // A stripe of another material as thin, in the plane of one wall (three bands sharing their
   // edges' vertices): the change of material is an edge, and the stripe shows.
@@ -470,27 +479,15 @@ TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   EXPECT_GT(f.pixelsPlain, f.pixelsTraced / 2);
   const float* striped = e.beauty.at(160 - e.x0, 120 - e.y0);
   EXPECT_NEAR(striped[0] - striped[1], 0.5f, 1e-4f);
-  worst = 0.0f;
-  for (size_t i = 0; i < e.beauty.pixels.size(); ++i)
-    worst = std::max(worst, std::abs(e.beauty.pixels[i] - f.beauty.pixels[i]));
-  EXPECT_LT(worst, 1e-5f);
+  EXPECT_LT(largestDifference(e, f), 1e-5f);
 }
 
 // The plate's lens distortion applies to the object's rays: the straight top edge of a wall bends
 // in the render exactly as the lens model bends a straight line of the scene (a ruler held in front
 // of the camera), and not as a pinhole would draw it.
 TEST(Renderer, AStraightEdgeBendsLikeThePlatesLens) {
-  calib::CameraOptions options;
-  options.height = 1e-3;
-  calib::Lens lens;
-  lens.width = 320;
-  lens.height = 240;
-  lens.fx = lens.fy = 200.0;
-  lens.cx = 160.0;
-  lens.cy = 120.0;
-  lens.distortion = {-0.2, 0.0, 0.0, 0.0, 0.0};  // barrel, as a wide zoom at its short end
-  options.lens = lens;
-  const calib::PlateCamera camera = calib::plateCamera(320, 240, {}, options);
+  // Barrel distortion, as a wide zoom at its short end.
+  const calib::PlateCamera camera = levelCamera(-0.2);
 
   // A wall 5 units in front of the camera, wider than the view, its top edge 1.5 units above the
   // optical axis and its bottom below the frame.
