@@ -759,8 +759,11 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           nearDepth = std::min(nearDepth, depth);
           farDepth = std::max(farDepth, depth);
           const uint32_t* tri = &mesh.indices[3 * size_t(hit.triangle)];
-          normals[b] = (1.0f - hit.u - hit.v) * mesh.normals[tri[0]] +
-                       hit.u * mesh.normals[tri[1]] + hit.v * mesh.normals[tri[2]];
+          // Compared in world space: a non-uniform scale turns object-space normals.
+          normals[b] =
+              glm::vec3(normalFromObject *
+                        glm::dvec3((1.0f - hit.u - hit.v) * mesh.normals[tri[0]] +
+                                   hit.u * mesh.normals[tri[1]] + hit.v * mesh.normals[tri[2]]));
           const float length = glm::length(normals[b]);
           if (!(length > 1e-6f)) {
             plain = false;

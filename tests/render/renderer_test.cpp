@@ -482,6 +482,58 @@ TEST(Renderer, AdaptiveSamplingKeepsThinPartsAndGapsTheCornerSamplesMiss) {
   EXPECT_LT(largestDifference(e, f), 1e-5f);
 }
 
+// The normals are compared where they are shaded, in world space. A flat wall whose normals (from
+// the file) tilt by +4° and -4° in a pattern that repeats every pixel is within 10° in object
+// space; squeezed ten times across by its placement, the world normals tilt by ±35°. The corner
+// samples (at 1/8 and 7/8 of the pixel) see +4° and -4°, the middle ones (3/8, 5/8) -4°: shaded
+// from the corners under light from one side, a pixel would be a quarter of the two tilts'
+// difference off.
+TEST(Renderer, AdaptiveSamplingComparesNormalsInWorldSpace) {
+  const calib::PlateCamera camera = levelCamera(0.0);
+  // At 4 units from the camera a pixel is 0.02 units wide; ten times that in object space. The
+  // wall spans pixels 150..170 across and 110..130 up, a column of vertices every quarter pixel
+  // at the samples' positions (pixel + 1/8 + k/4, a hundredth of a pixel aside: a ray along an
+  // edge shared by two triangles may miss both).
+  Mesh m;
+  const float tilt = float(4.0 * std::numbers::pi / 180.0);
+  // Columns k = -2..81 (the wall's ends between samples, not on them).
+  const int columns = 84;
+  for (int k = -2; k < columns - 2; ++k) {
+    const float x = 0.2f * (-10.0f + 0.135f + 0.25f * float(k));
+    const float side = (k + 4) % 4 == 0 ? 1.0f : -1.0f;
+    const glm::vec3 normal(side * std::sin(tilt), 0.0f, std::cos(tilt));
+    for (float y : {-0.2f, 0.2f}) {
+      m.positions.push_back({x, y, 0.0f});
+      m.normals.push_back(normal);
+    }
+  }
+  for (uint32_t k = 0; k + 1 < uint32_t(columns); ++k)
+    m.indices.insert(m.indices.end(), {2 * k, 2 * k + 2, 2 * k + 3, 2 * k, 2 * k + 3, 2 * k + 1});
+  m.normalsFromFile = true;
+  const EmbreeScene bvh(m.positions, m.indices);
+  const glm::dmat4 worldFromObject =
+      glm::scale(glm::translate(glm::dmat4(1.0), camera.position() + glm::dvec3(0, 0, -4)),
+                 glm::dvec3(0.1, 1.0, 1.0));
+  // Light from one side: the sky bright over half the azimuths.
+  Image sky(64, 32, 3);
+  for (int y = 0; y < sky.height; ++y)
+    for (int x = 0; x < sky.width; ++x)
+      for (int c = 0; c < 3; ++c) sky.at(x, y)[c] = x < sky.width / 2 ? 2.0f : 0.1f;
+  lighting::ShLighting sh(2);
+  sh.project(lighting::Environment::fromLatLong(sky));
+  RenderSettings full, adaptive;
+  full.adaptive = false;
+  full.jitter = adaptive.jitter = false;
+  const RenderOutput a = renderDiffuse(m, bvh, worldFromObject, camera, sh, full);
+  const RenderOutput b = renderDiffuse(m, bvh, worldFromObject, camera, sh, adaptive);
+  ASSERT_EQ(a.beauty.pixels.size(), b.beauty.pixels.size());
+  ASSERT_GT(a.beauty.width, 10);
+  // The tilts shade differently: the wall's pixels are not flat.
+  const float* p = a.beauty.at(a.beauty.width / 2, a.beauty.height / 2);
+  ASSERT_GT(p[3], 0.99f);
+  EXPECT_LT(largestDifference(a, b), 1e-5f);
+}
+
 // The plate's lens distortion applies to the object's rays: the straight top edge of a wall bends
 // in the render exactly as the lens model bends a straight line of the scene (a ruler held in front
 // of the camera), and not as a pinhole would draw it.
