@@ -4,9 +4,9 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
-#include <map>
 #include <vector>
 
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/output_files.h"
@@ -51,24 +51,19 @@ std::string contentKey(const std::filesystem::path& file, const std::string& sta
 }
 
 Image toRgb(const Image& in) {
-  // The channels by name (the last part of a layered name: "diffuse.R" is R): R, G, B in that
-  // order wherever they are; else Y alone as grey, or Y with OpenEXR's chroma RY, BY; else by
-  // position, as an image without names has them.
-  std::map<std::string, int> named;
-  for (int c = 0; c < int(in.channelNames.size()) && c < in.channels; ++c) {
-    std::string n = in.channelNames[size_t(c)];
-    n = n.substr(n.rfind('.') == std::string::npos ? 0 : n.rfind('.') + 1);
-    for (char& ch : n) ch = char(std::toupper(static_cast<unsigned char>(ch)));
-    named.emplace(n, c);
-  }
-  auto at = [&](const char* n) {
-    const auto it = named.find(n);
-    return it == named.end() ? -1 : it->second;
-  };
-  const int r = at("R"), g = at("G"), b = at("B"), y = at("Y"), ry = at("RY"), by = at("BY");
-  const bool rgb = r >= 0 && g >= 0 && b >= 0;
-  const bool chroma = !rgb && y >= 0 && ry >= 0 && by >= 0;
-  if (in.channels == 3 && ((rgb && r == 0 && g == 1 && b == 2) || (!rgb && !chroma && y < 0)))
+  // The picture's colour by channel name (core/channels.h): R, G, B in that order wherever they
+  // are (of the layer that is the picture); else Y alone as grey, or Y with OpenEXR's chroma RY,
+  // BY; else by position, as an image without names has them.
+  const PictureChannels picture = pictureChannels(in);
+  const bool rgb = picture.kind == PictureChannels::Kind::Rgb;
+  const bool chroma = picture.kind == PictureChannels::Kind::Chroma;
+  const bool grey = picture.kind == PictureChannels::Kind::Grey;
+  const int r = rgb ? picture.colour[0] : -1, g = rgb ? picture.colour[1] : -1,
+            b = rgb ? picture.colour[2] : -1;
+  const int y = chroma || grey ? picture.colour[0] : -1, ry = chroma ? picture.colour[1] : -1,
+            by = chroma ? picture.colour[2] : -1;
+  if (in.channels == 3 &&
+      ((rgb && r == 0 && g == 1 && b == 2) || picture.kind == PictureChannels::Kind::ByPosition))
     return in;
   Image out(in.width, in.height, 3, {"R", "G", "B"});
   out.colorSpace = in.colorSpace;

@@ -26,8 +26,10 @@ inline void hashVector(Hash128& hash, const glm::dvec3& v) {
   hash.number(v.z);
 }
 
-// Any image made RGB: grey is replicated, extra channels (alpha) are dropped.
+// Any image made RGB from its picture's channels (core/channels.h): grey is replicated, other
+// channels (alpha, other layers) are dropped.
 Image toRgb(const Image& in);
+
 
 inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "cubemap/layouts.h"
@@ -517,10 +518,11 @@ class ColorStage final : public Stage {
       // pixels become the linear plate. An 8-bit RGB plate (a JPEG) is converted from its codes
       // into a new float image; any other RGB plate is converted in place.
       ingest::LoadedImage& plate = *ctx.artefacts.plate;
-      // A plate's alpha (its channel named A or Alpha), kept when it is not 1 everywhere.
+      // A plate's alpha (the A of its picture's layer, core/channels.h, or a channel named
+      // Alpha), kept when it is not 1 everywhere.
       std::vector<float> alpha;
-      int alphaChannel = -1;
-      for (size_t c = 0; c < plate.image.channelNames.size(); ++c) {
+      int alphaChannel = plate.image.channelNames.empty() ? -1 : pictureChannels(plate.image).alpha;
+      for (size_t c = 0; c < plate.image.channelNames.size() && alphaChannel < 0; ++c) {
         std::string name = plate.image.channelNames[c];
         std::transform(name.begin(), name.end(), name.begin(),
                        [](unsigned char ch) { return char(std::tolower(ch)); });

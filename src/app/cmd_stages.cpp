@@ -9,12 +9,14 @@
 #include "app/cli.h"
 #include "app/compose_options.h"
 #include "color/color.h"
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/scene.h"
 #include "pipeline/stage_files.h"
+#include "pipeline/stage_util.h"
 #include "pipeline/stages.h"
 
 namespace compose::app {
@@ -55,13 +57,30 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     ingest::LoadedImage loaded = ingest::readImage(o->in, "color");
     Image& image = loaded.image;
     ingest::requireFinite(image, o->in, "color", "the image");
-    if (image.channels < 3) {
-      Image rgb(image.width, image.height, 3, {"R", "G", "B"});
-      for (size_t i = 0; i < image.pixelCount(); ++i)
-        for (int c = 0; c < 3; ++c)
-          rgb.pixels[3 * i + size_t(c)] = image.pixels[i * size_t(image.channels)];
-      rgb.colorSpace = image.colorSpace;
-      image = std::move(rgb);
+    // Colour by channel name, as the pipeline reads plates and environments (core/channels.h:
+    // a layer's beauty.R, G, B; Y alone as grey), with the alpha that goes with it; other
+    // channels (normals, depth, other layers) are not colours and are left out, said below.
+    ingest::requireColourChannels(image, o->in, "color", "the image");
+    std::vector<std::string> leftOut;
+    {
+      const PictureChannels picture = pictureChannels(image);
+      for (int c = 0; c < image.channels; ++c)
+        if (c != picture.alpha &&
+            std::find(picture.colour.begin(), picture.colour.end(), c) == picture.colour.end())
+          leftOut.push_back(c < int(image.channelNames.size()) ? image.channelNames[size_t(c)]
+                                                               : std::to_string(c));
+      Image converted = pipeline::toRgb(image);
+      if (picture.alpha >= 0) {
+        Image withAlpha(image.width, image.height, 4, {"R", "G", "B", "A"});
+        for (size_t i = 0; i < image.pixelCount(); ++i) {
+          std::copy_n(&converted.pixels[3 * i], 3, &withAlpha.pixels[4 * i]);
+          withAlpha.pixels[4 * i + 3] =
+              image.pixels[i * size_t(image.channels) + size_t(picture.alpha)];
+        }
+        converted = std::move(withAlpha);
+      }
+      converted.colorSpace = image.colorSpace;
+      image = std::move(converted);
     }
     const std::string read =
         pipeline::toWorkingSpace(image, o->in, loaded.info, o->from, "--from", colors);
@@ -76,6 +95,14 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     if (!globals.quiet) {
       std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", printable(o->in).c_str(),
                    printable(read).c_str(), target.c_str());
+      if (!leftOut.empty()) {
+        std::string names;
+        for (const std::string& n : leftOut) names += (names.empty() ? "" : ", ") + n;
+        std::fprintf(stderr,
+                     "compose: note: %zu channel%s not converted and not written (not the image's "
+                     "colour or its alpha): %s\n",
+                     leftOut.size(), leftOut.size() == 1 ? "" : "s", printable(names).c_str());
+      }
       if (!options.chromaticities)
         std::fprintf(stderr,
                      "compose: note: the config does not say what the primaries of '%s' are: the "

@@ -12,6 +12,7 @@
 
 #include <Imath/half.h>
 
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/output_files.h"
@@ -609,8 +610,26 @@ void requireColourChannels(const Image& image, const fs::path& file, const std::
                     names + ")",
                 file);
   }
-  for (const std::string& n : image.channelNames)
-    if (isColourChannel(n)) return;
+  for (const std::string& n : image.channelNames) {
+    if (!isColourChannel(n)) continue;
+    // Several layers with a colour and nothing to say which is the picture: refused rather than
+    // read from whichever sorts first (a render's albedo.R before its beauty).
+    const PictureChannels picture = pictureChannels(image);
+    if (picture.ambiguous) {
+      std::string layers = "'" + picture.layer.substr(0, picture.layer.size() - 1) + "'";
+      for (const std::string& l : picture.otherLayers)
+        layers += ", '" + (l.empty() ? l : l.substr(0, l.size() - 1)) + "'";
+      const std::string first = picture.layer;
+      throw Error(stage,
+                  what + " has colour in several layers (" + layers +
+                      ") and none is marked as the picture (bare R, G, B, a layer named beauty, "
+                      "combined or rgba, or the only one with an alpha): take the one you mean "
+                      "out first, e.g. oiiotool IN --ch " +
+                      first + "R," + first + "G," + first + "B --chnames R,G,B -o OUT",
+                  file);
+    }
+    return;
+  }
   throw Error(stage,
               what + " has no colour channel (R, G, B or Y): its channels are " + names +
                   " (a depth or data image?)",

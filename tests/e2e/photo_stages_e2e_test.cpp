@@ -295,6 +295,54 @@ TEST(ColorCommand, SaysTheSpaceGivenWithFrom) {
   }
 }
 
+// `color` converts the picture's colour, taken by channel name, and keeps its alpha: a render
+// layer's beauty (object.R, G, B, A) beside its passes (albedo sorts first) is what is converted,
+// the passes are left out and named; a file of passes alone is refused, naming the layers.
+TEST(ColorCommand, ConvertsThePicturesLayerAndNamesWhatItLeavesOut) {
+  TempDir dir;
+  Image layered(
+      4, 3, 8,
+      {"albedo.B", "albedo.G", "albedo.R", "N.X", "object.A", "object.B", "object.G", "object.R"});
+  Image plain(4, 3, 4, {"R", "G", "B", "A"});
+  for (size_t i = 0; i < layered.pixelCount(); ++i) {
+    const float v = 0.1f + 0.05f * float(i);
+    const float rgba[4] = {v, 2.0f * v, 0.5f * v, 0.75f};
+    const float passes[4] = {0.9f, 0.8f, 0.7f, -1.0f};  // albedo B, G, R and N.X
+    std::copy_n(passes, 4, &layered.pixels[8 * i]);
+    layered.pixels[8 * i + 4] = rgba[3];
+    for (int c = 0; c < 3; ++c) layered.pixels[8 * i + 7 - size_t(c)] = rgba[c];
+    std::copy_n(rgba, 4, &plain.pixels[4 * i]);
+  }
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "layered.exr", layered, options);
+  ingest::writeImage(dir / "plain.exr", plain, options);
+  const std::string to = " --from ACEScg --to \"Linear Rec.709 (sRGB)\" --depth float --out ";
+  const CommandRun a = compose("color " + q(dir / "layered.exr") + to + q(dir / "a.exr"), dir);
+  ASSERT_EQ(a.status, 0) << a.err;
+  EXPECT_NE(a.err.find("4 channels not converted and not written (not the image's colour or its "
+                       "alpha): "),
+            std::string::npos)
+      << a.err;
+  for (const char* name : {"albedo.R", "albedo.G", "albedo.B", "N.X"})
+    EXPECT_NE(a.err.find(name), std::string::npos) << name << ": " << a.err;
+  const CommandRun b = compose("color " + q(dir / "plain.exr") + to + q(dir / "b.exr"), dir);
+  ASSERT_EQ(b.status, 0) << b.err;
+  const ingest::LoadedImage fromLayer = ingest::readImage(dir / "a.exr");
+  const ingest::LoadedImage fromPlain = ingest::readImage(dir / "b.exr");
+  ASSERT_EQ(fromLayer.image.channels, 4);
+  EXPECT_EQ(fromLayer.image.pixels, fromPlain.image.pixels);
+  EXPECT_NE(fromLayer.image.pixels[0], plain.pixels[0]) << "converted";
+  EXPECT_EQ(fromLayer.image.pixels[3], 0.75f) << "the alpha kept";
+
+  Image passes(4, 3, 6, {"albedo.B", "albedo.G", "albedo.R", "normal.B", "normal.G", "normal.R"});
+  ingest::writeImage(dir / "passes.exr", passes, options);
+  const CommandRun c = compose("color " + q(dir / "passes.exr") + to + q(dir / "c.exr"), dir);
+  EXPECT_FAILS_WITH(c, 1, "has colour in several layers ('albedo', 'normal')");
+  EXPECT_NE(c.err.find("passes.exr"), std::string::npos) << c.err;
+  EXPECT_FALSE(fs::exists(dir / "c.exr"));
+}
+
 TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
   makeCapture();
   // Brackets of different sizes.

@@ -4,6 +4,7 @@
 #include <map>
 #include <set>
 
+#include "core/channels.h"
 #include "core/error.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/scene.h"
@@ -46,6 +47,48 @@ TEST(ToRgb, TakesTheChannelsByName) {
   Image unnamed(1, 1, 3);
   unnamed.pixels = {0.1f, 0.2f, 0.3f};
   EXPECT_EQ(values(toRgb(unnamed)), values(unnamed));
+}
+
+// A layered image is read from the layer that is its picture, not from whichever sorts first: a
+// render's beauty beside albedo and irradiance passes (OpenEXR sorts albedo first), bare R, G, B
+// before any layer, a layer named as a beauty pass (Blender's Combined beside its AO), or the
+// one layer with an alpha. With nothing to tell them apart the choice is marked ambiguous.
+TEST(ToRgb, TakesTheLayerThatIsThePicture) {
+  auto values = [](const Image& image) {
+    return std::vector<float>(image.pixels.begin(), image.pixels.end());
+  };
+  Image render(
+      1, 1, 8,
+      {"AO.Y", "albedo.R", "albedo.G", "albedo.B", "object.A", "object.B", "object.G", "object.R"});
+  render.pixels = {0.9f, 0.5f, 0.5f, 0.5f, 1.0f, 0.3f, 0.2f, 0.1f};
+  EXPECT_EQ(values(toRgb(render)), (std::vector<float>{0.1f, 0.2f, 0.3f}));
+  PictureChannels picture = pictureChannels(render);
+  EXPECT_EQ(picture.layer, "object.");
+  EXPECT_EQ(picture.alpha, 4);
+  EXPECT_FALSE(picture.ambiguous);
+  EXPECT_EQ(picture.otherLayers, (std::vector<std::string>{"albedo."}));
+
+  Image blender(1, 1, 6,
+                {"ViewLayer.AO.B", "ViewLayer.AO.G", "ViewLayer.AO.R", "ViewLayer.Combined.B",
+                 "ViewLayer.Combined.G", "ViewLayer.Combined.R"});
+  blender.pixels = {0.7f, 0.7f, 0.7f, 0.3f, 0.2f, 0.1f};
+  EXPECT_EQ(values(toRgb(blender)), (std::vector<float>{0.1f, 0.2f, 0.3f}));
+
+  Image bare(1, 1, 6, {"B", "G", "R", "diffuse.B", "diffuse.G", "diffuse.R"});
+  bare.pixels = {0.3f, 0.2f, 0.1f, 0.7f, 0.7f, 0.7f};
+  EXPECT_EQ(values(toRgb(bare)), (std::vector<float>{0.1f, 0.2f, 0.3f}));
+
+  Image passes(1, 1, 6, {"albedo.B", "albedo.G", "albedo.R", "normal.B", "normal.G", "normal.R"});
+  passes.pixels = {0.3f, 0.2f, 0.1f, 0.7f, 0.7f, 0.7f};
+  picture = pictureChannels(passes);
+  EXPECT_TRUE(picture.ambiguous);
+  EXPECT_EQ(picture.layer, "albedo.");
+
+  // Without names: by position, the fourth channel the alpha.
+  Image unnamed(1, 1, 4);
+  picture = pictureChannels(unnamed);
+  EXPECT_EQ(picture.colour, (std::vector<int>{0, 1, 2}));
+  EXPECT_EQ(picture.alpha, 3);
 }
 
 TEST(Registry, EveryInputIsMadeByAnEarlierStageAndEveryOutputByOne) {

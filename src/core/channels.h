@@ -1,0 +1,34 @@
+// Which of an image's channels hold its picture: the colour by channel name, as OpenEXR and Nuke
+// name them (R, G, B; a layer's beauty.R, G, B; Y alone for grey; Y, RY, BY for luminance-chroma),
+// and the alpha that goes with it. A layered image (a render's AOVs beside its beauty) is read
+// from the layer that is its picture, not from whichever layer sorts first.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+
+namespace compose {
+
+struct PictureChannels {
+  enum class Kind { Rgb, Chroma, Grey, ByPosition };
+  Kind kind = Kind::ByPosition;
+  // Indices: R, G, B (Rgb); Y, RY, BY (Chroma); Y (Grey); the first three, or the first of fewer
+  // (ByPosition: channels without colour names).
+  std::vector<int> colour;
+  int alpha = -1;     // the layer's A, else the only A of the image; -1: none
+  std::string layer;  // the colour's layer ("" for bare R, G, B), with its dot: "beauty."
+  // Layers that hold a colour too, beside the one chosen (for notes and errors).
+  std::vector<std::string> otherLayers;
+  // More than one layer holds a colour and nothing says which is the picture: no bare R, G, B,
+  // no layer named as a beauty pass (beauty, combined, rgba, rgb, color, colour), and not just
+  // one of them with an alpha. `layer` is then the first of them.
+  bool ambiguous = false;
+};
+
+// The picture's channels by the rules above: bare channels first, then a layer named as a beauty
+// pass, then the one layer with an alpha, then the only layer with a colour.
+PictureChannels pictureChannels(const Image& image);
+
+}  // namespace compose
