@@ -367,12 +367,52 @@ class SourceEdges {
     tnear_ = 1e-5f * points_.size;
     const int n = settings.samplesPerAxis;
     raysPerSample_ = std::max(1, 16 / (n * n));
+    // Each point's normal in the environment's frame, and the sources above its horizon.
+    const size_t count = points_.count();
+    normals_.resize(count);
+    facing_.assign(count, 0);
+    parallelFor(
+        0, int64_t(count),
+        [&](int64_t p) {
+          const glm::vec3 normal = envFromObject_ * points_.normals[size_t(p)];
+          const float length = glm::length(normal);
+          normals_[size_t(p)] = length > 0.0f ? normal / length : normal;
+          uint64_t bits = 0;
+          for (size_t i = 0; i < sources_.size(); ++i)
+            bits |= uint64_t(glm::dot(normals_[size_t(p)], sources_[i].direction) > 0.0f) << i;
+          facing_[size_t(p)] = bits;
+        },
+        1024);
   }
 
   static bool wanted(const RenderSettings& settings) {
     return settings.shadows && settings.points && settings.sources && !settings.sources->empty() &&
            settings.shadows->sourceCount == settings.sources->size() &&
            settings.shadows->sourceSeen.size() == settings.points->count();
+  }
+
+  // The sources above the horizon of a surface point that the point does not see (it is in their
+  // shadow) are in its unshadowed irradiance and not in its shadowed one. Left in, the ratio of
+  // the two would dim the rest of the light with them, and where the hit's normal has turned past
+  // their terminator (none of their light there to lose) it would draw a dark line along it.
+  // Those that none of the triangle's three points sees are taken out of the interpolated
+  // unshadowed irradiance `un` and of the hit's irradiance `e` (normal `nEnv`): the ratio is then
+  // that of the light the points do get, and applies to the light the hit gets but for them.
+  void removeUnseen(const uint32_t near[3], const float weight[3], const glm::vec3& nEnv,
+                    glm::vec3& un, glm::vec3& e) const {
+    const uint64_t* seen = vi_.sourceSeen.data();
+    uint64_t unseen = ~(seen[near[0]] | seen[near[1]] | seen[near[2]]) &
+                      (facing_[near[0]] | facing_[near[1]] | facing_[near[2]]);
+    if (unseen == 0) return;
+    for (; unseen != 0; unseen &= unseen - 1) {
+      const lighting::LightSource& source = sources_[size_t(std::countr_zero(unseen))];
+      for (int q = 0; q < 3; ++q)
+        un -= (weight[q] * std::max(0.0f, glm::dot(normals_[near[q]], source.direction))) *
+              source.power;
+      e -= std::max(0.0f, glm::dot(nEnv, source.direction)) * source.power;
+    }
+    un = glm::max(un, glm::vec3(0.0f));
+    e = glm::max(e, glm::vec3(0.0f));
   }
 
   // The shadowed irradiance at a hit (object-space position `at`, shading normal `nObj` and its
@@ -453,6 +493,7 @@ class SourceEdges {
       direct += taken[k].visible * taken[k].cosine * source.power;
     }
     rest = glm::max(rest, glm::vec3(0.0f));
+    removeUnseen(near, weight, nEnv, un, rest);
     for (int c = 0; c < 3; ++c) {
       const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
       shadowed[c] = rest[c] * ratio + direct[c];
@@ -468,6 +509,8 @@ class SourceEdges {
   std::vector<SourceFrame> frames_;
   float lift_ = 0.0f, tnear_ = 0.0f;
   int raysPerSample_ = 1;
+  std::vector<glm::vec3> normals_;  // per surface point, in the environment's frame
+  std::vector<uint64_t> facing_;    // per surface point: the sources above its horizon
 };
 
 }  // namespace
@@ -589,12 +632,14 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       const VertexIrradiance& vi = *settings.shadows;
       const glm::vec3 sh = weight[0] * vi.shadowed[near[0]] + weight[1] * vi.shadowed[near[1]] +
                            weight[2] * vi.shadowed[near[2]];
-      const glm::vec3 un = weight[0] * vi.unshadowed[near[0]] + weight[1] * vi.unshadowed[near[1]] +
-                           weight[2] * vi.unshadowed[near[2]];
+      glm::vec3 un = weight[0] * vi.unshadowed[near[0]] + weight[1] * vi.unshadowed[near[1]] +
+                     weight[2] * vi.unshadowed[near[2]];
+      glm::vec3 e = r.e;
+      if (edges) edges->removeUnseen(near, weight, settings.envFromWorld * nrm, un, e);
       for (int c = 0; c < 3; ++c) {
         // Where the vertices get (almost) no light there is nothing to shadow.
         const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
-        r.shadowed[c] = r.e[c] * ratio;
+        r.shadowed[c] = e[c] * ratio;
       }
     }
     if (settings.occlusion) {

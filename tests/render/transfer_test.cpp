@@ -390,6 +390,85 @@ TEST(SurfacePoints, LargeTrianglesGetAGridThatInterpolatesExactly) {
   }
 }
 
+// Light adds: a sphere wholly in a wall's shadow, the sun low behind the wall, is lit by the sky
+// alone, with or without the sun. Its points facing the sun have it in their unshadowed
+// irradiance and not in their shadowed one; a ratio of the two taken across the sun's terminator
+// (pixels whose normal no longer faces it, between points that do) dimmed the sky's light there
+// too: a dark line along the terminator, 14 times darker than the sky alone in the compose run
+// that showed it.
+TEST(SourceEdges, ASourceThatNoPointSeesDoesNotDimTheRestOfTheLight) {
+  Mesh mesh = uvSphere(12, 24);  // coarse: the triangles span the terminator
+  for (glm::vec3& p : mesh.positions) p.y += 1.0f;
+  mesh.normalsFromFile = true;
+  addBox(mesh, {1.3f, 0.0f, -4.0f}, {1.4f, 5.0f, 4.0f});  // the wall, on the sphere's +X side
+  const EmbreeScene scene(mesh.positions, mesh.indices);
+  const SurfacePoints points = surfacePoints(mesh, 10.0f);
+  const glm::vec3 toSun = glm::normalize(glm::vec3(1.0f, 0.6f, 0.0f));  // 31° high, behind it
+  auto sky = [&](bool withSun) {
+    const int w = 256, h = 128;
+    const auto probe = lighting::Environment::constant(glm::vec3(0.0f), w);
+    Image img(w, h, 3);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const glm::vec3 d = probe.direction(x, y);
+        float L = d.y > 0.0f ? 0.5f : 0.1f;
+        if (withSun && glm::dot(d, toSun) > 0.999f) L += 3000.0f;
+        img.at(x, y)[0] = img.at(x, y)[1] = img.at(x, y)[2] = L;
+      }
+    return lighting::Environment::fromLatLong(img);
+  };
+  calib::Placement place;
+  place.imagePoint = {0.4, 0.8};
+  place.heightFraction = 0.5;
+  const calib::PlateCamera camera = calib::plateCamera(320, 240, {}, {});
+  const glm::dmat4 worldFromObject = calib::placeOnGround(
+      camera, place, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+  const glm::mat3 envFromObject(1.0f);  // no turn
+  TransferParams params;
+  params.grid = 16;
+  params.order = 8;
+  const VertexTransfer transfer = computeTransfer(mesh, points, params);
+  auto render = [&](const lighting::Environment& env) {
+    const lighting::SourceSplit split = lighting::splitBrightSources(env, 16);
+    lighting::ChebParams cp;
+    cp.order = 8;
+    cp.samples = 16;
+    lighting::ChebLocalLighting residual(cp), whole(cp);
+    residual.project(split.residual);
+    whole.project(env);
+    const SourceVisibility seen = traceSources(points, scene, split.sources, envFromObject, 1);
+    ShadowInputs in;
+    in.transfer = &transfer;
+    in.shadowLighting = &residual;
+    in.sources = split.sources;
+    in.sourceVisibility = &seen;
+    const VertexIrradiance shaded = shadeVertices(points, envFromObject, in);
+    RenderSettings settings;
+    settings.samplesPerAxis = 1;
+    settings.jitter = false;
+    settings.points = &points;
+    settings.shadows = &shaded;
+    settings.sources = &split.sources;
+    return renderDiffuse(mesh, scene, worldFromObject, camera, whole, settings);
+  };
+  const RenderOutput sun = render(sky(true)), plain = render(sky(false));
+  ASSERT_EQ(sun.aovs.pixels.size(), plain.aovs.pixels.size());
+  // The sphere's pixels (normals not along ±X, the wall's), facing the sun and not.
+  int sphere = 0, facing = 0, darker = 0;
+  for (int y = 0; y < sun.aovs.height; ++y)
+    for (int x = 0; x < sun.aovs.width; ++x) {
+      const float* a = sun.aovs.at(x, y);
+      const float* b = plain.aovs.at(x, y);
+      if (sun.beauty.at(x, y)[3] < 1.0f || std::abs(a[0]) > 0.99f) continue;
+      ++sphere;
+      facing += a[0] * toSun.x + a[1] * toSun.y + a[2] * toSun.z > 0.0f;
+      darker += a[14] < 0.9f * b[14];  // irradianceShadowed.G
+    }
+  ASSERT_GT(sphere, 1000);
+  ASSERT_GT(facing, sphere / 4) << "the terminator crosses the sphere as the camera sees it";
+  EXPECT_LT(darker, sphere / 200) << darker << " of " << sphere << " pixels darker with the sun";
+}
+
 // A low sun's shadow crossing large triangles. The floor is two triangles with points at its four
 // corners only, so interpolating between points smears the wall's shadow over the whole floor;
 // the renderer must trace the sun from each hit where the corners disagree. The reference is the
