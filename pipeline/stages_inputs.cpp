@@ -231,7 +231,8 @@ class IngestStage final : public Stage {
 class MergeStage final : public Stage {
  public:
   // Bump when merging gives other numbers for the same photos.
-  static constexpr int kVersion = 2;  // 2: a stored response is checked against the photos
+  // 2: a stored response is checked against the photos; 3: aligned before recovery (--align)
+  static constexpr int kVersion = 3;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {

@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <optional>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -18,6 +20,39 @@ namespace {
 
 bool isEightBit(const ingest::CaptureInfo& info) {
   return info.sampleType == "uint8";
+}
+
+// Where every shot of a bracket has pixels once moved by its alignment shift (alignBracket:
+// shot i's (x, y) lands on (x + dx_i, y + dy_i)): {x0, y0, x1, y1}, empty when nothing is left.
+std::array<int, 4> alignedRect(int width, int height,
+                               const std::vector<std::array<int, 2>>& shifts) {
+  std::array<int, 4> r{0, 0, width, height};
+  for (const std::array<int, 2>& d : shifts) {
+    r[0] = std::max(r[0], d[0]), r[2] = std::min(r[2], width + d[0]);
+    r[1] = std::max(r[1], d[1]), r[3] = std::min(r[3], height + d[1]);
+  }
+  return r;
+}
+
+// The bracket's codes moved by their shifts, `width` x `height` of them from (x0, y0) of the
+// aligned frame (within alignedRect).
+std::vector<Codes8> alignedCrops(const std::vector<Codes8>& shots,
+                                 const std::vector<std::array<int, 2>>& shifts, int x0, int y0,
+                                 int width, int height) {
+  std::vector<Codes8> out(shots.size());
+  for (size_t i = 0; i < shots.size(); ++i) {
+    Codes8& c = out[i];
+    c.width = width, c.height = height;
+    c.rgb.resize(size_t(width) * size_t(height) * 3);
+    const uint8_t* from = shots[i].data();
+    const size_t stride = size_t(shots[i].width) * 3;
+    parallelFor(0, height, [&](int64_t v) {
+      const int y = y0 + int(v) - shifts[i][1], x = x0 - shifts[i][0];
+      std::copy_n(from + size_t(y) * stride + size_t(x) * 3, size_t(width) * 3,
+                  c.rgb.data() + size_t(v) * size_t(width) * 3);
+    });
+  }
+  return out;
 }
 
 }  // namespace
@@ -196,6 +231,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
   }
 
   // One response curve for every 8-bit view.
+  std::vector<std::optional<Alignment>> alignments(capture.views.size());
   std::string linearSpace;
   const bool anyEightBit = !firstEightBitSpace.empty();
   if (anyEightBit) {
@@ -205,12 +241,38 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     cameraInfo.cameraMake = capture.cameraMake;
     cameraInfo.cameraModel = capture.cameraModel;
     const std::string camera = cameraInfo.camera();
+    // Hand-held brackets are aligned before the response is recovered from them (and checked
+    // against them): recovery compares the shots pixel by pixel. The shifts go to the merge too.
+    const bool needBrackets =
+        options.response == ResponseMode::Auto || options.response == ResponseMode::Recover;
+    // Every view is cropped to one size (recovery stacks the views; their widths must agree).
+    std::vector<std::vector<Codes8>> aligned(capture.views.size());
+    std::vector<std::array<int, 4>> rects(capture.views.size());
+    int cropWidth = std::numeric_limits<int>::max(), cropHeight = cropWidth;
+    for (size_t v = 0; v < capture.views.size(); ++v) {
+      if (!eightBit[v] || photos[v].size() < 2 || !options.merge.align) continue;
+      std::vector<const Codes8*> view;
+      for (const Codes8& c : codes[v]) view.push_back(&c);
+      double seconds = 0.0;
+      alignments[v] = alignBracket(view, options.merge.maxShift, &seconds);
+      result.openCvSeconds += seconds;
+      rects[v] =
+          alignedRect(codes[v].front().width, codes[v].front().height, alignments[v]->shifts);
+      cropWidth = std::min(cropWidth, rects[v][2] - rects[v][0]);
+      cropHeight = std::min(cropHeight, rects[v][3] - rects[v][1]);
+    }
+    for (size_t v = 0; v < capture.views.size() && needBrackets && cropWidth > 0 && cropHeight > 0;
+         ++v) {
+      if (alignments[v])
+        aligned[v] = alignedCrops(codes[v], alignments[v]->shifts, rects[v][0], rects[v][1],
+                                  cropWidth, cropHeight);
+    }
     std::vector<BracketCodes> brackets;
     for (size_t v = 0; v < capture.views.size(); ++v) {
       if (!eightBit[v] || photos[v].size() < 2) continue;
       BracketCodes b;
       for (size_t s = 0; s < photos[v].size(); ++s) {
-        b.images.push_back(&codes[v][s]);
+        b.images.push_back(aligned[v].empty() ? &codes[v][s] : &aligned[v][s]);
         b.exposures.push_back(*capture.views[v].shots[s].exposure);
       }
       brackets.push_back(std::move(b));
@@ -344,7 +406,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       }
     }
     result.linearisation += "; camera RGB taken as " + linearSpace + " (" + why + ")";
-  }
+  }  // the aligned copies were for recovery only: the merge shifts the shots itself
 
   // The unit of 8-bit views: middle grey as the sRGB curve decodes it (capture_merge.h, Units).
   if (anyEightBit) {
@@ -385,6 +447,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       out.exposures.push_back(*view.shots[s].exposure);
       out.files.push_back(view.shots[s].file);
     }
+    input.alignment = alignments[v];
     const Progress viewProgress = [&](std::string_view stage, double f) {
       report(progress, stage, (double(v) + f) / double(views));
     };

@@ -81,6 +81,32 @@ void MergeParams::validate() const {
     throw Error(kStage, "clipping thresholds must satisfy 0 <= low < high <= 1");
 }
 
+Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
+                       double* openCvSeconds) {
+  const size_t n = codes.size();
+  Alignment out;
+  out.shifts.assign(n, {0, 0});
+  out.found.assign(n, {0, 0});
+  if (n < 2) return out;
+  int bits = 1;
+  while ((1 << bits) - 1 < maxShift) ++bits;
+  const size_t pivot = n / 2;
+  OpenCvClock opencv;
+  opencv([&] {
+    std::vector<cv::Mat> gray(n);
+    for (size_t i = 0; i < n; ++i) cv::cvtColor(wrap(*codes[i]), gray[i], cv::COLOR_RGB2GRAY);
+    auto mtb = cv::createAlignMTB(bits, 4, true);
+    for (size_t i = 0; i < n; ++i) {
+      if (i == pivot) continue;
+      const cv::Point s = mtb->calculateShift(gray[pivot], gray[i]);
+      out.found[i] = {s.x, s.y};
+      if (std::abs(s.x) <= maxShift && std::abs(s.y) <= maxShift) out.shifts[i] = {s.x, s.y};
+    }
+  });
+  if (openCvSeconds) *openCvSeconds += opencv.seconds;
+  return out;
+}
+
 MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
                          const Progress& progress) {
   const auto start = std::chrono::steady_clock::now();
@@ -155,26 +181,37 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   std::vector<cv::Mat> codes(n);  // for OpenCV: views of the codes, or shifted copies
   for (size_t i = 0; i < n; ++i) codes[i] = wrap(*codePtr[i]);
 
-  // 1. Alignment against the middle exposure.
+  // 1. Alignment against the middle exposure (or the shifts the caller found already).
   if (params.align && n > 1) {
-    int bits = 1;
-    while ((1 << bits) - 1 < params.maxShift) ++bits;
-    const size_t pivot = n / 2;
-    std::vector<cv::Mat> gray(n);
-    opencv([&] {
-      for (size_t i = 0; i < n; ++i) cv::cvtColor(codes[i], gray[i], cv::COLOR_RGB2GRAY);
-      auto mtb = cv::createAlignMTB(bits, 4, true);
-      for (size_t i = 0; i < n; ++i) {
-        if (i == pivot) continue;
-        const cv::Point s = mtb->calculateShift(gray[pivot], gray[i]);
-        result.shifts[i] = {s.x, s.y};
-        if (useOpenCvMerge && (s.x != 0 || s.y != 0)) {
+    Alignment alignment;
+    if (input.alignment && input.alignment->shifts.size() == n) {
+      alignment = *input.alignment;
+    } else {
+      double seconds = 0.0;
+      alignment = alignBracket(codePtr, params.maxShift, &seconds);
+      opencv.seconds += seconds;
+    }
+    result.shifts = alignment.shifts;
+    for (size_t i = 0; i < n; ++i) {
+      if (!alignment.refused(i)) continue;
+      result.notes.push_back(
+          name(i) + ": AlignMTB found a shift of (" + std::to_string(alignment.found[i][0]) + ", " +
+          std::to_string(alignment.found[i][1]) + ") pixels, beyond --max-shift " +
+          std::to_string(params.maxShift) +
+          ": not shifted (too little detail in it to align on?); give a larger --max-shift if "
+          "the camera moved that much");
+    }
+    if (useOpenCvMerge) {
+      opencv([&] {
+        for (size_t i = 0; i < n; ++i) {
+          const cv::Point s(result.shifts[i][0], result.shifts[i][1]);
+          if (s.x == 0 && s.y == 0) continue;
           cv::Mat shifted;
-          mtb->shiftMat(codes[i], shifted, s);
+          cv::createAlignMTB()->shiftMat(codes[i], shifted, s);
           codes[i] = shifted;
         }
-      }
-    });
+      });
+    }
     std::string list;
     for (size_t i = 0; i < n; ++i) {
       list += (list.empty() ? "" : ", ") + name(i) + " (" + std::to_string(result.shifts[i][0]) +

@@ -27,6 +27,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -54,6 +55,12 @@ struct MergeParams {
 };
 
 // One bracket of one view. Images are as read (ingest::readImage): RGB or RGBA, all the same size.
+struct Alignment {
+  std::vector<std::array<int, 2>> shifts;  // per image: the shift applied, (0, 0) where refused
+  std::vector<std::array<int, 2>> found;   // per image: the shift AlignMTB found
+  bool refused(size_t i) const { return found[i] != shifts[i]; }
+};
+
 struct MergeInput {
   std::vector<const Image*> images;
   std::vector<double> exposures;   // relative exposures, one per image, increasing
@@ -67,7 +74,18 @@ struct MergeInput {
   // Optional: the images' 8-bit codes (toCodes8), when the caller has them already (8-bit input
   // only); otherwise they are made here.
   std::vector<const Codes8*> codes;
+  // Optional, with MergeParams::align: the alignment alignBracket() found already, used instead
+  // of searching again.
+  std::optional<Alignment> alignment;
 };
+
+// AlignMTB's translations of each image of a bracket onto the middle one (index n / 2): shifted
+// by (dx, dy), image i's pixel (x, y) moves to (x + dx, y + dy) (cv::AlignMTB::shiftMat). A shift
+// beyond `maxShift` in either direction is not applied: AlignMTB searches a power-of-two range
+// and, on a shot with little detail (the darkest exposure of a plain floor), can land anywhere in
+// it. Time inside OpenCV is added to *openCvSeconds when given.
+Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
+                       double* openCvSeconds = nullptr);
 
 struct MergeResult {
   // Channels R, G, B (radiance) and "clipped" (1 where every shot was clipped, else 0). The
