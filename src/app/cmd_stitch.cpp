@@ -287,6 +287,31 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       else
         ingest::requireFinite(img.image, args[size_t(i)].file, "ingest", "the photo",
                               ingest::kMaxPhotoValue);
+      // A merged view's pixels black in every photo (its 'clipped' channel, below the view's
+      // median) hold only a bound: outside a circular fisheye's image circle they are no picture
+      // at all. They are made 0, which the stitch reads as no picture where it reaches the frame.
+      {
+        const auto& names = img.image.channelNames;
+        const auto it = std::find(names.begin(), names.end(), "clipped");
+        const int nc = img.image.channels;
+        if (it != names.end() && nc >= 4) {
+          const size_t k = size_t(it - names.begin()), count = img.image.pixelCount();
+          auto luminance = [&](size_t at) {
+            const float* q = img.image.pixels.data() + at * size_t(nc);
+            return q[0] + q[1] + q[2];
+          };
+          std::vector<float> sample;
+          for (size_t at = 0; at < count; at += std::max<size_t>(1, count / 4096))
+            sample.push_back(luminance(at));
+          std::nth_element(sample.begin(), sample.begin() + ptrdiff_t(sample.size() / 2),
+                           sample.end());
+          const float median = sample.empty() ? 0.0f : sample[sample.size() / 2];
+          for (size_t at = 0; at < count; ++at) {
+            float* q = img.image.pixels.data() + at * size_t(nc);
+            if (q[k] >= 0.5f && luminance(at) < median) q[0] = q[1] = q[2] = 0.0f;
+          }
+        }
+      }
       Image rgb;
       if (img.image.channels == 3) {
         rgb = std::move(img.image);

@@ -84,6 +84,47 @@ glm::dmat3 kabsch(const std::vector<glm::dvec3>& a, const std::vector<glm::dvec3
 }
 
 // Area-averaged mip pyramid of a photo (RGB float), for prefiltered lookups.
+// Distance in pixels from every pixel to the nearest one that holds no picture: black (0 in
+// every channel) and joined to the frame's border through black pixels, as outside a circular
+// fisheye's image circle or in the corners a lens correction left. Empty when no such pixel is
+// there (a black part inside the frame is the scene's).
+cv::Mat distanceToNoPicture(const Image& img) {
+  const int w = img.width, h = img.height, c = img.channels;
+  cv::Mat black(h, w, CV_8U);
+  parallelFor(0, h, [&](int64_t y) {
+    const float* p = img.row(int(y)).data();
+    uint8_t* m = black.ptr<uint8_t>(int(y));
+    for (int x = 0; x < w; ++x, p += c) m[x] = (p[0] <= 0.0f && p[1] <= 0.0f && p[2] <= 0.0f);
+  });
+  cv::Mat labels;
+  const int count = cv::connectedComponents(black, labels, 8, CV_32S);
+  std::vector<uint8_t> outer(size_t(count), 0);
+  for (int x = 0; x < w; ++x) {
+    outer[size_t(labels.at<int>(0, x))] = 1;
+    outer[size_t(labels.at<int>(h - 1, x))] = 1;
+  }
+  for (int y = 0; y < h; ++y) {
+    outer[size_t(labels.at<int>(y, 0))] = 1;
+    outer[size_t(labels.at<int>(y, w - 1))] = 1;
+  }
+  bool any = false;
+  cv::Mat picture(h, w, CV_8U);
+  for (int y = 0; y < h; ++y) {
+    const int* l = labels.ptr<int>(y);
+    const uint8_t* b = black.ptr<uint8_t>(y);
+    uint8_t* m = picture.ptr<uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      const bool none = b[x] && outer[size_t(l[x])];
+      m[x] = none ? 0 : 255;
+      any = any || none;
+    }
+  }
+  if (!any) return {};
+  cv::Mat distance;
+  cv::distanceTransform(picture, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  return distance;
+}
+
 class PhotoPyramid {
  public:
   // Takes the photo's pixels (RGB: without a copy).
@@ -986,6 +1027,7 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
     if (!options.keepPhotos) timer.add("load", t0);
     t0 = Clock::now();
     const int w = img.width, h = img.height;
+    const cv::Mat noPicture = distanceToNoPicture(img);
     const PhotoPyramid pyramid(std::move(img));
     const glm::dmat3 cameraFromWorld = glm::transpose(result.worldFromCamera[size_t(i)]);
     const float gain = result.gains[size_t(i)];
@@ -1054,13 +1096,22 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
           L /= float(std::max(rays, 1));
         }
         L *= gain;
-        // Feathering: 1 in the middle of the frame, 0 at its edges.
+        // Feathering: 1 in the middle of the frame, 0 at its edges, and at the edge of the
+        // picture where part of the frame holds none (a fisheye's image circle): there the texel
+        // is left to other photos before its samples reach the black.
         const double fx = std::min(px.x, w - px.x) / (0.5 * w);
         const double fy = std::min(px.y, h - px.y) / (0.5 * h);
         float wt = float(fx * fy);
+        double inside = std::numeric_limits<double>::max();
+        if (!noPicture.empty()) {
+          const int ix = std::clamp(int(px.x), 0, w - 1), iy = std::clamp(int(px.y), 0, h - 1);
+          inside = double(noPicture.at<float>(iy, ix)) - texelPixels - 1.0;
+          if (!(inside > 0.0)) continue;
+          wt *= float(std::min(1.0, inside / (0.5 * std::min(w, h))));
+        }
         if (p.saturation > 0.0f && std::max({L.x, L.y, L.z}) >= 0.98f * p.saturation * gain)
           wt *= 0.01f;
-        const double edge = std::min({px.x, w - px.x, px.y, h - px.y});
+        const double edge = std::min({px.x, w - px.x, px.y, h - px.y, inside});
         const float cover = float(std::clamp(edge / margin, 0.0, 1.0));
         const size_t t = (size_t(f) * size_t(n) + size_t(y)) * size_t(n) + size_t(x);
         sum[3 * t] += wt * L.x;
