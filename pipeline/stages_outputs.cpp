@@ -715,6 +715,9 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   objectPart.moreImages = {&rendered.aovs};
   objectPart.channelNames = {"object.R", "object.G", "object.B", "object.A"};
   objectPart.channelNames.insert(objectPart.channelNames.end(), aovNames.begin(), aovNames.end());
+  // Positions and depth in float whatever the depth of the rest: in half, P put a point 10 m away
+  // up to a pixel off where it shows on a 3088-pixel-wide plate.
+  objectPart.floatChannels = {"P.X", "P.Y", "P.Z", "depth.Z"};
   if (!compositePart.options.chromaticities) {
     notes.push_back("the config (" + colors.source() +
                     ") does not say what the primaries of the working space '" + working +

@@ -442,10 +442,12 @@ std::optional<ExrCompression> parseExrCompression(const std::string& text, std::
 
 namespace {
 
-// The header of one part: size, windows, channels of `type` in the file's order, and metadata.
+// The header of one part: size, windows, channels of their `types` in the file's order, and
+// metadata.
 Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
-                     const std::vector<std::string>& names, Imf::PixelType type,
-                     const ExrHeader& shared, bool multiPart, const fs::path& shown) {
+                     const std::vector<std::string>& names,
+                     const std::vector<Imf::PixelType>& types, const ExrHeader& shared,
+                     bool multiPart, const fs::path& shown) {
   const Image& image = *part.image;
   const int fullWidth = part.fullWidth > 0 ? part.fullWidth : image.width;
   const int fullHeight = part.fullHeight > 0 ? part.fullHeight : image.height;
@@ -458,7 +460,8 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
   if (!compression) throw Error("output", why, shown);
   compression->apply(header);
   COMPOSE_CHECK(int(names.size()) == sources.channels());
-  for (const std::string& name : names) header.channels().insert(name, Imf::Channel(type));
+  for (size_t c = 0; c < names.size(); ++c)
+    header.channels().insert(names[c], Imf::Channel(types[c]));
   if (multiPart || !part.name.empty()) {
     header.setName(part.name);
     header.setType(Imf::SCANLINEIMAGE);
@@ -520,11 +523,21 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
 // compressor gets several blocks at once.
 template <class SetFrame, class Write>
 void writeBands(const detail::ChannelSources& sources, const std::vector<std::string>& names,
-                Imf::PixelType type, int x0, int y0, SetFrame&& setFrame, Write&& write) {
+                const std::vector<Imf::PixelType>& types, int x0, int y0, SetFrame&& setFrame,
+                Write&& write) {
   const int width = sources.width(), height = sources.height();
   const int channels = sources.channels();
-  const size_t valueBytes = type == Imf::HALF ? sizeof(Imath::half) : sizeof(float);
-  const size_t pixelBytes = size_t(channels) * valueBytes;
+  COMPOSE_CHECK(int(types.size()) == channels);
+  auto bytesOf = [](Imf::PixelType t) {
+    return t == Imf::HALF ? sizeof(Imath::half) : sizeof(float);
+  };
+  const bool uniform =
+      std::all_of(types.begin(), types.end(), [&](Imf::PixelType t) { return t == types.front(); });
+  const Imf::PixelType type = types.front();             // when uniform
+  std::vector<size_t> offsets(size_t(channels) + 1, 0);  // of each channel in a pixel, in bytes
+  for (int c = 0; c < channels; ++c)
+    offsets[size_t(c) + 1] = offsets[size_t(c)] + bytesOf(types[size_t(c)]);
+  const size_t pixelBytes = offsets.back();
   const size_t rowBytes = pixelBytes * size_t(width);
   constexpr size_t kBandBytes = size_t(8) << 20;
   constexpr int kBlockRows = 32;
@@ -535,7 +548,7 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
     parallelFor(0, rows, [&](int64_t r) {
       unsigned char* dst = band.data() + size_t(r) * rowBytes;
       const int y = r0 + int(r);
-      if (sources.images.size() == 1 && sources.constants.empty()) {
+      if (uniform && sources.images.size() == 1 && sources.constants.empty()) {
         // One image: its rows are already laid out as the file's pixels.
         const float* row = sources.images.front()->row(y).data();
         const size_t values = size_t(width) * size_t(channels);
@@ -546,35 +559,40 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         }
         return;
       }
-      // Several: each image's row converted, then its channels put in place pixel by pixel.
-      std::vector<unsigned char> converted;
-      size_t offset = 0;  // of the image's first channel in a pixel, in bytes
+      // Otherwise each image's row is converted to halves, and each channel is put in place from
+      // the halves or the floats, as its type says.
+      std::vector<uint16_t> halves;
+      int first = 0;  // the image's first channel
       for (const Image* image : sources.images) {
         const float* row = image->row(y).data();
-        const size_t values = size_t(width) * size_t(image->channels);
-        const size_t bytes = size_t(image->channels) * valueBytes;
-        converted.resize(values * valueBytes);
-        if (type == Imf::HALF) {
-          detail::toHalf(row, reinterpret_cast<uint16_t*>(converted.data()), values);
-        } else {
-          std::memcpy(converted.data(), row, values * sizeof(float));
+        const int n = image->channels;
+        const size_t values = size_t(width) * size_t(n);
+        halves.resize(values);
+        detail::toHalf(row, halves.data(), values);
+        for (int x = 0; x < width; ++x) {
+          unsigned char* pixel = dst + size_t(x) * pixelBytes;
+          for (int k = 0; k < n; ++k) {
+            const size_t at = size_t(x) * size_t(n) + size_t(k);
+            const size_t c = size_t(first + k);
+            if (types[c] == Imf::HALF)
+              std::memcpy(pixel + offsets[c], &halves[at], sizeof(uint16_t));
+            else
+              std::memcpy(pixel + offsets[c], &row[at], sizeof(float));
+          }
         }
-        for (int x = 0; x < width; ++x)
-          std::memcpy(dst + size_t(x) * pixelBytes + offset, converted.data() + size_t(x) * bytes,
-                      bytes);
-        offset += bytes;
+        first += n;
       }
       for (const float v : sources.constants) {
+        const size_t c = size_t(first++);
         unsigned char value[sizeof(float)];
-        if (type == Imf::HALF) {
+        if (types[c] == Imf::HALF) {
           const uint16_t h = Imath::half(v).bits();
           std::memcpy(value, &h, sizeof h);
         } else {
           std::memcpy(value, &v, sizeof v);
         }
         for (int x = 0; x < width; ++x)
-          std::memcpy(dst + size_t(x) * pixelBytes + offset, value, valueBytes);
-        offset += valueBytes;
+          std::memcpy(dst + size_t(x) * pixelBytes + offsets[c], value, bytesOf(types[c]));
       }
     });
     Imf::FrameBuffer frame;
@@ -582,7 +600,7 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
     // pointer is placed so that OpenEXR's absolute coordinates land in it.
     const Imath::Box2i bandWindow({x0, y0 + r0}, {x0 + width - 1, y0 + r0 + rows - 1});
     for (size_t c = 0; c < names.size(); ++c) {
-      frame.insert(names[c], Imf::Slice::Make(type, band.data() + c * valueBytes, bandWindow,
+      frame.insert(names[c], Imf::Slice::Make(types[c], band.data() + offsets[c], bandWindow,
                                               pixelBytes, rowBytes));
     }
     setFrame(frame, r0);
@@ -600,6 +618,7 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
   std::vector<detail::ChannelSources> sources(parts.size());
   std::vector<std::vector<std::string>> names(parts.size());
   std::vector<Imf::PixelType> types(parts.size());
+  std::vector<std::vector<Imf::PixelType>> channelTypes(parts.size());
   std::vector<Imf::Header> headers;
   for (size_t i = 0; i < parts.size(); ++i) {
     const ExrPart& part = parts[i];
@@ -640,16 +659,21 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
         reports[i].promotedToFloat = true;
       }
     }
+    channelTypes[i].assign(n.size(), types[i]);
+    for (size_t c = 0; c < n.size(); ++c)
+      if (std::find(part.floatChannels.begin(), part.floatChannels.end(), n[c]) !=
+          part.floatChannels.end())
+        channelTypes[i][c] = Imf::FLOAT;
   }
   errno = 0;
   try {
     for (size_t i = 0; i < parts.size(); ++i)
-      headers.push_back(
-          headerOf(parts[i], sources[i], names[i], types[i], shared, parts.size() > 1, shown));
+      headers.push_back(headerOf(parts[i], sources[i], names[i], channelTypes[i], shared,
+                                 parts.size() > 1, shown));
     if (parts.size() == 1) {
       Imf::OutputFile out(file.c_str(), headers[0], Imf::globalThreadCount());
       writeBands(
-          sources[0], names[0], types[0], parts[0].x, parts[0].y,
+          sources[0], names[0], channelTypes[0], parts[0].x, parts[0].y,
           [&](const Imf::FrameBuffer& frame, int) { out.setFrameBuffer(frame); },
           [&](int, int rows) { out.writePixels(rows); });
     } else {
@@ -658,7 +682,7 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
       for (size_t i = 0; i < parts.size(); ++i) {
         Imf::OutputPart part(out, int(i));
         writeBands(
-            sources[i], names[i], types[i], parts[i].x, parts[i].y,
+            sources[i], names[i], channelTypes[i], parts[i].x, parts[i].y,
             [&](const Imf::FrameBuffer& frame, int) { part.setFrameBuffer(frame); },
             [&](int, int rows) { part.writePixels(rows); });
       }

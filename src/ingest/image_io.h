@@ -274,6 +274,9 @@ struct ExrPart {
   std::vector<std::pair<std::string, float>> constantChannels;
   std::vector<std::string> channelNames;
   std::string colorSpace;  // the part's colour space attribute; empty: `image`'s
+  // Channels written as 32-bit float whatever options.depth says: positions and depths, which
+  // half's 11 bits of precision would misplace (a point 10 m away by a centimetre).
+  std::vector<std::string> floatChannels;
 };
 
 // Attributes written on every part of an OpenEXR file: 4x4 matrices (OpenEXR's m44f, stored as

@@ -850,8 +850,16 @@ TEST_F(ComposeOutputs, AFloatPlateGivesAFloatExr) {
     std::vector<std::string> types;
     auto in = OIIO::ImageInput::open(exr.string());
     if (!in) return types;
-    for (int part = 0; in->seek_subimage(part, 0); ++part)
-      types.push_back(in->spec().format.c_str());
+    // The colour's samples (the object part's positions and depth are float whatever they are).
+    for (int part = 0; in->seek_subimage(part, 0); ++part) {
+      const OIIO::ImageSpec& spec = in->spec();
+      const int colour = std::max(spec.channelindex("R"), spec.channelindex("object.R"));
+      types.push_back(spec.channelformat(colour).c_str());
+      if (part == 1) {
+        EXPECT_EQ(spec.channelformat(spec.channelindex("P.X")), OIIO::TypeDesc::FLOAT);
+        EXPECT_EQ(spec.channelformat(spec.channelindex("depth.Z")), OIIO::TypeDesc::FLOAT);
+      }
+    }
     return types;
   };
   const std::string floatPlate = " --plate-space lin_rec709";

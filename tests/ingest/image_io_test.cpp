@@ -5,6 +5,7 @@
 #include <limits>
 #include <random>
 
+#include <Imath/half.h>
 #include <OpenImageIO/imageio.h>
 
 #include "core/output_files.h"
@@ -494,6 +495,48 @@ TEST(ImageIo, MultiPartExrReadsBackExactlyAsWritten) {
   ASSERT_GE(alpha, 0);
   for (size_t i = 0; i < size_t(fullW) * fullH; ++i)
     ASSERT_EQ(parts[0].pixels[i * 4 + size_t(alpha)], 1.0f);
+}
+
+// Channels named as float in a half part (positions, depth) are written as 32-bit float, the
+// rest as half: a point 10.0001 units away keeps its last digit, the colour its half rounding.
+TEST(ImageIo, FloatChannelsInAHalfPartKeepTheirPrecision) {
+  TempDir dir;
+  Image beauty(5, 3, 2, {"R", "G"});
+  Image aovs(5, 3, 2, {"P.X", "N.X"});
+  for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+    beauty.pixels[2 * i] = 0.1f + 0.01f * float(i);
+    beauty.pixels[2 * i + 1] = 0.3f;
+    aovs.pixels[2 * i] = 10.0001f + float(i);
+    aovs.pixels[2 * i + 1] = 0.7f;
+  }
+  ExrPart part{"object", &beauty, 2, 1, 9, 6, {}};
+  part.options.depth = WriteOptions::Depth::Half;
+  part.moreImages = {&aovs};
+  part.floatChannels = {"P.X"};
+  {
+    OutputFiles outputs("output");
+    writeExrParts(outputs, dir / "mixed.exr", {part});
+    outputs.commit();
+  }
+  auto in = OIIO::ImageInput::open((dir / "mixed.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec spec = in->spec();
+  ASSERT_EQ(spec.nchannels, 4);
+  std::vector<float> pixels(size_t(spec.image_pixels()) * 4);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 4, OIIO::TypeDesc::FLOAT, pixels.data()));
+  for (int c = 0; c < 4; ++c) {
+    const std::string& name = spec.channelnames[size_t(c)];
+    const OIIO::TypeDesc type = spec.channelformat(c);
+    EXPECT_EQ(type, name == "P.X" ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF) << name;
+    for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+      const float got = pixels[4 * i + size_t(c)];
+      const float want = name == "R"     ? beauty.pixels[2 * i]
+                         : name == "G"   ? beauty.pixels[2 * i + 1]
+                         : name == "P.X" ? aovs.pixels[2 * i]
+                                         : aovs.pixels[2 * i + 1];
+      EXPECT_EQ(got, name == "P.X" ? want : float(Imath::half(want))) << name << " " << i;
+    }
+  }
 }
 
 // A multi-part OpenEXR whose first part is not the picture (a depth pass first, as a renderer may
