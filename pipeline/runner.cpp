@@ -1,5 +1,9 @@
 // The runner: plans a job over the registered stages (stage.h) and runs what it must.
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <exception>
 #include <fstream>
 #include <future>
@@ -200,12 +204,26 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
   validate(job);
   Context ctx(job, colors, {});
   Planned p = planJob(ctx, false, request);
+  // A cache folder the run could not write (read-only): it would say so, and cache nothing.
+  std::string unwritable;
+  if (!job.cache.empty()) {
+    fs::path folder = job.cache / "stages";
+    std::error_code ec;
+    while (!folder.empty() && !fs::exists(folder, ec) && folder.has_parent_path() &&
+           folder.parent_path() != folder)
+      folder = folder.parent_path();
+    if (!folder.empty() && ::access(folder.c_str(), W_OK | X_OK) != 0)
+      unwritable = "; not cached: the cache folder " + (job.cache / "stages").string() +
+                   " cannot be written (" + std::strerror(errno) + ")";
+  }
   for (size_t i = 0; i < p.records.size(); ++i) {
     StageRecord& r = p.records[i];
     r.seconds = 0.0;
     if (r.state == StageState::Run) {
       r.reason = stages()[i]->summary();
-      if (p.entries[i]) {
+      if (p.entries[i] && !unwritable.empty()) {
+        r.reason += unwritable;
+      } else if (p.entries[i]) {
         if (!p.problems[i].empty())
           r.reason += "; its cache entry " + p.entries[i]->path().string() + " " + p.problems[i] +
                       ": computed again and rewritten";

@@ -2,6 +2,7 @@
 // option groups it shares with the stage commands (compose_options.h).
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 
 #include "app/cli.h"
 #include "app/compose_options.h"
@@ -230,6 +231,23 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
   const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
   validateJob(o.job, colors);
   if (o.explain) {
+    // The checks the run makes on its outputs before any stage, so that the plan is not one that
+    // fails at once.
+    const pipeline::ComposeJob& j = o.job;
+    for (const std::filesystem::path& out :
+         {pipeline::exrPathFor(j), pipeline::displayPathFor(j)}) {
+      OutputFiles::check(out, "output");
+      for (const std::filesystem::path& in :
+           {j.plate, j.object, j.environment, j.holdout, j.lensFile, j.poseFile}) {
+        std::error_code ec;
+        if (!in.empty() && std::filesystem::exists(out, ec) &&
+            std::filesystem::equivalent(out, in, ec))
+          throw Error(
+              "output",
+              "the output would replace an input (" + in.string() + "): choose another output path",
+              out);
+      }
+    }
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),
                   s.reason.c_str());

@@ -36,21 +36,32 @@ std::vector<ingest::ImageAttribute> exrAttributes(const hdr::CaptureMergeResult&
   for (const auto& f : view.files) files += (files.empty() ? "" : ";") + f.filename().string();
   a.push_back({"compose:relativeExposures", exposures});
   a.push_back({"compose:sourceFiles", files});
+  // The exposures the radiance is divided by: EXIF's t·ISO/N², or the numbers given for them
+  // (--exposures, a capture description's), whatever their unit.
+  const ingest::View* source = nullptr;
+  for (const ingest::View& v : capture.views)
+    if (v.name == view.name) source = &v;
+  bool fromExif = source != nullptr;
+  if (source) {
+    for (const ingest::Shot& s : source->shots) {
+      const std::optional<double> own = s.info.relativeExposure();
+      if (!s.exposure || !own || std::abs(*s.exposure / *own - 1.0) > 1e-6) fromExif = false;
+    }
+  }
+  const std::string per = fromExif ? "linear value / (t * ISO / N^2)"
+                                   : "linear value / (the relative exposure given for each photo)";
   a.push_back(
       {"compose:radianceUnit",
        !result.response.empty()  // 8-bit photos were linearised by a curve
-           ? std::string("linear value / (t * ISO / N^2), 8-bit photos' linear values scaled so "
-                         "that code 118 (middle grey) decodes as the sRGB curve decodes it")
-           : std::string("linear value / (t * ISO / N^2), in the photos' own linear unit")});
+           ? per + ", 8-bit photos' linear values scaled so that code 118 (middle grey) decodes as "
+                   "the sRGB curve decodes it"
+           : per + ", in the photos' own linear unit"});
   a.push_back({"compose:linearisation", result.linearisation});
   if (!result.response.empty())
     a.push_back({"compose:response", result.response.method + ": " + result.response.source});
   a.push_back({"compose:clippedPixels", int(view.stats.saturated + view.stats.dark)});
   // The radiance is in the camera's EXIF exposure unit when every photo of the view is 8-bit
   // and merged at its own EXIF exposure (not --exposures, not a description's numbers).
-  const ingest::View* source = nullptr;
-  for (const ingest::View& v : capture.views)
-    if (v.name == view.name) source = &v;
   bool exifUnit = source && !result.response.empty();
   if (source) {
     for (const ingest::Shot& s : source->shots)  // every photo names the camera of the unit

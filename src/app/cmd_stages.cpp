@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <istream>
+#include <string>
 
 #include "app/cli.h"
 #include "app/compose_options.h"
@@ -169,6 +171,15 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
             "the output would replace an input (" + env.string() + "): choose another output path",
             *out);
     }
+    // An older lighting file may be replaced, nothing else (a scene file, a mesh).
+    requireReplaceable(
+        *out, "compose lighting file",
+        [](std::istream& in) {
+          char magic[7] = {};
+          return bool(in.read(magic, sizeof magic)) &&
+                 std::string(magic, sizeof magic) == "COMPSTG";
+        },
+        "precompute");
     pipeline::RunRequest request;
     request.targets = {pipeline::artefact::kLighting};
     if (o->job.shadows || o->job.groundShadow)
@@ -286,6 +297,18 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     o->job.threads = threads;
     const pipeline::ComposeJob fromScene = o->job;
     for (const std::string& s : *sets) pipeline::setParameter(o->job, s);
+    // A whole job needs a plate and an object: the scene file's fault when neither it nor a --set
+    // gives one.
+    if (o->job.plate.empty())
+      throw Error(
+          "scene",
+          "the scene gives no plate: set ingest.plate (a path from the scene file's folder)",
+          *scene);
+    if (o->job.object.empty())
+      throw Error(
+          "scene",
+          "the scene gives no object: set ingest.object (a path from the scene file's folder)",
+          *scene);
     // A value out of range is the scene file's fault when the scene alone has it (exit 1, naming
     // the file), the command line's when a --set brought it (exit 2).
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();

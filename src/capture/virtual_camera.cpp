@@ -346,7 +346,8 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   const auto directions = viewDirections(p.views);
   const bool shaken = p.shakePixels > 0.0 || p.shakeRollDegrees > 0.0;
-  const int renders = int(directions.size()) * (shaken ? p.brackets + 1 : 1);
+  // Steps: every image rendered, and every shot's noise and quantisation.
+  const int renders = int(directions.size()) * ((shaken ? p.brackets + 1 : 1) + p.brackets);
   int rendered = 0;
   auto step = [&] { report(progress, kStage, double(++rendered) / renders); };
   report(progress, kStage, 0.0);
@@ -455,6 +456,7 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
           }
         }
       });
+      step();
 
       ingest::CaptureInfo& exif = s.exif;
       exif.exposureTime = s.exposureTime;

@@ -324,8 +324,8 @@ namespace {
 std::string layoutAdvice(const ReadOptions& options, const fs::path& path,
                          const std::string& choices) {
   if (!options.adviseConvert) return "say which with --layout (" + choices + ")";
-  return "convert it first, saying which: compose convert " + path.filename().string() +
-         " --layout " + choices + " --to latlong --out ENV.exr";
+  return "convert it first, saying which: compose convert " + path.string() + " --layout " +
+         choices + " --to latlong --out ENV.exr";
 }
 
 }  // namespace

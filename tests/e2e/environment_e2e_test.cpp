@@ -589,7 +589,9 @@ TEST_F(BadEnvironmentInput, CrossOfTheWrongAspect) {
   // The one-shot command has no --layout: its message says how to convert the file instead.
   expectRefused("--plate " + q(dir_ / "odd.exr") + " --object " + q(sample("bunny.obj")) +
                     " --env " + q(dir_ / "odd.exr") + " --out " + q(dir_ / "out"),
-                1, "convert it first, saying which: compose convert odd.exr --layout LAYOUT",
+                1,
+                "convert it first, saying which: compose convert " + (dir_ / "odd.exr").string() +
+                    " --layout LAYOUT",
                 "odd.exr");
   expectRefused("convert " + q(dir_ / "odd.exr") + " --to cube --out " + q(dir_ / "x.exr"), 1,
                 "or 3:4 (vertical cross); say which with --layout (LAYOUT)", "odd.exr");

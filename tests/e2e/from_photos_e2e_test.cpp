@@ -1052,6 +1052,21 @@ TEST_F(FromPhotos, ExposureFromExifWhenThePlateIsFromTheCapturesCamera) {
           dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_EQ(ingest::readCaptureInfo(dir_ / "given.exr").exposureUnit, "");
+  // And the unit attribute names what the radiance was divided by: the numbers given, not EXIF's.
+  auto unitOf = [](const fs::path& file) {
+    auto in = OIIO::ImageInput::open(file.string());
+    return in ? std::string(in->spec().get_string_attribute("compose:radianceUnit"))
+              : std::string();
+  };
+  EXPECT_NE(unitOf(dir_ / "given.exr").find("the relative exposure given for each photo"),
+            std::string::npos)
+      << unitOf(dir_ / "given.exr");
+  r = run("merge --out " + q(dir_ / "exif.exr") + " " + q(shots / "pz_1.jpg") + " " +
+              q(shots / "pz_2.jpg") + " " + q(shots / "pz_3.jpg"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(unitOf(dir_ / "exif.exr").find("(t * ISO / N^2)"), std::string::npos)
+      << unitOf(dir_ / "exif.exr");
 
   // A plate from another camera (the small tabletop plate: no EXIF): the automatic match, and
   // the reason EXIF was not used.

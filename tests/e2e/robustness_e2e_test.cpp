@@ -161,6 +161,58 @@ TEST_F(Robustness, AStageCommandRefusesAnOutputThatCannotBeAFileBeforeWorking) {
   EXPECT_TRUE(fs::is_directory(dir / "folder.exr") && fs::is_empty(dir / "folder.exr", ec));
 }
 
+// --explain makes the run's own checks on its outputs before saying what would run: a plan that
+// the run would refuse at once (its EXR over the environment, its output a folder) is that error,
+// not a plan. A scene without a plate is the scene's error (exit 1, naming it), and precompute
+// does not replace a file that is not a lighting file.
+TEST_F(Robustness, ExplainScenesAndLightingFilesRefuseWhatTheRunWould) {
+  const fs::path envCopy = dir / "env_copy.exr";
+  fs::copy_file(dir / "env.exr", envCopy);
+  const std::string over = kCompose + " --plate " + quote((dir / "plate.jpg").string()) +
+                           " --object " + quote((dir / "two.obj").string()) + " --env " +
+                           quote(envCopy.string()) + " --out " +
+                           quote((dir / "env_copy").string()) + " --explain";
+  const RunResult a = runShell(over, dir.path(), "explain_over");
+  EXPECT_EQ(a.status, 1) << a.out << a.err;
+  EXPECT_NE(a.err.find("the output would replace an input"), std::string::npos) << a.err;
+  EXPECT_EQ(a.out.find("render"), std::string::npos) << "no plan printed: " << a.out;
+  fs::create_directories(dir / "folder.exr");
+  const RunResult b = run("folder", "--explain");
+  EXPECT_EQ(b.status, 1) << b.out << b.err;
+  EXPECT_NE(b.err.find("output path is an existing folder"), std::string::npos) << b.err;
+  const RunResult fine = run("fine", "--explain");
+  EXPECT_EQ(fine.status, 0) << fine.err;
+  EXPECT_NE(fine.out.find("render"), std::string::npos) << fine.out;
+
+  compose::testing::writeText(dir / "noplate.json",
+                              "{\"compose\": \"scene\", \"version\": 1, \"stages\": {\"ingest\": "
+                              "{\"object\": \"two.obj\"}}}\n");
+  const RunResult c =
+      runShell(kCompose + " run " + quote((dir / "noplate.json").string()) + " --explain",
+               dir.path(), "noplate");
+  EXPECT_EQ(c.status, 1) << c.err;
+  EXPECT_NE(c.err.find("scene: the scene gives no plate: set ingest.plate"), std::string::npos)
+      << c.err;
+  EXPECT_NE(c.err.find("noplate.json"), std::string::npos) << c.err;
+
+  const std::string sceneText = slurp(dir / "noplate.json");
+  const RunResult d = runShell(kCompose + " precompute --env " + quote((dir / "env.exr").string()) +
+                                   " --cache " + quote((dir / "cache").string()) + " --out " +
+                                   quote((dir / "noplate.json").string()),
+                               dir.path(), "precompute_over_scene");
+  EXPECT_EQ(d.status, 1) << d.err;
+  EXPECT_NE(d.err.find("is not a compose lighting file and would be replaced"), std::string::npos)
+      << d.err;
+  EXPECT_EQ(slurp(dir / "noplate.json"), sceneText) << "the scene file is untouched";
+  // An older lighting file is replaced.
+  const std::string lighting = " --out " + quote((dir / "a.lighting").string());
+  const std::string precompute = kCompose + " precompute --env " +
+                                 quote((dir / "env.exr").string()) + " --cache " +
+                                 quote((dir / "cache").string());
+  EXPECT_EQ(runShell(precompute + lighting, dir.path(), "lighting1").status, 0);
+  EXPECT_EQ(runShell(precompute + " --env-yaw 30" + lighting, dir.path(), "lighting2").status, 0);
+}
+
 TEST_F(Robustness, LimitsRefuseWithTheirOptionNamed) {
   const RunResult pixels = run("p", "--max-pixels 1000");
   EXPECT_EQ(pixels.status, 1) << pixels.err;
