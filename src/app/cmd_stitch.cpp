@@ -26,6 +26,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A level view named by its turn, as compose capture-sim names a ring of views: "yaw120" (or
+// yaw120_2, yaw120.exr) is 120° from -Z towards -X, as @120,0 says it.
+std::optional<double> yawFromPhotoName(const fs::path& file) {
+  const std::string stem = file.stem().string();
+  if (stem.size() < 4 || stem.compare(0, 3, "yaw") != 0) return std::nullopt;
+  size_t end = 3;
+  while (end < stem.size() && end < 6 && std::isdigit(static_cast<unsigned char>(stem[end]))) ++end;
+  if (end == 3 || (end < stem.size() && std::isalnum(static_cast<unsigned char>(stem[end]))))
+    return std::nullopt;
+  const int degrees = std::stoi(stem.substr(3, end - 3));
+  if (degrees >= 360) return std::nullopt;
+  return double(degrees);
+}
+
 struct StitchCommandOptions {
   std::vector<std::string> photos;
   std::string out, calib, to = "cube", photoSpace, outSpace, depth = "auto", faceNames = "pxnx",
@@ -205,6 +219,9 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       } else if (const auto token = cubemap::faceFromPhotoName(args[i].file)) {
         rough[i] = cubemap::faceCameraRotation(token->face);
         noneNamed = false;
+      } else if (const std::optional<double> yaw = yawFromPhotoName(args[i].file)) {
+        rough[i] = cubemap::cameraRotation(*yaw, 0.0, 0.0);
+        noneNamed = false;
       } else {
         allNamed = false;
       }
@@ -215,10 +232,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         notes.push_back("no directions in the photo names: taken in the order +X -X +Y -Y +Z -Z");
       } else {
         for (const auto& a : args) {
-          if (!a.angles && !cubemap::faceFromPhotoName(a.file))
+          if (!a.angles && !cubemap::faceFromPhotoName(a.file) && !yawFromPhotoName(a.file))
             throw UsageError("cannot tell where " + a.file.string() +
-                             " points: name it for a cube face (_px, _nx, ...) or add "
-                             "@YAW,PITCH[,ROLL]");
+                             " points: name it for a cube face (_px, _nx, ...) or a level turn "
+                             "(yaw120), or add @YAW,PITCH[,ROLL]");
         }
       }
     }

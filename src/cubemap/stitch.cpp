@@ -96,6 +96,13 @@ cv::Mat distanceToNoPicture(const Image& img) {
     uint8_t* m = black.ptr<uint8_t>(int(y));
     for (int x = 0; x < w; ++x, p += c) m[x] = (p[0] <= 0.0f && p[1] <= 0.0f && p[2] <= 0.0f);
   });
+  // Most photos have no black pixel on their border: nothing to label.
+  bool onBorder = false;
+  for (int x = 0; x < w && !onBorder; ++x)
+    onBorder = black.at<uint8_t>(0, x) || black.at<uint8_t>(h - 1, x);
+  for (int y = 0; y < h && !onBorder; ++y)
+    onBorder = black.at<uint8_t>(y, 0) || black.at<uint8_t>(y, w - 1);
+  if (!onBorder) return {};
   cv::Mat labels;
   const int count = cv::connectedComponents(black, labels, 8, CV_32S);
   std::vector<uint8_t> outer(size_t(count), 0);

@@ -261,6 +261,51 @@ TEST(StitchCommand, SixNamedPhotosToACube) {
   EXPECT_FALSE(fs::exists(dir / "twice.exr"));
 }
 
+// A ring of level views named as compose capture-sim names them (yaw000, yaw120_2, ...): the name
+// says where each points, as @120,0 would; the stitched map matches the scene.
+TEST(StitchCommand, ARingOfViewsNamedByTheirTurn) {
+  if (!fs::exists(sample("courtyard.exr"))) GTEST_SKIP() << "samples missing";
+  TempDir dir;
+  const Environment env =
+      Environment::fromLatLong(ingest::readImage(sample("courtyard.exr")).image);
+  const lighting::FilteredCube scene(lighting::cubeFromLatLong(env, 128));
+  const CubeMap truth = lighting::cubeFromLatLong(env, 64);
+  const calib::Lens lens =
+      calib::Lens::fromFieldOfView(256, 256, 200.0, calib::Projection::Equidistant);
+  std::string photos;
+  for (int k = 0; k < 3; ++k) {
+    const int yaw = 120 * k;
+    char name[32];
+    std::snprintf(name, sizeof name, k == 1 ? "yaw%03d_2.exr" : "yaw%03d.exr", yaw);
+    ingest::WriteOptions w;
+    w.depth = ingest::WriteOptions::Depth::Float;
+    ingest::writeImage(dir / name,
+                       cubemap::renderView(scene, lens, cubemap::cameraRotation(yaw, 0, 0), 2), w);
+    photos += " " + q(dir / name);
+  }
+  const RunResult r =
+      run("stitch --fov 200 --fisheye --no-refine --size 64 --out " + q(dir / "ring.exr") + photos,
+          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const CubeMap stitched = cubemap::cubeMapOf(cubemap::readEnvironmentFile({dir / "ring.exr"}));
+  std::vector<double> rel;
+  for (int f = 0; f < kCubeFaces; ++f)
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        const glm::vec3 a = truth.radiance(f, x, y), b = stitched.radiance(f, x, y);
+        rel.push_back(double(glm::length(a - b) / std::max(glm::length(a), 1e-6f)));
+      }
+  std::nth_element(rel.begin(), rel.begin() + ptrdiff_t(rel.size() / 2), rel.end());
+  EXPECT_LT(rel[rel.size() / 2], 0.05);
+  // A name that says nothing of its direction is still refused.
+  fs::copy_file(dir / "yaw000.exr", dir / "yawning.exr");
+  const RunResult bad = run("stitch --fov 200 --fisheye --out " + q(dir / "bad.exr") + " " +
+                                q(dir / "yawning.exr") + " " + q(dir / "yaw120_2.exr"),
+                            dir);
+  EXPECT_EQ(bad.status, 2) << bad.err;
+  EXPECT_NE(bad.err.find("cannot tell where"), std::string::npos) << bad.err;
+}
+
 // A float photo holding NaN is an error naming it and the pixel, and nothing is written (the NaN
 // used to spread into thousands of texels of the stitched map).
 TEST(StitchCommand, ANonFinitePhotoIsANamedError) {
