@@ -309,6 +309,29 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
           "scene",
           "the scene gives no object: set ingest.object (a path from the scene file's folder)",
           *scene);
+    // An input the scene names that is not there is said with its key, before anything runs:
+    // paths in a scene are read from the scene file's folder (the folder of the name given, a
+    // link's own folder for a link).
+    const std::pair<const char*, fs::path pipeline::ComposeJob::*> inputs[] = {
+        {"ingest.plate", &pipeline::ComposeJob::plate},
+        {"ingest.object", &pipeline::ComposeJob::object},
+        {"ingest.environment", &pipeline::ComposeJob::environment},
+        {"render.calib", &pipeline::ComposeJob::lensFile},
+        {"render.pose", &pipeline::ComposeJob::poseFile},
+        {"composite.holdout", &pipeline::ComposeJob::holdout}};
+    for (const auto& [key, member] : inputs) {
+      const fs::path& path = o->job.*member;
+      std::error_code ec;
+      if (path.empty() || path.string().find('%') != std::string::npos || fs::exists(path, ec))
+        continue;
+      if (path != fromScene.*member)
+        throw UsageError(std::string(key) +
+                         " (given with --set) names a file that is not there: " + path.string());
+      throw Error("scene",
+                  std::string(key) + " names a file that is not there: " + path.string() +
+                      " (a path in a scene is read from the scene file's folder)",
+                  *scene);
+    }
     // A value out of range is the scene file's fault when the scene alone has it (exit 1, naming
     // the file), the command line's when a --set brought it (exit 2).
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();

@@ -194,6 +194,19 @@ TEST_F(Robustness, ExplainScenesAndLightingFilesRefuseWhatTheRunWould) {
   EXPECT_NE(c.err.find("scene: the scene gives no plate: set ingest.plate"), std::string::npos)
       << c.err;
   EXPECT_NE(c.err.find("noplate.json"), std::string::npos) << c.err;
+  // A path the scene names that is not there: its key, and where scene paths are read from.
+  compose::testing::writeText(dir / "missing.json",
+                              "{\"compose\": \"scene\", \"version\": 1, \"stages\": {\"ingest\": "
+                              "{\"plate\": \"plate.jpg\", \"object\": \"two.obj\", "
+                              "\"environment\": \"elsewhere/env.exr\"}}}\n");
+  const RunResult m =
+      runShell(kCompose + " run " + quote((dir / "missing.json").string()) + " --explain",
+               dir.path(), "missing");
+  EXPECT_EQ(m.status, 1) << m.err;
+  EXPECT_NE(m.err.find("scene: ingest.environment names a file that is not there: "),
+            std::string::npos)
+      << m.err;
+  EXPECT_NE(m.err.find("read from the scene file's folder"), std::string::npos) << m.err;
 
   const std::string sceneText = slurp(dir / "noplate.json");
   const RunResult d = runShell(kCompose + " precompute --env " + quote((dir / "env.exr").string()) +
