@@ -170,6 +170,25 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
         for (cv::Point2f& c : corners) c = toSensor(c, photos[i].orientation);
       out.used.push_back(photos[i].file);
       imagePoints.push_back(std::move(corners));
+      // A board with a row or a column more also holds the one asked for: OpenCV finds part of
+      // it, and the calibration is plausible but not what the photos show. Checked once.
+      if (out.used.size() == 1) {
+        for (const cv::Size larger :
+             {cv::Size(board.columns + 1, board.rows), cv::Size(board.columns, board.rows + 1)}) {
+          std::vector<cv::Point2f> more;
+          if (cv::findChessboardCorners(grey8(*photos[i].image), larger, more,
+                                        cv::CALIB_CB_ADAPTIVE_THRESH |
+                                            cv::CALIB_CB_NORMALIZE_IMAGE |
+                                            cv::CALIB_CB_FAST_CHECK)) {
+            out.notes.push_back(
+                photos[i].file.filename().string() + " shows a board of " +
+                std::to_string(larger.width) + "x" + std::to_string(larger.height) +
+                " inner corners, more than --board " + board.name() +
+                " says: the calibration used part of it; count the inner corners again");
+            break;
+          }
+        }
+      }
     }
   }
   if (int(out.used.size()) < params.minPhotos) {

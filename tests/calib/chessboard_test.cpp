@@ -133,6 +133,23 @@ TEST(Chessboard, PortraitAndUpsideDownPhotosCalibrateTheSameLens) {
   }
 }
 
+// A board size a column short of the photos' board is found as part of it (OpenCV finds 8x6 on
+// the 9x6 board, not 9x5): the calibration runs, with a note that the photos show a larger board;
+// the right size has no note.
+TEST(Chessboard, ABoardSizeThatIsPartOfThePhotosBoardIsNoted) {
+  std::vector<std::filesystem::path> files;
+  const auto images = loadLeftPhotos(files);
+  ASSERT_GE(files.size(), 4u) << "sample chessboard photos missing (samples/fetch.sh)";
+  auto noted = [](const LensCalibration& cal) {
+    for (const std::string& n : cal.notes)
+      if (n.find("shows a board of 9x6 inner corners, more than --board") != std::string::npos)
+        return true;
+    return false;
+  };
+  EXPECT_TRUE(noted(calibrateLens(photosOf(files, images), Board::parse("8x6"), {})));
+  EXPECT_FALSE(noted(calibrateLens(photosOf(files, images), Board::parse("9x6"), {})));
+}
+
 TEST(Chessboard, WrongBoardSizeNamesTheBoardAndThePhotos) {
   std::vector<std::filesystem::path> files;
   const auto images = loadLeftPhotos(files);
