@@ -30,7 +30,6 @@ inline void hashVector(Hash128& hash, const glm::dvec3& v) {
 // channels (alpha, other layers) are dropped.
 Image toRgb(const Image& in);
 
-
 inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
