@@ -318,9 +318,13 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
                         std::log2(e / view.exposures.front()));
           stops += text;
         }
-        std::fprintf(stderr, "compose: %-8s %zu photo%s (EV %s), %lld clipped pixels\n",
+        std::string outside;
+        if (view.stats.outside > 0)
+          outside = " (" + std::to_string(view.stats.outside) + " beyond the picture)";
+        std::fprintf(stderr, "compose: %-8s %zu photo%s (EV %s), %lld clipped pixels%s\n",
                      view.name.c_str(), view.files.size(), view.files.size() == 1 ? "" : "s",
-                     stops.c_str(), static_cast<long long>(view.stats.saturated + view.stats.dark));
+                     stops.c_str(), static_cast<long long>(view.stats.saturated + view.stats.dark),
+                     outside.c_str());
       }
       std::fprintf(stderr, "compose: merged in %.2f s (%.2f s inside OpenCV)\n", result.seconds,
                    result.openCvSeconds);

@@ -44,6 +44,30 @@ std::string percent(int64_t count, size_t total) {
   return text;
 }
 
+// How many of the set pixels of `mask` (8-bit, 0 or 1) are joined to the image's border through
+// set pixels (8-connected): black beyond a fisheye's image circle rather than a dark scene.
+int64_t blackJoinedToTheEdge(const cv::Mat& mask) {
+  const int w = mask.cols, h = mask.rows;
+  cv::Mat labels;
+  const int count = cv::connectedComponents(mask, labels, 8, CV_32S);
+  std::vector<uint8_t> outer(size_t(count), 0);
+  for (int x = 0; x < w; ++x) {
+    outer[size_t(labels.at<int>(0, x))] = 1;
+    outer[size_t(labels.at<int>(h - 1, x))] = 1;
+  }
+  for (int y = 0; y < h; ++y) {
+    outer[size_t(labels.at<int>(y, 0))] = 1;
+    outer[size_t(labels.at<int>(y, w - 1))] = 1;
+  }
+  outer[0] = 0;  // the background: pixels not set
+  int64_t joined = 0;
+  for (int y = 0; y < h; ++y) {
+    const int* l = labels.ptr<int>(y);
+    for (int x = 0; x < w; ++x) joined += outer[size_t(l[x])];
+  }
+  return joined;
+}
+
 // One shot as the per-pixel passes see it: its values through a shift (x, y) and how they map to
 // codes, clipping and linear light.
 struct ShotView {
@@ -252,6 +276,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   for (size_t i = 0; i < n; ++i) logExposure[i] = float(std::log(input.exposures[i]));
   std::vector<int64_t> saturatedRows(size_t(height), 0), darkRows(size_t(height), 0),
       ghostRows(size_t(height), 0);
+  cv::Mat darkMask = cv::Mat::zeros(height, width, CV_8U);  // black in every shot
   // Linear value of channel c of shot i at a pixel: through the curve for 8-bit codes.
   auto linearOf = [&](const ShotView& shot, int x, int y, int c) -> float {
     return input.eightBit ? curve->inverse[size_t(c)][shot.codeAt(x, y)[c]]
@@ -328,6 +353,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           o[c] = float(linearOf(shots[pick], x, y, c) / shots[pick].exposure);
         o[3] = 1.0f;
         (allOver ? saturatedRows : darkRows)[size_t(y)]++;
+        if (!allOver) darkMask.at<uint8_t>(y, x) = 1;
         continue;
       }
       o[3] = 0.0f;
@@ -436,9 +462,20 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
                            "(channel 'clipped' = 1); add a shorter exposure to recover them");
   }
   if (result.dark > 0) {
-    result.notes.push_back(std::to_string(result.dark) + " pixels (" + percent(result.dark, total) +
-                           ") are black in every photo: their radiance is an upper bound "
-                           "(channel 'clipped' = 1)");
+    result.outside = blackJoinedToTheEdge(darkMask);
+    const int64_t inside = result.dark - result.outside;
+    if (inside > 0) {
+      result.notes.push_back(std::to_string(inside) + " pixels (" + percent(inside, total) +
+                             ") are black in every photo: their radiance is an upper bound "
+                             "(channel 'clipped' = 1); add a longer exposure to recover them");
+    }
+    if (result.outside > 0) {
+      result.notes.push_back(
+          std::to_string(result.outside) + " pixels (" + percent(result.outside, total) +
+          ") black in every photo reach the frame's edge: no picture (the black around a "
+          "fisheye's image circle, a vignette); channel 'clipped' = 1 there, and the stitch "
+          "leaves them to other photos");
+    }
   }
   if (params.deghost) {
     result.notes.push_back("ghost suppression left shots out at " + std::to_string(result.ghosted) +

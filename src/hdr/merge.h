@@ -94,7 +94,8 @@ struct MergeResult {
   std::vector<std::array<int, 2>> shifts;  // per input: the (x, y) shift applied, pixels
   int64_t saturated = 0;                   // pixels over-exposed in every shot
   int64_t dark = 0;                        // pixels under-exposed in every shot
-  int64_t ghosted = 0;                     // pixels where ghost suppression left a shot out
+  int64_t outside = 0;  // of those, joined to the frame's edge (beyond a fisheye's image circle)
+  int64_t ghosted = 0;  // pixels where ghost suppression left a shot out
   std::vector<std::string> notes;
   double seconds = 0.0;        // wall-clock time of mergeBracket
   double openCvSeconds = 0.0;  // of which inside OpenCV calls

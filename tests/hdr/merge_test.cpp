@@ -131,6 +131,35 @@ TEST(Merge, PixelsClippedInEveryShotAreFlaggedCountedAndBounded) {
   EXPECT_TRUE(noted);
 }
 
+// A circular fisheye's frame: black beyond its image circle in every shot, which is no picture,
+// and a black spot inside it, which is a dark scene a longer exposure would recover. The note
+// tells the two apart (it called the corners under-exposed).
+TEST(Merge, BlackReachingTheFramesEdgeIsToldApartFromADarkScene) {
+  constexpr int kSize = 96;
+  SyntheticBracket b = syntheticBracket(kSize, kSize, {0.25, 1.0, 4.0}, 2.0, -3.0);
+  int64_t corners = 0, spot = 0;
+  for (int y = 0; y < kSize; ++y)
+    for (int x = 0; x < kSize; ++x) {
+      const double r = std::hypot(x + 0.5 - 0.5 * kSize, y + 0.5 - 0.5 * kSize);
+      const bool outside = r > 0.45 * kSize, inside = r < 5.0;
+      if (!outside && !inside) continue;
+      (outside ? corners : spot)++;
+      for (Image& img : b.images)
+        for (int c = 0; c < 3; ++c) img.at(x, y)[c] = 0.0f;
+    }
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  const MergeResult r = mergeBracket(inputOf(b, &srgb), {});
+  EXPECT_EQ(r.dark, corners + spot);
+  EXPECT_EQ(r.outside, corners);
+  auto noted = [&](const std::string& count, const std::string& text) {
+    for (const auto& n : r.notes)
+      if (n.rfind(count + " pixels", 0) == 0 && n.find(text) != n.npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(noted(std::to_string(corners), "reach the frame's edge: no picture"));
+  EXPECT_TRUE(noted(std::to_string(spot), "add a longer exposure"));
+}
+
 TEST(Merge, BadBracketsAreNamedErrors) {
   const SyntheticBracket b = syntheticBracket(64, 8, {0.25, 1.0, 4.0});
   const ResponseCurve srgb = ResponseCurve::srgb();
