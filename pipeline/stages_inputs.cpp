@@ -1,6 +1,7 @@
 // The stages that bring the inputs in: ingest, merge, stitch, color.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "core/channels.h"
 #include "core/error.h"
@@ -488,8 +489,10 @@ class ColorStage final : public Stage {
                           &ComposeJob::environmentSpace)};
   }
 
-  // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded
-  static constexpr int kColorVersion = 2;
+  // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded;
+  // 3: a config's file rule before a format's usual space, three channels by name, primaries of
+  // configs without an interchange role by their spaces' names
+  static constexpr int kColorVersion = 3;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
@@ -562,7 +565,11 @@ class ColorStage final : public Stage {
           ingest::floatsFromCodes(plate);
         else
           ingest::requireFinite(plate.image, ctx.job.plate, "ingest", "the plate");
-        if (plate.image.channels == 3) {
+        const PictureChannels picture = pictureChannels(plate.image);
+        const bool inOrder = picture.kind == PictureChannels::Kind::ByPosition ||
+                             (picture.kind == PictureChannels::Kind::Rgb &&
+                              picture.colour == std::vector<int>{0, 1, 2});
+        if (plate.image.channels == 3 && inOrder) {
           linear = std::move(plate.image);
           plate.image.pixels = {};
           plate.image.width = linear.width;
@@ -652,6 +659,20 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
       image.colorSpace = named;
       colors.convert(image, working);
       return "'" + named + "' (by the chromaticities in its header)";
+    }
+    if (!colors.chromaticities(working)) {
+      const auto& c = *info.chromaticities;
+      char primaries[160];
+      std::snprintf(primaries, sizeof primaries,
+                    "red %.4g,%.4g green %.4g,%.4g blue %.4g,%.4g white %.4g,%.4g", c[0], c[1],
+                    c[2], c[3], c[4], c[5], c[6], c[7]);
+      throw Error("color",
+                  "its header's chromaticities (" + std::string(primaries) +
+                      ") are those of no colour space of the config (" + colors.source() +
+                      "), which says no primaries to convert them by (it has no aces_interchange "
+                      "or cie_xyz_d65_interchange role): give " +
+                      option + " to say its space",
+                  file);
     }
     colors.convertFromChromaticities(image, *info.chromaticities, working);
     return "the RGB space of the chromaticities in its header (converted by matrix)";

@@ -177,6 +177,17 @@ double maxDifference(const glm::dmat3& a, const glm::dmat3& b) {
 constexpr Chromaticities kP3D65 = {0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290};
 constexpr Chromaticities kRec2020 = {0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290};
 
+// Linear spaces by the names configs give them (the built-in config, OCIO v1's nuke-default and
+// ACES 1.x, Blender's, OCIO v2's studio configs), for configs with no interchange role.
+const std::vector<std::pair<const Chromaticities*, std::vector<const char*>>> kNamedLinearSpaces = {
+    {&kRec709Chromaticities,
+     {"Linear Rec.709 (sRGB)", "lin_rec709", "Linear Rec.709", "Utility - Linear - sRGB",
+      "lin_srgb", "linear", "Linear"}},
+    {&kAcesAp1Chromaticities, {"ACEScg", "ACES - ACEScg", "lin_ap1"}},
+    {&kAcesAp0Chromaticities, {"ACES2065-1", "ACES - ACES2065-1", "lin_ap0"}},
+    {&kP3D65, {"Linear P3-D65", "lin_p3d65", "Utility - Linear - P3-D65"}},
+    {&kRec2020, {"Linear Rec.2020", "lin_rec2020", "Utility - Linear - Rec.2020"}}};
+
 }  // namespace
 
 ColorConfig ColorConfig::builtin() {
@@ -361,6 +372,14 @@ InputSpace ColorConfig::inputSpace(const std::filesystem::path& file, const std:
       if (!byPrimaries.empty()) known = byPrimaries;
     }
   }
+  // The space a format implies (OpenImageIO's 'Linear' for every OpenEXR, 'sRGB' for a JPEG)
+  // gives way to a file rule of the config's own for the file: a studio config that reads
+  // OpenEXRs as ACEScg means it.
+  const OCIO::ConstConfigRcPtr& rules = impl_->config;
+  if (declaredByConvention && !rules->filepathOnlyMatchesDefaultRule(file.string().c_str())) {
+    const char* byRule = rules->getColorSpaceFromFilepath(file.string().c_str());
+    if (byRule && has(byRule)) known.clear();
+  }
   if (has(known)) {
     r.space = resolve(known, file.string());
     r.how = declaredByConvention ? "its format's usual space" : "as the file says";
@@ -491,6 +510,13 @@ std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& spa
     whiteX = 0.3127;
     whiteY = 0.3290;
   } else {
+    // A config that says no primaries (OCIO v1: nuke-default, ACES 1.x): the linear spaces by
+    // their usual names.
+    for (const auto& [primaries, names] : kNamedLinearSpaces)
+      for (const char* name : names)
+        if (OCIO::ConstColorSpaceRcPtr known = config->getColorSpace(name);
+            known && std::string(known->getName()) == cs->getName())
+          return *primaries;
     return std::nullopt;
   }
   glm::dmat3 toInterchange(1.0);

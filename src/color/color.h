@@ -99,8 +99,10 @@ class ColorConfig {
   // interchange role (aces_interchange or cie_xyz_d65_interchange): the space's unit primaries
   // are converted there and read off. A space whose conversion matches a well-known set of
   // primaries (Rec.709, P3-D65, Rec.2020, ACES AP0, AP1) up to the config's white-point adaptation
-  // reports that set. Empty when the config has no interchange role, or the space is not linear
-  // RGB (an encoded or data space).
+  // reports that set. A config with no interchange role (OCIO v1: nuke-default, ACES 1.x) says
+  // no primaries: there the linear spaces of the usual names ('linear', 'ACES - ACEScg',
+  // 'Utility - Linear - sRGB', ...) report theirs. Empty otherwise, or when the space is not
+  // linear RGB (an encoded or data space).
   std::optional<Chromaticities> chromaticities(const std::string& space) const;
   // The weights of R, G and B in the luminance (CIE Y) of a linear space: from its chromaticities
   // when known, else the config's `luma` coefficients.

@@ -190,7 +190,11 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
                    [](unsigned char c) { return std::tolower(c); });
     const bool linear = lower.find("linear") != std::string::npos ||
                         lower.find("g10") != std::string::npos;  // as "sRGB-elle-V4-g10"
-    const bool p3 = lower.find("p3") != std::string::npos;
+    // P3 with D65 white (Display P3, phones' photos); DCI-P3 (theatre white, gamma 2.6) and
+    // ACES' P3-D60 are other spaces, named in a note.
+    const bool p3 =
+        lower.find("p3") != std::string::npos && lower.find("dci") == std::string::npos &&
+        lower.find("d60") == std::string::npos && lower.find("431") == std::string::npos;
     const bool adobe =
         lower.find("adobe rgb") != std::string::npos || lower.find("adobergb") != std::string::npos;
     if (linear && p3) {

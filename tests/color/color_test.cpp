@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "pipeline/compose_job.h"
+#include "pipeline/stages.h"
 #include "test_util.h"
 
 namespace compose::color {
@@ -368,6 +369,99 @@ TEST(Chromaticities, OfAThirdPartyConfig) {
   const ColorConfig c = ColorConfig::fromFile(file);
   expectChromaticities(c.chromaticities("Linear"), kRec709Chromaticities);
   expectChromaticities(c.chromaticities("Linear ACEScg"), kAcesAp1Chromaticities);
+}
+
+// An OCIO v1 config (nuke-default, ACES 1.x) has no interchange role: it says no primaries.
+// Its linear spaces of the usual names are known by them, so that an OpenEXR with
+// chromaticities (compose's own output among them) is read; a space of another name cannot be.
+std::string v1Config(const std::string& linearName) {
+  return "ocio_profile_version: 1\nroles:\n  default: raw\n  reference: raw\n  data: raw\n"
+         "  scene_linear: " +
+         linearName +
+         "\n  texture_paint: sRGB\ndisplays:\n  default:\n"
+         "    - !<View> {name: sRGB, colorspace: sRGB}\ncolorspaces:\n"
+         "  - !<ColorSpace>\n    name: " +
+         linearName +
+         "\n    isdata: false\n  - !<ColorSpace>\n    name: sRGB\n    isdata: false\n"
+         "    to_reference: !<ExponentTransform> {value: [2.2, 2.2, 2.2, 1]}\n"
+         "  - !<ColorSpace>\n    name: raw\n    isdata: true\n";
+}
+
+TEST(Chromaticities, OfAConfigThatSaysNoPrimariesByTheirNames) {
+  compose::testing::TempDir dir;
+  compose::testing::writeText(dir / "nuke.ocio", v1Config("linear"));
+  const ColorConfig c = ColorConfig::fromFile(dir / "nuke.ocio");
+  expectChromaticities(c.chromaticities("linear"), kRec709Chromaticities);
+  EXPECT_FALSE(c.chromaticities("sRGB").has_value());
+  EXPECT_EQ(c.spaceWithChromaticities(kRec709Chromaticities), "linear");
+  EXPECT_EQ(c.spaceWithChromaticities(kAcesAp1Chromaticities), "");
+
+  // ACEScg pixels with their chromaticities, as compose writes them: converted by matrix.
+  const ColorConfig builtin = ColorConfig::builtin();
+  Image ap1(2, 1, 3, {"R", "G", "B"});
+  const float px[6] = {0.2f, 0.5f, 0.9f, 3.0f, 0.01f, 0.4f};
+  std::copy(px, px + 6, ap1.pixels.begin());
+  ap1.colorSpace = "ACEScg";
+  Image expected = ap1;
+  builtin.convert(expected, "Linear Rec.709 (sRGB)");
+  ingest::CaptureInfo info;
+  info.chromaticities = kAcesAp1Chromaticities;
+  Image read = ap1;
+  const std::string how =
+      pipeline::toWorkingSpace(read, dir / "plate.exr", info, "", "--plate-space", c);
+  EXPECT_NE(how.find("chromaticities"), std::string::npos) << how;
+  for (size_t i = 0; i < 6; ++i)
+    EXPECT_NEAR(read.pixels[i], expected.pixels[i], 2e-4 * (1 + std::abs(expected.pixels[i])));
+
+  // A working space of no usual name: the file and the option that says its space.
+  compose::testing::writeText(dir / "studio.ocio", v1Config("lnf"));
+  const ColorConfig studio = ColorConfig::fromFile(dir / "studio.ocio");
+  read = ap1;
+  COMPOSE_EXPECT_ERROR(
+      pipeline::toWorkingSpace(read, dir / "plate.exr", info, "", "--plate-space", studio),
+      "give --plate-space to say its space (" + (dir / "plate.exr").string() + ")");
+  read = ap1;
+  EXPECT_EQ(pipeline::toWorkingSpace(read, dir / "plate.exr", info, "lnf", "--plate-space", studio),
+            "'lnf' (--plate-space)");
+}
+
+// The space a format implies (OpenImageIO's 'Linear' for every OpenEXR) gives way to a file rule
+// of the config's own: a config that reads OpenEXRs as ACEScg means it, even where it also knows
+// a space called 'Linear'. What a file declares itself still wins.
+TEST(ColorConfig, AFileRuleOfTheConfigsOwnWinsOverTheFormatsUsualSpace) {
+  compose::testing::TempDir dir;
+  compose::testing::writeText(dir / "c.ocio", R"(ocio_profile_version: 2.1
+roles:
+  aces_interchange: ACES2065-1
+  scene_linear: ACEScg
+  data: Raw
+file_rules:
+  - !<Rule> {name: OpenEXR, pattern: "*", extension: "exr", colorspace: ACEScg}
+  - !<Rule> {name: Default, colorspace: Raw}
+displays:
+  sRGB:
+    - !<View> {name: Raw, colorspace: Raw}
+colorspaces:
+  - !<ColorSpace>
+    name: ACES2065-1
+  - !<ColorSpace>
+    name: ACEScg
+    to_scene_reference: !<BuiltinTransform> {style: ACEScg_to_ACES2065-1}
+  - !<ColorSpace>
+    name: Linear Rec.709
+    aliases: [Linear, linear]
+    to_scene_reference: !<MatrixTransform> {matrix: [0.4397010, 0.3829780, 0.1773350, 0, 0.0897923, 0.8134230, 0.0967616, 0, 0.0175440, 0.1115440, 0.8707040, 0, 0, 0, 0, 1]}
+  - !<ColorSpace>
+    name: Raw
+    isdata: true
+)");
+  const ColorConfig c = ColorConfig::fromFile(dir / "c.ocio");
+  InputSpace s = c.inputSpace("sky.exr", "Linear", /*declaredByConvention=*/true, false);
+  EXPECT_EQ(s.space, "ACEScg");
+  EXPECT_EQ(s.how, "the config's file rule for it");
+  s = c.inputSpace("sky.exr", "Linear", /*declaredByConvention=*/false, false);
+  EXPECT_EQ(s.space, "Linear Rec.709");
+  EXPECT_EQ(s.how, "as the file says");
 }
 
 TEST(Chromaticities, ConversionAgreesWithTheConfigsOwn) {

@@ -886,6 +886,36 @@ TEST_F(ComposeOutputs, AFloatPlateGivesAFloatExr) {
   EXPECT_FALSE(fs::exists(dir_ / "z.exr"));
 }
 
+// A plate of three channels is read by their names: OpenEXR's luminance-chroma Y, RY, BY is the
+// same picture as its R, G, B (it was taken by position, BY as red: the background off by up to
+// 1.0).
+TEST_F(ComposeOutputs, AThreeChannelPlateIsReadByItsChannelsNames) {
+  constexpr float kR = 0.5f, kG = 0.25f, kB = 0.125f;
+  const float y = 0.2126f * kR + 0.7152f * kG + 0.0722f * kB;
+  writeExr(dir_ / "rgb.exr", 320, 240, [](float* p, int, int) { p[0] = kR, p[1] = kG, p[2] = kB; });
+  {
+    std::vector<float> px(320 * 240 * 3);
+    for (size_t i = 0; i < px.size(); i += 3)
+      px[i] = y, px[i + 1] = (kR - y) / y, px[i + 2] = (kB - y) / y;
+    OIIO::ImageSpec spec(320, 240, 3, OIIO::TypeDesc::FLOAT);
+    spec.channelnames = {"Y", "RY", "BY"};
+    auto out = OIIO::ImageOutput::create((dir_ / "yc.exr").string());
+    ASSERT_TRUE(out->open((dir_ / "yc.exr").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  for (const char* name : {"rgb", "yc"}) {
+    const auto r = runCompose(
+        args((dir_ / (std::string("out-") + name)).string(), std::string(name) + ".exr") +
+            " --depth float",
+        dir_.path());
+    ASSERT_EQ(r.status, 0) << r.err;
+  }
+  const Raster rgb = readRaster(dir_ / "out-rgb.exr"), yc = readRaster(dir_ / "out-yc.exr");
+  for (const char* c : {"R", "G", "B"})
+    EXPECT_NEAR(yc.at(2, 2, yc.channel(c)), rgb.at(2, 2, rgb.channel(c)), 1e-5) << c;
+}
+
 // A float TIFF environment holds the same linear radiance as an OpenEXR one: it lights the object
 // the same (the built-in config's default rule, meant for 8-bit images, decoded it with the sRGB
 // curve: 555 times too bright for one texel of 100, -3.10 stops of exposure against +6.02).

@@ -202,7 +202,12 @@ TEST(ImageIo, AnEmbeddedIccProfileNamesTheColourSpace) {
            {"Linear Display P3", "Linear P3-D65"},
            {"Adobe RGB (1998) Linear", "Linear Adobe RGB (1998)"},
            {"Linear ProPhoto", "Linear ProPhoto"},
-           {"ProPhoto RGB", "ProPhoto RGB"}}) {
+           {"ProPhoto RGB", "ProPhoto RGB"},
+           // Theatre white and gamma 2.6, or ACES' D60 white: not Display P3 (a cinema grade
+           // was read as a phone's photo, +0.37 stops at code 128); named, so a note says so.
+           {"DCI-P3", "DCI-P3"},
+           {"P3-D60", "P3-D60"},
+           {"SMPTE RP 431-2", "SMPTE RP 431-2"}}) {
     const std::vector<unsigned char> icc = iccProfileDescribed(description, description[0] == 'A');
     const std::filesystem::path file = dir.path() / "photo.jpg";
     OIIO::ImageSpec spec(8, 4, 3, OIIO::TypeDesc::UINT8);
