@@ -189,12 +189,15 @@ render::VertexIrradiance shadePoints(const render::SurfacePoints& points,
                                      const render::VertexTransfer& transfer,
                                      const render::EmbreeScene& scene,
                                      const ShadowLighting& lighting, const glm::mat3& envFromObject,
-                                     const ShadowPlan& plan, int raysPerSource,
-                                     int64_t& sourceRays) {
+                                     const ShadowPlan& plan, int raysPerSource, int64_t& sourceRays,
+                                     const render::Mesh* penumbrae = nullptr) {
   render::SourceVisibility seen;
   if (!lighting.split.sources.empty()) {
     seen =
         render::traceSources(points, scene, lighting.split.sources, envFromObject, raysPerSource);
+    if (penumbrae)
+      render::refineSourcePenumbrae(*penumbrae, points, scene, lighting.split.sources,
+                                    envFromObject, seen);
     sourceRays = seen.rays;
   }
   render::ShadowInputs inputs;
@@ -299,11 +302,12 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     out.reason =
         "reused the visibility pass " + cache.pathFor(key).string() + " (same mesh and parameters)";
   }
-  // One ray per source per point: the renderer traces a source again from the hit wherever the
-  // points around it see it differently (its shadow's edge and penumbra).
+  // One ray per source per point, four where the points of a cell see a source differently:
+  // the renderer traces a source again from the hit wherever the points around it see it
+  // differently or in part (its shadow's edge and penumbra).
   int64_t sourceRays = 0;
   out.irradiance =
-      shadePoints(out.points, transfer, scene, lighting, envFromObject, plan, 1, sourceRays);
+      shadePoints(out.points, transfer, scene, lighting, envFromObject, plan, 1, sourceRays, &mesh);
   out.occlusion = std::move(transfer.ao);
   if (out.irradiance.sourceCount > 0) out.sources = lighting.split.sources;
   return out;

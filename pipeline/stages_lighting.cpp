@@ -340,7 +340,9 @@ class ShadowsStage final : public Stage {
   // 4: refined points in the order of their triangles (entries of 3 held their values in another
   // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its
   // strata; 6: SH transfer projected cell by cell.
-  static constexpr int kVersion = 7;  // 7: the ground beneath a cut-out at what it keeps
+  // 7: the ground beneath a cut-out at what it keeps; 8: sources traced again across their
+  // penumbrae, the points that see them in part marked
+  static constexpr int kVersion = 8;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -417,19 +419,28 @@ class ShadowsStage final : public Stage {
                       l.halfLatitude <= 4.0f && l.halfLongitude >= 0.0f && l.halfLongitude <= 4.0f;
       if (!ok) return false;
     }
-    // Each point's 64 bits of sources seen, in four 16-bit parts (exact in a float).
-    const std::span<const float> seen = cache.get("sourceSeen");
-    if (seen.size() != (r.sources.empty() ? 0 : 4 * n)) return false;
+    // Each point's 64 bits of sources seen, and seen in part, in four 16-bit parts (exact in a
+    // float).
     r.irradiance.sourceCount = r.sources.size();
-    r.irradiance.sourceSeen.assign(r.sources.empty() ? 0 : n, 0);
-    for (size_t i = 0; i < seen.size(); ++i) {
-      if (!(seen[i] >= 0.0f && seen[i] <= 65535.0f) || seen[i] != std::floor(seen[i])) return false;
-      r.irradiance.sourceSeen[i / 4] |= uint64_t(seen[i]) << (16 * (i % 4));
-    }
     const uint64_t known =
         r.sources.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << r.sources.size()) - 1;
-    for (const uint64_t bits : r.irradiance.sourceSeen)
-      if (bits & ~known) return false;  // a source that is not there
+    for (const auto& [name, bitsOf] :
+         {std::pair<const char*, std::vector<uint64_t>*>{"sourceSeen", &r.irradiance.sourceSeen},
+          {"sourcePartial", &r.irradiance.sourcePartial}}) {
+      const std::span<const float> parts = cache.get(name);
+      if (parts.size() != (r.sources.empty() ? 0 : 4 * n)) return false;
+      bitsOf->assign(r.sources.empty() ? 0 : n, 0);
+      for (size_t i = 0; i < parts.size(); ++i) {
+        if (!(parts[i] >= 0.0f && parts[i] <= 65535.0f) || parts[i] != std::floor(parts[i]))
+          return false;
+        (*bitsOf)[i / 4] |= uint64_t(parts[i]) << (16 * (i % 4));
+      }
+      for (const uint64_t bits : *bitsOf)
+        if (bits & ~known) return false;  // a source that is not there
+    }
+    const std::span<const float> fractions = cache.get("sourceFraction");
+    r.irradiance.partialFraction.assign(fractions.begin(), fractions.end());
+    if (!r.sources.empty() && !r.irradiance.indexPartial()) return false;
     ctx.artefacts.selfShadowing = std::move(r);
     return true;
   }
@@ -440,11 +451,17 @@ class ShadowsStage final : public Stage {
     cache.put("occlusion", r.occlusion);
     cache.put("levels", std::vector<float>(r.points.level.begin(), r.points.level.end()));
     cache.put("sources", sourcesToFloats(r.sources));
-    std::vector<float> seen;
-    seen.reserve(4 * r.irradiance.sourceSeen.size());
-    for (const uint64_t bits : r.irradiance.sourceSeen)
-      for (int part = 0; part < 4; ++part) seen.push_back(float((bits >> (16 * part)) & 0xFFFFu));
-    cache.put("sourceSeen", seen);
+    for (const auto& [name, bitsOf] : {std::pair<const char*, const std::vector<uint64_t>*>{
+                                           "sourceSeen", &r.irradiance.sourceSeen},
+                                       {"sourcePartial", &r.irradiance.sourcePartial}}) {
+      std::vector<float> parts;
+      parts.reserve(4 * bitsOf->size());
+      for (const uint64_t bits : *bitsOf)
+        for (int part = 0; part < 4; ++part)
+          parts.push_back(float((bits >> (16 * part)) & 0xFFFFu));
+      cache.put(name, parts);
+    }
+    cache.put("sourceFraction", r.irradiance.partialFraction);
     cache.meta()["clamped"] = r.irradiance.clamped;
     return cache.write();
   }

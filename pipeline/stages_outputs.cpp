@@ -225,8 +225,9 @@ class RenderStage final : public Stage {
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
   // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
   // middle; 6: the plate's key is taken below the horizon; 7: matched by a card on the ground;
-  // 9: adaptive sampling; 10: sources no surface point sees kept out of the shadow ratio
-  static constexpr int kVersion = 10;
+  // 9: adaptive sampling; 10: sources no surface point sees kept out of the shadow ratio;
+  // 11: sources traced across their penumbrae
+  static constexpr int kVersion = 11;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {

@@ -385,10 +385,20 @@ class SourceEdges {
         1024);
   }
 
+  // The sources whose shadow's edge or penumbra (or terminator) crosses the cell of these three
+  // points: they see them differently, or in part.
+  uint64_t crossing(const uint32_t near[3]) const {
+    const uint64_t* seen = vi_.sourceSeen.data();
+    const uint64_t* partial = vi_.sourcePartial.data();
+    return (seen[near[0]] ^ seen[near[1]]) | (seen[near[0]] ^ seen[near[2]]) | partial[near[0]] |
+           partial[near[1]] | partial[near[2]];
+  }
+
   static bool wanted(const RenderSettings& settings) {
     return settings.shadows && settings.points && settings.sources && !settings.sources->empty() &&
            settings.shadows->sourceCount == settings.sources->size() &&
-           settings.shadows->sourceSeen.size() == settings.points->count();
+           settings.shadows->sourceSeen.size() == settings.points->count() &&
+           settings.shadows->sourcePartial.size() == settings.points->count();
   }
 
   // The sources above the horizon of a surface point that the point does not see (it is in their
@@ -398,10 +408,13 @@ class SourceEdges {
   // Those that none of the triangle's three points sees are taken out of the interpolated
   // unshadowed irradiance `un` and of the hit's irradiance `e` (normal `nEnv`): the ratio is then
   // that of the light the points do get, and applies to the light the hit gets but for them.
+  // Sources in `taken` (traced from the hit, already out of both) are left alone.
   void removeUnseen(const uint32_t near[3], const float weight[3], const glm::vec3& nEnv,
-                    glm::vec3& un, glm::vec3& e) const {
+                    glm::vec3& un, glm::vec3& e, uint64_t taken = 0) const {
     const uint64_t* seen = vi_.sourceSeen.data();
-    uint64_t unseen = ~(seen[near[0]] | seen[near[1]] | seen[near[2]]) &
+    const uint64_t* partial = vi_.sourcePartial.data();
+    uint64_t unseen = ~(seen[near[0]] | seen[near[1]] | seen[near[2]] | partial[near[0]] |
+                        partial[near[1]] | partial[near[2]] | taken) &
                       (facing_[near[0]] | facing_[near[1]] | facing_[near[2]]);
     if (unseen == 0) return;
     for (; unseen != 0; unseen &= unseen - 1) {
@@ -424,10 +437,9 @@ class SourceEdges {
   bool shade(const EmbreeScene& scene, const uint32_t near[3], const float weight[3],
              const glm::vec3& at, const glm::vec3& nObj, const glm::vec3& nEnv, const glm::vec3& e,
              uint32_t seed, glm::vec3& shadowed, int64_t& rays) const {
-    // The sources the three points see differently: their shadow's edge (or their terminator)
-    // crosses the triangle.
-    const uint64_t* seen = vi_.sourceSeen.data();
-    uint64_t mask = (seen[near[0]] ^ seen[near[1]]) | (seen[near[0]] ^ seen[near[2]]);
+    // The sources the three points see differently, or in part: their shadow's edge, penumbra
+    // (or their terminator) crosses the triangle.
+    uint64_t mask = crossing(near);
     if (mask == 0) return false;
     const float floor = (1.0f / 256.0f) * luminance(e);
     struct Taken {
@@ -455,7 +467,7 @@ class SourceEdges {
         const lighting::LightSource& source = sources_[taken[k].source];
         const glm::vec3 light =
             (weight[q] * std::max(0.0f, glm::dot(corner, source.direction))) * source.power;
-        if ((seen[near[q]] >> taken[k].source) & 1u) sh -= light;
+        sh -= vi_.seenFraction(near[q], int(taken[k].source)) * light;
         un -= light;
       }
     }
@@ -493,7 +505,9 @@ class SourceEdges {
       direct += taken[k].visible * taken[k].cosine * source.power;
     }
     rest = glm::max(rest, glm::vec3(0.0f));
-    removeUnseen(near, weight, nEnv, un, rest);
+    uint64_t tracedMask = 0;
+    for (int k = 0; k < n; ++k) tracedMask |= uint64_t(1) << taken[k].source;
+    removeUnseen(near, weight, nEnv, un, rest, tracedMask);
     for (int c = 0; c < 3; ++c) {
       const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
       shadowed[c] = rest[c] * ratio + direct[c];
@@ -845,9 +859,11 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           if (edges) {
             const uint64_t* seen = settings.shadows->sourceSeen.data();
             const uint64_t first = seen[samples[0].near[0]];
-            for (const SampleHit& sample : samples)
+            for (const SampleHit& sample : samples) {
+              if (edges->crossing(sample.near) != 0) plain = false;
               for (int q = 0; q < 3; ++q)
                 if (seen[sample.near[q]] != first) plain = false;
+            }
           }
           if (plain && settings.shadows) {
             const VertexIrradiance& vi = *settings.shadows;
@@ -967,8 +983,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
           uSum += b.u;
           vSum += b.v;
         }
-        const bool edge = seen && ((seen[a.near[0]] ^ seen[a.near[1]]) |
-                                   (seen[a.near[0]] ^ seen[a.near[2]])) != 0;
+        const bool edge = seen && edges->crossing(a.near) != 0;
         // Adds shading `r` for `count` samples whose albedos sum to `albedo`.
         auto accumulate = [&](const Shaded& r, const glm::vec3& albedo, float count) {
           colour += reflect * albedo * r.shadowed;

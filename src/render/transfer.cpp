@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <numbers>
 #include <optional>
 #include <unordered_map>
@@ -403,6 +405,18 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   return out;
 }
 
+uint32_t SurfacePoints::gridPoint(const Mesh& mesh, uint32_t t, int i, int j) const {
+  const uint32_t* corner = &mesh.indices[3 * size_t(t)];
+  const int L = level[t];
+  if (i == 0 && j == 0) return corner[0];
+  if (i == L && j == 0) return corner[1];
+  if (i == 0 && j == L) return corner[2];
+  int rank = j * (L + 1) - j * (j - 1) / 2 + i;  // row j holds L - j + 1 points
+  rank -= 1;                                     // corner (0, 0) is not stored
+  if (j > 0) rank -= 1;                          // nor (L, 0), the last of row 0
+  return first[t] + uint32_t(rank);
+}
+
 void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
                            float w[3]) const {
   const uint32_t* corner = &mesh.indices[3 * size_t(t)];
@@ -412,16 +426,7 @@ void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint3
     w[0] = 1.0f - u - v, w[1] = u, w[2] = v;
     return;
   }
-  // Grid point (i, j) at barycentrics (i/L, j/L) of corners 1 and 2.
-  auto point = [&](int i, int j) -> uint32_t {
-    if (i == 0 && j == 0) return corner[0];
-    if (i == L && j == 0) return corner[1];
-    if (i == 0 && j == L) return corner[2];
-    int rank = j * (L + 1) - j * (j - 1) / 2 + i;  // row j holds L - j + 1 points
-    rank -= 1;                                     // corner (0, 0) is not stored
-    if (j > 0) rank -= 1;                          // nor (L, 0), the last of row 0
-    return first[t] + uint32_t(rank);
-  };
+  auto point = [&](int i, int j) { return gridPoint(mesh, t, i, j); };
   const float fu = std::clamp(u, 0.0f, 1.0f) * float(L), fv = std::clamp(v, 0.0f, 1.0f) * float(L);
   int i = std::min(int(fu), L - 1), j = std::min(int(fv), L - 1);
   if (i + j > L - 1) {
@@ -1154,6 +1159,99 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
   return out;
 }
 
+bool VertexIrradiance::indexPartial() {
+  partialFirst.assign(sourcePartial.size() + 1, 0);
+  uint64_t total = 0;
+  for (size_t p = 0; p < sourcePartial.size(); ++p) {
+    partialFirst[p] = uint32_t(total);
+    total += uint64_t(std::popcount(sourcePartial[p]));
+    if (total > std::numeric_limits<uint32_t>::max()) return false;
+  }
+  partialFirst.back() = uint32_t(total);
+  if (partialFraction.size() != total) return false;
+  for (const float f : partialFraction)
+    if (!(f > 0.0f && f < 1.0f)) return false;
+  return true;
+}
+
+int64_t refineSourcePenumbrae(const Mesh& mesh, const SurfacePoints& points,
+                              const EmbreeScene& scene,
+                              const std::vector<lighting::LightSource>& sources,
+                              const glm::mat3& envFromObject, SourceVisibility& visibility) {
+  const size_t n = sources.size(), count = points.count();
+  if (n == 0) return 0;
+  COMPOSE_CHECK(n <= 64 && visibility.count == n && visibility.visible.size() == count * n);
+  // Per point, the sources a cell around it sees differently.
+  std::vector<uint64_t> seen(count, 0), again(count, 0);
+  for (size_t p = 0; p < count; ++p) {
+    const float* v = visibility.visible.data() + p * n;
+    for (size_t i = 0; i < n; ++i) seen[p] |= uint64_t(v[i] >= 0.5f) << i;
+  }
+  const size_t triangles = mesh.triangleCount();
+  for (size_t t = 0; t < triangles; ++t) {
+    const int L = points.level[t];
+    auto cell = [&](uint32_t a, uint32_t b, uint32_t c) {
+      const uint64_t differ = (seen[a] ^ seen[b]) | (seen[a] ^ seen[c]);
+      again[a] |= differ, again[b] |= differ, again[c] |= differ;
+    };
+    for (int j = 0; j < L; ++j) {
+      for (int i = 0; i + j < L; ++i) {
+        const uint32_t t32 = uint32_t(t);
+        cell(points.gridPoint(mesh, t32, i, j), points.gridPoint(mesh, t32, i + 1, j),
+             points.gridPoint(mesh, t32, i, j + 1));
+        if (i + j + 1 < L)
+          cell(points.gridPoint(mesh, t32, i + 1, j + 1), points.gridPoint(mesh, t32, i, j + 1),
+               points.gridPoint(mesh, t32, i + 1, j));
+      }
+    }
+  }
+  const std::vector<SourceFrame> frames = sourceFrames(sources, envFromObject);
+  const float lift = 1e-4f * points.size, tnear = 1e-5f * points.size;
+  constexpr int kStrata = 4;  // 2 x 2 across the source's extent
+  std::atomic<int64_t> rays{0};
+  parallelFor(
+      0, int64_t(count),
+      [&](int64_t pi) {
+        const size_t p = size_t(pi);
+        uint64_t sourcesAgain = again[p];
+        if (sourcesAgain == 0) return;
+        const glm::vec3 normal = points.normals[p];
+        const glm::vec3 origin = points.positions[p] + lift * normal;
+        thread_local std::vector<glm::vec3> batch;
+        thread_local std::vector<uint32_t> index;
+        thread_local std::vector<float> through;
+        batch.clear();
+        index.clear();
+        uint32_t bits[3];
+        std::memcpy(bits, &points.positions[p], sizeof bits);
+        // Draws of their own (another stream than traceSources' first ray).
+        const uint32_t firstSample =
+            ((bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du)) +
+            0x68E31DA4u;
+        float* visible = visibility.visible.data() + p * n;
+        for (; sourcesAgain != 0; sourcesAgain &= sourcesAgain - 1) {
+          const uint32_t i = uint32_t(std::countr_zero(sourcesAgain));
+          visible[i] = 0.0f;
+          for (int k = 0; k < kStrata; ++k) {
+            const uint32_t sample = firstSample + i * uint32_t(kStrata) + uint32_t(k);
+            const float a = (float(k % 2) + hash01(2 * sample)) / 2.0f - 0.5f;
+            const float b = (float(k / 2) + hash01(2 * sample + 1)) / 2.0f - 0.5f;
+            const glm::vec3 d = frames[i].direction(a, b);
+            if (glm::dot(normal, d) <= 0.0f) continue;  // below the horizon: no light anyway
+            batch.push_back(d);
+            index.push_back(i);
+          }
+        }
+        through.resize(batch.size());
+        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data());
+        for (size_t b = 0; b < batch.size(); ++b) visible[index[b]] += through[b] / float(kStrata);
+        rays += int64_t(batch.size());
+      },
+      256);
+  visibility.rays += rays;
+  return rays;
+}
+
 VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& envFromObject,
                                const ShadowInputs& in) {
   COMPOSE_CHECK(in.shadowLighting != nullptr);
@@ -1202,7 +1300,11 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
     COMPOSE_CHECK(in.sources.size() <= 64);
     out.sourceCount = in.sources.size();
     out.sourceSeen.resize(count);
+    out.sourcePartial.resize(count);
   }
+  // (point, fraction) of the sources seen in part, each point's in the order of its sources.
+  std::vector<std::pair<uint32_t, float>> fractions;
+  std::mutex fractionsMutex;
   std::atomic<int> clamped{0};
   parallelFor(
       0, int64_t(count),
@@ -1257,14 +1359,21 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
         }
         if (withSources && method != ShadowMethod::AmbientOcclusion) {
           const float* seen = in.sourceVisibility->visible.data() + v * in.sources.size();
-          uint64_t bits = 0;
+          uint64_t bits = 0, partial = 0;
           for (size_t i = 0; i < in.sources.size(); ++i) {
             bits |= uint64_t(seen[i] >= 0.5f) << i;
+            partial |= uint64_t(seen[i] > 0.0f && seen[i] < 1.0f) << i;
             if (seen[i] <= 0.0f) continue;
             const float c = glm::dot(nEnv, in.sources[i].direction);
             if (c > 0.0f) shadowed += seen[i] * c * in.sources[i].power;
           }
           out.sourceSeen[v] = bits;
+          out.sourcePartial[v] = partial;
+          if (partial != 0) {
+            std::lock_guard<std::mutex> lock(fractionsMutex);
+            for (uint64_t m = partial; m != 0; m &= m - 1)
+              fractions.push_back({uint32_t(v), seen[std::countr_zero(m)]});
+          }
         }
         // Truncation can ring below 0 or above the unshadowed value: light is never negative and
         // visibility never adds light.
@@ -1276,6 +1385,14 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
       },
       256);
   out.clamped = clamped;
+  if (!out.sourcePartial.empty()) {
+    // In the order of the points (stable: each point's own stay in the order of its sources).
+    std::stable_sort(fractions.begin(), fractions.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    out.partialFraction.reserve(fractions.size());
+    for (const auto& f : fractions) out.partialFraction.push_back(f.second);
+    COMPOSE_CHECK(out.indexPartial());
+  }
   return out;
 }
 

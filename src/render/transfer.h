@@ -38,6 +38,7 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -88,6 +89,9 @@ struct SurfacePoints {
   float radius = 0.0f;
 
   size_t count() const { return positions.size(); }
+  // The point at grid node (i, j) of triangle t (barycentrics i/L, j/L of its corners 1 and 2;
+  // i + j <= L, the triangle's level): a corner is the mesh's vertex.
+  uint32_t gridPoint(const Mesh& mesh, uint32_t triangle, int i, int j) const;
   // The three points whose values, with these weights, interpolate at Embree's barycentrics
   // (u for corner 1, v for corner 2) of `triangle`.
   void locate(const Mesh& mesh, uint32_t triangle, float u, float v, uint32_t points[3],
@@ -258,6 +262,16 @@ struct SourceVisibility {
 SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& objectScene,
                               const std::vector<lighting::LightSource>& sources,
                               const glm::mat3& envFromObject, int raysPerSource = 4);
+// The object's points trace one ray per source: across a source's penumbra (a sun of a few
+// degrees behind a roof's edge) each says 0 or 1 at random, so that neighbouring cells of a
+// surface would be told they lie wholly in or out of it. Where the three points of a cell
+// disagree about a source, each of them traces it again with 2 x 2 stratified rays across its
+// extent, which replace its one: what they see of it is then a fraction where the penumbra
+// passes. Returns the rays traced.
+int64_t refineSourcePenumbrae(const Mesh& mesh, const SurfacePoints& points,
+                              const EmbreeScene& objectScene,
+                              const std::vector<lighting::LightSource>& sources,
+                              const glm::mat3& envFromObject, SourceVisibility& visibility);
 
 // A bright source's extent in the object's frame, for tracing its shadow across it: the
 // direction at (a, b) in [-1/2, 1/2]² of its latitude/longitude block.
@@ -297,6 +311,23 @@ struct VertexIrradiance {
   // 64 sources (lighting::kMaxSources).
   size_t sourceCount = 0;
   std::vector<uint64_t> sourceSeen;
+  // Bit i set when the point sees part of source i, neither none nor all of it (its penumbra, a
+  // semi-transparent occluder): the renderer traces the source wherever such a point is one of
+  // the three around a hit, as where they disagree.
+  std::vector<uint64_t> sourcePartial;
+  // What those points see of those sources: per point, one value per set bit of sourcePartial
+  // (lowest source first), from partialFirst[p] on (partialFirst: count + 1 entries).
+  std::vector<float> partialFraction;
+  std::vector<uint32_t> partialFirst;
+  // What point p sees of source i, in [0, 1]: its fraction where it sees it in part, else 0 or 1.
+  float seenFraction(size_t p, int i) const {
+    if ((sourcePartial[p] >> i) & 1u)
+      return partialFraction[partialFirst[p] +
+                             uint32_t(std::popcount(sourcePartial[p] & ((uint64_t(1) << i) - 1)))];
+    return float((sourceSeen[p] >> i) & 1u);
+  }
+  // Makes partialFirst from sourcePartial; false if partialFraction does not fit it.
+  bool indexPartial();
 };
 
 // `envFromObject` is the rotation from the mesh's coordinates to the environment's; it must be a
