@@ -261,7 +261,12 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // are made linear first, as compose reads such a picture with --env: an OpenEXR holds
       // linear light, and other tools take it so. The other way round, linear light written
       // into 8-bit codes is encoded as compose (and other tools) will read those files.
-      const std::string ext = ingest::lowerExtension(o->out);
+      // The files written: for --to faces, the six face files the name gives (a base name
+      // without an extension, or a folder, gets OpenEXR's).
+      const std::filesystem::path firstOut = *to == Layout::Faces
+                                                 ? cubemap::facePaths(o->out, write.faceNaming)[0]
+                                                 : std::filesystem::path(o->out);
+      const std::string ext = ingest::lowerExtension(firstOut);
       const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
       // A Radiance file says no primaries: it is read as the config's rules say, so it is
@@ -274,7 +279,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                 ? declared
                 : colors.inputSpace(file.files.front(), declared, false, file.info.integerSamples())
                       .space;
-        const std::string target = colors.inputSpaceFor(o->out, "");
+        const std::string target = colors.inputSpaceFor(firstOut, "");
         if (source != target) {
           auto linearise = [&](Image& image) {
             if (byMatrix) {  // by matrix into the working space, then as any other space
@@ -292,8 +297,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
           }
           write.chromaticities = colors.chromaticities(target);
           notes.push_back("its " + file.info.sampleType + " values read as '" + source +
-                          "' and written as '" + target + "' (as " +
-                          std::filesystem::path(o->out).extension().string() + " files are read)");
+                          "' and written as '" + target + "' (as " + firstOut.extension().string() +
+                          " files are read)");
         }
       } else if (file.info.chromaticities && declared.empty()) {
         notes.push_back(

@@ -229,12 +229,14 @@ float maxValue(std::span<const float> v) {
 bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
                 std::vector<std::string>& notes) {
   if (lowerExtension(path) != ".exr") return false;
-  if (depth == WriteOptions::Depth::Half) return true;
   if (depth == WriteOptions::Depth::Float) return false;
   constexpr float kHalfMax = 65504.0f;
   if (maximum > kHalfMax) {
-    notes.push_back("values up to " + numberText(maximum) + " exceed half float's range: " +
-                    path.filename().string() + " is written as 32-bit float");
+    // Half would hold infinity there (asked for or not): float, said so.
+    notes.push_back(
+        "values up to " + numberText(maximum) +
+        " exceed half float's range: " + path.filename().string() + " is written as 32-bit float" +
+        (depth == WriteOptions::Depth::Half ? " instead of the --depth half asked for" : ""));
     return false;
   }
   return true;
@@ -587,6 +589,9 @@ std::array<fs::path, kCubeFaces> facePaths(const fs::path& path, int faceNaming)
     const std::string token = faceNameIn(faceNaming, f, "px");
     if (at != std::string::npos) {
       out[size_t(f)] = text.substr(0, at) + token + text.substr(at + 1);
+    } else if (!text.empty() && (text.back() == '/' || fs::is_directory(path))) {
+      // A folder: the faces in it by their names alone, as OpenEXR.
+      out[size_t(f)] = path / (token + ".exr");
     } else {
       // A base name without an extension gets OpenEXR's, as the HDR default.
       const std::string extension =

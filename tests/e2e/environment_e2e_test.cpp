@@ -958,6 +958,44 @@ TEST(ConvertCommand, NegativeTexelsAreKept) {
   EXPECT_FALSE(fs::exists(dir / "w.exr"));
 }
 
+// Faces named by a base name or a folder (the forms --help gives) are OpenEXRs of linear light,
+// as the face pattern's are (they were sRGB-encoded: a texel of 0.5 came out 0.7354, a sun of
+// 1e6 at 200); and a value beyond half's range is written as float whatever --depth says (half
+// held infinity, which compose then refused to read).
+TEST(ConvertCommand, FacesByBaseNameOrFolderAreLinearAndBrightTexelsStayFinite) {
+  TempDir dir;
+  Image map(64, 32, 3, {"R", "G", "B"});
+  for (float& v : map.pixels) v = 0.5f;
+  for (int c = 0; c < 3; ++c) map.at(10, 8)[c] = 1e6f;
+  ingest::WriteOptions floats;
+  floats.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "sun.exr", map, floats);
+  fs::create_directories(dir / "folder");
+  for (const fs::path& out : {dir / "base", dir / "folder" / ""}) {
+    const RunResult r =
+        run("convert " + q(dir / "sun.exr") + " --to faces --size 16 --out " + q(out), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+  }
+  for (const fs::path& face : {dir / "base_py.exr", dir / "folder" / "py.exr"}) {
+    ASSERT_TRUE(fs::exists(face)) << face;
+    const Image up = ingest::readImage(face).image;
+    float least = 1e30f;
+    for (float v : up.pixels) least = std::min(least, v);
+    EXPECT_NEAR(least, 0.5f, 1e-3f) << face;
+  }
+  float brightest = 0.0f;
+  for (const char* f : {"px", "nx", "py", "ny", "pz", "nz"})
+    for (float v : ingest::readImage(dir / ("base_" + std::string(f) + ".exr")).image.pixels)
+      brightest = std::max(brightest, v);
+  EXPECT_GT(brightest, 1e4f) << "the sun's texel is linear light";
+  const RunResult r = run("convert " + q(dir / "sun.exr") + " --to cube --size 16 --depth half " +
+                              "--out " + q(dir / "half.exr"),
+                          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("instead of the --depth half asked for"), std::string::npos) << r.err;
+  for (float v : ingest::readImage(dir / "half.exr").image.pixels) ASSERT_TRUE(std::isfinite(v));
+}
+
 // An OpenEXR that says its primaries by chromaticities only (no colorSpace attribute; OpenImageIO
 // calls every such file 'Linear') is read as compose --env reads it: as the config's space with
 // those primaries, whose name the converted map carries; encoded into a PNG it gives the codes
