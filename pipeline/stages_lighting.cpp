@@ -192,6 +192,10 @@ class PrecomputeStage final : public Stage {
              }}};
   }
 
+  // The bright sources split off for the shadows. 2: none from a map whose texels span more than
+  // 12°.
+  static constexpr int kSourcesVersion = 2;
+
   void keys(Context& ctx) const override {
     Hash128 h;
     h.bytes("lighting");
@@ -205,6 +209,7 @@ class PrecomputeStage final : public Stage {
       Hash128 s;
       s.bytes("shadow-lighting");
       s.word(lighting::LightingCache::kProjectionVersion);
+      s.word(kSourcesVersion);
       s.combine(ctx.key(kEnvironment));
       s.bytes(ShadowPlan::parse(ctx.job.shadowParams).describeLighting());
       hashProxy(ctx, s);

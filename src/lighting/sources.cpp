@@ -18,6 +18,14 @@ SourceSplit splitBrightSources(const Environment& env, int count) {
   // Blocks of f x f texels, f a power of two, so that the reduced map is at most 1024 wide.
   int f = 1;
   while (env.width() / f > 1024 && f < env.height()) f *= 2;
+  // A map so coarse that one texel spans more than 12° (16 x 8: 22.5°) holds no small bright
+  // source: a texel is a lit area, and taken as one light from its centre it would light a
+  // surface at up to twice its irradiance (cos at the centre times the power of a texel that
+  // reaches the horizon). Its light stays with the moments.
+  constexpr double kLargestTexel = 12.0 * std::numbers::pi / 180.0;
+  if (std::numbers::pi / env.height() > kLargestTexel ||
+      2.0 * std::numbers::pi / env.width() > kLargestTexel)
+    return out;
   const int bw = (env.width() + f - 1) / f, bh = (env.height() + f - 1) / f;
   struct Block {
     int bx, by;

@@ -510,7 +510,9 @@ class SourceEdges {
     removeUnseen(near, weight, nEnv, un, rest, tracedMask);
     for (int c = 0; c < 3; ++c) {
       const float ratio = un[c] > 1e-20f ? std::clamp(sh[c] / un[c], 0.0f, 1.0f) : 1.0f;
-      shadowed[c] = rest[c] * ratio + direct[c];
+      // Visibility never adds light: a source's light at the hit as from its centre can exceed
+      // what the lighting says the hit gets.
+      shadowed[c] = std::min(rest[c] * ratio + direct[c], e[c]);
     }
     return true;
   }

@@ -718,6 +718,67 @@ TEST(SourceEdges, ASunsPenumbraAcrossLargeTrianglesIsEvenAlongItsEdge) {
   EXPECT_GT(worstOneRay, 2.0 * worst) << "the test can tell";
 }
 
+// Visibility never adds light. On a map so coarse that a texel spans tens of degrees (8 x 4: one
+// bright texel of 45° x 45°), a texel split off as a source and lit from its centre gave points
+// facing it up to 1.47 times the irradiance the map gives them; such maps keep their light in the
+// moments, and a hit's shadowed irradiance is at most its unshadowed one.
+TEST(SourceEdges, ACoarseMapsTexelsAreNotPointSourcesAndAddNoLight) {
+  for (const int width : {8, 16, 32}) {
+    Image img(width, width / 2, 3);
+    for (float& v : img.pixels) v = 0.01f;
+    for (int c = 0; c < 3; ++c) img.at(0, 0)[c] = 100.0f;
+    const lighting::Environment env = lighting::Environment::fromLatLong(img);
+    const lighting::SourceSplit split = lighting::splitBrightSources(env, lighting::kMaxSources);
+    // 32 x 16: 11.25° texels, still sources.
+    EXPECT_EQ(split.sources.empty(), width < 32) << width;
+    if (width != 8) continue;
+    // The render of a wall on a floor in that map, as the pipeline shades it.
+    const Mesh mesh = floorAndWall(5);
+    const EmbreeScene scene(mesh.positions, mesh.indices);
+    const SurfacePoints points = surfacePoints(mesh);
+    lighting::ChebParams cp;
+    cp.order = 8;
+    cp.samples = 16;
+    lighting::ChebLocalLighting residual(cp), whole(cp);
+    residual.project(split.residual);
+    whole.project(env);
+    TransferParams params;
+    params.grid = 16;
+    params.order = 8;
+    const glm::mat3 envFromObject(1.0f);
+    const VertexTransfer transfer = computeTransfer(mesh, points, params);
+    SourceVisibility seen = traceSources(points, scene, split.sources, envFromObject, 1);
+    ShadowInputs in;
+    in.transfer = &transfer;
+    in.shadowLighting = &residual;
+    in.sources = split.sources;
+    in.sourceVisibility = &seen;
+    const VertexIrradiance shaded = shadeVertices(points, envFromObject, in);
+    const calib::PlateCamera camera = calib::plateCamera(160, 120, {}, {});
+    calib::Placement place;
+    place.imagePoint = {0.5, 0.7};
+    place.heightFraction = 0.4;
+    const glm::dmat4 worldFromObject = calib::placeOnGround(
+        camera, place, glm::dvec3(mesh.boundsMin()), glm::dvec3(mesh.boundsMax()));
+    RenderSettings settings;
+    settings.samplesPerAxis = 2;
+    settings.points = &points;
+    settings.shadows = &shaded;
+    settings.sources = &split.sources;
+    const RenderOutput out = renderDiffuse(mesh, scene, worldFromObject, camera, whole, settings);
+    int pixels = 0, brighter = 0;
+    for (int y = 0; y < out.aovs.height; ++y)
+      for (int x = 0; x < out.aovs.width; ++x) {
+        if (out.beauty.at(x, y)[3] < 1.0f) continue;
+        ++pixels;
+        const float* a = out.aovs.at(x, y);
+        brighter += a[14] > 1.001f * a[11];  // irradianceShadowed.G against irradiance.G
+      }
+    ASSERT_GT(pixels, 500);
+    EXPECT_EQ(brighter, 0) << "of " << pixels << " pixels";
+  }
+}
+
 // A coarse floor (two triangles, points at its corners) that a box goes through: one floor
 // corner is inside the box and sees nothing, the others see the sky. Interpolating between the
 // corners smears that darkness over the floor; refined, the floor's points follow the box.
