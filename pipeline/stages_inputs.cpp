@@ -545,6 +545,17 @@ class ColorStage final : public Stage {
         }
         if (opaque) alpha.clear();
       }
+      const bool windowAlpha = alpha.empty() && plate.info.partlyStored;
+      if (windowAlpha) {
+        // No alpha, and part of the frame holds no stored pixel (an OpenEXR's data window): no
+        // picture there, as Nuke takes it (black, alpha 0), so that the automatic exposure and
+        // the composite read the picture only.
+        const int w = plate.image.width, h = plate.image.height;
+        alpha.assign(size_t(w) * size_t(h), 0.0f);
+        for (int y = plate.info.storedY0; y < std::min(plate.info.storedY1, h); ++y)
+          for (int x = plate.info.storedX0; x < std::min(plate.info.storedX1, w); ++x)
+            alpha[size_t(y) * size_t(w) + size_t(x)] = 1.0f;
+      }
       Image linear;
       if (!plate.codes.empty() && plate.image.channels >= 3 && !plate.info.chromaticities) {
         const bool named = !ctx.job.plateSpace.empty();
@@ -600,9 +611,15 @@ class ColorStage final : public Stage {
           }
         });
         linear = std::move(rgba);
-        ctx.note("the plate " + ctx.job.plate.filename().string() + " has an alpha channel (" +
-                 (straight ? "unassociated: premultiplied in linear light" : "premultiplied") +
-                 "): the composite keeps it (the object over the plate, alpha = the object's + (1 "
+        ctx.note("the plate " + ctx.job.plate.filename().string() +
+                 (windowAlpha
+                      ? std::string(" has no pixels stored outside its data window: no picture "
+                                    "there (alpha 0)")
+                      : " has an alpha channel (" +
+                            std::string(straight ? "unassociated: premultiplied in linear light"
+                                                 : "premultiplied") +
+                            ")") +
+                 ": the composite keeps it (the object over the plate, alpha = the object's + (1 "
                  "- the object's) x the plate's); a PNG display image keeps it, a JPEG shows it "
                  "over black");
       }

@@ -487,6 +487,11 @@ LoadedImage readExr(const fs::path& path, const std::string& stage, bool picture
                       ? ", the overscan outside it left out"
                       : "");
     out.notes.push_back(line);
+    if (x0 > 0 || y0 > 0 || x1 < part.fullWidth || y1 < part.fullHeight) {
+      out.info.partlyStored = true;
+      out.info.storedX0 = x0, out.info.storedY0 = y0;
+      out.info.storedX1 = std::max(x0, x1), out.info.storedY1 = std::max(y0, y1);
+    }
     out.image = std::move(framed);
     out.info.fileWidth = part.fullWidth;
     out.info.fileHeight = part.fullHeight;

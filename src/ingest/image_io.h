@@ -110,7 +110,12 @@ struct CaptureInfo {
   std::string sampleType;             // pixel type as stored: "uint8", "uint16", "half", "float"...
   int bitsPerSample = 0;              // 8, 16, 32...
   int fileWidth = 0, fileHeight = 0;  // as stored, before orientation
-  int channels = 0;                   // as stored
+  // An OpenEXR whose data window is smaller than its display window: the part of the frame that
+  // holds stored pixels, [x0, x1) x [y0, y1) (the rest of the image is 0, no picture). Empty
+  // (partlyStored false) when every pixel is stored.
+  bool partlyStored = false;
+  int storedX0 = 0, storedY0 = 0, storedX1 = 0, storedY1 = 0;
+  int channels = 0;  // as stored
 
   // Relative exposure t · ISO / N² (time in seconds, N the f-number): proportional to the light
   // a pixel collects from a given radiance. Empty without an exposure time; a missing ISO counts

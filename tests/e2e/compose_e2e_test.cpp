@@ -761,6 +761,54 @@ TEST_F(ComposeOutputs, RadianceBeyondHalfRangeIsWrittenAsFloatNotInf) {
 // does not change the exposure (it pulled the object a stop too bright on the sample meadow);
 // with the camera pitched down so far that the horizon is above the frame, the whole plate is
 // the ground.
+// An OpenEXR plate whose data window is part of its frame has no picture outside it: the
+// automatic exposure and the composite's alpha are those of the same plate with alpha 0 there
+// (the zeros outside were read as black ground: -10.78 stops, the object rendered black).
+TEST_F(ComposeOutputs, APlatesDataWindowIsItsPicture) {
+  constexpr int kW = 320, kH = 240, kX0 = 20, kY0 = 130, kX1 = 300, kY1 = 230;
+  auto value = [](int x, int y) { return 0.05f + 0.2f * float((x / 16 + y / 16) % 2); };
+  {
+    std::vector<float> px;
+    for (int y = kY0; y < kY1; ++y)
+      for (int x = kX0; x < kX1; ++x)
+        for (int c = 0; c < 3; ++c) px.push_back(value(x, y));
+    OIIO::ImageSpec spec(kX1 - kX0, kY1 - kY0, 3, OIIO::TypeDesc::FLOAT);
+    spec.x = kX0, spec.y = kY0, spec.full_width = kW, spec.full_height = kH;
+    auto out = OIIO::ImageOutput::create((dir_ / "window.exr").string());
+    ASSERT_TRUE(out->open((dir_ / "window.exr").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  {
+    std::vector<float> px(size_t(kW) * kH * 4, 0.0f);
+    for (int y = kY0; y < kY1; ++y)
+      for (int x = kX0; x < kX1; ++x) {
+        float* p = &px[(size_t(y) * kW + size_t(x)) * 4];
+        p[0] = p[1] = p[2] = value(x, y);
+        p[3] = 1.0f;
+      }
+    OIIO::ImageSpec spec(kW, kH, 4, OIIO::TypeDesc::FLOAT);
+    auto out = OIIO::ImageOutput::create((dir_ / "alpha.exr").string());
+    ASSERT_TRUE(out->open((dir_ / "alpha.exr").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  const std::string more = " --plate-space lin_rec709 --depth float --place 0.5,0.85 --scale 0.15";
+  const auto window = runCompose(args((dir_ / "w").string(), "window.exr") + more, dir_.path());
+  const auto alpha = runCompose(args((dir_ / "a").string(), "alpha.exr") + more, dir_.path());
+  ASSERT_EQ(window.status, 0) << window.err;
+  ASSERT_EQ(alpha.status, 0) << alpha.err;
+  ASSERT_LT(stops(alpha.err), 50.0) << alpha.err;
+  EXPECT_NEAR(stops(window.err), stops(alpha.err), 0.01) << window.err;
+  const Raster w = readRaster(dir_ / "w.exr");
+  EXPECT_EQ(w.at(5, 5, w.channel("A")), 0.0f) << "outside the data window";
+  EXPECT_EQ(w.at(kX0 + 2, kY0 + 2, w.channel("A")), 1.0f);
+}
+
 TEST_F(ComposeOutputs, AutoExposureReadsThePlatesGroundNotItsSky) {
   writeExr(dir_ / "input-sky.exr", 320, 240,
            [](float* p, int, int y) { p[0] = p[1] = p[2] = y < 120 ? 0.9f : 0.1f; });
