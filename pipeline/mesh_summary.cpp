@@ -24,8 +24,9 @@ namespace {
 // read (such a file has a material now, and is no longer kept); 5: sharp edges on lines that end
 // in a smooth surface are shaded smooth; 6: only those less than 25° sharper than the crease;
 // 7: OBJ faces of 256 corners and more kept whole, a Kd that is not a number the default grey;
-// 8: lines split at a lone CR, a Kd of one number a grey.
-constexpr uint32_t kMeshVersion = 8;
+// 8: lines split at a lone CR, a Kd of one number a grey; 9: KHR_texture_transform's rotation
+// turned as Blender turns it, textures not turned by their EXIF orientation.
+constexpr uint32_t kMeshVersion = 9;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {

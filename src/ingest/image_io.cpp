@@ -507,6 +507,7 @@ LoadedImage readExr(const fs::path& path, const std::string& stage, bool picture
 LoadedImage fromJpeg(jpeg::Decoded&& decoded, const ReadOptions& options) {
   LoadedImage out;
   fillCaptureInfo(headerOf(decoded.header), out.info);
+  if (!options.upright) out.info.orientation = 1;
   const int channels = decoded.header.channels;
   fromCodes(std::move(decoded.codes), decoded.header.width, decoded.header.height, channels,
             options, out);
@@ -525,6 +526,7 @@ LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::
   checkImageSize(h.width, h.height, h.channels, stage, path);
   LoadedImage out;
   fillCaptureInfo(headerOf(h), out.info);
+  if (!options.upright) out.info.orientation = 1;
   std::string why;
   bool truncated = false;
   const size_t values = size_t(h.width) * size_t(h.height) * size_t(h.channels);

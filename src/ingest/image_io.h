@@ -165,6 +165,9 @@ struct ReadOptions {
   // B, else with a layer's colour or Y), with a note naming it, instead of its first part (as
   // masks are read): for plates and environments, whose depth or data passes may come first.
   bool picturePart = false;
+  // The image turned upright by its EXIF orientation, as a photo is shown. A texture keeps its
+  // pixels as stored: UVs are laid on them, and Blender and glTF viewers ignore the tag.
+  bool upright = true;
 };
 
 // Reads an image file. `stage` names the pipeline stage on whose behalf it is read, for errors.

@@ -293,7 +293,9 @@ Image readTextureFile(const fs::path& file, const std::string& fallbackSpace, Im
   const fs::file_status status = fs::status(file, ec);
   if (fs::exists(status) && !fs::is_regular_file(status) && !fs::is_directory(status))
     throw Error("mesh", "not a regular file", file);
-  return textureImage(ingest::readImage(file, "mesh").image, fallbackSpace, alpha);
+  ingest::ReadOptions stored;
+  stored.upright = false;  // UVs are laid on the pixels as stored
+  return textureImage(ingest::readImage(file, "mesh", stored).image, fallbackSpace, alpha);
 }
 
 }  // namespace detail

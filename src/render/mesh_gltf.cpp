@@ -397,7 +397,10 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
   }
   if (!mime.empty()) where += ", " + mime;
   file = path_.string() + " (" + where + ")" + ext;
-  return textureImage(ingest::readImageFromMemory(bytes, file, "mesh").image, "sRGB", alpha);
+  ingest::ReadOptions stored;
+  stored.upright = false;  // UVs are laid on the pixels as stored
+  return textureImage(ingest::readImageFromMemory(bytes, file, "mesh", stored).image, "sRGB",
+                      alpha);
 }
 
 int GltfReader::texture(int gltfTexture, const std::string& materialName) {
@@ -523,7 +526,10 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
           set = t.Get("texCoord").GetNumberAsInt();
         const double c = std::cos(rotation), s = std::sin(rotation);
         const glm::dmat3 translate(1, 0, 0, 0, 1, 0, ox, oy, 1);
-        const glm::dmat3 rotate(c, s, 0, -s, c, 0, 0, 0, 1);
+        // A turn by -rotation in v-down coordinates (u' = c u + s v, v' = -s u + c v), as
+        // Blender, Babylon and three.js read it and the extension's sample model shows; the
+        // extension's GLSL listing has the opposite sign (KhronosGroup/glTF#1563).
+        const glm::dmat3 rotate(c, -s, 0, s, c, 0, 0, 0, 1);
         const glm::dmat3 scale(sx, 0, 0, 0, sy, 0, 0, 0, 1);
         const glm::dmat3 flip(1, 0, 0, 0, -1, 0, 0, 1, 1);
         m.uvTransform = glm::mat3(flip * translate * rotate * scale * flip);

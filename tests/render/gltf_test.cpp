@@ -502,6 +502,34 @@ TEST(Gltf, JpegTexturesAreDecodedToo) {
   EXPECT_NEAR(albedo.y, 128.0f / 255.0f, 2.0f / 255.0f);
 }
 
+// A texture's EXIF orientation is not applied: UVs are laid on the pixels as stored, and Blender
+// and glTF viewers ignore the tag (a phone photo used as a label was turned a quarter).
+TEST(Gltf, ATexturesExifOrientationIsNotApplied) {
+  TempDir dir;
+  Image img(16, 16, 3, {"R", "G", "B"});
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      float* p = img.at(x, y);
+      p[0] = (y < 8) == (x < 8) ? 1.0f : 0.0f;  // red top left and bottom right
+      p[1] = 0.0f;
+      p[2] = (y < 8) == (x < 8) ? 0.0f : 1.0f;
+    }
+  img.colorSpace = "sRGB";
+  ingest::WriteOptions options;
+  options.jpegQuality = 100;
+  options.attributes.push_back({"Orientation", 6});
+  ingest::writeImage(dir / "label.jpg", img, options);
+  // As a photo, the file is turned upright: its top left is then blue.
+  const Image upright = ingest::readImage(dir / "label.jpg").image;
+  ASSERT_GT(upright.at(2, 2)[2], 0.8f) << "the file carries orientation 6";
+  writeText(dir / "label.gltf", texturedPair({{"uri", "label.jpg"}}).gltf());
+  const Mesh m = loadMesh(dir / "label.gltf");
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  const glm::vec3 topLeft = m.albedoAt(first, 0, 0);  // uv (0.25, 0.25): the stored top left
+  EXPECT_GT(topLeft.x, 0.4f);                         // red (times the base colour factor's 0.5)
+  EXPECT_LT(topLeft.z, 0.1f);
+}
+
 TEST(Gltf, ABinaryGlbWithItsTextureInABufferView) {
   TempDir dir;
   const std::vector<uint8_t> png = quadrantPng(dir);
@@ -529,6 +557,16 @@ TEST(Gltf, TextureTransformAndWrapModes) {
   Mesh m = loadMesh(dir / "offset.gltf");
   const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
   EXPECT_LT(glm::length(m.albedoAt(first, 0, 0) - glm::vec3(0, 1, 0)), 1e-6f);
+  // A quarter turn alone: uv -> (v, -u) in glTF's v-down texture space, as Blender, Babylon and
+  // three.js turn it and the extension's sample model checks (its GLSL listing turns the other
+  // way, KhronosGroup/glTF#1563): red's corner shows blue, green's red, blue's white.
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+      {"KHR_texture_transform", {{"rotation", 1.5707963267948966}}}};
+  writeText(dir / "turned.gltf", b.gltf());
+  m = loadMesh(dir / "turned.gltf");
+  EXPECT_LT(glm::length(m.albedoAt(first, 0, 0) - glm::vec3(0, 0, 1)), 1e-5f);
+  EXPECT_LT(glm::length(m.albedoAt(first, 1, 0) - glm::vec3(0.5f, 0, 0)), 1e-5f);
+  EXPECT_LT(glm::length(m.albedoAt(first, 0, 1) - glm::vec3(0.5f, 1, 1)), 1e-5f);
   // u = 1.25: repeat wraps to red's column, clamp stays at green's.
   b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
       {"KHR_texture_transform", {{"offset", {1.0, 0}}}}};
