@@ -55,10 +55,15 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
   nlohmann::ordered_json all = nlohmann::ordered_json::object();
   // A scene file named without a folder ("x.json") lies in the working folder.
   const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : folder).lexically_normal();
+  const ComposeJob defaults;
   for (const auto& stage : stages()) {
     nlohmann::ordered_json values = nlohmann::ordered_json::object();
     for (const StageParameter& p : stage->parameters()) {
       nlohmann::json value = p.get(job);
+      // A path left at its default (the output, out/compose) is relative to the folder compose
+      // runs in, not to the scene: it stays out of the file, so that `compose run` means the
+      // same by it.
+      if (p.isPath && value == p.get(defaults)) continue;
       if (p.isPath && value.is_string() && !value.get<std::string>().empty()) {
         // Relative when the file is near the scene (below the same top folder), else absolute.
         const fs::path path = fs::absolute(value.get<std::string>()).lexically_normal();

@@ -451,7 +451,9 @@ LoadedMesh loadObj(const fs::path& path) {
                               "with " +
                               (colours.empty() ? "the default albedo" : "their vertex colours"));
     }
-    std::map<fs::path, int> textureOf;
+    // A texture per file and wrap mode: two materials may use one file, one clamped (-clamp on)
+    // and one repeated.
+    std::map<std::pair<fs::path, bool>, int> textureOf;
     for (int id : usedMaterials) {
       Material material;
       if (id < 0) {
@@ -487,15 +489,15 @@ LoadedMesh loadObj(const fs::path& path) {
         std::string relative = om.diffuse_texname;
         std::replace(relative.begin(), relative.end(), '\\', '/');
         const fs::path file = path.parent_path() / relative;
-        auto [it, inserted] = textureOf.try_emplace(file, -1);
+        const bool clamp = om.diffuse_texopt.clamp;
+        auto [it, inserted] = textureOf.try_emplace({file, clamp}, -1);
         if (inserted) {
-          mesh.otherFiles.push_back(file);
+          if (!textureOf.count({file, !clamp})) mesh.otherFiles.push_back(file);
           try {
             Texture texture;
             texture.file = file;
             texture.image = readTextureFile(file, "");
-            const tinyobj::texture_option_t& o = om.diffuse_texopt;
-            if (o.clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
+            if (clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
             it->second = int(mesh.textures.size());
             mesh.textures.push_back(std::move(texture));
           } catch (const Error& e) {

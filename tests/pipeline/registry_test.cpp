@@ -183,6 +183,13 @@ TEST(Registry, ParametersReadBackWhatTheySetAndRefuseTheWrongKind) {
   ComposeJob copy;
   applyScene(scene, "/nowhere", copy);
   EXPECT_EQ(sceneFromJob(copy, "/nowhere").dump(), scene.dump());
+  // The default output (out/compose) is relative to where compose runs: not written, so that
+  // `compose run` reads it so (it was written relative to the scene: ../out/compose); one given
+  // is written.
+  EXPECT_FALSE(scene["stages"].contains("output") && scene["stages"]["output"].contains("out"))
+      << scene.dump();
+  job.output = "/nowhere/renders/bunny";
+  EXPECT_EQ(sceneFromJob(job, "/nowhere")["stages"]["output"]["out"], "renders/bunny");
   EXPECT_EQ(copy.placement.heightFraction, 0.42);
   EXPECT_EQ(copy.lighting, "sh");
   EXPECT_FALSE(copy.groundShadow);

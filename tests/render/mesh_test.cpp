@@ -489,6 +489,26 @@ TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
   EXPECT_FALSE(m.normalsFromFile);
 }
 
+// Two materials on one texture file, repeated and clamped (-clamp on): each keeps its own wrap
+// (the first to use the file set it for both).
+TEST(Mesh, ObjMaterialsSharingATextureKeepTheirOwnWrap) {
+  TempDir dir;
+  writeQuadrants(dir / "quadrants.png");
+  writeText(dir / "w.mtl",
+            "newmtl repeated\nmap_Kd -o 1 0 0 quadrants.png\n"
+            "newmtl clamped\nmap_Kd -clamp on -o 1 0 0 quadrants.png\n");
+  writeText(dir / "w.obj",
+            "mtllib w.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
+            "vt 0.25 0.75\nvt 0.75 0.75\nvt 0.25 0.25\n"
+            "usemtl repeated\nf 1/1 2/2 3/3\nusemtl clamped\nf 4/1 5/2 6/3\n");
+  const Mesh m = loadMesh(dir / "w.obj");
+  ASSERT_EQ(m.triangleCount(), 2u);
+  // u = 1.25: repeated, red's column again; clamped, the right edge (green).
+  EXPECT_TRUE(near(m.albedoAt(0, 0, 0), {1, 0, 0}));
+  EXPECT_TRUE(near(m.albedoAt(1, 0, 0), {0, 1, 0}));
+  EXPECT_EQ(m.otherFiles.size(), 2u) << "the library and the texture, once each";
+}
+
 // A base colour is an albedo: outside 0..1 (Kd 5 -1 0) it rendered as given without a word (and
 // --albedo 1.5 is refused). A Kd that is not a number (tinyobjloader reads nan as 0) is the
 // default grey, with a warning of its own.
