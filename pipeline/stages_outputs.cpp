@@ -779,6 +779,8 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
       displayNotes.push_back(*n);
     ingest::WriteOptions displayOptions;
     displayOptions.jpegQuality = job.jpegQuality;
+    // The plate's colour edges stay where they were (4:2:0 moved them by up to 43 codes).
+    displayOptions.jpegFullChroma = true;
     if (keepAlpha) {
       displayOptions.alphaChannel = 3;
       // The colour is unassociated already: OpenImageIO is not to divide it by alpha again.

@@ -831,27 +831,27 @@ void writeJpeg(const fs::path& file, const fs::path& shown, const Image& image,
   std::vector<ImageAttribute> attributes = options.attributes;
   attributes.push_back({"Software", std::string("compose")});
   if (isSrgbEncoded(image.colorSpace)) attributes.push_back({"Exif:ColorSpace", 1});
-  jpeg::write(file, shown, image.width, image.height, channels, options.jpegQuality, attributes,
-              [&](int y0, int rows, uint8_t* codes) {
-                parallelFor(0, rows, [&](int64_t r) {
-                  const float* from = image.row(y0 + int(r)).data();
-                  uint8_t* to = codes + size_t(r) * size_t(image.width) * size_t(channels);
-                  if (image.channels == channels) {  // the file's layout already
-                    const size_t values = size_t(image.width) * size_t(channels);
-                    for (size_t i = 0; i < values; ++i)
-                      to[i] = uint8_t(detail::toCode(from[i], 255.0f));
-                    return;
-                  }
-                  for (int x = 0; x < image.width; ++x) {
-                    const float* p = from + size_t(x) * size_t(image.channels);
-                    for (int c = 0; c < channels; ++c) {
-                      const float v = c < image.channels ? p[c] : 0.0f;
-                      to[size_t(x) * size_t(channels) + size_t(c)] =
-                          uint8_t(detail::toCode(v, 255.0f));
-                    }
-                  }
-                });
-              });
+  jpeg::write(
+      file, shown, image.width, image.height, channels, options.jpegQuality, attributes,
+      [&](int y0, int rows, uint8_t* codes) {
+        parallelFor(0, rows, [&](int64_t r) {
+          const float* from = image.row(y0 + int(r)).data();
+          uint8_t* to = codes + size_t(r) * size_t(image.width) * size_t(channels);
+          if (image.channels == channels) {  // the file's layout already
+            const size_t values = size_t(image.width) * size_t(channels);
+            for (size_t i = 0; i < values; ++i) to[i] = uint8_t(detail::toCode(from[i], 255.0f));
+            return;
+          }
+          for (int x = 0; x < image.width; ++x) {
+            const float* p = from + size_t(x) * size_t(image.channels);
+            for (int c = 0; c < channels; ++c) {
+              const float v = c < image.channels ? p[c] : 0.0f;
+              to[size_t(x) * size_t(channels) + size_t(c)] = uint8_t(detail::toCode(v, 255.0f));
+            }
+          }
+        });
+      },
+      options.jpegFullChroma);
 }
 
 // Writes into `file` (a temporary); errors name `shown`, the destination the user asked for.

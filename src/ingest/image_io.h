@@ -219,6 +219,9 @@ struct WriteOptions {
     Float
   } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
   int jpegQuality = 95;
+  // JPEG only: chroma at full resolution (4:4:4) instead of OpenImageIO's and cameras' 4:2:0, for
+  // a picture whose colour edges must stay where they are (a composite over a photo).
+  bool jpegFullChroma = false;
   int alphaChannel = -1;  // index of the alpha channel, or -1
   // OpenEXR only: chromaticities of the RGB channels (red, green, blue, white xy).
   std::optional<std::array<double, 8>> chromaticities;

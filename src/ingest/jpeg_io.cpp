@@ -168,7 +168,8 @@ struct Compressor {
 
 bool encodePhase(Compressor& c, int width, int height, int channels, int quality,
                  const std::vector<unsigned char>& exifBlock,
-                 const std::function<void(int, int, uint8_t*)>& rows, uint8_t* band, int bandRows) {
+                 const std::function<void(int, int, uint8_t*)>& rows, uint8_t* band, int bandRows,
+                 bool fullChroma) {
   install(c.err, c.cinfo.err);
   if (setjmp(c.err.jump)) return false;
   jpeg_create_compress(&c.cinfo);
@@ -180,6 +181,9 @@ bool encodePhase(Compressor& c, int width, int height, int channels, int quality
   c.cinfo.in_color_space = channels == 1 ? JCS_GRAYSCALE : JCS_RGB;
   jpeg_set_defaults(&c.cinfo);
   jpeg_set_quality(&c.cinfo, quality, TRUE);
+  if (fullChroma)
+    for (int k = 0; k < c.cinfo.num_components; ++k)
+      c.cinfo.comp_info[k].h_samp_factor = c.cinfo.comp_info[k].v_samp_factor = 1;
   c.cinfo.write_JFIF_header = TRUE;
   jpeg_start_compress(&c.cinfo, TRUE);
   if (!exifBlock.empty())
@@ -218,7 +222,7 @@ Decoded readMemory(std::span<const unsigned char> bytes, const fs::path& name, b
 
 void write(const fs::path& file, const fs::path& shown, int width, int height, int channels,
            int quality, const std::vector<ImageAttribute>& attributes,
-           const std::function<void(int, int, uint8_t*)>& rows) {
+           const std::function<void(int, int, uint8_t*)>& rows, bool fullChroma) {
   COMPOSE_CHECK(width > 0 && height > 0 && (channels == 1 || channels == 3));
   std::vector<unsigned char> exifBlock;
   if (std::vector<unsigned char> tiff = exif::encode(attributes); !tiff.empty()) {
@@ -237,7 +241,7 @@ void write(const fs::path& file, const fs::path& shown, int width, int height, i
   if (!c.file)
     throw Error("output", std::string("cannot open for writing: ") + std::strerror(errno), shown);
   const bool ok = encodePhase(c, width, height, channels, std::clamp(quality, 1, 100), exifBlock,
-                              rows, band.data(), bandRows);
+                              rows, band.data(), bandRows, fullChroma);
   const int writeErrno = errno;
   if (!ok) {
     std::string why = c.err.message;

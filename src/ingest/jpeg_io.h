@@ -50,9 +50,10 @@ Decoded readMemory(std::span<const unsigned char> bytes, const std::filesystem::
 
 // Writes a JPEG of width x height pixels of `channels` (1 or 3) 8-bit codes into `file`:
 // `rows(firstRow, rowCount, codes)` fills the codes of the rows asked for (interleaved), a band
-// at a time. `attributes` go into the EXIF block. Errors name `shown`.
+// at a time. `attributes` go into the EXIF block. Chroma is subsampled 2 x 2 (4:2:0, as cameras
+// and OpenImageIO write), or kept at full resolution (`fullChroma`, 4:4:4). Errors name `shown`.
 void write(const std::filesystem::path& file, const std::filesystem::path& shown, int width,
            int height, int channels, int quality, const std::vector<ImageAttribute>& attributes,
-           const std::function<void(int, int, uint8_t*)>& rows);
+           const std::function<void(int, int, uint8_t*)>& rows, bool fullChroma = false);
 
 }  // namespace compose::ingest::jpeg

@@ -21,7 +21,7 @@
 //    peak memory from its --timings);
 //  * baseline: OpenImageIO alone on the same files: decoding the plate and the environment to
 //    float, encoding the EXR (the parts, channels, data windows and compression of compose's own
-//    output, from its pixels) and the JPEG (quality 95, from the display pixels), with
+//    output, from its pixels) and the JPEG (quality 95, 4:4:4, from the display pixels), with
 //    OpenImageIO's defaults (its own threads for OpenEXR);
 //  * render: the BVH build, the visibility pass (cold, then cached), the per-point shading with
 //    self-shadowing and renderDiffuse() at 1920x1080, 4x4 samples per pixel, at the default
@@ -247,6 +247,7 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
     OIIO::ImageSpec spec(displaySpec.width, displaySpec.height, displaySpec.nchannels,
                          OIIO::TypeDesc::UINT8);
     spec.attribute("Compression", "jpeg:95");
+    spec.attribute("jpeg:subsampling", "4:4:4");  // as compose writes its display image
     auto out = OIIO::ImageOutput::create(file.string());
     if (!out->open(file.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, display.data()))
       throw std::runtime_error(out->geterror());

@@ -341,8 +341,11 @@ int main(int argc, char** argv) {
       };
       add("none", 0, false, 0, double(unshadowedLighting->floatsStored()), 0, 0, measure(plain));
 
-      const render::SourceVisibility seen =
+      render::SourceVisibility seen =
           render::traceSources(points, scene, split.sources, envFromObject, sourceRays);
+      // As the pipeline does: a source traced again across its penumbra.
+      if (sourceRays == 1)
+        render::refineSourcePenumbrae(mesh, points, scene, split.sources, envFromObject, seen);
       for (const bool withSources : {false, true}) {
         const lighting::Environment& shadowEnv = withSources ? split.residual : env;
         render::ShadowInputs in;

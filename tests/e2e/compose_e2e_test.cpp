@@ -964,6 +964,44 @@ TEST_F(ComposeOutputs, AThreeChannelPlateIsReadByItsChannelsNames) {
     EXPECT_NEAR(yc.at(2, 2, yc.channel(c)), rgb.at(2, 2, rgb.channel(c)), 1e-5) << c;
 }
 
+// The display JPEG keeps its colour at full resolution (4:4:4): a plate's colour edges stay where
+// they are (at 4:2:0, the default of cameras and OpenImageIO, red against green moved by up to 43
+// codes at quality 95).
+TEST_F(ComposeOutputs, TheJpegKeepsThePlatesColourEdges) {
+  {
+    std::vector<uint8_t> px(size_t(320) * 240 * 3);
+    for (int y = 0; y < 240; ++y)
+      for (int x = 0; x < 320; ++x) {
+        uint8_t* p = &px[(size_t(y) * 320 + size_t(x)) * 3];
+        const bool red = (x / 3) % 2 == 0;
+        p[0] = red ? 200 : 30, p[1] = red ? 30 : 180, p[2] = 40;
+      }
+    OIIO::ImageSpec spec(320, 240, 3, OIIO::TypeDesc::UINT8);
+    auto out = OIIO::ImageOutput::create((dir_ / "stripes.png").string());
+    ASSERT_TRUE(out->open((dir_ / "stripes.png").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+  }
+  const auto r = runCompose(
+      args((dir_ / "s").string(), "stripes.png") + " --view Standard --place 0.9,0.9 --scale 0.05",
+      dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  auto in = OIIO::ImageInput::open((dir_ / "s.jpg").string());
+  ASSERT_TRUE(in);
+  EXPECT_EQ(in->spec().get_string_attribute("jpeg:subsampling"), "4:4:4");
+  std::vector<uint8_t> got(size_t(320) * 240 * 3);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, got.data()));
+  int worst = 0;
+  for (int y = 0; y < 150; ++y)  // well away from the object, low on the right
+    for (int x = 0; x < 320; ++x) {
+      const bool red = (x / 3) % 2 == 0;
+      const uint8_t* p = &got[(size_t(y) * 320 + size_t(x)) * 3];
+      worst = std::max({worst, std::abs(p[0] - (red ? 200 : 30)), std::abs(p[1] - (red ? 30 : 180)),
+                        std::abs(p[2] - 40)});
+    }
+  EXPECT_LE(worst, 8) << "codes off the plate";
+}
+
 // A float TIFF environment holds the same linear radiance as an OpenEXR one: it lights the object
 // the same (the built-in config's default rule, meant for 8-bit images, decoded it with the sRGB
 // curve: 555 times too bright for one texel of 100, -3.10 stops of exposure against +6.02).
