@@ -179,6 +179,8 @@ class GltfReader {
   size_t primitives_ = 0, skippedLines = 0, droppedIndices = 0, triangles_ = 0;
   size_t colours_ = 0, clampedColours_ = 0, morphs_ = 0, skinned_ = 0, missingTexcoords_ = 0,
          missingMaterials_ = 0;
+  // What the materials ask for that a diffuse renderer does not do: feature → materials.
+  std::map<std::string, int> unrendered_;
   // Triangle lists whose vertices (or indices) do not come in threes: the primitives, and the
   // vertices left over at their ends.
   size_t ragged_ = 0, leftOver_ = 0;
@@ -461,6 +463,22 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
     } else {
       mesh_.warnings.push_back("material '" + m.name +
                                "' has no valid baseColorFactor: using white");
+    }
+    // Every material renders diffuse: what else it asks for is said once, with counts.
+    {
+      const tinygltf::PbrMetallicRoughness& pbr = gm.pbrMetallicRoughness;
+      if (pbr.metallicFactor >= 0.5 && pbr.roughnessFactor < 0.5) ++unrendered_["metal"];
+      if (pbr.metallicRoughnessTexture.index >= 0) ++unrendered_["metallic-roughness textures"];
+      if (gm.normalTexture.index >= 0) ++unrendered_["normal maps"];
+      if (gm.occlusionTexture.index >= 0) ++unrendered_["occlusion maps"];
+      const std::vector<double>& e = gm.emissiveFactor;
+      if (gm.emissiveTexture.index >= 0 ||
+          (e.size() >= 3 && (e[0] > 0.0 || e[1] > 0.0 || e[2] > 0.0)))
+        ++unrendered_["emission"];
+      for (const auto& [name, value] : gm.extensions)
+        if (name != "KHR_materials_pbrSpecularGlossiness" && name != "KHR_materials_unlit" &&
+            name != "KHR_texture_transform")
+          ++unrendered_[name];
     }
     tinygltf::TextureInfo info = gm.pbrMetallicRoughness.baseColorTexture;
     double factorAlpha = f.size() >= 4 && std::isfinite(f[3]) ? f[3] : 1.0;
@@ -842,6 +860,16 @@ void GltfReader::read() {
   if (skinned_) {
     mesh_.warnings.push_back(count(skinned_, "node is", "nodes are") +
                              " skinned: rendered in the bind pose, under the node transforms");
+  }
+  if (!unrendered_.empty()) {
+    std::string what;
+    for (const auto& [feature, materials] : unrendered_)
+      what += (what.empty() ? "" : ", ") + feature + " (" +
+              count(size_t(materials), "material", "materials") + ")";
+    mesh_.warnings.push_back(
+        "every material renders as a diffuse surface of its base colour; "
+        "not rendered: " +
+        what);
   }
   if (missingMaterials_) {
     mesh_.warnings.push_back(count(missingMaterials_, "primitive refers", "primitives refer") +

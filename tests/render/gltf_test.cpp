@@ -530,6 +530,40 @@ TEST(Gltf, ATexturesExifOrientationIsNotApplied) {
   EXPECT_LT(topLeft.z, 0.1f);
 }
 
+// Every material renders diffuse; what a material asks for beyond its base colour is said once,
+// with counts (a glass, an emitter and a metal silently became clay).
+TEST(Gltf, WhatMaterialsAskForBeyondTheirBaseColourIsSaid) {
+  TempDir dir;
+  GltfBuilder b = texturedPair(json::object());
+  b.json["images"] = json::array();
+  b.json["textures"] = json::array();
+  b.json["materials"] = json::array(
+      {{{"name", "chrome"},
+        {"pbrMetallicRoughness", {{"metallicFactor", 1.0}, {"roughnessFactor", 0.1}}},
+        {"normalTexture", {{"index", 0}}},
+        {"emissiveFactor", {1.0, 0.5, 0.0}}},
+       {{"name", "glass"},
+        {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1.0}}}}}}});
+  b.json["textures"] = json::array({{{"source", 0}}});
+  b.json["images"] = json::array({{{"uri", "none.png"}}});
+  b.json["meshes"][0]["primitives"][0].erase("attributes");
+  b.json["meshes"][0]["primitives"][0]["attributes"] =
+      b.json["meshes"][0]["primitives"][1]["attributes"];
+  b.json["meshes"][0]["primitives"][1]["material"] = 1;
+  writeText(dir / "materials.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "materials.gltf");
+  const std::string expected =
+      "every material renders as a diffuse surface of its base colour; not rendered: "
+      "KHR_materials_transmission (1 material), emission (1 material), metal (1 material), normal "
+      "maps (1 material)";
+  EXPECT_NE(std::find(m.warnings.begin(), m.warnings.end(), expected), m.warnings.end())
+      << ::testing::PrintToString(m.warnings);
+  // A plain material (glTF's defaults: metallic 1, rough 1) says nothing.
+  writeText(dir / "plain.gltf", texturedPair({{"uri", "none.png"}}).gltf());
+  for (const std::string& w : loadMesh(dir / "plain.gltf").warnings)
+    EXPECT_EQ(w.find("not rendered"), std::string::npos) << w;
+}
+
 TEST(Gltf, ABinaryGlbWithItsTextureInABufferView) {
   TempDir dir;
   const std::vector<uint8_t> png = quadrantPng(dir);
