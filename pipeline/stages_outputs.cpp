@@ -207,9 +207,12 @@ std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendere
     return std::nullopt;
   return format(
       "warning: %.1f%% of the object's pixels are clipped to white in %s (view %s): lower "
-      "--exposure to keep their shading",
+      "--exposure to keep their shading%s",
       100.0 * double(allClipped) / double(allCovered), displayPath.filename().string().c_str(),
-      view.c_str());
+      view.c_str(),
+      view == "Standard" ? ", or --view 'Soft Clip' to roll the highlights off (the plate's "
+                           "brightest levels with them)"
+                         : "");
 }
 
 glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {

@@ -27,7 +27,7 @@ TEST(ColorConfig, BuiltinWorkingSpaceIsAcescg) {
   EXPECT_EQ(c.resolve("srgb_tx", "test"), "sRGB - Texture");
   EXPECT_EQ(c.resolve("lin_rec709", "test"), "Linear Rec.709 (sRGB)");
   EXPECT_EQ(c.defaultDisplay(), "sRGB");
-  EXPECT_EQ(c.defaultView("sRGB"), "Soft Clip") << "the default view rolls highlights off";
+  EXPECT_EQ(c.defaultView("sRGB"), "Standard") << "the default view leaves the plate as it was";
 }
 
 TEST(ColorConfig, DecodesSrgbAndConvertsToAcescg) {
