@@ -57,8 +57,17 @@ BasisChoice createBasis(const ComposeJob& job, const lighting::Environment* envi
     const auto estimates = lighting::estimateOrders(job.lighting, *environment, params);
     const lighting::OrderEstimate pick = lighting::selectOrder(estimates, targetDb);
     out.order = pick.order;
-    out.note = format("order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
-                      job.lighting.c_str(), pick.order, pick.estimatedSnrDb, targetDb);
+    if (std::isfinite(pick.estimatedSnrDb)) {
+      out.note =
+          format("order=auto: %s order %d, estimated truncation SNR %.1f dB (target %.1f dB)",
+                 job.lighting.c_str(), pick.order, pick.estimatedSnrDb, targetDb);
+    } else {
+      // The highest order has no tail above it to estimate from.
+      out.note = format(
+          "order=auto: %s order %d, the highest it takes; whether it reaches the target (%.1f dB) "
+          "cannot be estimated (no higher orders to measure the tail with)",
+          job.lighting.c_str(), pick.order, targetDb);
+    }
   } else {
     out.order = cachedOrder;
   }

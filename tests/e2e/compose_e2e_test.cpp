@@ -1070,6 +1070,25 @@ TEST_F(ComposeOutputs, ABurntOutObjectIsWarnedAboutInTheSoftClipViewToo) {
   EXPECT_EQ(fine.err.find("clipped to white"), std::string::npos) << fine.err;
 }
 
+// order=auto at a target no order reaches stops at the highest order and says that it cannot
+// tell whether the target is met (it claimed an estimated SNR of inf dB there).
+TEST_F(ComposeOutputs, AnAutomaticOrderAtItsHighestDoesNotClaimTheTarget) {
+  const auto high = runCompose(
+      args((dir_ / "h").string()) + " --lighting sh --lighting-params order=auto,target=90",
+      dir_.path());
+  ASSERT_EQ(high.status, 0) << high.err;
+  EXPECT_NE(high.err.find("order=auto: sh order 8, the highest it takes; whether it reaches the "
+                          "target (90.0 dB) cannot be estimated"),
+            std::string::npos)
+      << high.err;
+  EXPECT_EQ(high.err.find("inf dB"), std::string::npos) << high.err;
+  const auto low = runCompose(
+      args((dir_ / "l").string()) + " --lighting sh --lighting-params order=auto,target=20",
+      dir_.path());
+  ASSERT_EQ(low.status, 0) << low.err;
+  EXPECT_NE(low.err.find("estimated truncation SNR"), std::string::npos) << low.err;
+}
+
 TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
   EXPECT_EQ(r.status, 1);
