@@ -180,7 +180,14 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
         lighting::Environment::fromLatLong(env.image, o->env, &sanitize);
 
     ProgressPrinter printer(globals);
-    capture::SimulatedCapture sim = capture::simulateCapture(environment, p, printer.callback());
+    capture::SimulatedCapture sim = [&] {
+      try {
+        return capture::simulateCapture(environment, p, printer.callback());
+      } catch (const Error& e) {
+        if (!e.file().empty()) throw;
+        throw Error(e.stage(), e.what(), o->env);  // what it says is of the environment
+      }
+    }();
     sim.environmentName = o->env.string();
     capture::WriteCaptureOptions write;
     write.truthImages = o->truthImages;

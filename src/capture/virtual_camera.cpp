@@ -407,6 +407,24 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
         0.9 / percentile(0.99) * std::exp2(0.5 * (p.brackets - 1) * p.evStep);
     const double e = std::min(forMedian, forHighlights);
     middle = std::exp2(std::floor(std::log2(e * p.fNumber * p.fNumber / p.iso)));
+    // A camera's shutter: the whole bracket between 1 ns and an hour. A map too dark or too
+    // bright for it would give photos whose EXIF says 0 s (and black frames).
+    const double spread = std::exp2(0.5 * (p.brackets - 1) * p.evStep);
+    if (!(middle / spread >= 1e-9 && middle * spread <= 3600.0)) {
+      char text[320];
+      const double median = percentile(0.5);
+      char luminance[48];
+      if (median > 1e-12)
+        std::snprintf(luminance, sizeof luminance, "%.3g", median);
+      else
+        std::snprintf(luminance, sizeof luminance, "%s", "0 (below 1e-12)");
+      std::snprintf(text, sizeof text,
+                    "the environment is too %s for a camera: its median luminance %s would "
+                    "need a middle exposure of %.3g s at f/%.3g ISO %.0f (shutter times from 1 ns "
+                    "to 3600 s); give --exposure, or scale the map",
+                    middle > 1.0 ? "dark" : "bright", luminance, middle, p.fNumber, p.iso);
+      throw Error("capture", text);
+    }
   }
   cap.middleExposureTime = middle;
 

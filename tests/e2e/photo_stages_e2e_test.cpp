@@ -459,6 +459,22 @@ TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
     EXPECT_TRUE(fs::exists(dir / "camera.json"));
     EXPECT_NE(ok.err.find("RMS reprojection"), std::string::npos);
   }
+  // A map no shutter time can photograph (the virtual camera wrote photos of 6.9e10 s whose EXIF
+  // said 0 s, black frames that no merge could use).
+  {
+    TempDir dir;
+    Image dim(64, 32, 3, {"R", "G", "B"});
+    for (float& v : dim.pixels) v = 1e-15f;
+    ingest::WriteOptions floats;
+    floats.depth = ingest::WriteOptions::Depth::Float;
+    ingest::writeImage(dir / "dim.exr", dim, floats);
+    const CommandRun r = compose("capture-sim --env " + q(dir / "dim.exr") + " --out " +
+                                     q(dir / "shots") + " --size 64x48 --views 1",
+                                 dir);
+    EXPECT_FAILS_WITH(r, 1, "the environment is too dark for a camera");
+    EXPECT_NE(r.err.find("dim.exr"), std::string::npos) << r.err;
+    EXPECT_TRUE(filesIn(dir / "shots").empty());
+  }
 }
 
 // The virtual camera takes an environment in any layout compose --env takes: a cube map's photos
