@@ -458,6 +458,38 @@ class RenderStage final : public Stage {
       r.notes.push_back(ctx.notes.back());
     }
     r.exposure = settings.exposure;
+    // A camera inside the object sees its inside only (a frame of back faces, near black): seven
+    // rays from the camera, most of which meet the object from within, say so.
+    {
+      glm::dvec3 origin, dir;
+      if (g.camera.ray(0.5 * g.camera.width, 0.5 * g.camera.height, origin, dir)) {
+        const glm::dmat4 objectFromWorld = glm::inverse(g.worldFromObject);
+        const glm::vec3 from = glm::vec3(glm::dvec3(objectFromWorld * glm::dvec4(origin, 1.0)));
+        const glm::vec3 centre = 0.5f * (ctx.mesh().boundsMin() + ctx.mesh().boundsMax());
+        const glm::vec3 toCentre = centre - from;
+        std::vector<glm::vec3> directions = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                             {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+        if (glm::length(toCentre) > 0.0f) directions.push_back(glm::normalize(toCentre));
+        // The mesh's own normals say which side is out (the winding may not).
+        const render::Mesh& mesh = ctx.mesh();
+        int inside = 0;
+        for (const glm::vec3& d : directions) {
+          const render::EmbreeScene::Hit hit = ctx.objectScene().intersect(from, d);
+          if (!hit.found) continue;
+          const uint32_t* c = &mesh.indices[3 * size_t(hit.triangle)];
+          const glm::vec3 n = (1.0f - hit.u - hit.v) * mesh.normals[c[0]] +
+                              hit.u * mesh.normals[c[1]] + hit.v * mesh.normals[c[2]];
+          inside += glm::dot(n, d) > 0.0f;
+        }
+        if (inside * 2 > int(directions.size())) {
+          ctx.note(
+              format("warning: the camera is inside the object (%d of %zu rays from it meet "
+                     "the object from within): the frame shows its inside; a smaller --scale "
+                     "(%s of the plate height now) or a --place higher in the frame (further away)",
+                     inside, directions.size(), givenText(job.placement.heightFraction).c_str()));
+        }
+      }
+    }
     r.meshFile = fs::absolute(job.object).string();
     r.fileOrigin = ctx.mesh().fileOrigin;
     const auto start = std::chrono::steady_clock::now();

@@ -1089,6 +1089,19 @@ TEST_F(ComposeOutputs, AnAutomaticOrderAtItsHighestDoesNotClaimTheTarget) {
   EXPECT_NE(low.err.find("estimated truncation SNR"), std::string::npos) << low.err;
 }
 
+// An object so large that the camera stands inside it gives a frame of its inside: said (it was
+// written without a word).
+TEST_F(ComposeOutputs, ACameraInsideTheObjectIsWarnedAbout) {
+  const auto inside =
+      runCompose(args((dir_ / "i").string()) + " --scale 8 --place 0.5,0.95", dir_.path());
+  ASSERT_EQ(inside.status, 0) << inside.err;
+  EXPECT_NE(inside.err.find("warning: the camera is inside the object"), std::string::npos)
+      << inside.err;
+  const auto outside = runCompose(args((dir_ / "o").string()), dir_.path());
+  ASSERT_EQ(outside.status, 0) << outside.err;
+  EXPECT_EQ(outside.err.find("inside the object"), std::string::npos) << outside.err;
+}
+
 TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
   EXPECT_EQ(r.status, 1);
