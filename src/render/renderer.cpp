@@ -1059,7 +1059,8 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     plainPixels += rowPlain;
     tracedPixels += rowTraced;
     const int done = ++rowsDone;
-    if (done % 16 == 0) report(progress, "render", double(done) / std::max(h, 1));
+    // Every row: a row can take seconds (Monte Carlo lighting at many samples per pixel).
+    report(progress, "render", double(done) / std::max(h, 1));
   });
   out.rays = cameraRaysTotal + sourceRays;
   out.pixelsTraced = tracedPixels;
