@@ -88,9 +88,10 @@ bool materialUv(const Mesh& mesh, const Material& mat, uint32_t triangle, float 
   return std::isfinite(t.x) && std::isfinite(t.y);
 }
 
-// The first `channels` (1 or 3) channels of `img` at texture coordinates `uv`, bilinear with the
-// texture's wrap modes. Texel centres lie at (i + 0.5) / width; v = 0 is the bottom row (OBJ and
-// glTF flip differently: loaders store v so that this holds).
+// The first `channels` (1 or 3) channels of `img` at texture coordinates `uv`, bilinear (or the
+// nearest texel, Texture::nearest) with the texture's wrap modes. Texel centres lie at (i + 0.5) /
+// width; v = 0 is the bottom row (OBJ and glTF flip differently: loaders store v so that this
+// holds).
 glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv) {
   const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
   const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
@@ -101,6 +102,7 @@ glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv) {
         img.at(wrapIndex(ix, img.width, tex.wrapU), wrapIndex(iy, img.height, tex.wrapV));
     return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
   };
+  if (tex.nearest) return texel(int(std::floor(x + 0.5f)), int(std::floor(y + 0.5f)));
   const int x0 = int(fx), y0 = int(fy);
   return (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
          (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;

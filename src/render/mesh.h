@@ -71,6 +71,9 @@ struct Texture {
   // 1 everywhere. Only a cut-out material (Material::alphaCutoff) reads it.
   Image alpha;
   Wrap wrapU = Wrap::Repeat, wrapV = Wrap::Repeat;
+  // Magnified as blocks of texels (glTF's magFilter NEAREST: pixel art, label atlases) instead of
+  // bilinearly.
+  bool nearest = false;
   // The format says the colour is sRGB-encoded whatever the image file says (glTF's base colour
   // textures): the file's own tag (a PNG's gAMA) is not followed.
   bool srgbByFormat = false;

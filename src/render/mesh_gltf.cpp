@@ -426,6 +426,8 @@ int GltfReader::texture(int gltfTexture, const std::string& materialName) {
       };
       texture.wrapU = wrap(model_.samplers[size_t(t.sampler)].wrapS);
       texture.wrapV = wrap(model_.samplers[size_t(t.sampler)].wrapT);
+      texture.nearest =
+          model_.samplers[size_t(t.sampler)].magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
     }
     it->second = int(mesh_.textures.size());
     mesh_.textures.push_back(std::move(texture));

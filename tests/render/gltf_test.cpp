@@ -601,6 +601,20 @@ TEST(Gltf, TextureTransformAndWrapModes) {
   EXPECT_LT(glm::length(m.albedoAt(first, 0, 0) - glm::vec3(0, 0, 1)), 1e-5f);
   EXPECT_LT(glm::length(m.albedoAt(first, 1, 0) - glm::vec3(0.5f, 0, 0)), 1e-5f);
   EXPECT_LT(glm::length(m.albedoAt(first, 0, 1) - glm::vec3(0.5f, 1, 1)), 1e-5f);
+  // Halfway between red's and green's texel centres: blended, or red's own with magFilter
+  // NEAREST (9728) below the centre line of the texture (Blender's "Closest").
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"].erase("extensions");
+  writeText(dir / "linear.gltf", b.gltf());
+  m = loadMesh(dir / "linear.gltf");
+  EXPECT_LT(glm::length(m.albedoAt(first, 0.45f, 0) - glm::vec3(0.5f * 0.55f, 0.45f, 0)), 1e-5f);
+  b.json["samplers"] = json::array({{{"magFilter", 9728}}});
+  b.json["textures"][0]["sampler"] = 0;
+  writeText(dir / "nearest.gltf", b.gltf());
+  m = loadMesh(dir / "nearest.gltf");
+  EXPECT_LT(glm::length(m.albedoAt(first, 0.45f, 0) - glm::vec3(0.5f, 0, 0)), 1e-6f);
+  EXPECT_LT(glm::length(m.albedoAt(first, 0.55f, 0) - glm::vec3(0, 1, 0)), 1e-6f);
+  b.json.erase("samplers");
+  b.json["textures"][0].erase("sampler");
   // u = 1.25: repeat wraps to red's column, clamp stays at green's.
   b.json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
       {"KHR_texture_transform", {{"offset", {1.0, 0}}}}};
