@@ -92,18 +92,36 @@ bool materialUv(const Mesh& mesh, const Material& mat, uint32_t triangle, float 
 // nearest texel, Texture::nearest) with the texture's wrap modes. Texel centres lie at (i + 0.5) /
 // width; v = 0 is the bottom row (OBJ and glTF flip differently: loaders store v so that this
 // holds).
-glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv) {
+glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv,
+                   const Image* weights = nullptr) {
   const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
   const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
   const float ax = x - fx, ay = y - fy;
+  const int x0 = int(fx), y0 = int(fy);
   auto texel = [&](int ix, int iy) {
     const float* p =
         img.at(wrapIndex(ix, img.width, tex.wrapU), wrapIndex(iy, img.height, tex.wrapV));
     return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
   };
   if (tex.nearest) return texel(int(std::floor(x + 0.5f)), int(std::floor(y + 0.5f)));
-  const int x0 = int(fx), y0 = int(fy);
+  if (weights) {
+    // Weighted by the texels' alpha (a cut-out's colour, premultiplied as a filter takes it): the
+    // colour of texels that are not there does not bleed into the edge of those that are.
+    auto at = [&](const Image& image, int ix, int iy) {
+      return image.at(wrapIndex(ix, image.width, tex.wrapU),
+                      wrapIndex(iy, image.height, tex.wrapV))[0];
+    };
+    const float w[4] = {(1.0f - ax) * (1.0f - ay) * at(*weights, x0, y0),
+                        ax * (1.0f - ay) * at(*weights, x0 + 1, y0),
+                        (1.0f - ax) * ay * at(*weights, x0, y0 + 1),
+                        ax * ay * at(*weights, x0 + 1, y0 + 1)};
+    const float sum = w[0] + w[1] + w[2] + w[3];
+    if (sum > 1e-6f)
+      return (texel(x0, y0) * w[0] + texel(x0 + 1, y0) * w[1] + texel(x0, y0 + 1) * w[2] +
+              texel(x0 + 1, y0 + 1) * w[3]) /
+             sum;
+  }
   return (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
          (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
 }
@@ -160,7 +178,8 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
     const Texture& tex = textures[size_t(mat.texture)];
     glm::vec2 uv;
     if (!tex.image.empty() && materialUv(*this, mat, triangle, u, v, uv))
-      albedo *= bilinear(tex, tex.image, uv);
+      albedo *=
+          bilinear(tex, tex.image, uv, mat.cutOut() && !tex.alpha.empty() ? &tex.alpha : nullptr);
   }
   if (!colors.empty()) {
     const uint32_t* c = &indices[3 * size_t(triangle)];

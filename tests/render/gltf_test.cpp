@@ -378,6 +378,15 @@ TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   EXPECT_FALSE(m.hasCutouts());  // alpha alone (OPAQUE) cuts nothing
   const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
   EXPECT_FALSE(m.cutAway(first, 1, 0));
+  // Opaque, the colour blends across texels whatever their alpha: between red's and green's
+  // centres, both.
+  EXPECT_GT(m.albedoAt(first, 0.45f, 0).y, 0.4f);
+  // A cut-out's colour is filtered by alpha: green, not there, does not bleed into red's edge
+  // (a purple fringe along the cut where the transparent texels were blue).
+  b.json["materials"][0]["alphaMode"] = "MASK";
+  writeBytes(dir / "mask.glb", b.glb());
+  const Mesh masked = loadMesh(dir / "mask.glb");
+  EXPECT_LT(glm::length(masked.albedoAt(first, 0.45f, 0) - glm::vec3(0.5f, 0, 0)), 1e-5f);
   // BLEND: semi-transparent by the texture's alpha (green 0: not there; blue 128/255: found by
   // rays whose random number is below it).
   b.json["materials"][0]["alphaMode"] = "BLEND";
