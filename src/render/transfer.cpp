@@ -264,7 +264,17 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress, const GroundContact* ground) {
   const EmbreeScene scene(mesh);
-  VertexTransfer transfer = computeTransfer(mesh, scene, points, params, progress, ground);
+  // One progress for both passes: the first to 85 %, the refinement's (at most as many points,
+  // usually a few per cent) after it.
+  constexpr double kFirstShare = 0.85;
+  auto part = [&](double from, double to) -> Progress {
+    if (!progress) return {};
+    return [&progress, from, to](std::string_view stage, double fraction) {
+      progress(stage, from + (to - from) * fraction);
+    };
+  };
+  VertexTransfer transfer =
+      computeTransfer(mesh, scene, points, params, part(0.0, kFirstShare), ground);
   // Refined where the object's own shadowing changes fast: the ground's darkening is smooth.
   const size_t first = refineSurfacePoints(
       mesh, points, transfer.aoSelf.empty() ? transfer.ao : transfer.aoSelf, refine);
@@ -275,7 +285,7 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   extra.radius = points.radius;
   extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
   extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
-  transfer.append(computeTransfer(mesh, scene, extra, params, progress, ground));
+  transfer.append(computeTransfer(mesh, scene, extra, params, part(kFirstShare, 1.0), ground));
   return transfer;
 }
 
