@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <optional>
 
@@ -53,6 +54,44 @@ std::vector<Codes8> alignedCrops(const std::vector<Codes8>& shots,
     });
   }
   return out;
+}
+
+// A bracket whose exposures are in another order than its pictures' brightness: the exposures
+// were given in another order than the photos (or for other photos). Every merge of it would be
+// wrong, and a response recovered from it would be stored for the camera, so it is refused.
+// Compares the green samples of each pair of shots adjacent in exposure, at most ~65 k pixels
+// each: a longer exposure is brighter wherever neither is clipped, whatever the response.
+void checkBrightnessOrder(const ingest::View& view,
+                          const std::function<float(size_t shot, size_t pixel)>& green,
+                          size_t pixels, float tolerance) {
+  const size_t n = view.shots.size();
+  std::vector<size_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return *view.shots[a].exposure < *view.shots[b].exposure;
+  });
+  const size_t step = std::max<size_t>(1, pixels / 65536);
+  for (size_t k = 0; k + 1 < n; ++k) {
+    const ingest::Shot& a = view.shots[order[k]];
+    const ingest::Shot& b = view.shots[order[k + 1]];
+    const double stops = std::log2(*b.exposure / *a.exposure);
+    if (stops < 0.5) continue;  // too close for brightness to tell them apart reliably
+    size_t brighter = 0, darker = 0, sampled = 0;
+    for (size_t i = 0; i < pixels; i += step, ++sampled) {
+      const float va = green(order[k], i), vb = green(order[k + 1], i);
+      if (vb > va + tolerance) ++brighter;
+      if (vb < va - tolerance) ++darker;
+    }
+    if (darker <= brighter || darker * 200 < sampled) continue;
+    char text[400];
+    std::snprintf(text, sizeof text,
+                  "%s is given %.1f stops more exposure than %s (%s) but is darker in %.0f %% of "
+                  "the pixels (brighter in %.0f %%): are the exposures in the order of the photos?",
+                  b.file.filename().string().c_str(), stops, a.file.filename().string().c_str(),
+                  b.exposureSource.c_str(), 100.0 * double(darker) / double(sampled),
+                  100.0 * double(brighter) / double(sampled));
+    throw Error(kStage, text, b.file);
+  }
 }
 
 }  // namespace
@@ -227,6 +266,23 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
           for (size_t k = 0; k < 3; ++k) c.rgb[i * 3 + k] = photo.codes[i * size_t(ch) + k];
       }
       codes[v].push_back(std::move(c));
+    }
+  }
+
+  // The exposures agree with the pictures' brightness (before anything is recovered from them).
+  for (size_t v = 0; v < capture.views.size(); ++v) {
+    const Image& first = photos[v].front().image;
+    const size_t pixels = size_t(first.width) * size_t(first.height);
+    if (eightBit[v]) {
+      checkBrightnessOrder(
+          capture.views[v],
+          [&](size_t s, size_t i) { return float(codes[v][s].data()[i * 3 + 1]); }, pixels, 2.0f);
+    } else if (photos[v].front().hasPixels()) {
+      const size_t ch = size_t(first.channels), g = ch > 1 ? 1 : 0;
+      checkBrightnessOrder(
+          capture.views[v],
+          [&](size_t s, size_t i) { return photos[v][s].image.pixels[i * ch + g]; }, pixels,
+          2.0f / 65535.0f);
     }
   }
 

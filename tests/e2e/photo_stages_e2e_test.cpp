@@ -405,6 +405,31 @@ TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {
                 dir);
     EXPECT_EQ(ok.status, 0) << ok.err;
     EXPECT_NE(ok.err.find("not by a camera response"), std::string::npos) << ok.err;
+    // With the list in the other order: refused, nothing written.
+    fs::remove(dir / "hdr.exr");
+    const CommandRun reversed =
+        compose("merge --exposures 1,0.25 --response colorspace --out " + q(dir / "hdr.exr") + " " +
+                    q(dir / "bare_yaw000_1.jpg") + " " + q(dir / "bare_yaw000_2.jpg"),
+                dir);
+    EXPECT_FAILS_WITH(reversed, 1,
+                      "bare_yaw000_1.jpg is given 2.0 stops more exposure than bare_yaw000_2.jpg "
+                      "(--exposures) but is darker in");
+    EXPECT_NE(reversed.err.find("are the exposures in the order of the photos?"),
+              std::string::npos);
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+  }
+  // Exposures given in the reverse order of a camera's photos: no merge, and no response stored
+  // for the camera (it would linearise its later merges).
+  {
+    TempDir dir;
+    const CommandRun r =
+        compose("merge --exposures 16,4,1 --response-dir " + q(dir / "responses") + " --out " +
+                    q(dir / "hdr.exr") + " " + q(shot("yaw000_1.jpg")) + " " +
+                    q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg")),
+                dir);
+    EXPECT_FAILS_WITH(r, 1, "yaw000_2.jpg is given 2.0 stops more exposure than yaw000_3.jpg");
+    EXPECT_FALSE(fs::exists(dir / "hdr.exr"));
+    EXPECT_TRUE(filesIn(dir / "responses").empty());
   }
   // A truncated JPEG.
   {
@@ -534,6 +559,10 @@ TEST_F(PhotoStages, MergedViewsKeepTheLensAndDeepPhotosSayTheirSpace) {
   };
   r = compose("merge --out " + q(dir / "tif.exr") + " " + tiffs("px"), dir);
   ASSERT_EQ(r.status, 0) << r.err;
+  // 16-bit photos given exposures in the reverse order: refused.
+  r = compose("merge --exposures 16,4,1 --out " + q(dir / "reversed.exr") + " " + tiffs("px"), dir);
+  EXPECT_FAILS_WITH(r, 1, "px_2.tif is given 2.0 stops more exposure than px_3.tif");
+  EXPECT_FALSE(fs::exists(dir / "reversed.exr"));
   EXPECT_EQ(r.err.find("16-bit photos such as"), std::string::npos) << r.err;
   r = compose("merge --input-space 'Linear Rec.709 (sRGB)' --out " + q(dir / "given.exr") + " " +
                   tiffs("px"),
