@@ -66,6 +66,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
       if (!(std::abs(kept - v) <= 1e-4f)) ++clampedTexels;
       v = kept;
     }
+    render::buildMipLevels(texture);  // filtered in linear light
   }
   std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
                      (mesh.materials.size() == 1 ? "" : "s") +

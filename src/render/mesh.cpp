@@ -13,10 +13,12 @@
 #include <unordered_set>
 
 #include <glm/geometric.hpp>
+#include <glm/mat2x2.hpp>
 
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/numbers.h"
+#include "core/parallel.h"
 #include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
@@ -93,7 +95,7 @@ bool materialUv(const Mesh& mesh, const Material& mat, uint32_t triangle, float 
 // width; v = 0 is the bottom row (OBJ and glTF flip differently: loaders store v so that this
 // holds).
 glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv,
-                   const Image* weights = nullptr) {
+                   const Image* weights = nullptr, bool magnified = true) {
   const float x = reduce(uv.x, tex.wrapU) * float(img.width) - 0.5f;
   const float y = (1.0f - reduce(uv.y, tex.wrapV)) * float(img.height) - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
@@ -104,7 +106,7 @@ glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv,
         img.at(wrapIndex(ix, img.width, tex.wrapU), wrapIndex(iy, img.height, tex.wrapV));
     return img.channels >= 3 ? glm::vec3(p[0], p[1], p[2]) : glm::vec3(p[0]);
   };
-  if (tex.nearest) return texel(int(std::floor(x + 0.5f)), int(std::floor(y + 0.5f)));
+  if (tex.nearest && magnified) return texel(int(std::floor(x + 0.5f)), int(std::floor(y + 0.5f)));
   if (weights) {
     // Weighted by the texels' alpha (a cut-out's colour, premultiplied as a filter takes it): the
     // colour of texels that are not there does not bleed into the edge of those that are.
@@ -124,6 +126,71 @@ glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv,
   }
   return (texel(x0, y0) * (1.0f - ax) + texel(x0 + 1, y0) * ax) * (1.0f - ay) +
          (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
+}
+
+// Level k of the texture's colour or alpha (0: the image itself).
+const Image& colourLevel(const Texture& tex, size_t k) {
+  return k == 0 ? tex.image : tex.levels[k - 1];
+}
+const Image* alphaLevel(const Texture& tex, size_t k) {
+  if (tex.alpha.empty()) return nullptr;
+  return k == 0 ? &tex.alpha : &tex.alphaLevels[k - 1];
+}
+
+// Trilinear: bilinear in the two levels around `lod` (0: full size), blended.
+glm::vec3 trilinear(const Texture& tex, const glm::vec2& uv, float lod, bool weighted) {
+  const size_t top = tex.levels.size();
+  if (!(lod > 0.0f) || top == 0)
+    return bilinear(tex, tex.image, uv, weighted ? alphaLevel(tex, 0) : nullptr);
+  lod = std::min(lod, float(top));
+  const size_t k = std::min(size_t(lod), top);
+  const float f = lod - float(k);
+  const glm::vec3 a =
+      bilinear(tex, colourLevel(tex, k), uv, weighted ? alphaLevel(tex, k) : nullptr, false);
+  if (k == top || f <= 0.0f) return a;
+  const glm::vec3 b = bilinear(tex, colourLevel(tex, k + 1), uv,
+                               weighted ? alphaLevel(tex, k + 1) : nullptr, false);
+  return a + (b - a) * f;
+}
+
+// One dimension's area weights from n samples down to m: for each output index, its inputs and
+// their shares (summing to 1).
+struct AreaTap {
+  int index;
+  float weight;
+};
+std::vector<std::vector<AreaTap>> areaTaps(int n, int m) {
+  std::vector<std::vector<AreaTap>> taps(static_cast<size_t>(m));
+  const double scale = double(n) / double(m);
+  for (int i = 0; i < m; ++i) {
+    const double lo = i * scale, hi = (i + 1) * scale;
+    for (int k = int(std::floor(lo)); k < int(std::ceil(hi)) && k < n; ++k) {
+      const double w = std::min(hi, double(k + 1)) - std::max(lo, double(k));
+      if (w > 0.0) taps[size_t(i)].push_back({k, float(w / scale)});
+    }
+  }
+  return taps;
+}
+
+// `img` reduced to width x height, each output texel the area average of the inputs it covers.
+Image areaReduce(const Image& img, int width, int height) {
+  const auto across = areaTaps(img.width, width), down = areaTaps(img.height, height);
+  const int c = img.channels;
+  Image rows(width, img.height, c, img.channelNames);
+  parallelFor(0, img.height, [&](int64_t y) {
+    for (int x = 0; x < width; ++x)
+      for (const AreaTap& t : across[size_t(x)])
+        for (int k = 0; k < c; ++k)
+          rows.at(x, int(y))[k] += t.weight * img.at(t.index, int(y))[k];
+  });
+  Image out(width, height, c, img.channelNames);
+  out.colorSpace = img.colorSpace;
+  parallelFor(0, height, [&](int64_t y) {
+    for (const AreaTap& t : down[size_t(y)])
+      for (int x = 0; x < width; ++x)
+        for (int k = 0; k < c; ++k) out.at(x, int(y))[k] += t.weight * rows.at(x, t.index)[k];
+  });
+  return out;
 }
 
 const Material& materialOf(const Mesh& mesh, uint32_t triangle) {
@@ -186,6 +253,101 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
     albedo *= (1.0f - u - v) * colors[c[0]] + u * colors[c[1]] + v * colors[c[2]];
   }
   return albedo;
+}
+
+glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v, const glm::vec3& dPdx,
+                         const glm::vec3& dPdy) const {
+  const Material& mat = materialOf(*this, triangle);
+  if (mat.texture < 0 || texcoords.empty() || textures[size_t(mat.texture)].levels.empty())
+    return albedoAt(triangle, u, v);
+  const Texture& tex = textures[size_t(mat.texture)];
+  glm::vec2 uv;
+  glm::vec3 albedo = mat.baseColor;
+  if (tex.image.empty() || !materialUv(*this, mat, triangle, u, v, uv))
+    return albedoAt(triangle, u, v);
+  // The footprint in texture coordinates: dP on the triangle's plane as barycentric steps (by the
+  // dual basis of its edges), then as steps of the corners' texture coordinates.
+  const uint32_t* c = &indices[3 * size_t(triangle)];
+  const glm::vec3 e1 = positions[c[1]] - positions[c[0]], e2 = positions[c[2]] - positions[c[0]];
+  const glm::vec3 n = glm::cross(e1, e2);
+  const float nn = glm::dot(n, n);
+  const glm::vec3 g1 = glm::cross(e2, n) / nn, g2 = glm::cross(n, e1) / nn;
+  const glm::mat2 linear(mat.uvTransform);
+  const glm::vec2 t1 = linear * (texcoords[c[1]] - texcoords[c[0]]),
+                  t2 = linear * (texcoords[c[2]] - texcoords[c[0]]);
+  const glm::vec2 size(float(tex.image.width), float(tex.image.height));
+  glm::vec2 ax = glm::dot(dPdx, g1) * t1 + glm::dot(dPdx, g2) * t2;
+  glm::vec2 ay = glm::dot(dPdy, g1) * t1 + glm::dot(dPdy, g2) * t2;
+  float lx = glm::length(ax * size), ly = glm::length(ay * size);  // in texels
+  if (ly > lx) {
+    std::swap(ax, ay);
+    std::swap(lx, ly);
+  }
+  const bool weighted = mat.cutOut() && !tex.alpha.empty();
+  glm::vec3 colour;
+  if (!(nn > 0.0f) || !std::isfinite(lx) || !std::isfinite(ly)) {
+    colour = trilinear(tex, uv, float(tex.levels.size()), weighted);  // the mean colour
+  } else if (!(lx > 1.0f)) {
+    colour = bilinear(tex, tex.image, uv, weighted ? &tex.alpha : nullptr);
+  } else {
+    // Elongated: taps along the long axis, each at the level of the short one (at most 8 taps;
+    // beyond that the level of a longer segment).
+    constexpr int kMaxTaps = 8;
+    const int taps = std::clamp(int(std::ceil(lx / std::max(ly, 1e-6f))), 1, kMaxTaps);
+    const float lod = std::log2(lx / float(taps));
+    colour = glm::vec3(0.0f);
+    for (int k = 0; k < taps; ++k)
+      colour += trilinear(tex, uv + ax * ((float(k) + 0.5f) / float(taps) - 0.5f), lod, weighted);
+    colour /= float(taps);
+  }
+  albedo *= colour;
+  if (!colors.empty())
+    albedo *= (1.0f - u - v) * colors[c[0]] + u * colors[c[1]] + v * colors[c[2]];
+  return albedo;
+}
+
+void buildMipLevels(Texture& texture) {
+  texture.levels.clear();
+  texture.alphaLevels.clear();
+  if (texture.image.empty()) return;
+  const bool alpha = !texture.alpha.empty();
+  // With an alpha: the colour premultiplied by it is averaged and divided by the averaged alpha
+  // (texels that are not there do not tint the level), the plain average where none is left.
+  Image premultiplied;
+  if (alpha) {
+    premultiplied = texture.image;
+    for (size_t i = 0; i < size_t(premultiplied.width) * size_t(premultiplied.height); ++i)
+      for (int k = 0; k < premultiplied.channels; ++k)
+        premultiplied.pixels[i * size_t(premultiplied.channels) + size_t(k)] *=
+            texture.alpha.pixels[i];
+  }
+  const Image* plain = &texture.image;
+  Image plainKept;
+  const Image* alphaPrevious = alpha ? &texture.alpha : nullptr;
+  while (plain->width > 1 || plain->height > 1) {
+    const int w = std::max(1, plain->width / 2), h = std::max(1, plain->height / 2);
+    Image level = areaReduce(*plain, w, h);
+    if (alpha) {
+      Image a = areaReduce(*alphaPrevious, w, h);
+      premultiplied = areaReduce(premultiplied, w, h);
+      texture.alphaLevels.push_back(std::move(a));
+      const Image& al = texture.alphaLevels.back();
+      Image shown = level;
+      for (size_t i = 0; i < size_t(w) * size_t(h); ++i)
+        if (al.pixels[i] > 1e-6f)
+          for (int k = 0; k < shown.channels; ++k)
+            shown.pixels[i * size_t(shown.channels) + size_t(k)] =
+                premultiplied.pixels[i * size_t(shown.channels) + size_t(k)] / al.pixels[i];
+      texture.levels.push_back(std::move(shown));
+      alphaPrevious = &texture.alphaLevels.back();
+      // The next level averages this one's plain colour (kept apart from the shown one).
+      plainKept = std::move(level);
+      plain = &plainKept;
+    } else {
+      texture.levels.push_back(std::move(level));
+      plain = &texture.levels.back();
+    }
+  }
 }
 
 void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {

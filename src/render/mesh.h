@@ -77,7 +77,16 @@ struct Texture {
   // The format says the colour is sRGB-encoded whatever the image file says (glTF's base colour
   // textures): the file's own tag (a PNG's gAMA) is not followed.
   bool srgbByFormat = false;
+  // Its mip levels for minification (buildMipLevels): level k is level k - 1 halved, area
+  // averaged (a cut-out's colour weighted by its alpha), down to 1 x 1; level 0 is `image`.
+  // Empty until built: only `image` is then sampled, however small the texture appears.
+  std::vector<Image> levels;       // levels 1, 2, ...
+  std::vector<Image> alphaLevels;  // of `alpha`, when it has one
 };
+
+// Builds `texture`'s mip levels from its image (and alpha) as they are: call it once the colour
+// is in the space it is filtered in (linear, the working space).
+void buildMipLevels(Texture& texture);
 
 // A diffuse material: the albedo is baseColor times the texture's colour (when there is one).
 // baseColor is linear, in the colour space named by Mesh::colorSpace.
@@ -146,6 +155,13 @@ struct Mesh {
   // its material's base colour times its texture at the interpolated texture coordinates, times
   // the interpolated vertex colour. Only meaningful when hasMaterials().
   glm::vec3 albedoAt(uint32_t triangle, float u, float v) const;
+  // The same, its texture filtered over a sample's footprint, whose edges (across and down the
+  // image) span dPdx and dPdy on the triangle's plane (object space): the mip level whose texels
+  // are the footprint's width, with up to 8 taps along its length where it is elongated (a surface
+  // seen at a grazing angle). The footprint's texels are averaged instead of one being picked: a
+  // texture finer than the samples does not alias into grain.
+  glm::vec3 albedoAt(uint32_t triangle, float u, float v, const glm::vec3& dPdx,
+                     const glm::vec3& dPdy) const;
   // Some material is a cut-out or semi-transparent (Material::cutOut()).
   bool hasCutouts() const;
   // Whether the point at barycentrics (u, v) of `triangle` is cut away: its material is a

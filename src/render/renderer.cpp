@@ -694,6 +694,17 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
     const Material& material = mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)];
     return material.texture < 0 && !material.cutOut();
   };
+  bool textured = false;  // some material has a texture with mip levels to filter it
+  if (materials)
+    for (const Material& m : mesh.materials)
+      textured = textured || (m.texture >= 0 && !mesh.textures[size_t(m.texture)].levels.empty());
+  // The footprint a sample's texture lookup averages, in pixels: wider than the samples' spacing
+  // (1/n), three quarters of a pixel. With the samples' own box it makes a tent of about 1.75
+  // pixels: no grain where the texture is finer than the samples. Measured against 16 x 16
+  // samples filtered over 1/16 pixel (Suzanne with a 2048^2 checker of 2-texel squares on the
+  // meadow plate, 960 wide): RMS 0.0088 unfiltered, 0.0072 over 1/4 pixel, 0.0043 over 3/4, 0.0048
+  // over one pixel; at a third of the size 0.0046, 0.0019, 0.00075, 0.00073.
+  const double textureFootprint = std::max(1.0 / n, 0.75);
   std::atomic<int64_t> cameraRaysTotal{0}, plainPixels{0}, tracedPixels{0};
   parallelFor(out.y0, out.y1, [&](int64_t yy) {
     const int y = int(yy);
@@ -709,7 +720,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       uint32_t near[3];
       float weight[3];
       glm::dvec3 dir;
-      glm::vec3 at, geometricNormal;
+      glm::vec3 d, at, geometricNormal;  // d: the ray's direction in the object's frame
       uint32_t seed;
       int group;
       float cover;  // of the sample: 1, or what a semi-transparent layer takes of it
@@ -780,6 +791,32 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       glm::dvec3 positionSum(0.0);
       float aoSum = 0.0f;
       samples.clear();
+      // How a sample's ray changes across its footprint, across and down (object frame): textures
+      // are filtered over what that spans on the surface.
+      glm::vec3 stepX(0.0f), stepY(0.0f);
+      bool footprints = false;
+      if (textured) {
+        glm::dvec3 world;
+        glm::vec3 o, d0, d1, d2;
+        footprints = cameraRays.ray(x + 0.5, y + 0.5, world, o, d0) &&
+                     cameraRays.ray(x + 0.5 + textureFootprint, y + 0.5, world, o, d1) &&
+                     cameraRays.ray(x + 0.5, y + 0.5 + textureFootprint, world, o, d2);
+        stepX = d1 - d0;
+        stepY = d2 - d0;
+      }
+      // A sample's albedo, its texture filtered over its footprint: the steps across it carried
+      // to its hit and onto the triangle's plane (ray differentials).
+      auto albedoOf = [&](const SampleHit& s) {
+        if (!materials) return settings.albedo;
+        if (!footprints) return mesh.albedoAt(s.triangle, s.u, s.v);
+        const glm::vec3& normal = s.geometricNormal;
+        const float facing = glm::dot(s.d, normal);
+        auto onPlane = [&](const glm::vec3& step) {
+          const glm::vec3 a = s.distance * step;
+          return a - s.d * (glm::dot(a, normal) / facing);
+        };
+        return mesh.albedoAt(s.triangle, s.u, s.v, onPlane(stepX), onPlane(stepY));
+      };
       const uint32_t pixelSeed =
           (uint32_t(y) * uint32_t(camera.width) + uint32_t(x)) * uint32_t(n * n);
       auto addSample = [&](const EmbreeScene::Hit& hit, const glm::dvec3& dir, const glm::vec3& o,
@@ -794,6 +831,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         if (settings.points)
           settings.points->locate(mesh, hit.triangle, hit.u, hit.v, sample.near, sample.weight);
         sample.dir = dir;
+        sample.d = d;
         sample.at = o + d * hit.distance;
         sample.geometricNormal = hit.geometricNormal;
         sample.seed = pixelSeed + uint32_t(s);
@@ -1000,8 +1038,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             if (b.group != i) continue;
             const Shaded r = shade(b.triangle, b.u, b.v, b.near, b.weight, b.dir, b.at,
                                    b.geometricNormal, b.seed, true, rowSourceRays);
-            const glm::vec3 albedo =
-                b.cover * (materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo);
+            const glm::vec3 albedo = b.cover * albedoOf(b);
             albedoSum += albedo;
             accumulate(r, albedo, b.cover);
           }
@@ -1018,7 +1055,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         for (int j = i; j < hits; ++j) {
           const SampleHit& b = samples[size_t(j)];
           if (b.group != i) continue;
-          albedo += b.cover * (materials ? mesh.albedoAt(b.triangle, b.u, b.v) : settings.albedo);
+          albedo += b.cover * albedoOf(b);
         }
         albedoSum += albedo;
         accumulate(r, albedo, cover);

@@ -25,6 +25,49 @@ constexpr const char* kCube =
 const MeshOptions kSmooth{.creaseDegrees = 180.0};
 constexpr float kPi = 3.14159265f;
 
+// Mip levels: area averages down to 1 x 1 whatever the size (an odd one too), the mean kept; a
+// cut-out's colour weighted by its alpha, so that the colour of texels that are not there does not
+// tint the levels.
+TEST(Mesh, MipLevelsKeepTheMeanAndACutOutsColourIsWeightedByAlpha) {
+  Texture t;
+  t.image = Image(5, 3, 3, {"R", "G", "B"});
+  double sum = 0.0;
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 5; ++x) {
+      t.image.at(x, y)[0] = float(x * 3 + y * 7 % 5);
+      sum += t.image.at(x, y)[0];
+    }
+  buildMipLevels(t);
+  ASSERT_EQ(t.levels.size(), 2u);  // 2 x 1, 1 x 1
+  EXPECT_EQ(t.levels[0].width, 2);
+  EXPECT_EQ(t.levels[0].height, 1);
+  const Image& last = t.levels.back();
+  ASSERT_EQ(last.width * last.height, 1);
+  EXPECT_NEAR(last.pixels[0], sum / 15.0, 1e-4);
+  EXPECT_NEAR(0.5 * (t.levels[0].pixels[0] + t.levels[0].pixels[3]), sum / 15.0, 1e-4);
+  EXPECT_TRUE(t.alphaLevels.empty());
+
+  // Red where alpha is 0, blue where it is 1, alternating: every level is blue.
+  Texture leaf;
+  leaf.image = Image(8, 8, 3, {"R", "G", "B"});
+  leaf.alpha = Image(8, 8, 1, {"A"});
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      const bool there = (x + y) % 2 == 0;
+      leaf.image.at(x, y)[there ? 2 : 0] = 1.0f;
+      leaf.alpha.at(x, y)[0] = there ? 1.0f : 0.0f;
+    }
+  buildMipLevels(leaf);
+  ASSERT_EQ(leaf.levels.size(), 3u);
+  ASSERT_EQ(leaf.alphaLevels.size(), 3u);
+  for (const Image& level : leaf.levels)
+    for (size_t i = 0; i < size_t(level.width * level.height); ++i) {
+      EXPECT_NEAR(level.pixels[3 * i], 0.0f, 1e-6f);
+      EXPECT_NEAR(level.pixels[3 * i + 2], 1.0f, 1e-6f);
+    }
+  EXPECT_NEAR(leaf.alphaLevels.back().pixels[0], 0.5f, 1e-6f);
+}
+
 TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {
   TempDir dir;
   writeText(dir / "cube.obj", kCube);
