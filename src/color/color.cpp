@@ -4,7 +4,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <utility>
 
@@ -16,6 +19,7 @@
 #include "color/builtin_config.h"
 #include "color/separable_table.h"
 #include "core/error.h"
+#include "core/hash.h"
 #include "core/numbers.h"
 #include "core/parallel.h"
 
@@ -32,6 +36,12 @@ struct ColorConfig::Impl {
     std::string name;
   };
   std::shared_ptr<Found> srgb = std::make_shared<Found>();
+  // identity(), made on first use.
+  struct Identity {
+    std::once_flag once;
+    std::string value;
+  };
+  std::shared_ptr<Identity> identity = std::make_shared<Identity>();
 };
 
 namespace {
@@ -228,12 +238,77 @@ const std::string& ColorConfig::source() const {
   return impl_->source;
 }
 
-std::string ColorConfig::identity() const {
-  try {
-    return impl_->config->getCacheID();
-  } catch (const OCIO::Exception&) {
-    return impl_->source;
+namespace {
+
+// The files the FileTransforms in `t` name (through groups), added to `files`.
+void namedFiles(const OCIO::ConstTransformRcPtr& t, std::set<std::string>& files) {
+  if (!t) return;
+  if (auto file = OCIO::DynamicPtrCast<const OCIO::FileTransform>(t)) {
+    if (file->getSrc()) files.insert(file->getSrc());
+  } else if (auto group = OCIO::DynamicPtrCast<const OCIO::GroupTransform>(t)) {
+    for (int i = 0; i < group->getNumTransforms(); ++i) namedFiles(group->getTransform(i), files);
   }
+}
+
+}  // namespace
+
+std::string ColorConfig::identity() const {
+  std::call_once(impl_->identity->once, [&] {
+    const OCIO::Config& c = *impl_->config;
+    std::string id;
+    try {
+      id = c.getCacheID();
+    } catch (const OCIO::Exception&) {
+      id = impl_->source;
+    }
+    // OpenColorIO's cache ID does not change when a LUT the config names is edited: the content
+    // of every file its transforms name (as the config's search path finds it) goes in too.
+    std::set<std::string> files;
+    for (int i = 0; i < c.getNumColorSpaces(OCIO::SEARCH_REFERENCE_SPACE_ALL, OCIO::COLORSPACE_ALL);
+         ++i) {
+      const OCIO::ConstColorSpaceRcPtr cs = c.getColorSpace(
+          c.getColorSpaceNameByIndex(OCIO::SEARCH_REFERENCE_SPACE_ALL, OCIO::COLORSPACE_ALL, i));
+      if (!cs) continue;
+      namedFiles(cs->getTransform(OCIO::COLORSPACE_DIR_TO_REFERENCE), files);
+      namedFiles(cs->getTransform(OCIO::COLORSPACE_DIR_FROM_REFERENCE), files);
+    }
+    for (int i = 0; i < c.getNumLooks(); ++i) {
+      if (const OCIO::ConstLookRcPtr look = c.getLook(c.getLookNameByIndex(i))) {
+        namedFiles(look->getTransform(), files);
+        namedFiles(look->getInverseTransform(), files);
+      }
+    }
+    for (int i = 0; i < c.getNumViewTransforms(); ++i) {
+      if (const OCIO::ConstViewTransformRcPtr v =
+              c.getViewTransform(c.getViewTransformNameByIndex(i))) {
+        namedFiles(v->getTransform(OCIO::VIEWTRANSFORM_DIR_TO_REFERENCE), files);
+        namedFiles(v->getTransform(OCIO::VIEWTRANSFORM_DIR_FROM_REFERENCE), files);
+      }
+    }
+    for (int i = 0; i < c.getNumNamedTransforms(OCIO::NAMEDTRANSFORM_ALL); ++i) {
+      if (const OCIO::ConstNamedTransformRcPtr t =
+              c.getNamedTransform(c.getNamedTransformNameByIndex(OCIO::NAMEDTRANSFORM_ALL, i))) {
+        namedFiles(t->getTransform(OCIO::TRANSFORM_DIR_FORWARD), files);
+        namedFiles(t->getTransform(OCIO::TRANSFORM_DIR_INVERSE), files);
+      }
+    }
+    Hash128 h;
+    for (const std::string& name : files) {
+      h.bytes(name);
+      std::string where;
+      try {
+        where = c.getCurrentContext()->resolveFileLocation(name.c_str());
+      } catch (const OCIO::Exception&) {
+        continue;  // not found: the name alone (using it fails with OpenColorIO's error)
+      }
+      std::ifstream in(where, std::ios::binary);
+      const std::string content{std::istreambuf_iterator<char>(in), {}};
+      h.bytes(where);
+      h.data(content.data(), content.size());
+    }
+    impl_->identity->value = id + " " + h.hex();
+  });
+  return impl_->identity->value;
 }
 
 std::string ColorConfig::workingSpace() const {

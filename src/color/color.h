@@ -52,7 +52,7 @@ class ColorConfig {
   // "built-in" or the path of the config file.
   const std::string& source() const;
   // A string that changes whenever the config's content (or the environment it reads) does, for
-  // cache keys: OpenColorIO's cache ID.
+  // cache keys: OpenColorIO's cache ID and the content of every file (LUT) its transforms name.
   std::string identity() const;
 
   // Canonical name of the working space (role scene_linear).

@@ -478,5 +478,64 @@ TEST(Chromaticities, ConversionAgreesWithTheConfigsOwn) {
   for (size_t i = 0; i < 6; ++i) EXPECT_NEAR(a.pixels[i], b.pixels[i], 2e-6 * (1 + a.pixels[i]));
 }
 
+// A LUT the config names, edited in place (its time stamp even put back): the config's identity,
+// which keys the caches, changes with it (OpenColorIO's own cache ID does not), and stays the same
+// while nothing changes. The LUT sits in a group and in a look, where it is found too.
+TEST(ColorConfig, IdentityChangesWhenALutTheConfigNamesIsEdited) {
+  compose::testing::TempDir dir;
+  compose::testing::writeText(dir / "c.ocio", R"(ocio_profile_version: 2.1
+search_path: luts
+roles:
+  scene_linear: linear
+  data: Raw
+file_rules:
+  - !<Rule> {name: Default, colorspace: linear}
+displays:
+  sRGB:
+    - !<View> {name: Raw, colorspace: Raw}
+looks:
+  - !<Look>
+    name: grade
+    process_space: linear
+    transform: !<FileTransform> {src: grade.spi1d}
+colorspaces:
+  - !<ColorSpace>
+    name: linear
+  - !<ColorSpace>
+    name: camera
+    to_scene_reference: !<GroupTransform>
+      children:
+        - !<MatrixTransform> {}
+        - !<FileTransform> {src: cam.spi1d, interpolation: linear}
+  - !<ColorSpace>
+    name: Raw
+    isdata: true
+)");
+  auto lut = [](double power) {
+    std::string text = "Version 1\nFrom 0 1\nLength 16\nComponents 1\n{\n";
+    char line[32];
+    for (int i = 0; i < 16; ++i) {
+      std::snprintf(line, sizeof line, "  %.6f\n", std::pow(i / 15.0, power));
+      text += line;
+    }
+    return text + "}\n";
+  };
+  std::filesystem::create_directories(dir / "luts");
+  compose::testing::writeText(dir / "luts" / "cam.spi1d", lut(2.2));
+  compose::testing::writeText(dir / "luts" / "grade.spi1d", lut(1.0));
+  const std::string first = ColorConfig::fromFile(dir / "c.ocio").identity();
+  EXPECT_EQ(ColorConfig::fromFile(dir / "c.ocio").identity(), first);
+  for (const char* name : {"cam.spi1d", "grade.spi1d"}) {
+    const auto stamp = std::filesystem::last_write_time(dir / "luts" / name);
+    compose::testing::writeText(dir / "luts" / name, lut(1.8));
+    std::filesystem::last_write_time(dir / "luts" / name, stamp);
+    EXPECT_NE(ColorConfig::fromFile(dir / "c.ocio").identity(), first) << name;
+    compose::testing::writeText(dir / "luts" / name,
+                                name == std::string("cam.spi1d") ? lut(2.2) : lut(1.0));
+    std::filesystem::last_write_time(dir / "luts" / name, stamp);
+    EXPECT_EQ(ColorConfig::fromFile(dir / "c.ocio").identity(), first) << name;
+  }
+}
+
 }  // namespace
 }  // namespace compose::color
