@@ -24,6 +24,7 @@ namespace compose::app {
 struct Globals {
   bool quiet = false;
   ResourceLimits limits;  // --max-pixels, --max-triangles (core/limits.h)
+  std::string ocio;       // --ocio: the OpenColorIO config instead of $OCIO
 };
 
 // Progress on stderr: on a terminal one line per stage, redrawn in place; otherwise (a log, a

@@ -13,6 +13,7 @@
 #include <CLI/CLI.hpp>
 
 #include "app/cli.h"
+#include "color/color.h"
 #include "core/error.h"
 
 namespace {
@@ -101,7 +102,10 @@ int main(int argc, char** argv) {
       app.add_option("--max-triangles", globals.limits.maxTriangles,
                      "Refuse meshes of more triangles than this, before loading them (any "
                      "command)")
-          ->capture_default_str()};
+          ->capture_default_str(),
+      app.add_option("--ocio", globals.ocio,
+                     "OpenColorIO config file to use instead of $OCIO ('builtin': the built-in "
+                     "one; any command)")};
 
   std::vector<std::pair<CLI::App*, Runner>> runners;
   for (const Command& c : commands()) {
@@ -131,6 +135,7 @@ int main(int argc, char** argv) {
   try {
     requireValues(app);
     compose::setResourceLimits(globals.limits);
+    if (!globals.ocio.empty()) compose::color::ColorConfig::useConfig(globals.ocio);
     for (auto& [sub, run] : runners) {
       if (!sub->parsed()) continue;
       refuseOneShotOptions(app, *sub, everyCommand);

@@ -221,7 +221,26 @@ ColorConfig ColorConfig::fromFile(const std::filesystem::path& file) {
   return c;
 }
 
+namespace {
+std::string& chosenConfig() {
+  static std::string file;
+  return file;
+}
+}  // namespace
+
+void ColorConfig::useConfig(const std::string& file) {
+  chosenConfig() = file;
+}
+
 ColorConfig ColorConfig::fromEnvironment() {
+  if (const std::string& chosen = chosenConfig(); !chosen.empty()) {
+    if (chosen == "builtin" || chosen == "built-in") return builtin();
+    try {
+      return fromFile(chosen);
+    } catch (const Error& e) {
+      throw Error("color", std::string(e.what()) + " (named by --ocio)", e.file());
+    }
+  }
   const char* env = std::getenv("OCIO");
   if (!(env && *env)) return builtin();
   try {

@@ -44,8 +44,11 @@ struct InputSpace {
 
 class ColorConfig {
  public:
-  // $OCIO if set (error if it cannot be loaded), else the built-in configuration.
+  // The config named by useConfig() (the --ocio option), else $OCIO if set (error if it cannot
+  // be loaded), else the built-in configuration.
   static ColorConfig fromEnvironment();
+  // Makes fromEnvironment() load `file` instead of $OCIO ("builtin": the built-in config).
+  static void useConfig(const std::string& file);
   static ColorConfig builtin();
   static ColorConfig fromFile(const std::filesystem::path& file);
 

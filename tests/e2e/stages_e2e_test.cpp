@@ -489,6 +489,24 @@ TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
       << composite.err;
   EXPECT_NE(composite.err.find("layer.exr"), std::string::npos) << composite.err;
   EXPECT_FALSE(fs::exists(dir_ / "final.exr"));
+
+  // --ocio names the config as $OCIO does, and wins over it; 'builtin' is the built-in one.
+  r = run(render + quote(dir_ / "other.exr") + " --ocio " + quote(blender), dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("the lighting file was made in the working space 'ACEScg'"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "other.exr"));
+  ::setenv("OCIO", blender.c_str(), 1);
+  r = run(render + quote(dir_ / "other.exr") + " --ocio builtin", dir_.path());
+  ::unsetenv("OCIO");
+  EXPECT_EQ(r.status, 0) << r.err;
+  r = run(render + quote(dir_ / "third.exr") + " --ocio " + quote(dir_ / "missing.ocio"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("OpenColorIO config not found (named by --ocio)"), std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "third.exr"));
 }
 
 // compose cache shows what the caches hold and removes old entries, never the samples or the
