@@ -289,8 +289,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
       throw Error(stage.name(),
                   "out of memory (" + std::to_string(peakResidentBytes() >> 20) +
                       " MB in use at the peak): the machine or its limits (ulimit -v) allow less "
-                      "than this job needs; a smaller plate or --max-pixels, which refuses larger "
-                      "images before they are read, keep it within bounds");
+                      "than this job needs; " +
+                      stage.memoryAdvice());
     }
     if (p.entries[i]) {
       if (stage.storesWhileLaterStagesRun()) {

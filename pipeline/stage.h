@@ -78,6 +78,12 @@ class Stage {
   // Whether store() may run on a thread of its own while the later stages run: only for a stage
   // whose outputs no later stage changes or moves (they are read, never written, once made).
   virtual bool storesWhileLaterStagesRun() const { return false; }
+  // What keeps the stage within memory, for the error when it runs out: the parameters that
+  // size what it allocates.
+  virtual std::string memoryAdvice() const {
+    return "a smaller plate or --max-pixels, which refuses larger images before they are read, "
+           "keep it within bounds";
+  }
 };
 
 // The registry: every stage, in pipeline order.

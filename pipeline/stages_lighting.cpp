@@ -129,6 +129,11 @@ std::vector<glm::vec3> vec3sFromFloats(std::span<const float> v) {
 
 class PrecomputeStage final : public Stage {
  public:
+  std::string memoryAdvice() const override {
+    return "the lighting's tables grow with its parameters: cheb-local holds order^2 x rows x cols "
+           "x 3 floats (--lighting-params order, rows, cols; 1 x 33 x 64 by default), and the "
+           "shadows' lighting --shadow-params order^2 x 33 x 64 x 3";
+  }
   std::string name() const override { return "precompute"; }
   std::string summary() const override {
     return "project the environment onto the lighting basis (Chebyshev moments by default), and "
@@ -350,6 +355,10 @@ class PrecomputeStage final : public Stage {
 
 class ShadowsStage final : public Stage {
  public:
+  std::string memoryAdvice() const override {
+    return "the visibility pass holds order^2 floats a surface point (--shadow-params order; "
+           "refine-budget bounds the points added, --max-triangles the mesh)";
+  }
   // 2: the sources' visibility per point kept; 3: points refined where visibility changes fast;
   // 4: refined points in the order of their triangles (entries of 3 held their values in another
   // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its

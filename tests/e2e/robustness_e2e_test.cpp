@@ -407,6 +407,27 @@ TEST_F(Robustness, AReadOnlyCacheFolderIsANoteAndTheRunGoesOn) {
   EXPECT_TRUE(fs::exists(dir / "ro.jpg"));
 }
 
+// Lighting parameters whose tables do not fit in memory (cheb-local at order 32 on a 1025 x 2048
+// grid of normals: 26 GB) under a 4 GB address-space limit: the stage that ran out, and the
+// parameters that size it, are named; exit 1 and nothing written.
+TEST_F(Robustness, LightingParametersBeyondMemoryNameWhatSizesThem) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer reserves more address space than the limit";
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+  GTEST_SKIP() << "AddressSanitizer reserves more address space than the limit";
+#endif
+#endif
+  const RunResult r = runShell(
+      "ulimit -v 4000000; " +
+          job("big", "--no-cache --lighting-params order=32,samples=32,rows=1025,cols=2048"),
+      dir.path(), "big");
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("compose: error: precompute: out of memory"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--lighting-params order, rows, cols"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "big.exr"));
+}
+
 TEST_F(Robustness, AFullDiskIsANamedErrorAndThePreviousOutputsStay) {
   ASSERT_EQ(run("out", "--albedo 0.3").status, 0);
   const std::string exr = slurp(dir / "out.exr"), jpg = slurp(dir / "out.jpg");
