@@ -61,6 +61,9 @@ struct ComposeJob {
   // The EXR's sample type: "half", "float", or "auto" (float when the plate is stored as 32-bit
   // float, half otherwise, as Nuke writes; a part with values beyond half's range is float).
   std::string exrDepth = "auto";
+  // The colour space of the EXR's colour channels (composite, object, albedo and irradiance):
+  // a linear space of the config; empty: the working space.
+  std::string exrSpace;
   int jpegQuality = 95;  // of the display image when it is a JPEG, 1-100
 
   std::string lighting = "cheb-local";

@@ -631,6 +631,10 @@ class OutputStage final : public Stage {
                           "the EXR's samples: half, float, or auto (float for a 32-bit float "
                           "plate, else half)",
                           &ComposeJob::exrDepth),
+            textParameter("exr-space",
+                          "colour space of the EXR's colour channels, a linear one (empty: the "
+                          "working space)",
+                          &ComposeJob::exrSpace),
             {"jpeg-quality", "quality of the display image when it is a JPEG, 1-100",
              [](const ComposeJob& j) { return nlohmann::json(j.jpegQuality); },
              [](ComposeJob& j, const nlohmann::json& v) {
@@ -726,10 +730,45 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   const std::string working = colors.workingSpace();
   COMPOSE_CHECK((composite.channels == 3 || composite.channels == 4) &&
                 rendered.beauty.channels == 4);
+  // The colour channels in the space asked for (--exr-space): converted copies. A linear space,
+  // so that premultiplied colour converts as it is.
+  const std::string space =
+      job.exrSpace.empty() ? working : colors.resolve(job.exrSpace, "--exr-space");
+  Image compositeIn, beautyIn, aovsIn;
+  const Image* compositeOut = &composite;
+  const Image* beautyOut = &rendered.beauty;
+  const Image* aovsOut = &rendered.aovs;
+  if (space != working) {
+    compositeIn = composite;
+    compositeIn.colorSpace = working;
+    colors.convert(compositeIn, space);
+    beautyIn = rendered.beauty;
+    beautyIn.colorSpace = working;
+    colors.convert(beautyIn, space);
+    aovsIn = rendered.aovs;
+    const std::vector<std::string>& names = render::aovChannelNames();
+    for (const char* layer : {"albedo", "irradiance", "irradianceShadowed"}) {
+      const auto first = std::find(names.begin(), names.end(), std::string(layer) + ".R");
+      COMPOSE_CHECK(first != names.end());
+      const size_t at = size_t(first - names.begin());
+      Image rgb(aovsIn.width, aovsIn.height, 3);
+      const size_t pixels = size_t(aovsIn.width) * size_t(aovsIn.height);
+      const size_t stride = size_t(aovsIn.channels);
+      for (size_t i = 0; i < pixels; ++i)
+        std::copy_n(&aovsIn.pixels[i * stride + at], 3, &rgb.pixels[3 * i]);
+      rgb.colorSpace = working;
+      colors.convert(rgb, space);
+      for (size_t i = 0; i < pixels; ++i)
+        std::copy_n(&rgb.pixels[3 * i], 3, &aovsIn.pixels[i * stride + at]);
+    }
+    compositeOut = &compositeIn;
+    beautyOut = &beautyIn;
+    aovsOut = &aovsIn;
+  }
   // The parts are written from the images as they are, without interleaving them into new ones
   // first: the composite's RGB with an opaque alpha added on the way, the object's RGBA followed
   // by its AOVs.
-  ingest::ExrPart compositePart{"composite",     &composite,       0, 0,
+  ingest::ExrPart compositePart{"composite",     compositeOut,     0, 0,
                                 composite.width, composite.height, {}};
   if (composite.channels == 4) {
     compositePart.channelNames = {"R", "G", "B", "A"};  // a plate with alpha
@@ -737,26 +776,26 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     compositePart.channelNames = {"R", "G", "B"};
     compositePart.constantChannels = {{"A", 1.0f}};
   }
-  compositePart.colorSpace = working;
+  compositePart.colorSpace = space;
   compositePart.options.depth =
       floatSamples ? ingest::WriteOptions::Depth::Float : ingest::WriteOptions::Depth::Half;
   compositePart.options.alphaChannel = 3;
-  compositePart.options.chromaticities = colors.chromaticities(working);
+  compositePart.options.chromaticities = colors.chromaticities(space);
   compositePart.options.exrCompression = job.exrCompression;
-  ingest::ExrPart objectPart{"object",        &rendered.beauty, rendered.x0,          rendered.y0,
+  ingest::ExrPart objectPart{"object",        beautyOut,        rendered.x0,          rendered.y0,
                              composite.width, composite.height, compositePart.options};
   const std::vector<std::string>& aovNames = render::aovChannelNames();
   COMPOSE_CHECK(rendered.aovs.channels == int(aovNames.size()));
-  objectPart.colorSpace = working;
-  objectPart.moreImages = {&rendered.aovs};
+  objectPart.colorSpace = space;
+  objectPart.moreImages = {aovsOut};
   objectPart.channelNames = {"object.R", "object.G", "object.B", "object.A"};
   objectPart.channelNames.insert(objectPart.channelNames.end(), aovNames.begin(), aovNames.end());
   // Positions and depth in float whatever the depth of the rest: in half, P put a point 10 m away
   // up to a pixel off where it shows on a 3088-pixel-wide plate.
   objectPart.floatChannels = {"P.X", "P.Y", "P.Z", "depth.Z"};
   if (!compositePart.options.chromaticities) {
-    notes.push_back("the config (" + colors.source() +
-                    ") does not say what the primaries of the working space '" + working +
+    notes.push_back("the config (" + colors.source() + ") does not say what the primaries of " +
+                    (space == working ? "the working space" : "--exr-space") + " '" + space +
                     "' are: the EXR carries its name but no chromaticities");
   }
   ingest::ExrHeader header = sceneHeader(geometry, meshFile, fileOrigin);

@@ -162,6 +162,9 @@ void ComposeOptions::addOutput(CLI::App& app) {
                  "else half; float where a value exceeds half's range)")
       ->check(CLI::IsMember({"auto", "half", "float"}))
       ->capture_default_str();
+  app.add_option("--exr-space", job.exrSpace,
+                 "Colour space of the EXR's colour channels (composite, object, albedo, "
+                 "irradiance), a linear one of the config [default: the working space]");
   app.add_option("--jpeg-quality", job.jpegQuality, "Quality of the JPEG display image, 1-100")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
@@ -221,6 +224,13 @@ void validateJob(const pipeline::ComposeJob& j, const color::ColorConfig& colors
   asUsage([&] {
     if (!j.plateSpace.empty()) colors.resolve(j.plateSpace, "--plate-space");
     if (!j.environmentSpace.empty()) colors.resolve(j.environmentSpace, "--env-space");
+    if (!j.exrSpace.empty()) {
+      const std::string s = colors.resolve(j.exrSpace, "--exr-space");
+      if (colors.isData(s) || !colors.isLinearOrData(s))
+        throw UsageError("--exr-space '" + s + "' is not a linear colour space: the EXR holds " +
+                         "scene-linear light (premultiplied); name a linear one (the display " +
+                         "image takes --view)");
+    }
     const std::string display = j.display.empty() ? colors.defaultDisplay() : j.display;
     colors.checkDisplayView(display, j.view.empty() ? colors.defaultView(display) : j.view);
   });

@@ -353,6 +353,12 @@ std::string ColorConfig::resolve(const std::string& name, const std::string& wha
   return cs->getName();
 }
 
+bool ColorConfig::isData(const std::string& space) const {
+  OCIO::ConstColorSpaceRcPtr cs =
+      space.empty() ? nullptr : impl_->config->getColorSpace(space.c_str());
+  return cs && cs->isData();
+}
+
 bool ColorConfig::isLinearOrData(const std::string& space) const {
   const OCIO::ConstConfigRcPtr& config = impl_->config;
   OCIO::ConstColorSpaceRcPtr cs = space.empty() ? nullptr : config->getColorSpace(space.c_str());

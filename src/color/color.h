@@ -86,6 +86,8 @@ class ColorConfig {
   std::string srgbEncodedSpace() const;
   // Whether converting `space` to the working space scales greys linearly, or it is a data space.
   bool isLinearOrData(const std::string& space) const;
+  // Whether `space` is a data space (never converted: normals, masks).
+  bool isData(const std::string& space) const;
 
   // Converts the first three channels of `image` from image.colorSpace to `to` in place and sets
   // image.colorSpace. Other channels (alpha, AOVs) are left alone. The image needs >= 3 channels.

@@ -727,6 +727,69 @@ TEST_F(ComposeOutputs, ExrSaysWhatColourSpaceItIsIn) {
   EXPECT_NE(rawJpeg->spec().get_int_attribute("Exif:ColorSpace", 0), 1);
 }
 
+// --exr-space writes the colour channels in another linear space, with its chromaticities, for a
+// compositor whose working space is not the config's (Nuke's default linear Rec.709): the
+// composite, the object and its albedo and irradiance, converted (checked here by the Rec.709 to
+// ACEScg matrix written out above); normals, positions and alpha as they were. A space that is not
+// linear, or data, is refused before anything is read.
+TEST_F(ComposeOutputs, TheExrCanBeWrittenInAnotherLinearSpace) {
+  const std::string common = " --depth float --albedo 0.6";
+  ASSERT_EQ(runCompose(args((dir_ / "cg").string()) + common, dir_.path()).status, 0);
+  const auto r =
+      runCompose(args((dir_ / "rec709").string()) + common + " --exr-space 'Linear Rec.709 (sRGB)'",
+                 dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  {
+    auto in = OIIO::ImageInput::open((dir_ / "rec709.exr").string());
+    ASSERT_TRUE(in);
+    const OIIO::ParamValue* c = in->spec().find_attribute("chromaticities");
+    ASSERT_NE(c, nullptr);
+    const float rec709[8] = {0.64f, 0.33f, 0.30f, 0.60f, 0.15f, 0.06f, 0.3127f, 0.3290f};
+    for (int i = 0; i < 8; ++i)
+      EXPECT_NEAR(static_cast<const float*>(c->data())[i], rec709[i], 1e-4) << i;
+    EXPECT_EQ(in->spec().get_string_attribute("colorSpace"), "Linear Rec.709 (sRGB)");
+  }
+  const Raster cg = readRaster(dir_ / "cg.exr"), lin = readRaster(dir_ / "rec709.exr");
+  ASSERT_EQ(cg.names, lin.names);
+  auto index = [&](const std::string& name) {
+    return int(std::find(cg.names.begin(), cg.names.end(), name) - cg.names.begin());
+  };
+  int converted = 0;
+  for (const char* layer : {"", "object.", "albedo.", "irradiance.", "irradianceShadowed."}) {
+    const int first = index(std::string(layer) + "R");
+    ASSERT_LT(first, int(cg.names.size())) << layer;
+    double worst = 0.0, largest = 0.0;
+    for (int y = 0; y < cg.height; ++y)
+      for (int x = 0; x < cg.width; ++x) {
+        const double in[3] = {lin.at(x, y, first), lin.at(x, y, first + 1),
+                              lin.at(x, y, first + 2)};
+        double back[3];
+        toAp1(in, back);
+        for (int k = 0; k < 3; ++k) {
+          worst = std::max(worst, std::abs(back[k] - cg.at(x, y, first + k)));
+          largest = std::max(largest, double(std::abs(cg.at(x, y, first + k))));
+        }
+      }
+    EXPECT_GT(largest, 0.05) << layer;
+    EXPECT_LT(worst, 1e-4 * largest + 1e-6) << layer;
+    ++converted;
+  }
+  EXPECT_EQ(converted, 5);
+  for (const char* name : {"A", "object.A", "N.X", "N.Y", "N.Z", "P.X", "depth.Z"}) {
+    const int c = index(name);
+    ASSERT_LT(c, int(cg.names.size())) << name;
+    for (int y = 0; y < cg.height; ++y)
+      for (int x = 0; x < cg.width; ++x) ASSERT_EQ(lin.at(x, y, c), cg.at(x, y, c)) << name;
+  }
+  for (const std::string space : {"sRGB", "Raw"}) {
+    const auto bad =
+        runCompose(args((dir_ / "bad").string()) + " --exr-space " + space, dir_.path());
+    EXPECT_EQ(bad.status, 2) << space;
+    EXPECT_NE(bad.err.find("is not a linear colour space"), std::string::npos) << bad.err;
+    EXPECT_FALSE(fs::exists(dir_ / "bad.exr"));
+  }
+}
+
 TEST_F(ComposeOutputs, OutEndingInASlashWritesIntoThatFolder) {
   const auto r = runCompose(args((dir_ / "results").string() + "/"), dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
