@@ -124,6 +124,27 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    // A one-shot option given before a command's name is the first thing to say (a value the
+    // command misses may be that very option).
+    for (auto& [sub, run] : runners) {
+      if (!sub->parsed()) continue;
+      try {
+        refuseOneShotOptions(app, *sub, everyCommand);
+        // An option only the command has, given before its name.
+        for (int i = 1; i < argc && argv[i] != sub->get_name(); ++i) {
+          const std::string word = argv[i];
+          if (word.size() < 2 || word[0] != '-') continue;
+          const std::string name = word.substr(0, word.find('='));
+          if (sub->get_option_no_throw(name) && !app.get_option_no_throw(name))
+            throw compose::UsageError(name + " is an option of compose " + sub->get_name() +
+                                      ": give it after the command's name");
+        }
+      } catch (const compose::UsageError& u) {
+        std::fprintf(stderr, "compose: error: %s\n(run compose --help for usage)\n",
+                     compose::printable(u.describe()).c_str());
+        return 2;
+      }
+    }
     std::cerr << "compose: error: cli: " << compose::printable(cliMessage(e.what()))
               << "\n(run compose --help for usage)\n";
     return 2;

@@ -275,6 +275,17 @@ TEST_F(StageCommands, AnOptionOnlyTheOneShotCommandHasIsRefused) {
                             "command's name"),
             std::string::npos)
       << before.err;
+  // Said first, before what the command then misses: the very option given too early (an option
+  // only the command has), or another value it requires.
+  for (const std::string early : {"--exposure 1 render", "--lighting-file f.lighting render",
+                                  "--lighting-file=f.lighting render --plate p.jpg"}) {
+    const RunResult r = run(early, dir_.path());
+    EXPECT_EQ(r.status, 2) << early;
+    EXPECT_NE(r.err.find(" is an option of compose render: give it after the command's name"),
+              std::string::npos)
+        << early << "\n"
+        << r.err;
+  }
   const RunResult pre =
       run("precompute -q --max-pixels 100000000 --env " + quote(samples_ / "forest.exr") +
               " --lighting-params order=4" + " --out " + quote(dir_ / "f.lighting") + " --no-cache",
