@@ -507,6 +507,15 @@ LoadedMesh loadObj(const fs::path& path) {
           }
         }
         material.texture = it->second;
+        if (material.texture >= 0 && libraries.withKd.count(om.name) &&
+            material.baseColor != glm::vec3(1.0f)) {
+          char kd[96];
+          std::snprintf(kd, sizeof kd, "%g %g %g", double(material.baseColor.x),
+                        double(material.baseColor.y), double(material.baseColor.z));
+          mesh.warnings.push_back("material '" + om.name + "': its Kd (" + kd +
+                                  ") multiplies its map_Kd, as the MTL format says (Blender, Maya "
+                                  "and 3ds Max show the texture alone; Kd 1 1 1 does that here)");
+        }
         // map_Kd -s and -o: uv' = uv * scale + offset.
         const tinyobj::texture_option_t& o = om.diffuse_texopt;
         material.uvTransform =

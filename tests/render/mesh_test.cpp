@@ -518,9 +518,12 @@ TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
   ASSERT_EQ(m.materials.size(), 4u);
   ASSERT_EQ(m.textures.size(), 1u) << "one file, read once";
   EXPECT_EQ(m.colorSpace, "lin_rec709");
+  // Kd times the texture is said (Blender shows the texture alone); the texture alone is not.
   const std::vector<std::string> warnings = {
       "1 face has no material (or one no material library defines): rendered with the default "
-      "albedo"};
+      "albedo",
+      "material 'painted': its Kd (0.5 1 1) multiplies its map_Kd, as the MTL format says "
+      "(Blender, Maya and 3ds Max show the texture alone; Kd 1 1 1 does that here)"};
   EXPECT_EQ(m.warnings, warnings);
   // Triangles in file order (materials in the order faces first use them).
   EXPECT_TRUE(near(m.albedoAt(0, 0, 0), {0.5f, 0, 0})) << "red times Kd";
