@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include "core/error.h"
 
@@ -48,7 +49,8 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
 
   std::map<std::string, int> textureSpaces;
   size_t clampedTexels = 0;
-  for (render::Texture& texture : mesh.textures) {
+  for (size_t t = 0; t < mesh.textures.size(); ++t) {
+    render::Texture& texture = mesh.textures[t];
     if (texture.srgbByFormat && texture.image.colorSpace != working) {
       // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
       texture.image.colorSpace =
@@ -66,7 +68,13 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
       if (!(std::abs(kept - v) <= 1e-4f)) ++clampedTexels;
       v = kept;
     }
-    render::buildMipLevels(texture);  // filtered in linear light
+    // Filtered in linear light; for a cut-out, weighted by what it keeps.
+    std::optional<float> keptFrom;
+    for (const render::Material& m : mesh.materials) {
+      if (m.texture != int(t) || !m.cutOut()) continue;
+      keptFrom = m.blend ? -1.0f : (keptFrom && *keptFrom < 0.0f ? *keptFrom : m.alphaCutoff);
+    }
+    render::buildMipLevels(texture, keptFrom);
   }
   std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
                      (mesh.materials.size() == 1 ? "" : "s") +

@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -18,8 +19,8 @@
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/numbers.h"
-#include "core/parallel.h"
 #include "core/output_files.h"
+#include "core/parallel.h"
 #include "ingest/image_io.h"
 #include "render/mesh_formats.h"
 
@@ -128,28 +129,34 @@ glm::vec3 bilinear(const Texture& tex, const Image& img, const glm::vec2& uv,
          (texel(x0, y0 + 1) * (1.0f - ax) + texel(x0 + 1, y0 + 1) * ax) * ay;
 }
 
-// Level k of the texture's colour or alpha (0: the image itself).
-const Image& colourLevel(const Texture& tex, size_t k) {
-  return k == 0 ? tex.image : tex.levels[k - 1];
+// Level k of the texture's colour (0: the image itself), plain or weighted by what a cut-out
+// keeps (Texture::keptLevels), and the weights of the latter.
+const Image& colourLevel(const Texture& tex, size_t k, bool weighted) {
+  if (k == 0) return tex.image;
+  return weighted ? tex.keptLevels[k - 1] : tex.levels[k - 1];
 }
-const Image* alphaLevel(const Texture& tex, size_t k) {
+const Image* weightLevel(const Texture& tex, size_t k) {
   if (tex.alpha.empty()) return nullptr;
-  return k == 0 ? &tex.alpha : &tex.alphaLevels[k - 1];
+  if (!tex.keptWeights.empty()) return &tex.keptWeights[k];
+  return k == 0 ? &tex.alpha : nullptr;
 }
 
-// Trilinear: bilinear in the two levels around `lod` (0: full size), blended.
+// Trilinear: bilinear in the two levels around `lod` (0: full size), blended. `weighted`: a
+// cut-out's colour, the texels weighted by what it keeps.
 glm::vec3 trilinear(const Texture& tex, const glm::vec2& uv, float lod, bool weighted) {
+  weighted = weighted && !tex.alpha.empty();
   const size_t top = tex.levels.size();
   if (!(lod > 0.0f) || top == 0)
-    return bilinear(tex, tex.image, uv, weighted ? alphaLevel(tex, 0) : nullptr);
+    return bilinear(tex, tex.image, uv, weighted ? weightLevel(tex, 0) : nullptr);
+  if (weighted && tex.keptLevels.size() != top) weighted = false;  // built without them
   lod = std::min(lod, float(top));
   const size_t k = std::min(size_t(lod), top);
   const float f = lod - float(k);
-  const glm::vec3 a =
-      bilinear(tex, colourLevel(tex, k), uv, weighted ? alphaLevel(tex, k) : nullptr, false);
+  const glm::vec3 a = bilinear(tex, colourLevel(tex, k, weighted), uv,
+                               weighted ? weightLevel(tex, k) : nullptr, false);
   if (k == top || f <= 0.0f) return a;
-  const glm::vec3 b = bilinear(tex, colourLevel(tex, k + 1), uv,
-                               weighted ? alphaLevel(tex, k + 1) : nullptr, false);
+  const glm::vec3 b = bilinear(tex, colourLevel(tex, k + 1, weighted), uv,
+                               weighted ? weightLevel(tex, k + 1) : nullptr, false);
   return a + (b - a) * f;
 }
 
@@ -172,23 +179,42 @@ std::vector<std::vector<AreaTap>> areaTaps(int n, int m) {
   return taps;
 }
 
-// `img` reduced to width x height, each output texel the area average of the inputs it covers.
-Image areaReduce(const Image& img, int width, int height) {
+// `img` reduced to width x height, each output texel the area average of the inputs it covers;
+// with `weights` (one channel, img's size) the average weighted by them (the plain one where they
+// are all 0), and their own area average in `reducedWeights`. Row by row, without a copy.
+Image areaReduce(const Image& img, int width, int height, const Image* weights = nullptr,
+                 Image* reducedWeights = nullptr) {
   const auto across = areaTaps(img.width, width), down = areaTaps(img.height, height);
   const int c = img.channels;
-  Image rows(width, img.height, c, img.channelNames);
-  parallelFor(0, img.height, [&](int64_t y) {
-    for (int x = 0; x < width; ++x)
-      for (const AreaTap& t : across[size_t(x)])
-        for (int k = 0; k < c; ++k)
-          rows.at(x, int(y))[k] += t.weight * img.at(t.index, int(y))[k];
-  });
   Image out(width, height, c, img.channelNames);
   out.colorSpace = img.colorSpace;
-  parallelFor(0, height, [&](int64_t y) {
-    for (const AreaTap& t : down[size_t(y)])
-      for (int x = 0; x < width; ++x)
-        for (int k = 0; k < c; ++k) out.at(x, int(y))[k] += t.weight * rows.at(x, t.index)[k];
+  if (weights) *reducedWeights = Image(width, height, 1, weights->channelNames);
+  parallelFor(0, height, [&](int64_t yy) {
+    const int y = int(yy);
+    thread_local std::vector<float> weighted;
+    weighted.assign(weights ? size_t(c) : 0, 0.0f);
+    for (int x = 0; x < width; ++x) {
+      float* o = out.at(x, y);
+      float sum = 0.0f;
+      std::fill(weighted.begin(), weighted.end(), 0.0f);
+      for (const AreaTap& ty : down[size_t(y)]) {
+        for (const AreaTap& tx : across[size_t(x)]) {
+          const float t = ty.weight * tx.weight;
+          const float* p = img.at(tx.index, ty.index);
+          for (int k = 0; k < c; ++k) o[k] += t * p[k];
+          if (weights) {
+            const float w = t * weights->at(tx.index, ty.index)[0];
+            sum += w;
+            for (int k = 0; k < c; ++k) weighted[size_t(k)] += w * p[k];
+          }
+        }
+      }
+      if (weights) {
+        reducedWeights->at(x, y)[0] = sum;
+        if (sum > 1e-12f)
+          for (int k = 0; k < c; ++k) o[k] = weighted[size_t(k)] / sum;
+      }
+    }
   });
   return out;
 }
@@ -278,6 +304,9 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v, const glm::vec3& d
   const glm::vec2 size(float(tex.image.width), float(tex.image.height));
   glm::vec2 ax = glm::dot(dPdx, g1) * t1 + glm::dot(dPdx, g2) * t2;
   glm::vec2 ay = glm::dot(dPdy, g1) * t1 + glm::dot(dPdy, g2) * t2;
+  // A clamped axis outside 0..1 is the edge texel wherever the footprint reaches: no extent.
+  if (tex.wrapU == Texture::Wrap::Clamp && (uv.x < 0.0f || uv.x > 1.0f)) ax.x = ay.x = 0.0f;
+  if (tex.wrapV == Texture::Wrap::Clamp && (uv.y < 0.0f || uv.y > 1.0f)) ax.y = ay.y = 0.0f;
   float lx = glm::length(ax * size), ly = glm::length(ay * size);  // in texels
   if (ly > lx) {
     std::swap(ax, ay);
@@ -306,47 +335,33 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v, const glm::vec3& d
   return albedo;
 }
 
-void buildMipLevels(Texture& texture) {
+void buildMipLevels(Texture& texture, std::optional<float> keptFrom) {
   texture.levels.clear();
-  texture.alphaLevels.clear();
+  texture.keptLevels.clear();
+  texture.keptWeights.clear();
   if (texture.image.empty()) return;
-  const bool alpha = !texture.alpha.empty();
-  // With an alpha: the colour premultiplied by it is averaged and divided by the averaged alpha
-  // (texels that are not there do not tint the level), the plain average where none is left.
-  Image premultiplied;
-  if (alpha) {
-    premultiplied = texture.image;
-    for (size_t i = 0; i < size_t(premultiplied.width) * size_t(premultiplied.height); ++i)
-      for (int k = 0; k < premultiplied.channels; ++k)
-        premultiplied.pixels[i * size_t(premultiplied.channels) + size_t(k)] *=
-            texture.alpha.pixels[i];
-  }
-  const Image* plain = &texture.image;
-  Image plainKept;
-  const Image* alphaPrevious = alpha ? &texture.alpha : nullptr;
-  while (plain->width > 1 || plain->height > 1) {
+  for (const Image* plain = &texture.image; plain->width > 1 || plain->height > 1;) {
     const int w = std::max(1, plain->width / 2), h = std::max(1, plain->height / 2);
-    Image level = areaReduce(*plain, w, h);
-    if (alpha) {
-      Image a = areaReduce(*alphaPrevious, w, h);
-      premultiplied = areaReduce(premultiplied, w, h);
-      texture.alphaLevels.push_back(std::move(a));
-      const Image& al = texture.alphaLevels.back();
-      Image shown = level;
-      for (size_t i = 0; i < size_t(w) * size_t(h); ++i)
-        if (al.pixels[i] > 1e-6f)
-          for (int k = 0; k < shown.channels; ++k)
-            shown.pixels[i * size_t(shown.channels) + size_t(k)] =
-                premultiplied.pixels[i * size_t(shown.channels) + size_t(k)] / al.pixels[i];
-      texture.levels.push_back(std::move(shown));
-      alphaPrevious = &texture.alphaLevels.back();
-      // The next level averages this one's plain colour (kept apart from the shown one).
-      plainKept = std::move(level);
-      plain = &plainKept;
-    } else {
-      texture.levels.push_back(std::move(level));
-      plain = &texture.levels.back();
-    }
+    texture.levels.push_back(areaReduce(*plain, w, h));
+    plain = &texture.levels.back();
+  }
+  if (!keptFrom || texture.alpha.empty()) return;
+  // What a cut-out keeps of each texel: all of it where its alpha reaches the cutoff (MASK), its
+  // alpha for a semi-transparent material (BLEND, *keptFrom < 0).
+  texture.keptLevels.reserve(texture.levels.size());
+  texture.keptWeights.reserve(texture.levels.size() + 1);
+  texture.keptWeights.push_back(texture.alpha);
+  if (*keptFrom >= 0.0f)
+    for (float& a : texture.keptWeights[0].pixels) a = a >= *keptFrom ? 1.0f : 0.0f;
+  const Image* colour = &texture.image;
+  const Image* weights = &texture.keptWeights[0];
+  for (size_t k = 0; k < texture.levels.size(); ++k) {
+    const Image& size = texture.levels[k];
+    Image reduced;
+    texture.keptLevels.push_back(areaReduce(*colour, size.width, size.height, weights, &reduced));
+    texture.keptWeights.push_back(std::move(reduced));
+    colour = &texture.keptLevels.back();
+    weights = &texture.keptWeights.back();
   }
 }
 

@@ -48,6 +48,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -78,15 +79,20 @@ struct Texture {
   // textures): the file's own tag (a PNG's gAMA) is not followed.
   bool srgbByFormat = false;
   // Its mip levels for minification (buildMipLevels): level k is level k - 1 halved, area
-  // averaged (a cut-out's colour weighted by its alpha), down to 1 x 1; level 0 is `image`.
-  // Empty until built: only `image` is then sampled, however small the texture appears.
-  std::vector<Image> levels;       // levels 1, 2, ...
-  std::vector<Image> alphaLevels;  // of `alpha`, when it has one
+  // averaged, down to 1 x 1; level 0 is `image`. Empty until built: only `image` is then
+  // sampled, however small the texture appears.
+  std::vector<Image> levels;  // levels 1, 2, ...
+  // For a cut-out material using it: the levels 1, 2, ... of its colour weighted by what the
+  // cut-out keeps of each texel, and those weights at levels 0, 1, 2, ... (so that texels that
+  // are not there do not tint the ones that are). Empty when no cut-out uses it.
+  std::vector<Image> keptLevels, keptWeights;
 };
 
-// Builds `texture`'s mip levels from its image (and alpha) as they are: call it once the colour
-// is in the space it is filtered in (linear, the working space).
-void buildMipLevels(Texture& texture);
+// Builds `texture`'s mip levels from its image as it is: call it once the colour is in the space
+// it is filtered in (linear, the working space). `keptFrom`, for a texture with alpha that a
+// cut-out material uses: its alphaCutoff (MASK: a texel is kept whole where its alpha reaches
+// it), or negative for a semi-transparent material (BLEND: its alpha is what is kept).
+void buildMipLevels(Texture& texture, std::optional<float> keptFrom = std::nullopt);
 
 // A diffuse material: the albedo is baseColor times the texture's colour (when there is one).
 // baseColor is linear, in the colour space named by Mesh::colorSpace.

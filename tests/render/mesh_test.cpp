@@ -25,10 +25,10 @@ constexpr const char* kCube =
 const MeshOptions kSmooth{.creaseDegrees = 180.0};
 constexpr float kPi = 3.14159265f;
 
-// Mip levels: area averages down to 1 x 1 whatever the size (an odd one too), the mean kept; a
-// cut-out's colour weighted by its alpha, so that the colour of texels that are not there does not
-// tint the levels.
-TEST(Mesh, MipLevelsKeepTheMeanAndACutOutsColourIsWeightedByAlpha) {
+// Mip levels: area averages down to 1 x 1 whatever the size (an odd one too), the mean kept; for a
+// cut-out, the colour weighted by what it keeps, so that the colour of texels that are not there
+// does not tint the levels; for an opaque material the alpha plays no part.
+TEST(Mesh, MipLevelsKeepTheMeanAndACutOutsColourIsWeightedByWhatItKeeps) {
   Texture t;
   t.image = Image(5, 3, 3, {"R", "G", "B"});
   double sum = 0.0;
@@ -45,27 +45,67 @@ TEST(Mesh, MipLevelsKeepTheMeanAndACutOutsColourIsWeightedByAlpha) {
   ASSERT_EQ(last.width * last.height, 1);
   EXPECT_NEAR(last.pixels[0], sum / 15.0, 1e-4);
   EXPECT_NEAR(0.5 * (t.levels[0].pixels[0] + t.levels[0].pixels[3]), sum / 15.0, 1e-4);
-  EXPECT_TRUE(t.alphaLevels.empty());
+  EXPECT_TRUE(t.keptLevels.empty());
 
-  // Red where alpha is 0, blue where it is 1, alternating: every level is blue.
+  // Red with alpha 0.6, blue with alpha 0 and green with alpha 1 on alternate texels of rows.
   Texture leaf;
   leaf.image = Image(8, 8, 3, {"R", "G", "B"});
   leaf.alpha = Image(8, 8, 1, {"A"});
   for (int y = 0; y < 8; ++y)
     for (int x = 0; x < 8; ++x) {
-      const bool there = (x + y) % 2 == 0;
-      leaf.image.at(x, y)[there ? 2 : 0] = 1.0f;
-      leaf.alpha.at(x, y)[0] = there ? 1.0f : 0.0f;
+      const int kind = (x + y) % 2 == 0 ? 0 : (y % 2 == 0 ? 1 : 2);  // red, blue, green
+      leaf.image.at(x, y)[kind == 0 ? 0 : kind == 1 ? 2 : 1] = 1.0f;
+      leaf.alpha.at(x, y)[0] = kind == 0 ? 0.6f : kind == 1 ? 0.0f : 1.0f;
     }
+  // Opaque: the alpha plays no part (half red, a quarter each blue and green).
   buildMipLevels(leaf);
   ASSERT_EQ(leaf.levels.size(), 3u);
-  ASSERT_EQ(leaf.alphaLevels.size(), 3u);
-  for (const Image& level : leaf.levels)
+  EXPECT_TRUE(leaf.keptLevels.empty());
+  EXPECT_NEAR(leaf.levels.back().pixels[0], 0.5f, 1e-6f);
+  EXPECT_NEAR(leaf.levels.back().pixels[2], 0.25f, 1e-6f);
+  // A cut-out at 0.5 keeps red and green whole and no blue: two thirds red, a third green.
+  buildMipLevels(leaf, 0.5f);
+  ASSERT_EQ(leaf.keptLevels.size(), 3u);
+  ASSERT_EQ(leaf.keptWeights.size(), 4u);  // with the full size's
+  for (const Image& level : leaf.keptLevels)
     for (size_t i = 0; i < size_t(level.width * level.height); ++i) {
-      EXPECT_NEAR(level.pixels[3 * i], 0.0f, 1e-6f);
-      EXPECT_NEAR(level.pixels[3 * i + 2], 1.0f, 1e-6f);
+      EXPECT_NEAR(level.pixels[3 * i], 2.0f / 3.0f, 1e-5f);
+      EXPECT_NEAR(level.pixels[3 * i + 1], 1.0f / 3.0f, 1e-5f);
+      EXPECT_NEAR(level.pixels[3 * i + 2], 0.0f, 1e-6f);
     }
-  EXPECT_NEAR(leaf.alphaLevels.back().pixels[0], 0.5f, 1e-6f);
+  EXPECT_NEAR(leaf.keptWeights.back().pixels[0], 0.75f, 1e-6f);
+  // Semi-transparent: weighted by alpha (red 0.6 against green 1).
+  buildMipLevels(leaf, -1.0f);
+  EXPECT_NEAR(leaf.keptLevels.back().pixels[0], 0.6f / 1.1f, 1e-5f);
+  EXPECT_NEAR(leaf.keptLevels.back().pixels[1], 0.5f / 1.1f, 1e-5f);
+}
+
+// A clamped texture beyond 0..1 is its edge texels, whatever the footprint: filtering over the
+// footprint must not reach into the texture (its mip levels average the whole of it).
+TEST(Mesh, AClampedTextureBeyondItsEdgeIsTheEdgeTexelsWhateverTheFootprint) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.normals = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+  m.indices = {0, 1, 2};
+  m.texcoords = {{0, 0}, {3, 0}, {0, 3}};
+  Texture t;
+  t.image = Image(64, 64, 3, {"R", "G", "B"});
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) t.image.at(x, y)[x == 63 ? 0 : 2] = 1.0f;  // red right edge
+  t.wrapU = t.wrapV = Texture::Wrap::Clamp;
+  buildMipLevels(t);
+  m.textures.push_back(t);
+  Material mat;
+  mat.texture = 0;
+  m.materials.push_back(mat);
+  // u = 2.5 (beyond the right edge), v = 0.5; a footprint of 19 texels across u.
+  const float u = 2.5f / 3.0f, v = 0.5f / 3.0f;
+  const glm::vec3 wide = m.albedoAt(0, u, v, {0.1f, 0, 0}, {0, 0, 0});
+  EXPECT_NEAR(wide.x, 1.0f, 1e-4f);
+  EXPECT_NEAR(wide.z, 0.0f, 1e-4f);
+  // Inside the texture the same footprint averages: mostly blue.
+  const glm::vec3 inside = m.albedoAt(0, 0.5f / 3.0f, v, {0.1f, 0, 0}, {0, 0, 0});
+  EXPECT_GT(inside.z, 0.9f);
 }
 
 TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {

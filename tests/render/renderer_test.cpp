@@ -456,6 +456,16 @@ TEST(Renderer, AFineTextureIsAveragedOverTheFootprintNotSampledIntoGrain) {
   EXPECT_LT(filtered, 0.005);
   EXPECT_NEAR(filteredMean, 0.5, 0.005);
   EXPECT_NEAR(pickedMean, 0.5, 0.02);
+  // The texture with alpha 0 on its black texels, on an opaque material: the alpha plays no part
+  // (it weighted the levels: white).
+  Texture& withAlpha = textured.textures[0];
+  withAlpha.alpha = Image(2048, 1024, 1, {"A"});
+  for (int y = 0; y < 1024; ++y)
+    for (int x = 0; x < 2048; ++x) withAlpha.alpha.at(x, y)[0] = float((x + y) % 2);
+  buildMipLevels(withAlpha);
+  double opaqueMean = 0.0;
+  EXPECT_LT(spread(textured, &opaqueMean), 0.005);
+  EXPECT_NEAR(opaqueMean, 0.5, 0.005);
 }
 
 // A part thinner than the corner samples' spacing in front of a surface: a red strip a third of a
