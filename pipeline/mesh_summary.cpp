@@ -84,6 +84,7 @@ Hash128 meshKey(const render::Mesh& mesh, double creaseDegrees) {
     h.word(uint32_t(t.wrapU));
     h.word(uint32_t(t.wrapV));
     h.word(t.srgbByFormat ? 1u : 0u);
+    if (t.nearest) h.bytes("nearest");  // magnified as blocks of texels
     h.floats(t.image.pixels);
     h.floats(t.alpha.pixels);
   }

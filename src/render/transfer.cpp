@@ -1038,6 +1038,7 @@ std::string meshHash(const Mesh& mesh) {
       h.word(uint32_t(t.alpha.height));
       h.word(uint32_t(t.wrapU));
       h.word(uint32_t(t.wrapV));
+      if (t.nearest) h.bytes("nearest");  // the alpha magnified as blocks of texels
       h.floats(t.alpha.pixels);
     }
   }

@@ -121,6 +121,9 @@ TEST(MeshKey, EveryPartOfTheLookIsInIt) {
   m.textures[0].wrapV = render::Texture::Wrap::Mirror;
   EXPECT_NE(meshKey(m, 60.0), base) << "wrap v";
   m = mesh;
+  m.textures[0].nearest = true;
+  EXPECT_NE(meshKey(m, 60.0), base) << "magnified as blocks (glTF's magFilter NEAREST)";
+  m = mesh;
   m.materials[0].uvTransform[0][0] = 2.0f;
   EXPECT_NE(meshKey(m, 60.0), base) << "texture-coordinate scale";
   m = mesh;

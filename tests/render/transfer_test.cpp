@@ -1181,6 +1181,9 @@ TEST(Cutouts, RaysPassWhereTheMaterialCutsTheSurfaceAway) {
   Mesh other = roof;
   other.textures[0].alpha.pixels = {1.0f, 0.0f};
   EXPECT_NE(meshHash(roof), meshHash(other));
+  Mesh blocks = roof;
+  blocks.textures[0].nearest = true;  // its alpha magnified as blocks: cut out otherwise
+  EXPECT_NE(meshHash(roof), meshHash(blocks));
 }
 
 // An upright card (x in [-0.5, 0.5], y in [0, 1]) whose alpha texture has eight rows, the lowest
