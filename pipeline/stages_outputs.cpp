@@ -805,12 +805,22 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   // Both files appear together or not at all: a failure keeps every previous output.
   OutputFiles outputs("output");
   std::vector<ingest::ExrPart> parts = {compositePart, objectPart};
+  Image ratioIn;
   if (ground) {
     // The ground shadow's ratio, in its own data window (where it is below 1): 1 elsewhere.
     ingest::ExrPart shadowPart{
         "shadow",        &ground->ratio,   ground->grid.x0,      ground->grid.y0,
         composite.width, composite.height, compositePart.options};
     shadowPart.options.alphaChannel = -1;
+    if (space != working) {
+      // Per channel of the working space the plate was darkened by it. In other primaries a
+      // tinted ratio has no exact counterpart (it would depend on the plate's colour): it is
+      // converted as a colour is, exact for a grey ratio (white stays white).
+      ratioIn = ground->ratio;
+      ratioIn.colorSpace = working;
+      colors.convert(ratioIn, space);
+      shadowPart.image = &ratioIn;
+    }
     parts.push_back(shadowPart);
   }
   // The display image (the view transform, the clipping check, the JPEG) is made on a thread of
