@@ -51,6 +51,8 @@ struct ComposeJob {
   // A path ending in '/' (or an existing folder) writes <folder>/compose.exr and .jpg.
   std::filesystem::path output = "out/compose";
 
+  // The OpenColorIO config file (--ocio; a scene file's): empty: $OCIO, else the built-in one.
+  std::filesystem::path ocio;
   std::string plateSpace;        // empty: from the file (see ColorConfig::inputSpaceFor)
   std::string environmentSpace;  // empty: from the file
   std::string display, view;     // empty: the config's defaults

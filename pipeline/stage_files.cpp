@@ -188,7 +188,7 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
                         "' (config: " + made.value("colorConfig", std::string("?")) +
                         "); this run's is '" + working + "' (config: " + ctx.colors.source() +
                         "): precompute again under this config, or render under that one (the "
-                        "same $OCIO)",
+                        "same --ocio or $OCIO)",
                     file);
       }
     } else {
@@ -394,7 +394,7 @@ StageInput objectLayerInput(const fs::path& file) {
                         "'; this run's is '" + ctx.colors.workingSpace() +
                         "' (config: " + ctx.colors.source() +
                         "): composite under the colour config the layer was rendered with (the "
-                        "same $OCIO)",
+                        "same --ocio or $OCIO)",
                     file);
       }
       // OpenEXR keeps channels in its own order: find each by the name it was written under

@@ -483,10 +483,13 @@ class ColorStage final : public Stage {
   }
   std::vector<std::string> outputs() const override { return {kPlateLinear, kEnvironment}; }
   std::vector<StageParameter> parameters() const override {
-    return {textParameter("plate-space", "colour space of the plate (empty: from the file)",
-                          &ComposeJob::plateSpace),
-            textParameter("env-space", "colour space of the environment (empty: from the file)",
-                          &ComposeJob::environmentSpace)};
+    return {
+        pathParameter("ocio", "the OpenColorIO config file (empty: $OCIO, else the built-in one)",
+                      &ComposeJob::ocio),
+        textParameter("plate-space", "colour space of the plate (empty: from the file)",
+                      &ComposeJob::plateSpace),
+        textParameter("env-space", "colour space of the environment (empty: from the file)",
+                      &ComposeJob::environmentSpace)};
   }
 
   // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded;

@@ -236,9 +236,16 @@ void validateJob(const pipeline::ComposeJob& j, const color::ColorConfig& colors
   });
 }
 
+color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals) {
+  // A scene's config, unless the command line names one.
+  if (!job.ocio.empty() && globals.ocio.empty())
+    color::ColorConfig::useConfig(job.ocio.string(), "the scene's color.ocio");
+  return color::ColorConfig::fromEnvironment();
+}
+
 int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunRequest& request,
            bool printOutputs) {
-  const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+  const color::ColorConfig colors = jobConfig(o.job, globals);
   validateJob(o.job, colors);
   if (o.explain) {
     // The checks the run makes on its outputs before any stage, so that the plan is not one that
@@ -294,6 +301,7 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
           "compose --help)");
     }
     o->apply(app);
+    if (!globals.ocio.empty() && globals.ocio != "builtin") o->job.ocio = globals.ocio;
     if (!saveScene->empty()) {
       pipeline::validate(o->job);
       // The scene is written before any input is read: it must not replace one of them.

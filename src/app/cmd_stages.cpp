@@ -293,6 +293,8 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     const fs::path cache = o->job.cache;
     const int threads = o->job.threads;
     o->job = pipeline::loadScene(*scene);
+    if (!globals.ocio.empty())
+      o->job.ocio = globals.ocio == "builtin" ? fs::path() : fs::path(globals.ocio);
     o->job.cache = o->noCache ? fs::path() : cache;
     o->job.threads = threads;
     const pipeline::ComposeJob fromScene = o->job;
@@ -334,7 +336,7 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     }
     // A value out of range is the scene file's fault when the scene alone has it (exit 1, naming
     // the file), the command line's when a --set brought it (exit 2).
-    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    const color::ColorConfig colors = jobConfig(o->job, globals);
     try {
       validateJob(o->job, colors);
     } catch (const UsageError& e) {

@@ -39,6 +39,9 @@ struct ComposeOptions {
 // Checks the job's values and the colour names it gives (pipeline::validate, then the config):
 // throws UsageError naming the option.
 void validateJob(const pipeline::ComposeJob& job, const color::ColorConfig& colors);
+// The colour config of a job: --ocio, else the job's own (a scene's color.ocio), else $OCIO, else
+// the built-in one.
+color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals);
 
 int runJob(const ComposeOptions& o, const Globals& globals,
            const pipeline::RunRequest& request = {}, bool printOutputs = true);

@@ -226,10 +226,15 @@ std::string& chosenConfig() {
   static std::string file;
   return file;
 }
+std::string& chosenBy() {
+  static std::string by;
+  return by;
+}
 }  // namespace
 
-void ColorConfig::useConfig(const std::string& file) {
+void ColorConfig::useConfig(const std::string& file, const std::string& namedBy) {
   chosenConfig() = file;
+  chosenBy() = namedBy;
 }
 
 ColorConfig ColorConfig::fromEnvironment() {
@@ -238,7 +243,7 @@ ColorConfig ColorConfig::fromEnvironment() {
     try {
       return fromFile(chosen);
     } catch (const Error& e) {
-      throw Error("color", std::string(e.what()) + " (named by --ocio)", e.file());
+      throw Error("color", std::string(e.what()) + " (named by " + chosenBy() + ")", e.file());
     }
   }
   const char* env = std::getenv("OCIO");

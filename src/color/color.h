@@ -47,8 +47,9 @@ class ColorConfig {
   // The config named by useConfig() (the --ocio option), else $OCIO if set (error if it cannot
   // be loaded), else the built-in configuration.
   static ColorConfig fromEnvironment();
-  // Makes fromEnvironment() load `file` instead of $OCIO ("builtin": the built-in config).
-  static void useConfig(const std::string& file);
+  // Makes fromEnvironment() load `file` instead of $OCIO ("builtin": the built-in config);
+  // `namedBy` says where the name came from in its errors.
+  static void useConfig(const std::string& file, const std::string& namedBy = "--ocio");
   static ColorConfig builtin();
   static ColorConfig fromFile(const std::filesystem::path& file);
 

@@ -518,6 +518,25 @@ TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
   EXPECT_NE(r.err.find("OpenColorIO config not found (named by --ocio)"), std::string::npos)
       << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "third.exr"));
+
+  // A scene saved with --ocio names the config (color.ocio), and runs under it: Filmic is a view
+  // of Blender's config only.
+  const fs::path scene = dir_ / "filmic.json";
+  r = run("--ocio " + quote(blender) + " --plate " + quote(plate_) + " " + objectOptions() +
+              " --env " + quote(env) + " --view Filmic --save-scene " + quote(scene),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(slurp(scene).find("config.ocio"), std::string::npos) << slurp(scene);
+  r = run("-q run " + quote(scene) + " --no-cache --set output.out=" + quote(dir_ / "filmic"),
+          dir_.path());
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir_ / "filmic.jpg"));
+  // The command line's --ocio wins over the scene's.
+  r = run("-q --ocio builtin run " + quote(scene) +
+              " --no-cache --set output.out=" + quote(dir_ / "filmic2"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("unknown view 'Filmic'"), std::string::npos) << r.err;
 }
 
 // compose cache shows what the caches hold and removes old entries, never the samples or the
