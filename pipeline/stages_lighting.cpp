@@ -130,9 +130,11 @@ std::vector<glm::vec3> vec3sFromFloats(std::span<const float> v) {
 class PrecomputeStage final : public Stage {
  public:
   std::string memoryAdvice() const override {
-    return "the lighting's tables grow with its parameters: cheb-local holds order^2 x rows x cols "
-           "x 3 floats (--lighting-params order, rows, cols; 1 x 33 x 64 by default), and the "
-           "shadows' lighting --shadow-params order^2 x 33 x 64 x 3";
+    return "a large environment (--max-pixels refuses larger ones before they are read; a "
+           "smaller copy lights the object as well: oiiotool IN --resize 2048x1024 -o OUT), or "
+           "the lighting's tables, which grow with its parameters: cheb-local holds order^2 x "
+           "rows x cols x 3 floats (--lighting-params order, rows, cols; 1 x 33 x 64 by "
+           "default), and the shadows' lighting --shadow-params order^2 x 33 x 64 x 3";
   }
   std::string name() const override { return "precompute"; }
   std::string summary() const override {

@@ -5,7 +5,6 @@
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
-#include <iterator>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -325,10 +324,24 @@ std::string ColorConfig::identity() const {
       } catch (const OCIO::Exception&) {
         continue;  // not found: the name alone (using it fails with OpenColorIO's error)
       }
-      std::ifstream in(where, std::ios::binary);
-      const std::string content{std::istreambuf_iterator<char>(in), {}};
       h.bytes(where);
-      h.data(content.data(), content.size());
+      // A regular file's content, read in pieces; past 64 MB (a LUT that large is rare, and
+      // reading it on every command would cost seconds) its size and time stamp stand for it.
+      std::error_code ec;
+      const std::filesystem::file_status status = std::filesystem::status(where, ec);
+      if (!std::filesystem::is_regular_file(status)) continue;  // a device: never read
+      const uintmax_t size = std::filesystem::file_size(where, ec);
+      if (ec || size > (uintmax_t(64) << 20)) {
+        h.number(double(size));
+        h.number(double(std::filesystem::last_write_time(where, ec).time_since_epoch().count()));
+        continue;
+      }
+      std::ifstream in(where, std::ios::binary);
+      std::vector<char> piece(1 << 20);
+      while (in) {
+        in.read(piece.data(), std::streamsize(piece.size()));
+        h.data(piece.data(), size_t(in.gcount()));
+      }
     }
     impl_->identity->value = id + " " + h.hex();
   });
