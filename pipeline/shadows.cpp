@@ -344,6 +344,7 @@ GroundShadowResult computeGroundShadow(
     rays += transfer.rays + sourceRays;
   } while (render::refineGroundGrid(out.grid, scene, worldFromObject, camera));
   out.ratio = render::groundRatio(out.grid);
+  rays += render::sharpenGroundEdges(out.grid, out.ratio, scene, worldFromObject, camera);
   out.points = out.grid.points.count();
   out.rays = rays;
   std::string levels;

@@ -560,8 +560,9 @@ class GroundStage final : public Stage {
  public:
   // 2: the ratio cut to where it is below 1; 3: refined across sharp shadow edges; 4: the
   // object's rotation normalised in double (pipeline/context.cpp); 5: a shadow edge's cell keeps
-  // its first ray as one of its strata; 6: points placed coarse to fine (render/ground.h).
-  static constexpr int kVersion = 6;
+  // its first ray as one of its strata; 6: points placed coarse to fine (render/ground.h);
+  // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses.
+  static constexpr int kVersion = 7;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

@@ -1,6 +1,9 @@
 #include "render/ground.h"
 
 #include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -187,6 +190,13 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
   return grid;
 }
 
+float GroundGrid::seenFraction(size_t p, int i) const {
+  if (p < partial.size() && ((partial[p] >> i) & 1u))
+    return partialFraction[partialFirst[p] +
+                           uint32_t(std::popcount(partial[p] & ((uint64_t(1) << i) - 1)))];
+  return p < seen.size() ? float((seen[p] >> i) & 1u) : 1.0f;
+}
+
 SurfacePoints GroundGrid::pending() const {
   SurfacePoints out;
   out.size = points.size, out.centre = points.centre, out.radius = points.radius;
@@ -199,10 +209,21 @@ void shadeGroundPoints(GroundGrid& grid, const VertexIrradiance& irradiance) {
   const size_t count = grid.points.count() - grid.shaded;
   COMPOSE_CHECK(irradiance.shadowed.size() == count && irradiance.unshadowed.size() == count);
   const bool bits = irradiance.sourceSeen.size() == count;
+  const bool fractions = bits && irradiance.sourcePartial.size() == count &&
+                         irradiance.partialFirst.size() == count + 1;
   grid.seen.resize(grid.points.count(), ~uint64_t(0));
+  grid.partial.resize(grid.points.count(), 0);
+  grid.partialFirst.resize(grid.points.count(), uint32_t(grid.partialFraction.size()));
   for (size_t k = 0; k < count; ++k) {
     const size_t p = grid.shaded + k;
     grid.ratio[grid.pointNode[p]] = ratioAt(irradiance, k);
+    grid.partialFirst[p] = uint32_t(grid.partialFraction.size());
+    if (fractions) {
+      grid.partial[p] = irradiance.sourcePartial[k];
+      for (int i = 0; i < 64; ++i)
+        if ((grid.partial[p] >> i) & 1u)
+          grid.partialFraction.push_back(irradiance.seenFraction(k, i));
+    }
     if (bits) grid.seen[p] = irradiance.sourceSeen[k];
     if (p == 0) grid.open = irradiance.unshadowed[k];
   }
@@ -428,6 +449,121 @@ Image groundRatio(const GroundGrid& grid) {
     }
   });
   return out;
+}
+
+int64_t sharpenGroundEdges(const GroundGrid& grid, Image& ratio, const EmbreeScene& scene,
+                           const glm::dmat4& worldFromObject, const calib::PlateCamera& camera,
+                           const GroundSettings& settings) {
+  const int levels = grid.levels();
+  if (grid.empty() || levels == 0 || grid.split.empty()) return 0;
+  // The sources that change the ratio by more than a fiftieth of the sharp threshold, and what
+  // each adds to it where it is seen.
+  uint64_t strong = 0;
+  std::vector<glm::vec3> share(64, glm::vec3(0.0f));
+  for (size_t i = 0; i < grid.sources.size() && i < 64; ++i) {
+    const lighting::LightSource& src = grid.sources[i];
+    const glm::vec3 d = glm::normalize(src.direction);
+    if (d.y <= 0.0f) continue;
+    float weight = 0.0f;
+    for (int c = 0; c < 3; ++c) {
+      share[i][c] = grid.open[c] > 1e-20f ? src.power[c] * d.y / grid.open[c] : 0.0f;
+      weight = std::max(weight, share[i][c]);
+    }
+    // (A sun split into several sources: each may be below the sharp threshold, their edges
+    // together are not.)
+    if (weight > 0.02f * settings.sharp) strong |= uint64_t(1) << i;
+  }
+  if (strong == 0) return 0;
+  const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+  auto nodeAt = [&](int a, int b) { return size_t(b) * size_t(grid.columns) + size_t(a); };
+  // The finest cells: one lattice unit, inside the cells of the last level that were split.
+  const int last = levels - 1, parent = 2;
+  const int across = (grid.columns - 1) / parent, down = (grid.rows - 1) / parent;
+  const std::vector<uint8_t>& split = grid.split[size_t(last)];
+  std::vector<std::array<int, 2>> cells;
+  for (int j = 0; j < down; ++j)
+    for (int i = 0; i < across; ++i)
+      if (split[size_t(j) * size_t(across) + size_t(i)])
+        for (int q = 0; q < 4; ++q) cells.push_back({2 * i + q % 2, 2 * j + q / 2});
+  const double lift = 1e-4 * grid.sphereRadius;
+  std::atomic<int64_t> rays{0};
+  parallelFor(0, int64_t(cells.size()), [&](int64_t k) {
+    const int a = cells[size_t(k)][0], b = cells[size_t(k)][1];
+    // The strong sources whose visibility differs at the cell's corners (or a corner shows no
+    // ground): the bilinear ratio draws their shadow's edge as the cell's square.
+    uint64_t all = ~uint64_t(0), any = 0;
+    uint64_t corner[4];
+    int cornerPoint[4];
+    for (int q = 0; q < 4; ++q) {
+      const int p = grid.node[nodeAt(a + q % 2, b + q / 2)];
+      if (p < 0 || size_t(p) >= grid.seen.size()) return;
+      cornerPoint[q] = p;
+      corner[q] = grid.seen[size_t(p)];
+      all &= corner[q];
+      any |= corner[q];
+    }
+    const uint64_t differ = (any & ~all) & strong;
+    if (differ == 0) return;
+    glm::vec3 directions[64];
+    int sources[64], count = 0;
+    for (int i = 0; i < 64; ++i)
+      if ((differ >> i) & 1u) sources[count++] = i;
+    int64_t traced = 0;
+    const int px0 = int(std::ceil(a * grid.unit)), px1 = int(std::ceil((a + 1) * grid.unit));
+    const int py0 = int(std::ceil(b * grid.unit)), py1 = int(std::ceil((b + 1) * grid.unit));
+    for (int y = std::max(py0, 0); y < std::min(py1, ratio.height); ++y) {
+      for (int x = std::max(px0, 0); x < std::min(px1, ratio.width); ++x) {
+        // The pixel's bilinear share of each source (as groundRatio weighs the corners), and its
+        // own: 2 x 2 samples across the pixel, each to its own quarter of the source's extent.
+        const double u = double(x) / grid.unit - a, v = double(y) / grid.unit - b;
+        const double wq[4] = {(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v};
+        float seenHere[64] = {};
+        int samples = 0;
+        for (int sy = 0; sy < 2; ++sy) {
+          for (int sx = 0; sx < 2; ++sx) {
+            glm::vec3 g;
+            glm::dvec3 origin, dir;
+            if (!camera.ray(grid.x0 + x + 0.25 + 0.5 * sx, grid.y0 + y + 0.25 + 0.5 * sy, origin,
+                            dir) ||
+                !(dir.y < -1e-9))
+              continue;
+            const glm::dvec3 world = origin + dir * (-origin.y / dir.y) + glm::dvec3(0, lift, 0);
+            g = glm::vec3(glm::dvec3(objectFromWorld * glm::dvec4(world, 1.0)));
+            for (int n = 0; n < count; ++n) {
+              const lighting::LightSource& src = grid.sources[size_t(sources[n])];
+              const glm::dvec3 d = glm::normalize(glm::dvec3(src.direction));
+              const glm::dvec3 east =
+                  glm::normalize(glm::cross(glm::dvec3(0, 1, 0), d) + glm::dvec3(1e-12, 0, 0));
+              const glm::dvec3 north = glm::cross(d, east);
+              const double du = (sx - 0.5) * double(src.halfLongitude) *
+                                std::sqrt(std::max(0.0, 1.0 - d.y * d.y));
+              const double dv = (sy - 0.5) * double(src.halfLatitude);
+              const glm::dvec3 jittered = glm::normalize(d + east * du + north * dv);
+              directions[n] = glm::vec3(
+                  glm::normalize(glm::dvec3(objectFromWorld * glm::dvec4(jittered, 0.0))));
+            }
+            float through[64];
+            scene.transmittanceStream(g, directions, size_t(count), 0.0f, through);
+            traced += count;
+            for (int n = 0; n < count; ++n) seenHere[n] += through[n];
+            ++samples;
+          }
+        }
+        if (samples == 0) continue;
+        float* o = ratio.at(x, y);
+        for (int n = 0; n < count; ++n) {
+          double bilinear = 0.0;
+          for (int q = 0; q < 4; ++q)
+            bilinear += wq[q] * double(grid.seenFraction(size_t(cornerPoint[q]), sources[n]));
+          const float change = seenHere[n] / float(samples) - float(bilinear);
+          for (int c = 0; c < 3; ++c) o[c] += change * share[size_t(sources[n])][c];
+        }
+        for (int c = 0; c < 3; ++c) o[c] = std::clamp(o[c], 0.0f, 1.0f);
+      }
+    }
+    rays += traced;
+  });
+  return rays.load();
 }
 
 }  // namespace compose::render

@@ -79,6 +79,13 @@ struct GroundGrid {
   std::vector<lighting::LightSource> sources;
   glm::vec3 open{0.0f};
   std::vector<uint64_t> seen;
+  // What each point sees of the sources it sees in part (VertexIrradiance::seenFraction): per
+  // point the sources' mask, and their fractions (lowest source first) from partialFirst[p] on.
+  std::vector<uint64_t> partial;
+  std::vector<uint32_t> partialFirst;
+  std::vector<float> partialFraction;
+  // What point p sees of source i, in [0, 1].
+  float seenFraction(size_t p, int i) const;
   std::vector<int8_t> hidden;  // per lattice node: 1 when the object hides it, 0 not, -1 not asked
 
   bool empty() const { return points.count() == 0; }
@@ -109,5 +116,14 @@ bool refineGroundGrid(GroundGrid& grid, const EmbreeScene& scene, const glm::dma
 // The per-pixel ratio E_with / E_without (RGB, in [0, 1]) over the grid's rectangle. Pixels with
 // no ground point around them keep 1.
 Image groundRatio(const GroundGrid& grid);
+
+// Where a strong source's shadow edge crosses a finest cell (its corners see the source
+// differently), the bilinear ratio draws the edge as the cell's square: stair steps along a
+// hard shadow. There each pixel traces those sources itself, 2 x 2 samples across the pixel and
+// across the source's extent, and its ratio takes what they see instead of the corners'
+// interpolation. Returns the rays traced.
+int64_t sharpenGroundEdges(const GroundGrid& grid, Image& ratio, const EmbreeScene& scene,
+                           const glm::dmat4& worldFromObject, const calib::PlateCamera& camera,
+                           const GroundSettings& settings = {});
 
 }  // namespace compose::render

@@ -103,7 +103,7 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
   const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
   const glm::vec3 up(0, 1, 0);
   const double unshadowed = exact.irradiance(up).y;
-  double worst = 0.0;
+  double worst = 0.0, worstEdge = 0.0;
   int shadowed = 0, lit = 0;
   const GroundGrid& grid = ground.grid;
   for (int b = 0; b < grid.rows; b += 3) {
@@ -118,14 +118,37 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
       // Not on the cube's own outline, where the ground point lies in the plane of a face and
       // "half the sky" depends on a rounding of its position.
       if (pObj.x > -0.02f && pObj.x < 1.02f && pObj.z > -0.02f && pObj.z < 1.02f) continue;
-      const glm::vec3 origin = pObj + glm::vec3(0.0f, 1e-4f, 0.0f);
+      // Where a finest cell around the node has the sun's edge the pixel holds the average over
+      // its area (sharpenGroundEdges: 2 x 2 points across it), elsewhere the value at its centre.
+      bool edge = false;
+      for (int db = -1; db <= 1; ++db)
+        for (int da = -1; da <= 1; ++da) {
+          if (a + da < 0 || b + db < 0 || a + da >= grid.columns || b + db >= grid.rows) continue;
+          const int q = grid.node[size_t(b + db) * size_t(grid.columns) + size_t(a + da)];
+          if (q >= 0 && grid.seen[size_t(q)] != grid.seen[size_t(p)]) edge = true;
+        }
       const glm::mat3 objectFromEnv = glm::mat3(objectFromWorld);
-      const lighting::MonteCarloLighting::VisibilityFn blocked = [&](const glm::vec3& d) {
-        return scene.occluded(origin, glm::normalize(objectFromEnv * d), 1e-5f);
+      auto ratioAt = [&](const glm::vec3& at) {
+        const glm::vec3 origin = at + glm::vec3(0.0f, 1e-4f, 0.0f);
+        const lighting::MonteCarloLighting::VisibilityFn blocked = [&](const glm::vec3& d) {
+          return scene.occluded(origin, glm::normalize(objectFromEnv * d), 1e-5f);
+        };
+        return 1.0 - mc.estimate(up, 8192, &blocked).y / unshadowed;
       };
-      const double ref = 1.0 - mc.estimate(up, 8192, &blocked).y / unshadowed;
+      double ref = 0.0;
+      if (!edge) {
+        ref = ratioAt(pObj);
+      } else {
+        for (int k = 0; k < 4; ++k) {
+          glm::dvec3 o, d;
+          ASSERT_TRUE(camera.ray(grid.x0 + x + 0.25 + 0.5 * (k % 2),
+                                 grid.y0 + y + 0.25 + 0.5 * (k / 2), o, d));
+          const glm::dvec3 g = o + d * (-o.y / d.y);
+          ref += 0.25 * ratioAt(glm::vec3(glm::dvec3(objectFromWorld * glm::dvec4(g, 1.0))));
+        }
+      }
       const double got = ground.ratio.at(x, y)[1];
-      worst = std::max(worst, std::abs(got - ref));
+      (edge ? worstEdge : worst) = std::max(edge ? worstEdge : worst, std::abs(got - ref));
       shadowed += ref < 0.5;
       lit += ref > 0.99;
     }
@@ -137,7 +160,11 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
   // quarters of a texel: 5 texels, so steps of about 0.05 where the edge passes), the sky by the
   // transfer; the reference's noise (8192 samples on the blocked part) is ~0.01.
   EXPECT_LT(worst, 0.06);
-  std::printf("ground ratio against ray tracing: worst difference %.3f\n", worst);
+  // At the edge's pixels, 2 x 2 rays across the pixel, each to a quarter of the sun's extent,
+  // against the mean of four references: steps of a quarter of the sun's share.
+  EXPECT_LT(worstEdge, 0.08);
+  std::printf("ground ratio against ray tracing: worst difference %.3f (%.3f at the edge)\n", worst,
+              worstEdge);
 }
 
 // Shading for the tests below: the default plan's transfer and four rays per bright source, as
@@ -185,7 +212,8 @@ struct GroundShading {
 std::vector<double> againstEachPixel(const GroundGrid& grid, const calib::PlateCamera& camera,
                                      const glm::dmat4& worldFromObject, const GroundShading& shade,
                                      const std::vector<const Image*>& images, int step,
-                                     size_t& pixelCount, double shadedBelow = 2.0) {
+                                     size_t& pixelCount, double shadedBelow = 2.0,
+                                     const Image* differing = nullptr, double by = 0.0) {
   SurfacePoints exact;
   exact.size = grid.points.size, exact.centre = grid.points.centre;
   exact.radius = grid.points.radius;
@@ -212,6 +240,7 @@ std::vector<double> againstEachPixel(const GroundGrid& grid, const calib::PlateC
     const glm::vec3 un = truth.unshadowed[k], sh = truth.shadowed[k];
     const double ref = un.y > 1e-20f ? std::clamp(sh.y / un.y, 0.0f, 1.0f) : 1.0;
     if (ref >= shadedBelow) continue;
+    if (differing && !(std::abs(differing->at(pixels[k].x, pixels[k].y)[1] - ref) > by)) continue;
     ++pixelCount;
     for (size_t i = 0; i < images.size(); ++i)
       err[i] += std::abs(images[i]->at(pixels[k].x, pixels[k].y)[1] - ref);
@@ -256,6 +285,22 @@ TEST(GroundShadow, SharpEdgesAreFollowedCoarseToFine) {
       pixels);
   EXPECT_LT(err[1], 0.3 * err[0]);
   EXPECT_LT(err[1], 0.01);
+
+  // The finest cells an edge crosses, traced at their pixels: the edge no longer follows the
+  // cells' squares (stair steps along a hard shadow). Measured at the pixels where the
+  // interpolation and the pixel's own point disagree by more than 0.1: the edge's pixels.
+  Image sharpened = passes.last;
+  const int64_t rays =
+      sharpenGroundEdges(grid, sharpened, scene, shot.worldFromObject, shot.camera, settings);
+  EXPECT_GT(rays, 0);
+  size_t edgePixels = 0;
+  const std::vector<double> edge =
+      againstEachPixel(grid, shot.camera, shot.worldFromObject, shade, {&passes.last, &sharpened},
+                       1, edgePixels, 2.0, &passes.last, 0.1);
+  ASSERT_GT(edgePixels, 100u);
+  std::printf("at the %zu edge pixels: mean |ratio - per-pixel ratio| %.3f -> %.3f (%lld rays)\n",
+              edgePixels, edge[0], edge[1], static_cast<long long>(rays));
+  EXPECT_LT(edge[1], 0.5 * edge[0]);
 }
 
 // A thin post in the sun: its shadow is narrower than the first grid's cells (wider than the base
