@@ -486,6 +486,25 @@ int64_t sharpenGroundEdges(const GroundGrid& grid, Image& ratio, const EmbreeSce
       if (split[size_t(j) * size_t(across) + size_t(i)])
         for (int q = 0; q < 4; ++q) cells.push_back({2 * i + q % 2, 2 * j + q / 2});
   const double lift = 1e-4 * grid.sphereRadius;
+  // Each strong source's four directions (object frame), one to each quarter of its extent, in
+  // the order of a pixel's 2 x 2 samples.
+  std::vector<std::array<glm::vec3, 4>> quarters(64);
+  for (int i = 0; i < 64; ++i) {
+    if (!((strong >> i) & 1u)) continue;
+    const lighting::LightSource& src = grid.sources[size_t(i)];
+    const glm::dvec3 d = glm::normalize(glm::dvec3(src.direction));
+    const glm::dvec3 east =
+        glm::normalize(glm::cross(glm::dvec3(0, 1, 0), d) + glm::dvec3(1e-12, 0, 0));
+    const glm::dvec3 north = glm::cross(d, east);
+    for (int q = 0; q < 4; ++q) {
+      const double du =
+          (q % 2 - 0.5) * double(src.halfLongitude) * std::sqrt(std::max(0.0, 1.0 - d.y * d.y));
+      const double dv = (q / 2 - 0.5) * double(src.halfLatitude);
+      const glm::dvec3 jittered = glm::normalize(d + east * du + north * dv);
+      quarters[size_t(i)][size_t(q)] =
+          glm::vec3(glm::normalize(glm::dvec3(objectFromWorld * glm::dvec4(jittered, 0.0))));
+    }
+  }
   std::atomic<int64_t> rays{0};
   parallelFor(0, int64_t(cells.size()), [&](int64_t k) {
     const int a = cells[size_t(k)][0], b = cells[size_t(k)][1];
@@ -529,19 +548,8 @@ int64_t sharpenGroundEdges(const GroundGrid& grid, Image& ratio, const EmbreeSce
               continue;
             const glm::dvec3 world = origin + dir * (-origin.y / dir.y) + glm::dvec3(0, lift, 0);
             g = glm::vec3(glm::dvec3(objectFromWorld * glm::dvec4(world, 1.0)));
-            for (int n = 0; n < count; ++n) {
-              const lighting::LightSource& src = grid.sources[size_t(sources[n])];
-              const glm::dvec3 d = glm::normalize(glm::dvec3(src.direction));
-              const glm::dvec3 east =
-                  glm::normalize(glm::cross(glm::dvec3(0, 1, 0), d) + glm::dvec3(1e-12, 0, 0));
-              const glm::dvec3 north = glm::cross(d, east);
-              const double du = (sx - 0.5) * double(src.halfLongitude) *
-                                std::sqrt(std::max(0.0, 1.0 - d.y * d.y));
-              const double dv = (sy - 0.5) * double(src.halfLatitude);
-              const glm::dvec3 jittered = glm::normalize(d + east * du + north * dv);
-              directions[n] = glm::vec3(
-                  glm::normalize(glm::dvec3(objectFromWorld * glm::dvec4(jittered, 0.0))));
-            }
+            for (int n = 0; n < count; ++n)
+              directions[n] = quarters[size_t(sources[n])][size_t(2 * sy + sx)];
             float through[64];
             scene.transmittanceStream(g, directions, size_t(count), 0.0f, through);
             traced += count;
