@@ -255,7 +255,10 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
       if (levels.size() == triangles && render::restoreLevels(mesh, refined, levels)) {
         r.values.resize(values - triangles);
         reused = transfer.importState(transferParams, refined.count(), std::move(r.values));
-        if (reused) out.points = std::move(refined);
+        if (reused) {
+          out.points = std::move(refined);
+          out.points.buried = transfer.buried;
+        }
       }
       if (!reused) problem = "does not fit the mesh (" + std::to_string(values) + " values)";
     }

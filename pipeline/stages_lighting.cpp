@@ -366,8 +366,9 @@ class ShadowsStage final : public Stage {
   // order than the points read back); 5: a shadow edge's cell keeps its first ray as one of its
   // strata; 6: SH transfer projected cell by cell.
   // 7: the ground beneath a cut-out at what it keeps; 8: sources traced again across their
-  // penumbrae, the points that see them in part marked
-  static constexpr int kVersion = 8;
+  // penumbrae, the points that see them in part marked; 9: points inside another part of the
+  // object left out of the interpolation
+  static constexpr int kVersion = 9;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -426,6 +427,11 @@ class ShadowsStage final : public Stage {
       levels.push_back(uint8_t(v));
     }
     if (!render::restoreLevels(ctx.mesh(), r.points, levels)) return false;
+    for (const float v : cache.get("buried")) {
+      if (v != 0.0f && v != 1.0f) return false;
+      r.points.buried.push_back(uint8_t(v));
+    }
+    if (r.points.buried.size() != r.points.count()) return false;
     r.irradiance.shadowed = vec3sFromFloats(cache.get("shadowed"));
     r.irradiance.unshadowed = vec3sFromFloats(cache.get("unshadowed"));
     r.irradiance.clamped = int(wholeMember(cache.meta(), "clamped", 0).value_or(0));
@@ -475,6 +481,7 @@ class ShadowsStage final : public Stage {
     cache.put("unshadowed", vec3sToFloats(r.irradiance.unshadowed));
     cache.put("occlusion", r.occlusion);
     cache.put("levels", std::vector<float>(r.points.level.begin(), r.points.level.end()));
+    cache.put("buried", std::vector<float>(r.points.buried.begin(), r.points.buried.end()));
     cache.put("sources", sourcesToFloats(r.sources));
     for (const auto& [name, bitsOf] : {std::pair<const char*, const std::vector<uint64_t>*>{
                                            "sourceSeen", &r.irradiance.sourceSeen},

@@ -120,17 +120,22 @@ std::vector<float> VertexTransfer::exportState() const {
   out.insert(out.end(), cheb.begin(), cheb.end());
   out.insert(out.end(), sh.begin(), sh.end());
   out.insert(out.end(), ao.begin(), ao.end());
+  for (const uint8_t b : buried) out.push_back(float(b));
   return out;
 }
 
 bool VertexTransfer::importState(const TransferParams& p, size_t vertices, FloatBuffer in) {
   const size_t kk = size_t(p.order) * size_t(p.order);
   const size_t nsh = size_t(lighting::shCount(p.shBands));
-  if (in.size() != vertices * (kk + nsh + 1)) return false;
+  if (in.size() != vertices * (kk + nsh + 2)) return false;
+  const auto flags = in.begin() + ptrdiff_t(vertices * (kk + nsh + 1));
+  if (!std::all_of(flags, in.end(), [](float f) { return f == 0.0f || f == 1.0f; })) return false;
   params = p;
   vertexCount = vertices;
   sh.assign(in.begin() + ptrdiff_t(vertices * kk), in.begin() + ptrdiff_t(vertices * (kk + nsh)));
-  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), in.end());
+  ao.assign(in.begin() + ptrdiff_t(vertices * (kk + nsh)), flags);
+  buried.assign(vertices, 0);
+  for (size_t v = 0; v < vertices; ++v) buried[v] = uint8_t(flags[ptrdiff_t(v)] == 1.0f);
   // The moments come first: they stay where they are.
   in.resize(vertices * kk);
   cheb = std::move(in);
@@ -256,6 +261,7 @@ void VertexTransfer::append(const VertexTransfer& more) {
   sh.insert(sh.end(), more.sh.begin(), more.sh.end());
   ao.insert(ao.end(), more.ao.begin(), more.ao.end());
   aoSelf.insert(aoSelf.end(), more.aoSelf.begin(), more.aoSelf.end());
+  buried.insert(buried.end(), more.buried.begin(), more.buried.end());
   vertexCount += more.vertexCount;
   rays += more.rays;
 }
@@ -278,7 +284,10 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   // Refined where the object's own shadowing changes fast: the ground's darkening is smooth.
   const size_t first = refineSurfacePoints(
       mesh, points, transfer.aoSelf.empty() ? transfer.ao : transfer.aoSelf, refine);
-  if (first == points.count()) return transfer;
+  if (first == points.count()) {
+    points.buried = transfer.buried;
+    return transfer;
+  }
   SurfacePoints extra;
   extra.size = points.size;
   extra.centre = points.centre;
@@ -286,6 +295,7 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
   extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
   transfer.append(computeTransfer(mesh, scene, extra, params, part(kFirstShare, 1.0), ground));
+  points.buried = transfer.buried;
   return transfer;
 }
 
@@ -429,6 +439,31 @@ uint32_t SurfacePoints::gridPoint(const Mesh& mesh, uint32_t t, int i, int j) co
 
 void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
                            float w[3]) const {
+  locateGrid(mesh, t, u, v, idx, w);
+  if (buried.size() != positions.size()) return;
+  const int open = int(!buried[idx[0]]) + int(!buried[idx[1]]) + int(!buried[idx[2]]);
+  if (open == 0 || open == 3) return;
+  // Inside another part: left out, the others' weights scaled up (shared equally where the hit
+  // is at the buried point itself).
+  int best = -1;
+  float sum = 0.0f;
+  for (int q = 0; q < 3; ++q) {
+    if (buried[idx[q]]) continue;
+    sum += w[q];
+    if (best < 0 || w[q] > w[best]) best = q;
+  }
+  for (int q = 0; q < 3; ++q) {
+    if (buried[idx[q]]) {
+      idx[q] = idx[best];
+      w[q] = 0.0f;
+    } else {
+      w[q] = sum > 0.0f ? w[q] / sum : 1.0f / float(open);
+    }
+  }
+}
+
+void SurfacePoints::locateGrid(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
+                               float w[3]) const {
   const uint32_t* corner = &mesh.indices[3 * size_t(t)];
   const int L = level[t];
   if (L == 1) {
@@ -618,6 +653,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
   out.cheb.assign(count * kk, 0.0f);
   out.sh.assign(count * size_t(nsh), 0.0f);
   out.ao.assign(count, 0.0f);
+  out.buried.assign(count, 0);
   if (ground) out.aoSelf.assign(count, 0.0f);
 
   // Rays leave a spot lifted off the surface by 1e-4 of the object's size, and ignore hits
@@ -834,6 +870,30 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           if (through < 0.5f) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
           if (through < 0.9f) sc.dimmed[size_t(cell / s)] |= uint64_t(1) << (cell % s);
         });
+        // Inside another part of the object (transfer.h)? Every first ray blocked, and most of
+        // 16 of them, spread over the hemisphere, by a surface met from behind.
+        if (params.selfOcclusion && sc.batch.size() == cells && cells >= 16 &&
+            std::all_of(sc.firstThrough.begin(), sc.firstThrough.end(),
+                        [](float f) { return f == 0.0f; })) {
+          glm::vec3 origins[16], directions[16];
+          EmbreeScene::Hit hits[16];
+          for (size_t b = 0; b < 16; ++b) {
+            origins[b] = origin;
+            directions[b] = sc.batch[b * cells / 16];
+          }
+          scene.intersect16(origins, directions, 0xFFFFu, hits, tnear);
+          traced += 16;
+          int behind = 0;
+          for (size_t b = 0; b < 16; ++b) {
+            if (!hits[b].found) continue;
+            const uint32_t* corner = &mesh.indices[3 * size_t(hits[b].triangle)];
+            const glm::vec3 normal = (1.0f - hits[b].u - hits[b].v) * mesh.normals[corner[0]] +
+                                     hits[b].u * mesh.normals[corner[1]] +
+                                     hits[b].v * mesh.normals[corner[2]];
+            behind += int(glm::dot(normal, directions[b]) > 0.0f);
+          }
+          out.buried[v] = uint8_t(behind >= 12);
+        }
 
         // Cells whose ray disagrees with one of its eight neighbours' (the azimuth wraps around)
         // lie on a shadow's edge: they get r x r stratified rays, the first ray standing for its

@@ -84,8 +84,13 @@ struct SurfacePoints {
   std::vector<glm::vec3> positions, normals;  // object space
   std::vector<uint32_t> first;                // per triangle: index of its first own grid point
   std::vector<uint8_t> level;  // per triangle: segments per edge (1: the corners only)
-  float size = 0.0f;           // the object's size: its bounding box's largest extent
-  glm::vec3 centre{0.0f};      // the object's bounding sphere (object space), to cull rays
+  // Per point: 1 where the point lies inside another part of the object (an eye pushed into its
+  // socket, a spout into a teapot's body: every ray from it meets that part from within). Such a
+  // point sees nothing, but the surface next to it, where the parts meet, does: locate() leaves
+  // it out of a hit's interpolation unless all three points are buried. Empty: none known.
+  std::vector<uint8_t> buried;
+  float size = 0.0f;       // the object's size: its bounding box's largest extent
+  glm::vec3 centre{0.0f};  // the object's bounding sphere (object space), to cull rays
   float radius = 0.0f;
 
   size_t count() const { return positions.size(); }
@@ -93,9 +98,14 @@ struct SurfacePoints {
   // i + j <= L, the triangle's level): a corner is the mesh's vertex.
   uint32_t gridPoint(const Mesh& mesh, uint32_t triangle, int i, int j) const;
   // The three points whose values, with these weights, interpolate at Embree's barycentrics
-  // (u for corner 1, v for corner 2) of `triangle`.
+  // (u for corner 1, v for corner 2) of `triangle`. A buried point among them, with others that
+  // are not, is replaced by the one of those with the largest weight, at weight 0, the others'
+  // weights scaled to sum to 1.
   void locate(const Mesh& mesh, uint32_t triangle, float u, float v, uint32_t points[3],
               float weights[3]) const;
+  // The same without leaving buried points out.
+  void locateGrid(const Mesh& mesh, uint32_t triangle, float u, float v, uint32_t points[3],
+                  float weights[3]) const;
 };
 
 SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 96.0f,
@@ -132,6 +142,10 @@ struct VertexTransfer {
   FloatBuffer cheb;       // k² per vertex: moments of V on the local grid
   std::vector<float> sh;  // (shBands + 1)² per vertex: Sloan's transfer vector
   std::vector<float> ao;  // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
+  // Per vertex: 1 where the point is inside another part of the object (SurfacePoints::buried):
+  // every ray of the first pass was blocked, and at least 12 of 16 of them met the surface that
+  // blocked it from behind (its shading normal facing along the ray).
+  std::vector<uint8_t> buried;
   // The same without the ground (GroundContact), to refine by; empty without one. Not cached.
   std::vector<float> aoSelf;
   int64_t rays = 0;
@@ -210,7 +224,7 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS7";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS8";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own
@@ -223,7 +237,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
 VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
                                const TransferParams& params, const Progress& progress = {});
 // The visibility pass, then refineSurfacePoints() and the pass again at the new points: `points`
-// gets them, the transfer covers them all.
+// gets them (and their buried flags), the transfer covers them all.
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress = {},

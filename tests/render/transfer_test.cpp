@@ -912,6 +912,85 @@ TEST(SurfacePoints, RestoredLevelsGiveTheRefinedPointsInTheirOrder) {
   EXPECT_EQ(restored.first, points.first);
 }
 
+// A cube pushed halfway into a floor (two parts cutting into each other, as an eye into its
+// socket): the floor's vertex inside the cube sees nothing, and a hit on the floor just outside
+// the cube must not take its darkness from it.
+TEST(SurfacePoints, PointsInsideAnotherPartAreLeftOutOfTheInterpolation) {
+  Mesh mesh;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      mesh.positions.emplace_back(float(i - 1), 0.0f, float(j - 1));
+      mesh.normals.emplace_back(0.0f, 1.0f, 0.0f);
+    }
+  for (uint32_t j = 0; j < 2; ++j)
+    for (uint32_t i = 0; i < 2; ++i) {
+      const uint32_t a = j * 3 + i, b = a + 1, c = a + 3, d = c + 1;
+      mesh.indices.insert(mesh.indices.end(), {a, c, b, b, c, d});
+    }
+  addBox(mesh, {-0.2f, -0.2f, -0.2f}, {0.2f, 0.2f, 0.2f});  // around the floor's vertex 4
+  mesh.normalsFromFile = true;
+  TransferParams params;
+  params.grid = 16;
+  params.order = 4;
+  params.shBands = 0;
+  SurfacePoints points = surfacePoints(mesh, 10.0f);  // the vertices only
+  RefineParams none;
+  none.spread = 0.0f;
+  const VertexTransfer t = computeRefinedTransfer(mesh, points, params, none);
+  ASSERT_EQ(points.buried.size(), points.count());
+  std::vector<size_t> buried;
+  for (size_t p = 0; p < points.count(); ++p)
+    if (points.buried[p]) buried.push_back(p);
+  EXPECT_EQ(buried, std::vector<size_t>{4}) << "only the floor's vertex inside the cube";
+  EXPECT_EQ(t.ao[4], 0.0f);
+
+  // Hits on the floor beside the cube, on the triangles around vertex 4, against the ambient
+  // occlusion computed at the hit itself.
+  SurfacePoints at = points;
+  at.buried.clear();
+  at.positions.clear();
+  at.normals.clear();
+  struct Hit {
+    uint32_t triangle;
+    float u, v;
+  };
+  std::vector<Hit> hits;
+  for (uint32_t tri = 0; tri < mesh.triangleCount(); ++tri) {
+    const uint32_t* c = &mesh.indices[3 * tri];
+    if (c[0] != 4 && c[1] != 4 && c[2] != 4) continue;
+    for (const auto& [u, v] : {std::pair{0.3f, 0.3f}, {0.5f, 0.2f}, {0.2f, 0.5f}, {0.4f, 0.4f}}) {
+      const glm::vec3 q = (1.0f - u - v) * mesh.positions[c[0]] + u * mesh.positions[c[1]] +
+                          v * mesh.positions[c[2]];
+      if (std::max(std::abs(q.x), std::abs(q.z)) < 0.25f) continue;  // in or at the cube
+      hits.push_back({tri, u, v});
+      at.positions.push_back(q);
+      at.normals.emplace_back(0.0f, 1.0f, 0.0f);
+    }
+  }
+  ASSERT_GE(hits.size(), 8u);
+  const VertexTransfer truth = computeTransfer(mesh, at, params);
+  double worst = 0.0, worstPlain = 0.0;
+  for (size_t h = 0; h < hits.size(); ++h) {
+    uint32_t near[3], plainNear[3];
+    float weight[3], plainWeight[3];
+    points.locate(mesh, hits[h].triangle, hits[h].u, hits[h].v, near, weight);
+    points.locateGrid(mesh, hits[h].triangle, hits[h].u, hits[h].v, plainNear, plainWeight);
+    EXPECT_NEAR(weight[0] + weight[1] + weight[2], 1.0f, 1e-6f);
+    double ao = 0.0, plain = 0.0;
+    for (int q = 0; q < 3; ++q) {
+      EXPECT_FALSE(points.buried[near[q]]);
+      ao += weight[q] * t.ao[near[q]];
+      plain += plainWeight[q] * t.ao[plainNear[q]];
+    }
+    worst = std::max(worst, std::abs(ao - truth.ao[h]));
+    worstPlain = std::max(worstPlain, std::abs(plain - truth.ao[h]));
+  }
+  std::printf("ambient occlusion beside the cube: worst error %.3f (%.3f with the point inside)\n",
+              worst, worstPlain);
+  EXPECT_LT(worst, 0.15);
+  EXPECT_GT(worstPlain, 0.3) << "the case this test is about: the point inside is dark";
+}
+
 using testing::uvSphere;
 
 // The share of a point's cosine-weighted sky that a unit sphere resting on its plane leaves
