@@ -367,8 +367,9 @@ class ShadowsStage final : public Stage {
   // strata; 6: SH transfer projected cell by cell.
   // 7: the ground beneath a cut-out at what it keeps; 8: sources traced again across their
   // penumbrae, the points that see them in part marked; 9: points inside another part of the
-  // object left out of the interpolation
-  static constexpr int kVersion = 9;
+  // object left out of the interpolation; 10: triangles' grid points on the smooth surface of
+  // the vertex normals
+  static constexpr int kVersion = 10;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {

@@ -229,8 +229,9 @@ class RenderStage final : public Stage {
   // stages marked; 5: the automatic exposure matches luminance, with the ball at the object's
   // middle; 6: the plate's key is taken below the horizon; 7: matched by a card on the ground;
   // 9: adaptive sampling; 10: sources no surface point sees kept out of the shadow ratio;
-  // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint
-  static constexpr int kVersion = 12;
+  // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
+  // 13: sources traced from the smooth surface of the vertex normals
+  static constexpr int kVersion = 13;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {

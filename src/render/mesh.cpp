@@ -40,6 +40,18 @@ glm::vec3 Mesh::boundsMax() const {
   return hi;
 }
 
+glm::vec3 Mesh::smoothPoint(uint32_t triangle, float u, float v, const glm::vec3& p,
+                            bool back) const {
+  const uint32_t* corner = &indices[3 * size_t(triangle)];
+  const float w[3] = {1.0f - u - v, u, v};
+  glm::vec3 out = p;
+  for (int i = 0; i < 3; ++i) {
+    const glm::vec3 n = back ? -normals[corner[i]] : normals[corner[i]];
+    out += (w[i] * std::max(0.0f, glm::dot(positions[corner[i]] - p, n))) * n;
+  }
+  return out;
+}
+
 namespace {
 
 // A texture coordinate brought into one period of its wrap mode (so that texel indices stay

@@ -168,6 +168,15 @@ struct Mesh {
   // texture finer than the samples does not alias into grain.
   glm::vec3 albedoAt(uint32_t triangle, float u, float v, const glm::vec3& dPdx,
                      const glm::vec3& dPdy) const;
+  // Point p at barycentrics (u, v) of `triangle`, lifted towards the smooth surface that its
+  // vertex normals describe (Hanika 2021, "Hacking the shadow terminator"):
+  // p + Σ w_i max(0, (v_i - p)·n_i) n_i, the vertex normals n_i turned round for `back`. Where
+  // the surface bulges (the vertices' tangent planes pass above p) a flat triangle lies inside
+  // the surface it stands for; rays to the light leave from here, so that the coarse facets next
+  // to it do not cast hard-edged shadows across smooth shading near the terminator. Where it is
+  // hollow, p itself.
+  glm::vec3 smoothPoint(uint32_t triangle, float u, float v, const glm::vec3& p,
+                        bool back = false) const;
   // Some material is a cut-out or semi-transparent (Material::cutOut()).
   bool hasCutouts() const;
   // Whether the point at barycentrics (u, v) of `triangle` is cut away: its material is a

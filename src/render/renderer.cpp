@@ -640,7 +640,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
                    glm::vec3(0.0f));
     r.shadowed = r.e;
     if (traceEdges && edges && glm::dot(interpolated, interpolated) > 1e-12f &&
-        edges->shade(scene, near, weight, at,
+        edges->shade(scene, near, weight, mesh.smoothPoint(triangle, u, v, at, backFace),
                      glm::normalize(backFace ? -interpolated : interpolated),
                      settings.envFromWorld * nrm, r.e, seed, r.shadowed, rays)) {
       // A source's shadow edge crosses the triangle: traced from the hit.

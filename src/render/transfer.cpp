@@ -84,7 +84,10 @@ void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
     for (int i = 0; i <= L - j; ++i) {
       if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
       const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
-      out.positions.push_back(b0 * p[0] + b1 * p[1] + b2 * p[2]);
+      // On the smooth surface of the vertex normals: a flat triangle's own point could be
+      // shadowed by its neighbours where the shading says it faces the light.
+      out.positions.push_back(
+          mesh.smoothPoint(uint32_t(t), b1, b2, b0 * p[0] + b1 * p[1] + b2 * p[2]));
       const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
       const float len = glm::length(nn);
       out.normals.push_back(len > 1e-12f ? nn / len

@@ -29,8 +29,9 @@
 //
 // Where: at surface points (SurfacePoints): the mesh's vertices, and on triangles larger than a
 // set fraction of the object a barycentric grid of points, so that a shadow falling across a
-// large face is not smeared between its corners. The renderer interpolates linearly between the
-// three points around a hit.
+// large face is not smeared between its corners, each grid point lifted onto the smooth surface
+// of the vertex normals (Mesh::smoothPoint: a coarse mesh's facets do not shadow its own
+// terminator). The renderer interpolates linearly between the three points around a hit.
 //
 // Threading: computeTransfer() uses every core (points in parallel); the result is
 // deterministic (per-point jitter from a hash of the point's position and the seed, so that the
@@ -78,8 +79,8 @@ struct TransferParams {
 // each triangle whose longest edge is longer than `maxEdge` a grid of `level` segments per edge
 // (level = ceil(longest edge / maxEdge), at most 32), its corners being the triangle's vertices.
 // maxEdge is `maxEdgeFraction` of the object's size, widened as needed to keep the number of
-// points within `budget` (a finely tessellated mesh keeps its vertices only). Normals are the
-// interpolated vertex normals, normalised.
+// points within `budget` (a finely tessellated mesh keeps its vertices only). Grid points lie on
+// the smooth surface (Mesh::smoothPoint); normals are the interpolated vertex normals, normalised.
 struct SurfacePoints {
   std::vector<glm::vec3> positions, normals;  // object space
   std::vector<uint32_t> first;                // per triangle: index of its first own grid point
@@ -224,7 +225,7 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS8";
+inline constexpr char kTransferCacheMagic[] = "COMPVIS9";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own

@@ -13,7 +13,9 @@
 // 480x360, one sample per pixel at the pixel's centre, so that every pixel is shaded at one point
 // whose position and normal the P and N AOVs give. The reference at a pixel is the exact
 // unshadowed irradiance at its normal minus a Monte Carlo estimate (environment and cosine
-// sampling, MIS) of the light the object blocks there, with 32768 samples; a second reference
+// sampling, MIS) of the light the object blocks there, with 32768 samples, its rays leaving from
+// the hit lifted onto the smooth surface of the vertex normals as the renderer's do (Mesh::
+// smoothPoint: without it a coarse mesh's facets shadow its terminator); a second reference
 // with another seed says how converged it is. The object's pixels are compared with it: SNR and
 // relative error over an even spread of fully covered pixels.
 //
@@ -64,6 +66,9 @@ namespace fs = std::filesystem;
 struct Pixel {
   int x, y;
   glm::vec3 p, n;
+  // Object space: the hit lifted onto the smooth surface of the vertex normals
+  // (Mesh::smoothPoint), where the renderer's shadow rays leave from, and the reference's too.
+  glm::vec3 origin{0.0f};
 };
 
 struct Row {
@@ -233,9 +238,19 @@ int main(int argc, char** argv) {
       std::vector<Pixel> px;
       const size_t step = std::max<size_t>(1, all.size() / size_t(pixels));
       for (size_t i = 0; i < all.size(); i += step) px.push_back(all[i]);
+      // Each pixel's triangle, found again along its camera ray, for its smooth point.
+      const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+      const glm::vec3 eye(objectFromWorld * glm::dvec4(camera.position(), 1.0));
+      for (Pixel& p : px) {
+        const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(p.p), 1.0));
+        const glm::vec3 dir = glm::normalize(pObj - eye);
+        const render::EmbreeScene::Hit hit = scene.intersect(eye, dir);
+        p.origin = hit.found ? mesh.smoothPoint(hit.triangle, hit.u, hit.v, pObj,
+                                                glm::dot(hit.geometricNormal, dir) > 0.0f)
+                             : pObj;
+      }
 
       // References: exact unshadowed minus the MC estimate of the blocked light, twice.
-      const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
       const glm::mat3 objectFromEnv = glm::transpose(envFromObject);
       auto reference = [&](uint64_t seed, std::vector<glm::dvec3>& out,
                            std::vector<glm::dvec3>* unshadowed) {
@@ -245,9 +260,8 @@ int main(int argc, char** argv) {
         if (unshadowed) unshadowed->resize(px.size());
         for (size_t i = 0; i < px.size(); ++i) {
           const glm::vec3 n = glm::normalize(px[i].n);  // world = environment frame here
-          const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
           const glm::vec3 nObj = glm::normalize(objectFromEnv * n);
-          const glm::vec3 origin = pObj + 1e-4f * size * nObj;
+          const glm::vec3 origin = px[i].origin + 1e-4f * size * nObj;
           const lighting::MonteCarloLighting::VisibilityFn blocked = [&](const glm::vec3& d) {
             return scene.occluded(origin, objectFromEnv * d, 1e-5f * size);
           };
@@ -415,7 +429,7 @@ int main(int argc, char** argv) {
         at.centre = points.centre;
         at.radius = points.radius;
         for (const Pixel& p : px) {
-          at.positions.push_back(glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(p.p), 1.0)));
+          at.positions.push_back(p.origin);
           at.normals.push_back(glm::normalize(objectFromEnv * glm::normalize(p.n)));
         }
         render::TransferParams tq = tp;
@@ -454,8 +468,7 @@ int main(int argc, char** argv) {
         const auto m0 = bench::Clock::now();
         for (size_t i = 0; i < px.size(); ++i) {
           const glm::vec3 nw = glm::normalize(px[i].n);
-          const glm::vec3 pObj = glm::vec3(objectFromWorld * glm::dvec4(glm::dvec3(px[i].p), 1.0));
-          const glm::vec3 origin = pObj + 1e-4f * size * glm::normalize(objectFromEnv * nw);
+          const glm::vec3 origin = px[i].origin + 1e-4f * size * glm::normalize(objectFromEnv * nw);
           const lighting::MonteCarloLighting::VisibilityFn visible = [&](const glm::vec3& d) {
             return !scene.occluded(origin, objectFromEnv * d, 1e-5f * size);
           };

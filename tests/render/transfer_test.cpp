@@ -912,6 +912,66 @@ TEST(SurfacePoints, RestoredLevelsGiveTheRefinedPointsInTheirOrder) {
   EXPECT_EQ(restored.first, points.first);
 }
 
+// A coarse sphere lit at a grazing angle: from the flat triangles' own points, rays towards the
+// light that the smooth shading says is above the horizon meet the neighbouring facets (hard
+// triangular shadows along the terminator). From the points lifted onto the vertex normals'
+// smooth surface (Mesh::smoothPoint) a convex object sees all of such light.
+TEST(SmoothPoint, ACoarseConvexMeshDoesNotShadowItsOwnTerminator) {
+  const Mesh sphere = testing::uvSphere(6, 12);
+  const EmbreeScene scene(sphere.positions, sphere.indices);
+  int lit = 0, flatShadowed = 0, smoothShadowed = 0;
+  double flatOff = 0.0, smoothOff = 0.0;  // mean distance from the true sphere
+  int points = 0;
+  for (const glm::vec3 sun :
+       {glm::vec3(1, 0.3f, 0.2f), glm::vec3(-0.4f, 0.8f, 0.5f), glm::vec3(0.1f, -0.6f, -1.0f)}) {
+    const glm::vec3 l = glm::normalize(sun);
+    for (uint32_t t = 0; t < sphere.triangleCount(); ++t) {
+      const uint32_t* c = &sphere.indices[3 * t];
+      for (int i = 1; i < 8; ++i)
+        for (int j = 1; i + j < 8; ++j) {
+          const float u = float(i) / 8.0f, v = float(j) / 8.0f;
+          const glm::vec3 p = (1.0f - u - v) * sphere.positions[c[0]] + u * sphere.positions[c[1]] +
+                              v * sphere.positions[c[2]];
+          const glm::vec3 n = glm::normalize((1.0f - u - v) * sphere.normals[c[0]] +
+                                             u * sphere.normals[c[1]] + v * sphere.normals[c[2]]);
+          const glm::vec3 q = sphere.smoothPoint(t, u, v, p);
+          flatOff += std::abs(1.0 - double(glm::length(p)));
+          smoothOff += std::abs(1.0 - double(glm::length(q)));
+          ++points;
+          const float c0 = glm::dot(n, l);
+          if (c0 < 0.02f || c0 > 0.3f) continue;  // near the terminator, on its lit side
+          ++lit;
+          flatShadowed += int(scene.occluded(p + 1e-4f * n, l, 1e-5f));
+          smoothShadowed += int(scene.occluded(q + 1e-4f * n, l, 1e-5f));
+        }
+    }
+  }
+  std::printf(
+      "%d points near the terminator: %d shadowed from the facets, %d from the smooth "
+      "surface; mean distance from the sphere %.4f flat, %.4f lifted\n",
+      lit, flatShadowed, smoothShadowed, flatOff / points, smoothOff / points);
+  ASSERT_GT(lit, 100);
+  EXPECT_GT(flatShadowed, lit / 10) << "the case this test is about";
+  EXPECT_EQ(smoothShadowed, 0);
+  EXPECT_LT(smoothOff, flatOff) << "nearer the sphere on average";
+
+  // A vertex stays where it is; so does a point of a flat surface, and of a hollow one.
+  EXPECT_EQ(sphere.smoothPoint(0, 0.0f, 0.0f, sphere.positions[sphere.indices[0]]),
+            sphere.positions[sphere.indices[0]]);
+  Mesh bowl;
+  bowl.positions = {{-1, 0.5f, 0}, {1, 0.5f, 0}, {0, 0, 0}};
+  bowl.normals = {
+      glm::normalize(glm::vec3(1, 1, 0)), glm::normalize(glm::vec3(-1, 1, 0)), {0, 1, 0}};
+  bowl.indices = {0, 2, 1};
+  const glm::vec3 inside(0.0f, 1.0f / 6.0f, 0.0f);
+  EXPECT_EQ(bowl.smoothPoint(0, 1.0f / 3.0f, 1.0f / 3.0f, inside), inside);
+  Mesh flat = bowl;
+  flat.positions = {{-1, 0, 0}, {1, 0, 0}, {0, 0, 1}};
+  flat.normals.assign(3, glm::vec3(0, 1, 0));
+  const glm::vec3 centre(0.0f, 0.0f, 1.0f / 3.0f);
+  EXPECT_EQ(flat.smoothPoint(0, 1.0f / 3.0f, 1.0f / 3.0f, centre), centre);
+}
+
 // A cube pushed halfway into a floor (two parts cutting into each other, as an eye into its
 // socket): the floor's vertex inside the cube sees nothing, and a hit on the floor just outside
 // the cube must not take its darkness from it.
