@@ -257,6 +257,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
         reused = transfer.importState(transferParams, refined.count(), std::move(r.values));
         if (reused) {
           out.points = std::move(refined);
+          render::keepLiftsClear(mesh, scene, out.points);
           out.points.buried = transfer.buried;
         }
       }

@@ -368,8 +368,8 @@ class ShadowsStage final : public Stage {
   // 7: the ground beneath a cut-out at what it keeps; 8: sources traced again across their
   // penumbrae, the points that see them in part marked; 9: points inside another part of the
   // object left out of the interpolation; 10: triangles' grid points on the smooth surface of
-  // the vertex normals
-  static constexpr int kVersion = 10;
+  // the vertex normals; 11: that lift bounded and checked for parts in the way
+  static constexpr int kVersion = 11;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {

@@ -230,8 +230,9 @@ class RenderStage final : public Stage {
   // middle; 6: the plate's key is taken below the horizon; 7: matched by a card on the ground;
   // 9: adaptive sampling; 10: sources no surface point sees kept out of the shadow ratio;
   // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
-  // 13: sources traced from the smooth surface of the vertex normals
-  static constexpr int kVersion = 13;
+  // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
+  // checked for parts in the way
+  static constexpr int kVersion = 14;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {

@@ -44,12 +44,20 @@ glm::vec3 Mesh::smoothPoint(uint32_t triangle, float u, float v, const glm::vec3
                             bool back) const {
   const uint32_t* corner = &indices[3 * size_t(triangle)];
   const float w[3] = {1.0f - u - v, u, v};
-  glm::vec3 out = p;
+  glm::vec3 lift(0.0f);
   for (int i = 0; i < 3; ++i) {
     const glm::vec3 n = back ? -normals[corner[i]] : normals[corner[i]];
-    out += (w[i] * std::max(0.0f, glm::dot(positions[corner[i]] - p, n))) * n;
+    lift += (w[i] * std::max(0.0f, glm::dot(positions[corner[i]] - p, n))) * n;
   }
-  return out;
+  // At most an eighth of the longest edge: normals averaged across a hard edge (a smooth-shaded
+  // box) would otherwise lift the middle of a face far off it.
+  const glm::vec3 a = positions[corner[0]], b = positions[corner[1]], c = positions[corner[2]];
+  const float most =
+      0.125f *
+      std::sqrt(std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)}));
+  const float length = glm::length(lift);
+  if (length > most) lift *= most / length;
+  return p + lift;
 }
 
 namespace {

@@ -174,7 +174,9 @@ struct Mesh {
   // the surface bulges (the vertices' tangent planes pass above p) a flat triangle lies inside
   // the surface it stands for; rays to the light leave from here, so that the coarse facets next
   // to it do not cast hard-edged shadows across smooth shading near the terminator. Where it is
-  // hollow, p itself.
+  // hollow, p itself (at a saddle, the bulging corners' share). The lift is at most an eighth of
+  // the triangle's longest edge; whoever traces from the point checks that nothing of the object
+  // lies between p and it (transfer.h: keepLiftsClear).
   glm::vec3 smoothPoint(uint32_t triangle, float u, float v, const glm::vec3& p,
                         bool back = false) const;
   // Some material is a cut-out or semi-transparent (Material::cutOut()).

@@ -1,6 +1,7 @@
 #include "render/transfer.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
@@ -269,10 +270,38 @@ void VertexTransfer::append(const VertexTransfer& more) {
   rays += more.rays;
 }
 
+void keepLiftsClear(const Mesh& mesh, const EmbreeScene& scene, SurfacePoints& points,
+                    size_t from) {
+  const float tnear = 1e-5f * points.size;
+  parallelFor(
+      0, int64_t(mesh.triangleCount()),
+      [&](int64_t ti) {
+        const size_t t = size_t(ti);
+        const int L = points.level[t];
+        if (L == 1 || points.first[t] < from) return;
+        const uint32_t* v = &mesh.indices[3 * t];
+        const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+        uint32_t index = points.first[t];  // in appendGrid's order
+        for (int j = 0; j <= L; ++j) {
+          for (int i = 0; i <= L - j; ++i) {
+            if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+            const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
+            const glm::vec3 flat = b0 * p[0] + b1 * p[1] + b2 * p[2];
+            glm::vec3& lifted = points.positions[index++];
+            const glm::vec3 d = lifted - flat;
+            const float length = glm::length(d);
+            if (length > tnear && scene.occluded(flat, d / length, tnear, length)) lifted = flat;
+          }
+        }
+      },
+      256);
+}
+
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress, const GroundContact* ground) {
   const EmbreeScene scene(mesh);
+  keepLiftsClear(mesh, scene, points);
   // One progress for both passes: the first to 85 %, the refinement's (at most as many points,
   // usually a few per cent) after it.
   constexpr double kFirstShare = 0.85;
@@ -291,6 +320,7 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
     points.buried = transfer.buried;
     return transfer;
   }
+  keepLiftsClear(mesh, scene, points, first);
   SurfacePoints extra;
   extra.size = points.size;
   extra.centre = points.centre;
@@ -443,21 +473,23 @@ uint32_t SurfacePoints::gridPoint(const Mesh& mesh, uint32_t t, int i, int j) co
 void SurfacePoints::locate(const Mesh& mesh, uint32_t t, float u, float v, uint32_t idx[3],
                            float w[3]) const {
   locateGrid(mesh, t, u, v, idx, w);
-  if (buried.size() != positions.size()) return;
+  if (buried.empty()) return;
+  COMPOSE_CHECK(buried.size() == positions.size());
   const int open = int(!buried[idx[0]]) + int(!buried[idx[1]]) + int(!buried[idx[2]]);
   if (open == 0 || open == 3) return;
   // Inside another part: left out, the others' weights scaled up (shared equally where the hit
-  // is at the buried point itself).
-  int best = -1;
+  // is at the buried point itself). Its place goes to the first open point, so that every hit in
+  // the cell names the same three (the renderer shades samples that share them together).
+  int keep = -1;
   float sum = 0.0f;
   for (int q = 0; q < 3; ++q) {
     if (buried[idx[q]]) continue;
     sum += w[q];
-    if (best < 0 || w[q] > w[best]) best = q;
+    if (keep < 0) keep = q;
   }
   for (int q = 0; q < 3; ++q) {
     if (buried[idx[q]]) {
-      idx[q] = idx[best];
+      idx[q] = idx[keep];
       w[q] = 0.0f;
     } else {
       w[q] = sum > 0.0f ? w[q] / sum : 1.0f / float(open);
@@ -714,6 +746,17 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     const int j = 4 * (block % blocksPerRow) + within % 4;
     if (i < s && j < s) firstPassOrder.push_back(i * s + j);
   }
+  // Where each cell's ray stands in the first pass' batch (when no cell is skipped), and the
+  // 16 cells whose rays tell a point inside another part (4 rows by 4 columns, staggered).
+  std::vector<uint32_t> batchIndexOf(cells);
+  for (size_t b = 0; b < firstPassOrder.size(); ++b)
+    batchIndexOf[size_t(firstPassOrder[b])] = uint32_t(b);
+  std::array<uint32_t, 16> probes{};
+  for (int b = 0; b < 16 && s >= 4; ++b) {
+    const int i = int((double(b / 4) + 0.5) * s / 4.0);
+    const int j = ((b % 4) * s + (b / 4) * s / 8) / 4 % s;
+    probes[size_t(b)] = batchIndexOf[size_t(i * s + j)];
+  }
   const uint64_t fullRow = s == 64 ? ~uint64_t(0) : (uint64_t(1) << s) - 1u;
   // The object's bounding sphere, in its own coordinates.
   const glm::dvec3 centre = 0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax()));
@@ -882,7 +925,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           EmbreeScene::Hit hits[16];
           for (size_t b = 0; b < 16; ++b) {
             origins[b] = origin;
-            directions[b] = sc.batch[b * cells / 16];
+            directions[b] = sc.batch[probes[b]];
           }
           scene.intersect16(origins, directions, 0xFFFFu, hits, tnear);
           traced += 16;

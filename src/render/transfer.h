@@ -55,6 +55,8 @@
 
 namespace compose::render {
 
+class EmbreeScene;
+
 struct TransferParams {
   int grid = 16;  // s: s x s cells on the hemisphere around the normal
   int order = 8;  // k: k x k Chebyshev moments kept per vertex (k <= s)
@@ -111,6 +113,12 @@ struct SurfacePoints {
 
 SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction = 1.0f / 96.0f,
                             size_t budget = 80000);
+// Grid points from `from` on go back onto their flat triangle where something of the object lies
+// between it and their lifted position (Mesh::smoothPoint): another part closer to the surface
+// than the lift, which rays from the lifted point would pass. computeRefinedTransfer() calls it
+// for the points it is given and those it adds; restoreLevels() leaves it to its caller.
+void keepLiftsClear(const Mesh& mesh, const EmbreeScene& scene, SurfacePoints& points,
+                    size_t from = 0);
 
 // Where the visibility changes fast across a triangle (the rim of an eye socket, where a handle
 // enters a body), interpolating linearly between its points blurs and facets the shadow. So
@@ -144,14 +152,15 @@ struct VertexTransfer {
   std::vector<float> sh;  // (shBands + 1)² per vertex: Sloan's transfer vector
   std::vector<float> ao;  // per vertex: (1/π) ∫ V cos θ dω, in [0, 1]
   // Per vertex: 1 where the point is inside another part of the object (SurfacePoints::buried):
-  // every ray of the first pass was blocked, and at least 12 of 16 of them met the surface that
-  // blocked it from behind (its shading normal facing along the ray).
+  // every ray of the first pass was blocked, and at least 12 of 16 of them (4 rows by 4 staggered
+  // columns of cells) met the surface that blocked it from behind (its shading normal facing
+  // along the ray).
   std::vector<uint8_t> buried;
   // The same without the ground (GroundContact), to refine by; empty without one. Not cached.
   std::vector<float> aoSelf;
   int64_t rays = 0;
 
-  size_t floatsStored() const { return cheb.size() + sh.size() + ao.size(); }
+  size_t floatsStored() const { return cheb.size() + sh.size() + ao.size() + buried.size(); }
   // Appends the transfer of more points (computed with the same parameters).
   void append(const VertexTransfer& more);
   // Plain floats for the on-disk cache, and back (taking `in`'s storage); false if `in` does not
@@ -219,13 +228,12 @@ struct GroundContactParams {
   void validate() const;  // compose::UsageError (stage "shadows")
   std::string key() const;
 };
-class EmbreeScene;
 GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
                             const GroundContactParams& params = {});
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
 // format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVIS9";
+inline constexpr char kTransferCacheMagic[] = "COMPVISA";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own

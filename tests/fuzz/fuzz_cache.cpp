@@ -47,7 +47,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                                    ".visibility");
   const std::string key = "0123456789abcdef0123456789abcdef";
   auto basis = smallBasis();
-  // Visibility of 3 points at order 2 without SH: 3 x (4 + 0 + 1) values.
+  // Visibility of 3 points at order 2, SH band 0: 3 x (4 + 1 + 2) values (moments, SH, ambient
+  // occlusion and the buried flag).
   render::TransferParams transfer;
   transfer.grid = 2;
   transfer.order = 2;
@@ -77,7 +78,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     for (size_t i = 0; i < count && !in.empty(); ++i) values[i] = in.f32();
     FloatCache(folder / "lighting", "COMPLIT5", ".lighting")
         .store(key, basis->parameterKey(), values);
-    values.resize(shape % 2 ? 15 : values.size());  // the visibility state of 3 points: 15 values
+    values.resize(shape % 2 ? 21 : values.size());  // the visibility state of 3 points: 21 values
     visibilityFiles.store(key, description, values);
     // A well-formed stage entry whose image header says what the input says.
     pipeline::StageCache entry(folder / "stages", "render", key);

@@ -955,21 +955,104 @@ TEST(SmoothPoint, ACoarseConvexMeshDoesNotShadowItsOwnTerminator) {
   EXPECT_EQ(smoothShadowed, 0);
   EXPECT_LT(smoothOff, flatOff) << "nearer the sphere on average";
 
-  // A vertex stays where it is; so does a point of a flat surface, and of a hollow one.
+  // The triangles' grid points are lifted (surfacePoints), nearer the sphere than their flat
+  // positions.
+  const SurfacePoints grid = surfacePoints(sphere, 0.1f);
+  double gridFlat = 0.0, gridLifted = 0.0;
+  size_t gridCount = 0;
+  for (uint32_t t = 0; t < sphere.triangleCount(); ++t) {
+    const int L = grid.level[t];
+    const uint32_t* c = &sphere.indices[3 * t];
+    for (int j = 0; j <= L; ++j)
+      for (int i = 0; i + j <= L; ++i) {
+        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+        const float u = float(i) / float(L), v = float(j) / float(L);
+        const glm::vec3 flat = (1.0f - u - v) * sphere.positions[c[0]] +
+                               u * sphere.positions[c[1]] + v * sphere.positions[c[2]];
+        const glm::vec3 lifted = grid.positions[grid.gridPoint(sphere, t, i, j)];
+        gridFlat += std::abs(1.0 - double(glm::length(flat)));
+        gridLifted += std::abs(1.0 - double(glm::length(lifted)));
+        ++gridCount;
+      }
+  }
+  ASSERT_GT(gridCount, 100u);
+  EXPECT_LT(gridLifted, 0.9 * gridFlat) << "grid points lifted towards the sphere";
+
+  // A vertex stays where it is; so does a point of a flat surface, of a hollow one, and of the
+  // sphere seen from inside (its back side, hollow).
   EXPECT_EQ(sphere.smoothPoint(0, 0.0f, 0.0f, sphere.positions[sphere.indices[0]]),
             sphere.positions[sphere.indices[0]]);
+  {
+    const uint32_t* c = &sphere.indices[3 * 40];
+    const glm::vec3 p =
+        (sphere.positions[c[0]] + sphere.positions[c[1]] + sphere.positions[c[2]]) / 3.0f;
+    EXPECT_EQ(sphere.smoothPoint(40, 1.0f / 3.0f, 1.0f / 3.0f, p, true), p);
+    EXPECT_GT(glm::length(sphere.smoothPoint(40, 1.0f / 3.0f, 1.0f / 3.0f, p)), glm::length(p));
+  }
   Mesh bowl;
   bowl.positions = {{-1, 0.5f, 0}, {1, 0.5f, 0}, {0, 0, 0}};
   bowl.normals = {
       glm::normalize(glm::vec3(1, 1, 0)), glm::normalize(glm::vec3(-1, 1, 0)), {0, 1, 0}};
   bowl.indices = {0, 2, 1};
-  const glm::vec3 inside(0.0f, 1.0f / 6.0f, 0.0f);
+  const glm::vec3 inside(0.0f, 1.0f / 3.0f, 0.0f);  // barycentrics (1/3, 1/3)
   EXPECT_EQ(bowl.smoothPoint(0, 1.0f / 3.0f, 1.0f / 3.0f, inside), inside);
   Mesh flat = bowl;
   flat.positions = {{-1, 0, 0}, {1, 0, 0}, {0, 0, 1}};
   flat.normals.assign(3, glm::vec3(0, 1, 0));
   const glm::vec3 centre(0.0f, 0.0f, 1.0f / 3.0f);
   EXPECT_EQ(flat.smoothPoint(0, 1.0f / 3.0f, 1.0f / 3.0f, centre), centre);
+}
+
+// A box shaded smooth (each corner's normal the average of its three faces'), with a thin plate
+// floating just above part of its top: the top's grid points are lifted towards a rounded box,
+// past the plate where it is closer than the lift; those go back onto the flat top.
+TEST(SmoothPoint, LiftsThatWouldPassAnotherPartAreUndone) {
+  Mesh mesh;
+  const glm::vec3 c[8] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                          {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+  for (const glm::vec3& p : c) {
+    mesh.positions.push_back(p);
+    mesh.normals.push_back(glm::normalize(p));
+  }
+  const uint32_t faces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
+                                {3, 7, 6, 2}, {0, 4, 7, 3}, {1, 2, 6, 5}};
+  for (const auto& f : faces)
+    mesh.indices.insert(mesh.indices.end(), {f[0], f[1], f[2], f[0], f[2], f[3]});
+  addBox(mesh, {-1.5f, 1.02f, -1.5f}, {0.0f, 1.03f, 1.5f});  // over the top's x < 0 half
+  mesh.normalsFromFile = true;
+  SurfacePoints points = surfacePoints(mesh, 0.1f);
+  const EmbreeScene scene(mesh);
+  keepLiftsClear(mesh, scene, points);
+  int under = 0, undone = 0, open = 0, lifted = 0;
+  for (uint32_t t = 0; t < 12; ++t) {  // the box's own triangles
+    const int L = points.level[t];
+    const uint32_t* v = &mesh.indices[3 * t];
+    for (int j = 0; j <= L; ++j)
+      for (int i = 0; i + j <= L; ++i) {
+        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+        const float b1 = float(i) / float(L), b2 = float(j) / float(L);
+        const glm::vec3 flat = (1.0f - b1 - b2) * mesh.positions[v[0]] + b1 * mesh.positions[v[1]] +
+                               b2 * mesh.positions[v[2]];
+        if (flat.y < 0.999f || std::abs(flat.x) > 0.8f || std::abs(flat.z) > 0.8f) continue;
+        if (std::abs(flat.x) < 0.1f) continue;  // near the plate's edge
+        const glm::vec3 q = points.positions[points.gridPoint(mesh, t, i, j)];
+        if (flat.x < 0.0f) {
+          ++under;
+          undone += int(q == flat);
+        } else {
+          ++open;
+          lifted += int(q.y > 1.03f);
+        }
+      }
+  }
+  std::printf(
+      "top's grid points: %d of %d under the plate back on the top, %d of %d in the open "
+      "lifted past the plate's height\n",
+      undone, under, lifted, open);
+  ASSERT_GT(under, 10);
+  ASSERT_GT(open, 10);
+  EXPECT_EQ(undone, under);
+  EXPECT_GT(lifted, open / 2) << "the case this test is about: lifts longer than the gap";
 }
 
 // A cube pushed halfway into a floor (two parts cutting into each other, as an eye into its
@@ -1003,6 +1086,14 @@ TEST(SurfacePoints, PointsInsideAnotherPartAreLeftOutOfTheInterpolation) {
     if (points.buried[p]) buried.push_back(p);
   EXPECT_EQ(buried, std::vector<size_t>{4}) << "only the floor's vertex inside the cube";
   EXPECT_EQ(t.ao[4], 0.0f);
+  // Through the cache's floats and back.
+  const std::vector<float> state = t.exportState();
+  VertexTransfer back;
+  ASSERT_TRUE(back.importState(params, t.vertexCount, FloatBuffer(state.begin(), state.end())));
+  EXPECT_EQ(back.buried, t.buried);
+  std::vector<float> bad = state;
+  bad.back() = 0.5f;
+  EXPECT_FALSE(back.importState(params, t.vertexCount, FloatBuffer(bad.begin(), bad.end())));
 
   // Hits on the floor beside the cube, on the triangles around vertex 4, against the ambient
   // occlusion computed at the hit itself.
