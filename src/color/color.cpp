@@ -185,6 +185,9 @@ double maxDifference(const glm::dmat3& a, const glm::dmat3& b) {
 
 constexpr Chromaticities kP3D65 = {0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290};
 constexpr Chromaticities kRec2020 = {0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290};
+// CIE XYZ as RGB: its primaries are the XYZ axes, and (1, 1, 1) is the equal-energy white E, so
+// that the matrix OpenEXR makes of them is the identity.
+constexpr Chromaticities kXyzChromaticities = {1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0 / 3.0, 1.0 / 3.0};
 
 // Linear spaces by the names configs give them (the built-in config, OCIO v1's nuke-default and
 // ACES 1.x, Blender's, OCIO v2's studio configs), for configs with no interchange role.
@@ -666,6 +669,15 @@ std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& spa
        {kRec709Chromaticities, kAcesAp1Chromaticities, kAcesAp0Chromaticities, kP3D65, kRec2020}) {
     const glm::dmat3 adapted = bradford(known[6], known[7], whiteX, whiteY) * xyzFromRgb(known);
     if (maxDifference(adapted, xyz) < 1e-3) return known;
+  }
+  // CIE XYZ itself, taken as having the white of D65 (Blender's 'XYZ', cie_xyz_d65), E, D60 (ACES)
+  // or D50 (ICC) when the config adapts it to the interchange's white: written as XYZ, not as its
+  // adapted primaries.
+  for (const auto& [x, y] : {std::pair{0.3127, 0.3290},
+                             {1.0 / 3.0, 1.0 / 3.0},
+                             {kAcesAp0Chromaticities[6], kAcesAp0Chromaticities[7]},
+                             {0.3457, 0.3585}}) {
+    if (maxDifference(bradford(x, y, whiteX, whiteY), xyz) < 1e-3) return kXyzChromaticities;
   }
   return chromaticitiesOf(xyz);
 }

@@ -336,6 +336,20 @@ TEST(ColorConfig, HonoursOcioEnvironmentVariable) {
   const ColorConfig builtin = ColorConfig::builtin();
   EXPECT_TRUE(builtin.isLinearOrData(
       builtin.inputSpace("photo.tif", "Linear Rec.709 (sRGB)", false, true).space));
+  // Its 'XYZ' (CIE XYZ of D65 white, adapted to the ACES white through its interchange role) has
+  // the chromaticities of XYZ itself: the identity matrix, so that a reader of an EXR written in
+  // it (--exr-space XYZ) takes the values for XYZ. Rec.709's white there is D65's XYZ.
+  const std::optional<Chromaticities> xyz = c.chromaticities("XYZ");
+  ASSERT_TRUE(xyz.has_value());
+  const double want[8] = {1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0 / 3.0, 1.0 / 3.0};
+  for (int i = 0; i < 8; ++i) EXPECT_NEAR((*xyz)[size_t(i)], want[i], 1e-6) << i;
+  Image white(1, 1, 3);
+  white.pixels = {1.0f, 1.0f, 1.0f};
+  white.colorSpace = linear.space;
+  c.convert(white, "XYZ");
+  EXPECT_NEAR(white.pixels[0], 0.9505f, 2e-3);
+  EXPECT_NEAR(white.pixels[1], 1.0f, 2e-3);
+  EXPECT_NEAR(white.pixels[2], 1.089f, 2e-3);
 }
 
 }  // namespace
