@@ -15,6 +15,7 @@
 #include <tbb/global_control.h>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/context.h"
 #include "pipeline/stage.h"
@@ -284,6 +285,10 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     const auto start = std::chrono::steady_clock::now();
     try {
       r.reason = stage.run(ctx);
+    } catch (const MemoryShortfall& e) {
+      // Found before allocating: what needed how much.
+      throw Error(stage.name(),
+                  std::string("out of memory: ") + e.what() + "; " + stage.memoryAdvice());
     } catch (const std::bad_alloc&) {
       // Named like any other failure, with the stage that ran out.
       throw Error(stage.name(),

@@ -1,6 +1,11 @@
 #include "core/limits.h"
 
 #include <cstdio>
+#include <fstream>
+#include <limits>
+
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include "core/error.h"
 
@@ -108,6 +113,51 @@ void requireInputFile(const std::filesystem::path& file, const std::string& stag
   if (!fs::exists(file, ec)) throw Error(stage, what + " not found", file);
   if (fs::is_directory(file, ec)) throw Error(stage, what + " is a folder, not a file", file);
   requireRegularFile(file, stage);
+}
+
+size_t allocatableBytes() {
+  size_t out = std::numeric_limits<size_t>::max();
+  std::ifstream meminfo("/proc/meminfo");
+  std::string key;
+  size_t kb = 0;
+  std::string unit;
+  while (meminfo >> key >> kb >> unit) {
+    if (key == "MemAvailable:") {
+      out = kb * 1024;
+      break;
+    }
+  }
+  rlimit limit{};
+  if (getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    size_t pages = 0;
+    std::ifstream statm("/proc/self/statm");
+    statm >> pages;  // the address space in use, in pages
+    const size_t used = pages * size_t(sysconf(_SC_PAGESIZE));
+    const size_t cap = size_t(limit.rlim_cur);
+    out = std::min(out, cap > used ? cap - used : 0);
+  }
+  return out;
+}
+
+namespace {
+
+std::string gigabytes(size_t bytes) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f GB", double(bytes) / 1e9);
+  return text;
+}
+
+}  // namespace
+
+MemoryShortfall::MemoryShortfall(std::string what, size_t needed, size_t available)
+    : message_("needs " + gigabytes(needed) + " for " + what + ", more than the " +
+               gigabytes(available) + " the machine and its limits (ulimit -v) leave"),
+      needed_(needed) {}
+
+void requireMemory(size_t bytes, const std::string& what) {
+  if (bytes < (size_t(64) << 20)) return;
+  const size_t available = allocatableBytes();
+  if (bytes > available) throw MemoryShortfall(what, bytes, available);
 }
 
 }  // namespace compose

@@ -9,8 +9,10 @@
 // them; libraries never change them.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <new>
 #include <string>
 
 namespace compose {
@@ -58,5 +60,28 @@ void requireInputFile(const std::filesystem::path& file, const std::string& stag
 // device", "a FIFO (named pipe)", ...), else nullptr. An output is written to a temporary file and
 // renamed over its destination: over /dev/null that would put a file in the device's place.
 const char* specialFileKind(const std::filesystem::path& file);
+
+// Memory this process may still take: the machine's available memory (MemAvailable in
+// /proc/meminfo) and, under an address-space limit (ulimit -v), what that limit leaves beside the
+// address space already in use; the smaller of the two, SIZE_MAX where neither is known.
+size_t allocatableBytes();
+
+// A table whose size the user's parameters choose would not fit: thrown before it is allocated,
+// as the std::bad_alloc it would otherwise become (or, with the kernel's overcommit, a process
+// killed while filling it, with no message). what() says what needed how much, and how much
+// there was.
+class MemoryShortfall : public std::bad_alloc {
+ public:
+  MemoryShortfall(std::string what, size_t needed, size_t available);
+  const char* what() const noexcept override { return message_.c_str(); }
+  size_t needed() const { return needed_; }
+
+ private:
+  std::string message_;
+  size_t needed_ = 0;
+};
+// Throws MemoryShortfall when `bytes` (for `what`, e.g. "the lighting's table of 1025 x 2048
+// normals") exceed allocatableBytes(). Sizes below 64 MB are not checked.
+void requireMemory(size_t bytes, const std::string& what);
 
 }  // namespace compose

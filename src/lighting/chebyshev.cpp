@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/fast_math.h"
+#include "core/limits.h"
 #include "core/numbers.h"
 #include "core/parallel.h"
 #include "lighting/cubemap.h"
@@ -156,6 +157,16 @@ std::string ChebBase::describe() const {
          " normals=" + std::to_string(params_.normalRows) + "x" +
          std::to_string(params_.normalCols) + " (" + std::to_string(coefficientsPerChannel()) +
          " coefficients/channel, " + std::to_string(floatsStored()) + " floats)";
+}
+
+void ChebBase::reserveTable() {
+  const size_t floats = grid_.size() * stride_;
+  requireMemory(floats * sizeof(float),
+                "the " + name_ + " lighting's table (order=" + std::to_string(params_.order) +
+                    ", " + std::to_string(params_.normalRows) + " x " +
+                    std::to_string(params_.normalCols) + " normals: " + std::to_string(floats) +
+                    " floats)");
+  table_.assign(floats, 0.0f);
 }
 
 size_t ChebBase::floatsStored() const {
@@ -315,7 +326,7 @@ void ChebLatLongLighting::project(const Environment& env, const Progress& progre
     }
   }
   stride_ = size_t(k) * size_t(k);
-  table_.assign(grid_.size() * stride_, 0.0f);
+  reserveTable();
   std::atomic<size_t> done{0};
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
@@ -433,7 +444,7 @@ void ChebFaceLighting::project(const Environment& env, const Progress& progress)
     }
   }
   stride_ = kCubeFaces * kk;
-  table_.assign(grid_.size() * stride_, 0.0f);
+  reserveTable();
   std::atomic<size_t> done{0};
   parallelFor(0, int64_t(grid_.size()), [&](int64_t node) {
     const glm::vec3 n = grid_.normal(size_t(node));
@@ -534,7 +545,7 @@ void ChebLocalLighting::project(const Environment& env, const Progress& progress
   }
   const RadianceCells cells(env);
   stride_ = 3 * kk;
-  table_.assign(grid_.size() * stride_, 0.0f);
+  reserveTable();
   // Altitude cells by their cosine bounds: cell i holds cos θ in (cos((i+1)π/2s), cos(iπ/2s)].
   std::vector<float> cosBound(static_cast<size_t>(s));
   for (int i = 1; i <= s; ++i) cosBound[size_t(i - 1)] = float(std::cos(i * 0.5 * kPi / s));

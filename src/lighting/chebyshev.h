@@ -96,6 +96,9 @@ class ChebBase : public DiffuseLighting {
  protected:
   // E_k at a grid node for one channel: the inner product over the top-left k x k moments.
   virtual double truncatedProduct(size_t node, int channel, int k) const = 0;
+  // table_ made grid_.size() x stride_ zeros; compose::MemoryShortfall (core/limits.h) first when
+  // that would not fit in the memory left, naming the parameters that size it.
+  void reserveTable();
 
   std::string name_;
   ChebParams params_;

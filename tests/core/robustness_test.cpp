@@ -7,6 +7,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -124,6 +125,26 @@ std::string hugePngHeader() {
   const std::string idat("\x78\x9c\x03\x00\x00\x00\x00\x01", 8);
   return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", idat) +
          chunk("IEND", "");
+}
+
+// A table larger than the memory left is refused before it is allocated, saying how much it
+// needed; small ones are not checked.
+TEST(ResourceLimits, ATableBeyondTheMemoryLeftIsRefusedUpFront) {
+  const size_t available = allocatableBytes();
+  ASSERT_GT(available, size_t(0));
+  EXPECT_NO_THROW(requireMemory(size_t(1) << 20, "a small table"));
+  const size_t huge = std::numeric_limits<size_t>::max() / 2;
+  ASSERT_GT(huge, available);
+  try {
+    requireMemory(huge, "the test's table");
+    ADD_FAILURE() << "not refused";
+  } catch (const MemoryShortfall& e) {
+    EXPECT_EQ(e.needed(), huge);
+    EXPECT_NE(std::string(e.what()).find("for the test's table, more than the"), std::string::npos)
+        << e.what();
+    const std::bad_alloc& asBadAlloc = e;  // what a caller that knows no better catches
+    EXPECT_STREQ(asBadAlloc.what(), e.what());
+  }
 }
 
 TEST(ResourceLimits, AHugeImageHeaderIsRefusedBeforeDecoding) {

@@ -408,8 +408,9 @@ TEST_F(Robustness, AReadOnlyCacheFolderIsANoteAndTheRunGoesOn) {
 }
 
 // Lighting parameters whose tables do not fit in memory (cheb-local at order 32 on a 1025 x 2048
-// grid of normals: 26 GB) under a 4 GB address-space limit: the stage that ran out, and the
-// parameters that size it, are named; exit 1 and nothing written.
+// grid of normals: 26 GB) under a 4 GB address-space limit: refused before the table is allocated
+// (with the kernel's overcommit, filling it could get the process killed without a word), the
+// stage and the parameters that size it named; exit 1 and nothing written.
 TEST_F(Robustness, LightingParametersBeyondMemoryNameWhatSizesThem) {
 #if defined(__SANITIZE_ADDRESS__)
   GTEST_SKIP() << "AddressSanitizer reserves more address space than the limit";
@@ -425,6 +426,10 @@ TEST_F(Robustness, LightingParametersBeyondMemoryNameWhatSizesThem) {
   EXPECT_EQ(r.status, 1) << r.err;
   EXPECT_NE(r.err.find("compose: error: precompute: out of memory"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--lighting-params order, rows, cols"), std::string::npos) << r.err;
+  // Found before the table is allocated: what needs how much.
+  EXPECT_NE(r.err.find("needs 25.8 GB for the cheb-local lighting's table (order=32, 1025 x 2048"),
+            std::string::npos)
+      << r.err;
   EXPECT_FALSE(fs::exists(dir / "big.exr"));
 }
 
