@@ -71,8 +71,24 @@ double longitudeOf(const glm::dvec3& n) {
   return std::sqrt(n.x * n.x + n.z * n.z) > 1e-6 ? std::atan2(n.x, n.z) : 0.0;
 }
 
-// Gives triangle t a grid of L segments per edge (transfer.h): its own points (all but its
-// corners) appended, in rows of increasing j and, within a row, of increasing i.
+// Calls visit(b0, b1, b2, flat) for each own point of triangle t's grid of L segments per edge
+// (all but its corners), in rows of increasing j and, within a row, of increasing i: the order
+// in which appendGrid() stores them. flat is the point on the triangle itself.
+template <class Visit>
+void forEachGridPoint(const Mesh& mesh, size_t t, int L, Visit&& visit) {
+  const uint32_t* v = &mesh.indices[3 * t];
+  const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
+  for (int j = 0; j <= L; ++j) {
+    for (int i = 0; i <= L - j; ++i) {
+      if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+      const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
+      visit(b0, b1, b2, b0 * p[0] + b1 * p[1] + b2 * p[2]);
+    }
+  }
+}
+
+// Gives triangle t a grid of L segments per edge (transfer.h): its own points appended in
+// forEachGridPoint's order.
 void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
   out.level[t] = uint8_t(L);
   out.first[t] = 0;
@@ -81,20 +97,15 @@ void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
   const uint32_t* v = &mesh.indices[3 * t];
   const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
   const glm::vec3 n[3] = {out.normals[v[0]], out.normals[v[1]], out.normals[v[2]]};
-  for (int j = 0; j <= L; ++j) {
-    for (int i = 0; i <= L - j; ++i) {
-      if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
-      const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
-      // On the smooth surface of the vertex normals: a flat triangle's own point could be
-      // shadowed by its neighbours where the shading says it faces the light.
-      out.positions.push_back(
-          mesh.smoothPoint(uint32_t(t), b1, b2, b0 * p[0] + b1 * p[1] + b2 * p[2]));
-      const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
-      const float len = glm::length(nn);
-      out.normals.push_back(len > 1e-12f ? nn / len
-                                         : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
-    }
-  }
+  forEachGridPoint(mesh, t, L, [&](float b0, float b1, float b2, const glm::vec3& flat) {
+    // On the smooth surface of the vertex normals: a flat triangle's own point could be
+    // shadowed by its neighbours where the shading says it faces the light.
+    out.positions.push_back(mesh.smoothPoint(uint32_t(t), b1, b2, flat));
+    const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
+    const float len = glm::length(nn);
+    out.normals.push_back(len > 1e-12f ? nn / len
+                                       : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
+  });
 }
 
 }  // namespace
@@ -279,20 +290,13 @@ void keepLiftsClear(const Mesh& mesh, const EmbreeScene& scene, SurfacePoints& p
         const size_t t = size_t(ti);
         const int L = points.level[t];
         if (L == 1 || points.first[t] < from) return;
-        const uint32_t* v = &mesh.indices[3 * t];
-        const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
-        uint32_t index = points.first[t];  // in appendGrid's order
-        for (int j = 0; j <= L; ++j) {
-          for (int i = 0; i <= L - j; ++i) {
-            if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
-            const float b1 = float(i) / float(L), b2 = float(j) / float(L), b0 = 1.0f - b1 - b2;
-            const glm::vec3 flat = b0 * p[0] + b1 * p[1] + b2 * p[2];
-            glm::vec3& lifted = points.positions[index++];
-            const glm::vec3 d = lifted - flat;
-            const float length = glm::length(d);
-            if (length > tnear && scene.occluded(flat, d / length, tnear, length)) lifted = flat;
-          }
-        }
+        uint32_t index = points.first[t];
+        forEachGridPoint(mesh, t, L, [&](float, float, float, const glm::vec3& flat) {
+          glm::vec3& lifted = points.positions[index++];
+          const glm::vec3 d = lifted - flat;
+          const float length = glm::length(d);
+          if (length > tnear && scene.occluded(flat, d / length, tnear, length)) lifted = flat;
+        });
       },
       256);
 }

@@ -912,6 +912,25 @@ TEST(SurfacePoints, RestoredLevelsGiveTheRefinedPointsInTheirOrder) {
   EXPECT_EQ(restored.first, points.first);
 }
 
+// Calls visit(flat, point) for each own grid point of the first `triangles` triangles: its
+// position on the flat triangle, and where `points` has it.
+template <class Visit>
+void forEachGridPoint(const Mesh& mesh, const SurfacePoints& points, size_t triangles,
+                      Visit&& visit) {
+  for (uint32_t t = 0; t < triangles; ++t) {
+    const int L = points.level[t];
+    const uint32_t* c = &mesh.indices[3 * t];
+    for (int j = 0; j <= L; ++j)
+      for (int i = 0; i + j <= L; ++i) {
+        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
+        const float u = float(i) / float(L), v = float(j) / float(L);
+        visit((1.0f - u - v) * mesh.positions[c[0]] + u * mesh.positions[c[1]] +
+                  v * mesh.positions[c[2]],
+              points.positions[points.gridPoint(mesh, t, i, j)]);
+      }
+  }
+}
+
 // A coarse sphere lit at a grazing angle: from the flat triangles' own points, rays towards the
 // light that the smooth shading says is above the horizon meet the neighbouring facets (hard
 // triangular shadows along the terminator). From the points lifted onto the vertex normals'
@@ -960,21 +979,12 @@ TEST(SmoothPoint, ACoarseConvexMeshDoesNotShadowItsOwnTerminator) {
   const SurfacePoints grid = surfacePoints(sphere, 0.1f);
   double gridFlat = 0.0, gridLifted = 0.0;
   size_t gridCount = 0;
-  for (uint32_t t = 0; t < sphere.triangleCount(); ++t) {
-    const int L = grid.level[t];
-    const uint32_t* c = &sphere.indices[3 * t];
-    for (int j = 0; j <= L; ++j)
-      for (int i = 0; i + j <= L; ++i) {
-        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
-        const float u = float(i) / float(L), v = float(j) / float(L);
-        const glm::vec3 flat = (1.0f - u - v) * sphere.positions[c[0]] +
-                               u * sphere.positions[c[1]] + v * sphere.positions[c[2]];
-        const glm::vec3 lifted = grid.positions[grid.gridPoint(sphere, t, i, j)];
-        gridFlat += std::abs(1.0 - double(glm::length(flat)));
-        gridLifted += std::abs(1.0 - double(glm::length(lifted)));
-        ++gridCount;
-      }
-  }
+  forEachGridPoint(sphere, grid, sphere.triangleCount(),
+                   [&](const glm::vec3& flat, const glm::vec3& lifted) {
+                     gridFlat += std::abs(1.0 - double(glm::length(flat)));
+                     gridLifted += std::abs(1.0 - double(glm::length(lifted)));
+                     ++gridCount;
+                   });
   ASSERT_GT(gridCount, 100u);
   EXPECT_LT(gridLifted, 0.9 * gridFlat) << "grid points lifted towards the sphere";
 
@@ -1024,27 +1034,19 @@ TEST(SmoothPoint, LiftsThatWouldPassAnotherPartAreUndone) {
   const EmbreeScene scene(mesh);
   keepLiftsClear(mesh, scene, points);
   int under = 0, undone = 0, open = 0, lifted = 0;
-  for (uint32_t t = 0; t < 12; ++t) {  // the box's own triangles
-    const int L = points.level[t];
-    const uint32_t* v = &mesh.indices[3 * t];
-    for (int j = 0; j <= L; ++j)
-      for (int i = 0; i + j <= L; ++i) {
-        if ((i == 0 && j == 0) || (i == L && j == 0) || (i == 0 && j == L)) continue;
-        const float b1 = float(i) / float(L), b2 = float(j) / float(L);
-        const glm::vec3 flat = (1.0f - b1 - b2) * mesh.positions[v[0]] + b1 * mesh.positions[v[1]] +
-                               b2 * mesh.positions[v[2]];
-        if (flat.y < 0.999f || std::abs(flat.x) > 0.8f || std::abs(flat.z) > 0.8f) continue;
-        if (std::abs(flat.x) < 0.1f) continue;  // near the plate's edge
-        const glm::vec3 q = points.positions[points.gridPoint(mesh, t, i, j)];
-        if (flat.x < 0.0f) {
-          ++under;
-          undone += int(q == flat);
-        } else {
-          ++open;
-          lifted += int(q.y > 1.03f);
-        }
-      }
-  }
+  forEachGridPoint(mesh, points, 12,  // the box's own triangles
+                   [&](const glm::vec3& flat, const glm::vec3& q) {
+                     if (flat.y < 0.999f || std::abs(flat.x) > 0.8f || std::abs(flat.z) > 0.8f)
+                       return;
+                     if (std::abs(flat.x) < 0.1f) return;  // near the plate's edge
+                     if (flat.x < 0.0f) {
+                       ++under;
+                       undone += int(q == flat);
+                     } else {
+                       ++open;
+                       lifted += int(q.y > 1.03f);
+                     }
+                   });
   std::printf(
       "top's grid points: %d of %d under the plate back on the top, %d of %d in the open "
       "lifted past the plate's height\n",
