@@ -97,6 +97,7 @@ struct Artefacts {
   std::optional<hdr::CaptureMergeResult> mergedViews;
   std::optional<Image> stitched;
   std::optional<Image> plateLinear;
+  std::optional<Image> holdout;  // read with the plate, used by the composite
   std::optional<Image> environment;
   std::unique_ptr<lighting::DiffuseLighting> lighting;
   int lightingOrder = 0;  // the order order=auto chose (0: the basis' own)

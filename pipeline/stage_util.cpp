@@ -10,6 +10,8 @@
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/output_files.h"
+#include "core/parallel.h"
+#include "ingest/image_io.h"
 #include "pipeline/stage.h"
 
 namespace compose::pipeline {
@@ -48,6 +50,27 @@ std::string contentKey(const std::filesystem::path& file, const std::string& sta
   Hash128 hash;
   hashBytes(hash, file, stage, false);
   return hash.hex();
+}
+
+Image loadHoldout(const std::filesystem::path& file, int width, int height) {
+  ingest::LoadedImage m = ingest::readImage(file, "composite");
+  if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
+  if (m.image.width != width || m.image.height != height) {
+    throw Error("composite",
+                "the holdout mask is " + std::to_string(m.image.width) + "x" +
+                    std::to_string(m.image.height) + ", the plate " + std::to_string(width) + "x" +
+                    std::to_string(height) + ": it must be the plate's size",
+                file);
+  }
+  if (m.image.channels == 1) return std::move(m.image);
+  // Only the first channel is used: the others are not kept through the render.
+  const Image& in = m.image;
+  Image mask =
+      Image::unfilled(width, height, 1, {in.channelNames.empty() ? "Y" : in.channelNames[0]});
+  parallelFor(0, height, [&](int64_t y) {
+    for (int x = 0; x < width; ++x) mask.at(x, int(y))[0] = in.at(x, int(y))[0];
+  });
+  return mask;
 }
 
 Image toRgb(const Image& in) {

@@ -30,6 +30,11 @@ inline void hashVector(Hash128& hash, const glm::dvec3& v) {
 // channels (alpha, other layers) are dropped.
 Image toRgb(const Image& in);
 
+// A holdout mask: the first channel of any image, as stored (no colour management: it is data).
+// Throws compose::Error (stage "composite") naming the file when it cannot be read, holds a value
+// that is not finite, or is not width x height.
+Image loadHoldout(const std::filesystem::path& file, int width, int height);
+
 inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }

@@ -179,19 +179,9 @@ class IngestStage final : public Stage {
       for (const std::string& n : p.notes) ctx.note("the plate " + n);
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
       if (!ctx.job.holdout.empty()) {
-        // The holdout is read at the end, by the composite: its header is checked now, so that
-        // a missing mask or one of the wrong size stops the job before the long work.
-        const ingest::CaptureInfo mask = ingest::readCaptureInfo(ctx.job.holdout, "composite");
-        const bool turned = mask.orientation >= 5;  // EXIF orientations 5-8 swap the sides
-        const int w = turned ? mask.fileHeight : mask.fileWidth,
-                  h = turned ? mask.fileWidth : mask.fileHeight;
-        if (w != p.image.width || h != p.image.height) {
-          throw Error("composite",
-                      format("the holdout mask is %dx%d, the plate %dx%d: it must be the plate's "
-                             "size",
-                             w, h, p.image.width, p.image.height),
-                      ctx.job.holdout);
-        }
+        // The holdout is read with the plate, not by the composite at the end: a missing mask,
+        // one of the wrong size or one holding NaN stops the job before the long work.
+        ctx.artefacts.holdout = loadHoldout(ctx.job.holdout, p.image.width, p.image.height);
       }
     }
     if (ctx.meshSummary) {

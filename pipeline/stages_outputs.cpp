@@ -164,21 +164,6 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   return *e;
 }
 
-// A holdout mask: the first channel of any image the plate's size, as stored (no colour
-// management: it is data).
-Image loadHoldout(const fs::path& file, int width, int height) {
-  ingest::LoadedImage m = ingest::readImage(file, "composite");
-  if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
-  if (m.image.width != width || m.image.height != height) {
-    throw Error("composite",
-                "the holdout mask is " + std::to_string(m.image.width) + "x" +
-                    std::to_string(m.image.height) + ", the plate " + std::to_string(width) + "x" +
-                    std::to_string(height) + ": it must be the plate's size",
-                file);
-  }
-  return std::move(m.image);
-}
-
 // A warning when the display image shows more than 2 % of the object's pixels as clipped white
 // (their shading is lost).
 std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendered,
@@ -599,7 +584,11 @@ class CompositeStage final : public Stage {
     }
     composite::overInPlace(out, object.output.beauty, object.output.x0, object.output.y0);
     if (holdout) {
-      const Image mask = loadHoldout(ctx.job.holdout, out.width, out.height);
+      // Read with the plate, so that a bad mask stopped the job before the render.
+      const Image mask = ctx.artefacts.holdout
+                             ? std::move(*ctx.artefacts.holdout)
+                             : loadHoldout(ctx.job.holdout, out.width, out.height);
+      ctx.artefacts.holdout.reset();
       out = composite::holdout(out, *ctx.artefacts.plateLinear, mask);
       reason += ", the holdout's plate in front";
     }

@@ -561,7 +561,8 @@ TEST_F(ComposeErrors, AHoldoutOfTheWrongSizeStopsTheJobBeforeTheRender) {
   expectNothingWritten();
 }
 
-// A holdout mask is data, but NaN in it put NaN in the composite: it is refused, naming the pixel.
+// A holdout mask is data, but NaN in it put NaN in the composite: it is refused, naming the pixel,
+// when the plate is read (it was found by the composite, after the whole render).
 TEST_F(ComposeErrors, AHoldoutWithNaNIsRefused) {
   const fs::path mask = dir_ / "input-mask.exr";
   {
@@ -582,7 +583,70 @@ TEST_F(ComposeErrors, AHoldoutWithNaNIsRefused) {
   EXPECT_NE(r.err.find("composite: NaN in the holdout mask at pixel (5, 7)"), std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find("input-mask.exr"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("compose: render "), std::string::npos) << "rendered first: " << r.err;
   expectNothingWritten();
+}
+
+// The holdout puts the plate in front of the object where the mask is white: there the composite
+// is the plate, elsewhere the composite without a holdout; of an RGB mask only the first channel
+// counts.
+TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
+  const int w = 64, h = 48;
+  {
+    std::vector<float> plate(size_t(w) * h * 3, 0.4f);
+    writePixels(dir_ / "input-plate.png", w, h, 3, OIIO::TypeDesc::UINT8, plate);
+    std::vector<float> grey(size_t(w) * h), rgb(size_t(w) * h * 3);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t i = size_t(y) * w + x;
+        grey[i] = x < w / 2 ? 1.0f : 0.0f;
+        rgb[3 * i] = grey[i];
+        rgb[3 * i + 1] = 1.0f - grey[i];  // ignored
+        rgb[3 * i + 2] = 0.5f;
+      }
+    }
+    writePixels(dir_ / "input-mask.exr", w, h, 1, OIIO::TypeDesc::FLOAT, grey);
+    writePixels(dir_ / "input-mask.png", w, h, 3, OIIO::TypeDesc::UINT8, rgb);
+  }
+  const auto composite = [&](const std::string& options, const std::string& out) {
+    const auto r = runCompose("--plate " + quote((dir_ / "input-plate.png").string()) +
+                                  " --object " + quote((samples_ / "monkey.obj").string()) +
+                                  " --scale 0.8 --shadows off --no-cache --out " +
+                                  quote((dir_ / out).string()) + options,
+                              dir_.path());
+    EXPECT_EQ(r.status, 0) << r.err;
+    std::vector<float> px(size_t(w) * h * 4);
+    auto in = OIIO::ImageInput::open((dir_ / (out + ".exr")).string());
+    EXPECT_TRUE(in && in->spec().width == w && in->spec().height == h &&
+                in->spec().nchannels == 4 &&
+                in->read_image(0, 0, 0, 4, OIIO::TypeDesc::FLOAT, px.data()))
+        << out;
+    return px;
+  };
+  const std::vector<float> plain = composite("", "plain"),
+                           masked = composite(
+                               " --holdout " + quote((dir_ / "input-mask.exr").string()), "masked"),
+                           rgbMask = composite(
+                               " --holdout " + quote((dir_ / "input-mask.png").string()), "rgb");
+  // The plate as the composite shows it, where neither the object nor its shadow reaches.
+  const float* plate = &plain[0];
+  int objectLeft = 0, plateLeft = 0, sameRight = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const size_t i = (size_t(y) * w + x) * 4;
+      const bool isPlate = std::equal(plate, plate + 4, &masked[i]);
+      if (x < w / 2) {
+        objectLeft += !std::equal(plate, plate + 4, &plain[i]);
+        plateLeft += isPlate;
+      } else {
+        sameRight += std::equal(&plain[i], &plain[i] + 4, &masked[i]);
+      }
+    }
+  }
+  EXPECT_GT(objectLeft, w * h / 20) << "the object should cover part of the left half";
+  EXPECT_EQ(plateLeft, w / 2 * h) << "the plate in front where the mask is white";
+  EXPECT_EQ(sameRight, w / 2 * h) << "the composite without a holdout where the mask is black";
+  EXPECT_EQ(rgbMask, masked) << "only the first channel of an RGB mask counts";
 }
 
 // A plate whose header names a colour space the config does not have was read as the default
