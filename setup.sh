@@ -34,7 +34,7 @@ SANITIZE_DIR=${COMPOSE_SANITIZE_BUILD_DIR:-build-sanitize}
 # suite runs them all. COMPOSE_SANITIZE_EXCLUDE= (empty) runs everything under the sanitizers too.
 # CTest's names of parameterised tests end in a comment ("  # GetParam() = ..."): a name is
 # matched up to a space or its end.
-SANITIZE_EXCLUDE=${COMPOSE_SANITIZE_EXCLUDE-'^(ComposeOutputs|ComposeEndToEnd|ComposeCache|ComposeWithCubeEnvironments|DefaultLightingOnSampleMaps|FloorAndWall|SampleHdris/StitchSample|SampleHdris/MergeAccuracy|SampleHdris/MergeAccuracyRobertson|MergeAccuracyRefit|SampleHdris/StitchFromPhotos)\.|^Sh\.BasisIsOrthonormalOverTheSphere$|^TchebichefBasis\.OrthonormalAtFullOrder$|^AllBases/WhiteFurnaceAtEverySize\..*_8192( |$)|^GroundShadow\.(SharpEdgesAreFollowedCoarseToFine|AShadowBetweenTheFirstNodesIsFound)$|^FromPhotos\.FromBrackets$'}
+SANITIZE_EXCLUDE=${COMPOSE_SANITIZE_EXCLUDE-'^(ComposeOutputs|ComposeEndToEnd|ComposeCache|ComposeWithCubeEnvironments|DefaultLightingOnSampleMaps|FloorAndWall|SampleHdris/StitchSample|SampleHdris/MergeAccuracy|SampleHdris/MergeAccuracyRobertson|MergeAccuracyRefit|MergeAccuracyHandHeld|MergeAccuracyEnds|SampleHdris/StitchFromPhotos)\.|^Sh\.BasisIsOrthonormalOverTheSphere$|^TchebichefBasis\.OrthonormalAtFullOrder$|^AllBases/WhiteFurnaceAtEverySize\..*_8192( |$)|^GroundShadow\.(SharpEdgesAreFollowedCoarseToFine|AShadowBetweenTheFirstNodesIsFound)$|^FromPhotos\.FromBrackets$'}
 
 say() { printf 'setup: %s\n' "$*" >&2; }
 

@@ -529,11 +529,12 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
       std::vector<float> px(16 * 8 * 3, value);
       writePixels(env.string(), 16, 8, 3, OIIO::TypeDesc::FLOAT, px);
     }
+    const bool dim = value < 1e-20f;
+    // The one that renders does so without self-shadowing, which this does not check.
     const auto r =
         runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
-                       " --env " + quote(env.string()),
+                       " --env " + quote(env.string()) + (dim ? "" : " --shadows off"),
                    dir_.path());
-    const bool dim = value < 1e-20f;
     EXPECT_EQ(r.status, dim ? 1 : 0) << value << ": " << r.err;
     EXPECT_EQ(r.err.find("too dim to light anything in single precision") != std::string::npos, dim)
         << r.err;
