@@ -4,11 +4,12 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
-#include <future>
 #include <limits>
 #include <numbers>
 #include <optional>
 #include <tuple>
+
+#include <tbb/parallel_invoke.h>
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -288,13 +289,7 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
     projected[v] = {lens.cx + lens.fx * c.x / -c.z, lens.cy - lens.fy * c.y / -c.z};
     if (nearest) inverseDepth[v] = 1.0 / -c.z;
   }
-  // The edges are found on a thread of their own while the triangles are rasterised here.
-  std::future<void> edgesMarked;
-  if (nearest) {
-    nearest->assign(size_t(w) * size_t(h), 0.0f);
-    edgesMarked = std::async(std::launch::async,
-                             [&] { markEdges(mesh, projected, x0, y0, w, h, surfaces->edges); });
-  }
+  if (nearest) nearest->assign(size_t(w) * size_t(h), 0.0f);
   constexpr double kPad = 0.05;
   constexpr int kSmall = 8;  // a triangle whose box is narrower and lower is marked by its box
   std::vector<uint8_t> mask(size_t(w) * size_t(h), 0);
@@ -322,59 +317,67 @@ std::vector<uint8_t> coverablePixels(const Mesh& mesh, const glm::dmat4& worldFr
   auto last = [](double hi, int from, int size) {
     return int(std::clamp(std::floor(hi + kPad), double(from - 1), double(from + size - 1)));
   };
-  for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
-    const glm::dvec2 p[3] = {projected[mesh.indices[t]], projected[mesh.indices[t + 1]],
-                             projected[mesh.indices[t + 2]]};
-    const glm::dvec2 lo = glm::min(glm::min(p[0], p[1]), p[2]);
-    const glm::dvec2 hi = glm::max(glm::max(p[0], p[1]), p[2]);
-    const int left = first(lo.x, x0, w), right = last(hi.x, x0, w);
-    const int top = first(lo.y, y0, h), bottom = last(hi.y, y0, h);
-    if (left > right || top > bottom) continue;  // outside the rectangle
-    if (nearest) {
-      const double q[3] = {inverseDepth[mesh.indices[t]], inverseDepth[mesh.indices[t + 1]],
-                           inverseDepth[mesh.indices[t + 2]]};
-      lowest = std::min({q[0], q[1], q[2]});
-      highest = std::max({q[0], q[1], q[2]});
-      // The plane through the three (x, y, 1 / depth); a triangle seen edge on has none: its
-      // nearest corner stands for all of it.
-      const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
-      const double det = e1.x * e2.y - e1.y * e2.x;
-      if (std::abs(det) > 1e-9) {
-        alongX = ((q[1] - q[0]) * e2.y - (q[2] - q[0]) * e1.y) / det;
-        alongY = ((q[2] - q[0]) * e1.x - (q[1] - q[0]) * e2.x) / det;
-        offset = q[0] - alongX * p[0].x - alongY * p[0].y;
-      } else {
-        alongX = alongY = 0.0;
-        offset = highest;
-      }
-    }
-    if (right - left < kSmall && bottom - top < kSmall) {
-      // A small triangle: its bounding box (a few pixels more than it covers, at most).
-      for (int y = top; y <= bottom; ++y) mark(y, left, right);
-      continue;
-    }
-    for (int y = top; y <= bottom; ++y) {
-      // The triangle's extent in x within the row's slab [y - pad, y + 1 + pad]: its corners in
-      // the slab and its edges' crossings of the slab's two lines.
-      const double ya = double(y) - kPad, yb = double(y) + 1.0 + kPad;
-      double from = std::numeric_limits<double>::max(), to = -from;
-      for (int e = 0; e < 3; ++e) {
-        const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
-        if (a.y >= ya && a.y <= yb) from = std::min(from, a.x), to = std::max(to, a.x);
-        if (a.y == b.y) continue;
-        for (const double line : {ya, yb}) {
-          const double f = (line - a.y) / (b.y - a.y);
-          if (f < 0.0 || f > 1.0) continue;
-          const double x = a.x + f * (b.x - a.x);
-          from = std::min(from, x), to = std::max(to, x);
+  auto rasterise = [&] {
+    for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+      const glm::dvec2 p[3] = {projected[mesh.indices[t]], projected[mesh.indices[t + 1]],
+                               projected[mesh.indices[t + 2]]};
+      const glm::dvec2 lo = glm::min(glm::min(p[0], p[1]), p[2]);
+      const glm::dvec2 hi = glm::max(glm::max(p[0], p[1]), p[2]);
+      const int left = first(lo.x, x0, w), right = last(hi.x, x0, w);
+      const int top = first(lo.y, y0, h), bottom = last(hi.y, y0, h);
+      if (left > right || top > bottom) continue;  // outside the rectangle
+      if (nearest) {
+        const double q[3] = {inverseDepth[mesh.indices[t]], inverseDepth[mesh.indices[t + 1]],
+                             inverseDepth[mesh.indices[t + 2]]};
+        lowest = std::min({q[0], q[1], q[2]});
+        highest = std::max({q[0], q[1], q[2]});
+        // The plane through the three (x, y, 1 / depth); a triangle seen edge on has none: its
+        // nearest corner stands for all of it.
+        const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+        const double det = e1.x * e2.y - e1.y * e2.x;
+        if (std::abs(det) > 1e-9) {
+          alongX = ((q[1] - q[0]) * e2.y - (q[2] - q[0]) * e1.y) / det;
+          alongY = ((q[2] - q[0]) * e1.x - (q[1] - q[0]) * e2.x) / det;
+          offset = q[0] - alongX * p[0].x - alongY * p[0].y;
+        } else {
+          alongX = alongY = 0.0;
+          offset = highest;
         }
       }
-      if (from > to) continue;
-      const int x1 = std::max(left, first(from, x0, w)), x2 = std::min(right, last(to, x0, w));
-      if (x1 <= x2) mark(y, x1, x2);
+      if (right - left < kSmall && bottom - top < kSmall) {
+        // A small triangle: its bounding box (a few pixels more than it covers, at most).
+        for (int y = top; y <= bottom; ++y) mark(y, left, right);
+        continue;
+      }
+      for (int y = top; y <= bottom; ++y) {
+        // The triangle's extent in x within the row's slab [y - pad, y + 1 + pad]: its corners in
+        // the slab and its edges' crossings of the slab's two lines.
+        const double ya = double(y) - kPad, yb = double(y) + 1.0 + kPad;
+        double from = std::numeric_limits<double>::max(), to = -from;
+        for (int e = 0; e < 3; ++e) {
+          const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
+          if (a.y >= ya && a.y <= yb) from = std::min(from, a.x), to = std::max(to, a.x);
+          if (a.y == b.y) continue;
+          for (const double line : {ya, yb}) {
+            const double f = (line - a.y) / (b.y - a.y);
+            if (f < 0.0 || f > 1.0) continue;
+            const double x = a.x + f * (b.x - a.x);
+            from = std::min(from, x), to = std::max(to, x);
+          }
+        }
+        if (from > to) continue;
+        const int x1 = std::max(left, first(from, x0, w)), x2 = std::min(right, last(to, x0, w));
+        if (x1 <= x2) mark(y, x1, x2);
+      }
     }
+  };
+  // The edges are found beside the rasterisation (the two write different arrays).
+  if (nearest) {
+    tbb::parallel_invoke([&] { markEdges(mesh, projected, x0, y0, w, h, surfaces->edges); },
+                         rasterise);
+  } else {
+    rasterise();
   }
-  if (edgesMarked.valid()) edgesMarked.get();
   return mask;
 }
 

@@ -360,6 +360,18 @@ class ComposeErrors : public ::testing::Test {
     return "--plate " + quote(plate) + " --object " + quote(object) + " --no-cache --out " +
            quote((dir_ / "x").string());
   }
+  // The options of base() with a cache folder the job may fill (named input-... so that
+  // expectNothingWritten() passes it by) instead of --no-cache, and the object unshadowed.
+  std::string cachedBase(const std::string& plate, const std::string& object) const {
+    return "--plate " + quote(plate) + " --object " + quote(object) + " --shadows off --cache " +
+           quote((dir_ / "input-cache").string()) + " --out " + quote((dir_ / "x").string());
+  }
+  // Whether a job run with cachedBase() got as far as the render: its stage entry is stored.
+  bool rendered() const {
+    std::error_code ec;
+    const fs::path entries = dir_ / "input-cache" / "stages" / "render";
+    return fs::exists(entries, ec) && !fs::is_empty(entries, ec);
+  }
   void expectNothingWritten() const {
     for (const auto& entry : fs::directory_iterator(dir_.path())) {
       const std::string name = entry.path().filename().string();
@@ -530,11 +542,11 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
       writePixels(env.string(), 16, 8, 3, OIIO::TypeDesc::FLOAT, px);
     }
     const bool dim = value < 1e-20f;
-    // The one that renders does so without self-shadowing, which this does not check.
-    const auto r =
-        runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
-                       " --env " + quote(env.string()) + (dim ? "" : " --shadows off"),
-                   dir_.path());
+    // The one that renders is self-shadowed from a coarser visibility grid than the default's.
+    const auto r = runCompose(
+        base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) + " --env " +
+            quote(env.string()) + (dim ? "" : " --shadow-params order=4,grid=4"),
+        dir_.path());
     EXPECT_EQ(r.status, dim ? 1 : 0) << value << ": " << r.err;
     EXPECT_EQ(r.err.find("too dim to light anything in single precision") != std::string::npos, dim)
         << r.err;
@@ -550,15 +562,15 @@ TEST_F(ComposeErrors, AHoldoutOfTheWrongSizeStopsTheJobBeforeTheRender) {
     std::vector<float> px(40 * 30, 1.0f);
     writePixels(file, 40, 30, 1, OIIO::TypeDesc::UINT8, px);
   }
-  const auto r =
-      runCompose(base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
-                     " --holdout " + quote((dir_ / "input-mask.png").string()),
-                 dir_.path());
+  const auto r = runCompose(
+      cachedBase((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) +
+          " --holdout " + quote((dir_ / "input-mask.png").string()),
+      dir_.path());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("composite: the holdout mask is 40x30, the plate "), std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find("input-mask.png"), std::string::npos) << r.err;
-  EXPECT_EQ(r.err.find("compose: render "), std::string::npos) << "rendered first: " << r.err;
+  EXPECT_FALSE(rendered()) << "rendered first: " << r.err;
   expectNothingWritten();
 }
 
@@ -576,16 +588,19 @@ TEST_F(ComposeErrors, AHoldoutWithNaNIsRefused) {
     std::vector<float> px(64 * 48 * 3, 0.4f);
     writePixels(file, 64, 48, 3, OIIO::TypeDesc::UINT8, px);
   }
-  const auto r =
-      runCompose(base((dir_ / "input-plate.png").string(), (samples_ / "monkey.obj").string()) +
-                     " --holdout " + quote(mask.string()),
-                 dir_.path());
+  const std::string job =
+      cachedBase((dir_ / "input-plate.png").string(), (samples_ / "monkey.obj").string());
+  const auto r = runCompose(job + " --holdout " + quote(mask.string()), dir_.path());
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("composite: NaN in the holdout mask at pixel (5, 7)"), std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find("input-mask.exr"), std::string::npos) << r.err;
-  EXPECT_EQ(r.err.find("compose: render "), std::string::npos) << "rendered first: " << r.err;
+  EXPECT_FALSE(rendered()) << "rendered first: " << r.err;
   expectNothingWritten();
+  // The same job without the mask renders, and its render is seen in the cache.
+  const auto unmasked = runCompose(job, dir_.path());
+  ASSERT_EQ(unmasked.status, 0) << unmasked.err;
+  EXPECT_TRUE(rendered());
 }
 
 // The holdout puts the plate in front of the object where the mask is white: there the composite
@@ -631,7 +646,7 @@ TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
                                " --holdout " + quote((dir_ / "input-mask.png").string()), "rgb");
   // The plate as the composite shows it, where neither the object nor its shadow reaches.
   const float* plate = &plain[0];
-  int objectLeft = 0, plateLeft = 0, sameRight = 0;
+  int objectLeft = 0, objectRight = 0, plateLeft = 0, sameRight = 0;
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const size_t i = (size_t(y) * w + x) * 4;
@@ -640,11 +655,13 @@ TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
         objectLeft += !std::equal(plate, plate + 4, &plain[i]);
         plateLeft += isPlate;
       } else {
+        objectRight += !std::equal(plate, plate + 4, &plain[i]);
         sameRight += std::equal(&plain[i], &plain[i] + 4, &masked[i]);
       }
     }
   }
   EXPECT_GT(objectLeft, w * h / 20) << "the object should cover part of the left half";
+  EXPECT_GT(objectRight, w * h / 20) << "and of the right half";
   EXPECT_EQ(plateLeft, w / 2 * h) << "the plate in front where the mask is white";
   EXPECT_EQ(sameRight, w / 2 * h) << "the composite without a holdout where the mask is black";
   EXPECT_EQ(rgbMask, masked) << "only the first channel of an RGB mask counts";

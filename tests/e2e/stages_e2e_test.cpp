@@ -475,8 +475,8 @@ TEST_F(StageCommands, FilesOfOneConfigAreNotReadInAnother) {
   const fs::path blender = samples_ / "ocio" / "blender" / "config.ocio";
   ASSERT_TRUE(fs::exists(blender)) << blender;
   const fs::path lighting = dir_ / "forest.lighting";
-  // Lower orders and no self-shadowing than the defaults keep it quick: what is checked is which
-  // config the files were made in.
+  // Lower orders than the defaults, and renders without self-shadowing, keep it quick: what is
+  // checked is which config the files were made in.
   r = run("precompute --env " + quote(env) + " --out " + quote(lighting) +
               " --no-cache --lighting-params order=4 --shadow-params order=8,grid=8",
           dir_.path());
