@@ -539,6 +539,24 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
     offsets[size_t(c) + 1] = offsets[size_t(c)] + bytesOf(types[size_t(c)]);
   const size_t pixelBytes = offsets.back();
   const size_t rowBytes = pixelBytes * size_t(width);
+  // Per image, its channels in runs of one type (the object's colour, normal, position, depth,
+  // albedo, ... are five runs of two images): a pixel is put in place run by run.
+  struct Run {
+    int first = 0, count = 0;  // the image's channels [first, first + count)
+    bool half = true;
+    size_t offset = 0;  // in the file's pixel, in bytes
+  };
+  std::vector<std::vector<Run>> runs;
+  for (int c = 0; const Image* image : sources.images) {
+    std::vector<Run>& r = runs.emplace_back();
+    for (int k = 0; k < image->channels; ++k, ++c) {
+      const bool half = types[size_t(c)] == Imf::HALF;
+      if (!r.empty() && r.back().half == half)
+        ++r.back().count;
+      else
+        r.push_back({k, 1, half, offsets[size_t(c)]});
+    }
+  }
   constexpr size_t kBandBytes = size_t(8) << 20;
   constexpr int kBlockRows = 32;
   const int bandRows = std::max(kBlockRows, int(kBandBytes / rowBytes) / kBlockRows * kBlockRows);
@@ -559,11 +577,12 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         }
         return;
       }
-      // Otherwise each image's row is converted to halves, and each channel is put in place from
-      // the halves or the floats, as its type says.
-      std::vector<uint16_t> halves;
+      // Otherwise each image's row is converted to halves, and each run of channels is put in
+      // place from the halves or the floats, as its type says.
+      thread_local std::vector<uint16_t> halves;
       int first = 0;  // the image's first channel
-      for (const Image* image : sources.images) {
+      for (size_t i = 0; i < sources.images.size(); ++i) {
+        const Image* image = sources.images[i];
         const float* row = image->row(y).data();
         const int n = image->channels;
         const size_t values = size_t(width) * size_t(n);
@@ -571,13 +590,14 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         detail::toHalf(row, halves.data(), values);
         for (int x = 0; x < width; ++x) {
           unsigned char* pixel = dst + size_t(x) * pixelBytes;
-          for (int k = 0; k < n; ++k) {
-            const size_t at = size_t(x) * size_t(n) + size_t(k);
-            const size_t c = size_t(first + k);
-            if (types[c] == Imf::HALF)
-              std::memcpy(pixel + offsets[c], &halves[at], sizeof(uint16_t));
+          const size_t at = size_t(x) * size_t(n);
+          for (const Run& run : runs[i]) {
+            if (run.half)
+              std::memcpy(pixel + run.offset, &halves[at + size_t(run.first)],
+                          size_t(run.count) * sizeof(uint16_t));
             else
-              std::memcpy(pixel + offsets[c], &row[at], sizeof(float));
+              std::memcpy(pixel + run.offset, &row[at + size_t(run.first)],
+                          size_t(run.count) * sizeof(float));
           }
         }
         first += n;
