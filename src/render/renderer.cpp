@@ -461,16 +461,17 @@ class SourceEdges {
     e = glm::max(e, glm::vec3(0.0f));
   }
 
-  // The shadowed irradiance at a hit (object-space position `at`, `lifted` onto the smooth
-  // surface by Mesh::smoothPoint, shading normal `nObj` and its environment-frame twin `nEnv`,
-  // unshadowed irradiance `e` there), or false when no source needs tracing (then the plain
-  // interpolated ratio applies). A source whose edge crosses the triangle is traced only where it
-  // could change the pixel by more than 1/256 of its irradiance (less is below what an 8-bit
-  // display shows, and the interpolated ratio already holds it approximately).
+  // The shadowed irradiance at a hit (object-space position `at`, `lifted()` giving it lifted
+  // onto the smooth surface by Mesh::smoothPoint, asked only when a source is traced; shading
+  // normal `nObj` and its environment-frame twin `nEnv`, unshadowed irradiance `e` there), or
+  // false when no source needs tracing (then the plain interpolated ratio applies). A source whose
+  // edge crosses the triangle is traced only where it could change the pixel by more than 1/256 of
+  // its irradiance (less is below what an 8-bit display shows, and the interpolated ratio already
+  // holds it approximately).
+  template <class Lifted>
   bool shade(const EmbreeScene& scene, const uint32_t near[3], const float weight[3],
-             const glm::vec3& at, const glm::vec3& lifted, const glm::vec3& nObj,
-             const glm::vec3& nEnv, const glm::vec3& e, uint32_t seed, glm::vec3& shadowed,
-             int64_t& rays) const {
+             const glm::vec3& at, Lifted&& lifted, const glm::vec3& nObj, const glm::vec3& nEnv,
+             const glm::vec3& e, uint32_t seed, glm::vec3& shadowed, int64_t& rays) const {
     // The sources the three points see differently, or in part: their shadow's edge, penumbra
     // (or their terminator) crosses the triangle.
     uint64_t mask = crossing(near);
@@ -507,8 +508,8 @@ class SourceEdges {
     }
     // ... and traced from the hit, across their extent: from its point on the smooth surface
     // (Mesh::smoothPoint) unless something of the object lies between the two.
-    glm::vec3 from = lifted;
-    const glm::vec3 up = lifted - at;
+    glm::vec3 from = lifted();
+    const glm::vec3 up = from - at;
     const float length = glm::length(up);
     if (length > tnear_) {
       ++rays;
@@ -682,9 +683,10 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
                    glm::vec3(0.0f));
     r.shadowed = r.e;
     if (traceEdges && edges && glm::dot(interpolated, interpolated) > 1e-12f &&
-        edges->shade(scene, near, weight, at, mesh.smoothPoint(triangle, u, v, at, backFace),
-                     glm::normalize(backFace ? -interpolated : interpolated),
-                     settings.envFromWorld * nrm, r.e, seed, r.shadowed, rays)) {
+        edges->shade(
+            scene, near, weight, at, [&] { return mesh.smoothPoint(triangle, u, v, at, backFace); },
+            glm::normalize(backFace ? -interpolated : interpolated), settings.envFromWorld * nrm,
+            r.e, seed, r.shadowed, rays)) {
       // A source's shadow edge crosses the triangle: traced from the hit.
     } else if (settings.shadows) {
       const VertexIrradiance& vi = *settings.shadows;
