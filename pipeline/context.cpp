@@ -18,6 +18,19 @@ std::string EnvironmentInput::describe() const {
   return files.size() == 6 ? "six cube faces" : "one image";
 }
 
+const std::vector<std::string>& exposedChannels() {
+  static const std::vector<std::string> names = {"object.R",
+                                                 "object.G",
+                                                 "object.B",
+                                                 "irradiance.R",
+                                                 "irradiance.G",
+                                                 "irradiance.B",
+                                                 "irradianceShadowed.R",
+                                                 "irradianceShadowed.G",
+                                                 "irradianceShadowed.B"};
+  return names;
+}
+
 const Hash128& Context::key(const std::string& name) const {
   const auto it = keys.find(name);
   if (it != keys.end()) return it->second;

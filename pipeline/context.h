@@ -81,6 +81,11 @@ struct Geometry {
 struct RenderedObject {
   render::RenderOutput output;
   float exposure = 1.0f;
+  // What the output's colour and irradiance AOVs (exposedChannels()) are still to be multiplied
+  // by, in the composite and the files: the exposure for the render stage's own render, which is
+  // kept in the environment's units so that a new --exposure reuses it; 1 for a layer read from a
+  // file, whose values carry their exposure.
+  float pending = 1.0f;
   std::vector<std::string> notes;  // how the exposure was chosen
   std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
   glm::dvec3 fileOrigin{0.0};      // render::Mesh::fileOrigin of that mesh
@@ -88,6 +93,10 @@ struct RenderedObject {
   // hash of that plate's bytes (contentKey); empty for a layer that does not say.
   std::string layerPlateFile, layerPlateKey;
 };
+
+// The channels of a rendered object that scale with its exposure, by their names in the files
+// (the object's colour, its irradiance with and without self-shadowing).
+const std::vector<std::string>& exposedChannels();
 
 struct Artefacts {
   std::optional<ingest::LoadedImage> plate;

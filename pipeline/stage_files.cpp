@@ -235,10 +235,19 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   names.insert(names.end(), aovNames.begin(), aovNames.end());
   Image layer(r.beauty.width, r.beauty.height, channels, names);
   layer.colorSpace = r.beauty.colorSpace;
+  // The pending exposure applied: the layer's values are those the one-shot EXR holds.
+  std::vector<float> scale(size_t(channels), 1.0f);
+  for (size_t c = 0; c < names.size(); ++c) {
+    const std::vector<std::string>& exposed = exposedChannels();
+    if (std::find(exposed.begin(), exposed.end(), names[c]) != exposed.end())
+      scale[c] = object.pending;
+  }
   for (size_t i = 0; i < layer.pixelCount(); ++i) {
     float* d = layer.pixels.data() + i * size_t(channels);
     std::copy_n(r.beauty.pixels.data() + 4 * i, 4, d);
     std::copy_n(r.aovs.pixels.data() + i * aovNames.size(), aovNames.size(), d + 4);
+    if (object.pending != 1.0f)
+      for (size_t c = 0; c < size_t(channels); ++c) d[c] *= scale[c];
   }
   ingest::WriteOptions options;
   options.depth = ingest::WriteOptions::Depth::Float;  // the composite reads these numbers back

@@ -42,12 +42,14 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
 
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
-// not at all. Returns notes for the user.
+// not at all, the object's pending exposure applied on the way. Returns notes for the user.
 // `floatSamples`: the EXR's parts in 32-bit float, else half (float where a value exceeds half).
-std::vector<std::string> writeComposeFiles(
-    const color::ColorConfig& colors, const ComposeJob& job, const Geometry& geometry,
-    const Image& composite, const render::RenderOutput& rendered, const GroundShadowResult* ground,
-    const std::string& meshFile, const glm::dvec3& fileOrigin, const std::filesystem::path& exrPath,
-    const std::filesystem::path& displayPath, bool floatSamples = false);
+std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
+                                           const Geometry& geometry, const Image& composite,
+                                           const RenderedObject& object,
+                                           const GroundShadowResult* ground,
+                                           const std::filesystem::path& exrPath,
+                                           const std::filesystem::path& displayPath,
+                                           bool floatSamples = false);
 
 }  // namespace compose::pipeline

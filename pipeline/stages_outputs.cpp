@@ -216,8 +216,9 @@ class RenderStage final : public Stage {
   // 9: adaptive sampling; 10: sources no surface point sees kept out of the shadow ratio;
   // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
   // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
-  // checked for parts in the way
-  static constexpr int kVersion = 14;
+  // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
+  // the composite and the files
+  static constexpr int kVersion = 15;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -330,11 +331,18 @@ class RenderStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.geometryKey());
     h.combine(ctx.key(kLighting));
-    h.combine(ctx.key(kPlateLinear));  // auto exposure reads the plate
+    // The render is kept in the environment's units: an exposure given by number is applied
+    // afterwards (a new --exposure reuses it); the automatic one reads the plate, and the entry
+    // keeps what it chose.
+    if (ctx.job.exposureStops) {
+      h.bytes("exposure given");
+    } else {
+      h.bytes("exposure auto");
+      h.combine(ctx.key(kPlateLinear));
+    }
     if (ctx.hasKey(kSelfShadowing)) h.combine(ctx.key(kSelfShadowing));
     h.bytes(ctx.colors.identity());  // the materials' colours
     if (ctx.job.albedo) h.floats(std::span<const float>(&ctx.job.albedo->x, 3));
-    h.number(ctx.job.exposureStops.value_or(1e300));
     h.word(uint32_t(ctx.job.samplesPerAxis));
     h.word(ctx.job.adaptiveSampling ? 1u : 0u);
     ctx.keys[kObject] = h;
@@ -355,7 +363,9 @@ class RenderStage final : public Stage {
     r.output.rays =
         wholeMember(m, "rays", 0, std::numeric_limits<int64_t>::max()).value_or(int64_t(0));
     r.output.coverage = m.value("coverage", 0.0);
-    r.exposure = m.value("exposure", 1.0f);
+    r.exposure = ctx.job.exposureStops ? float(std::exp2(*ctx.job.exposureStops))
+                                       : m.value("exposure", 1.0f);
+    r.pending = r.exposure;
     if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))
       return false;
     // The rectangle and the images it holds agree (the composite places them by it).
@@ -402,15 +412,16 @@ class RenderStage final : public Stage {
       settings.sources = &s.sources;
     }
     RenderedObject r;
+    float exposure = 1.0f;
     if (job.exposureStops) {
-      settings.exposure = float(std::exp2(*job.exposureStops));
+      exposure = float(std::exp2(*job.exposureStops));
     } else {
       const ExposureMatch match =
           autoExposure(*ctx.artefacts.plateLinear, g.camera, *ctx.artefacts.lighting,
                        settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
       if (const std::optional<double> exif = exifExposure(ctx, why)) {
-        settings.exposure = float(*exif);
+        exposure = float(*exif);
         const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
         ctx.note(format(
             "exposure from EXIF: %+.2f stops: the plate and the environment's photos come from one "
@@ -421,13 +432,13 @@ class RenderStage final : public Stage {
             std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
             *info.iso, std::log2(match.scale)));
       } else if (match.nothingVisible) {
-        settings.exposure = 1.0f;
+        exposure = 1.0f;
         ctx.note(
             "auto exposure: 0 stops (the environment's own units): the plate is transparent "
             "everywhere (alpha below 0.01), so it has no brightness to match; override with "
             "--exposure");
       } else {
-        settings.exposure = float(match.scale);
+        exposure = float(match.scale);
         ctx.note(format(
             "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
             "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
@@ -444,7 +455,10 @@ class RenderStage final : public Stage {
       }
       r.notes.push_back(ctx.notes.back());
     }
-    r.exposure = settings.exposure;
+    // Rendered in the environment's units; the composite and the files apply the exposure.
+    r.exposure = exposure;
+    r.pending = exposure;
+    settings.exposure = 1.0f;
     // A camera inside the object sees its inside only (a frame of back faces, near black): seven
     // rays from the camera, most of which meet the object from within, say so.
     {
@@ -539,6 +553,7 @@ class CompositeStage final : public Stage {
     h.bytes("composite");
     h.combine(ctx.key(kPlateLinear));
     h.combine(ctx.key(kObject));
+    h.number(ctx.job.exposureStops.value_or(1e300));  // applied here to the render
     if (ctx.hasKey(kGroundShadow)) h.combine(ctx.key(kGroundShadow));
     if (!ctx.job.holdout.empty()) hashFile(h, ctx.job.holdout, "composite");
     ctx.keys[kComposite] = h;
@@ -582,7 +597,8 @@ class CompositeStage final : public Stage {
       composite::multiply(out, ground.ratio, ground.grid.x0, ground.grid.y0);
       reason = "the plate darkened by the ground shadow, the object over it";
     }
-    composite::overInPlace(out, object.output.beauty, object.output.x0, object.output.y0);
+    composite::overInPlace(out, object.output.beauty, object.output.x0, object.output.y0,
+                           object.pending);
     if (holdout) {
       // Read with the plate, so that a bad mask stopped the job before the render.
       const Image mask = ctx.artefacts.holdout
@@ -654,9 +670,9 @@ class OutputStage final : public Stage {
         ctx.artefacts.plate && (ctx.artefacts.plate->info.sampleType == "float" ||
                                 ctx.artefacts.plate->info.sampleType == "double");
     const bool floatSamples = job.exrDepth == "float" || (job.exrDepth == "auto" && floatPlate);
-    const std::vector<std::string> notes = writeComposeFiles(
-        ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object.output, ground,
-        object.meshFile, object.fileOrigin, exrPath, displayPath, floatSamples);
+    const std::vector<std::string> notes =
+        writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object, ground,
+                          exrPath, displayPath, floatSamples);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
     const std::string ext = ingest::lowerExtension(displayPath);
@@ -712,11 +728,11 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
 
 std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
                                            const Geometry& geometry, const Image& composite,
-                                           const render::RenderOutput& rendered,
+                                           const RenderedObject& object,
                                            const GroundShadowResult* ground,
-                                           const std::string& meshFile,
-                                           const glm::dvec3& fileOrigin, const fs::path& exrPath,
-                                           const fs::path& displayPath, bool floatSamples) {
+                                           const fs::path& exrPath, const fs::path& displayPath,
+                                           bool floatSamples) {
+  const render::RenderOutput& rendered = object.output;
   std::vector<std::string> notes;
   const std::string working = colors.workingSpace();
   COMPOSE_CHECK((composite.channels == 3 || composite.channels == 4) &&
@@ -784,12 +800,15 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   // Positions and depth in float whatever the depth of the rest: in half, P put a point 10 m away
   // up to a pixel off where it shows on a 3088-pixel-wide plate.
   objectPart.floatChannels = {"P.X", "P.Y", "P.Z", "depth.Z"};
+  if (object.pending != 1.0f)
+    for (const std::string& name : exposedChannels())
+      objectPart.channelScales.emplace_back(name, object.pending);
   if (!compositePart.options.chromaticities) {
     notes.push_back("the config (" + colors.source() + ") does not say what the primaries of " +
                     (space == working ? "the working space" : "--exr-space") + " '" + space +
                     "' are: the EXR carries its name but no chromaticities");
   }
-  ingest::ExrHeader header = sceneHeader(geometry, meshFile, fileOrigin);
+  ingest::ExrHeader header = sceneHeader(geometry, object.meshFile, object.fileOrigin);
 
   const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
   const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;

@@ -23,7 +23,7 @@ Image over(const Image& fg, int x0, int y0, const Image& bg) {
   return out;
 }
 
-void overInPlace(Image& bg, const Image& fg, int x0, int y0) {
+void overInPlace(Image& bg, const Image& fg, int x0, int y0, float scale) {
   if (fg.channels != 4)
     throw Error("composite",
                 "foreground must be RGBA, it has " + std::to_string(fg.channels) + " channels");
@@ -48,9 +48,9 @@ void overInPlace(Image& bg, const Image& fg, int x0, int y0) {
           if (a == 0.0f && f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f) continue;
           float* o = bg.at(x + x0, int(y) + y0);
           const float k = 1.0f - a;
-          o[0] = f[0] + o[0] * k;
-          o[1] = f[1] + o[1] * k;
-          o[2] = f[2] + o[2] * k;
+          o[0] = f[0] * scale + o[0] * k;
+          o[1] = f[1] * scale + o[1] * k;
+          o[2] = f[2] * scale + o[2] * k;
           if (bgAlpha) o[3] = a + o[3] * k;
         }
       },

@@ -16,8 +16,9 @@ Image over(const Image& foreground, const Image& background);
 Image over(const Image& foreground, int x, int y, const Image& background);
 
 // The same, in place: `background` becomes the composite (its pixels outside the foreground's
-// rectangle are not touched, and no copy of the frame is made). Errors as over().
-void overInPlace(Image& background, const Image& foreground, int x, int y);
+// rectangle are not touched, and no copy of the frame is made), the foreground's colour
+// multiplied by `scale` on the way (a render's exposure; its alpha as it is). Errors as over().
+void overInPlace(Image& background, const Image& foreground, int x, int y, float scale = 1.0f);
 
 // Multiplies the first three channels of `image` over [x, x + w) x [y, y + h) by the RGB of
 // `factor` (w x h): the ground shadow's ratio applied to the plate in linear light. The rectangle

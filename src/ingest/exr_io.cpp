@@ -566,7 +566,8 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
     parallelFor(0, rows, [&](int64_t r) {
       unsigned char* dst = band.data() + size_t(r) * rowBytes;
       const int y = r0 + int(r);
-      if (uniform && sources.images.size() == 1 && sources.constants.empty()) {
+      if (uniform && sources.images.size() == 1 && sources.constants.empty() &&
+          !sources.scalesOf(0)) {
         // One image: its rows are already laid out as the file's pixels.
         const float* row = sources.images.front()->row(y).data();
         const size_t values = size_t(width) * size_t(channels);
@@ -577,15 +578,22 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         }
         return;
       }
-      // Otherwise each image's row is converted to halves, and each run of channels is put in
-      // place from the halves or the floats, as its type says.
+      // Otherwise each image's row is converted to halves (scaled first where it is to be), and
+      // each run of channels is put in place from the halves or the floats, as its type says.
       thread_local std::vector<uint16_t> halves;
+      thread_local std::vector<float> scaled;
       int first = 0;  // the image's first channel
       for (size_t i = 0; i < sources.images.size(); ++i) {
         const Image* image = sources.images[i];
         const float* row = image->row(y).data();
         const int n = image->channels;
         const size_t values = size_t(width) * size_t(n);
+        if (const std::vector<float>* scales = sources.scalesOf(i)) {
+          scaled.resize(values);
+          for (size_t k = 0; k < values; k += size_t(n))
+            for (size_t c = 0; c < size_t(n); ++c) scaled[k + c] = row[k + c] * (*scales)[c];
+          row = scaled.data();
+        }
         halves.resize(values);
         detail::toHalf(row, halves.data(), values);
         for (int x = 0; x < width; ++x) {
@@ -671,6 +679,26 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
     }
     if (n.empty()) n = defaultChannelNames(s.channels());
     COMPOSE_CHECK(int(n.size()) == s.channels());
+    if (!part.channelScales.empty()) {
+      size_t c = 0;
+      for (const Image* source : s.images) {
+        std::vector<float> factors(size_t(source->channels), 1.0f);
+        bool any = false;
+        for (float& f : factors) {
+          for (const auto& [name, scale] : part.channelScales) {
+            if (name != n[c]) continue;
+            f = scale;
+            any = any || scale != 1.0f;
+          }
+          ++c;
+        }
+        s.scales.push_back(any ? std::move(factors) : std::vector<float>());
+      }
+      for (const auto& scaled : part.channelScales) {
+        COMPOSE_CHECK(std::find(n.begin(), n.begin() + std::ptrdiff_t(c), scaled.first) !=
+                      n.begin() + std::ptrdiff_t(c));
+      }
+    }
     types[i] = part.options.depth == WriteOptions::Depth::Float ? Imf::FLOAT : Imf::HALF;
     if (types[i] == Imf::HALF) {
       reports[i].largestMagnitude = detail::largestFiniteMagnitude(s);

@@ -32,14 +32,27 @@ float largestFiniteMagnitude(const ChannelSources& sources) {
   float largest = 0.0f;
   for (float v : sources.constants)
     if (std::isfinite(v)) largest = std::max(largest, std::abs(v));
-  for (const Image* image : sources.images) {
+  for (size_t i = 0; i < sources.images.size(); ++i) {
+    const Image* image = sources.images[i];
+    const std::vector<float>* scales = sources.scalesOf(i);
     std::vector<float> rowLargest(size_t(image->height), 0.0f);
     parallelFor(0, image->height, [&](int64_t y) {
       // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
       float m = 0.0f;
-      for (float v : image->row(int(y))) {
-        const float a = std::abs(v);
-        m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+      if (!scales) {
+        for (float v : image->row(int(y))) {
+          const float a = std::abs(v);
+          m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+        }
+      } else {
+        const std::span<const float> row = image->row(int(y));
+        const size_t n = size_t(image->channels);
+        for (size_t k = 0; k < row.size(); k += n) {
+          for (size_t c = 0; c < n; ++c) {
+            const float a = std::abs(row[k + c] * (*scales)[c]);
+            m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
+          }
+        }
       }
       rowLargest[size_t(y)] = m;
     });
@@ -892,7 +905,7 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
       break;
   }
   if (options.depth == WriteOptions::Depth::Half) {
-    report.largestMagnitude = detail::largestFiniteMagnitude({{&image}, {}});
+    report.largestMagnitude = detail::largestFiniteMagnitude({{&image}, {}, {}});
     if (report.largestMagnitude > kHalfMax)
       report.promotedToFloat = true;
     else

@@ -264,6 +264,8 @@ WriteReport writeImage(OutputFiles& outputs, const std::filesystem::path& path, 
 // layers held apart (a beauty and its AOVs, an RGB composite and its alpha) are written without
 // first being copied into one interleaved image. `channelNames`, when given, names the channels of
 // the images (else each image's own names); options.alphaChannel counts every channel of the part.
+// `channelScales` multiplies the named channels of the images on the way (an object's colour and
+// irradiance by the exposure chosen after its render), before the check for half's range.
 struct ExrPart {
   ExrPart() = default;
   ExrPart(std::string partName, const Image* partImage, int partX = 0, int partY = 0,
@@ -283,6 +285,7 @@ struct ExrPart {
   WriteOptions options;
   std::vector<const Image*> moreImages;
   std::vector<std::pair<std::string, float>> constantChannels;
+  std::vector<std::pair<std::string, float>> channelScales;
   std::vector<std::string> channelNames;
   std::string colorSpace;  // the part's colour space attribute; empty: `image`'s
   // Channels written as 32-bit float whatever options.depth says: positions and depths, which

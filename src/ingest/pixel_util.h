@@ -14,10 +14,17 @@
 namespace compose::ingest::detail {
 
 // The channels of one output file or part: images of one size whose channels follow one another,
-// then channels of one value.
+// then channels of one value. An image's channels may be multiplied by factors on the way: `scales`
+// holds one factor per channel of each image, or nothing for an image taken as it is (and is
+// empty when no image is scaled).
 struct ChannelSources {
   std::vector<const Image*> images;
   std::vector<float> constants;
+  std::vector<std::vector<float>> scales;
+
+  const std::vector<float>* scalesOf(size_t image) const {
+    return image < scales.size() && !scales[image].empty() ? &scales[image] : nullptr;
+  }
 
   int width() const { return images.front()->width; }
   int height() const { return images.front()->height; }
@@ -28,7 +35,7 @@ struct ChannelSources {
   }
 };
 
-// The largest finite magnitude among the sources' values, rows on every core.
+// The largest finite magnitude among the sources' values (scaled), rows on every core.
 float largestFiniteMagnitude(const ChannelSources& sources);
 
 // Floats to halves as Imath rounds them (to nearest, ties to even), `n` of them: eight at a time

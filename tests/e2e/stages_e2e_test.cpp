@@ -4,7 +4,9 @@
 #include <sys/wait.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -225,6 +227,74 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_EQ(wrong.status, 1);
   EXPECT_NE(wrong.err.find("rendered for a 320x213 plate"), std::string::npos) << wrong.err;
   EXPECT_FALSE(fs::exists(dir_ / "three" / "compose.exr"));
+}
+
+// The render is kept in the environment's units and the exposure applied after it: a new
+// --exposure reuses the cached render, and gives the files a run without the cache gives, byte for
+// byte; the object's colour and irradiance scale with it, its other channels do not.
+TEST_F(StageCommands, ANewExposureReusesTheRender) {
+  const std::string job = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
+                          quote(samples_ / "forest.exr") +
+                          " --lighting-params order=4 --shadow-params order=4,grid=4";
+  auto renderLine = [](const RunResult& r) {
+    const size_t at = r.err.find("compose: render ");
+    return at == std::string::npos ? std::string() : r.err.substr(at, r.err.find('\n', at) - at);
+  };
+  const RunResult first = run(job + " --exposure -1 --out " + quote(dir_ / "first" / "compose") +
+                                  " --cache " + quote(dir_ / "cache"),
+                              dir_.path());
+  ASSERT_EQ(first.status, 0) << first.err;
+  ASSERT_FALSE(renderLine(first).empty()) << first.err;
+  EXPECT_EQ(renderLine(first).find("reused"), std::string::npos) << first.err;
+  const RunResult brighter =
+      run(job + " --exposure 0.5 --out " + quote(dir_ / "brighter" / "compose") + " --cache " +
+              quote(dir_ / "cache"),
+          dir_.path());
+  ASSERT_EQ(brighter.status, 0) << brighter.err;
+  EXPECT_NE(renderLine(brighter).find("reused"), std::string::npos) << brighter.err;
+  const RunResult fresh =
+      run(job + " --exposure 0.5 --out " + quote(dir_ / "fresh" / "compose") + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(fresh.status, 0) << fresh.err;
+  EXPECT_EQ(slurp(dir_ / "brighter" / "compose.exr"), slurp(dir_ / "fresh" / "compose.exr"));
+  EXPECT_EQ(slurp(dir_ / "brighter" / "compose.jpg"), slurp(dir_ / "fresh" / "compose.jpg"));
+
+  // 1.5 stops apart: the object's colour and irradiance 2^1.5 times as bright (within half's
+  // rounding), its alpha, normals, positions, albedo and occlusion the same.
+  const std::vector<Part> a = readParts(dir_ / "first" / "compose.exr");
+  const std::vector<Part> b = readParts(dir_ / "brighter" / "compose.exr");
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_GE(a.size(), 2u);
+  const Part &dim = a[1], &bright = b[1];
+  ASSERT_EQ(dim.name, "object");
+  ASSERT_EQ(dim.channels, bright.channels);
+  ASSERT_EQ(dim.pixels.size(), bright.pixels.size());
+  const size_t stride = dim.channels.size();
+  const float ratio = std::exp2(1.5f);
+  for (size_t c = 0; c < stride; ++c) {
+    const std::string& name = dim.channels[c];
+    SCOPED_TRACE(name);
+    const bool exposed = name == "object.R" || name == "object.G" || name == "object.B" ||
+                         name.rfind("irradiance", 0) == 0;
+    size_t lit = 0, wrong = 0;
+    for (size_t k = c; k < dim.pixels.size(); k += stride) {
+      const float d = dim.pixels[k], v = bright.pixels[k];
+      if (!exposed) {
+        wrong += std::memcmp(&d, &v, sizeof d) != 0;
+        continue;
+      }
+      if (d == 0.0f) {
+        wrong += v != 0.0f;
+        continue;
+      }
+      ++lit;
+      wrong += std::abs(v - ratio * d) > 2e-3f * ratio * std::abs(d) + 1e-4f;  // half subnormals
+    }
+    EXPECT_EQ(wrong, 0u);
+    if (exposed) {
+      EXPECT_GT(lit, 100u);
+    }
+  }
 }
 
 // An option only the one-shot command has, given to a command, is refused before anything is

@@ -544,6 +544,60 @@ TEST(ImageIo, FloatChannelsInAHalfPartKeepTheirPrecision) {
   }
 }
 
+// Channels scaled on the way (a render's exposure applied as it is written): a scaled channel
+// holds the half of value x factor, the others their own values, a float channel its float; and
+// half's range is checked on the scaled values, so that a part is written as float when a scaled
+// value exceeds it, and not when only an unscaled value would exceed it scaled.
+TEST(ImageIo, ScaledChannelsAreWrittenScaled) {
+  TempDir dir;
+  Image beauty(5, 3, 2, {"R", "A"});
+  Image aovs(5, 3, 2, {"P.X", "E.Y"});
+  for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+    beauty.pixels[2 * i] = 0.1f + 0.37f * float(i);
+    beauty.pixels[2 * i + 1] = 0.25f * float(i % 5);
+    aovs.pixels[2 * i] = 10.0001f + float(i);
+    aovs.pixels[2 * i + 1] = 1.3f * float(i);
+  }
+  const float factor = 2.7f;
+  auto write = [&](const std::string& name) {
+    ExrPart part{"object", &beauty, 2, 1, 9, 6, {}};
+    part.options.depth = WriteOptions::Depth::Half;
+    part.moreImages = {&aovs};
+    part.channelNames = {"object.R", "object.A", "P.X", "E.Y"};
+    part.floatChannels = {"P.X"};
+    part.channelScales = {{"object.R", factor}, {"E.Y", factor}};
+    OutputFiles outputs("output");
+    const std::vector<WriteReport> reports = writeExrParts(outputs, dir / name, {part});
+    outputs.commit();
+    return reports.at(0);
+  };
+  EXPECT_FALSE(write("scaled.exr").promotedToFloat);
+  auto in = OIIO::ImageInput::open((dir / "scaled.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec spec = in->spec();
+  ASSERT_EQ(spec.nchannels, 4);
+  std::vector<float> pixels(size_t(spec.image_pixels()) * 4);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 4, OIIO::TypeDesc::FLOAT, pixels.data()));
+  for (int c = 0; c < 4; ++c) {
+    const std::string& name = spec.channelnames[size_t(c)];
+    for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+      const float got = pixels[4 * i + size_t(c)];
+      const float want = name == "object.R"   ? float(Imath::half(beauty.pixels[2 * i] * factor))
+                         : name == "object.A" ? float(Imath::half(beauty.pixels[2 * i + 1]))
+                         : name == "P.X"      ? aovs.pixels[2 * i]
+                                              : float(Imath::half(aovs.pixels[2 * i + 1] * factor));
+      EXPECT_EQ(got, want) << name << " " << i;
+    }
+  }
+  // 30,000 in the unscaled alpha fits half; in a scaled channel (81,000) it does not.
+  beauty.pixels[1] = 30000.0f;
+  EXPECT_FALSE(write("alpha.exr").promotedToFloat);
+  aovs.pixels[1] = 30000.0f;
+  const WriteReport promoted = write("irradiance.exr");
+  EXPECT_TRUE(promoted.promotedToFloat);
+  EXPECT_FLOAT_EQ(promoted.largestMagnitude, 30000.0f * factor);
+}
+
 // A multi-part OpenEXR whose first part is not the picture (a depth pass first, as a renderer may
 // write it): the part with R, G and B is read, and a note says which; the header-only reading
 // agrees. (Part 0 was read: the depth as a grey plate, exit 0.)
