@@ -557,6 +557,11 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         r.push_back({k, 1, half, offsets[size_t(c)]});
     }
   }
+  // The factors of the scaled images, over a row.
+  std::vector<std::vector<float>> rowScales(sources.images.size());
+  for (size_t i = 0; i < sources.images.size(); ++i)
+    if (const std::vector<float>* scales = sources.scalesOf(i))
+      rowScales[i] = detail::rowOfScales(*scales, width);
   constexpr size_t kBandBytes = size_t(8) << 20;
   constexpr int kBlockRows = 32;
   const int bandRows = std::max(kBlockRows, int(kBandBytes / rowBytes) / kBlockRows * kBlockRows);
@@ -588,10 +593,10 @@ void writeBands(const detail::ChannelSources& sources, const std::vector<std::st
         const float* row = image->row(y).data();
         const int n = image->channels;
         const size_t values = size_t(width) * size_t(n);
-        if (const std::vector<float>* scales = sources.scalesOf(i)) {
+        if (!rowScales[i].empty()) {
           scaled.resize(values);
-          for (size_t k = 0; k < values; k += size_t(n))
-            for (size_t c = 0; c < size_t(n); ++c) scaled[k + c] = row[k + c] * (*scales)[c];
+          const float* factor = rowScales[i].data();
+          for (size_t k = 0; k < values; ++k) scaled[k] = row[k] * factor[k];
           row = scaled.data();
         }
         halves.resize(values);

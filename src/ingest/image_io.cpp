@@ -35,26 +35,13 @@ float largestFiniteMagnitude(const ChannelSources& sources) {
   for (size_t i = 0; i < sources.images.size(); ++i) {
     const Image* image = sources.images[i];
     const std::vector<float>* scales = sources.scalesOf(i);
+    const std::vector<float> rowScales =
+        scales ? rowOfScales(*scales, image->width) : std::vector<float>();
     std::vector<float> rowLargest(size_t(image->height), 0.0f);
     parallelFor(0, image->height, [&](int64_t y) {
-      // Branch-free, so that it vectorises: NaN and infinities fail `a <= max`.
-      float m = 0.0f;
-      if (!scales) {
-        for (float v : image->row(int(y))) {
-          const float a = std::abs(v);
-          m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
-        }
-      } else {
-        const std::span<const float> row = image->row(int(y));
-        const size_t n = size_t(image->channels);
-        for (size_t k = 0; k < row.size(); k += n) {
-          for (size_t c = 0; c < n; ++c) {
-            const float a = std::abs(row[k + c] * (*scales)[c]);
-            m = a <= std::numeric_limits<float>::max() && a > m ? a : m;
-          }
-        }
-      }
-      rowLargest[size_t(y)] = m;
+      const std::span<const float> row = image->row(int(y));
+      rowLargest[size_t(y)] = scales ? largestFinite(row.data(), rowScales.data(), row.size())
+                                     : largestFinite(row.data(), row.size());
     });
     for (float m : rowLargest) largest = std::max(largest, m);
   }

@@ -38,6 +38,20 @@ struct ChannelSources {
 // The largest finite magnitude among the sources' values (scaled), rows on every core.
 float largestFiniteMagnitude(const ChannelSources& sources);
 
+// The largest finite magnitude among `n` values (0 when there is none), four at a time; the same
+// among values[i] * scales[i].
+float largestFinite(const float* values, size_t n);
+float largestFinite(const float* values, const float* scales, size_t n);
+
+// An image's per-channel factors repeated over a row of `width` pixels, so that a row is scaled
+// value by value.
+inline std::vector<float> rowOfScales(const std::vector<float>& perChannel, int width) {
+  std::vector<float> row;
+  row.reserve(perChannel.size() * size_t(width));
+  for (int x = 0; x < width; ++x) row.insert(row.end(), perChannel.begin(), perChannel.end());
+  return row;
+}
+
 // Floats to halves as Imath rounds them (to nearest, ties to even), `n` of them: eight at a time
 // with the processor's F16C instructions where it has them.
 void toHalf(const float* from, uint16_t* to, size_t n);

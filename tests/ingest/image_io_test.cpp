@@ -1,6 +1,7 @@
 #include "ingest/image_io.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -10,6 +11,7 @@
 
 #include "core/output_files.h"
 #include "ingest/exif.h"
+#include "ingest/pixel_util.h"
 #include "test_util.h"
 
 namespace compose::ingest {
@@ -321,6 +323,44 @@ TEST(ImageIo, ExrCarriesChromaticitiesAndTheColourSpaceName) {
   for (size_t i = 0; i < 8; ++i)
     EXPECT_NEAR((*back.info.chromaticities)[i], (*opt.chromaticities)[i], 1e-7);
   EXPECT_EQ(back.info.fileColorSpace, "ACEScg");
+}
+
+// The largest finite magnitude, four lanes at a time, against a plain loop: every length up to 40
+// (the lanes and the tail), a NaN, an infinity or the largest value at every place, signs mixed;
+// and the same of the values scaled (the largest float scaled up is infinite, not counted).
+TEST(ImageIo, LargestFiniteMagnitudeMatchesAPlainLoop) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-3.0f, 3.0f);
+  auto plain = [](const std::vector<float>& v) {
+    float m = 0.0f;
+    for (float x : v)
+      if (std::isfinite(x)) m = std::max(m, std::abs(x));
+    return m;
+  };
+  auto product = [](const std::vector<float>& v, const std::vector<float>& s) {
+    std::vector<float> p(v.size());
+    for (size_t i = 0; i < v.size(); ++i) p[i] = v[i] * s[i];
+    return p;
+  };
+  const float specials[] = {
+      std::numeric_limits<float>::quiet_NaN(), -std::numeric_limits<float>::infinity(),
+      std::numeric_limits<float>::infinity(),  -9.5f,
+      std::numeric_limits<float>::max(),       -0.0f};
+  for (size_t n = 0; n <= 40; ++n) {
+    std::vector<float> v(n), scales(n);
+    for (float& x : v) x = u(rng);
+    for (float& x : scales) x = std::abs(u(rng)) * 4.0f;
+    EXPECT_EQ(detail::largestFinite(v.data(), n), plain(v)) << n;
+    EXPECT_EQ(detail::largestFinite(v.data(), scales.data(), n), plain(product(v, scales))) << n;
+    for (size_t at = 0; at < n; ++at)
+      for (float special : specials) {
+        std::vector<float> w = v;
+        w[at] = special;
+        ASSERT_EQ(detail::largestFinite(w.data(), n), plain(w)) << n << " " << at << " " << special;
+        ASSERT_EQ(detail::largestFinite(w.data(), scales.data(), n), plain(product(w, scales)))
+            << n << " " << at << " " << special;
+      }
+  }
 }
 
 TEST(ImageIo, ValuesBeyondHalfRangeAreWrittenAsFloatNotInf) {
