@@ -24,7 +24,8 @@ namespace compose::pipeline {
 namespace fs = std::filesystem;
 
 namespace {
-constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '3'};
+// The last character is the format's version (4: checksums of 64-bit words).
+constexpr char kMagic[8] = {'C', 'O', 'M', 'P', 'S', 'T', 'G', '4'};
 constexpr uint64_t kMaxHeader = 1 << 20;
 constexpr uint64_t kChecksumBytes = 16;
 

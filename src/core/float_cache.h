@@ -28,7 +28,7 @@ namespace compose {
 
 class FloatCache {
  public:
-  // `magic`: 8 bytes, the kind of entry (7) and its format version (1), e.g. "COMPLIT5".
+  // `magic`: 8 bytes, the kind of entry (7) and its format version (1), e.g. "COMPLIT6".
   FloatCache(std::filesystem::path folder, const std::string& magic, std::string extension);
 
   std::filesystem::path pathFor(const std::string& key) const;

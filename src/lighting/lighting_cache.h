@@ -27,7 +27,7 @@ class LightingCache {
   static constexpr int kProjectionVersion = 3;
 
   explicit LightingCache(std::filesystem::path folder)
-      : files_(std::move(folder), "COMPLIT5", ".lighting") {}
+      : files_(std::move(folder), "COMPLIT6", ".lighting") {}
 
   static std::string key(const Environment& environment, const DiffuseLighting& basis);
   // Whether a restored basis gives finite irradiance (probed at the 26 axis and diagonal

@@ -232,8 +232,8 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
                             const GroundContactParams& params = {});
 
 // The header of the visibility cache's files (core/float_cache.h); its last character is the
-// format's version.
-inline constexpr char kTransferCacheMagic[] = "COMPVISA";
+// format's version (B: checksums of 64-bit words).
+inline constexpr char kTransferCacheMagic[] = "COMPVISB";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
 // from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own

@@ -378,7 +378,7 @@ TEST_F(StageCacheFiles, ZeroedOldVersionForeignAndDamagedEntriesAreDetected) {
   std::string old = full;
   old[7] = '1';
   writeBytes(path(), old);
-  expectInvalid("is of format version '1', this compose reads version '3'");
+  expectInvalid("is of format version '1', this compose reads version '4'");
   writeBytes(path(), "PNG? no. Something else entirely, long enough to have a header.");
   expectInvalid("not a compose stage cache entry");
   for (size_t i = 8; i < full.size(); i += 3) {

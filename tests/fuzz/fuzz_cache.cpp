@@ -76,7 +76,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const size_t count = shape < 200 ? stateSize : shape < 228 ? stateSize + 1 : stateSize - 1;
     std::vector<float> values(count, 0.0f);
     for (size_t i = 0; i < count && !in.empty(); ++i) values[i] = in.f32();
-    FloatCache(folder / "lighting", "COMPLIT5", ".lighting")
+    FloatCache(folder / "lighting", "COMPLIT6", ".lighting")
         .store(key, basis->parameterKey(), values);
     values.resize(shape % 2 ? 21 : values.size());  // the visibility state of 3 points: 21 values
     visibilityFiles.store(key, description, values);
