@@ -86,6 +86,9 @@ struct RenderedObject {
   // kept in the environment's units so that a new --exposure reuses it; 1 for a layer read from a
   // file, whose values carry their exposure.
   float pending = 1.0f;
+  // What the automatic exposure chose and said, kept with the render whichever was used.
+  float autoExposure = 1.0f;
+  std::string autoNote;
   std::vector<std::string> notes;  // how the exposure was chosen
   std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
   glm::dvec3 fileOrigin{0.0};      // render::Mesh::fileOrigin of that mesh

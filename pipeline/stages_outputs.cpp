@@ -208,6 +208,21 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 
 // ---------------------------------------------------------------------------------------------
 
+// The exposure the render is shown at: the one given in stops, else the automatic choice (whose
+// note is printed); still to be applied to the render, which is in the environment's units.
+void chooseExposure(Context& ctx, RenderedObject& r) {
+  if (ctx.job.exposureStops) {
+    r.exposure = float(std::exp2(*ctx.job.exposureStops));
+  } else {
+    r.exposure = r.autoExposure;
+    if (!r.autoNote.empty()) {
+      r.notes.push_back(r.autoNote);
+      ctx.note(r.autoNote);
+    }
+  }
+  r.pending = r.exposure;
+}
+
 class RenderStage final : public Stage {
  public:
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
@@ -217,8 +232,8 @@ class RenderStage final : public Stage {
   // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
   // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
   // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
-  // the composite and the files
-  static constexpr int kVersion = 15;
+  // the composite and the files; 16: the automatic exposure kept whichever is used
+  static constexpr int kVersion = 16;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -331,15 +346,9 @@ class RenderStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.geometryKey());
     h.combine(ctx.key(kLighting));
-    // The render is kept in the environment's units: an exposure given by number is applied
-    // afterwards (a new --exposure reuses it); the automatic one reads the plate, and the entry
-    // keeps what it chose.
-    if (ctx.job.exposureStops) {
-      h.bytes("exposure given");
-    } else {
-      h.bytes("exposure auto");
-      h.combine(ctx.key(kPlateLinear));
-    }
+    // The render is kept in the environment's units, the exposure applied afterwards: a new
+    // --exposure reuses it. The automatic exposure reads the plate; the entry keeps what it chose.
+    h.combine(ctx.key(kPlateLinear));
     if (ctx.hasKey(kSelfShadowing)) h.combine(ctx.key(kSelfShadowing));
     h.bytes(ctx.colors.identity());  // the materials' colours
     if (ctx.job.albedo) h.floats(std::span<const float>(&ctx.job.albedo->x, 3));
@@ -363,9 +372,8 @@ class RenderStage final : public Stage {
     r.output.rays =
         wholeMember(m, "rays", 0, std::numeric_limits<int64_t>::max()).value_or(int64_t(0));
     r.output.coverage = m.value("coverage", 0.0);
-    r.exposure = ctx.job.exposureStops ? float(std::exp2(*ctx.job.exposureStops))
-                                       : m.value("exposure", 1.0f);
-    r.pending = r.exposure;
+    r.autoExposure = m.value("autoExposure", 1.0f);
+    r.autoNote = m.value("autoNote", "");
     if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))
       return false;
     // The rectangle and the images it holds agree (the composite places them by it).
@@ -374,22 +382,25 @@ class RenderStage final : public Stage {
         r.output.beauty.height != h || r.output.beauty.channels != 4 || r.output.aovs.width != w ||
         r.output.aovs.height != h)
       return false;
-    r.notes = m.value("notes", std::vector<std::string>());
     r.meshFile = m.value("mesh", "");
     if (const auto o = m.find("fileOrigin"); o != m.end() && o->is_array() && o->size() == 3)
       r.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
-    for (const auto& n : r.notes) ctx.note(n);
+    chooseExposure(ctx, r);
     ctx.artefacts.object = std::move(r);
     return true;
   }
   bool store(const Context& ctx, StageCache& cache) const override {
     const RenderedObject& r = *ctx.artefacts.object;
-    cache.meta() = {
-        {"x0", r.output.x0},      {"y0", r.output.y0},
-        {"x1", r.output.x1},      {"y1", r.output.y1},
-        {"rays", r.output.rays},  {"coverage", r.output.coverage},
-        {"exposure", r.exposure}, {"notes", r.notes},
-        {"mesh", r.meshFile},     {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}};
+    cache.meta() = {{"x0", r.output.x0},
+                    {"y0", r.output.y0},
+                    {"x1", r.output.x1},
+                    {"y1", r.output.y1},
+                    {"rays", r.output.rays},
+                    {"coverage", r.output.coverage},
+                    {"autoExposure", r.autoExposure},
+                    {"autoNote", r.autoNote},
+                    {"mesh", r.meshFile},
+                    {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}};
     cache.putImage("beauty", r.output.beauty);
     cache.putImage("aovs", r.output.aovs);
     return cache.write();
@@ -412,34 +423,33 @@ class RenderStage final : public Stage {
       settings.sources = &s.sources;
     }
     RenderedObject r;
-    float exposure = 1.0f;
-    if (job.exposureStops) {
-      exposure = float(std::exp2(*job.exposureStops));
-    } else {
+    // What the automatic exposure chooses, worked out whichever exposure is used and kept in the
+    // render's cache entry: going from `auto` to a given --exposure and back reuses the render.
+    {
       const ExposureMatch match =
           autoExposure(*ctx.artefacts.plateLinear, g.camera, *ctx.artefacts.lighting,
                        settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
       std::string why;
       if (const std::optional<double> exif = exifExposure(ctx, why)) {
-        exposure = float(*exif);
+        r.autoExposure = float(*exif);
         const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
-        ctx.note(format(
+        r.autoNote = format(
             "exposure from EXIF: %+.2f stops: the plate and the environment's photos come from one "
             "camera "
             "(%s); the plate's relative exposure %.4g (%.4g s, f/%.3g, ISO %.0f) puts the "
             "environment's radiance in the plate's units (the automatic match would give %+.2f "
             "stops); override with --exposure",
             std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
-            *info.iso, std::log2(match.scale)));
+            *info.iso, std::log2(match.scale));
       } else if (match.nothingVisible) {
-        exposure = 1.0f;
-        ctx.note(
+        r.autoExposure = 1.0f;
+        r.autoNote =
             "auto exposure: 0 stops (the environment's own units): the plate is transparent "
             "everywhere (alpha below 0.01), so it has no brightness to match; override with "
-            "--exposure");
+            "--exposure";
       } else {
-        exposure = float(match.scale);
-        ctx.note(format(
+        r.autoExposure = float(match.scale);
+        r.autoNote = format(
             "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
             "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
             "override with --exposure",
@@ -451,13 +461,11 @@ class RenderStage final : public Stage {
                 : "",
             ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
                 ? (" (not from EXIF: " + why + ")").c_str()
-                : ""));
+                : "");
       }
-      r.notes.push_back(ctx.notes.back());
     }
+    chooseExposure(ctx, r);
     // Rendered in the environment's units; the composite and the files apply the exposure.
-    r.exposure = exposure;
-    r.pending = exposure;
     settings.exposure = 1.0f;
     // A camera inside the object sees its inside only (a frame of back faces, near black): seven
     // rays from the camera, most of which meet the object from within, say so.

@@ -229,9 +229,11 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_FALSE(fs::exists(dir_ / "three" / "compose.exr"));
 }
 
-// The render is kept in the environment's units and the exposure applied after it: a new
-// --exposure reuses the cached render, and gives the files a run without the cache gives, byte for
-// byte; the object's colour and irradiance scale with it, its other channels do not.
+// The render is kept in the environment's units and the exposure applied after it: a given
+// --exposure after the automatic one, another one, and the automatic one again reuse the cached
+// render, and give the files a run without the cache gives, byte for byte; the object's colour and
+// irradiance scale with it, its other channels do not, and the composite shows the object's colour
+// where it covers the plate.
 TEST_F(StageCommands, ANewExposureReusesTheRender) {
   const std::string job = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
                           quote(samples_ / "forest.exr") +
@@ -240,18 +242,28 @@ TEST_F(StageCommands, ANewExposureReusesTheRender) {
     const size_t at = r.err.find("compose: render ");
     return at == std::string::npos ? std::string() : r.err.substr(at, r.err.find('\n', at) - at);
   };
-  const RunResult first = run(job + " --exposure -1 --out " + quote(dir_ / "first" / "compose") +
-                                  " --cache " + quote(dir_ / "cache"),
-                              dir_.path());
+  auto cached = [&](const std::string& exposure, const std::string& name) {
+    return run(job + exposure + " --out " + quote(dir_ / name / "compose") + " --cache " +
+                   quote(dir_ / "cache"),
+               dir_.path());
+  };
+  const RunResult automatic = cached("", "auto");
+  ASSERT_EQ(automatic.status, 0) << automatic.err;
+  ASSERT_FALSE(renderLine(automatic).empty()) << automatic.err;
+  EXPECT_EQ(renderLine(automatic).find("reused"), std::string::npos) << automatic.err;
+  EXPECT_NE(automatic.err.find("auto exposure: "), std::string::npos) << automatic.err;
+  const RunResult first = cached(" --exposure -1", "first");
   ASSERT_EQ(first.status, 0) << first.err;
-  ASSERT_FALSE(renderLine(first).empty()) << first.err;
-  EXPECT_EQ(renderLine(first).find("reused"), std::string::npos) << first.err;
-  const RunResult brighter =
-      run(job + " --exposure 0.5 --out " + quote(dir_ / "brighter" / "compose") + " --cache " +
-              quote(dir_ / "cache"),
-          dir_.path());
+  EXPECT_NE(renderLine(first).find("reused"), std::string::npos) << first.err;
+  EXPECT_EQ(first.err.find("auto exposure: "), std::string::npos) << first.err;
+  const RunResult brighter = cached(" --exposure 0.5", "brighter");
   ASSERT_EQ(brighter.status, 0) << brighter.err;
   EXPECT_NE(renderLine(brighter).find("reused"), std::string::npos) << brighter.err;
+  const RunResult again = cached("", "again");
+  ASSERT_EQ(again.status, 0) << again.err;
+  EXPECT_NE(renderLine(again).find("reused"), std::string::npos) << again.err;
+  EXPECT_NE(again.err.find("auto exposure: "), std::string::npos) << again.err;
+  EXPECT_EQ(slurp(dir_ / "auto" / "compose.exr"), slurp(dir_ / "again" / "compose.exr"));
   const RunResult fresh =
       run(job + " --exposure 0.5 --out " + quote(dir_ / "fresh" / "compose") + " --no-cache",
           dir_.path());
@@ -295,6 +307,37 @@ TEST_F(StageCommands, ANewExposureReusesTheRender) {
       EXPECT_GT(lit, 100u);
     }
   }
+  // Where the object covers a pixel entirely, the composite is the object's colour.
+  const Part& composite = b[0];
+  ASSERT_EQ(composite.name, "composite");
+  const size_t alpha =
+      size_t(std::find(bright.channels.begin(), bright.channels.end(), "object.A") -
+             bright.channels.begin());
+  ASSERT_LT(alpha, stride);
+  size_t covered = 0, differing = 0;
+  for (int y = 0; y < bright.height; ++y)
+    for (int x = 0; x < bright.width; ++x) {
+      const float* o = &bright.pixels[(size_t(y) * size_t(bright.width) + size_t(x)) * stride];
+      if (o[alpha] != 1.0f) continue;
+      ++covered;
+      const float* c =
+          &composite
+               .pixels[(size_t(y + bright.y) * size_t(composite.width) + size_t(x + bright.x)) *
+                       composite.channels.size()];
+      for (const char* name : {"R", "G", "B"}) {
+        const size_t at =
+            size_t(std::find(composite.channels.begin(), composite.channels.end(), name) -
+                   composite.channels.begin());
+        const size_t from = size_t(std::find(bright.channels.begin(), bright.channels.end(),
+                                             std::string("object.") + name) -
+                                   bright.channels.begin());
+        ASSERT_LT(at, composite.channels.size());
+        ASSERT_LT(from, stride);
+        differing += c[at] != o[from];
+      }
+    }
+  EXPECT_GT(covered, 100u);
+  EXPECT_EQ(differing, 0u);
 }
 
 // An option only the one-shot command has, given to a command, is refused before anything is
