@@ -83,12 +83,15 @@ struct RenderedObject {
   float exposure = 1.0f;
   // What the output's colour and irradiance AOVs (exposedChannels()) are still to be multiplied
   // by, in the composite and the files: the exposure for the render stage's own render, which is
-  // kept in the environment's units so that a new --exposure reuses it; 1 for a layer read from a
-  // file, whose values carry their exposure.
+  // kept in the environment's units so that a new --exposure or plate reuses it; 1 for a layer
+  // read from a file, whose values carry their exposure.
   float pending = 1.0f;
-  // What the automatic exposure chose and said, kept with the render whichever was used.
-  float autoExposure = 1.0f;
-  std::string autoNote;
+  // Whether `exposure` is chosen: a render's is chosen for the plate it is composited on
+  // (chooseExposure, stages.h), a layer's came with it.
+  bool exposureChosen = false;
+  // A mid-grey card lying on the ground under the render's lighting: its radiance 0.18 E(up)/π as
+  // luminance, in the environment's units (the automatic exposure matches it to the plate).
+  double cardRadiance = 0.0;
   std::vector<std::string> notes;  // how the exposure was chosen
   std::string meshFile;            // the mesh it is made from (absolute), for the EXR header
   glm::dvec3 fileOrigin{0.0};      // render::Mesh::fileOrigin of that mesh

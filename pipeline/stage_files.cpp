@@ -225,7 +225,8 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
 }
 
 void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& compression) {
-  const RenderedObject& object = *ctx.artefacts.object;
+  RenderedObject& object = *ctx.artefacts.object;
+  if (!object.exposureChosen) chooseExposure(ctx, object);  // for the plate it is rendered on
   const render::RenderOutput& r = object.output;
   const Geometry& g = ctx.geometry();
   const std::vector<std::string>& aovNames = render::aovChannelNames();
@@ -379,6 +380,7 @@ StageInput objectLayerInput(const fs::path& file) {
       r.rays = whole(rj, "rays", std::numeric_limits<int64_t>::max());
       r.coverage = rj.at("coverage");
       object.exposure = rj.at("exposure");
+      object.exposureChosen = true;  // its values carry it: pending stays 1
       object.notes = rj.at("notes").get<std::vector<std::string>>();
       object.meshFile = rj.value("mesh", "");
       if (const auto o = rj.find("fileOrigin"); o != rj.end() && o->is_array() && o->size() == 3)

@@ -40,6 +40,12 @@ color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::file
 ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile,
                               const glm::dvec3& fileOrigin);
 
+// Chooses the exposure of a render (RenderedObject::exposureChosen false) for the plate it is
+// composited on: the one given in stops, else from EXIF where the plate and the environment's
+// photos come from one camera, else by matching a mid-grey card on the ground to the plate's
+// ground (the note printed says which); `pending` becomes it.
+void chooseExposure(Context& ctx, RenderedObject& object);
+
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
 // not at all, the object's pending exposure applied on the way. Returns notes for the user.

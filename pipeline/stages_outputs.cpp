@@ -49,9 +49,17 @@ struct ExposureMatch {
   bool nothingVisible = false;  // every pixel of the plate transparent: no key, scale 1
 };
 
+// The card's radiance, 0.18 E(up)/π, as luminance (environment units): the unshadowed irradiance
+// from above.
+double cardRadiance(const lighting::DiffuseLighting& lighting, const glm::mat3& envFromWorld,
+                    const glm::dvec3& luma) {
+  const glm::vec3 e =
+      glm::max(lighting.irradiance(envFromWorld * glm::vec3(0.0f, 1.0f, 0.0f)), glm::vec3(0.0f));
+  return 0.18 * (luma.x * e.x + luma.y * e.y + luma.z * e.z) / std::numbers::pi;
+}
+
 ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& camera,
-                           const lighting::DiffuseLighting& lighting, const glm::mat3& envFromWorld,
-                           const glm::dvec3& luma) {
+                           double cardRadiance, const glm::dvec3& luma) {
   ExposureMatch m;
   // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level;
   // of those whose camera ray looks down by more than a degree (the ground is y = 0: rows are
@@ -87,10 +95,7 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
   m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
   m.groundShare = double(count[1]) / double(std::max<int64_t>(count[0], 1));
   m.wholePlate = use == 0;
-  // The card: the unshadowed irradiance from above.
-  const glm::vec3 e =
-      glm::max(lighting.irradiance(envFromWorld * glm::vec3(0.0f, 1.0f, 0.0f)), glm::vec3(0.0f));
-  m.cardRadiance = 0.18 * (luma.x * e.x + luma.y * e.y + luma.z * e.z) / std::numbers::pi;
+  m.cardRadiance = cardRadiance;
   if (m.cardRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.cardRadiance;
   return m;
 }
@@ -208,21 +213,6 @@ glm::dvec2 pairOf(const nlohmann::json& v, const std::string& name) {
 
 // ---------------------------------------------------------------------------------------------
 
-// The exposure the render is shown at: the one given in stops, else the automatic choice (whose
-// note is printed); still to be applied to the render, which is in the environment's units.
-void chooseExposure(Context& ctx, RenderedObject& r) {
-  if (ctx.job.exposureStops) {
-    r.exposure = float(std::exp2(*ctx.job.exposureStops));
-  } else {
-    r.exposure = r.autoExposure;
-    if (!r.autoNote.empty()) {
-      r.notes.push_back(r.autoNote);
-      ctx.note(r.autoNote);
-    }
-  }
-  r.pending = r.exposure;
-}
-
 class RenderStage final : public Stage {
  public:
   // 3: samples in one surface cell shaded once; 4: the exposure from EXIF for maps the photo
@@ -232,7 +222,8 @@ class RenderStage final : public Stage {
   // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
   // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
   // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
-  // the composite and the files; 16: the automatic exposure kept whichever is used
+  // the composite and the files; 16: the card's radiance kept for the automatic exposure, which
+  // the composite chooses for its plate
   static constexpr int kVersion = 16;
 
   std::string name() const override { return "render"; }
@@ -241,7 +232,7 @@ class RenderStage final : public Stage {
            "self-shadowing), with AOVs";
   }
   std::vector<std::string> inputs() const override {
-    return {kPlate, kMesh, kPlateLinear, kLighting, kSelfShadowing};
+    return {kPlate, kMesh, kLighting, kSelfShadowing};
   }
   std::vector<std::string> outputs() const override { return {kObject}; }
   std::vector<StageParameter> parameters() const override {
@@ -346,9 +337,8 @@ class RenderStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.geometryKey());
     h.combine(ctx.key(kLighting));
-    // The render is kept in the environment's units, the exposure applied afterwards: a new
-    // --exposure reuses it. The automatic exposure reads the plate; the entry keeps what it chose.
-    h.combine(ctx.key(kPlateLinear));
+    // The render is kept in the environment's units and the exposure chosen and applied by the
+    // composite: neither the exposure nor the plate's pixels are part of its key.
     if (ctx.hasKey(kSelfShadowing)) h.combine(ctx.key(kSelfShadowing));
     h.bytes(ctx.colors.identity());  // the materials' colours
     if (ctx.job.albedo) h.floats(std::span<const float>(&ctx.job.albedo->x, 3));
@@ -372,8 +362,9 @@ class RenderStage final : public Stage {
     r.output.rays =
         wholeMember(m, "rays", 0, std::numeric_limits<int64_t>::max()).value_or(int64_t(0));
     r.output.coverage = m.value("coverage", 0.0);
-    r.autoExposure = m.value("autoExposure", 1.0f);
-    r.autoNote = m.value("autoNote", "");
+    const auto card = m.find("cardRadiance");
+    if (card == m.end() || !card->is_number()) return false;
+    r.cardRadiance = card->get<double>();
     if (!cache.takeImage("beauty", r.output.beauty) || !cache.takeImage("aovs", r.output.aovs))
       return false;
     // The rectangle and the images it holds agree (the composite places them by it).
@@ -385,7 +376,6 @@ class RenderStage final : public Stage {
     r.meshFile = m.value("mesh", "");
     if (const auto o = m.find("fileOrigin"); o != m.end() && o->is_array() && o->size() == 3)
       r.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
-    chooseExposure(ctx, r);
     ctx.artefacts.object = std::move(r);
     return true;
   }
@@ -397,8 +387,7 @@ class RenderStage final : public Stage {
                     {"y1", r.output.y1},
                     {"rays", r.output.rays},
                     {"coverage", r.output.coverage},
-                    {"autoExposure", r.autoExposure},
-                    {"autoNote", r.autoNote},
+                    {"cardRadiance", r.cardRadiance},
                     {"mesh", r.meshFile},
                     {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}};
     cache.putImage("beauty", r.output.beauty);
@@ -423,50 +412,11 @@ class RenderStage final : public Stage {
       settings.sources = &s.sources;
     }
     RenderedObject r;
-    // What the automatic exposure chooses, worked out whichever exposure is used and kept in the
-    // render's cache entry: going from `auto` to a given --exposure and back reuses the render.
-    {
-      const ExposureMatch match =
-          autoExposure(*ctx.artefacts.plateLinear, g.camera, *ctx.artefacts.lighting,
-                       settings.envFromWorld, ctx.colors.lumaWeights(ctx.colors.workingSpace()));
-      std::string why;
-      if (const std::optional<double> exif = exifExposure(ctx, why)) {
-        r.autoExposure = float(*exif);
-        const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
-        r.autoNote = format(
-            "exposure from EXIF: %+.2f stops: the plate and the environment's photos come from one "
-            "camera "
-            "(%s); the plate's relative exposure %.4g (%.4g s, f/%.3g, ISO %.0f) puts the "
-            "environment's radiance in the plate's units (the automatic match would give %+.2f "
-            "stops); override with --exposure",
-            std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
-            *info.iso, std::log2(match.scale));
-      } else if (match.nothingVisible) {
-        r.autoExposure = 1.0f;
-        r.autoNote =
-            "auto exposure: 0 stops (the environment's own units): the plate is transparent "
-            "everywhere (alpha below 0.01), so it has no brightness to match; override with "
-            "--exposure";
-      } else {
-        r.autoExposure = float(match.scale);
-        r.autoNote = format(
-            "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
-            "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
-            "override with --exposure",
-            std::log2(match.scale), match.cardRadiance, match.plateKey,
-            match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
-            : match.groundShare < 0.999
-                ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
-                      .c_str()
-                : "",
-            ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
-                ? (" (not from EXIF: " + why + ")").c_str()
-                : "");
-      }
-    }
-    chooseExposure(ctx, r);
-    // Rendered in the environment's units; the composite and the files apply the exposure.
+    // Rendered in the environment's units: the exposure is chosen for the plate the render is
+    // composited on (chooseExposure) and applied by the composite and the files.
     settings.exposure = 1.0f;
+    r.cardRadiance = cardRadiance(*ctx.artefacts.lighting, settings.envFromWorld,
+                                  ctx.colors.lumaWeights(ctx.colors.workingSpace()));
     // A camera inside the object sees its inside only (a frame of back faces, near black): seven
     // rays from the camera, most of which meet the object from within, say so.
     {
@@ -567,7 +517,8 @@ class CompositeStage final : public Stage {
     ctx.keys[kComposite] = h;
   }
   std::string run(Context& ctx) const override {
-    const RenderedObject& object = *ctx.artefacts.object;
+    RenderedObject& object = *ctx.artefacts.object;
+    if (!object.exposureChosen) chooseExposure(ctx, object);
     {
       const Image& plate = *ctx.artefacts.plateLinear;
       const calib::PlateCamera& camera = ctx.geometry().camera;
@@ -732,6 +683,56 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
                                 "distorted lens: worldToNDC holds its pinhole part only");
   }
   return header;
+}
+
+void chooseExposure(Context& ctx, RenderedObject& object) {
+  COMPOSE_CHECK(!object.exposureChosen);
+  object.notes.clear();
+  if (ctx.job.exposureStops) {
+    object.exposure = float(std::exp2(*ctx.job.exposureStops));
+  } else {
+    const ExposureMatch match =
+        autoExposure(*ctx.artefacts.plateLinear, ctx.geometry().camera, object.cardRadiance,
+                     ctx.colors.lumaWeights(ctx.colors.workingSpace()));
+    std::string why, note;
+    if (const std::optional<double> exif = exifExposure(ctx, why)) {
+      object.exposure = float(*exif);
+      const ingest::CaptureInfo& info = ctx.artefacts.plate->info;
+      note = format(
+          "exposure from EXIF: %+.2f stops: the plate and the environment's photos come from one "
+          "camera "
+          "(%s); the plate's relative exposure %.4g (%.4g s, f/%.3g, ISO %.0f) puts the "
+          "environment's radiance in the plate's units (the automatic match would give %+.2f "
+          "stops); override with --exposure",
+          std::log2(*exif), info.camera().c_str(), *exif, *info.exposureTime, *info.fNumber,
+          *info.iso, std::log2(match.scale));
+    } else if (match.nothingVisible) {
+      object.exposure = 1.0f;
+      note =
+          "auto exposure: 0 stops (the environment's own units): the plate is transparent "
+          "everywhere (alpha below 0.01), so it has no brightness to match; override with "
+          "--exposure";
+    } else {
+      object.exposure = float(match.scale);
+      note = format(
+          "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
+          "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
+          "override with --exposure",
+          std::log2(match.scale), match.cardRadiance, match.plateKey,
+          match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
+          : match.groundShare < 0.999
+              ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
+                    .c_str()
+              : "",
+          ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
+              ? (" (not from EXIF: " + why + ")").c_str()
+              : "");
+    }
+    ctx.note(note);
+    object.notes.push_back(note);
+  }
+  object.pending = object.exposure;
+  object.exposureChosen = true;
 }
 
 std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,

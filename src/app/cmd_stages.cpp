@@ -228,6 +228,8 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
     request.targets = {pipeline::artefact::kObject, pipeline::artefact::kPlate,
                        pipeline::artefact::kMesh};
     if (o->job.groundShadow) request.targets.push_back(pipeline::artefact::kGroundShadow);
+    // The automatic exposure matches the object to the plate's pixels.
+    if (!o->job.exposureStops) request.targets.push_back(pipeline::artefact::kPlateLinear);
     const fs::path file = *out;
     request.finish = [file, compression](pipeline::Context& ctx) {
       pipeline::saveObjectLayer(ctx, file, *compression);

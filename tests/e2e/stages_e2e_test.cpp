@@ -229,11 +229,11 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_FALSE(fs::exists(dir_ / "three" / "compose.exr"));
 }
 
-// The render is kept in the environment's units and the exposure applied after it: a given
-// --exposure after the automatic one, another one, and the automatic one again reuse the cached
-// render, and give the files a run without the cache gives, byte for byte; the object's colour and
-// irradiance scale with it, its other channels do not, and the composite shows the object's colour
-// where it covers the plate.
+// The render is kept in the environment's units and the exposure chosen and applied after it: a
+// given --exposure after the automatic one, another one and the automatic one again reuse the
+// cached render, and give the files a run without the cache gives, byte for byte; the object's
+// colour and irradiance scale with the exposure, its other channels do not, and the composite
+// shows the object's colour where it covers the plate.
 TEST_F(StageCommands, ANewExposureReusesTheRender) {
   const std::string job = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
                           quote(samples_ / "forest.exr") +
