@@ -222,9 +222,9 @@ class RenderStage final : public Stage {
   // 11: sources traced across their penumbrae; 12: textures filtered over each sample's footprint;
   // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
   // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
-  // the composite and the files; 16: the card's radiance kept for the automatic exposure, which
-  // the composite chooses for its plate
-  static constexpr int kVersion = 16;
+  // the composite and the files; 16: the automatic exposure kept whichever is used; 17: the
+  // card's radiance kept instead, the composite choosing the exposure for its plate
+  static constexpr int kVersion = 17;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -232,7 +232,10 @@ class RenderStage final : public Stage {
            "self-shadowing), with AOVs";
   }
   std::vector<std::string> inputs() const override {
-    return {kPlate, kMesh, kLighting, kSelfShadowing};
+    // The linear plate for the colour stage, which brings the mesh's materials into the working
+    // space (base colours, textures and their mip levels) as it makes it: the render reads the
+    // materials, not the plate's pixels, and its key does not hold the linear plate.
+    return {kPlate, kMesh, kPlateLinear, kLighting, kSelfShadowing};
   }
   std::vector<std::string> outputs() const override { return {kObject}; }
   std::vector<StageParameter> parameters() const override {
@@ -347,7 +350,9 @@ class RenderStage final : public Stage {
     ctx.keys[kObject] = h;
   }
   bool cached() const override { return true; }
-  // Its outputs are only read once made (by the composite and the output stages).
+  // Its outputs are only read once made (by the composite and the output stages), but for the
+  // exposure chosen by the composite (RenderedObject::exposure, pending, notes, exposureChosen),
+  // which store() does not read.
   bool storesWhileLaterStagesRun() const override { return true; }
   bool load(Context& ctx, StageCache& cache) const override {
     const nlohmann::json& m = cache.meta();

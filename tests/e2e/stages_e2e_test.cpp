@@ -340,6 +340,54 @@ TEST_F(StageCommands, ANewExposureReusesTheRender) {
   EXPECT_EQ(differing, 0u);
 }
 
+// A textured object (Suzanne with a checker texture, exported by Blender) through compose render
+// and compose composite with a given exposure gives the one-shot command's files bit for bit: the
+// render command brings the materials into the working space as the one-shot command does (it did
+// not with a given exposure, whose render then showed the texture's sRGB codes as linear light).
+TEST_F(StageCommands, ATexturedObjectChainedByHandWithAGivenExposure) {
+  const fs::path mesh = fs::path(COMPOSE_TEST_DATA_DIR) / "suzanne_checker.obj";
+  ASSERT_TRUE(fs::exists(mesh)) << mesh;
+  const std::string env = " --env " + quote(samples_ / "forest.exr");
+  const std::string lighting = " --lighting-params order=4 --shadow-params order=4,grid=4";
+  const std::string object =
+      " --object " + quote(mesh) + " --samples 2 --scale 0.4 --yaw 20 --exposure 0.3";
+  const RunResult one =
+      run("-q --plate " + quote(plate_) + object + env + lighting + " --out " +
+              quote(dir_ / "one" / "compose") + " --cache " + quote(dir_ / "cache1"),
+          dir_.path());
+  ASSERT_EQ(one.status, 0) << one.err;
+  const fs::path light = dir_ / "forest.lighting", layer = dir_ / "suzanne.exr";
+  const RunResult pre = run("-q precompute" + env + lighting + " --out " + quote(light) +
+                                " --cache " + quote(dir_ / "cache2"),
+                            dir_.path());
+  ASSERT_EQ(pre.status, 0) << pre.err;
+  const RunResult ren =
+      run("render --plate " + quote(plate_) + object + " --lighting-file " + quote(light) +
+              " --out " + quote(layer) + " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(ren.status, 0) << ren.err;
+  EXPECT_NE(ren.err.find("1 texture (1 as 'sRGB - Texture'), converted to"), std::string::npos)
+      << "the materials were not brought into the working space:\n"
+      << ren.err;
+  const RunResult comp =
+      run("-q composite --plate " + quote(plate_) + " --layer " + quote(layer) + " --out " +
+              quote(dir_ / "two" / "compose") + " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(comp.status, 0) << comp.err;
+  const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
+  const std::vector<Part> b = readParts(dir_ / "two" / "compose.exr");
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    SCOPED_TRACE(a[i].name);
+    ASSERT_EQ(a[i].pixels.size(), b[i].pixels.size());
+    size_t differing = 0;
+    for (size_t k = 0; k < a[i].pixels.size(); ++k)
+      if (std::memcmp(&a[i].pixels[k], &b[i].pixels[k], sizeof(float)) != 0) ++differing;
+    EXPECT_EQ(differing, 0u);
+  }
+  EXPECT_EQ(slurp(dir_ / "one" / "compose.jpg"), slurp(dir_ / "two" / "compose.jpg"));
+}
+
 // An option only the one-shot command has, given to a command, is refused before anything is
 // read (CLI11 would pass it up to the one-shot command's options, where it was taken and not
 // used: compose composite --exposure 1 wrote the same picture as without). The options of every
