@@ -123,6 +123,15 @@ struct Artefacts {
   std::optional<Image> composite;
 };
 
+// The environment's side of the exposure from EXIF (chooseExposure, stages.h): the camera whose
+// EXIF exposure unit its radiance is in (a capture description, or a map the photo stages merged
+// at their photos' EXIF exposures), else empty and why not; `whose` names it in notes.
+struct EnvironmentExif {
+  std::string camera;
+  std::string whyNot;
+  std::string whose = "the environment's";
+};
+
 class Context {
  public:
   Context(const ComposeJob& theJob, const color::ColorConfig& theColors, Progress theProgress)
@@ -137,6 +146,9 @@ class Context {
   bool planning = false;
   // Filled in before any stage runs (runner.cpp).
   EnvironmentInput environmentInput;
+  // Read from a lighting file (compose render), which carries it for the environment it was made
+  // from; worked out from the environment otherwise.
+  std::optional<EnvironmentExif> environmentExif;
   std::map<std::string, Hash128> keys;  // per artefact
   std::set<std::string> needed;         // artefacts some running stage consumes
   std::set<std::string> reachable;      // artefacts the wanted ones may be made from

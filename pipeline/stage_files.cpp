@@ -125,6 +125,11 @@ void savePrecompute(const Context& ctx, const fs::path& file) {
   entry.meta()["colorConfig"] = ctx.colors.source();
   if (const auto c = ctx.colors.chromaticities(ctx.colors.workingSpace()))
     entry.meta()["chromaticities"] = std::vector<double>(c->begin(), c->end());
+  // What the exposure from EXIF needs of the environment, for compose render, which reads the
+  // lighting from this file and not the environment.
+  const EnvironmentExif exif = environmentExif(ctx);
+  entry.meta()["environmentExif"] = {
+      {"camera", exif.camera}, {"whyNot", exif.whyNot}, {"whose", exif.whose}};
   if (!findStage("precompute").store(ctx, entry)) {
     if (!entry.error().empty())
       throw Error("precompute", "cannot write the lighting file: " + entry.error(), file);
@@ -197,6 +202,20 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
                "this run's, '" +
                working + "'");
     }
+    EnvironmentExif exif;
+    exif.whyNot =
+        "the lighting file does not say which camera its environment's photos come from (an "
+        "older compose)";
+    if (const auto e = made.find("environmentExif"); e != made.end() && e->is_object()) {
+      auto text = [&](const char* key, std::string& to) {
+        if (const auto v = e->find(key); v != e->end() && v->is_string())
+          to = v->get<std::string>();
+      };
+      text("camera", exif.camera);
+      text("whyNot", exif.whyNot);
+      text("whose", exif.whose);
+    }
+    ctx.environmentExif = exif;
     std::vector<std::string> outputs = {kLighting};
     if (entry->meta().contains("shadowLighting")) {
       outputs.push_back(kShadowLighting);

@@ -45,6 +45,9 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
 // photos come from one camera, else by matching a mid-grey card on the ground to the plate's
 // ground (the note printed says which); `pending` becomes it.
 void chooseExposure(Context& ctx, RenderedObject& object);
+// The environment's side of the exposure from EXIF, worked out from the environment (a capture
+// description, or the files of a map), for a lighting file to carry.
+EnvironmentExif environmentExif(const Context& ctx);
 
 // Writes the outputs of a job: the multi-part OpenEXR (the composite, the object with its AOVs in
 // its own data window, the ground shadow's ratio in its own) and the display image, together or

@@ -110,61 +110,19 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
   const ingest::CaptureInfo& plate = ctx.artefacts.plate->info;
   const std::optional<double> e = plate.relativeExposure();
   const bool plateReady = e && plate.exposureAssumptions().empty() && plate.bitsPerSample == 8;
-  if (!ctx.artefacts.capture) {
-    // An environment file that the photo stages made (merge, stitch, convert) says its camera
-    // and whether its radiance is in that camera's EXIF exposure unit; six faces must all say
-    // the same.
-    ingest::CaptureInfo env;
-    bool first = true, agree = true;
-    for (const fs::path& file : ctx.environmentInput.files) {
-      std::error_code ec;
-      if (!fs::is_regular_file(file, ec)) continue;
-      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, "ingest", true);
-      if (first) {
-        env = info;
-        first = false;
-      } else if (info.exposureUnit != env.exposureUnit || info.camera() != env.camera()) {
-        agree = false;
-      }
-    }
-    if (!agree || env.exposureUnit != ingest::kExifExposureUnit) {
-      why =
-          "the environment is not a capture description (compose --env capture.json) nor a map "
-          "that compose merged from photos at their EXIF exposures";
-      return std::nullopt;
-    }
-    if (plate.camera().empty() || plate.camera() != env.camera()) {
-      why = "the plate's camera (" + (plate.camera().empty() ? "not in EXIF" : plate.camera()) +
-            ") is not the environment's (" + env.camera() + ")";
-      return std::nullopt;
-    }
-    if (!plateReady) {
-      why = "the plate is not an 8-bit photo with its exposure time, f-number and ISO in EXIF";
-      return std::nullopt;
-    }
-    return *e;
+  const EnvironmentExif env = ctx.environmentExif ? *ctx.environmentExif : environmentExif(ctx);
+  if (env.camera.empty()) {
+    why = env.whyNot;
+    return std::nullopt;
   }
-  const ingest::Capture& capture = *ctx.artefacts.capture;
-  ingest::CaptureInfo captureCamera;
-  captureCamera.cameraMake = capture.cameraMake;
-  captureCamera.cameraModel = capture.cameraModel;
-  if (plate.camera().empty() || plate.camera() != captureCamera.camera()) {
+  if (plate.camera().empty() || plate.camera() != env.camera) {
     why = "the plate's camera (" + (plate.camera().empty() ? "not in EXIF" : plate.camera()) +
-          ") is not the capture's (" +
-          (captureCamera.camera().empty() ? "unknown" : captureCamera.camera()) + ")";
+          ") is not " + env.whose + " (" + env.camera + ")";
     return std::nullopt;
   }
   if (!plateReady) {
     why = "the plate is not an 8-bit photo with its exposure time, f-number and ISO in EXIF";
     return std::nullopt;
-  }
-  for (const ingest::View& view : capture.views) {
-    for (const ingest::Shot& shot : view.shots) {
-      if (!ingest::atOwnExifExposure(shot)) {
-        why = "the capture's photos are not all 8-bit with their exposures from EXIF";
-        return std::nullopt;
-      }
-    }
   }
   return *e;
 }
@@ -688,6 +646,57 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
                                 "distorted lens: worldToNDC holds its pinhole part only");
   }
   return header;
+}
+
+EnvironmentExif environmentExif(const Context& ctx) {
+  EnvironmentExif out;
+  if (!ctx.artefacts.capture) {
+    // An environment file that the photo stages made (merge, stitch, convert) says its camera
+    // and whether its radiance is in that camera's EXIF exposure unit; six faces must all say
+    // the same.
+    ingest::CaptureInfo env;
+    bool first = true, agree = true;
+    for (const fs::path& file : ctx.environmentInput.files) {
+      std::error_code ec;
+      if (!fs::is_regular_file(file, ec)) continue;
+      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, "ingest", true);
+      if (first) {
+        env = info;
+        first = false;
+      } else if (info.exposureUnit != env.exposureUnit || info.camera() != env.camera()) {
+        agree = false;
+      }
+    }
+    if (first || !agree || env.exposureUnit != ingest::kExifExposureUnit) {
+      out.whyNot =
+          "the environment is not a capture description (compose --env capture.json) nor a map "
+          "that compose merged from photos at their EXIF exposures";
+    } else if (env.camera().empty()) {
+      out.whyNot = "the environment does not say which camera its photos come from";
+    } else {
+      out.camera = env.camera();
+    }
+    return out;
+  }
+  const ingest::Capture& capture = *ctx.artefacts.capture;
+  out.whose = "the capture's";
+  ingest::CaptureInfo captureCamera;
+  captureCamera.cameraMake = capture.cameraMake;
+  captureCamera.cameraModel = capture.cameraModel;
+  for (const ingest::View& view : capture.views) {
+    for (const ingest::Shot& shot : view.shots) {
+      if (!ingest::atOwnExifExposure(shot)) {
+        out.whyNot = "the capture's photos are not all 8-bit with their exposures from EXIF";
+        return out;
+      }
+    }
+  }
+  if (captureCamera.camera().empty()) {
+    out.whyNot = "the capture does not say which camera its photos come from";
+    return out;
+  }
+  out.camera = captureCamera.camera();
+  return out;
 }
 
 void chooseExposure(Context& ctx, RenderedObject& object) {

@@ -1036,6 +1036,21 @@ TEST_F(FromPhotos, ExposureFromExifWhenThePlateIsFromTheCapturesCamera) {
   EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
   EXPECT_NEAR(objectOverPlate(dir_ / "exif_by_hand.exr", "merged and stitched by hand"), 1.0,
               kExifExposureTolerance);
+  // And rendered stage by stage from a lighting file, which carries the environment's camera:
+  // compose render takes the exposure from EXIF as the one-shot command does.
+  const std::string lightingOptions = " --shadows off --no-shadow --no-cache";
+  r = run("precompute --env " + q(dir_ / "stitched.exr") + lightingOptions + " --out " +
+              q(dir_ / "stitched.lighting"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run("render --plate " + q(plate) + " --object " + q(sample("bunny.obj")) +
+              " --albedo 1 --samples 1" + lightingOptions + " --lighting-file " +
+              q(dir_ / "stitched.lighting") + " --out " + q(dir_ / "exif_layer.exr"),
+          dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("exposure from EXIF"), std::string::npos) << r.err;
+  EXPECT_NEAR(objectOverPlate(dir_ / "exif_layer.exr", "rendered from a lighting file"), 1.0,
+              kExifExposureTolerance);
   // Converted to six face files, named by a pattern: every face carries the mark.
   r = run("convert " + q(dir_ / "stitched.exr") + " --to faces --out " +
               q(dir_ / "faces" / "env_%.exr"),
