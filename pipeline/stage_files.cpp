@@ -257,11 +257,10 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   layer.colorSpace = r.beauty.colorSpace;
   // The pending exposure applied: the layer's values are those the one-shot EXR holds.
   std::vector<float> scale(size_t(channels), 1.0f);
-  for (size_t c = 0; c < names.size(); ++c) {
-    const std::vector<std::string>& exposed = exposedChannels();
+  const std::vector<std::string>& exposed = exposedChannels();
+  for (size_t c = 0; c < names.size(); ++c)
     if (std::find(exposed.begin(), exposed.end(), names[c]) != exposed.end())
       scale[c] = object.pending;
-  }
   for (size_t i = 0; i < layer.pixelCount(); ++i) {
     float* d = layer.pixels.data() + i * size_t(channels);
     std::copy_n(r.beauty.pixels.data() + 4 * i, 4, d);

@@ -60,6 +60,25 @@ std::vector<Part> readParts(const fs::path& path) {
   return parts;
 }
 
+// The same parts, data windows, channels and values, bit for bit, in two EXRs.
+void expectSameParts(const std::vector<Part>& a, const std::vector<Part>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    SCOPED_TRACE(a[i].name);
+    EXPECT_EQ(a[i].name, b[i].name);
+    EXPECT_EQ(a[i].x, b[i].x);
+    EXPECT_EQ(a[i].y, b[i].y);
+    EXPECT_EQ(a[i].width, b[i].width);
+    EXPECT_EQ(a[i].height, b[i].height);
+    EXPECT_EQ(a[i].channels, b[i].channels);
+    ASSERT_EQ(a[i].pixels.size(), b[i].pixels.size());
+    size_t differing = 0;
+    for (size_t k = 0; k < a[i].pixels.size(); ++k)
+      if (std::memcmp(&a[i].pixels[k], &b[i].pixels[k], sizeof(float)) != 0) ++differing;
+    EXPECT_EQ(differing, 0u) << "values differ between the one-shot and the chained stages";
+  }
+}
+
 class StageCommands : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -166,21 +185,7 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
   const std::vector<Part> b = readParts(dir_ / "two" / "compose.exr");
   ASSERT_EQ(a.size(), 3u);  // composite, object, shadow
-  ASSERT_EQ(a.size(), b.size());
-  for (size_t i = 0; i < a.size(); ++i) {
-    SCOPED_TRACE(a[i].name);
-    EXPECT_EQ(a[i].name, b[i].name);
-    EXPECT_EQ(a[i].x, b[i].x);
-    EXPECT_EQ(a[i].y, b[i].y);
-    EXPECT_EQ(a[i].width, b[i].width);
-    EXPECT_EQ(a[i].height, b[i].height);
-    EXPECT_EQ(a[i].channels, b[i].channels);
-    ASSERT_EQ(a[i].pixels.size(), b[i].pixels.size());
-    size_t differing = 0;
-    for (size_t k = 0; k < a[i].pixels.size(); ++k)
-      if (std::memcmp(&a[i].pixels[k], &b[i].pixels[k], sizeof(float)) != 0) ++differing;
-    EXPECT_EQ(differing, 0u) << "values differ between the one-shot and the chained stages";
-  }
+  expectSameParts(a, b);
   EXPECT_EQ(slurp(dir_ / "one" / "compose.jpg"), slurp(dir_ / "two" / "compose.jpg"));
 
   // The object moved the plate at all: the comparison above is not of two copies of the plate.
@@ -376,15 +381,7 @@ TEST_F(StageCommands, ATexturedObjectChainedByHandWithAGivenExposure) {
   ASSERT_EQ(comp.status, 0) << comp.err;
   const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
   const std::vector<Part> b = readParts(dir_ / "two" / "compose.exr");
-  ASSERT_EQ(a.size(), b.size());
-  for (size_t i = 0; i < a.size(); ++i) {
-    SCOPED_TRACE(a[i].name);
-    ASSERT_EQ(a[i].pixels.size(), b[i].pixels.size());
-    size_t differing = 0;
-    for (size_t k = 0; k < a[i].pixels.size(); ++k)
-      if (std::memcmp(&a[i].pixels[k], &b[i].pixels[k], sizeof(float)) != 0) ++differing;
-    EXPECT_EQ(differing, 0u);
-  }
+  expectSameParts(a, b);
   EXPECT_EQ(slurp(dir_ / "one" / "compose.jpg"), slurp(dir_ / "two" / "compose.jpg"));
 }
 
