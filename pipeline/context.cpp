@@ -42,13 +42,35 @@ const Hash128& Context::key(const std::string& name) const {
   return it->second;
 }
 
+Hash128 plateCameraKey(int uprightWidth, int uprightHeight, const ingest::CaptureInfo& info) {
+  Hash128 h;
+  h.bytes("plate camera");
+  h.word(uint32_t(uprightWidth));
+  h.word(uint32_t(uprightHeight));
+  h.word(uint32_t(info.orientation));
+  h.word(uint32_t(info.sensorOrientation));
+  h.number(info.focalLength35mm.value_or(-1.0));
+  h.bytes(info.focal35mmSource);
+  return h;
+}
+
+Hash128 plateCameraKey(const ingest::CaptureInfo& header) {
+  // EXIF orientations 5 to 8 turn the picture by a quarter turn.
+  const bool turned = header.orientation >= 5 && header.orientation <= 8;
+  return plateCameraKey(turned ? header.fileHeight : header.fileWidth,
+                        turned ? header.fileWidth : header.fileHeight, header);
+}
+
 Hash128 Context::geometryKey() const {
   Hash128 h;
   h.bytes("geometry");
   // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it; 3: a cut-out
-  // object stands on what its cut-outs keep (Mesh::keptBounds)
-  h.word(3);
-  h.combine(key(artefact::kPlate));
+  // object stands on what its cut-outs keep (Mesh::keptBounds); 4: the plate camera, not the
+  // plate's bytes
+  h.word(4);
+  key(artefact::kPlate);  // a job without a plate has no geometry: the usage error says so
+  COMPOSE_CHECK(plateCamera.has_value());
+  h.combine(*plateCamera);
   h.combine(key(artefact::kMesh));
   if (!job.lensFile.empty()) hashFile(h, job.lensFile, "camera");
   if (!job.poseFile.empty()) hashFile(h, job.poseFile, "camera");
@@ -67,6 +89,10 @@ const Geometry& Context::geometry() {
   if (geometry_) return *geometry_;
   COMPOSE_CHECK(artefacts.plate && meshSummary);
   const ingest::LoadedImage& plate = *artefacts.plate;
+  // The stages that use the geometry were keyed by the plate's header: the decoded plate must
+  // make the same camera.
+  COMPOSE_CHECK(plateCamera &&
+                *plateCamera == plateCameraKey(plate.image.width, plate.image.height, plate.info));
   const MeshSummary& mesh = *meshSummary;
   calib::CameraOptions options = job.camera;
   std::filesystem::path lensFrom;  // the file the lens comes from, for errors about it

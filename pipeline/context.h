@@ -100,6 +100,13 @@ struct RenderedObject {
   std::string layerPlateFile, layerPlateKey;
 };
 
+// What calib::plateCamera() makes of a plate: its upright size and the header's facts it reads
+// (EXIF orientation, the 35 mm equivalent focal length and where it came from).
+Hash128 plateCameraKey(int uprightWidth, int uprightHeight, const ingest::CaptureInfo& info);
+// The same from the header alone, before the plate is decoded (its size turned upright by the
+// EXIF orientation, as reading it turns its pixels).
+Hash128 plateCameraKey(const ingest::CaptureInfo& header);
+
 // The channels of a rendered object that scale with its exposure, by their names in the files
 // (the object's colour, its irradiance with and without self-shadowing).
 const std::vector<std::string>& exposedChannels();
@@ -163,8 +170,13 @@ class Context {
   // (a plate, an object).
   const Hash128& key(const std::string& name) const;
   bool hasKey(const std::string& name) const { return keys.count(name) > 0; }
-  // Everything the geometry depends on (the plate's content, the lens file, the camera and
-  // placement options, the mesh, the environment's turn).
+  // What the plate camera is made of, from the plate's header (plateCameraKey below); set by
+  // ingest with the plate's key.
+  std::optional<Hash128> plateCamera;
+  // Everything the geometry depends on (the plate camera as the plate's header makes it, not the
+  // plate's pixels; the lens and pose files, the camera and placement options, the mesh, the
+  // environment's turn): another take from the same camera keeps the geometry, and with it the
+  // render and the ground shadow.
   Hash128 geometryKey() const;
   void note(std::string text) { notes.push_back(std::move(text)); }
 

@@ -156,6 +156,7 @@ class IngestStage final : public Stage {
       plate.bytes("plate");
       hashFile(plate, ctx.job.plate, "ingest");
       ctx.keys[kPlate] = plate;
+      ctx.plateCamera = plateCameraKey(ingest::readCaptureInfo(ctx.job.plate, "ingest", true));
     }
     if (ctx.meshSummary) ctx.keys[kMesh] = ctx.meshSummary->key;
     if (ctx.environmentInput.path.empty()) return;

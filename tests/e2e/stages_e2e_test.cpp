@@ -345,6 +345,74 @@ TEST_F(StageCommands, ANewExposureReusesTheRender) {
   EXPECT_EQ(differing, 0u);
 }
 
+// The render and the ground shadow depend on the plate only through the camera it makes (its
+// size, EXIF orientation and focal length): another take from the same camera (here the plate
+// darkened) reuses both and gives what a run without the cache gives; a plate of the same pixels
+// with another focal length in EXIF renders again.
+TEST_F(StageCommands, AnotherTakeFromTheSameCameraReusesTheRenderAndTheGroundShadow) {
+  const std::string job = objectOptions() + " --env " + quote(samples_ / "forest.exr") +
+                          " --lighting-params order=4 --shadow-params order=4,grid=4";
+  auto line = [](const RunResult& r, const std::string& stage) {
+    const size_t at = r.err.find("compose: " + stage + " ");
+    return at == std::string::npos ? std::string() : r.err.substr(at, r.err.find('\n', at) - at);
+  };
+  auto cached = [&](const fs::path& plate, const std::string& name) {
+    return run("--timings --plate " + quote(plate) + " " + job + " --out " +
+                   quote(dir_ / name / "compose") + " --cache " + quote(dir_ / "cache"),
+               dir_.path());
+  };
+  const RunResult first = cached(plate_, "first");
+  ASSERT_EQ(first.status, 0) << first.err;
+  for (const char* stage : {"render", "ground"}) {
+    ASSERT_FALSE(line(first, stage).empty()) << first.err;
+    EXPECT_EQ(line(first, stage).find("reused"), std::string::npos) << first.err;
+  }
+
+  // Another take: the same size and EXIF, other pixels.
+  const fs::path take = dir_ / "take.jpg";
+  {
+    OIIO::ImageBuf original(plate_.string());
+    OIIO::ImageBuf darker = OIIO::ImageBufAlgo::mul(original, 0.6f);
+    ASSERT_TRUE(darker.write(take.string()));
+  }
+  ASSERT_NE(slurp(take), slurp(plate_));
+  const RunResult second = cached(take, "take");
+  ASSERT_EQ(second.status, 0) << second.err;
+  for (const char* stage : {"render", "ground"})
+    EXPECT_NE(line(second, stage).find("reused"), std::string::npos) << second.err;
+  EXPECT_EQ(line(second, "composite").find("reused"), std::string::npos) << second.err;
+  const RunResult fresh = run("--plate " + quote(take) + " " + job + " --out " +
+                                  quote(dir_ / "fresh" / "compose") + " --no-cache",
+                              dir_.path());
+  ASSERT_EQ(fresh.status, 0) << fresh.err;
+  EXPECT_EQ(slurp(dir_ / "take" / "compose.exr"), slurp(dir_ / "fresh" / "compose.exr"));
+  EXPECT_EQ(slurp(dir_ / "take" / "compose.jpg"), slurp(dir_ / "fresh" / "compose.jpg"));
+  EXPECT_NE(slurp(dir_ / "take" / "compose.jpg"), slurp(dir_ / "first" / "compose.jpg"));
+
+  // The first plate's pixels with another focal length in EXIF: another camera.
+  const fs::path zoomed = dir_ / "zoomed.jpg";
+  {
+    OIIO::ImageBuf original(plate_.string());
+    original.specmod().attribute("Exif:FocalLengthIn35mmFilm", 85);
+    ASSERT_TRUE(original.write(zoomed.string()));
+  }
+  const RunResult third = cached(zoomed, "zoomed");
+  ASSERT_EQ(third.status, 0) << third.err;
+  for (const char* stage : {"render", "ground"}) {
+    ASSERT_FALSE(line(third, stage).empty()) << third.err;
+    EXPECT_EQ(line(third, stage).find("reused"), std::string::npos) << third.err;
+  }
+  // The file's camera has the 85 mm lens (the first plate has no focal length in EXIF: 50 mm).
+  auto xScale = [](const fs::path& exr) {
+    auto in = OIIO::ImageInput::open(exr.string());
+    const OIIO::ParamValue* m = in ? in->spec().find_attribute("worldToNDC") : nullptr;
+    return m && m->type() == OIIO::TypeMatrix44 ? static_cast<const float*>(m->data())[0] : 0.0f;
+  };
+  const float wide = xScale(dir_ / "first" / "compose.exr");
+  ASSERT_GT(wide, 0.0f);
+  EXPECT_NEAR(xScale(dir_ / "zoomed" / "compose.exr") / wide, 85.0f / 50.0f, 1e-4f);
+}
+
 // A textured object (Suzanne with a checker texture, exported by Blender) through compose render
 // and compose composite with a given exposure gives the one-shot command's files bit for bit: the
 // render command brings the materials into the working space as the one-shot command does (it did

@@ -6,6 +6,7 @@
 
 #include "core/channels.h"
 #include "core/error.h"
+#include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/scene.h"
 #include "pipeline/stage.h"
@@ -248,8 +249,11 @@ class RegistrySkips : public ::testing::Test {
   void SetUp() override {
     env_ = samplesDirectory() / "forest.exr";
     if (!fs::exists(env_)) GTEST_FAIL() << "sample data missing: run samples/fetch.sh";
-    // plan() hashes the plate without decoding it.
-    writeText(dir_ / "plate.jpg", "plate bytes");
+    // plan() hashes the plate and reads its header (the camera), without decoding it.
+    Image plate(64, 48, 3, {"R", "G", "B"});
+    std::fill(plate.pixels.begin(), plate.pixels.end(), 0.5f);
+    plate.colorSpace = "sRGB";
+    ingest::writeImage(dir_ / "plate.jpg", plate);
     // A tetrahedron: closed and convex. A second one beside it: not convex as a whole.
     writeText(dir_ / "convex.obj",
               "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
