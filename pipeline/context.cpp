@@ -90,9 +90,14 @@ const Geometry& Context::geometry() {
   COMPOSE_CHECK(artefacts.plate && meshSummary);
   const ingest::LoadedImage& plate = *artefacts.plate;
   // The stages that use the geometry were keyed by the plate's header: the decoded plate must
-  // make the same camera.
-  COMPOSE_CHECK(plateCamera &&
-                *plateCamera == plateCameraKey(plate.image.width, plate.image.height, plate.info));
+  // make the same camera (it does not when the file was replaced while compose ran).
+  COMPOSE_CHECK(plateCamera.has_value());
+  if (*plateCamera != plateCameraKey(plate.image.width, plate.image.height, plate.info)) {
+    throw Error("ingest",
+                "the plate's header changed between reading it and decoding its pixels (was the "
+                "file replaced while compose ran?): run again",
+                job.plate);
+  }
   const MeshSummary& mesh = *meshSummary;
   calib::CameraOptions options = job.camera;
   std::filesystem::path lensFrom;  // the file the lens comes from, for errors about it

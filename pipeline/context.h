@@ -101,7 +101,8 @@ struct RenderedObject {
 };
 
 // What calib::plateCamera() makes of a plate: its upright size and the header's facts it reads
-// (EXIF orientation, the 35 mm equivalent focal length and where it came from).
+// (EXIF orientation, the 35 mm equivalent focal length and where it came from), and the sensor's
+// orientation of a map compose merged (CaptureInfo::sensorOrientation, for a lens in its frame).
 Hash128 plateCameraKey(int uprightWidth, int uprightHeight, const ingest::CaptureInfo& info);
 // The same from the header alone, before the plate is decoded (its size turned upright by the
 // EXIF orientation, as reading it turns its pixels).

@@ -660,7 +660,10 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage, bool
       return info;
     }
     case Kind::Jpeg: {
+      // As readImage(): a JPEG libjpeg does not convert (CMYK) is OpenImageIO's, header too (its
+      // EXIF rationals arrive as floats: the same file must give the same facts both ways).
       const jpeg::Decoded header = jpeg::readFile(path, true, stage);
+      if (!header.header.native) break;
       fillCaptureInfo(headerOf(header.header), info);
       return info;
     }

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <random>
@@ -15,6 +16,7 @@
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
+#include <jpeglib.h>
 
 #include "core/output_files.h"
 #include "ingest/exif.h"
@@ -208,6 +210,55 @@ TEST(NativeJpeg, OrientationTurnsThePictureAsExifSays) {
     EXPECT_NEAR(at[0], px[0], 0.02f);
     EXPECT_NEAR(at[1], px[1], 0.02f);
   }
+}
+
+// A CMYK JPEG, which libjpeg does not convert, is OpenImageIO's: its header too, so that
+// readCaptureInfo() gives the facts readImage() does (OpenImageIO hands EXIF rationals over as
+// floats; the plate's camera is keyed by the header and checked against the decoded plate).
+TEST(NativeJpeg, ACmykFilesHeaderGivesWhatReadingItGives) {
+  TempDir dir;
+  const std::filesystem::path file = dir / "cmyk.jpg";
+  {
+    const std::vector<unsigned char> tiff = exif::encode({{"Exif:FocalLength", 5.6},
+                                                          {"Exif:FocalPlaneXResolution", 3333.3},
+                                                          {"Exif:FocalPlaneYResolution", 3333.3},
+                                                          {"Exif:FocalPlaneResolutionUnit", 2}});
+    std::vector<unsigned char> app1 = {'E', 'x', 'i', 'f', 0, 0};
+    app1.insert(app1.end(), tiff.begin(), tiff.end());
+    jpeg_compress_struct c{};
+    jpeg_error_mgr e{};
+    c.err = jpeg_std_error(&e);
+    jpeg_create_compress(&c);
+    unsigned char* bytes = nullptr;
+    unsigned long size = 0;
+    jpeg_mem_dest(&c, &bytes, &size);
+    c.image_width = 64;
+    c.image_height = 48;
+    c.input_components = 4;
+    c.in_color_space = JCS_CMYK;
+    jpeg_set_defaults(&c);
+    jpeg_start_compress(&c, TRUE);
+    jpeg_write_marker(&c, JPEG_APP0 + 1, app1.data(), unsigned(app1.size()));
+    std::vector<unsigned char> row(64 * 4);
+    for (size_t i = 0; i < row.size(); ++i) row[i] = i % 4 == 3 ? 40 : 100;
+    while (c.next_scanline < c.image_height) {
+      JSAMPROW r = row.data();
+      jpeg_write_scanlines(&c, &r, 1);
+    }
+    jpeg_finish_compress(&c);
+    jpeg_destroy_compress(&c);
+    std::ofstream(file, std::ios::binary).write(reinterpret_cast<const char*>(bytes), long(size));
+    std::free(bytes);
+  }
+  ASSERT_FALSE(jpeg::readFile(file, true, "test").header.native);
+  const CaptureInfo header = readCaptureInfo(file);
+  const LoadedImage read = readImage(file);
+  ASSERT_TRUE(read.info.focalLength35mm.has_value());
+  EXPECT_EQ(header.focalLength35mm, read.info.focalLength35mm);
+  EXPECT_EQ(header.focal35mmSource, read.info.focal35mmSource);
+  EXPECT_EQ(header.focalLengthMm, read.info.focalLengthMm);
+  EXPECT_EQ(header.fileWidth, read.image.width);
+  EXPECT_EQ(header.fileHeight, read.image.height);
 }
 
 TEST(NativeJpeg, DamagedFilesAreErrorsNamingThem) {
