@@ -321,7 +321,8 @@ void EmbreeScene::occludedStream(const glm::vec3& o, const glm::vec3* d, size_t 
 }
 
 void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, size_t count,
-                                      float tnear, float* transmitted, float tfar) const {
+                                      float tnear, float* transmitted, float tfar,
+                                      bool coherent) const {
   if (count == 0) return;
   COMPOSE_CHECK(count <= 0xffffffu);
   thread_local std::vector<RTCRay> rays;
@@ -331,6 +332,7 @@ void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, si
   std::fill(transmitted, transmitted + count, 1.0f);
   TransmitContext context;
   rtcInitIntersectContext(&context.base);
+  if (coherent) context.base.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   context.transmitted = transmitted;
   context.counted = counted.data();
   rtcOccluded1M(impl_->scene, &context.base, rays.data(), unsigned(count), sizeof(RTCRay));

@@ -65,9 +65,12 @@ class EmbreeScene {
   // What each of `count` rays from one origin carries through the mesh (1: nothing in the way;
   // 0: something opaque; the product of 1 - alpha over the semi-transparent surfaces met
   // otherwise), into transmitted[i]. For a mesh without semi-transparent surfaces, 1 or 0 as
-  // occludedStream says.
+  // occludedStream says. `coherent`: the directions lie close together, in the order given (a
+  // point's rays to the bright sources, sorted across the sky): Embree's traversal for coherent
+  // rays, a quarter faster there and slower for a whole hemisphere of directions.
   void transmittanceStream(const glm::vec3& origin, const glm::vec3* directions, size_t count,
-                           float tnear, float* transmitted, float tfar = 1e30f) const;
+                           float tnear, float* transmitted, float tfar = 1e30f,
+                           bool coherent = false) const;
   // The same for up to 16 rays, those whose bit is set in `active` (only their directions are
   // read and their transmitted[] written).
   void transmittance16(const glm::vec3& origin, const glm::vec3* directions, uint32_t active,

@@ -1271,7 +1271,8 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
         }
         // What gets through: a semi-transparent surface lets 1 - alpha of the source by.
         through.resize(batch.size());
-        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data());
+        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data(), 1e30f,
+                                  true);
         for (size_t b = 0; b < batch.size(); ++b) seen[index[b]] += through[b] / float(kPerSource);
         rays += int64_t(batch.size());
       },
@@ -1364,7 +1365,8 @@ int64_t refineSourcePenumbrae(const Mesh& mesh, const SurfacePoints& points,
           }
         }
         through.resize(batch.size());
-        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data());
+        scene.transmittanceStream(origin, batch.data(), batch.size(), tnear, through.data(), 1e30f,
+                                  true);
         for (size_t b = 0; b < batch.size(); ++b) visible[index[b]] += through[b] / float(kStrata);
         rays += int64_t(batch.size());
       },
