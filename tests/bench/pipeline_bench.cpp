@@ -18,7 +18,9 @@
 //    (the same folder again: every stage up to the render reused from the stage cache), with the
 //    stage times and per-stage peak memory (VmHWM) the runner reports;
 //  * process: the compose executable itself, warm, as a user runs it (whole-process wall time,
-//    peak memory from its --timings);
+//    peak memory from its --timings); at 1080p also with the object moved at each run, rendered
+//    again at each run, and on another take from the same camera at each run (the plate's pixels
+//    scaled: the render and the ground shadow reused);
 //  * baseline: OpenImageIO alone on the same files: decoding the plate and the environment to
 //    float, encoding the EXR (the parts, channels, data windows and compression of compose's own
 //    output, from its pixels) and the JPEG (quality 95, 4:4:4, from the display pixels), with
@@ -710,11 +712,14 @@ int main(int argc, char** argv) {
     warmRuns[p.name] = warm;
     // The compose executable as a user runs it, the bunny in the environment on this plate with
     // the same cache, and `extra` options; empty (the error printed) when it fails.
-    auto composeProcess = [&](const std::vector<std::string>& extra) -> std::optional<Child> {
-      std::vector<std::string> args = {
-          "--plate", p.file.string(), "--object", (samples / "bunny.obj").string(),
-          "--env",   env.string(),    "--cache",  cache.string(),
-          "--out",   out.string(),    "-q"};
+    auto composeProcess = [&](const std::vector<std::string>& extra,
+                              const fs::path& plate = {}) -> std::optional<Child> {
+      std::vector<std::string> args = {"--plate",  (plate.empty() ? p.file : plate).string(),
+                                       "--object", (samples / "bunny.obj").string(),
+                                       "--env",    env.string(),
+                                       "--cache",  cache.string(),
+                                       "--out",    out.string(),
+                                       "-q"};
       args.insert(args.end(), extra.begin(), extra.end());
       Child c = run(COMPOSE_EXECUTABLE, args, work / "stderr.txt");
       if (c.status != 0) {
@@ -768,6 +773,35 @@ int main(int argc, char** argv) {
       }
     }
 
+    // Another take from the same camera at each run (the plate's pixels scaled, its EXIF the
+    // same: a plate sequence from a locked-off camera): the render and the ground shadow depend
+    // on the plate only through its camera and are reused; the plate is read, converted and
+    // composited.
+    std::vector<double> takes, takesDefault;
+    if (!p.large) {
+      auto takeRuns = [&](const std::vector<std::string>& sizing, std::vector<double>& seconds) {
+        for (int i = 0; i <= std::max(repeat, 3); ++i) {
+          const fs::path take = work / ("take_" + std::to_string(i) + ".jpg");
+          if (!fs::exists(take)) {
+            OIIO::ImageBuf scaled =
+                OIIO::ImageBufAlgo::mul(OIIO::ImageBuf(p.file.string()), 0.95f - 0.05f * float(i));
+            scaled.specmod().attribute("Compression", "jpeg:95");
+            if (!scaled.write(take.string())) {
+              std::fprintf(stderr, "cannot write %s: %s\n", take.c_str(),
+                           scaled.geterror().c_str());
+              return false;
+            }
+          }
+          const std::optional<Child> c = composeProcess(sizing, take);
+          if (!c) return false;
+          // The first run at the default size makes its render and ground shadow.
+          if (i > 0) seconds.push_back(c->seconds);
+        }
+        return true;
+      };
+      if (!(takeRuns({"--scale", "0.6"}, takes) && takeRuns({}, takesDefault))) return 1;
+    }
+
     rep.both("\n## " + std::string(p.name) + " plate, " + std::to_string(p.width) + "x" +
              std::to_string(p.height) + "\n\n");
     rep.both(
@@ -810,6 +844,18 @@ int main(int argc, char** argv) {
           {"1080p whole compose with the visibility cached and the render computed, bunny at its "
            "default size, < 0.5 s (issue 8)",
            median(rerendered) < 0.5, num("%.3f s", median(rerendered)) + " whole process"});
+      std::snprintf(line, sizeof line,
+                    "The compose executable on another take from the same camera at each run (the "
+                    "plate's pixels scaled, its EXIF the same: the ground shadow and the render "
+                    "reused, the plate read, converted and composited), whole process: %.3f s with "
+                    "the bunny 0.6 of the plate high, %.3f s at its default size (medians of "
+                    "%zu).\n\n",
+                    median(takes), median(takesDefault), takes.size());
+      rep.both(line);
+      goals.push_back(
+          {"1080p whole compose with the visibility cached, another take from the same camera at "
+           "each run (ground shadow and render reused), bunny 0.6 high, < 0.5 s (issue 8)",
+           median(takes) < 0.5, num("%.3f s", median(takes)) + " whole process"});
       goals.push_back({"1080p whole compose, caches warm, < 0.5 s (issue 8)",
                        warmProcess[p.name] < 0.5,
                        num("%.3f s", warmProcess[p.name]) + " whole process, " +
