@@ -1616,6 +1616,38 @@ TEST(SemiTransparent, RaysFindTheSurfaceWithAProbabilityOfItsAlpha) {
   }
 }
 
+// A stream traced as coherent (the rays to the bright sources) carries what an incoherent one
+// does, ray by ray: through a roof cut away in part, through semi-transparent layers (the
+// product of 1 - alpha over the layers met, each counted once) and past an opaque one.
+TEST(SemiTransparent, ACoherentStreamCarriesWhatAnIncoherentOneDoes) {
+  const std::vector<glm::vec3> dirs = raysThroughTheRoof(24);
+  const std::vector<Mesh> meshes = {cutRoof(), blendRoof(0.5f, 0.3f), blendRoof(0.5f, 1.0f)};
+  for (size_t m = 0; m < meshes.size(); ++m) {
+    SCOPED_TRACE(m);
+    const EmbreeScene scene(meshes[m]);
+    std::vector<float> incoherent(dirs.size()), coherent(dirs.size());
+    scene.transmittanceStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, incoherent.data());
+    scene.transmittanceStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, coherent.data(),
+                              1e30f, true);
+    size_t through = 0, stopped = 0, partly = 0;
+    for (size_t i = 0; i < dirs.size(); ++i) {
+      EXPECT_EQ(coherent[i], incoherent[i]) << i;
+      through += incoherent[i] == 1.0f;
+      stopped += incoherent[i] == 0.0f;
+      partly += incoherent[i] > 0.0f && incoherent[i] < 1.0f;
+    }
+    if (m == 1) {
+      EXPECT_GT(partly, dirs.size() / 2);  // dimmed by the faint roof
+    } else {
+      EXPECT_EQ(partly, 0u);
+      EXPECT_GT(stopped, 0u);
+      if (m == 0) {
+        EXPECT_GT(through, 0u);  // where the roof is cut away
+      }
+    }
+  }
+}
+
 TEST(SemiTransparent, TheCamerasRaysMeetEveryLayerFromTheFront) {
   // The camera's rays (layered) meet a semi-transparent surface wherever its alpha is above 0,
   // by its side facing them; where alpha is 0 they pass.
