@@ -25,8 +25,10 @@ namespace {
 // in a smooth surface are shaded smooth; 6: only those less than 25° sharper than the crease;
 // 7: OBJ faces of 256 corners and more kept whole, a Kd that is not a number the default grey;
 // 8: lines split at a lone CR, a Kd of one number a grey; 9: KHR_texture_transform's rotation
-// turned as Blender turns it, textures not turned by their EXIF orientation.
-constexpr uint32_t kMeshVersion = 9;
+// turned as Blender turns it, textures not turned by their EXIF orientation; 10: OBJ material
+// names whole, map_Kd relative to its library and with its options read as the MTL format has
+// them, a byte-order mark skipped, backslash-continued lines joined.
+constexpr uint32_t kMeshVersion = 10;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {

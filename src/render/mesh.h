@@ -4,7 +4,10 @@
 //  * Wavefront OBJ (.obj, through tinyobjloader): groups and objects are merged into one mesh;
 //    polygons of any size are triangulated (ear clipping in the polygon's own plane, so concave
 //    ones stay inside their outline); `mtllib`/`usemtl` materials give each face a base colour
-//    (`Kd`) and an albedo texture (`map_Kd`, with its `-s`, `-o` and `-clamp` options). `Kd` is
+//    (`Kd`) and an albedo texture (`map_Kd`, with its `-s`, `-o` and `-clamp` options, found
+//    from its library's folder). The lines are read as Blender reads them: a UTF-8 byte-order
+//    mark skipped, a line ending in a backslash joined to the next, a material's whole name
+//    (spaces included), Windows separators in paths. `Kd` is
 //    taken as linear Rec.709, the way Blender writes and reads it; a `map_Kd` image is decoded as
 //    the colour space its file declares (sRGB for 8-bit images). `map_Kd` multiplies `Kd`, as the
 //    MTL format defines it. Smoothing groups (`s`) of a file without normals split the computed

@@ -37,7 +37,16 @@ struct ObjScan {
   std::vector<std::string> materialLines;
   // Each face's number of corners, in the file's order (tinyobjloader keeps them in 8 bits).
   std::vector<uint32_t> faceCorners;
+  // Each face's material: an index into materialNames (the whole name after `usemtl`, spaces
+  // included: tinyobjloader keeps only its first word), or -1 before any `usemtl`.
+  std::vector<std::string> materialNames;
+  std::vector<int32_t> faceMaterial;
+  // The text needs rewriting before tinyobjloader reads it: it starts with a UTF-8 byte-order
+  // mark, or a line goes on on the next one (a backslash at its end).
+  bool rewrite = false;
 };
+
+constexpr std::string_view kUtf8Bom = "\xEF\xBB\xBF";
 
 // One line of an OBJ or MTL file, split where tinyobjloader splits them: at "\n", "\r\n" or a
 // lone "\r" (classic Mac files), so that both passes see the same lines. False at the end.
@@ -62,6 +71,62 @@ bool objSpace(char c) {
   return c == ' ' || c == '\t';
 }
 
+// Skips a UTF-8 byte-order mark at the start of `in` (Notepad writes one; tinyobjloader would
+// take it as part of the first line's keyword and drop that line). True if there was one.
+bool skipByteOrderMark(std::istream& in) {
+  char head[3] = {};
+  in.read(head, 3);
+  if (in.gcount() == 3 && std::string_view(head, 3) == kUtf8Bom) return true;
+  in.clear();
+  in.seekg(0);
+  return false;
+}
+
+// The lines of an OBJ file as Blender reads them: a line that ends in a backslash (not a
+// comment) goes on on the next one. Counts the file's lines read so far, for messages.
+class ObjLines {
+ public:
+  explicit ObjLines(std::streambuf& in) : in_(in) {}
+  bool next(std::string& line) {
+    if (!objLine(in_, line)) return false;
+    first_ = ++read_;
+    std::string more;
+    while (continues(line)) {
+      joined_ = true;
+      if (!objLine(in_, more)) break;
+      ++read_;
+      line += more;
+    }
+    return true;
+  }
+  size_t lineNumber() const { return first_; }  // in the file, of the line next() gave
+  bool joined() const { return joined_; }       // some line went on on the next
+
+ private:
+  // Replaces a closing backslash (and the blanks after it) by a space.
+  static bool continues(std::string& line) {
+    const size_t last = line.find_last_not_of(" \t");
+    if (last == std::string::npos || line[last] != '\\') return false;
+    if (line[line.find_first_not_of(" \t")] == '#') return false;
+    line.resize(last);
+    line += ' ';
+    return true;
+  }
+  std::streambuf& in_;
+  size_t read_ = 0, first_ = 0;
+  bool joined_ = false;
+};
+
+// The whole of what follows a statement's keyword, without the blanks around it (a material's
+// name may have spaces).
+std::string restOfLine(const std::string& line, std::string_view key) {
+  const size_t at = line.find_first_not_of(" \t");  // where the keyword is
+  if (at == std::string::npos) return {};
+  const size_t from = line.find_first_not_of(" \t", at + key.size());
+  if (from == std::string::npos) return {};
+  return line.substr(from, line.find_last_not_of(" \t") + 1 - from);
+}
+
 // tinyobjloader reads a malformed number ("nan", "inf", "abc") as 0 without saying so, and an
 // index beyond int's range wraps around. This pass over the text finds them first and names the
 // line: every field of v, vn and vt must be a finite number, and every corner of f an integer
@@ -70,15 +135,17 @@ ObjScan scanObj(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
   ObjScan scan;
+  scan.rewrite = skipByteOrderMark(in);
+  ObjLines lines(*in.rdbuf());
   std::string line;
-  size_t lineNo = 0;
   auto fail = [&](const std::string& what) {
-    throw Error("mesh", "line " + std::to_string(lineNo) + ": " + what, path);
+    throw Error("mesh", "line " + std::to_string(lines.lineNumber()) + ": " + what, path);
   };
   std::vector<std::string_view> fields;
+  std::map<std::string, int32_t, std::less<>> materialIndex;
+  int32_t material = -1;
   int64_t triangles = 0;
-  while (objLine(*in.rdbuf(), line)) {
-    ++lineNo;
+  while (lines.next(line)) {
     fields.clear();
     for (size_t i = 0; i < line.size();) {
       while (i < line.size() && objSpace(line[i])) ++i;
@@ -122,6 +189,7 @@ ObjScan scanObj(const fs::path& path) {
       triangles += int64_t(fields.size()) - 3;  // a polygon of n corners makes n - 2 triangles
       checkTriangleCount(triangles, path);
       scan.faceCorners.push_back(uint32_t(fields.size() - 1));
+      scan.faceMaterial.push_back(material);
       for (size_t f = 1; f < fields.size(); ++f) {
         // v, v/vt, v//vn or v/vt/vn: integers, the first present and none zero.
         const std::string_view corner = fields[f];
@@ -142,64 +210,208 @@ ObjScan scanObj(const fs::path& path) {
           start = slash + 1;
         }
       }
-    } else if (key == "mtllib" && fields.size() > 2) {
-      const size_t from = size_t(fields[1].data() - line.data());
-      const size_t to = size_t(fields.back().data() + fields.back().size() - line.data());
-      scan.materialLines.push_back(line.substr(from, to - from));
+    } else if (key == "mtllib" && fields.size() > 1) {
+      scan.materialLines.push_back(restOfLine(line, key));
+    } else if (key == "usemtl") {
+      const std::string name = restOfLine(line, key);
+      if (name.empty()) {
+        material = -1;
+      } else {
+        const auto [it, inserted] =
+            materialIndex.try_emplace(name, int32_t(scan.materialNames.size()));
+        if (inserted) scan.materialNames.push_back(name);
+        material = it->second;
+      }
     } else if (key == "s") {
       scan.smoothingGroups = true;
     } else if (key == "l" || key == "p") {
       ++scan.linesAndPoints;
     }
   }
+  scan.rewrite = scan.rewrite || lines.joined();
   return scan;
 }
 
-// Material libraries, found relative to the OBJ's folder (Windows separators accepted); the ones
-// that cannot be read are remembered for a warning instead of failing the load.
+// The file's lines as scanObj() read them, for tinyobjloader (ObjScan::rewrite).
+std::string rewrittenObj(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  skipByteOrderMark(in);
+  ObjLines lines(*in.rdbuf());
+  std::string text, line;
+  while (lines.next(line)) (text += line) += '\n';
+  return text;
+}
+
+// What a material library says about one material.
+struct MtlMaterial {
+  std::string name;
+  fs::path library;  // the file that defines it
+  bool hasKd = false;
+  glm::vec3 kd{kDefaultAlbedo};
+  std::string badKd;  // a Kd that is not a colour, as written (kd then stays the default)
+  // map_Kd: the file as written, without its options; empty when there is none.
+  std::string texture;
+  glm::vec2 scale{1.0f}, offset{0.0f};  // -s and -o
+  bool clamp = false;                   // -clamp on
+  std::string textureProblem;           // map_Kd given but unusable (no file named), for a warning
+  std::string transparency;             // d, Tr or map_d that would make it see-through, as written
+};
+
+// A number as the MTL format writes one: decimal, the whole field, finite.
+bool mtlNumber(std::string_view field, double& value) {
+  const std::string text(field);
+  char* end = nullptr;
+  value = std::strtod(text.c_str(), &end);
+  return !text.empty() && end == text.c_str() + text.size() && std::isfinite(value) &&
+         text.find_first_of("xX") == std::string::npos;
+}
+
+// map_Kd's options, as the MTL format defines them, and its file: the rest of the line, spaces
+// included. Unknown options are skipped with the numbers and on/off that follow them.
+void parseTextureMap(const std::string& rest, MtlMaterial& m) {
+  std::vector<std::pair<size_t, std::string_view>> fields;  // (offset in rest, field)
+  for (size_t i = 0; i < rest.size();) {
+    while (i < rest.size() && objSpace(rest[i])) ++i;
+    size_t j = i;
+    while (j < rest.size() && !objSpace(rest[j])) ++j;
+    if (j > i) fields.emplace_back(i, std::string_view(rest).substr(i, j - i));
+    i = j;
+  }
+  static const std::set<std::string_view> kOneValue = {
+      "-blendu", "-blendv", "-cc", "-clamp", "-boost", "-texres", "-bm", "-imfchan", "-type"};
+  size_t f = 0;
+  double unused = 0.0;
+  while (f < fields.size() && fields[f].second.size() > 1 && fields[f].second[0] == '-' &&
+         !mtlNumber(fields[f].second, unused)) {
+    const std::string_view option = fields[f++].second;
+    if (kOneValue.count(option)) {
+      if (f < fields.size()) {
+        if (option == "-clamp") m.clamp = fields[f].second == "on";
+        ++f;
+      }
+    } else if (option == "-mm") {
+      f = std::min(fields.size(), f + 2);
+    } else {
+      // -o, -s, -t: one to three numbers (v and w may be left out); anything else: what
+      // follows it that is a number or on/off.
+      std::vector<double> numbers;
+      double v = 0.0;
+      while (f < fields.size() && numbers.size() < 3 &&
+             (mtlNumber(fields[f].second, v) ||
+              (option != "-o" && option != "-s" && option != "-t" &&
+               (fields[f].second == "on" || fields[f].second == "off")))) {
+        numbers.push_back(v);
+        ++f;
+      }
+      if (option == "-s" && !numbers.empty())
+        m.scale = glm::vec2(float(numbers[0]), float(numbers.size() > 1 ? numbers[1] : 1.0));
+      if (option == "-o" && !numbers.empty())
+        m.offset = glm::vec2(float(numbers[0]), float(numbers.size() > 1 ? numbers[1] : 0.0));
+    }
+  }
+  if (f < fields.size()) {
+    const size_t from = fields[f].first;
+    m.texture = rest.substr(from, rest.find_last_not_of(" \t") + 1 - from);
+  } else {
+    m.textureProblem = "map_Kd names no file ('" + rest + "')";
+  }
+}
+
+// tinyobjloader's reading of an `mtllib` line: split at spaces, a backslash taking the next
+// character as it is (so that `mats\red.mtl` reaches the reader as `matsred.mtl`).
+std::vector<std::string> tinyobjSplit(const std::string& s) {
+  std::vector<std::string> out;
+  std::string token;
+  bool escaping = false;
+  for (const char c : s) {
+    if (!escaping && c == '\\') {
+      escaping = true;
+      continue;
+    }
+    if (!escaping && c == ' ') {
+      if (!token.empty()) out.push_back(token);
+      token.clear();
+      continue;
+    }
+    escaping = false;
+    token += c;
+  }
+  out.push_back(token);
+  return out;
+}
+
+// The same line's names as written, split at the spaces tinyobjloader splits at.
+std::vector<std::string> writtenNames(const std::string& s) {
+  std::vector<std::string> out;
+  std::string token;
+  bool escaping = false;
+  for (const char c : s) {
+    if (!escaping && c == ' ') {
+      if (!token.empty()) out.push_back(token);
+      token.clear();
+      continue;
+    }
+    escaping = !escaping && c == '\\';
+    token += c;
+  }
+  out.push_back(token);
+  return out;
+}
+
+// Material libraries, found relative to the OBJ's folder (Windows separators accepted), read
+// here (tinyobjloader's reading of MTL files keeps only the first word of a `usemtl` name and
+// takes the file name of `map_Kd -s 2 2 wood.png` for a number). The ones that cannot be read are
+// remembered for a warning instead of failing the load.
 class MaterialLibraries : public tinyobj::MaterialReader {
  public:
-  // `wholeLines`: what follows each `mtllib` of more than one word (ObjScan::materialLines).
-  MaterialLibraries(fs::path folder, std::vector<std::string> wholeLines)
-      : folder_(std::move(folder)), wholeLines_(std::move(wholeLines)) {}
-  bool operator()(const std::string& name, std::vector<tinyobj::material_t>* materials,
-                  std::map<std::string, int>* names, std::string* warn, std::string* err) override {
+  // `lines`: what follows each `mtllib` (ObjScan::materialLines).
+  MaterialLibraries(fs::path folder, std::vector<std::string> lines)
+      : folder_(std::move(folder)), lines_(std::move(lines)) {}
+  bool operator()(const std::string& name, std::vector<tinyobj::material_t>*,
+                  std::map<std::string, int>*, std::string*, std::string*) override {
     // tinyobjloader splits `mtllib My Chair.mtl` at the space and stops at the first library it
     // reads. Blender reads one file of that whole name when it exists, else every library the
     // line names; so does this, at the line's first word (later words ask again: nothing more).
     std::vector<std::string> files = {name};
-    for (const std::string& whole : wholeLines_) {
-      std::istringstream split(whole);
-      std::vector<std::string> words;
-      for (std::string w; split >> w;) words.push_back(w);
-      if (std::find(words.begin(), words.end(), name) == words.end()) continue;
+    for (const std::string& whole : lines_) {
+      const std::vector<std::string> asRead = tinyobjSplit(whole), written = writtenNames(whole);
+      const auto k = std::find(asRead.begin(), asRead.end(), name);
+      if (k == asRead.end() || asRead.size() != written.size()) continue;
       std::error_code ec;
-      files = fs::is_regular_file(folder_ / whole, ec) ? std::vector<std::string>{whole} : words;
+      if (fs::is_regular_file(folder_ / portable(whole), ec))
+        files = {whole};
+      else if (asRead.size() == 1)
+        files = {written[0]};  // `mats\red.mtl`: a Windows path
+      else
+        files = written;
       if (!linesRead_.insert(whole).second) return true;  // read for an earlier word
       break;
     }
     bool any = false;
-    for (const std::string& f : files) any = read(f, materials, names, warn, err) || any;
+    for (const std::string& f : files) any = read(f) || any;
     return any;
   }
+
   std::vector<std::string> unreadable;
-  std::vector<fs::path> looked;  // every library file asked for
-  std::set<std::string> withKd;  // materials that give Kd
-  // Materials whose Kd holds something that is not a finite number (tinyobjloader reads "nan"
-  // as 0), with the Kd line as written.
-  std::map<std::string, std::string> badKd;
-  std::map<std::string, double> greyKd;  // materials whose Kd gives one number: r = g = b
+  std::vector<std::string> redefined;  // warnings: a name defined again (the first one holds)
+  std::vector<fs::path> looked;        // every library file asked for
+  std::vector<MtlMaterial> materials;  // the first definition of each name, in file order
+  std::map<std::string, size_t, std::less<>> byName;
+
+  // A name as written in a file, Windows separators made '/'.
+  static std::string portable(std::string name) {
+    std::replace(name.begin(), name.end(), '\\', '/');
+    return name;
+  }
 
  private:
   fs::path folder_;
-  std::vector<std::string> wholeLines_;
+  std::vector<std::string> lines_;
   std::set<std::string> linesRead_;
 
-  bool read(const std::string& name, std::vector<tinyobj::material_t>* materials,
-            std::map<std::string, int>* names, std::string* warn, std::string* err) {
-    std::string relative = name;
-    std::replace(relative.begin(), relative.end(), '\\', '/');
-    const fs::path file = folder_ / relative;
+  bool read(const std::string& name) {
+    const fs::path file = folder_ / portable(name);
     looked.push_back(file);
     std::error_code ec;
     std::ifstream in;
@@ -213,43 +425,96 @@ class MaterialLibraries : public tinyobj::MaterialReader {
       unreadable.push_back("material library '" + name + "' cannot be read (" + why + ")");
       return false;
     }
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    // tinyobjloader gives a material without Kd a black one: remember which have it.
-    std::istringstream lines(text);
-    std::string line, current;
-    while (objLine(*lines.rdbuf(), line)) {
+    skipByteOrderMark(in);
+    std::string line;
+    MtlMaterial* current = nullptr;
+    while (objLine(*in.rdbuf(), line)) {
       std::istringstream fields(line);
       std::string key;
       fields >> key;
       if (key == "newmtl") {
-        std::getline(fields >> std::ws, current);
-        while (!current.empty() && std::isspace(static_cast<unsigned char>(current.back())))
-          current.pop_back();
+        const std::string material = restOfLine(line, key);
+        current = nullptr;
+        if (material.empty()) continue;
+        if (const auto it = byName.find(material); it != byName.end()) {
+          redefined.push_back("material '" + material + "' is defined again in " +
+                              file.filename().string() + ": the first definition (" +
+                              materials[it->second].library.filename().string() + ") is used");
+          continue;
+        }
+        byName.emplace(material, materials.size());
+        MtlMaterial defined;
+        defined.name = material;
+        defined.library = file;
+        materials.push_back(std::move(defined));
+        current = &materials.back();
+      } else if (!current) {
+        continue;
       } else if (key == "Kd") {
-        withKd.insert(current);
-        // Up to three numbers, as tinyobjloader reads them; a comment may follow.
+        // "Kd r" alone is a grey (the MTL format: g and b are r when not given); a comment may
+        // follow the numbers.
+        current->hasKd = true;
         std::string value, all;
         std::vector<double> numbers;
         bool finite = true;
         while (numbers.size() < 3 && fields >> value && value[0] != '#') {
-          char* end = nullptr;
-          const double v = std::strtod(value.c_str(), &end);
-          finite = finite && end != value.c_str() && *end == '\0' && std::isfinite(v) &&
-                   value.find_first_of("xX") == std::string::npos;
+          double v = 0.0;
+          finite = mtlNumber(value, v) && finite;
           numbers.push_back(v);
           all += (all.empty() ? "" : " ") + value;
         }
-        if (!finite || numbers.empty()) badKd[current] = all;
-        // "Kd r" alone is a grey (the MTL format: g and b are r when not given).
-        else if (numbers.size() == 1)
-          greyKd[current] = numbers[0];
+        if (!finite || numbers.empty() || numbers.size() == 2) {
+          current->badKd = all;
+        } else {
+          current->kd = numbers.size() == 1
+                            ? glm::vec3(float(numbers[0]))
+                            : glm::vec3(float(numbers[0]), float(numbers[1]), float(numbers[2]));
+        }
+      } else if (key == "map_Kd") {
+        current->texture.clear();
+        current->textureProblem.clear();
+        current->scale = glm::vec2(1.0f);
+        current->offset = glm::vec2(0.0f);
+        current->clamp = false;
+        parseTextureMap(restOfLine(line, key), *current);
+      } else if (key == "d" || key == "Tr") {
+        // d is the opacity, Tr its complement (some exporters write Tr as the opacity too).
+        std::string value;
+        double v = 1.0;
+        if (fields >> value && mtlNumber(value, v) && (key == "d" ? v < 1.0 : v > 0.0 && v < 1.0))
+          current->transparency = key + " " + value;
+      } else if (key == "map_d") {
+        current->transparency = "map_d " + restOfLine(line, key);
       }
     }
-    std::istringstream stream(text);
-    tinyobj::LoadMtl(names, materials, &stream, warn, err);
     return true;
   }
 };
+
+// Where map_Kd's file is: relative to its material library's folder (where the MTL format and
+// Blender look), else to the OBJ's; else, for a path from another machine
+// (C:\Users\me\wood.png), its name alone in either folder (`byName` is then set). When none
+// exists, the first place looked, for the error.
+fs::path locateTexture(const std::string& written, const fs::path& libraryFolder,
+                       const fs::path& objFolder, bool& byName) {
+  byName = false;
+  const fs::path relative = MaterialLibraries::portable(written);
+  std::vector<fs::path> places = {libraryFolder / relative};
+  if (objFolder != libraryFolder && !relative.is_absolute()) places.push_back(objFolder / relative);
+  std::error_code ec;
+  for (const fs::path& p : places)
+    if (fs::is_regular_file(p, ec)) return p;
+  if (relative.has_filename() && relative.filename() != relative) {
+    for (const fs::path& folder : {libraryFolder, objFolder}) {
+      const fs::path p = folder / relative.filename();
+      if (fs::is_regular_file(p, ec)) {
+        byName = true;
+        return p;
+      }
+    }
+  }
+  return places.front();
+}
 
 // (position, texture coordinate, normal) indices of a face corner, -1 where absent.
 struct CornerKey {
@@ -267,8 +532,16 @@ struct CornerHash {
 
 LoadedMesh loadObj(const fs::path& path) {
   const ObjScan scan = scanObj(path);
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  std::ifstream objFile;
+  std::istringstream rewritten;
+  std::istream* in = &objFile;
+  if (scan.rewrite) {
+    rewritten.str(rewrittenObj(path));
+    in = &rewritten;
+  } else {
+    objFile.open(path, std::ios::binary);
+    if (!objFile) throw Error("mesh", withSystemReason("cannot open", errno), path);
+  }
   tinyobj::attrib_t attrib;
   std::vector<tinyobj::shape_t> shapes;
   std::vector<tinyobj::material_t> objMaterials;
@@ -276,7 +549,7 @@ LoadedMesh loadObj(const fs::path& path) {
   MaterialLibraries libraries(path.parent_path(), scan.materialLines);
   // Polygons are triangulated below, in their own plane (tinyobjloader's fans and
   // shorter-diagonal quads can leave a concave polygon's outline).
-  if (!tinyobj::LoadObj(&attrib, &shapes, &objMaterials, &warn, &err, &in, &libraries,
+  if (!tinyobj::LoadObj(&attrib, &shapes, &objMaterials, &warn, &err, in, &libraries,
                         /*triangulate=*/false, /*default_vcols_fallback=*/false)) {
     while (!err.empty() && (err.back() == '\n' || err.back() == '\r')) err.pop_back();
     throw Error("mesh", "cannot parse OBJ: " + (err.empty() ? std::string("unknown reason") : err),
@@ -316,7 +589,7 @@ LoadedMesh loadObj(const fs::path& path) {
   std::map<int, uint32_t> materialIndex;
   std::vector<int> usedMaterials;
   auto materialOf = [&](int id) {
-    if (id < 0 || size_t(id) >= objMaterials.size()) id = -1;
+    if (id < 0 || size_t(id) >= libraries.materials.size()) id = -1;
     const auto [it, inserted] = materialIndex.try_emplace(id, uint32_t(usedMaterials.size()));
     if (inserted) usedMaterials.push_back(id);
     return it->second;
@@ -374,6 +647,14 @@ LoadedMesh loadObj(const fs::path& path) {
     return it->second;
   };
 
+  // Each `usemtl` name's material (-1: no library defines it), and the faces that named it then.
+  std::vector<int> materialOfName;
+  for (const std::string& name : scan.materialNames) {
+    const auto it = libraries.byName.find(name);
+    materialOfName.push_back(it == libraries.byName.end() ? -1 : int(it->second));
+  }
+  std::vector<size_t> undefinedFaces(scan.materialNames.size(), 0);
+
   size_t faces = 0, outOfRange = 0, noMaterial = 0;
   std::vector<uint32_t> polygon;
   std::vector<glm::vec3> corners;
@@ -410,7 +691,10 @@ LoadedMesh loadObj(const fs::path& path) {
         polygon.push_back(vertex({idx.vertex_index, idx.texcoord_index, idx.normal_index}));
         corners.push_back(mesh.positions[polygon.back()]);
       }
-      const int objMaterial = f < m.material_ids.size() ? m.material_ids[f] : -1;
+      // The face's material by the whole name its `usemtl` gave (ObjScan::faceMaterial).
+      const int32_t named = scan.faceMaterial[fileFace];
+      const int objMaterial = named < 0 ? -1 : materialOfName[size_t(named)];
+      if (named >= 0 && objMaterial < 0) ++undefinedFaces[size_t(named)];
       const uint32_t material = materialOf(objMaterial);
       const uint32_t group = f < m.smoothing_group_ids.size() ? m.smoothing_group_ids[f] : 0;
       for (uint32_t c : triangulatePolygon(corners)) mesh.indices.push_back(polygon[c]);
@@ -442,14 +726,30 @@ LoadedMesh loadObj(const fs::path& path) {
   if (!scan.smoothingGroups) loaded.smoothingGroup.clear();
 
   // Materials: Kd is the base colour, map_Kd its texture (read once per file).
+  for (const std::string& w : libraries.redefined) mesh.warnings.push_back(w);
+  // Names no library defines (with an unreadable library, its warning says it already).
+  std::string undefined;
+  size_t undefinedCount = 0, undefinedNames = 0;
+  for (size_t k = 0; k < undefinedFaces.size(); ++k) {
+    if (undefinedFaces[k] == 0) continue;
+    undefinedCount += undefinedFaces[k];
+    if (++undefinedNames <= 3)
+      undefined += (undefined.empty() ? "'" : ", '") + scan.materialNames[k] + "'";
+  }
+  if (undefinedNames > 3) undefined += " and " + std::to_string(undefinedNames - 3) + " more";
+  const std::string faceColour = colours.empty() ? "the default albedo" : "their vertex colours";
+  if (undefinedCount > 0 && libraries.unreadable.empty()) {
+    mesh.warnings.push_back(count(undefinedCount, "face uses", "faces use") + " " +
+                            (undefinedNames == 1 ? "material " : "materials ") + undefined +
+                            ", which no material library defines: rendered with " + faceColour);
+  }
   const bool anyMaterial =
       std::any_of(usedMaterials.begin(), usedMaterials.end(), [](int id) { return id >= 0; });
   if (anyMaterial) {
-    if (noMaterial) {
-      mesh.warnings.push_back(count(noMaterial, "face has", "faces have") +
-                              " no material (or one no material library defines): rendered "
-                              "with " +
-                              (colours.empty() ? "the default albedo" : "their vertex colours"));
+    if (noMaterial > undefinedCount || (noMaterial > 0 && !libraries.unreadable.empty())) {
+      const size_t none = libraries.unreadable.empty() ? noMaterial - undefinedCount : noMaterial;
+      mesh.warnings.push_back(count(none, "face has", "faces have") +
+                              " no material: rendered with " + faceColour);
     }
     // A texture per file and wrap mode: two materials may use one file, one clamped (-clamp on)
     // and one repeated.
@@ -463,34 +763,40 @@ LoadedMesh loadObj(const fs::path& path) {
         mesh.materials.push_back(material);
         continue;
       }
-      const tinyobj::material_t& om = objMaterials[size_t(id)];
+      const MtlMaterial& om = libraries.materials[size_t(id)];
       material.name = om.name;
+      // No Kd (Blender writes none with a map_Kd), or one that is not a colour: the texture
+      // alone, or the default grey.
+      const bool ownColour = om.hasKd && om.badKd.empty();
       material.baseColor =
-          glm::vec3(float(om.diffuse[0]), float(om.diffuse[1]), float(om.diffuse[2]));
-      if (!libraries.withKd.count(om.name)) {
-        // No Kd: the texture alone, or the default grey.
-        material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
-      }
-      if (const auto grey = libraries.greyKd.find(om.name); grey != libraries.greyKd.end())
-        material.baseColor = glm::vec3(float(grey->second));
-      if (const auto bad = libraries.badKd.find(om.name); bad != libraries.badKd.end()) {
-        // As if there were no Kd: the texture alone, or the default grey.
+          ownColour ? om.kd : glm::vec3(om.texture.empty() ? kDefaultAlbedo : 1.0f);
+      if (!om.badKd.empty()) {
         mesh.warnings.push_back(
-            "material '" + om.name + "' has a Kd that is not a colour ('" + bad->second +
-            "'): " + (om.diffuse_texname.empty() ? "using the default grey" : "its texture alone"));
-        material.baseColor = glm::vec3(om.diffuse_texname.empty() ? kDefaultAlbedo : 1.0f);
-      } else if (!std::isfinite(material.baseColor.x + material.baseColor.y +
-                                material.baseColor.z)) {
-        mesh.warnings.push_back("material '" + om.name +
-                                "' has a non-finite Kd: using the default");
-        material.baseColor = glm::vec3(kDefaultAlbedo);
+            "material '" + om.name + "' has a Kd that is not a colour ('" + om.badKd +
+            "'): " + (om.texture.empty() ? "using the default grey" : "its texture alone"));
       }
-      if (!om.diffuse_texname.empty()) {
-        std::string relative = om.diffuse_texname;
-        std::replace(relative.begin(), relative.end(), '\\', '/');
-        const fs::path file = path.parent_path() / relative;
-        const bool clamp = om.diffuse_texopt.clamp;
+      if (!om.textureProblem.empty()) {
+        mesh.warnings.push_back("material '" + om.name + "': " + om.textureProblem +
+                                ": the material renders with " +
+                                (ownColour ? "its Kd" : "the default albedo"));
+      }
+      if (!om.transparency.empty()) {
+        mesh.warnings.push_back("material '" + om.name + "' is see-through in its library ('" +
+                                om.transparency +
+                                "'): an OBJ material's transparency is not read; it renders "
+                                "opaque (a glTF file's alphaMode is)");
+      }
+      if (!om.texture.empty()) {
+        bool byName = false;
+        const fs::path file =
+            locateTexture(om.texture, om.library.parent_path(), path.parent_path(), byName);
+        const bool clamp = om.clamp;
         auto [it, inserted] = textureOf.try_emplace({file, clamp}, -1);
+        if (byName) {
+          mesh.warnings.push_back("texture '" + om.texture + "' of material '" + om.name +
+                                  "' is not where its library says: read " + file.string() +
+                                  ", the file of that name beside the library or the OBJ");
+        }
         if (inserted) {
           if (!textureOf.count({file, !clamp})) mesh.otherFiles.push_back(file);
           try {
@@ -501,14 +807,15 @@ LoadedMesh loadObj(const fs::path& path) {
             it->second = int(mesh.textures.size());
             mesh.textures.push_back(std::move(texture));
           } catch (const Error& e) {
-            mesh.warnings.push_back("texture '" + om.diffuse_texname + "' of material '" + om.name +
+            mesh.warnings.push_back("texture '" + om.texture + "' of material '" + om.name +
                                     "' cannot be read (" + e.what() +
-                                    "): the material renders with its Kd");
+                                    "): the material renders with " +
+                                    (ownColour ? "its Kd" : "the default albedo"));
           }
         }
         material.texture = it->second;
-        if (material.texture >= 0 && libraries.withKd.count(om.name) &&
-            material.baseColor != glm::vec3(1.0f)) {
+        if (material.texture < 0 && !ownColour) material.baseColor = glm::vec3(kDefaultAlbedo);
+        if (material.texture >= 0 && ownColour && material.baseColor != glm::vec3(1.0f)) {
           char kd[96];
           std::snprintf(kd, sizeof kd, "%g %g %g", double(material.baseColor.x),
                         double(material.baseColor.y), double(material.baseColor.z));
@@ -517,10 +824,8 @@ LoadedMesh loadObj(const fs::path& path) {
                                   "and 3ds Max show the texture alone; Kd 1 1 1 does that here)");
         }
         // map_Kd -s and -o: uv' = uv * scale + offset.
-        const tinyobj::texture_option_t& o = om.diffuse_texopt;
-        material.uvTransform =
-            glm::mat3(float(o.scale[0]), 0.0f, 0.0f, 0.0f, float(o.scale[1]), 0.0f,
-                      float(o.origin_offset[0]), float(o.origin_offset[1]), 1.0f);
+        material.uvTransform = glm::mat3(om.scale.x, 0.0f, 0.0f, 0.0f, om.scale.y, 0.0f,
+                                         om.offset.x, om.offset.y, 1.0f);
       }
       mesh.materials.push_back(material);
     }

@@ -560,8 +560,8 @@ TEST(Mesh, ObjMaterialsGiveBaseColoursAndTextures) {
   EXPECT_EQ(m.colorSpace, "lin_rec709");
   // Kd times the texture is said (Blender shows the texture alone); the texture alone is not.
   const std::vector<std::string> warnings = {
-      "1 face has no material (or one no material library defines): rendered with the default "
-      "albedo",
+      "1 face uses material 'nowhere', which no material library defines: rendered with the "
+      "default albedo",
       "material 'painted': its Kd (0.5 1 1) multiplies its map_Kd, as the MTL format says "
       "(Blender, Maya and 3ds Max show the texture alone; Kd 1 1 1 does that here)"};
   EXPECT_EQ(m.warnings, warnings);
@@ -593,6 +593,124 @@ TEST(Mesh, ObjMaterialsSharingATextureKeepTheirOwnWrap) {
   EXPECT_TRUE(near(m.albedoAt(0, 0, 0), {1, 0, 0}));
   EXPECT_TRUE(near(m.albedoAt(1, 0, 0), {0, 1, 0}));
   EXPECT_EQ(m.otherFiles.size(), 2u) << "the library and the texture, once each";
+}
+
+// Material names as written: `usemtl Red Paint` is the material of that whole name (tinyobjloader
+// took its first word, here another material), before its `mtllib` too; a name no library
+// defines is said, even when no face has a material (it rendered grey without a word).
+TEST(Mesh, ObjMaterialNamesAreWholeAndAnUndefinedOneIsSaid) {
+  TempDir dir;
+  writeText(dir / "m.mtl", "newmtl Red Paint\nKd 1 0 0\nnewmtl Red\nKd 0 0 1\n");
+  writeText(dir / "m.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl Red Paint \nf 1 2 3\nmtllib m.mtl\n"
+            "usemtl Red\nf 2 4 3\n");
+  const Mesh m = loadMesh(dir / "m.obj");
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  ASSERT_EQ(m.triangleCount(), 2u);
+  EXPECT_TRUE(near(m.albedoAt(0, 0.2f, 0.2f), {1, 0, 0}));
+  EXPECT_TRUE(near(m.albedoAt(1, 0.2f, 0.2f), {0, 0, 1}));
+
+  writeText(dir / "u.obj",
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl red\nf 1 2 3\n"
+            "usemtl Blue Paint\nf 2 4 3\n");
+  const Mesh u = loadMesh(dir / "u.obj");
+  const std::vector<std::string> said = {
+      "2 faces use materials 'red', 'Blue Paint', which no material library defines: rendered "
+      "with the default albedo"};
+  EXPECT_EQ(u.warnings, said);
+  EXPECT_FALSE(u.hasMaterials()) << "the renderer's albedo applies";
+}
+
+// What Windows tools write: a UTF-8 byte-order mark (Notepad) before the first line of the OBJ
+// and the MTL, `mtllib mats\red.mtl` (tinyobjloader took the backslash for an escape and looked
+// for matsred.mtl), and a face that goes on on the next line after a backslash (as Blender reads
+// it). Each lost the materials or the first vertex without a word.
+TEST(Mesh, AnObjFromWindowsToolsReadsAsBlenderReadsIt) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "mats");
+  writeText(dir / "mats" / "red.mtl", "\xEF\xBB\xBFnewmtl red\nKd 1 0 0\n");
+  writeText(dir / "w.obj",
+            "\xEF\xBB\xBFv 0 0 0\r\nmtllib mats\\red.mtl\r\nv 1 0 0\r\nv 0 1 0\r\nv 1 1 0\r\n"
+            "usemtl red\r\nf 1 2 \\\r\n  3 4\r\n# a comment that ends in a backslash \\\r\n"
+            "f 2 4 3\r\nf 1 2 x\r\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "w.obj"),
+                       "line 11: face corner 'x' is not a valid vertex reference");
+  writeText(dir / "w.obj",
+            "\xEF\xBB\xBFv 0 0 0\r\nmtllib mats\\red.mtl\r\nv 1 0 0\r\nv 0 1 0\r\nv 1 1 0\r\n"
+            "usemtl red\r\nf 1 2 \\\r\n  4 3\r\n# a comment that ends in a backslash \\\r\n"
+            "v 5 5 5\r\n");
+  const Mesh m = loadMesh(dir / "w.obj");
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings[0];
+  EXPECT_EQ(m.triangleCount(), 2u) << "the quad joined from two lines";
+  ASSERT_TRUE(m.hasMaterials());
+  EXPECT_TRUE(near(m.albedoAt(0, 0.2f, 0.2f), {1, 0, 0}));
+  EXPECT_TRUE(near(m.boundsMin(), {0, 0, 0})) << "the first vertex is read";
+}
+
+// map_Kd as the MTL format writes it: its file relative to the library's own folder; -s and -o
+// with one or two numbers (the file name was taken for the third); options compose does not use
+// (-cc on) skipped; a path from another machine found by its name beside the library, said.
+TEST(Mesh, ObjTextureMapsAsTheMtlFormatWritesThem) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "mats");
+  writeQuadrants(dir / "mats" / "quadrants.png");
+  writeText(dir / "mats" / "t.mtl",
+            "newmtl near\nmap_Kd quadrants.png\n"
+            "newmtl scaled\nmap_Kd -s 2 2 quadrants.png\n"
+            "newmtl shifted\nmap_Kd -cc on -o 0.5 quadrants.png\n"
+            "newmtl elsewhere\nmap_Kd C:\\Users\\me\\textures\\quadrants.png\n");
+  // (0.25, 0.75) is red's centre; (0.125, 0.375) scaled by 2 is too; shifted by 0.5, (0.25,
+  // 0.75) is green's.
+  writeText(dir / "t.obj",
+            "mtllib mats/t.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
+            "v 4 0 0\nv 5 0 0\nv 4 1 0\nv 6 0 0\nv 7 0 0\nv 6 1 0\nvt 0.25 0.75\n"
+            "vt 0.125 0.375\nusemtl near\nf 1/1 2/1 3/1\nusemtl scaled\nf 4/2 5/2 6/2\n"
+            "usemtl shifted\nf 7/1 8/1 9/1\nusemtl elsewhere\nf 10/1 11/1 12/1\n");
+  const Mesh m = loadMesh(dir / "t.obj");
+  ASSERT_EQ(m.triangleCount(), 4u);
+  ASSERT_EQ(m.textures.size(), 1u) << "one file, read once";
+  EXPECT_EQ(m.textures[0].file, dir / "mats" / "quadrants.png");
+  const std::vector<std::string> said = {
+      "texture 'C:\\Users\\me\\textures\\quadrants.png' of material 'elsewhere' is not where its "
+      "library says: read " +
+      (dir / "mats" / "quadrants.png").string() +
+      ", the file of that name beside the library or the OBJ"};
+  EXPECT_EQ(m.warnings, said);
+  EXPECT_TRUE(near(m.albedoAt(0, 0.2f, 0.2f), {1, 0, 0}));
+  EXPECT_TRUE(near(m.albedoAt(1, 0.2f, 0.2f), {1, 0, 0})) << "-s 2 2";
+  EXPECT_TRUE(near(m.albedoAt(2, 0.2f, 0.2f), {0, 1, 0})) << "-o 0.5";
+  EXPECT_TRUE(near(m.albedoAt(3, 0.2f, 0.2f), {1, 0, 0}));
+}
+
+// A material without Kd whose texture cannot be read renders the default grey (it rendered
+// white: the texture's colour 1 with no texture), and says so; a second definition of a name
+// in another library does not change the first (its one-number Kd did); a see-through material
+// is said to render opaque.
+TEST(Mesh, ObjMaterialsWithoutTheirTextureOrDefinedTwice) {
+  TempDir dir;
+  writeText(dir / "a.mtl",
+            "newmtl gone\nmap_Kd gone.png\nnewmtl twice\nKd 1 0 0\nnewmtl glass\nKd 0.2 0.2 "
+            "0.2\nd 0.25\n");
+  writeText(dir / "b.mtl", "newmtl twice\nKd 0.2\n");
+  writeText(dir / "g.obj",
+            "mtllib a.mtl b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
+            "v 4 0 0\nv 5 0 0\nv 4 1 0\nvt 0 0\nusemtl gone\nf 1/1 2/1 3/1\nusemtl twice\n"
+            "f 4 5 6\nusemtl glass\nf 7 8 9\n");
+  const Mesh m = loadMesh(dir / "g.obj");
+  ASSERT_GE(m.warnings.size(), 3u);
+  EXPECT_EQ(m.warnings[0],
+            "material 'twice' is defined again in b.mtl: the first definition (a.mtl) is used");
+  EXPECT_NE(m.warnings[1].find("texture 'gone.png' of material 'gone' cannot be read (file not "
+                               "found): the material renders with the default albedo"),
+            std::string::npos)
+      << m.warnings[1];
+  EXPECT_EQ(m.warnings[2],
+            "material 'glass' is see-through in its library ('d 0.25'): an OBJ material's "
+            "transparency is not read; it renders opaque (a glTF file's alphaMode is)");
+  ASSERT_TRUE(m.hasMaterials());
+  EXPECT_TRUE(near(m.albedoAt(0, 0.2f, 0.2f), glm::vec3(kDefaultAlbedo)));
+  EXPECT_TRUE(near(m.albedoAt(1, 0.2f, 0.2f), {1, 0, 0}));
+  EXPECT_TRUE(near(m.albedoAt(2, 0.2f, 0.2f), glm::vec3(0.2f)));
 }
 
 // A base colour is an albedo: outside 0..1 (Kd 5 -1 0) it rendered as given without a word (and
