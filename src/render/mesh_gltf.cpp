@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <set>
@@ -41,6 +42,18 @@ const std::set<std::string>& supportedRequiredExtensions() {
                                               "KHR_materials_specular",
                                               "KHR_materials_pbrSpecularGlossiness"};
   return names;
+}
+
+// A file that requires an extension compose cannot honour is an error naming it.
+void checkRequiredExtensions(const tinygltf::Model& model, const fs::path& path) {
+  for (const std::string& ext : model.extensionsRequired) {
+    if (supportedRequiredExtensions().count(ext)) continue;
+    std::string why =
+        "the file requires the glTF extension " + ext + ", which compose does not support";
+    if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression")
+      why += " (compressed geometry: export it without compression)";
+    throw Error("mesh", why, path);
+  }
 }
 
 // Keeps the encoded bytes of data-URI images for our own decoder. Images in buffer views are
@@ -632,7 +645,8 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
   else if (size_t(primitive.material) < model_.materials.size())
     someMaterial_ = true;
   std::vector<double> texcoords;
-  if (mesh_.materials[materialIndex].texture >= 0) {
+  const bool textured = mesh_.materials[materialIndex].texture >= 0;
+  if (textured) {
     const std::string set = "TEXCOORD_" + std::to_string(texCoordSet_[materialIndex]);
     if (const int a = attribute(set); a >= 0) {
       texcoords = accessor(a, 2, set);
@@ -689,9 +703,12 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
       mesh_.normals.emplace_back(0.0f);
     }
     out_.hasNormal.push_back(normals.empty() ? 0 : 1);
+    // Without the coordinates its texture needs, not finite: the base colour factor alone
+    // (render::Mesh::albedoAt), not the texel at (0, 0).
     mesh_.texcoords.emplace_back(
-        texcoords.empty() ? glm::vec2(0.0f)
-                          : glm::vec2(float(texcoords[2 * i]), float(1.0 - texcoords[2 * i + 1])));
+        !texcoords.empty() ? glm::vec2(float(texcoords[2 * i]), float(1.0 - texcoords[2 * i + 1]))
+        : textured         ? glm::vec2(std::numeric_limits<float>::quiet_NaN())
+                           : glm::vec2(0.0f));
     mesh_.colors.push_back(colours.empty()
                                ? glm::vec3(1.0f)
                                : glm::vec3(float(colours[3 * i]), float(colours[3 * i + 1]),
@@ -713,14 +730,7 @@ void GltfReader::addPrimitive(const tinygltf::Primitive& primitive,
 }
 
 void GltfReader::read() {
-  for (const std::string& ext : model_.extensionsRequired) {
-    if (supportedRequiredExtensions().count(ext)) continue;
-    std::string why =
-        "the file requires the glTF extension " + ext + ", which compose does not support";
-    if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression")
-      why += " (compressed geometry: export it without compression)";
-    throw Error("mesh", why, path_);
-  }
+  checkRequiredExtensions(model_, path_);
   // The scene: the default one, else the first, else every root node.
   std::vector<int> roots;
   if (!model_.scenes.empty()) {
@@ -934,6 +944,31 @@ bool readRegularFile(std::vector<unsigned char>* out, std::string* err, const st
   return tinygltf::ReadWholeFile(out, err, file, nullptr);
 }
 
+// A binary glTF's chunks must lie within the file: tinygltf 2.7 checks the BIN chunk's length
+// without its 8-byte header, and read up to 8 bytes past the end of the file's bytes.
+void checkGlbChunks(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return;  // tinygltf says why
+  auto word = [&](uint64_t at, uint32_t& value) {
+    unsigned char b[4];
+    in.seekg(std::streamoff(at));
+    if (!in.read(reinterpret_cast<char*>(b), 4)) return false;
+    value = uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
+    return true;
+  };
+  uint32_t length = 0, jsonLength = 0, binLength = 0;
+  if (!word(8, length) || !word(12, jsonLength)) return;  // too short: tinygltf says so
+  const uint64_t bin = 20ull + jsonLength;                // where the BIN chunk's header is
+  if (bin + 8 > length || !word(bin, binLength)) return;  // no BIN chunk (or tinygltf's error)
+  if (bin + 8 + binLength > length) {
+    throw Error("mesh",
+                "cannot parse glTF: its BIN chunk holds " + std::to_string(binLength) +
+                    " bytes, more than the " + std::to_string(length - bin - 8) +
+                    " the file's length leaves it (a truncated or damaged .glb)",
+                path);
+  }
+}
+
 }  // namespace
 
 LoadedMesh loadGltf(const fs::path& path) {
@@ -947,6 +982,7 @@ LoadedMesh loadGltf(const fs::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext == ".glb") checkGlbChunks(path);
   bool ok = false;
   try {
     ok = ext == ".glb" ? parser.LoadBinaryFromFile(&model, &err, &warn, path.string())
@@ -975,6 +1011,9 @@ LoadedMesh loadGltf(const fs::path& path) {
     return out;
   };
   if (!ok) {
+    // tinygltf reads extensionsRequired before the buffers: a compressed file (meshopt's buffer
+    // without a uri) fails on them, and the extension is what to say.
+    checkRequiredExtensions(model, path);
     const std::vector<std::string> why = lines(err);
     std::string joined;
     for (const std::string& w : why) joined += (joined.empty() ? "" : "; ") + w;

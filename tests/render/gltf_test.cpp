@@ -798,6 +798,57 @@ TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "draco.gltf"),
                        "requires the glTF extension KHR_draco_mesh_compression, which compose "
                        "does not support (compressed geometry: export it without compression)");
+  // The same when the file cannot be read without it: gltfpack's meshopt buffer has no uri
+  // (tinygltf failed on it first, and its message was given).
+  b.json["extensionsUsed"] = {"EXT_meshopt_compression"};
+  b.json["extensionsRequired"] = {"EXT_meshopt_compression"};
+  json meshopt = json::parse(b.gltf());
+  meshopt["buffers"].push_back({{"byteLength", 64}});
+  writeText(dir / "meshopt.gltf", meshopt.dump());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "meshopt.gltf"),
+                       "requires the glTF extension EXT_meshopt_compression, which compose does "
+                       "not support (compressed geometry: export it without compression)");
+  b.json.erase("extensionsUsed");
+  b.json.erase("extensionsRequired");
+
+  // A .glb whose BIN chunk says it is longer than what the file holds after its header: tinygltf
+  // read up to 8 bytes past the end (AddressSanitizer: heap-buffer-overflow).
+  std::vector<uint8_t> glb = b.glb();
+  writeBytes(dir / "good.glb", glb);
+  EXPECT_EQ(loadMesh(dir / "good.glb").triangleCount(), 1u);
+  uint32_t jsonLength = 0, binLength = 0;
+  std::memcpy(&jsonLength, glb.data() + 12, 4);
+  std::memcpy(&binLength, glb.data() + 20 + jsonLength, 4);
+  binLength += 8;
+  std::memcpy(glb.data() + 20 + jsonLength, &binLength, 4);
+  writeBytes(dir / "long.glb", glb);
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "long.glb"),
+                       "cannot parse glTF: its BIN chunk holds 44 bytes, more than the 36 the "
+                       "file's length leaves it (a truncated or damaged .glb)");
+}
+
+// A primitive whose material has a base-colour texture but which has no texture coordinates
+// renders the base colour factor alone, as the warning says (it took the texel at (0, 0)).
+TEST(Gltf, APrimitiveWithoutTheTextureCoordinatesItsTextureNeedsRendersTheFactor) {
+  TempDir dir;
+  const std::string png = "data:image/png;base64," + base64(quadrantPng(dir));
+  json j = json::parse(texturedPair({{"uri", png}}).gltf());
+  j["meshes"][0]["primitives"][0]["attributes"].erase("TEXCOORD_0");
+  writeText(dir / "bare.gltf", j.dump());
+  const Mesh m = loadMesh(dir / "bare.gltf");
+  const std::vector<std::string> said = {
+      "1 primitive has a base-colour texture but not its texture coordinates: rendered with the "
+      "base colour factor"};
+  EXPECT_EQ(m.warnings, said);
+  ASSERT_EQ(m.triangleCount(), 2u);
+  const uint32_t first = m.positions[m.indices[0]].x < 1.5f ? 0u : 1u;
+  for (const auto& [u, v] : {std::pair{0.0f, 0.0f}, {0.3f, 0.3f}, {1.0f, 0.0f}}) {
+    EXPECT_EQ(m.albedoAt(first, u, v), glm::vec3(0.5f, 1, 1)) << u << ", " << v;
+    EXPECT_EQ(m.albedoAt(first, u, v, glm::vec3(0.01f, 0, 0), glm::vec3(0, 0.01f, 0)),
+              glm::vec3(0.5f, 1, 1))
+        << "with a footprint, " << u << ", " << v;
+  }
+  EXPECT_EQ(m.albedoAt(1 - first, 0.3f, 0.3f), glm::vec3(0.2f, 0.4f, 0.6f));
 }
 
 TEST(Gltf, AnUnreadableTextureLeavesTheBaseColourWithAWarning) {
