@@ -28,8 +28,9 @@ namespace {
 // turned as Blender turns it, textures not turned by their EXIF orientation; 10: OBJ material
 // names whole, map_Kd relative to its library and with its options read as the MTL format has
 // them, a byte-order mark skipped, backslash-continued lines joined; 11: a glTF primitive
-// without the texture coordinates its texture needs renders its base colour factor.
-constexpr uint32_t kMeshVersion = 11;
+// without the texture coordinates its texture needs renders its base colour factor; 12: MTL
+// d and map_d read.
+constexpr uint32_t kMeshVersion = 12;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {

@@ -7,7 +7,8 @@
 //    (`Kd`) and an albedo texture (`map_Kd`, with its `-s`, `-o` and `-clamp` options, found
 //    from its library's folder). The lines are read as Blender reads them: a UTF-8 byte-order
 //    mark skipped, a line ending in a backslash joined to the next, a material's whole name
-//    (spaces included), Windows separators in paths. `Kd` is
+//    (spaces included), Windows separators in paths; `d` (not `Tr`) and a `map_d` naming
+//    `map_Kd`'s file (its alpha channel) make a material semi-transparent (BLEND). `Kd` is
 //    taken as linear Rec.709, the way Blender writes and reads it; a `map_Kd` image is decoded as
 //    the colour space its file declares (sRGB for 8-bit images). `map_Kd` multiplies `Kd`, as the
 //    MTL format defines it. Smoothing groups (`s`) of a file without normals split the computed

@@ -255,7 +255,10 @@ struct MtlMaterial {
   glm::vec2 scale{1.0f}, offset{0.0f};  // -s and -o
   bool clamp = false;                   // -clamp on
   std::string textureProblem;           // map_Kd given but unusable (no file named), for a warning
-  std::string transparency;             // d, Tr or map_d that would make it see-through, as written
+  double opacity = 1.0;                 // d
+  std::string opacityGiven;             // the d statement as written, for notes
+  std::string trGiven;                  // a Tr between 0 and 1 as written (not read), for a note
+  std::string alphaMap;                 // map_d's file as written, without its options
 };
 
 // A number as the MTL format writes one: decimal, the whole field, finite.
@@ -477,14 +480,24 @@ class MaterialLibraries : public tinyobj::MaterialReader {
         current->offset = glm::vec2(0.0f);
         current->clamp = false;
         parseTextureMap(restOfLine(line, key), *current);
-      } else if (key == "d" || key == "Tr") {
-        // d is the opacity, Tr its complement (some exporters write Tr as the opacity too).
+      } else if (key == "d") {
         std::string value;
         double v = 1.0;
-        if (fields >> value && mtlNumber(value, v) && (key == "d" ? v < 1.0 : v > 0.0 && v < 1.0))
-          current->transparency = key + " " + value;
+        if (!(fields >> value && mtlNumber(value, v))) continue;
+        current->opacity = std::clamp(v, 0.0, 1.0);
+        current->opacityGiven = key + " " + value;
+      } else if (key == "Tr") {
+        // Exporters disagree on Tr: the transparency (1 - d) for some, the opacity (d) for
+        // others (OpenMVS, older MeshLab and mvs-texturing write Tr 1 on opaque materials):
+        // not read. A value between 0 and 1 is said.
+        std::string value;
+        double v = 0.0;
+        if (fields >> value && mtlNumber(value, v) && v > 0.0 && v < 1.0)
+          current->trGiven = key + " " + value;
       } else if (key == "map_d") {
-        current->transparency = "map_d " + restOfLine(line, key);
+        MtlMaterial map;
+        parseTextureMap(restOfLine(line, key), map);
+        current->alphaMap = map.texture;
       }
     }
     return true;
@@ -780,11 +793,27 @@ LoadedMesh loadObj(const fs::path& path) {
                                 ": the material renders with " +
                                 (ownColour ? "its Kd" : "the default albedo"));
       }
-      if (!om.transparency.empty()) {
-        mesh.warnings.push_back("material '" + om.name + "' is see-through in its library ('" +
-                                om.transparency +
-                                "'): an OBJ material's transparency is not read; it renders "
-                                "opaque (a glTF file's alphaMode is)");
+      // See-through (glTF's BLEND): by d, and by map_Kd's own alpha where map_d names map_Kd's
+      // file.
+      // d 0 is taken for an exporter's mistake (as obj2gltf takes it): an object that hides
+      // nothing is not what anyone composites.
+      material.baseAlpha = om.opacity > 0.0 ? float(om.opacity) : 1.0f;
+      material.blend = material.baseAlpha < 1.0f;
+      if (!om.trGiven.empty() && om.opacityGiven.empty()) {
+        mesh.warnings.push_back("material '" + om.name + "': '" + om.trGiven +
+                                "' is not read (exporters disagree on whether Tr is the "
+                                "transparency or the opacity): it renders opaque; give d, the "
+                                "opacity");
+      }
+      if (om.opacity <= 0.0) {
+        mesh.warnings.push_back("material '" + om.name + "' says it is fully transparent ('" +
+                                om.opacityGiven +
+                                "'), most often an exporter's mistake: rendered opaque");
+      }
+      if (!om.alphaMap.empty() && om.texture.empty()) {
+        mesh.warnings.push_back("material '" + om.name + "': its map_d '" + om.alphaMap +
+                                "' is not read (a map_d is read from map_Kd's file, by its alpha "
+                                "channel, and this material has no map_Kd)");
       }
       if (!om.texture.empty()) {
         bool byName = false;
@@ -802,7 +831,7 @@ LoadedMesh loadObj(const fs::path& path) {
           try {
             Texture texture;
             texture.file = file;
-            texture.image = readTextureFile(file, "");
+            texture.image = readTextureFile(file, "", &texture.alpha);
             if (clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
             it->second = int(mesh.textures.size());
             mesh.textures.push_back(std::move(texture));
@@ -815,6 +844,22 @@ LoadedMesh loadObj(const fs::path& path) {
         }
         material.texture = it->second;
         if (material.texture < 0 && !ownColour) material.baseColor = glm::vec3(kDefaultAlbedo);
+        if (!om.alphaMap.empty()) {
+          bool alphaByName = false;
+          const fs::path alphaFile =
+              locateTexture(om.alphaMap, om.library.parent_path(), path.parent_path(), alphaByName);
+          const bool hasAlpha =
+              material.texture >= 0 && !mesh.textures[size_t(material.texture)].alpha.empty();
+          if (alphaFile == file && hasAlpha) {
+            material.blend = true;
+          } else if (material.texture >= 0) {
+            mesh.warnings.push_back(
+                "material '" + om.name + "': its map_d '" + om.alphaMap + "' is not read (" +
+                (alphaFile == file ? "map_Kd's file has no alpha channel"
+                                   : "it is not map_Kd's file, whose alpha channel is read") +
+                "): the texture is opaque");
+          }
+        }
         if (material.texture >= 0 && ownColour && material.baseColor != glm::vec3(1.0f)) {
           char kd[96];
           std::snprintf(kd, sizeof kd, "%g %g %g", double(material.baseColor.x),
