@@ -143,6 +143,25 @@ Lens Lens::resized(int newWidth, int newHeight) const {
 }
 
 Lens Lens::turnedFor(int exifOrientation) const {
+  // The mirrored orientations: flipped left to right (stored (x, y) seen at (W - x, y)), then
+  // turned as 3, 6 or 8 turn (EXIF: 4 is 2 and 180°, 5 is 2 and 90° anticlockwise, 7 is 2 and
+  // 90° clockwise). Under x -> -x, Brown–Conrady's p2 changes sign and p1 does not.
+  if (exifOrientation == 2 || exifOrientation == 4 || exifOrientation == 5 ||
+      exifOrientation == 7) {
+    Lens l = *this;
+    l.cx = double(width) - cx;
+    if (projection == Projection::Rectilinear && distortion.size() >= 4)
+      l.distortion[3] = -distortion[3];
+    l.source = source + (source.empty() ? "" : ", ") + "mirrored for the photo's EXIF orientation";
+    const int then = exifOrientation == 4   ? 3
+                     : exifOrientation == 5 ? 8
+                     : exifOrientation == 7 ? 6
+                                            : 1;
+    if (then == 1) return l;
+    Lens turned = l.turnedFor(then);
+    turned.source = l.source + " and turned";
+    return turned;
+  }
   if (exifOrientation == 3) {  // turned 180°: (x, y) is seen at (W - x, H - y), (u, v) at (-u, -v)
     Lens l = *this;
     l.cx = double(width) - cx;

@@ -61,7 +61,8 @@ struct Lens {
   // upright), 8 (90° anticlockwise) or 3 (180°) turns it: a portrait photo from a lens calibrated
   // on landscape ones. For 6 and 8 width and height, the focal lengths and the principal point
   // swap; the principal point and the tangential distortion turn with the image (radial terms do
-  // not change). Any other orientation (mirrored ones included): the lens as it is.
+  // not change). The mirrored ones (2, 4, 5, 7) flip the principal point and p2 left to right,
+  // then turn as 3, 8 or 6 do; for 2 the image's frame is mirrored, and so are the rays.
   Lens turnedFor(int exifOrientation) const;
   // Horizontal field of view in degrees across the image's width through the principal point.
   double horizontalFovDegrees() const;

@@ -485,8 +485,10 @@ class ColorStage final : public Stage {
 
   // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded;
   // 3: a config's file rule before a format's usual space, three channels by name, primaries of
-  // configs without an interchange role by their spaces' names
-  static constexpr int kColorVersion = 3;
+  // configs without an interchange role by their spaces' names; 4: environments' channels by name
+  // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
+  // whatever their EXIF ColorSpace says
+  static constexpr int kColorVersion = 4;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {

@@ -5,6 +5,7 @@
 
 #include "app/cli.h"
 #include "color/color.h"
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/numbers.h"
@@ -178,17 +179,16 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     lighting::SanitizeReport sanitized;
     sanitized.keepNegative = true;  // a conversion of layouts changes no value
     if (from == Layout::MirrorBall) {
-      ingest::LoadedImage photo = ingest::readImage(inputs.front(), "ingest");
+      ingest::LoadedImage photo =
+          ingest::readImage(inputs.front(), "ingest", {.picturePart = true});
       // Unwrapping averages pixels: it happens on linear radiance.
       const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
       const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
                                                      : colors.resolve(o->outSpace, "--out-space");
-      Image rgb(photo.image.width, photo.image.height, 3, {"R", "G", "B"});
-      for (size_t k = 0; k < rgb.pixelCount(); ++k) {
-        const float* s = photo.image.pixels.data() + k * size_t(photo.image.channels);
-        for (int c = 0; c < 3; ++c)
-          rgb.pixels[3 * k + size_t(c)] = s[photo.image.channels >= 3 ? c : 0];
-      }
+      ingest::requireColourChannels(photo.image, inputs.front(), "ingest", "the mirror ball");
+      notes.insert(notes.end(), photo.notes.begin(), photo.notes.end());
+      const int ballWidth = photo.image.width, ballHeight = photo.image.height;
+      Image rgb = pictureRgb(std::move(photo.image));  // by channel name, not as stored
       rgb.colorSpace = !o->photoSpace.empty()
                            ? colors.resolve(o->photoSpace, "--photo-space")
                            : colors
@@ -204,8 +204,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
           cubemap::unwrapMirrorBall(rgb, ball, inputs.front(), printer.callback());
       cube = std::move(unwrapped.cube);
       energyIn = cube.integral();
-      notes.push_back("mirror ball " + std::to_string(photo.image.width) + "x" +
-                      std::to_string(photo.image.height) + " unwrapped; " +
+      notes.push_back("mirror ball " + std::to_string(ballWidth) + "x" +
+                      std::to_string(ballHeight) + " unwrapped; " +
                       fraction(unwrapped.coverage.uncovered) +
                       " of the sphere (behind the ball) filled from its surroundings, " +
                       fraction(unwrapped.coverage.partial) + " blended towards the fill");
@@ -213,6 +213,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       cubemap::ReadOptions read;
       read.layout = from;
       cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
+      notes.insert(notes.end(), file.notes.begin(), file.notes.end());
       notes.push_back("read " + file.describe() + " (" + file.how + ")");
       // Values are resampled as stored; the colour metadata goes along, and the camera and
       // exposure unit of a map stitched from merged photos.

@@ -120,4 +120,54 @@ PictureChannels pictureChannels(const Image& image) {
   return out;
 }
 
+Image pictureRgb(const Image& in) {
+  // The picture's colour by channel name (core/channels.h): R, G, B in that order wherever they
+  // are (of the layer that is the picture); else Y alone as grey, or Y with OpenEXR's chroma RY,
+  // BY; else by position, as an image without names has them.
+  const PictureChannels picture = pictureChannels(in);
+  const bool rgb = picture.kind == PictureChannels::Kind::Rgb;
+  const bool chroma = picture.kind == PictureChannels::Kind::Chroma;
+  const bool grey = picture.kind == PictureChannels::Kind::Grey;
+  const int r = rgb ? picture.colour[0] : -1, g = rgb ? picture.colour[1] : -1,
+            b = rgb ? picture.colour[2] : -1;
+  const int y = chroma || grey ? picture.colour[0] : -1, ry = chroma ? picture.colour[1] : -1,
+            by = chroma ? picture.colour[2] : -1;
+  if (in.channels == 3 &&
+      ((rgb && r == 0 && g == 1 && b == 2) || picture.kind == PictureChannels::Kind::ByPosition))
+    return in;
+  Image out(in.width, in.height, 3, {"R", "G", "B"});
+  out.colorSpace = in.colorSpace;
+  const int n = in.channels;
+  // OpenEXR's luminance weights without a chromaticities attribute (Rec. ITU-R BT.709).
+  constexpr float kWr = 0.2126f, kWg = 0.7152f, kWb = 0.0722f;
+  for (size_t i = 0; i < in.pixelCount(); ++i) {
+    const float* s = in.pixels.data() + i * size_t(n);
+    float* d = out.pixels.data() + i * 3;
+    if (rgb) {
+      d[0] = s[r], d[1] = s[g], d[2] = s[b];
+    } else if (chroma) {
+      d[0] = s[y] * (1.0f + s[ry]);
+      d[2] = s[y] * (1.0f + s[by]);
+      d[1] = (s[y] - kWr * d[0] - kWb * d[2]) / kWg;
+    } else if (y >= 0) {
+      d[0] = d[1] = d[2] = s[y];
+    } else if (n < 3) {
+      d[0] = d[1] = d[2] = s[0];
+    } else {
+      d[0] = s[0], d[1] = s[1], d[2] = s[2];
+    }
+  }
+  return out;
+}
+
+Image pictureRgb(Image&& in) {
+  const PictureChannels picture = pictureChannels(in);
+  const auto& k = picture.colour;
+  if (in.channels == 3 &&
+      ((picture.kind == PictureChannels::Kind::Rgb && k[0] == 0 && k[1] == 1 && k[2] == 2) ||
+       picture.kind == PictureChannels::Kind::ByPosition))
+    return std::move(in);
+  return pictureRgb(static_cast<const Image&>(in));
+}
+
 }  // namespace compose

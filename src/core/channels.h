@@ -31,4 +31,11 @@ struct PictureChannels {
 // pass, then the one layer with an alpha, then the only layer with a colour.
 PictureChannels pictureChannels(const Image& image);
 
+// Any image made RGB from its picture's channels: R, G, B in that order wherever they are; Y
+// alone replicated as grey; Y with OpenEXR's chroma RY, BY converted (Rec. 709 luminance
+// weights); channels without colour names by position (one replicated). Other channels (alpha,
+// other layers) are dropped. The second form moves an image that is RGB already.
+Image pictureRgb(const Image& in);
+Image pictureRgb(Image&& in);
+
 }  // namespace compose

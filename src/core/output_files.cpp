@@ -177,6 +177,11 @@ void OutputFiles::check(const fs::path& destination, const std::string& stage) {
       throw Error(stage, "cannot write into the output folder: it is a file, not a folder", dir);
     break;
   }
+  // A file its owner write-protected is kept, as cp and the shell's > keep it: moving the new
+  // file over it needs only the folder's permission, which would go past the protection.
+  if (fs::is_regular_file(destination, ec) && ::access(destination.c_str(), W_OK) != 0 &&
+      errno == EACCES)
+    throw Error(stage, withSystemReason("cannot replace the file", EACCES), destination);
 }
 
 fs::path OutputFiles::add(const fs::path& destination) {
@@ -243,6 +248,11 @@ void OutputFiles::commit() {
       throw Error(stage_, "output path is an existing folder", e.destination);
     }
     const bool hadPrevious = fs::exists(fs::symlink_status(e.destination, ec));
+    if (hadPrevious && fs::is_regular_file(e.destination, ec) &&
+        ::access(e.destination.c_str(), W_OK) != 0 && errno == EACCES) {
+      rollback();  // write-protected since the job began (see check())
+      throw Error(stage_, withSystemReason("cannot replace the file", EACCES), e.destination);
+    }
     fs::path backup;
     if (hadPrevious) {
       backup = temporaryNear(e.destination, "previous");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 
@@ -17,6 +18,7 @@
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
 
+#include "core/channels.h"
 #include "core/error.h"
 #include "core/numbers.h"
 #include "ingest/exr_io.h"
@@ -31,8 +33,8 @@ using lighting::kCubeFaces;
 namespace {
 
 bool isImageFile(const fs::path& p) {
-  static const char* kExtensions[] = {".exr",  ".hdr", ".tif", ".tiff", ".png", ".jpg",
-                                      ".jpeg", ".pfm", ".dng", ".cr2",  ".nef", ".arw"};
+  static const char* kExtensions[] = {".exr", ".hdr",  ".pic", ".rgbe", ".tif", ".tiff", ".png",
+                                      ".jpg", ".jpeg", ".pfm", ".dng",  ".cr2", ".nef",  ".arw"};
   const std::string e = lowerExtension(p);
   return std::any_of(std::begin(kExtensions), std::end(kExtensions),
                      [&](const char* k) { return e == k; });
@@ -91,6 +93,7 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   for (int f = 0; f < kCubeFaces; ++f) {
     ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest", {.picturePart = true});
     ingest::requireColourChannels(img.image, files[size_t(f)], "ingest", "the environment's face");
+    img.image = pictureRgb(std::move(img.image));  // by channel name, not as stored
     out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
     checkShape(Layout::Faces, img.image.width, img.image.height, files[size_t(f)]);
@@ -323,6 +326,18 @@ std::optional<Layout> exrEnvmapLayout(const fs::path& file) {
 namespace {
 
 // How to give a layout that cannot be detected (ReadOptions::adviseConvert).
+// A lat-long map a texel or two off 2:1 (4096x2047, 8192x4097: an export rounded its height):
+// what to do about it; empty for any other shape.
+std::string nearlyLatLong(int w, int h, const fs::path& path) {
+  if (h < 1 || w == 2 * h || std::abs(w - 2 * h) > std::max(2, w / 100)) return {};
+  const int height = (w + 1) / 2;
+  return "a " + std::to_string(w) + "x" + std::to_string(h) +
+         " image is a lat-long map a texel or two off 2:1; a lat-long map must be exactly 2:1 "
+         "(width = 2 x height): resize it first, e.g. oiiotool " +
+         path.string() + " --resize " + std::to_string(2 * height) + "x" + std::to_string(height) +
+         " -o ENV.exr";
+}
+
 std::string layoutAdvice(const ReadOptions& options, const fs::path& path,
                          const std::string& choices) {
   if (!options.adviseConvert) return "say which with --layout (" + choices + ")";
@@ -388,6 +403,7 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
   EnvironmentFile out;
   ingest::LoadedImage img = ingest::readImage(path, "ingest", {.picturePart = true});
   ingest::requireColourChannels(img.image, path, "ingest", "the environment");
+  img.image = pictureRgb(std::move(img.image));  // by channel name, not as stored
   out.notes = img.notes;
   const int w = img.image.width, h = img.image.height;
   const std::optional<Layout> declared = exrEnvmapLayout(path);
@@ -410,6 +426,8 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                 "a square image could be a mirror ball or a single cube face: " +
                     layoutAdvice(options, path, "mirrorball|faces"),
                 path);
+  } else if (const std::string advice = nearlyLatLong(w, h, path); !advice.empty()) {
+    throw Error("ingest", advice, path);
   } else {
     throw Error("ingest",
                 "cannot tell the environment's layout from a " + std::to_string(w) + "x" +
@@ -419,6 +437,9 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                     layoutAdvice(options, path, "LAYOUT"),
                 path);
   }
+  if (out.layout == Layout::LatLong)
+    if (const std::string advice = nearlyLatLong(w, h, path); !advice.empty())
+      throw Error("ingest", advice, path);
   checkShape(out.layout, w, h, path);
   if (!options.layout && !declared &&
       (out.layout == Layout::HorizontalCross || out.layout == Layout::VerticalCross)) {

@@ -45,8 +45,10 @@ struct EnvironmentFile {
   Layout layout = Layout::LatLong;
   std::string how;  // how the layout was decided, for the user ("aspect 4:3", "envmap attribute")
   std::vector<std::filesystem::path> files;  // as read; for six face files, in face order
-  Image image;  // LatLong and MirrorBall: the image as read (channels as stored)
-  std::array<Image, lighting::kCubeFaces> faces;  // cube layouts: the faces as read
+  // LatLong and MirrorBall: the image as read; cube layouts: the faces. Both RGB, from the
+  // picture's channels by name (pictureRgb: a layer's beauty.R, G, B; Y alone; Y, RY, BY).
+  Image image;
+  std::array<Image, lighting::kCubeFaces> faces;
   ingest::CaptureInfo info;                       // of the first file
   std::vector<std::string> notes;                 // what reading changed (LoadedImage::notes)
 

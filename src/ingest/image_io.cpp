@@ -1,6 +1,7 @@
 #include "ingest/image_io.h"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -9,6 +10,7 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <sstream>
 
 #include <Imath/half.h>
 
@@ -180,6 +182,12 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.sensorOrientation = h.integer("compose:sensorOrientation", 1);
   if (info.sensorOrientation < 1 || info.sensorOrientation > 8) info.sensorOrientation = 1;
   info.fileColorSpace = h.text("oiio:ColorSpace");
+  // OpenImageIO's TIFF reader calls any file whose EXIF ColorSpace is 1 sRGB, float samples
+  // too (a linear float TIFF from a camera's raw converter): EXIF's tag speaks of 8-bit
+  // encodings, so floats are left to the rules for float samples (scene-linear).
+  if (h.format == "tiff" && (h.sampleType == "float" || h.sampleType == "half") &&
+      info.fileColorSpace == "sRGB" && h.integer("Exif:ColorSpace", 0) == 1)
+    info.fileColorSpace.clear();
   info.colorSpaceByConvention =
       (info.fileColorSpace == "Linear" && (h.format == "openexr" || h.format == "hdr")) ||
       (info.fileColorSpace == "sRGB" && (h.format == "jpeg" || h.format == "png"));
@@ -339,6 +347,23 @@ std::string pngTruncation(uint64_t size, Read&& read) {
     at += 12 + length;
   }
   return "the PNG ends before its IEND chunk (" + std::to_string(size) + " bytes)";
+}
+
+// A Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze) is not one OpenImageIO reads, and it
+// says "no FORMAT specifier found" of it: named here instead.
+void checkRadianceFormat(const fs::path& path, const std::string& stage) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  if (!std::getline(in, line) || line.rfind("#?", 0) != 0) return;
+  for (size_t read = 0; read < (1u << 16) && std::getline(in, line) && !line.empty();
+       read += line.size() + 1) {
+    if (line.rfind("FORMAT=32-bit_rle_xyze", 0) == 0) {
+      throw Error(stage,
+                  "a Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze): compose reads RGB "
+                  "ones (FORMAT=32-bit_rle_rgbe); convert it first (Radiance's ra_xyze -r)",
+                  path);
+    }
+  }
 }
 
 void checkPng(const fs::path& path, const std::string& stage) {
@@ -552,6 +577,76 @@ LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::
   return out;
 }
 
+// What a Radiance picture's header says of its values (Ward, "The RADIANCE Picture File
+// Format"): each EXPOSURE= multiplies the exposure the stored values carry, so that radiance is
+// the value divided by their product; COLORCORR= does so per channel; PRIMARIES= gives the RGB
+// primaries and white point (without it a file is in Radiance's own primaries, taken as Rec.
+// 709 as every tool takes .hdr files). OpenImageIO reports the last EXPOSURE alone and applies
+// none of them. An unreadable value is an error naming the line.
+void applyRadianceHeader(const fs::path& path, const std::string& stage, LoadedImage& out) {
+  std::ifstream in(path, std::ios::binary);
+  double exposure = 1.0;
+  std::array<double, 3> correction{1.0, 1.0, 1.0};
+  std::string line;
+  size_t read = 0;
+  auto numbers = [&](const std::string& text, size_t count, const char* what) {
+    std::istringstream fields(text);
+    std::vector<double> values;
+    for (double v; values.size() < count && fields >> v;) values.push_back(v);
+    if (values.size() != count ||
+        !std::all_of(values.begin(), values.end(), [](double v) { return std::isfinite(v); }))
+      throw Error(stage,
+                  std::string("the Radiance header's ") + what + " is not " +
+                      std::to_string(count) + " number" + (count > 1 ? "s" : "") + ": '" + text +
+                      "'",
+                  path);
+    return values;
+  };
+  while (read < (1u << 16) && std::getline(in, line)) {
+    read += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) break;  // the header ends with an empty line
+    if (line.rfind("EXPOSURE=", 0) == 0) {
+      const double v = numbers(line.substr(9), 1, "EXPOSURE")[0];
+      if (!(v > 0.0)) throw Error(stage, "the Radiance header's EXPOSURE is not positive", path);
+      exposure *= v;
+    } else if (line.rfind("COLORCORR=", 0) == 0) {
+      const std::vector<double> v = numbers(line.substr(10), 3, "COLORCORR");
+      for (int c = 0; c < 3; ++c) {
+        if (!(v[size_t(c)] > 0.0))
+          throw Error(stage, "the Radiance header's COLORCORR is not positive", path);
+        correction[size_t(c)] *= v[size_t(c)];
+      }
+    } else if (line.rfind("PRIMARIES=", 0) == 0) {
+      const std::vector<double> v = numbers(line.substr(10), 8, "PRIMARIES");
+      std::array<double, 8> xy;
+      std::copy(v.begin(), v.end(), xy.begin());
+      out.info.chromaticities = xy;
+    }
+  }
+  if (exposure == 1.0 && correction == std::array<double, 3>{1.0, 1.0, 1.0}) return;
+  Image& img = out.image;
+  const int n = img.channels;
+  if (img.pixels.empty() || n < 3) return;
+  const float scale[3] = {float(1.0 / (exposure * correction[0])),
+                          float(1.0 / (exposure * correction[1])),
+                          float(1.0 / (exposure * correction[2]))};
+  for (size_t i = 0; i < img.pixelCount(); ++i)
+    for (int c = 0; c < 3; ++c) img.pixels[i * size_t(n) + size_t(c)] *= scale[c];
+  char text[200];
+  if (correction == std::array<double, 3>{1.0, 1.0, 1.0})
+    std::snprintf(text, sizeof text,
+                  ": the EXPOSURE of its Radiance header (%g) applied: values divided by it, the "
+                  "radiance the format defines",
+                  exposure);
+  else
+    std::snprintf(text, sizeof text,
+                  ": the EXPOSURE (%g) and COLORCORR (%g %g %g) of its Radiance header applied: "
+                  "values divided by them, the radiance the format defines",
+                  exposure, correction[0], correction[1], correction[2]);
+  out.notes.push_back(path.filename().string() + text);
+}
+
 }  // namespace
 
 CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
@@ -703,12 +798,15 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
     }
     case Kind::Other:
       checkPng(path, stage);
+      checkRadianceFormat(path, stage);
       break;
   }
   std::string why;
   auto reader = oiio::module(stage, path).open(path.string(), why);
   if (!reader) throw Error(stage, "cannot read image: " + why, path);
-  return readWithOiio(*reader, path, stage, options);
+  LoadedImage out = readWithOiio(*reader, path, stage, options);
+  if (out.info.format == "hdr") applyRadianceHeader(path, stage, out);
+  return out;
 }
 
 void requireFinite(const Image& image, const std::filesystem::path& file, const std::string& stage,

@@ -70,11 +70,12 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
   lens.cx = 330.0;
   lens.cy = 228.0;
   lens.distortion = {-0.29, 0.11, 0.004, -0.003, 0.02};
-  for (const int orientation : {6, 8, 3}) {
+  for (const int orientation : {6, 8, 3, 2, 4, 5, 7}) {
     SCOPED_TRACE(orientation);
     const Lens turned = lens.turnedFor(orientation);
-    EXPECT_EQ(turned.width, orientation == 3 ? 640 : 480);
-    EXPECT_EQ(turned.height, orientation == 3 ? 480 : 640);
+    const bool across = orientation >= 5;  // width and height swap
+    EXPECT_EQ(turned.width, across ? 480 : 640);
+    EXPECT_EQ(turned.height, across ? 640 : 480);
     int checked = 0;
     for (double a = -0.5; a <= 0.5; a += 0.125) {
       for (double b = -0.4; b <= 0.4; b += 0.1) {
@@ -82,15 +83,34 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
         glm::dvec2 stored, seen;
         ASSERT_TRUE(lens.project(d, stored));
         // The upright photo's camera frame: for 6 its right is the stored up (+Y) and its up
-        // the stored left (-X); for 8 the other way round.
-        const glm::dvec3 upright = orientation == 6   ? glm::dvec3(d.y, -d.x, d.z)
-                                   : orientation == 8 ? glm::dvec3(-d.y, d.x, d.z)
-                                                      : glm::dvec3(-d.x, -d.y, d.z);
+        // the stored left (-X); for 8 the other way round. The mirrored ones (EXIF: 2 flips
+        // left to right, 4 top to bottom, 5 transposes, 7 transposes the other way) see the
+        // world mirrored, and so does their frame.
+        glm::dvec3 upright;
+        glm::dvec2 expected;
+        switch (orientation) {
+          case 6:
+            upright = {d.y, -d.x, d.z}, expected = {480.0 - stored.y, stored.x};
+            break;
+          case 8:
+            upright = {-d.y, d.x, d.z}, expected = {stored.y, 640.0 - stored.x};
+            break;
+          case 3:
+            upright = {-d.x, -d.y, d.z}, expected = {640.0 - stored.x, 480.0 - stored.y};
+            break;
+          case 2:
+            upright = {-d.x, d.y, d.z}, expected = {640.0 - stored.x, stored.y};
+            break;
+          case 4:
+            upright = {d.x, -d.y, d.z}, expected = {stored.x, 480.0 - stored.y};
+            break;
+          case 5:
+            upright = {-d.y, -d.x, d.z}, expected = {stored.y, stored.x};
+            break;
+          default:  // 7
+            upright = {d.y, d.x, d.z}, expected = {480.0 - stored.y, 640.0 - stored.x};
+        }
         ASSERT_TRUE(turned.project(upright, seen));
-        const glm::dvec2 expected = orientation == 6 ? glm::dvec2(480.0 - stored.y, stored.x)
-                                    : orientation == 8
-                                        ? glm::dvec2(stored.y, 640.0 - stored.x)
-                                        : glm::dvec2(640.0 - stored.x, 480.0 - stored.y);
         EXPECT_NEAR(seen.x, expected.x, 1e-6);
         EXPECT_NEAR(seen.y, expected.y, 1e-6);
         ++checked;
@@ -98,9 +118,13 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
     }
     EXPECT_GT(checked, 50);
   }
-  // Other orientations leave the lens as it is.
+  // Orientation 1 (and a value EXIF does not define) leaves the lens as it is.
   EXPECT_EQ(lens.turnedFor(1).cx, lens.cx);
-  EXPECT_EQ(lens.turnedFor(2).cx, lens.cx);
+  EXPECT_EQ(lens.turnedFor(9).cx, lens.cx);
+  // A portrait tagged 5 or 7 (transposed) fits a landscape lens, as 6 and 8 do (it was refused:
+  // "another aspect ratio").
+  EXPECT_TRUE(lensForImage(lens, 480, 640, 5, 0.01));
+  EXPECT_TRUE(lensForImage(lens, 480, 640, 7, 0.01));
   // lensForImage: turned and scaled for a portrait of half the size; a lens already in the
   // upright frame is taken as it is; another aspect is none.
   const std::optional<Lens> half = lensForImage(lens, 240, 320, 6, 0.01);

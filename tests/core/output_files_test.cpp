@@ -66,6 +66,41 @@ TEST(OutputFiles, AnInputIsNeverReplaced) {
   EXPECT_EQ(slurp(dir / "other.jpg"), "new");
 }
 
+// A file its owner write-protected is not replaced (the new file was moved over it: that needs
+// only the folder's permission), as cp and the shell's > keep it; a writable one beside it is.
+// Root may write anything, so the check runs in a child that gives root's rights up.
+TEST(OutputFiles, AWriteProtectedFileIsKept) {
+  TempDir dir;
+  writeText(dir / "kept.jpg", "the graded one");
+  fs::permissions(dir / "kept.jpg",
+                  fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  fs::permissions(dir.path(), fs::perms::all);  // the folder is writable by anyone
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    if (geteuid() == 0 && (setgid(65534) != 0 || setuid(65534) != 0)) _exit(3);
+    try {
+      OutputFiles out;
+      out.add(dir / "kept.jpg");
+      _exit(1);  // accepted
+    } catch (const Error& e) {
+      if (e.describe().find("cannot replace the file: Permission denied") == std::string::npos)
+        _exit(2);
+    }
+    OutputFiles out;
+    writeText(out.add(dir / "other.jpg"), "new");
+    out.commit();
+    _exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: the protected file was accepted; 2: another error; "
+                                       "3: could not give up root's rights";
+  EXPECT_EQ(slurp(dir / "kept.jpg"), "the graded one");
+  EXPECT_EQ(slurp(dir / "other.jpg"), "new");
+}
+
 TEST(OutputFiles, AFailedMoveRestoresThePreviousFiles) {
   TempDir dir;
   writeText(dir / "a.exr", "old a");

@@ -383,5 +383,68 @@ TEST(EnvironmentFiles, LoadEnvironmentTurnsCubesIntoLatLongMaps) {
   EXPECT_NE(loaded.notes.back().find("vertical cross"), std::string::npos);
 }
 
+// Every layout takes the picture's colour by channel name, as a lat-long map with --env does: a
+// cube strip stored as Z, beauty.R, beauty.G, beauty.B lit the object by (Z, R, G) (a red sun
+// turned green), and a one-channel Y map was refused by compose convert.
+TEST(EnvironmentFiles, EveryLayoutReadsThePicturesChannelsByName) {
+  TempDir dir;
+  Image strip(8, 48, 4, {"Z", "beauty.R", "beauty.G", "beauty.B"});
+  for (size_t i = 0; i < strip.pixelCount(); ++i) {
+    float* p = strip.pixels.data() + 4 * i;
+    p[0] = 100.0f, p[1] = 1.0f, p[2] = 2.0f, p[3] = 3.0f;
+  }
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "layered_cube.exr", strip, options);
+  const EnvironmentFile cube = readEnvironmentFile({dir / "layered_cube.exr"});
+  ASSERT_TRUE(cube.isCube());
+  for (const Image& face : cube.faces) {
+    ASSERT_EQ(face.channels, 3);
+    EXPECT_EQ(face.pixels[0], 1.0f);
+    EXPECT_EQ(face.pixels[1], 2.0f);
+    EXPECT_EQ(face.pixels[2], 3.0f);
+  }
+  Image grey(16, 8, 1, {"Y"});
+  for (float& v : grey.pixels) v = 0.5f;
+  ingest::writeImage(dir / "grey.exr", grey, options);
+  const EnvironmentFile latLong = readEnvironmentFile({dir / "grey.exr"});
+  ASSERT_EQ(latLong.image.channels, 3);
+  EXPECT_EQ(latLong.image.pixels[0], 0.5f);
+  EXPECT_EQ(latLong.image.pixels[2], 0.5f);
+  EXPECT_NEAR(lighting::integral(Environment::fromLatLong(latLong.image)).y, 0.5 * 4.0 * kPi, 1e-4);
+}
+
+// A lat-long map a texel off 2:1 (an export that rounded its height) is told how to make it 2:1
+// (the advice was to convert it with --layout latlong, which refuses it the same way); a folder
+// of Radiance faces named .pic is a folder of faces (it held "no cube face files").
+TEST(EnvironmentFiles, NearlyLatLongMapsAndRadianceFaces) {
+  TempDir dir;
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  Image odd(64, 31, 3, {"R", "G", "B"});
+  ingest::writeImage(dir / "odd.exr", odd, options);
+  const std::string advice =
+      "a 64x31 image is a lat-long map a texel or two off 2:1; a lat-long map must be exactly 2:1 "
+      "(width = 2 x height): resize it first, e.g. oiiotool " +
+      (dir / "odd.exr").string() + " --resize 64x32 -o ENV.exr";
+  COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "odd.exr"}), advice);
+  ReadOptions latLong;
+  latLong.layout = Layout::LatLong;
+  COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "odd.exr"}, latLong), advice);
+
+  fs::create_directory(dir / "faces");
+  Image face(8, 8, 3, {"R", "G", "B"});
+  for (float& v : face.pixels) v = 2.0f;
+  for (const char* name : {"px", "nx", "py", "ny", "pz", "nz"}) {
+    ingest::writeImage(dir / "faces" / (std::string(name) + ".hdr"), face);
+    fs::rename(dir / "faces" / (std::string(name) + ".hdr"),
+               dir / "faces" / (std::string(name) + ".pic"));
+  }
+  const EnvironmentFile faces = readEnvironmentFile({dir / "faces"});
+  ASSERT_TRUE(faces.isCube());
+  EXPECT_EQ(faces.files.size(), 6u);
+  EXPECT_NEAR(faces.faces[0].pixels[0], 2.0f, 0.01f);
+}
+
 }  // namespace
 }  // namespace compose::cubemap

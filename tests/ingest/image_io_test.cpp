@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <random>
 
@@ -739,6 +740,81 @@ TEST(ImageIo, RadianceHdrKeepsValuesAboveOne) {
     const float largest = std::max({p[0], p[1], p[2]});
     ASSERT_NEAR(back.image.pixels[i], img.pixels[i], largest / 128.0f + 1e-6f) << i;
   }
+}
+
+// A Radiance header's EXPOSURE (each one multiplies the exposure the values carry), COLORCORR
+// (the same per channel) and PRIMARIES are what the format defines the values by: OpenImageIO
+// applies none of them, and a map stored 4 times brighter with EXPOSURE=4 lit the object 4 times
+// brighter. A value that is not a number is an error naming it.
+TEST(ImageIo, ARadianceHeaderSaysWhatItsValuesAre) {
+  TempDir dir;
+  Image img(16, 8, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = 8.0f;
+  writeImage(dir / "plain.hdr", img);
+  const std::vector<uint8_t> bytes = [&] {
+    std::ifstream in(dir / "plain.hdr", std::ios::binary);
+    return std::vector<uint8_t>((std::istreambuf_iterator<char>(in)), {});
+  }();
+  const std::string text(bytes.begin(), bytes.end());
+  const size_t end = text.find("\n\n");
+  ASSERT_NE(end, std::string::npos);
+  auto withHeader = [&](const std::string& name, const std::string& lines) {
+    std::ofstream out(dir / name, std::ios::binary);
+    out << text.substr(0, end + 1) << lines << text.substr(end + 1);
+  };
+  withHeader("exposed.hdr", "EXPOSURE=2\nEXPOSURE=0.5e1\nCOLORCORR=1 2 4\n");
+  const LoadedImage exposed = readImage(dir / "exposed.hdr");
+  ASSERT_EQ(exposed.image.channels, 3);
+  EXPECT_NEAR(exposed.image.pixels[0], 8.0f / 10.0f, 1e-6f);
+  EXPECT_NEAR(exposed.image.pixels[1], 8.0f / 20.0f, 1e-6f);
+  EXPECT_NEAR(exposed.image.pixels[2], 8.0f / 40.0f, 1e-6f);
+  ASSERT_EQ(exposed.notes.size(), 1u);
+  EXPECT_EQ(exposed.notes[0],
+            "exposed.hdr: the EXPOSURE (10) and COLORCORR (1 2 4) of its Radiance header applied: "
+            "values divided by them, the radiance the format defines");
+  EXPECT_FALSE(exposed.info.chromaticities);
+  const LoadedImage plain = readImage(dir / "plain.hdr");
+  EXPECT_EQ(plain.image.pixels[0], 8.0f);
+  EXPECT_TRUE(plain.notes.empty());
+
+  withHeader("aces.hdr", "PRIMARIES=0.7347 0.2653 0.0 1.0 0.0001 -0.077 0.32168 0.33767\n");
+  const LoadedImage aces = readImage(dir / "aces.hdr");
+  ASSERT_TRUE(aces.info.chromaticities);
+  EXPECT_EQ((*aces.info.chromaticities)[0], 0.7347);
+  EXPECT_EQ((*aces.info.chromaticities)[5], -0.077);
+  EXPECT_EQ(aces.image.pixels[0], 8.0f);
+
+  withHeader("bad.hdr", "EXPOSURE=bright\n");
+  COMPOSE_EXPECT_ERROR(readImage(dir / "bad.hdr"),
+                       "the Radiance header's EXPOSURE is not 1 number: 'bright'");
+  // A picture in CIE XYZ, which OpenImageIO does not read ("no FORMAT specifier found").
+  std::string xyz = text;
+  xyz.replace(xyz.find("32-bit_rle_rgbe"), 15, "32-bit_rle_xyze");
+  std::ofstream(dir / "xyz.hdr", std::ios::binary) << xyz;
+  COMPOSE_EXPECT_ERROR(readImage(dir / "xyz.hdr"),
+                       "a Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze): compose reads RGB "
+                       "ones (FORMAT=32-bit_rle_rgbe); convert it first (Radiance's ra_xyze -r)");
+  withHeader("zero.hdr", "EXPOSURE=0\n");
+  COMPOSE_EXPECT_ERROR(readImage(dir / "zero.hdr"),
+                       "the Radiance header's EXPOSURE is not positive");
+}
+
+// A float TIFF whose EXIF ColorSpace is 1 (sRGB), as a raw converter writes it, holds linear
+// floats: OpenImageIO calls it sRGB, and it was decoded through the sRGB curve (as the file
+// says). The declared space is left to the rules for float samples; an 8-bit one keeps it.
+TEST(ImageIo, AFloatTiffIsNotSrgbBecauseItsExifSaysSo) {
+  TempDir dir;
+  Image img(8, 4, 3, {"R", "G", "B"});
+  for (float& v : img.pixels) v = 0.25f;
+  WriteOptions options;
+  options.depth = WriteOptions::Depth::Float;
+  options.attributes.push_back({"Exif:ColorSpace", 1});
+  writeImage(dir / "linear.tif", img, options);
+  const LoadedImage floats = readImage(dir / "linear.tif");
+  EXPECT_EQ(floats.info.fileColorSpace, "");
+  options.depth = WriteOptions::Depth::UInt8;
+  writeImage(dir / "codes.tif", img, options);
+  EXPECT_EQ(readImage(dir / "codes.tif").info.fileColorSpace, "sRGB");
 }
 
 }  // namespace
