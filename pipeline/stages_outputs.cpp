@@ -632,16 +632,26 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
   ndcFromCamera[2][3] = -1.0;
   header.matrices.emplace_back("worldtocamera", asImath(flipZ * cameraFromWorld));
   header.matrices.emplace_back("worldToNDC", asImath(ndcFromCamera * cameraFromWorld));
-  // From the mesh file's own coordinates: the object's, moved by its file origin.
-  header.matrices.emplace_back(
-      "compose:worldFromObject",
-      asImath(geometry.worldFromObject * glm::translate(glm::dmat4(1.0), -fileOrigin)));
+  // From the mesh file's own coordinates: the object's, moved by its file origin. In double
+  // (m44d): a mesh far from its file's origin (a scene exported in place, georeferenced) has a
+  // translation that float rounds by centimetres, and the rebuilt object would not stand where
+  // it was rendered.
+  const glm::dmat4 worldFromFile =
+      geometry.worldFromObject * glm::translate(glm::dmat4(1.0), -fileOrigin);
+  std::array<double, 16> fromFile;
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r) fromFile[size_t(4 * c + r)] = worldFromFile[c][r];
+  header.doubleMatrices.emplace_back("compose:worldFromObject", fromFile);
   // How the environment is turned in the world (--env-yaw): a direction in the world is looked up
   // in the environment map at envFromWorld times it.
   header.matrices.emplace_back("compose:envFromWorld",
                                asImath(glm::dmat4(glm::dmat3(geometry.envFromWorld))));
   if (!meshFile.empty()) header.strings.emplace_back("compose:object", meshFile);
-  if (lens.hasDistortion()) {
+  if (lens.projection != calib::Projection::Rectilinear) {
+    header.strings.emplace_back("compose:lens",
+                                "equidistant fisheye lens: worldToNDC is the pinhole of its focal "
+                                "lengths and principal point, not its projection");
+  } else if (lens.hasDistortion()) {
     header.strings.emplace_back("compose:lens",
                                 "distorted lens: worldToNDC holds its pinhole part only");
   }
@@ -845,6 +855,9 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
         "shadow",        &ground->ratio,   ground->grid.x0,      ground->grid.y0,
         composite.width, composite.height, compositePart.options};
     shadowPart.options.alphaChannel = -1;
+    // Labelled as the colour it multiplies, in the space written (it said 'Raw', which tells a
+    // colour-managed reader to leave it alone, beside the primaries of the working space).
+    shadowPart.colorSpace = space;
     if (space != working) {
       // Per channel of the working space the plate was darkened by it. In other primaries a
       // tinted ratio has no exact counterpart (it would depend on the plate's colour): it is

@@ -156,6 +156,14 @@ std::string leftOutNote(const std::vector<std::filesystem::path>& files) {
          join(names) + "; name them one by one, or in a capture description, to use them";
 }
 
+std::string rawPairsNote(const std::vector<std::filesystem::path>& jpegs) {
+  std::vector<std::string> names;
+  for (const auto& f : jpegs) names.push_back(f.filename().string());
+  return "left out " + std::to_string(jpegs.size()) + " JPEG" + (jpegs.size() == 1 ? "" : "s") +
+         " shot with a raw file of the same name and time (RAW+JPEG): " + join(names) +
+         "; the raw files are used (name the JPEGs alone to use them instead)";
+}
+
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
                                               const std::string& faceNames) {
   cubemap::WriteOptions write;

@@ -95,6 +95,8 @@ void requireExrName(const std::string& out, const std::string& why);
 // The note for the files of a folder of photos that ingest::scanShots left out (no exposure time
 // in their EXIF where the others have one).
 std::string leftOutNote(const std::vector<std::filesystem::path>& files);
+// The note for the JPEGs of RAW+JPEG pairs that scanShots left out.
+std::string rawPairsNote(const std::vector<std::filesystem::path>& jpegs);
 
 // How convert and stitch write an environment: --depth (auto, half or float) and --face-names
 // (layouts.h); throws UsageError for a value that is neither.

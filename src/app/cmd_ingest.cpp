@@ -114,10 +114,12 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     if (group == "json") {
       capture = ingest::readCaptureDescription(o->capture);
     } else {
-      std::vector<std::filesystem::path> leftOut;
-      auto shots = ingest::scanShots(o->paths, "ingest", &leftOut);
+      std::vector<std::filesystem::path> leftOut, rawPairs;
+      auto shots = ingest::scanShots(o->paths, "ingest", &leftOut, &rawPairs);
       if (!leftOut.empty() && !globals.quiet)
         std::fprintf(stderr, "compose: note: %s\n", printable(leftOutNote(leftOut)).c_str());
+      if (!rawPairs.empty() && !globals.quiet)
+        std::fprintf(stderr, "compose: note: %s\n", printable(rawPairsNote(rawPairs)).c_str());
       capture = group == "pattern" ? ingest::groupByPattern(std::move(shots), o->pattern)
                                    : ingest::groupByExif(std::move(shots), exif);
     }

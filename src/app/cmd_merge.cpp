@@ -245,11 +245,13 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       capture = ingest::readCaptureDescription(o->capture);
     } else {
       capture.views.push_back(ingest::View{o->out.stem().string(), {}, {}});
-      std::vector<std::filesystem::path> leftOut;
-      for (const auto& s : ingest::scanShots(o->images, "merge", &leftOut))
+      std::vector<std::filesystem::path> leftOut, rawPairs;
+      for (const auto& s : ingest::scanShots(o->images, "merge", &leftOut, &rawPairs))
         capture.views[0].shots.push_back(s);
       if (!leftOut.empty() && !globals.quiet)
         std::fprintf(stderr, "compose: note: %s\n", printable(leftOutNote(leftOut)).c_str());
+      if (!rawPairs.empty() && !globals.quiet)
+        std::fprintf(stderr, "compose: note: %s\n", printable(rawPairsNote(rawPairs)).c_str());
       if (capture.views[0].shots.size() != o->images.size() && !exposures.empty())
         throw UsageError("--exposures needs one value per photo; folders were given");
       if (!exposures.empty()) ingest::setExposures(capture.views[0], exposures, "--exposures");

@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "hdr/opencv_util.h"
+#include "ingest/pixel_util.h"
 
 namespace compose::hdr {
 
@@ -169,7 +170,29 @@ std::vector<std::vector<ingest::LoadedImage>> readCapturePhotos(const ingest::Ca
   for (const auto& v : capture.views) {
     photos.emplace_back();
     for (const auto& s : v.shots) {
-      photos.back().push_back(ingest::readImage(s.file, "merge", {.codesForEightBit = true}));
+      ingest::LoadedImage photo = ingest::readImage(s.file, "merge", {.codesForEightBit = true});
+      // A bracket is one frame of the sensor: a camera pointed up or down may tag its shots
+      // with different orientations (its orientation sensor changing its mind). Each is
+      // turned as the first one says, with a note.
+      const int first =
+          photos.back().empty() ? photo.info.orientation : photos.back().front().info.orientation;
+      if (photo.info.orientation != first) {
+        const int own = photo.info.orientation;
+        photo = ingest::readImage(s.file, "merge", {.codesForEightBit = true, .upright = false});
+        Image& img = photo.image;
+        if (!photo.codes.empty()) {
+          ingest::detail::applyOrientation(photo.codes, img.width, img.height, img.channels, first);
+        } else {
+          ingest::detail::applyOrientation(img.pixels, img.width, img.height, img.channels, first);
+        }
+        photo.info.orientation = first;
+        photo.notes.push_back(
+            s.file.filename().string() + " is tagged with EXIF orientation " + std::to_string(own) +
+            ", " + v.shots.front().file.filename().string() + " with " + std::to_string(first) +
+            ": turned as the bracket's first photo says (a bracket is one "
+            "frame of the sensor)");
+      }
+      photos.back().push_back(std::move(photo));
       report(progress, "read", double(++done) / double(total));
     }
   }
@@ -241,6 +264,11 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     }
   }
   if (!deepByRule.empty()) result.notes.push_back(deepByRule);
+  for (size_t v = 0; v < photos.size(); ++v)
+    for (const ingest::LoadedImage& photo : photos[v])
+      for (const std::string& note : photo.notes)
+        result.notes.push_back(capture.views.size() > 1 ? capture.views[v].name + ": " + note
+                                                        : note);
 
   // 8-bit codes of the 8-bit views, made once for recovery and merging.
   std::vector<std::vector<Codes8>> codes(capture.views.size());
@@ -497,6 +525,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     }
     for (size_t s = 0; s < photos[v].size(); ++s) {
       input.images.push_back(input.eightBit ? &photos[v][s].image : &converted[s]);
+      if (!input.eightBit) input.stored.push_back(&photos[v][s].image);
       if (input.eightBit) input.codes.push_back(&codes[v][s]);
       input.exposures.push_back(*view.shots[s].exposure);
       input.names.push_back(view.shots[s].file.string());

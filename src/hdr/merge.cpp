@@ -75,12 +75,14 @@ struct ShotView {
   const Codes8* codes = nullptr;
   int dx = 0, dy = 0;
   double exposure = 1.0;
+  const Image* stored = nullptr;  // deeper input: as stored (MergeInput::stored), or the image
   // Value of channel c at output pixel (x, y); false if the shifted shot does not cover it.
   bool covers(int x, int y) const {
     const int sx = x - dx, sy = y - dy;
     return sx >= 0 && sy >= 0 && sx < image->width && sy < image->height;
   }
   const float* at(int x, int y) const { return image->at(x - dx, y - dy); }
+  const float* storedAt(int x, int y) const { return stored->at(x - dx, y - dy); }
   const uint8_t* codeAt(int x, int y) const {
     return codes->data() + (size_t(y - dy) * size_t(codes->width) + size_t(x - dx)) * 3;
   }
@@ -185,7 +187,9 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       if (input.eightBit) {
         ownCodes.push_back(toCodes8(*input.images[i]));
       } else {
-        const Image& img = *input.images[i];
+        // Clipping is judged on the values as stored: a channel clipped in the camera's space
+        // may lie below full scale once converted.
+        const Image& img = input.stored.empty() ? *input.images[i] : *input.stored[i];
         Image encoded(width, height, 3);
         parallelFor(
             0, height,
@@ -245,10 +249,14 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
   }
   report(progress, kStage, 0.2);
 
+  COMPOSE_CHECK(input.stored.empty() || (!input.eightBit && input.stored.size() == n));
+  for (const Image* stored : input.stored)
+    COMPOSE_CHECK(stored->width == width && stored->height == height && stored->channels >= 3);
   std::vector<ShotView> shots(n);
   for (size_t i = 0; i < n; ++i)
-    shots[i] = {input.images[i], codePtr[i], result.shifts[i][0], result.shifts[i][1],
-                input.exposures[i]};
+    shots[i] = {input.images[i],     codePtr[i],
+                result.shifts[i][0], result.shifts[i][1],
+                input.exposures[i],  input.stored.empty() ? input.images[i] : input.stored[i]};
 
   // 2. OpenCV's merge of 8-bit brackets.
   cv::Mat merged;
@@ -384,15 +392,15 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       for (size_t i = 0; i < n; ++i) {
         weight[i] = 0.0f;
         if (!covered[i]) continue;
-        const float* v = shots[i].at(x, y);
         float w = 0.0f;
         if (input.eightBit) {
           const uint8_t* z = shots[i].codeAt(x, y);
           w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
           if (params.deghost && over[i]) w = 0.0f;
         } else {
+          const float* as = shots[i].storedAt(x, y);
           float peak = 0.0f;
-          for (int c = 0; c < 3; ++c) peak = std::max(peak, v[c]);
+          for (int c = 0; c < 3; ++c) peak = std::max(peak, as[c]);
           w = float(shots[i].exposure) * linearHat(peak);
           if (dark[i]) w *= 1e-3f;  // keep a trace so that a pixel dark everywhere gets a value
         }

@@ -74,6 +74,11 @@ struct MergeInput {
   // Optional: the images' 8-bit codes (toCodes8), when the caller has them already (8-bit input
   // only); otherwise they are made here.
   std::vector<const Codes8*> codes;
+  // Optional, deeper input only: the images as stored, before the caller converted them (same
+  // sizes, RGB first). Clipping is judged on them, each channel at its own full scale: red
+  // clipped in the camera's Rec. 709 (1.0, 0.3, 0.1) is (0.72, 0.35, 0.14) in ACEScg, below any
+  // threshold, and that shot took the full weight of a good one.
+  std::vector<const Image*> stored;
   // Optional, with MergeParams::align: the alignment alignBracket() found already, used instead
   // of searching again.
   std::optional<Alignment> alignment;

@@ -101,7 +101,7 @@ std::string relativeTo(const fs::path& file, const fs::path& folder) {
 }  // namespace
 
 std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::string& stage,
-                            std::vector<fs::path>* leftOut) {
+                            std::vector<fs::path>* leftOut, std::vector<fs::path>* rawPairs) {
   std::vector<Shot> shots;
   std::vector<int> folderOf;  // per shot: the index of the folder it was found in, or -1
   int folders = 0;
@@ -131,6 +131,44 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
   }
   if (shots.empty()) throw Error(stage, "no photos given");
   for (Shot& s : shots) s.info = readCaptureInfo(s.file, stage);
+  if (rawPairs) {
+    // RAW+JPEG: a camera writes IMG_0001.CR2 and IMG_0001.JPG of one shot; merged together they
+    // made views of two shots of the same exposure each. The JPEG is left out.
+    auto isJpeg = [](const fs::path& f) {
+      const std::string e = lowerExtension(f);
+      return e == ".jpg" || e == ".jpeg";
+    };
+    auto isRaw = [](const fs::path& f) {
+      static const char* const kRaw[] = {".dng", ".cr2", ".cr3", ".nef", ".arw",
+                                         ".orf", ".rw2", ".raf", ".pef", ".srw"};
+      const std::string e = lowerExtension(f);
+      return std::any_of(std::begin(kRaw), std::end(kRaw), [&](const char* r) { return e == r; });
+    };
+    auto key = [](const fs::path& f) {
+      std::string k = (f.parent_path() / f.stem()).string();
+      std::transform(k.begin(), k.end(), k.begin(),
+                     [](unsigned char c) { return char(std::tolower(c)); });
+      return k;
+    };
+    std::map<std::string, const Shot*> raws;
+    for (const Shot& s : shots)
+      if (isRaw(s.file)) raws.emplace(key(s.file), &s);
+    std::vector<Shot> kept;
+    std::vector<int> keptFolder;
+    for (size_t i = 0; i < shots.size(); ++i) {
+      const Shot& s = shots[i];
+      const auto raw = isJpeg(s.file) ? raws.find(key(s.file)) : raws.end();
+      if (raw != raws.end() && (!s.info.captureSeconds || !raw->second->info.captureSeconds ||
+                                *s.info.captureSeconds == *raw->second->info.captureSeconds)) {
+        rawPairs->push_back(s.file);
+        continue;
+      }
+      keptFolder.push_back(folderOf[i]);
+      kept.push_back(s);
+    }
+    shots = std::move(kept);
+    folderOf = std::move(keptFolder);
+  }
   if (!leftOut) return shots;
   // In a folder where some photos say their exposure time and others do not, the others are not
   // photos of the brackets (a merged EXR, a panorama saved beside them): left out, and named.
@@ -213,7 +251,9 @@ Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options) {
       capture.views.push_back(View{});
       current = &capture.views.back();
     }
-    if (timed) previousTime = *s.info.captureSeconds;
+    // A pause is from the end of one exposure to the start of the next (EXIF's capture time is
+    // the start): a 16 s shot of a night bracket is no pause.
+    if (timed) previousTime = *s.info.captureSeconds + s.info.exposureTime.value_or(0.0);
     current->shots.push_back(std::move(s));
   }
   const int digits = capture.views.size() >= 10 ? 2 : 1;

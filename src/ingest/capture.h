@@ -72,10 +72,13 @@ struct Capture {
 // Shots from files and folders (folders: every image file inside, not recursive, by name). Reads
 // headers only. Throws if a file cannot be read or nothing is found. With `leftOut`, the files of
 // a folder that say no exposure time in their EXIF, where others of that folder do, are left out
-// and listed there (files named one by one are always kept).
+// and listed there (files named one by one are always kept). With `rawPairs`, the JPEG of a
+// camera's RAW+JPEG pair (the same name and capture time beside a raw file) is left out and
+// listed there: the raw file is the deeper record of the same shot.
 std::vector<Shot> scanShots(const std::vector<std::filesystem::path>& paths,
                             const std::string& stage = "ingest",
-                            std::vector<std::filesystem::path>* leftOut = nullptr);
+                            std::vector<std::filesystem::path>* leftOut = nullptr,
+                            std::vector<std::filesystem::path>* rawPairs = nullptr);
 
 struct ExifGrouping {
   double maxGapSeconds = 3.0;  // a longer pause between shots starts a new view

@@ -484,6 +484,13 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
     std::memcpy(&matrix[0][0], m.data(), sizeof(float) * 16);
     header.insert(as, Imf::M44fAttribute(matrix));
   }
+  for (const auto& [name, m] : shared.doubleMatrices) {
+    const std::string as = exrName(name);
+    if (as.empty()) continue;
+    Imath::M44d matrix;
+    std::memcpy(&matrix[0][0], m.data(), sizeof(double) * 16);
+    header.insert(as, Imf::M44dAttribute(matrix));
+  }
   for (const auto& [name, value] : shared.strings) {
     const std::string as = exrName(name);
     if (!as.empty()) header.insert(as, Imf::StringAttribute(value));

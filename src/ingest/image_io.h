@@ -293,10 +293,12 @@ struct ExrPart {
   std::vector<std::string> floatChannels;
 };
 
-// Attributes written on every part of an OpenEXR file: 4x4 matrices (OpenEXR's m44f, stored as
-// Imath reads them: row vectors, translation in the last row) and strings.
+// Attributes written on every part of an OpenEXR file: 4x4 matrices (OpenEXR's m44f, or m44d
+// for `doubleMatrices`, stored as Imath reads them: row vectors, translation in the last row)
+// and strings.
 struct ExrHeader {
   std::vector<std::pair<std::string, std::array<float, 16>>> matrices;
+  std::vector<std::pair<std::string, std::array<double, 16>>> doubleMatrices;
   std::vector<std::pair<std::string, std::string>> strings;
 };
 

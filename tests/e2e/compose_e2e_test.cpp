@@ -1546,7 +1546,10 @@ TEST_F(ComposeOutputs, TheHeaderRebuildsTheScene) {
     std::array<double, 16> m{};
     const OIIO::ParamValue* p = in->spec().find_attribute(name);
     EXPECT_NE(p, nullptr) << name;
-    if (p) {
+    if (p && p->type().basetype == OIIO::TypeDesc::DOUBLE) {
+      const double* d = static_cast<const double*>(p->data());
+      for (int i = 0; i < 16; ++i) m[size_t(i)] = d[i];
+    } else if (p) {
       const float* f = static_cast<const float*>(p->data());
       for (int i = 0; i < 16; ++i) m[size_t(i)] = f[i];
     }

@@ -163,9 +163,14 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
       const OIIO::ParamValue* mine = layerIn->spec().find_attribute(attribute);
       const OIIO::ParamValue* theirs = oneIn->spec().find_attribute(attribute);
       ASSERT_TRUE(mine && theirs);
-      ASSERT_EQ(mine->type(), OIIO::TypeMatrix44);
-      ASSERT_EQ(theirs->type(), OIIO::TypeMatrix44);
-      EXPECT_EQ(std::memcmp(mine->data(), theirs->data(), 16 * sizeof(float)), 0);
+      // m44f, but the object's placement in double (m44d: a mesh far from its file's origin).
+      const bool inDouble = std::string(attribute) == "compose:worldFromObject";
+      const OIIO::TypeDesc type =
+          inDouble ? OIIO::TypeDesc(OIIO::TypeDesc::DOUBLE, OIIO::TypeDesc::MATRIX44)
+                   : OIIO::TypeMatrix44;
+      ASSERT_EQ(mine->type(), type);
+      ASSERT_EQ(theirs->type(), type);
+      EXPECT_EQ(std::memcmp(mine->data(), theirs->data(), type.size()), 0);
     }
     // The environment's turn: --env-yaw 70 about the vertical.
     {
@@ -915,8 +920,10 @@ TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
   ASSERT_EQ(r.status, 0) << r.err;
   auto in = OIIO::ImageInput::open((dir_ / "posed" / "compose.exr").string());
   ASSERT_TRUE(in);
-  float m[16] = {};
-  ASSERT_TRUE(in->spec().getattribute("compose:worldFromObject", OIIO::TypeMatrix, m));
+  double m[16] = {};  // m44d: the translation of a mesh far from its origin needs double
+  ASSERT_TRUE(
+      in->spec().getattribute("compose:worldFromObject",
+                              OIIO::TypeDesc(OIIO::TypeDesc::DOUBLE, OIIO::TypeDesc::MATRIX44), m));
   // Imath layout: the translation is the last row.
   EXPECT_NEAR(m[12], 0.0, 1e-3);
   EXPECT_NEAR(m[13], 0.0, 1e-6) << "the object's base is on the board's plane";

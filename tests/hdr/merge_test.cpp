@@ -270,6 +270,86 @@ TEST(Response, ColorSpaceCurveIsTheSrgbDecoding) {
   COMPOSE_EXPECT_ERROR(linearSpaceFor(colors, "sRGB", "no such space"), "no such space");
 }
 
+// A camera pointed up or down may tag the shots of one bracket with different orientations
+// (its orientation sensor changing its mind): each was turned by its own tag, and the bracket
+// merged a photo turned 180° with the others (every pixel wrong, and the curve recovered from
+// them stored for the camera). The bracket is one frame of the sensor: every shot is turned as
+// the first says, with a note.
+TEST(Merge, TheShotsOfABracketAreTurnedAsItsFirstSays) {
+  TempDir dir;
+  Image picture(24, 16, 3, {"R", "G", "B"});
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 24; ++x)
+      for (int c = 0; c < 3; ++c) picture.at(x, y)[c] = 0.1f + 0.03f * float(x) + 0.01f * float(y);
+  const double times[3] = {0.25, 1.0, 4.0};
+  for (int k = 0; k < 3; ++k) {
+    ingest::CaptureInfo info;
+    info.exposureTime = times[k];
+    info.fNumber = 8.0;
+    info.iso = 100.0;
+    info.dateTimeOriginal = "2024:05:01 12:00:0" + std::to_string(k);
+    ingest::WriteOptions options;
+    options.jpegQuality = 100;
+    options.attributes = ingest::exifAttributes(info);
+    if (k == 1) options.attributes.push_back({"Orientation", 3});
+    ingest::writeImage(dir / ("IMG_000" + std::to_string(k + 1) + ".jpg"), picture, options);
+  }
+  ingest::Capture capture = ingest::groupByExif(ingest::scanShots({dir.path()}), {});
+  ASSERT_EQ(capture.views.size(), 1u);
+  ASSERT_EQ(capture.views[0].shots.size(), 3u);
+  ASSERT_EQ(capture.views[0].shots[1].info.orientation, 3) << "the tag is written";
+  const auto photos = readCapturePhotos(capture);
+  ASSERT_EQ(photos[0].size(), 3u);
+  const ingest::LoadedImage &first = photos[0][0], &turned = photos[0][1];
+  ASSERT_FALSE(first.codes.empty());
+  EXPECT_EQ(turned.codes, first.codes) << "the same stored pixels, the same way up";
+  EXPECT_EQ(turned.info.orientation, 1);
+  ASSERT_EQ(turned.notes.size(), 1u);
+  EXPECT_EQ(turned.notes[0],
+            "IMG_0002.jpg is tagged with EXIF orientation 3, IMG_0001.jpg with 1: turned as the "
+            "bracket's first photo says (a bracket is one frame of the sensor)");
+}
+
+// A 16-bit bracket whose longer shots clip red alone (a tungsten lamp, a sunset): clipping is
+// judged on the values as stored, channel by channel. Judged after the conversion to the
+// working space (Rec. 709 (1, 0.3, 0.1) is about (0.72, 0.35, 0.14) in ACEScg, below any
+// threshold) the clipped shots took their full weight and red came out 37 % low.
+TEST(Merge, ADeepShotClippedInOneChannelIsNotTrusted) {
+  TempDir dir;
+  const glm::vec3 radiance(2.0f, 0.3f, 0.1f);  // linear Rec. 709
+  const double exposures[3] = {0.25, 1.0, 4.0};
+  std::vector<ingest::Shot> shots;
+  for (int k = 0; k < 3; ++k) {
+    Image shot(16, 8, 3, {"R", "G", "B"});
+    for (size_t i = 0; i < shot.pixelCount(); ++i)
+      for (int c = 0; c < 3; ++c)
+        shot.pixels[3 * i + size_t(c)] = std::min(1.0f, radiance[c] * float(exposures[k]));
+    ingest::WriteOptions options;
+    options.depth = ingest::WriteOptions::Depth::UInt16;
+    const auto file = dir / ("s" + std::to_string(k) + ".tif");
+    ingest::writeImage(file, shot, options);
+    shots.push_back(ingest::scanShots({file}).front());
+  }
+  ingest::Capture capture;
+  capture.views.push_back({"view", shots, {}});
+  ingest::setExposures(capture.views[0], {0.25, 1.0, 4.0}, "test");
+  std::vector<std::vector<ingest::LoadedImage>> photos(1);
+  for (const ingest::Shot& s : capture.views[0].shots)
+    photos[0].push_back(ingest::readImage(s.file));
+  const auto colors = color::ColorConfig::builtin();
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  options.inputSpace = "lin_rec709";
+  const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
+  Image truth(1, 1, 3, {"R", "G", "B"});
+  for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
+  truth.colorSpace = "lin_rec709";
+  colors.convert(truth, colors.workingSpace());
+  const float* m = merged.views[0].radiance.at(8, 4);
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
+}
+
 TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {
   // Linear 16-bit data, no JPEG: only noise and quantisation remain.
   constexpr double kMedianError = 0.01;

@@ -273,6 +273,61 @@ TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
                        "9 photos do not make brackets of 4 (the bracket size given): 1 left over");
 }
 
+// A pause is from the end of one exposure to the start of the next: a night bracket of 4, 1 and
+// 16 s shots, each started half a second after the last one ended, is one view (the starts
+// 4.5 and 1.3 s apart split it into three), and the next bracket, 35 s later, another.
+TEST(Capture, ALongExposureIsNoPause) {
+  TempDir dir;
+  const double t[3] = {4.0, 1.0, 16.0};
+  const char* starts[6] = {"12:00:00", "12:00:04.5", "12:00:05.8",
+                           "12:00:57", "12:01:01.5", "12:01:02.8"};
+  for (int i = 0; i < 6; ++i) {
+    char name[16];
+    std::snprintf(name, sizeof name, "IMG_%04d.jpg", 200 + i);
+    writeShot(dir / name, cameraShot(t[i % 3], std::string("2024:05:01 ") + starts[i]));
+  }
+  const Capture c = groupByExif(scanShots({dir.path()}), {});
+  ASSERT_EQ(c.views.size(), 2u);
+  EXPECT_EQ(c.views[0].shots.size(), 3u);
+  EXPECT_EQ(c.views[1].shots.size(), 3u);
+  EXPECT_EQ(c.views[1].shots[0].file.filename(), "IMG_0203.jpg");
+}
+
+// A camera set to RAW+JPEG writes IMG_n.CR2 and IMG_n.JPG of each shot: the pair made a view of
+// two shots of one exposure each (four views for a bracket of three). The JPEG of a pair (same
+// name and time beside a raw file) is left out and listed; a JPEG of another time is kept.
+TEST(Capture, TheJpegOfARawPlusJpegPairIsLeftOut) {
+  TempDir dir;
+  const double t[3] = {1.0 / 1600, 1.0 / 400, 1.0 / 100};
+  for (int i = 0; i < 3; ++i) {
+    const CaptureInfo info = cameraShot(t[i], "2024:05:01 12:00:0" + std::to_string(i));
+    const std::string stem = "IMG_" + std::to_string(5952 + i);
+    WriteOptions o;
+    o.attributes = exifAttributes(info);
+    o.depth = WriteOptions::Depth::UInt16;
+    writeImage(dir / (stem + ".tif"), grey(32, 24), o);
+    std::filesystem::rename(dir / (stem + ".tif"), dir / (stem + ".DNG"));
+    writeShot(dir / (stem + ".JPG"), info);
+  }
+  writeShot(dir / "IMG_5954b.jpg", cameraShot(t[2], "2024:05:01 12:00:02"));
+  CaptureInfo later = cameraShot(t[0], "2024:05:01 12:00:09");
+  std::vector<std::filesystem::path> leftOut, pairs;
+  const std::vector<Shot> shots = scanShots({dir.path()}, "ingest", &leftOut, &pairs);
+  ASSERT_EQ(pairs.size(), 3u);
+  EXPECT_EQ(pairs[0].filename(), "IMG_5952.JPG");
+  EXPECT_TRUE(leftOut.empty());
+  ASSERT_EQ(shots.size(), 4u) << "three raw files and a JPEG of another name";
+  // Without the list, every file is a shot (as before).
+  EXPECT_EQ(scanShots({dir.path()}).size(), 7u);
+  // The same name at another time is not a pair.
+  TempDir other;
+  std::filesystem::copy_file(dir / "IMG_5952.DNG", other / "IMG_5952.DNG");
+  writeShot(other / "IMG_5952.JPG", later);
+  pairs.clear();
+  EXPECT_EQ(scanShots({other.path()}, "ingest", nullptr, &pairs).size(), 2u);
+  EXPECT_TRUE(pairs.empty());
+}
+
 TEST(Capture, GroupsByFileNamePattern) {
   TempDir dir;
   for (const char* v : {"front", "left", "up"})

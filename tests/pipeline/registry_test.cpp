@@ -4,6 +4,8 @@
 #include <map>
 #include <set>
 
+#include <glm/gtc/matrix_transform.hpp>
+
 #include "core/channels.h"
 #include "core/error.h"
 #include "ingest/image_io.h"
@@ -12,6 +14,7 @@
 #include "pipeline/stage.h"
 #include "pipeline/stage_cache.h"
 #include "pipeline/stage_util.h"
+#include "pipeline/stages.h"
 #include "test_util.h"
 
 namespace compose::pipeline {
@@ -368,6 +371,52 @@ TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {
   EXPECT_TRUE(reopened.open());
   StageCache wrongStage = StageCache::atFile(dir / "mine.lighting", "render");
   EXPECT_FALSE(wrongStage.open());
+}
+
+// The output's header says when worldToNDC is not the whole lens: a distorted one keeps its
+// pinhole part, and a fisheye has none (it said nothing of a fisheye without distortion terms,
+// whose worldToNDC put the object's points 215 pixels from where they show, on average).
+TEST(SceneHeader, SaysWhenWorldToNdcIsNotTheLens) {
+  auto lensNote = [](const calib::Lens& lens) {
+    Geometry geometry;
+    geometry.camera.width = lens.width;
+    geometry.camera.height = lens.height;
+    geometry.camera.lens = lens;
+    for (const auto& [name, value] : sceneHeader(geometry, "", glm::dvec3(0.0)).strings)
+      if (name == "compose:lens") return value;
+    return std::string();
+  };
+  calib::Lens pinhole = calib::Lens::fromFieldOfView(640, 480, 60.0);
+  EXPECT_EQ(lensNote(pinhole), "");
+  pinhole.distortion = {-0.1, 0.02, 0.0, 0.0, 0.0};
+  EXPECT_EQ(lensNote(pinhole), "distorted lens: worldToNDC holds its pinhole part only");
+  const calib::Lens fisheye =
+      calib::Lens::fromFieldOfView(640, 480, 150.0, calib::Projection::Equidistant);
+  EXPECT_EQ(lensNote(fisheye),
+            "equidistant fisheye lens: worldToNDC is the pinhole of its focal lengths and "
+            "principal point, not its projection");
+}
+
+// compose:worldFromObject maps the mesh file's coordinates: for a mesh far from its file's
+// origin (here a million units out) its translation needs double, which float rounded by
+// centimetres (the rebuilt bunny stood 7 cm off where it was rendered).
+TEST(SceneHeader, TheObjectsPlacementIsKeptInDouble) {
+  Geometry geometry;
+  geometry.camera.width = 640;
+  geometry.camera.height = 480;
+  geometry.camera.lens = calib::Lens::fromFieldOfView(640, 480, 60.0);
+  geometry.worldFromObject = glm::scale(glm::dmat4(1.0), glm::dvec3(1.1005657));
+  const glm::dvec3 origin(1000000.123, 0.5, 2000000.456);
+  const ingest::ExrHeader header = sceneHeader(geometry, "far.obj", origin);
+  const std::array<double, 16>* m = nullptr;
+  for (const auto& [name, value] : header.doubleMatrices)
+    if (name == "compose:worldFromObject") m = &value;
+  ASSERT_NE(m, nullptr);
+  // Row vectors, translation in the last row: the file's origin lands at the object's.
+  for (int c = 0; c < 3; ++c) {
+    const double atOrigin = origin[c] * (*m)[size_t(4 * c + c)] + (*m)[size_t(12 + c)];
+    EXPECT_NEAR(atOrigin, 0.0, 1e-9) << c;
+  }
 }
 
 }  // namespace
