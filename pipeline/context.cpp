@@ -66,8 +66,8 @@ Hash128 Context::geometryKey() const {
   h.bytes("geometry");
   // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it; 3: a cut-out
   // object stands on what its cut-outs keep (Mesh::keptBounds); 4: the plate camera, not the
-  // plate's bytes
-  h.word(4);
+  // plate's bytes; 5: a lens mirrored for a plate tagged 2, 4, 5 or 7
+  h.word(5);
   key(artefact::kPlate);  // a job without a plate has no geometry: the usage error says so
   COMPOSE_CHECK(plateCamera.has_value());
   h.combine(*plateCamera);

@@ -223,8 +223,9 @@ class IngestStage final : public Stage {
 class MergeStage final : public Stage {
  public:
   // Bump when merging gives other numbers for the same photos.
-  // 2: a stored response is checked against the photos; 3: aligned before recovery (--align)
-  static constexpr int kVersion = 3;
+  // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
+  // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored
+  static constexpr int kVersion = 4;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -309,7 +310,9 @@ class MergeStage final : public Stage {
 
 class StitchStage final : public Stage {
  public:
-  static constexpr int kVersion = 2;  // 2: the 35 mm focal length derived where EXIF rounds it
+  // 2: the 35 mm focal length derived where EXIF rounds it; 3: float TIFFs linear, a Radiance
+  // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7
+  static constexpr int kVersion = 3;
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {

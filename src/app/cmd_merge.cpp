@@ -253,7 +253,10 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       if (!rawPairs.empty() && !globals.quiet)
         std::fprintf(stderr, "compose: note: %s\n", printable(rawPairsNote(rawPairs)).c_str());
       if (capture.views[0].shots.size() != o->images.size() && !exposures.empty())
-        throw UsageError("--exposures needs one value per photo; folders were given");
+        throw UsageError("--exposures needs one value per photo merged: " +
+                         std::to_string(capture.views[0].shots.size()) + " photos from " +
+                         std::to_string(o->images.size()) +
+                         " paths (folders given, or JPEGs of RAW+JPEG pairs left out)");
       if (!exposures.empty()) ingest::setExposures(capture.views[0], exposures, "--exposures");
       capture.method = "the photos given";
     }

@@ -326,13 +326,13 @@ std::optional<Layout> exrEnvmapLayout(const fs::path& file) {
 namespace {
 
 // How to give a layout that cannot be detected (ReadOptions::adviseConvert).
-// A lat-long map a texel or two off 2:1 (4096x2047, 8192x4097: an export rounded its height):
-// what to do about it; empty for any other shape.
+// A lat-long map slightly off 2:1, within 1 % (4096x2047, 8192x4097: an export rounded its
+// height): what to do about it; empty for any other shape.
 std::string nearlyLatLong(int w, int h, const fs::path& path) {
   if (h < 1 || w == 2 * h || std::abs(w - 2 * h) > std::max(2, w / 100)) return {};
   const int height = (w + 1) / 2;
   return "a " + std::to_string(w) + "x" + std::to_string(h) +
-         " image is a lat-long map a texel or two off 2:1; a lat-long map must be exactly 2:1 "
+         " image looks like a lat-long map slightly off 2:1; a lat-long map must be exactly 2:1 "
          "(width = 2 x height): resize it first, e.g. oiiotool " +
          path.string() + " --resize " + std::to_string(2 * height) + "x" + std::to_string(height) +
          " -o ENV.exr";

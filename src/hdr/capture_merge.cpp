@@ -176,7 +176,8 @@ std::vector<std::vector<ingest::LoadedImage>> readCapturePhotos(const ingest::Ca
       // turned as the first one says, with a note.
       const int first =
           photos.back().empty() ? photo.info.orientation : photos.back().front().info.orientation;
-      if (photo.info.orientation != first) {
+      // (An OpenEXR photo is read as stored: its pixels are not turned by any tag.)
+      if (photo.info.orientation != first && photo.info.format != "openexr") {
         const int own = photo.info.orientation;
         photo = ingest::readImage(s.file, "merge", {.codesForEightBit = true, .upright = false});
         Image& img = photo.image;

@@ -187,16 +187,21 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       if (input.eightBit) {
         ownCodes.push_back(toCodes8(*input.images[i]));
       } else {
-        // Clipping is judged on the values as stored: a channel clipped in the camera's space
-        // may lie below full scale once converted.
-        const Image& img = input.stored.empty() ? *input.images[i] : *input.stored[i];
+        // Codes of the linear values, gamma-encoded; where a channel as stored is clipped (it
+        // may lie below full scale once converted to the working space), clipped codes.
+        const Image& img = *input.images[i];
+        const Image* stored = input.stored.empty() ? nullptr : input.stored[i];
+        const float full = float(params.clipHigh);
         Image encoded(width, height, 3);
         parallelFor(
             0, height,
             [&](int64_t y) {
-              for (int x = 0; x < width; ++x)
+              for (int x = 0; x < width; ++x) {
+                const float* as = stored ? stored->at(x, int(y)) : nullptr;
+                const bool clipped = as && std::max({as[0], as[1], as[2]}) >= full;
                 for (int c = 0; c < 3; ++c)
-                  encoded.at(x, int(y))[c] = encodeGamma(img.at(x, int(y))[c]);
+                  encoded.at(x, int(y))[c] = clipped ? 1.0f : encodeGamma(img.at(x, int(y))[c]);
+              }
             },
             16);
         ownCodes.push_back(toCodes8(encoded));
@@ -398,10 +403,14 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
           if (params.deghost && over[i]) w = 0.0f;
         } else {
+          // The hat on the linear values and, when they were converted, on the values as
+          // stored (full scale there is full scale of the camera's channels, whatever their
+          // encoding): a channel clipped in the camera's space takes the weight away.
+          const float* v = shots[i].at(x, y);
           const float* as = shots[i].storedAt(x, y);
-          float peak = 0.0f;
-          for (int c = 0; c < 3; ++c) peak = std::max(peak, as[c]);
-          w = float(shots[i].exposure) * linearHat(peak);
+          const float peak = std::max({v[0], v[1], v[2]});
+          const float storedPeak = std::max({as[0], as[1], as[2]});
+          w = float(shots[i].exposure) * std::min(linearHat(peak), linearHat(storedPeak));
           if (dark[i]) w *= 1e-3f;  // keep a trace so that a pixel dark everywhere gets a value
         }
         weight[i] = w;

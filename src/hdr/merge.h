@@ -75,9 +75,10 @@ struct MergeInput {
   // only); otherwise they are made here.
   std::vector<const Codes8*> codes;
   // Optional, deeper input only: the images as stored, before the caller converted them (same
-  // sizes, RGB first). Clipping is judged on them, each channel at its own full scale: red
-  // clipped in the camera's Rec. 709 (1.0, 0.3, 0.1) is (0.72, 0.35, 0.14) in ACEScg, below any
-  // threshold, and that shot took the full weight of a good one.
+  // sizes, RGB first, full scale 1 whatever their encoding). Clipping is judged on them too,
+  // each channel at its own full scale: red clipped in the camera's Rec. 709 (1.0, 0.3, 0.1) is
+  // (0.72, 0.35, 0.14) in ACEScg, below any threshold, and that shot took the full weight of a
+  // good one.
   std::vector<const Image*> stored;
   // Optional, with MergeParams::align: the alignment alignBracket() found already, used instead
   // of searching again.

@@ -158,8 +158,10 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
     for (size_t i = 0; i < shots.size(); ++i) {
       const Shot& s = shots[i];
       const auto raw = isJpeg(s.file) ? raws.find(key(s.file)) : raws.end();
-      if (raw != raws.end() && (!s.info.captureSeconds || !raw->second->info.captureSeconds ||
-                                *s.info.captureSeconds == *raw->second->info.captureSeconds)) {
+      // The same second (a raw reader may give whole seconds where the JPEG has sub-seconds).
+      if (raw != raws.end() &&
+          (!s.info.captureSeconds || !raw->second->info.captureSeconds ||
+           std::abs(*s.info.captureSeconds - *raw->second->info.captureSeconds) < 1.0)) {
         rawPairs->push_back(s.file);
         continue;
       }

@@ -621,7 +621,12 @@ void applyRadianceHeader(const fs::path& path, const std::string& stage, LoadedI
       const std::vector<double> v = numbers(line.substr(10), 8, "PRIMARIES");
       std::array<double, 8> xy;
       std::copy(v.begin(), v.end(), xy.begin());
-      out.info.chromaticities = xy;
+      // Radiance's own primaries (white E) are what a file without the line has: taken alike.
+      const std::array<double, 8> radiance = {0.640, 0.330, 0.290,     0.600,
+                                              0.150, 0.060, 1.0 / 3.0, 1.0 / 3.0};
+      bool standard = true;
+      for (size_t k = 0; k < 8; ++k) standard = standard && std::abs(xy[k] - radiance[k]) < 2e-3;
+      if (!standard) out.info.chromaticities = xy;
     }
   }
   if (exposure == 1.0 && correction == std::array<double, 3>{1.0, 1.0, 1.0}) return;

@@ -956,7 +956,8 @@ void checkGlbChunks(const fs::path& path) {
     value = uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
     return true;
   };
-  uint32_t length = 0, jsonLength = 0, binLength = 0;
+  uint32_t magic = 0, length = 0, jsonLength = 0, binLength = 0;
+  if (!word(0, magic) || magic != 0x46546C67u) return;    // not "glTF": tinygltf says so
   if (!word(8, length) || !word(12, jsonLength)) return;  // too short: tinygltf says so
   const uint64_t bin = 20ull + jsonLength;                // where the BIN chunk's header is
   if (bin + 8 > length || !word(bin, binLength)) return;  // no BIN chunk (or tinygltf's error)

@@ -13,6 +13,7 @@
 #include <set>
 #include <sstream>
 #include <string_view>
+#include <tuple>
 #include <unordered_map>
 
 #include <tiny_obj_loader.h>
@@ -321,44 +322,31 @@ void parseTextureMap(const std::string& rest, MtlMaterial& m) {
   }
 }
 
-// tinyobjloader's reading of an `mtllib` line: split at spaces, a backslash taking the next
-// character as it is (so that `mats\red.mtl` reaches the reader as `matsred.mtl`).
-std::vector<std::string> tinyobjSplit(const std::string& s) {
-  std::vector<std::string> out;
-  std::string token;
+// An `mtllib` line's names as tinyobjloader reads them (split at spaces, a backslash taking the
+// next character as it is, so that `mats\red.mtl` reaches the reader as `matsred.mtl`), each
+// with the name as written (backslashes kept).
+struct MtllibName {
+  std::string asRead, written;
+};
+std::vector<MtllibName> mtllibNames(const std::string& s) {
+  std::vector<MtllibName> out;
+  MtllibName name;
   bool escaping = false;
   for (const char c : s) {
+    if (!escaping && c == ' ') {
+      if (!name.written.empty()) out.push_back(name);
+      name = {};
+      continue;
+    }
+    name.written += c;
     if (!escaping && c == '\\') {
       escaping = true;
       continue;
     }
-    if (!escaping && c == ' ') {
-      if (!token.empty()) out.push_back(token);
-      token.clear();
-      continue;
-    }
     escaping = false;
-    token += c;
+    name.asRead += c;
   }
-  out.push_back(token);
-  return out;
-}
-
-// The same line's names as written, split at the spaces tinyobjloader splits at.
-std::vector<std::string> writtenNames(const std::string& s) {
-  std::vector<std::string> out;
-  std::string token;
-  bool escaping = false;
-  for (const char c : s) {
-    if (!escaping && c == ' ') {
-      if (!token.empty()) out.push_back(token);
-      token.clear();
-      continue;
-    }
-    escaping = !escaping && c == '\\';
-    token += c;
-  }
-  out.push_back(token);
+  if (!name.written.empty()) out.push_back(name);
   return out;
 }
 
@@ -378,16 +366,23 @@ class MaterialLibraries : public tinyobj::MaterialReader {
     // line names; so does this, at the line's first word (later words ask again: nothing more).
     std::vector<std::string> files = {name};
     for (const std::string& whole : lines_) {
-      const std::vector<std::string> asRead = tinyobjSplit(whole), written = writtenNames(whole);
-      const auto k = std::find(asRead.begin(), asRead.end(), name);
-      if (k == asRead.end() || asRead.size() != written.size()) continue;
+      const std::vector<MtllibName> names = mtllibNames(whole);
+      if (std::none_of(names.begin(), names.end(),
+                       [&](const MtllibName& n) { return n.asRead == name; }))
+        continue;
       std::error_code ec;
-      if (fs::is_regular_file(folder_ / portable(whole), ec))
+      files.clear();
+      if (fs::is_regular_file(folder_ / portable(whole), ec)) {
         files = {whole};
-      else if (asRead.size() == 1)
-        files = {written[0]};  // `mats\red.mtl`: a Windows path
-      else
-        files = written;
+      } else {
+        // As written (in `mats\red.mtl` the backslash is a Windows separator), else as
+        // tinyobjloader unescapes it (`My\ Chair.mtl` is `My Chair.mtl`).
+        for (const MtllibName& n : names)
+          files.push_back(fs::is_regular_file(folder_ / portable(n.written), ec) ||
+                                  !fs::is_regular_file(folder_ / n.asRead, ec)
+                              ? n.written
+                              : n.asRead);
+      }
       if (!linesRead_.insert(whole).second) return true;  // read for an earlier word
       break;
     }
@@ -412,9 +407,12 @@ class MaterialLibraries : public tinyobj::MaterialReader {
   fs::path folder_;
   std::vector<std::string> lines_;
   std::set<std::string> linesRead_;
+  std::set<fs::path> readFiles_;
 
   bool read(const std::string& name) {
     const fs::path file = folder_ / portable(name);
+    // A library named again (another mtllib line) is read once.
+    if (!readFiles_.insert(file.lexically_normal()).second) return true;
     looked.push_back(file);
     std::error_code ec;
     std::ifstream in;
@@ -764,9 +762,10 @@ LoadedMesh loadObj(const fs::path& path) {
       mesh.warnings.push_back(count(none, "face has", "faces have") +
                               " no material: rendered with " + faceColour);
     }
-    // A texture per file and wrap mode: two materials may use one file, one clamped (-clamp on)
-    // and one repeated.
-    std::map<std::pair<fs::path, bool>, int> textureOf;
+    // A texture per file, wrap mode and use of its alpha: two materials may use one file, one
+    // clamped (-clamp on) and one repeated, one cut by its alpha (map_d) and one not.
+    std::map<std::tuple<fs::path, bool, bool>, int> textureOf;  // (file, clamped, with alpha)
+    std::set<fs::path> listed;                                  // in mesh.otherFiles
     for (int id : usedMaterials) {
       Material material;
       if (id < 0) {
@@ -820,18 +819,26 @@ LoadedMesh loadObj(const fs::path& path) {
         const fs::path file =
             locateTexture(om.texture, om.library.parent_path(), path.parent_path(), byName);
         const bool clamp = om.clamp;
-        auto [it, inserted] = textureOf.try_emplace({file, clamp}, -1);
+        // The texture's alpha channel is its opacity only where map_d names map_Kd's file: read
+        // then alone (a semi-transparent material by d is not cut by its texture's alpha).
+        bool alphaByName = false;
+        const fs::path alphaFile = om.alphaMap.empty()
+                                       ? fs::path()
+                                       : locateTexture(om.alphaMap, om.library.parent_path(),
+                                                       path.parent_path(), alphaByName);
+        const bool withAlpha = !om.alphaMap.empty() && alphaFile == file;
+        auto [it, inserted] = textureOf.try_emplace({file, clamp, withAlpha}, -1);
         if (byName) {
           mesh.warnings.push_back("texture '" + om.texture + "' of material '" + om.name +
                                   "' is not where its library says: read " + file.string() +
                                   ", the file of that name beside the library or the OBJ");
         }
         if (inserted) {
-          if (!textureOf.count({file, !clamp})) mesh.otherFiles.push_back(file);
+          if (listed.insert(file).second) mesh.otherFiles.push_back(file);
           try {
             Texture texture;
             texture.file = file;
-            texture.image = readTextureFile(file, "", &texture.alpha);
+            texture.image = readTextureFile(file, "", withAlpha ? &texture.alpha : nullptr);
             if (clamp) texture.wrapU = texture.wrapV = Texture::Wrap::Clamp;
             it->second = int(mesh.textures.size());
             mesh.textures.push_back(std::move(texture));
@@ -844,19 +851,14 @@ LoadedMesh loadObj(const fs::path& path) {
         }
         material.texture = it->second;
         if (material.texture < 0 && !ownColour) material.baseColor = glm::vec3(kDefaultAlbedo);
-        if (!om.alphaMap.empty()) {
-          bool alphaByName = false;
-          const fs::path alphaFile =
-              locateTexture(om.alphaMap, om.library.parent_path(), path.parent_path(), alphaByName);
-          const bool hasAlpha =
-              material.texture >= 0 && !mesh.textures[size_t(material.texture)].alpha.empty();
-          if (alphaFile == file && hasAlpha) {
+        if (!om.alphaMap.empty() && material.texture >= 0) {
+          if (withAlpha && !mesh.textures[size_t(material.texture)].alpha.empty()) {
             material.blend = true;
-          } else if (material.texture >= 0) {
+          } else {
             mesh.warnings.push_back(
                 "material '" + om.name + "': its map_d '" + om.alphaMap + "' is not read (" +
-                (alphaFile == file ? "map_Kd's file has no alpha channel"
-                                   : "it is not map_Kd's file, whose alpha channel is read") +
+                (withAlpha ? "map_Kd's file has no alpha channel"
+                           : "it is not map_Kd's file, whose alpha channel is read") +
                 "): the texture is opaque");
           }
         }

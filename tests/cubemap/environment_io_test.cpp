@@ -424,7 +424,8 @@ TEST(EnvironmentFiles, NearlyLatLongMapsAndRadianceFaces) {
   Image odd(64, 31, 3, {"R", "G", "B"});
   ingest::writeImage(dir / "odd.exr", odd, options);
   const std::string advice =
-      "a 64x31 image is a lat-long map a texel or two off 2:1; a lat-long map must be exactly 2:1 "
+      "a 64x31 image looks like a lat-long map slightly off 2:1; a lat-long map must be exactly "
+      "2:1 "
       "(width = 2 x height): resize it first, e.g. oiiotool " +
       (dir / "odd.exr").string() + " --resize 64x32 -o ENV.exr";
   COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "odd.exr"}), advice);

@@ -315,39 +315,47 @@ TEST(Merge, TheShotsOfABracketAreTurnedAsItsFirstSays) {
 // working space (Rec. 709 (1, 0.3, 0.1) is about (0.72, 0.35, 0.14) in ACEScg, below any
 // threshold) the clipped shots took their full weight and red came out 37 % low.
 TEST(Merge, ADeepShotClippedInOneChannelIsNotTrusted) {
-  TempDir dir;
-  const glm::vec3 radiance(2.0f, 0.3f, 0.1f);  // linear Rec. 709
-  const double exposures[3] = {0.25, 1.0, 4.0};
-  std::vector<ingest::Shot> shots;
-  for (int k = 0; k < 3; ++k) {
-    Image shot(16, 8, 3, {"R", "G", "B"});
-    for (size_t i = 0; i < shot.pixelCount(); ++i)
-      for (int c = 0; c < 3; ++c)
-        shot.pixels[3 * i + size_t(c)] = std::min(1.0f, radiance[c] * float(exposures[k]));
-    ingest::WriteOptions options;
-    options.depth = ingest::WriteOptions::Depth::UInt16;
-    const auto file = dir / ("s" + std::to_string(k) + ".tif");
-    ingest::writeImage(file, shot, options);
-    shots.push_back(ingest::scanShots({file}).front());
+  for (const bool encoded : {false, true}) {
+    SCOPED_TRACE(encoded ? "sRGB-encoded 16-bit" : "linear 16-bit");
+    TempDir dir;
+    const glm::vec3 radiance(2.0f, 0.3f, 0.1f);  // linear Rec. 709
+    const double exposures[3] = {0.25, 1.0, 4.0};
+    auto srgb = [](float v) {
+      return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+    };
+    std::vector<ingest::Shot> shots;
+    for (int k = 0; k < 3; ++k) {
+      Image shot(16, 8, 3, {"R", "G", "B"});
+      for (size_t i = 0; i < shot.pixelCount(); ++i)
+        for (int c = 0; c < 3; ++c) {
+          const float v = std::min(1.0f, radiance[c] * float(exposures[k]));
+          shot.pixels[3 * i + size_t(c)] = encoded ? srgb(v) : v;
+        }
+      ingest::WriteOptions options;
+      options.depth = ingest::WriteOptions::Depth::UInt16;
+      const auto file = dir / ("s" + std::to_string(k) + ".tif");
+      ingest::writeImage(file, shot, options);
+      shots.push_back(ingest::scanShots({file}).front());
+    }
+    ingest::Capture capture;
+    capture.views.push_back({"view", shots, {}});
+    ingest::setExposures(capture.views[0], {0.25, 1.0, 4.0}, "test");
+    std::vector<std::vector<ingest::LoadedImage>> photos(1);
+    for (const ingest::Shot& s : capture.views[0].shots)
+      photos[0].push_back(ingest::readImage(s.file));
+    const auto colors = color::ColorConfig::builtin();
+    CaptureMergeOptions options;
+    options.responseFolder = dir / "responses";
+    options.inputSpace = encoded ? "sRGB - Texture" : "lin_rec709";
+    const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
+    Image truth(1, 1, 3, {"R", "G", "B"});
+    for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
+    truth.colorSpace = "lin_rec709";
+    colors.convert(truth, colors.workingSpace());
+    const float* m = merged.views[0].radiance.at(8, 4);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
   }
-  ingest::Capture capture;
-  capture.views.push_back({"view", shots, {}});
-  ingest::setExposures(capture.views[0], {0.25, 1.0, 4.0}, "test");
-  std::vector<std::vector<ingest::LoadedImage>> photos(1);
-  for (const ingest::Shot& s : capture.views[0].shots)
-    photos[0].push_back(ingest::readImage(s.file));
-  const auto colors = color::ColorConfig::builtin();
-  CaptureMergeOptions options;
-  options.responseFolder = dir / "responses";
-  options.inputSpace = "lin_rec709";
-  const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
-  Image truth(1, 1, 3, {"R", "G", "B"});
-  for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
-  truth.colorSpace = "lin_rec709";
-  colors.convert(truth, colors.workingSpace());
-  const float* m = merged.views[0].radiance.at(8, 4);
-  for (int c = 0; c < 3; ++c)
-    EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
 }
 
 TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {

@@ -726,14 +726,16 @@ TEST(Mesh, SeeThroughObjMaterials) {
             "newmtl leaf\nmap_Kd leaf.png\nmap_d -imfchan m leaf.png\n"
             "newmtl solid\nKd 0.5 0.5 0.5\nd 1\n"
             "newmtl ghost\nKd 1 0 0\nd 0\n"
-            "newmtl other\nmap_Kd opaque.png\nmap_d leaf.png\n");
-  writeText(dir / "s.obj",
-            "mtllib s.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
-            "v 4 0 0\nv 5 0 0\nv 4 1 0\nv 6 0 0\nv 7 0 0\nv 6 1 0\nv 8 0 0\nv 9 0 0\nv 8 1 0\n"
-            "v 10 0 0\nv 11 0 0\nv 10 1 0\nvt 0.25 0.5\nvt 0.75 0.5\n"
-            "usemtl glass\nf 1 2 3\nusemtl tinted\nf 4 5 6\nusemtl leaf\nf 7/1 8/2 9/1\n"
-            "usemtl solid\nf 10 11 12\nusemtl ghost\nf 13 14 15\nusemtl other\nf 16/1 17/1 18/1\n"
-            "usemtl scanned\nf 1 3 4\n");
+            "newmtl other\nmap_Kd opaque.png\nmap_d leaf.png\n"
+            "newmtl veil\nmap_Kd leaf.png\nd 0.5\n");
+  writeText(
+      dir / "s.obj",
+      "mtllib s.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 2 1 0\n"
+      "v 4 0 0\nv 5 0 0\nv 4 1 0\nv 6 0 0\nv 7 0 0\nv 6 1 0\nv 8 0 0\nv 9 0 0\nv 8 1 0\n"
+      "v 10 0 0\nv 11 0 0\nv 10 1 0\nvt 0.25 0.5\nvt 0.75 0.5\n"
+      "usemtl glass\nf 1 2 3\nusemtl tinted\nf 4 5 6\nusemtl leaf\nf 7/1 8/2 9/1\n"
+      "usemtl solid\nf 10 11 12\nusemtl ghost\nf 13 14 15\nusemtl other\nf 16/1 17/1 18/1\n"
+      "usemtl scanned\nf 1 3 4\nv 12 0 0\nv 13 0 0\nv 12 1 0\nusemtl veil\nf 19/1 20/2 21/1\n");
   const Mesh m = loadMesh(dir / "s.obj");
   const std::vector<std::string> said = {
       "material 'tinted': 'Tr 0.4' is not read (exporters disagree on whether Tr is the "
@@ -743,7 +745,7 @@ TEST(Mesh, SeeThroughObjMaterials) {
       "material 'other': its map_d 'leaf.png' is not read (it is not map_Kd's file, whose alpha "
       "channel is read): the texture is opaque"};
   EXPECT_EQ(m.warnings, said);
-  ASSERT_EQ(m.materials.size(), 7u);
+  ASSERT_EQ(m.materials.size(), 8u);
   auto material = [&](const std::string& name) -> const Material& {
     for (const Material& mat : m.materials)
       if (mat.name == name) return mat;
@@ -758,8 +760,11 @@ TEST(Mesh, SeeThroughObjMaterials) {
   EXPECT_FALSE(material("solid").blend);
   EXPECT_FALSE(material("other").blend);
   EXPECT_FALSE(material("ghost").blend);
-  // Triangles in file order, each see-through one's back side after them: 7 + 2.
-  EXPECT_EQ(m.triangleCount(), 9u);
+  EXPECT_TRUE(material("veil").blend);
+  // Triangles in file order, each see-through one's back side after them: 8 + 3.
+  EXPECT_EQ(m.triangleCount(), 11u);
+  // d alone: its texture's alpha does not cut it (no map_d names it).
+  EXPECT_FLOAT_EQ(m.alphaAt(7, 1.0f, 0.0f), 0.5f);
   EXPECT_FLOAT_EQ(m.alphaAt(0, 0.3f, 0.3f), 0.25f);
   EXPECT_FALSE(m.passes(0, 0.3f, 0.3f, 0.2f)) << "met by a ray whose number is below alpha";
   EXPECT_TRUE(m.passes(0, 0.3f, 0.3f, 0.3f));
@@ -820,6 +825,15 @@ TEST(Mesh, AMaterialLibraryWhoseNameHasSpaces) {
   const Mesh two = loadMesh(dir / "two.obj");
   EXPECT_TRUE(two.warnings.empty()) << two.warnings[0];
   EXPECT_EQ(two.materials.size(), 2u);
+  // A space escaped as tinyobjloader reads it (`my\ mats.mtl`), and a library named again on a
+  // later line, read once (it said its materials were "defined again" in the same file).
+  writeText(dir / "escaped.obj",
+            "mtllib my\\ mats.mtl\nmtllib my\\ mats.mtl b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+            "v 1 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 2 4 3\n");
+  const Mesh escaped = loadMesh(dir / "escaped.obj");
+  EXPECT_TRUE(escaped.warnings.empty()) << escaped.warnings[0];
+  ASSERT_EQ(escaped.materials.size(), 2u);
+  EXPECT_TRUE(near(escaped.materials[0].baseColor, {0.8f, 0.1f, 0.2f}));
 }
 
 // A two-sided card (the same triangle twice, back to back, another material on each side): one is
