@@ -49,8 +49,8 @@ struct EnvironmentFile {
   // picture's channels by name (pictureRgb: a layer's beauty.R, G, B; Y alone; Y, RY, BY).
   Image image;
   std::array<Image, lighting::kCubeFaces> faces;
-  ingest::CaptureInfo info;                       // of the first file
-  std::vector<std::string> notes;                 // what reading changed (LoadedImage::notes)
+  ingest::CaptureInfo info;        // of the first file
+  std::vector<std::string> notes;  // what reading changed (LoadedImage::notes)
 
   bool isCube() const { return layout != Layout::LatLong && layout != Layout::MirrorBall; }
   // "vertical cross, faces 256²" / "lat-long 1024x512".

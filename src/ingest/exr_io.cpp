@@ -477,20 +477,18 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
     header.insert("chromaticities",
                   Imf::ChromaticitiesAttribute(Imf::Chromaticities(xy(0), xy(1), xy(2), xy(3))));
   }
-  for (const auto& [name, m] : shared.matrices) {
-    const std::string as = exrName(name);
-    if (as.empty()) continue;
-    Imath::M44f matrix;
-    std::memcpy(&matrix[0][0], m.data(), sizeof(float) * 16);
-    header.insert(as, Imf::M44fAttribute(matrix));
-  }
-  for (const auto& [name, m] : shared.doubleMatrices) {
-    const std::string as = exrName(name);
-    if (as.empty()) continue;
-    Imath::M44d matrix;
-    std::memcpy(&matrix[0][0], m.data(), sizeof(double) * 16);
-    header.insert(as, Imf::M44dAttribute(matrix));
-  }
+  // m44f and m44d alike: Imath's rows, as stored.
+  auto insertMatrices = [&]<class Matrix, class Attribute>(const auto& matrices) {
+    for (const auto& [name, m] : matrices) {
+      const std::string as = exrName(name);
+      if (as.empty()) continue;
+      Matrix matrix;
+      std::memcpy(&matrix[0][0], m.data(), sizeof m);
+      header.insert(as, Attribute(matrix));
+    }
+  };
+  insertMatrices.operator()<Imath::M44f, Imf::M44fAttribute>(shared.matrices);
+  insertMatrices.operator()<Imath::M44d, Imf::M44dAttribute>(shared.doubleMatrices);
   for (const auto& [name, value] : shared.strings) {
     const std::string as = exrName(name);
     if (!as.empty()) header.insert(as, Imf::StringAttribute(value));

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -349,23 +350,6 @@ std::string pngTruncation(uint64_t size, Read&& read) {
   return "the PNG ends before its IEND chunk (" + std::to_string(size) + " bytes)";
 }
 
-// A Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze) is not one OpenImageIO reads, and it
-// says "no FORMAT specifier found" of it: named here instead.
-void checkRadianceFormat(const fs::path& path, const std::string& stage) {
-  std::ifstream in(path, std::ios::binary);
-  std::string line;
-  if (!std::getline(in, line) || line.rfind("#?", 0) != 0) return;
-  for (size_t read = 0; read < (1u << 16) && std::getline(in, line) && !line.empty();
-       read += line.size() + 1) {
-    if (line.rfind("FORMAT=32-bit_rle_xyze", 0) == 0) {
-      throw Error(stage,
-                  "a Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze): compose reads RGB "
-                  "ones (FORMAT=32-bit_rle_rgbe); convert it first (Radiance's ra_xyze -r)",
-                  path);
-    }
-  }
-}
-
 void checkPng(const fs::path& path, const std::string& stage) {
   std::ifstream in(path, std::ios::binary);
   std::error_code ec;
@@ -582,13 +566,22 @@ LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::
 // the value divided by their product; COLORCORR= does so per channel; PRIMARIES= gives the RGB
 // primaries and white point (without it a file is in Radiance's own primaries, taken as Rec.
 // 709 as every tool takes .hdr files). OpenImageIO reports the last EXPOSURE alone and applies
-// none of them. An unreadable value is an error naming the line.
-void applyRadianceHeader(const fs::path& path, const std::string& stage, LoadedImage& out) {
-  std::ifstream in(path, std::ios::binary);
+// none of them.
+struct RadianceHeader {
   double exposure = 1.0;
   std::array<double, 3> correction{1.0, 1.0, 1.0};
-  std::string line;
-  size_t read = 0;
+  std::optional<std::array<double, 8>> primaries;  // when other than Radiance's own
+};
+
+// The header of a Radiance picture (one that starts with "#?"), read before OpenImageIO reads
+// the file; nullopt for any other file. An unreadable value is an error naming it, and so is a
+// picture in CIE XYZ (FORMAT=32-bit_rle_xyze), which OpenImageIO does not read ("no FORMAT
+// specifier found").
+std::optional<RadianceHeader> readRadianceHeader(const fs::path& path, const std::string& stage) {
+  std::ifstream in(path, std::ios::binary);
+  char magic[2] = {};
+  if (!in.read(magic, 2) || magic[0] != '#' || magic[1] != '?') return std::nullopt;
+  RadianceHeader header;
   auto numbers = [&](const std::string& text, size_t count, const char* what) {
     std::istringstream fields(text);
     std::vector<double> values;
@@ -602,20 +595,26 @@ void applyRadianceHeader(const fs::path& path, const std::string& stage, LoadedI
                   path);
     return values;
   };
-  while (read < (1u << 16) && std::getline(in, line)) {
-    read += line.size() + 1;
+  std::string line;
+  std::getline(in, line);  // the rest of the "#?RADIANCE" line
+  for (size_t read = 0; read < (1u << 16) && std::getline(in, line); read += line.size() + 1) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty()) break;  // the header ends with an empty line
-    if (line.rfind("EXPOSURE=", 0) == 0) {
+    if (line.rfind("FORMAT=32-bit_rle_xyze", 0) == 0) {
+      throw Error(stage,
+                  "a Radiance picture in CIE XYZ (FORMAT=32-bit_rle_xyze): compose reads RGB "
+                  "ones (FORMAT=32-bit_rle_rgbe); convert it first (Radiance's ra_xyze -r)",
+                  path);
+    } else if (line.rfind("EXPOSURE=", 0) == 0) {
       const double v = numbers(line.substr(9), 1, "EXPOSURE")[0];
       if (!(v > 0.0)) throw Error(stage, "the Radiance header's EXPOSURE is not positive", path);
-      exposure *= v;
+      header.exposure *= v;
     } else if (line.rfind("COLORCORR=", 0) == 0) {
       const std::vector<double> v = numbers(line.substr(10), 3, "COLORCORR");
       for (int c = 0; c < 3; ++c) {
         if (!(v[size_t(c)] > 0.0))
           throw Error(stage, "the Radiance header's COLORCORR is not positive", path);
-        correction[size_t(c)] *= v[size_t(c)];
+        header.correction[size_t(c)] *= v[size_t(c)];
       }
     } else if (line.rfind("PRIMARIES=", 0) == 0) {
       const std::vector<double> v = numbers(line.substr(10), 8, "PRIMARIES");
@@ -626,9 +625,18 @@ void applyRadianceHeader(const fs::path& path, const std::string& stage, LoadedI
                                               0.150, 0.060, 1.0 / 3.0, 1.0 / 3.0};
       bool standard = true;
       for (size_t k = 0; k < 8; ++k) standard = standard && std::abs(xy[k] - radiance[k]) < 2e-3;
-      if (!standard) out.info.chromaticities = xy;
+      header.primaries = standard ? std::nullopt : std::optional(xy);
     }
   }
+  return header;
+}
+
+// Divides the values by the header's exposures (and colour corrections), with a note, and takes
+// its primaries.
+void applyRadianceHeader(const RadianceHeader& header, const fs::path& path, LoadedImage& out) {
+  if (header.primaries) out.info.chromaticities = header.primaries;
+  const double exposure = header.exposure;
+  const std::array<double, 3>& correction = header.correction;
   if (exposure == 1.0 && correction == std::array<double, 3>{1.0, 1.0, 1.0}) return;
   Image& img = out.image;
   const int n = img.channels;
@@ -803,14 +811,14 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
     }
     case Kind::Other:
       checkPng(path, stage);
-      checkRadianceFormat(path, stage);
       break;
   }
+  const std::optional<RadianceHeader> radiance = readRadianceHeader(path, stage);
   std::string why;
   auto reader = oiio::module(stage, path).open(path.string(), why);
   if (!reader) throw Error(stage, "cannot read image: " + why, path);
   LoadedImage out = readWithOiio(*reader, path, stage, options);
-  if (out.info.format == "hdr") applyRadianceHeader(path, stage, out);
+  if (radiance) applyRadianceHeader(*radiance, path, out);
   return out;
 }
 
