@@ -13,6 +13,11 @@
 #include <set>
 #include <sstream>
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <Imath/half.h>
 
 #include "core/channels.h"
@@ -20,6 +25,7 @@
 #include "core/limits.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
+#include "ingest/exif.h"
 #include "ingest/exr_io.h"
 #include "ingest/jpeg_io.h"
 #include "ingest/oiio_module.h"
@@ -294,9 +300,51 @@ FileHeader headerOf(const jpeg::Header& jpeg) {
   return {jpeg.width, jpeg.height, jpeg.channels, "jpeg", "uint8", 8, &jpeg.attributes};
 }
 
-FileHeader headerOf(const oiio::Header& oiio) {
+FileHeader headerOf(const oiio::Header& oiio, const std::vector<ImageAttribute>& attributes) {
   return {oiio.width,      oiio.height,        oiio.channels,   oiio.format,
-          oiio.sampleType, oiio.bitsPerSample, &oiio.attributes};
+          oiio.sampleType, oiio.bitsPerSample, &attributes};
+}
+
+// A file's bytes mapped into memory, read only as they are looked at. Empty when the file cannot
+// be mapped.
+class MappedFile {
+ public:
+  explicit MappedFile(const fs::path& file) {
+    const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return;
+    struct stat st {};
+    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_size > 0) {
+      void* at = ::mmap(nullptr, size_t(st.st_size), PROT_READ, MAP_PRIVATE, fd, 0);
+      if (at != MAP_FAILED) bytes_ = {static_cast<const unsigned char*>(at), size_t(st.st_size)};
+    }
+    ::close(fd);
+  }
+  ~MappedFile() {
+    if (!bytes_.empty()) ::munmap(const_cast<unsigned char*>(bytes_.data()), bytes_.size());
+  }
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+  std::span<const unsigned char> bytes() const { return bytes_; }
+
+ private:
+  std::span<const unsigned char> bytes_;
+};
+
+// A file's attributes as OpenImageIO read them, with the EXIF tags its TIFF reader leaves out
+// read from the TIFF structure itself (exif.h: a TIFF file is one). OpenImageIO 2.4 drops the
+// Exif IFD's ISO (tag 0x8827), which raw converters write into their 16-bit TIFFs and which an
+// exposure needs. `tiff` is the file's bytes (empty: the file is mapped).
+std::vector<ImageAttribute> attributesOf(const oiio::Header& h, const fs::path& file,
+                                         std::span<const unsigned char> tiff = {}) {
+  std::vector<ImageAttribute> attributes = h.attributes;
+  if (h.format != "tiff") return attributes;
+  std::optional<MappedFile> mapped;
+  if (tiff.empty()) tiff = mapped.emplace(file).bytes();
+  for (ImageAttribute& a : exif::decode(tiff)) {
+    if (!FileHeader{0, 0, 0, {}, {}, 0, &attributes}.find(a.name.c_str()))
+      attributes.push_back(std::move(a));
+  }
+  return attributes;
 }
 
 // Which reader a file goes to: by its first bytes, not its name.
@@ -525,16 +573,17 @@ LoadedImage fromJpeg(jpeg::Decoded&& decoded, const ReadOptions& options) {
   return out;
 }
 
-// Everything readImage() does with a file OpenImageIO opened; `path` names it in errors.
+// Everything readImage() does with a file OpenImageIO opened; `path` names it in errors. `bytes`
+// are the file's when it was read from memory.
 LoadedImage readWithOiio(oiio::Reader& reader, const fs::path& path, const std::string& stage,
-                         const ReadOptions& options) {
+                         const ReadOptions& options, std::span<const unsigned char> bytes = {}) {
   const oiio::Header& h = reader.header();
   if (h.width <= 0 || h.height <= 0 || h.channels <= 0)
     throw Error(stage, "image has no pixels", path);
   // What the header claims, checked before a pixel buffer is allocated (core/limits.h).
   checkImageSize(h.width, h.height, h.channels, stage, path);
   LoadedImage out;
-  fillCaptureInfo(headerOf(h), out.info);
+  fillCaptureInfo(headerOf(h, attributesOf(h, path, bytes)), out.info);
   if (!options.upright) out.info.orientation = 1;
   std::string why;
   bool truncated = false;
@@ -784,7 +833,7 @@ CaptureInfo readCaptureInfo(const fs::path& path, const std::string& stage, bool
   const oiio::Header& h = reader->header();
   if (h.width <= 0 || h.height <= 0 || h.channels <= 0)
     throw Error(stage, "image has no pixels", path);
-  fillCaptureInfo(headerOf(h), info);
+  fillCaptureInfo(headerOf(h, attributesOf(h, path)), info);
   return info;
 }
 
@@ -858,7 +907,7 @@ LoadedImage readImageFromMemory(std::span<const unsigned char> bytes, const fs::
   auto reader =
       oiio::module(stage, name).openMemory(bytes.data(), bytes.size(), name.string(), why);
   if (!reader) throw Error(stage, "cannot read image: " + why, name);
-  return readWithOiio(*reader, name, stage, options);
+  return readWithOiio(*reader, name, stage, options, bytes);
 }
 
 std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {

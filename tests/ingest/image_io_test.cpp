@@ -817,5 +817,88 @@ TEST(ImageIo, AFloatTiffIsNotSrgbBecauseItsExifSaysSo) {
   EXPECT_EQ(readImage(dir / "codes.tif").info.fileColorSpace, "sRGB");
 }
 
+// A 16-bit TIFF as a raw converter writes it, built byte by byte (little-endian, uncompressed
+// 4 x 2 RGB): its Exif IFD holds ExposureTime 1/100, FNumber 4 and ISO (tag 0x8827) `iso`.
+std::vector<unsigned char> tiffWithIso(uint16_t iso) {
+  std::vector<unsigned char> b;
+  auto u16 = [&](uint32_t v) {
+    b.push_back(uint8_t(v));
+    b.push_back(uint8_t(v >> 8));
+  };
+  auto u32 = [&](uint32_t v) {
+    u16(v & 0xFFFF);
+    u16(v >> 16);
+  };
+  struct Entry {
+    uint16_t tag, type;
+    uint32_t count, value;
+  };
+  auto ifd = [&](const std::vector<Entry>& entries) {
+    u16(uint32_t(entries.size()));
+    for (const Entry& e : entries) {
+      u16(e.tag);
+      u16(e.type);
+      u32(e.count);
+      if (e.type == 3 && e.count == 1) {
+        u16(e.value);
+        u16(0);
+      } else {
+        u32(e.value);
+      }
+    }
+    u32(0);
+  };
+  const uint32_t ifd0 = 8, ifd0Entries = 12, exif = ifd0 + 2 + 12 * ifd0Entries + 4;
+  const uint32_t exifEntries = 3, data = exif + 2 + 12 * exifEntries + 4;
+  const uint32_t bits = data, exposure = bits + 6, fNumber = exposure + 8, pixels = fNumber + 8;
+  const uint32_t pixelBytes = 4 * 2 * 3 * 2;
+  b.insert(b.end(), {'I', 'I', 42, 0});
+  u32(ifd0);
+  ifd({{256, 3, 1, 4},
+       {257, 3, 1, 2},
+       {258, 3, 3, bits},
+       {259, 3, 1, 1},
+       {262, 3, 1, 2},
+       {273, 4, 1, pixels},
+       {274, 3, 1, 1},
+       {277, 3, 1, 3},
+       {278, 3, 1, 2},
+       {279, 4, 1, pixelBytes},
+       {284, 3, 1, 1},
+       {0x8769, 4, 1, exif}});
+  ifd({{0x829A, 5, 1, exposure}, {0x829D, 5, 1, fNumber}, {0x8827, 3, 1, iso}});
+  for (int i = 0; i < 3; ++i) u16(16);
+  for (uint32_t v : {1u, 100u, 4u, 1u}) u32(v);
+  for (uint32_t i = 0; i < pixelBytes / 2; ++i) u16(30000);
+  return b;
+}
+
+// OpenImageIO 2.4's TIFF reader leaves out the ISO of a TIFF's Exif IFD: the exposure of a
+// raw converter's TIFF (time x ISO / N^2) must still take it, from the file and from memory.
+TEST(ImageIo, ATiffsIsoIsRead) {
+  TempDir dir;
+  const std::vector<unsigned char> bytes = tiffWithIso(800);
+  {
+    std::ofstream out(dir / "iso800.tif", std::ios::binary);
+    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  }
+  const CaptureInfo header = readCaptureInfo(dir / "iso800.tif");
+  ASSERT_TRUE(header.exposureTime && header.fNumber);
+  EXPECT_NEAR(*header.exposureTime, 0.01, 1e-8);  // OpenImageIO reads it as a float
+  ASSERT_TRUE(header.iso);
+  EXPECT_EQ(*header.iso, 800.0);
+  EXPECT_TRUE(header.exposureAssumptions().empty()) << header.exposureAssumptions();
+  const LoadedImage file = readImage(dir / "iso800.tif");
+  ASSERT_TRUE(file.info.iso);
+  EXPECT_EQ(*file.info.iso, 800.0);
+  ASSERT_TRUE(file.info.relativeExposure());
+  EXPECT_NEAR(*file.info.relativeExposure(), 0.01 * 800.0 / 16.0, 1e-6);
+  ASSERT_EQ(file.image.width, 4);
+  EXPECT_NEAR(file.image.pixels[0], 30000.0f / 65535.0f, 1e-6f);
+  const LoadedImage memory = readImageFromMemory(bytes, "iso800.tif");
+  ASSERT_TRUE(memory.info.iso);
+  EXPECT_EQ(*memory.info.iso, 800.0);
+}
+
 }  // namespace
 }  // namespace compose::ingest
