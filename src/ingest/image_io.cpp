@@ -301,7 +301,7 @@ FileHeader headerOf(const jpeg::Header& jpeg) {
 }
 
 FileHeader headerOf(const oiio::Header& oiio, const std::vector<ImageAttribute>& attributes) {
-  return {oiio.width,      oiio.height,        oiio.channels,   oiio.format,
+  return {oiio.width,      oiio.height,        oiio.channels, oiio.format,
           oiio.sampleType, oiio.bitsPerSample, &attributes};
 }
 
