@@ -287,8 +287,7 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
   pose.width = plate.width;
   pose.height = plate.height;
   // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
-  const std::optional<Lens> fitted =
-      lensForImage(lensIn, plate.width, plate.height, orientation, 0.002);
+  const std::optional<Lens> fitted = lensForImage(lensIn, plate.width, plate.height, orientation);
   if (!fitted) {
     throw Error(kStage,
                 "the lens was calibrated for " + std::to_string(lensIn.width) + "x" +

@@ -193,11 +193,14 @@ Lens Lens::turnedFor(int exifOrientation) const {
   return l;
 }
 
-std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation,
-                                 double aspectTolerance) {
+std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation) {
   const double aspect = double(width) / height;
+  // Rounding each side of a resized image to whole pixels changes its aspect ratio by up to
+  // 0.5 / width + 0.5 / height, relative (the smaller image's: it rounds more).
   auto fits = [&](const Lens& l) {
-    return std::abs(double(l.width) / l.height / aspect - 1.0) <= aspectTolerance;
+    const double tolerance =
+        0.5 / std::min(width, l.width) + 0.5 / std::min(height, l.height) + 1e-9;
+    return std::abs(double(l.width) / l.height / aspect - 1.0) <= tolerance;
   };
   auto sized = [&](const Lens& l) {
     return l.width == width && l.height == height ? l : l.resized(width, height);

@@ -75,9 +75,10 @@ struct Lens {
 // in the sensor's frame (photos as stored, which is how compose calib lens writes it): turned by
 // the orientation and resized. A lens that fits the upright image as it is (a lens file
 // calibrated on photos held that way) is taken as it is. Empty when neither fits the aspect
-// ratio (within the relative `aspectTolerance`): a crop.
-std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation,
-                                 double aspectTolerance);
+// ratio: a crop. The aspect ratios may differ by what rounding a resized image's sides to whole
+// pixels makes of them (half a pixel on each side), no more: a crop of a few rows moves the
+// principal point, which scaling the lens cannot follow.
+std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation);
 
 // Lens file (JSON): {"model": "rectilinear"|"equidistant", "width", "height", "fx", "fy", "cx",
 // "cy", "dist": [...], "rms"}, with cx, cy in OpenCV's pixel convention. Errors throw

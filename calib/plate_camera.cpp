@@ -72,7 +72,8 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   if (options.lens) {
     // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
     const Lens& file = *options.lens;
-    const std::optional<Lens> fitted = lensForImage(file, width, height, exif.orientation, 0.01);
+    const std::optional<Lens> fitted =
+        lensForImage(file, width, height, options.lensUpright ? 1 : exif.orientation);
     if (!fitted) {
       throw Error("camera", "the calibration is for " + std::to_string(file.width) + "x" +
                                 std::to_string(file.height) + " images, the plate is " +

@@ -45,7 +45,10 @@ struct PlateCamera {
 };
 
 struct CameraOptions {
-  std::optional<Lens> lens;         // from a calibration file; overrides everything else
+  std::optional<Lens> lens;  // from a calibration file; overrides everything else
+  // The lens is in the plate's upright frame (a plate pose's, estimated on the plate as it is
+  // shown): not turned by the plate's EXIF orientation, as a lens in the sensor's frame is.
+  bool lensUpright = false;
   std::optional<double> focal35mm;  // overrides EXIF
   double height = 1.6;              // metres above the ground
   double pitchDegrees = 0.0;        // positive tilts the camera down

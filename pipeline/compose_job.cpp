@@ -140,6 +140,10 @@ void validate(const ComposeJob& job) {
   job.placement.validate();
   ShadowPlan::parse(job.shadowParams);
   if (job.room && job.environmentRadius) throw UsageError("give either --room or --env-radius");
+  if (job.camera.focal35mm && (!job.lensFile.empty() || !job.poseFile.empty())) {
+    throw UsageError(std::string(job.lensFile.empty() ? "--pose" : "--calib") +
+                     " gives the plate's lens: leave out --focal35");
+  }
   if (!job.poseFile.empty() && (job.room || job.environmentRadius) && !job.captureAt)
     throw UsageError(
         "with --pose, parallax needs --capture-at (in the board's frame and units): where the "

@@ -177,6 +177,10 @@ struct RunRequest {
   std::vector<std::string> targets = {"files"};
   std::vector<StageInput> inputs;
   std::function<void(Context&)> finish;
+  // The files the command writes (empty: the job's BASE.exr and BASE.jpg), and the files it
+  // reads besides the job's own (a lighting file, a layer): checked before any stage runs, and
+  // by --explain, so that no output replaces an input.
+  std::vector<std::filesystem::path> outputFiles, inputFiles;
 };
 
 // What would run, be reused from the cache, or be skipped, and why, without reading any pixels

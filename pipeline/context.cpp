@@ -1,5 +1,6 @@
 #include "pipeline/context.h"
 
+#include <cstdio>
 #include <numbers>
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -66,8 +67,9 @@ Hash128 Context::geometryKey() const {
   h.bytes("geometry");
   // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it; 3: a cut-out
   // object stands on what its cut-outs keep (Mesh::keptBounds); 4: the plate camera, not the
-  // plate's bytes; 5: a lens mirrored for a plate tagged 2, 4, 5 or 7
-  h.word(5);
+  // plate's bytes; 5: a lens mirrored for a plate tagged 2, 4, 5 or 7; 6: a pose's lens is not
+  // turned by the plate's orientation, and a lens file fits a plate only to a resize's rounding
+  h.word(6);
   key(artefact::kPlate);  // a job without a plate has no geometry: the usage error says so
   COMPOSE_CHECK(plateCamera.has_value());
   h.combine(*plateCamera);
@@ -110,6 +112,8 @@ const Geometry& Context::geometry() {
     const calib::PlatePose pose = calib::readPose(job.poseFile);
     if (!options.lens) {
       options.lens = pose.lens;
+      options.lens->source = "the lens of pose file " + job.poseFile.string();
+      options.lensUpright = true;
       lensFrom = job.poseFile;
     }
     options.worldFromCamera = pose.worldFromCamera;
@@ -125,6 +129,20 @@ const Geometry& Context::geometry() {
     }
   }();
   Geometry g{camera};
+  {
+    // Which lens the object is seen through: the plate's facts are untrusted, and a default or
+    // a lens taken for another framing is what a user looks for first when the object sits
+    // wrongly.
+    char text[128];
+    std::snprintf(
+        text, sizeof text,
+        "plate camera: a 35 mm equivalent focal length of %.1f mm (fx %.1f px at %dx%d): ",
+        camera.focal35mm, camera.lens.fx, camera.width, camera.height);
+    std::string said = text + camera.focalSource;
+    if (options.lens == std::nullopt && !options.focal35mm && !plate.info.focalLength35mm)
+      said += "; give --focal35 or --calib";
+    note(said);
+  }
   try {
     g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),
                                              glm::dvec3(mesh.boundsMax));

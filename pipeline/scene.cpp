@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/json_keys.h"
 #include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
@@ -35,7 +36,7 @@ void setOne(ComposeJob& job, const Stage& stage, const std::string& name, nlohma
             const fs::path& folder) {
   const std::vector<StageParameter> parameters = stage.parameters();
   const StageParameter& p = findParameter(stage, parameters, name);
-  if (p.isPath && value.is_string() && !value.get<std::string>().empty() && !folder.empty()) {
+  if (p.isFile(value) && !folder.empty()) {
     const fs::path path = value.get<std::string>();
     if (path.is_relative()) value = (folder / path).lexically_normal().string();
   }
@@ -64,7 +65,7 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
       // runs in, not to the scene: it stays out of the file, so that `compose run` means the
       // same by it.
       if (p.isPath && value == p.get(defaults)) continue;
-      if (p.isPath && value.is_string() && !value.get<std::string>().empty()) {
+      if (p.isFile(value)) {
         // Relative when the file is near the scene (below the same top folder), else absolute.
         const fs::path path = fs::absolute(value.get<std::string>()).lexically_normal();
         auto top = [](const fs::path& full) {
@@ -141,6 +142,8 @@ ComposeJob loadScene(const fs::path& file) {
   } catch (const nlohmann::json::exception& e) {
     throw Error("scene", std::string("not JSON: ") + jsonMessage(e.what()), file);
   }
+  if (const std::string key = repeatedJsonKey(text.str()); !key.empty())
+    throw Error("scene", "'" + key + "' is given twice: which one counts? Give it once", file);
   ComposeJob job;
   try {
     applyScene(scene, fs::absolute(file).parent_path(), job);

@@ -37,6 +37,12 @@ struct StageParameter {
   std::function<void(ComposeJob&, const nlohmann::json&)> set;
   // A file or folder: a scene file holds it relative to the scene file's folder.
   bool isPath = false;
+  // A path's value that names no file and is kept as it is (the ocio parameter's "builtin").
+  std::string literal{};
+  bool isFile(const nlohmann::json& value) const {
+    return isPath && value.is_string() && !value.get<std::string>().empty() &&
+           (literal.empty() || value.get<std::string>() != literal);
+  }
 };
 
 // A parameter that is a path, or a string, held in that member of the job.

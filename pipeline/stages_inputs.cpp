@@ -80,6 +80,8 @@ void prepareEnvironment(Context& ctx) {
     in.path = capturePath;
     ingest::Capture capture = ingest::readCaptureDescription(capturePath);
     ingest::resolveExposures(capture);
+    for (const std::string& w : ingest::captureWarnings(capture))
+      ctx.note("warning: " + w + " (" + capturePath.string() + ")");
     in.files = {capturePath};
     for (const ingest::View& v : capture.views) {
       for (const ingest::Shot& s : v.shots) in.files.push_back(s.file);
@@ -224,8 +226,9 @@ class MergeStage final : public Stage {
  public:
   // Bump when merging gives other numbers for the same photos.
   // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
-  // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored
-  static constexpr int kVersion = 4;
+  // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
+  // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken
+  static constexpr int kVersion = 5;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -311,8 +314,9 @@ class MergeStage final : public Stage {
 class StitchStage final : public Stage {
  public:
   // 2: the 35 mm focal length derived where EXIF rounds it; 3: float TIFFs linear, a Radiance
-  // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7
-  static constexpr int kVersion = 3;
+  // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7; 4: a wide hole filled
+  // from its rim
+  static constexpr int kVersion = 4;
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {
@@ -477,21 +481,26 @@ class ColorStage final : public Stage {
   }
   std::vector<std::string> outputs() const override { return {kPlateLinear, kEnvironment}; }
   std::vector<StageParameter> parameters() const override {
-    return {
-        pathParameter("ocio", "the OpenColorIO config file (empty: $OCIO, else the built-in one)",
-                      &ComposeJob::ocio),
-        textParameter("plate-space", "colour space of the plate (empty: from the file)",
-                      &ComposeJob::plateSpace),
-        textParameter("env-space", "colour space of the environment (empty: from the file)",
-                      &ComposeJob::environmentSpace)};
+    StageParameter ocio =
+        pathParameter("ocio",
+                      "the OpenColorIO config file (builtin: the built-in config; empty: $OCIO, "
+                      "else the built-in one)",
+                      &ComposeJob::ocio);
+    ocio.literal = "builtin";
+    return {ocio,
+            textParameter("plate-space", "colour space of the plate (empty: from the file)",
+                          &ComposeJob::plateSpace),
+            textParameter("env-space", "colour space of the environment (empty: from the file)",
+                          &ComposeJob::environmentSpace)};
   }
 
   // 2: 8- and 16-bit images that the config's rules make linear are read as sRGB-encoded;
   // 3: a config's file rule before a format's usual space, three channels by name, primaries of
   // configs without an interchange role by their spaces' names; 4: environments' channels by name
   // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
-  // whatever their EXIF ColorSpace says
-  static constexpr int kColorVersion = 4;
+  // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
+  // primaries
+  static constexpr int kColorVersion = 5;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
@@ -670,6 +679,7 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
     return "'" + space + "' (" + option + ")";
   }
   if (info.chromaticities) {
+    color::requireRgbSpace(*info.chromaticities, file);
     const std::string named = colors.spaceWithChromaticities(*info.chromaticities);
     if (!named.empty()) {
       image.colorSpace = named;
@@ -690,7 +700,7 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
                       option + " to say its space",
                   file);
     }
-    colors.convertFromChromaticities(image, *info.chromaticities, working);
+    colors.convertFromChromaticities(image, *info.chromaticities, working, file);
     return "the RGB space of the chromaticities in its header (converted by matrix)";
   }
   const color::InputSpace space = inputSpaceOf(colors, file, info);

@@ -336,7 +336,9 @@ class RenderStage final : public Stage {
         r.output.beauty.height != h || r.output.beauty.channels != 4 || r.output.aovs.width != w ||
         r.output.aovs.height != h)
       return false;
-    r.meshFile = m.value("mesh", "");
+    // The mesh of this job: the entry is keyed by the mesh's content, and may have been made
+    // from a copy of it elsewhere (the header names the file that was given).
+    r.meshFile = fs::absolute(ctx.job.object).string();
     if (const auto o = m.find("fileOrigin"); o != m.end() && o->is_array() && o->size() == 3)
       r.fileOrigin = {(*o)[0].get<double>(), (*o)[1].get<double>(), (*o)[2].get<double>()};
     ctx.artefacts.object = std::move(r);
@@ -907,6 +909,18 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     }
     if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
       displayNotes.push_back(*n);
+    // Only sRGB is said in the file (EXIF ColorSpace, PNG's sRGB chunk): another display's codes
+    // go untagged, and viewers take them for sRGB (Display P3's red shows duller).
+    std::string viewName = view;
+    std::transform(viewName.begin(), viewName.end(), viewName.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    if (!ingest::isSrgbEncoded(shown.colorSpace) && viewName != "raw") {
+      displayNotes.push_back("the display '" + display +
+                             "' is not sRGB: " + displayPath.filename().string() +
+                             " holds its codes but carries no colour profile that says so, and "
+                             "viewers will show it as sRGB (the EXR's scene-linear colour is "
+                             "tagged)");
+    }
     ingest::WriteOptions displayOptions;
     displayOptions.jpegQuality = job.jpegQuality;
     // The plate's colour edges stay where they were (4:2:0 moved them by up to 43 codes).

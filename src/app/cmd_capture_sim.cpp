@@ -165,7 +165,7 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
                                         ? colors.spaceWithChromaticities(*env.info.chromaticities)
                                         : std::string();
     if (envSpace.empty() && env.info.chromaticities && byPrimaries.empty()) {
-      colors.convertFromChromaticities(env.image, *env.info.chromaticities, cameraSpace);
+      colors.convertFromChromaticities(env.image, *env.info.chromaticities, cameraSpace, o->env);
     } else {
       env.image.colorSpace =
           !envSpace.empty() ? envSpace

@@ -20,8 +20,11 @@ namespace {
 // The stages of a run on stderr: what each did (unless quiet) and, with --timings, its time and
 // the peak memory during it.
 void printStages(const pipeline::ComposeResult& result, bool quiet, bool timings) {
-  if (!quiet) {
-    for (const auto& note : result.notes)
+  // A warning (a note that starts so) is printed even when quiet: what it says may be wrong.
+  for (const auto& note : result.notes) {
+    if (note.rfind("warning: ", 0) == 0)
+      std::fprintf(stderr, "compose: %s\n", printable(note).c_str());
+    else if (!quiet)
       std::fprintf(stderr, "compose: note: %s\n", printable(note).c_str());
   }
   double total = 0.0;
@@ -236,10 +239,11 @@ void validateJob(const pipeline::ComposeJob& j, const color::ColorConfig& colors
   });
 }
 
-color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals) {
+color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals,
+                             const std::string& namedBy) {
   // A scene's config, unless the command line names one.
   if (!job.ocio.empty() && globals.ocio.empty())
-    color::ColorConfig::useConfig(job.ocio.string(), "the scene's color.ocio");
+    color::ColorConfig::useConfig(job.ocio.string(), namedBy);
   return color::ColorConfig::fromEnvironment();
 }
 
@@ -247,15 +251,18 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
            bool printOutputs) {
   const color::ColorConfig colors = jobConfig(o.job, globals);
   validateJob(o.job, colors);
-  if (o.explain) {
-    // The checks the run makes on its outputs before any stage, so that the plan is not one that
-    // fails at once.
+  {
+    // The command's outputs, checked before any stage runs (and by --explain, so that its plan is
+    // not one that fails at once): each one writable, none an input.
     const pipeline::ComposeJob& j = o.job;
-    for (const std::filesystem::path& out :
-         {pipeline::exrPathFor(j), pipeline::displayPathFor(j)}) {
+    std::vector<std::filesystem::path> outputs = request.outputFiles;
+    if (outputs.empty()) outputs = {pipeline::exrPathFor(j), pipeline::displayPathFor(j)};
+    std::vector<std::filesystem::path> inputs = {j.plate,   j.object,   j.environment,
+                                                 j.holdout, j.lensFile, j.poseFile};
+    inputs.insert(inputs.end(), request.inputFiles.begin(), request.inputFiles.end());
+    for (const std::filesystem::path& out : outputs) {
       OutputFiles::check(out, "output");
-      for (const std::filesystem::path& in :
-           {j.plate, j.object, j.environment, j.holdout, j.lensFile, j.poseFile}) {
+      for (const std::filesystem::path& in : inputs) {
         std::error_code ec;
         if (!in.empty() && std::filesystem::exists(out, ec) &&
             std::filesystem::equivalent(out, in, ec))
@@ -265,6 +272,8 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
               out);
       }
     }
+  }
+  if (o.explain) {
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),
                   s.reason.c_str());
@@ -301,7 +310,9 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
           "compose --help)");
     }
     o->apply(app);
-    if (!globals.ocio.empty() && globals.ocio != "builtin") o->job.ocio = globals.ocio;
+    // The config named on the command line, "builtin" too: a scene saved from it pins it (else
+    // `compose run` took $OCIO's).
+    if (!globals.ocio.empty()) o->job.ocio = globals.ocio;
     if (!saveScene->empty()) {
       pipeline::validate(o->job);
       // The scene is written before any input is read: it must not replace one of them.

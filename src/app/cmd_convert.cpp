@@ -285,7 +285,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
           auto linearise = [&](Image& image) {
             if (byMatrix) {  // by matrix into the working space, then as any other space
               colors.convertFromChromaticities(image, *file.info.chromaticities,
-                                               colors.workingSpace());
+                                               colors.workingSpace(), file.files.front());
             } else {
               image.colorSpace = source;
             }

@@ -128,9 +128,7 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         throw UsageError("--exposures applies to one view, but the photos form " +
                          std::to_string(capture.views.size()) + " views");
       }
-      ingest::setExposures(capture.views[0], exposures, "--exposures");
-      if (const std::string w = ingest::exposureContradiction(capture.views[0]); !w.empty())
-        std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
+      ingest::setExposures(capture.views[0], exposures, "--exposures");  // checked below
     }
 
     // The table: one line per photo, as found.
@@ -215,6 +213,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     try {  // what merge will say of this capture, said now
       ingest::Capture check = capture;
       ingest::resolveExposures(check);
+      for (const std::string& w : ingest::captureWarnings(check))
+        notes.push_back("compose merge will warn: " + w);
     } catch (const Error& e) {
       notes.push_back(std::string("compose merge will refuse this capture: ") + e.what());
     }

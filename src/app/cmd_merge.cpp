@@ -261,9 +261,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       capture.method = "the photos given";
     }
     ingest::resolveExposures(capture);  // checks too that the photos are one camera's
-    for (const ingest::View& v : capture.views)
-      if (const std::string w = ingest::exposureContradiction(v); !w.empty())
-        std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
+    for (const std::string& w : ingest::captureWarnings(capture))
+      std::fprintf(stderr, "compose: warning: %s\n", printable(w).c_str());
     if (o->capture.empty()) {
       for (const ingest::Shot& s : capture.views[0].shots) {  // the first photo that names one
         if (s.info.camera().empty()) continue;

@@ -14,6 +14,7 @@
 #include "core/channels.h"
 #include "core/error.h"
 #include "core/output_files.h"
+#include "core/parallel.h"
 #include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/scene.h"
@@ -87,6 +88,21 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     const std::string read =
         pipeline::toWorkingSpace(image, o->in, loaded.info, o->from, "--from", colors);
     if (target != image.colorSpace) colors.convert(image, target);
+    // OpenEXR's colour is premultiplied: a PNG's or TIFF's unassociated colour is multiplied by
+    // its alpha, after the conversion (in linear light for a linear target), as the pipeline
+    // reads a plate. Written as it was, a reader took the colour of a transparent pixel for
+    // light added over the background.
+    const bool premultiplied = image.channels == 4 && loaded.info.unassociatedAlpha;
+    if (premultiplied) {
+      parallelFor(0, image.height, [&](int64_t y) {
+        for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * 4; p != end;
+             p += 4) {
+          p[0] *= p[3];
+          p[1] *= p[3];
+          p[2] *= p[3];
+        }
+      });
+    }
     ingest::WriteOptions options;
     options.depth = o->depth == "float" ? ingest::WriteOptions::Depth::Float
                                         : ingest::WriteOptions::Depth::Half;
@@ -95,8 +111,10 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     options.exrCompression = o->compression;
     const ingest::WriteReport report = ingest::writeImage(o->out, image, options);
     if (!globals.quiet) {
-      std::fprintf(stderr, "compose: read %s as %s, wrote '%s'\n", printable(o->in).c_str(),
-                   printable(read).c_str(), target.c_str());
+      std::fprintf(
+          stderr, "compose: read %s as %s, wrote '%s'%s\n", printable(o->in).c_str(),
+          printable(read).c_str(), target.c_str(),
+          premultiplied ? ", its colour premultiplied by its alpha (OpenEXR's convention)" : "");
       if (!leftOut.empty()) {
         std::string names;
         for (const std::string& n : leftOut) names += (names.empty() ? "" : ", ") + n;
@@ -186,6 +204,7 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
       request.targets.push_back(pipeline::artefact::kShadowLighting);
     const fs::path file = *out;
     request.finish = [file](pipeline::Context& ctx) { pipeline::savePrecompute(ctx, file); };
+    request.outputFiles = {file};
     const int status = runJob(*o, globals, request, false);
     if (!o->explain) std::printf("%s\n", file.c_str());
     return status;
@@ -234,6 +253,8 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
     request.finish = [file, compression](pipeline::Context& ctx) {
       pipeline::saveObjectLayer(ctx, file, *compression);
     };
+    request.outputFiles = {file};
+    request.inputFiles = {*lightingFile};
     const int status = runJob(*o, globals, request, false);
     if (!o->explain) std::printf("%s\n", file.c_str());
     return status;
@@ -259,6 +280,7 @@ Runner setupComposite(CLI::App& cmd, const Globals& globals) {
     o->apply(cmd);
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::objectLayerInput(*layer));
+    request.inputFiles = {*layer};
     return runJob(*o, globals, request);
   };
 }
@@ -295,14 +317,17 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     const fs::path cache = o->job.cache;
     const int threads = o->job.threads;
     o->job = pipeline::loadScene(*scene);
-    if (!globals.ocio.empty())
-      o->job.ocio = globals.ocio == "builtin" ? fs::path() : fs::path(globals.ocio);
+    if (!globals.ocio.empty()) o->job.ocio = globals.ocio;
     o->job.cache = o->noCache ? fs::path() : cache;
     o->job.threads = threads;
     const pipeline::ComposeJob fromScene = o->job;
     for (const std::string& s : *sets) pipeline::setParameter(o->job, s);
     // A whole job needs a plate and an object: the scene file's fault when neither it nor a --set
-    // gives one.
+    // gives one, the command line's when a --set took it away.
+    if (o->job.plate.empty() && !fromScene.plate.empty())
+      throw UsageError("--set ingest.plate= leaves the job without a plate");
+    if (o->job.object.empty() && !fromScene.object.empty())
+      throw UsageError("--set ingest.object= leaves the job without an object");
     if (o->job.plate.empty())
       throw Error(
           "scene",
@@ -338,7 +363,18 @@ Runner setupRun(CLI::App& cmd, const Globals& globals) {
     }
     // A value out of range is the scene file's fault when the scene alone has it (exit 1, naming
     // the file), the command line's when a --set brought it (exit 2).
-    const color::ColorConfig colors = jobConfig(o->job, globals);
+    const bool ocioSet = o->job.ocio != fromScene.ocio;
+    const color::ColorConfig colors = [&] {
+      try {
+        return jobConfig(o->job, globals, ocioSet ? "--set color.ocio" : "the scene's color.ocio");
+      } catch (const Error& e) {
+        if (!ocioSet) throw;
+        // The config a --set names: the command line's fault.
+        throw UsageError(
+            std::string(e.what()) + (e.file().empty() ? "" : " (" + e.file().string() + ")"),
+            e.stage());
+      }
+    }();
     try {
       validateJob(o->job, colors);
     } catch (const UsageError& e) {

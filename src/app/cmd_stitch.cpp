@@ -341,7 +341,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
         }
       }
       if (space.empty()) {
-        colors.convertFromChromaticities(rgb, *primaries, colors.workingSpace());
+        colors.convertFromChromaticities(rgb, *primaries, colors.workingSpace(),
+                                         args[size_t(i)].file);
       } else {
         rgb.colorSpace = space;
       }

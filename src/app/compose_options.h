@@ -41,7 +41,8 @@ struct ComposeOptions {
 void validateJob(const pipeline::ComposeJob& job, const color::ColorConfig& colors);
 // The colour config of a job: --ocio, else the job's own (a scene's color.ocio), else $OCIO, else
 // the built-in one.
-color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals);
+color::ColorConfig jobConfig(const pipeline::ComposeJob& job, const Globals& globals,
+                             const std::string& namedBy = "the scene's color.ocio");
 
 int runJob(const ComposeOptions& o, const Globals& globals,
            const pipeline::RunRequest& request = {}, bool printOutputs = true);

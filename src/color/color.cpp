@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <mutex>
@@ -138,14 +139,23 @@ std::optional<SeparableTable> separableTable(const OCIO::ConstConfigRcPtr& confi
 
 // --- linear RGB spaces from chromaticities ------------------------------------------------------
 
+// XYZ of a colour of chromaticity x, y and luminance 1 (y > 0).
 glm::dvec3 xyzOfChromaticity(double x, double y) {
   return {x / y, 1.0, (1.0 - x - y) / y};
 }
 
-// RGB → XYZ of a linear RGB space (the normalised primary matrix, SMPTE RP 177).
+// The primaries' chromaticity coordinates x, y, z = 1 - x - y, as columns: each primary's XYZ up
+// to its scale, defined for a primary with y = 0 (CIE XYZ's X and Z) as for any other.
+glm::dmat3 primaryColumns(const Chromaticities& c) {
+  return glm::dmat3(glm::dvec3(c[0], c[1], 1.0 - c[0] - c[1]),
+                    glm::dvec3(c[2], c[3], 1.0 - c[2] - c[3]),
+                    glm::dvec3(c[4], c[5], 1.0 - c[4] - c[5]));
+}
+
+// RGB → XYZ of a linear RGB space (the normalised primary matrix, SMPTE RP 177): each primary
+// scaled so that the three add up to the white at luminance 1.
 glm::dmat3 xyzFromRgb(const Chromaticities& c) {
-  const glm::dmat3 primaries(xyzOfChromaticity(c[0], c[1]), xyzOfChromaticity(c[2], c[3]),
-                             xyzOfChromaticity(c[4], c[5]));  // columns
+  const glm::dmat3 primaries = primaryColumns(c);
   const glm::dvec3 scale = glm::inverse(primaries) * xyzOfChromaticity(c[6], c[7]);
   return glm::dmat3(primaries[0] * scale[0], primaries[1] * scale[1], primaries[2] * scale[2]);
 }
@@ -201,6 +211,30 @@ const std::vector<std::pair<const Chromaticities*, std::vector<const char*>>> kN
     {&kRec2020, {"Linear Rec.2020", "lin_rec2020", "Utility - Linear - Rec.2020"}}};
 
 }  // namespace
+
+std::string chromaticitiesProblem(const Chromaticities& c) {
+  if (!std::all_of(c.begin(), c.end(), [](double v) { return std::isfinite(v); }))
+    return "a value is not a finite number";
+  if (!(c[7] > 0.0)) return "the white's y is not positive";
+  // Primaries on one line span no space; a white on the line through two primaries needs none
+  // of the third, and the matrix is singular just the same.
+  if (!(std::abs(glm::determinant(primaryColumns(c))) > 1e-6))
+    return "the three primaries lie on one line";
+  if (!(std::abs(glm::determinant(xyzFromRgb(c))) > 1e-9))
+    return "the white lies on the line through two primaries";
+  return {};
+}
+
+void requireRgbSpace(const Chromaticities& c, const std::filesystem::path& file) {
+  const std::string why = chromaticitiesProblem(c);
+  if (why.empty()) return;
+  char given[160];
+  std::snprintf(given, sizeof given, "red %.4g,%.4g green %.4g,%.4g blue %.4g,%.4g white %.4g,%.4g",
+                c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]);
+  throw Error("color",
+              "the chromaticities (" + std::string(given) + ") describe no RGB space: " + why,
+              file);
+}
 
 ColorConfig ColorConfig::builtin() {
   ColorConfig c;
@@ -696,8 +730,10 @@ std::string ColorConfig::spaceWithChromaticities(const Chromaticities& c) const 
 }
 
 void ColorConfig::convertFromChromaticities(Image& image, const Chromaticities& from,
-                                            const std::string& to) const {
+                                            const std::string& to,
+                                            const std::filesystem::path& file) const {
   COMPOSE_CHECK(image.channels >= 3);
+  requireRgbSpace(from, file);
   const std::string dst = resolve(to, "a conversion target");
   const std::optional<Chromaticities> target = chromaticities(dst);
   if (!target) {

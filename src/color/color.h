@@ -35,6 +35,14 @@ inline constexpr Chromaticities kAcesAp1Chromaticities = {0.713, 0.293, 0.165,  
 inline constexpr Chromaticities kAcesAp0Chromaticities = {0.7347, 0.2653,  0.0,     1.0,
                                                           0.0001, -0.0770, 0.32168, 0.33767};
 
+// Why chromaticities describe no RGB space, or empty when they do: a value that is not finite,
+// a white with y <= 0, or primaries on one line (as three equal primaries, or all zeros, are).
+// CIE XYZ's own, red (1, 0), green (0, 1), blue (0, 0), do describe one.
+std::string chromaticitiesProblem(const Chromaticities& c);
+// Throws compose::Error (stage "color", naming `file`) saying the chromaticities and the problem
+// when there is one.
+void requireRgbSpace(const Chromaticities& c, const std::filesystem::path& file);
+
 // How an input file's colour space was chosen (ColorConfig::inputSpace).
 struct InputSpace {
   std::string space;     // canonical name in the config
@@ -118,9 +126,10 @@ class ColorConfig {
   // Converts the first three channels of `image` from the linear RGB space with chromaticities
   // `from` to the config space `to` (whose chromaticities must be known), with Bradford
   // adaptation between the white points; tags the image `to`. Throws compose::Error (stage
-  // "color") when `to` has no known chromaticities.
-  void convertFromChromaticities(Image& image, const Chromaticities& from,
-                                 const std::string& to) const;
+  // "color", naming `file`) when `from` describe no RGB space (chromaticitiesProblem()) or `to`
+  // has no known chromaticities.
+  void convertFromChromaticities(Image& image, const Chromaticities& from, const std::string& to,
+                                 const std::filesystem::path& file = {}) const;
 
   std::string defaultDisplay() const;
   std::string defaultView(const std::string& display) const;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 
 namespace compose {
 
@@ -168,6 +169,55 @@ Image pictureRgb(Image&& in) {
        picture.kind == PictureChannels::Kind::ByPosition))
     return std::move(in);
   return pictureRgb(static_cast<const Image&>(in));
+}
+
+std::array<float, 3> luminanceWeights(const std::array<double, 8>& c) {
+  // The primaries' XYZ up to their scales, as columns (x, y, 1 - x - y); the scales make the
+  // three add up to the white at Y = 1 (SMPTE RP 177). Solved by Cramer's rule.
+  const double m[3][3] = {{c[0], c[2], c[4]},
+                          {c[1], c[3], c[5]},
+                          {1.0 - c[0] - c[1], 1.0 - c[2] - c[3], 1.0 - c[4] - c[5]}};
+  const std::array<float, 3> rec709 = {0.2126f, 0.7152f, 0.0722f};
+  if (!(c[7] > 0.0)) return rec709;
+  const double w[3] = {c[6] / c[7], 1.0, (1.0 - c[6] - c[7]) / c[7]};
+  auto det = [](const double a[3][3]) {
+    return a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
+           a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+           a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+  };
+  const double d = det(m);
+  if (!(std::abs(d) > 1e-9)) return rec709;
+  double y[3];
+  for (int k = 0; k < 3; ++k) {
+    double a[3][3];
+    for (int r = 0; r < 3; ++r)
+      for (int col = 0; col < 3; ++col) a[r][col] = col == k ? w[r] : m[r][col];
+    y[k] = m[1][k] * det(a) / d;  // the primary's scale times its y
+  }
+  const double sum = y[0] + y[1] + y[2];
+  if (!(std::abs(sum) > 1e-9) || !std::isfinite(sum)) return rec709;
+  return {float(y[0] / sum), float(y[1] / sum), float(y[2] / sum)};
+}
+
+void decodeLuminanceChroma(Image& image, const std::array<float, 3>& weights) {
+  const PictureChannels picture = pictureChannels(image);
+  if (picture.kind != PictureChannels::Kind::Chroma) return;
+  const int y = picture.colour[0], ry = picture.colour[1], by = picture.colour[2];
+  const size_t n = size_t(image.channels);
+  const auto [wr, wg, wb] = weights;
+  for (size_t i = 0; i < image.pixelCount(); ++i) {
+    float* p = image.pixels.data() + i * n;
+    const float r = p[y] * (1.0f + p[ry]), b = p[y] * (1.0f + p[by]);
+    const float g = (p[y] - wr * r - wb * b) / wg;
+    p[ry] = r;
+    p[y] = g;
+    p[by] = b;
+  }
+  if (image.channelNames.size() == n) {
+    image.channelNames[size_t(ry)] = picture.layer + "R";
+    image.channelNames[size_t(y)] = picture.layer + "G";
+    image.channelNames[size_t(by)] = picture.layer + "B";
+  }
 }
 
 }  // namespace compose

@@ -4,6 +4,7 @@
 // from the layer that is its picture, not from whichever layer sorts first.
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -37,5 +38,15 @@ PictureChannels pictureChannels(const Image& image);
 // other layers) are dropped. The second form moves an image that is RGB already.
 Image pictureRgb(const Image& in);
 Image pictureRgb(Image&& in);
+
+// OpenEXR's luminance weights of a linear RGB space: the Y row of its RGB → XYZ matrix, summing
+// to 1 (Imf::computeYw), from its chromaticities (red x, y, green x, y, blue x, y, white x, y).
+// Rec. 709's when the chromaticities describe no space.
+std::array<float, 3> luminanceWeights(const std::array<double, 8>& chromaticities);
+
+// An image whose picture is luminance-chroma (Y, RY, BY) made RGB in place, as OpenEXR's RgbaYca
+// decodes it with the weights of the file's primaries: the three channels hold R, G, B and are
+// named so (within their layer); alpha and other channels stay. Anything else is left alone.
+void decodeLuminanceChroma(Image& image, const std::array<float, 3>& weights);
 
 }  // namespace compose

@@ -1,5 +1,11 @@
 #include "cubemap/coverage.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
 #include "core/error.h"
 #include "core/parallel.h"
 #include "lighting/filtered_cube.h"
@@ -53,6 +59,51 @@ CoverageReport fillUncovered(lighting::CubeMap& cube, const std::vector<float>& 
   const lighting::FilteredCube pa(weighted), pb(weights);
   constexpr float kEnough = 0.25f;  // weight that makes a level's average trustworthy
   constexpr float kStep = 0.25f;    // fractional levels, for a fill without visible level steps
+
+  // The rim fill at the level of at most 32 texels per face edge (coverage.h): its well-seen
+  // texels as they are, every other one from the well-seen ones by inverse-cube distance.
+  int coarse = 0;
+  while (coarse + 1 < pa.levels() && pa.size(coarse) > 32) ++coarse;
+  const int m = pa.size(coarse);
+  lighting::CubeMap rim(m);
+  struct Source {
+    glm::vec3 d, radiance;
+    float weight;
+  };
+  std::vector<Source> sources;
+  std::vector<std::array<int, 3>> holes;
+  for (int f = 0; f < kCubeFaces; ++f) {
+    for (int y = 0; y < m; ++y) {
+      for (int x = 0; x < m; ++x) {
+        const float b = pb.texel(coarse, f, x, y).x;
+        const glm::vec3 mean = b > 0.0f ? pa.texel(coarse, f, x, y) / b : glm::vec3(0.0f);
+        float* out = rim.texel(f, x, y);
+        for (int c = 0; c < 3; ++c) out[c] = mean[c];
+        if (b >= 0.5f) sources.push_back({rim.direction(f, x, y), mean, b});
+        if (b < kEnough) holes.push_back({f, x, y});
+      }
+    }
+  }
+  const bool rimFill = !sources.empty() && !holes.empty();
+  if (rimFill) {
+    parallelFor(0, int64_t(holes.size()), [&](int64_t i) {
+      const auto [f, x, y] = holes[size_t(i)];
+      const glm::vec3 d = rim.direction(f, x, y);
+      glm::dvec3 sum(0.0);
+      double total = 0.0;
+      for (const Source& s : sources) {
+        // The chord's cube (the chord is the angle's measure for near texels, and cheaper).
+        const float chord2 = std::max(2.0f - 2.0f * glm::dot(d, s.d), 1e-6f);
+        const double w = double(s.weight) / (double(chord2) * std::sqrt(double(chord2)));
+        sum += w * glm::dvec3(s.radiance);
+        total += w;
+      }
+      float* out = rim.texel(f, x, y);
+      for (int c = 0; c < 3; ++c) out[c] = float(sum[c] / total);
+    });
+  }
+  const lighting::FilteredCube rimCube =
+      rimFill ? lighting::FilteredCube(rim) : lighting::FilteredCube();
   parallelFor(0, int64_t(kCubeFaces) * n, [&](int64_t task) {
     const int f = int(task / n), y = int(task % n);
     for (int x = 0; x < n; ++x) {
@@ -63,6 +114,10 @@ CoverageReport fillUncovered(lighting::CubeMap& cube, const std::vector<float>& 
       for (float level = 0.0f;; level += kStep) {
         const float last = float(pa.levels() - 1);
         const float l = std::min(level, last);
+        if (rimFill && l >= float(coarse)) {  // wider than a texel of the rim's level
+          fill = rimCube.lookupLevel(d, 0.0f);
+          break;
+        }
         const float b = pb.lookupLevel(d, l).x;
         if (b >= kEnough || l >= last) {
           if (b > 0.0f) fill = pa.lookupLevel(d, l) / b;

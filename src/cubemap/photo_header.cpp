@@ -37,7 +37,7 @@ calib::Lens photoLens(const std::filesystem::path& file, const PhotoHeader& h,
   if (lensFile) {
     // Turned by the photo's EXIF orientation (the lens is in the sensor's frame) and scaled.
     if (const std::optional<calib::Lens> fitted =
-            calib::lensForImage(*lensFile, h.width, h.height, h.orientation, 1e-3))
+            calib::lensForImage(*lensFile, h.width, h.height, h.orientation))
       return *fitted;
     throw Error("stitch",
                 "the lens file is for " + std::to_string(lensFile->width) + "x" +

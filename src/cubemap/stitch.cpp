@@ -933,6 +933,20 @@ StitchResult stitch(const std::vector<StitchPhoto>& photos, const std::function<
                              "its overlaps instead" +
                              fmt(" (log-luminance residual %.3f from %.3f), turned by %.2f degrees",
                                  std::sqrt(pm.cost), std::sqrt(pm.initialCost), turned / kDegrees));
+      // A photo put where it belongs agrees with its neighbours to a tenth or so in log-luminance
+      // (noise, JPEG, gains); one whose name or suffix puts it elsewhere agrees no better after the
+      // search, which then ends at its limit (two photos of a ring swapped: residual 1.05 and a
+      // 9.8 degree turn against 0.08 for the others).
+      const bool atLimit = turned >= 0.95 * options.maxCorrectionDegrees * kDegrees;
+      if (std::sqrt(pm.cost) > 0.5 || atLimit) {
+        result.warnings.push_back(
+            "photo " + photos[size_t(i)].name +
+            fmt(" agrees poorly with its neighbours (log-luminance residual %.2f",
+                std::sqrt(pm.cost)) +
+            (atLimit ? ", after turning it as far as the search goes" : "") +
+            "): is its direction right? (its name _px _nx ..., @YAW,PITCH[,ROLL], or its place in "
+            "the order +X -X +Y -Y +Z -Z)");
+      }
     }
     // A group was put where its own photos' rough orientations say it is; the photos aligned to
     // it on radiance hold rough orientations too, and as a whole their errors are as likely as

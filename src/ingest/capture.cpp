@@ -5,12 +5,16 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <initializer_list>
+#include <iterator>
 #include <map>
 #include <regex>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/json_keys.h"
 #include "core/json_number.h"
 #include "core/limits.h"
 #include "core/output_files.h"
@@ -274,7 +278,7 @@ Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern) {
   std::string re;
   for (size_t i = 0; i < pattern.size();) {
     if (pattern.compare(i, 6, "{view}") == 0) {
-      re += "(.+?)";
+      re += "(.+)";  // greedy: a view's name may hold the separator (garden_px of garden_px_1)
       i += 6;
     } else if (pattern.compare(i, 9, "{bracket}") == 0) {
       re += ".+?";
@@ -323,14 +327,17 @@ Capture readCaptureDescription(const fs::path& file) try {
   requireInputFile(file, kStage, "capture description");
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the capture description", file);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   nlohmann::json j;
   try {
-    in >> j;
+    j = nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
     throw Error(kStage,
                 std::string("not a valid JSON capture description: ") + jsonMessage(e.what()),
                 file);
   }
+  if (const std::string key = repeatedJsonKey(text); !key.empty())
+    throw Error(kStage, "'" + key + "' is given twice: which one counts? Give it once", file);
   auto fail = [&](const std::string& what) -> void { throw Error(kStage, what, file); };
   if (!j.is_object()) fail("a capture description must hold a JSON object");
   if (j.value("format", std::string()) != "compose-capture")
@@ -339,6 +346,21 @@ Capture readCaptureDescription(const fs::path& file) try {
     fail("unsupported capture description version (this compose reads version 1)");
   if (!j.contains("views") || !j["views"].is_array() || j["views"].empty())
     fail("a capture description needs a non-empty \"views\" array");
+  // A key this reader does not know is a misspelling (exposuretime) or a field of another tool:
+  // left out without a word, its value silently did not count.
+  auto onlyKnown = [&](const nlohmann::json& o, std::initializer_list<const char*> known,
+                       const std::string& where) {
+    for (const auto& item : o.items()) {
+      if (std::none_of(known.begin(), known.end(),
+                       [&](const char* k) { return item.key() == k; })) {
+        std::string list;
+        for (const char* k : known) list += std::string(list.empty() ? "" : ", ") + k;
+        fail(where + "\"" + item.key() + "\" is not a field of a capture description (" + list +
+             ")");
+      }
+    }
+  };
+  onlyKnown(j, {"format", "version", "camera", "lens", "groundTruth", "views"}, "");
   const fs::path folder = file.parent_path();
   auto resolvePath = [&](const std::string& p) {
     return fs::path(p).is_absolute() ? fs::path(p) : folder / p;
@@ -348,6 +370,7 @@ Capture readCaptureDescription(const fs::path& file) try {
   capture.method = "capture description " + file.string();
   if (j.contains("camera")) {
     if (!j["camera"].is_object()) fail("\"camera\" must be an object");
+    onlyKnown(j["camera"], {"make", "model"}, "camera: ");
     capture.cameraMake = j["camera"].value("make", std::string());
     capture.cameraModel = j["camera"].value("model", std::string());
   }
@@ -371,6 +394,7 @@ Capture readCaptureDescription(const fs::path& file) try {
   for (const auto& jv : j["views"]) {
     const std::string where = "view " + std::to_string(capture.views.size() + 1);
     if (!jv.is_object()) fail(where + " must be an object");
+    onlyKnown(jv, {"name", "worldFromCamera", "colorSpace", "exposures"}, where + ": ");
     View v;
     v.name = jv.value("name", "view" + std::to_string(capture.views.size() + 1));
     if (v.name.empty() || v.name.find_first_of("/\\") != std::string::npos)
@@ -402,6 +426,8 @@ Capture readCaptureDescription(const fs::path& file) try {
     for (const auto& je : jv["exposures"]) {
       if (!je.is_object() || !je.contains("file") || !je["file"].is_string())
         fail("view '" + v.name + "': every exposure needs a \"file\"");
+      onlyKnown(je, {"file", "exposure", "exposureTime", "fNumber", "iso", "colorSpace"},
+                "view '" + v.name + "', " + je["file"].get<std::string>() + ": ");
       Shot s;
       s.file = resolvePath(je["file"].get<std::string>());
       s.colorSpace = je.value("colorSpace", viewSpace);
@@ -414,14 +440,18 @@ Capture readCaptureDescription(const fs::path& file) try {
       if (rel) {
         s.exposure = rel;
         s.exposureSource = "capture description";
-      } else if (t) {
-        // Fields given here override EXIF; missing ones come from EXIF.
+      } else if (t || n || iso) {
+        // Fields given here override EXIF; missing ones come from EXIF (without an exposure
+        // time in either, resolveExposures() says so).
         CaptureInfo merged = s.info;
-        merged.exposureTime = t;
+        if (t) merged.exposureTime = t;
         if (n) merged.fNumber = n;
         if (iso) merged.iso = iso;
         s.exposure = merged.relativeExposure();
-        s.exposureSource = "capture description";
+        s.exposureSource = t ? "capture description" : "capture description and EXIF";
+        // What EXIF lacks, the description gives: the exposure rests on it, not on a default.
+        if (!s.info.fNumber) s.info.fNumber = n;
+        if (!s.info.iso) s.info.iso = iso;
       }
       v.shots.push_back(std::move(s));
     }
@@ -557,6 +587,84 @@ std::string exposureContradiction(const View& view) {
   return text;
 }
 
+std::vector<std::string> captureWarnings(const Capture& capture) {
+  std::vector<std::string> out;
+  for (const View& v : capture.views)
+    if (std::string w = exposureContradiction(v); !w.empty())
+      out.push_back("view '" + v.name + "': " + w);
+  // One exposure several times in a view: two exposures within a sixth of a stop are one.
+  for (const View& v : capture.views) {
+    size_t repeated = 0;
+    for (size_t i = 1; i < v.shots.size(); ++i)
+      if (v.shots[i].exposure && v.shots[i - 1].exposure &&
+          std::abs(std::log2(*v.shots[i].exposure / *v.shots[i - 1].exposure)) < 1.0 / 6.0)
+        ++repeated;
+    if (repeated > 0) {
+      out.push_back("view '" + v.name + "' holds " + std::to_string(v.shots.size()) + " photos, " +
+                    std::to_string(repeated) +
+                    " of them at an exposure another of its photos has: the photos of several "
+                    "directions grouped as one view? A merge averages them (check the grouping: "
+                    "--pattern, --max-gap, --brackets, or the capture description)");
+    }
+  }
+  if (capture.views.size() < 2) return out;
+  // The views' scale: their exposures must rest on the same facts. An exposure from EXIF that
+  // assumed a missing f-number or ISO is off by N² or the ISO ratio against views whose EXIF
+  // says them; given exposures off their EXIF by a factor are off the views taken from EXIF.
+  std::map<std::string, std::vector<std::string>> byAssumption;  // assumption → views
+  std::vector<std::pair<std::string, double>> offsets;           // view → stops given - EXIF
+  for (const View& v : capture.views) {
+    std::set<std::string> assumed;
+    std::vector<double> stops;
+    for (const Shot& s : v.shots) {
+      if (s.exposureSource == "EXIF") assumed.insert(s.info.exposureAssumptions());
+      const std::optional<double> own = s.info.relativeExposure();
+      if (s.exposure && own && s.info.exposureAssumptions().empty())
+        stops.push_back(std::log2(*s.exposure / *own));
+    }
+    for (const std::string& a : assumed) byAssumption[a].push_back(v.name);
+    if (!stops.empty()) {
+      std::nth_element(stops.begin(), stops.begin() + ptrdiff_t(stops.size() / 2), stops.end());
+      offsets.emplace_back(v.name, stops[stops.size() / 2]);
+    }
+  }
+  auto listed = [](const std::vector<std::string>& names) {
+    std::string s;
+    for (size_t i = 0; i < names.size() && i < 6; ++i) s += (i ? ", " : "") + names[i];
+    return names.size() > 6 ? s + ", ..." : s;
+  };
+  if (byAssumption.size() > 1) {
+    for (const auto& [assumption, views] : byAssumption) {
+      if (assumption.empty()) continue;
+      out.push_back("the exposures of view" + std::string(views.size() > 1 ? "s " : " ") +
+                    listed(views) + " assume " + assumption +
+                    ", other views' photos say theirs: the views' radiance is on different "
+                    "scales (give the missing field in the capture description)");
+    }
+  }
+  if (offsets.size() > 1) {
+    double lo = offsets.front().second, hi = lo;
+    for (const auto& [name, stops] : offsets) lo = std::min(lo, stops), hi = std::max(hi, stops);
+    if (hi - lo > 1.0 / 3.0) {
+      std::string which;
+      for (const auto& [name, stops] : offsets) {
+        if (std::abs(stops) <= 1.0 / 6.0) continue;
+        char text[96];
+        std::snprintf(text, sizeof text, "%s%s %+.2f stops", which.empty() ? "" : ", ",
+                      name.c_str(), stops);
+        which += text;
+      }
+      out.push_back(
+          "the exposures given stand at different scales to the photos' EXIF from "
+          "view to view (" +
+          which +
+          " from EXIF): the views' radiance disagrees by as much (give every view's "
+          "exposures on one scale, or leave them to EXIF)");
+    }
+  }
+  return out;
+}
+
 void resolveExposures(Capture& capture) {
   // One photo, one shot: a file given twice would count as two exposures (or two views).
   std::vector<std::pair<fs::path, fs::path>> seen;  // canonical, as given
@@ -592,6 +700,29 @@ void resolveExposures(Capture& capture) {
                     s.file);
       }
     }
+  }
+  // One kind of photo for every view: 8-bit photos' radiance comes out in the unit of the
+  // camera's response (middle grey as sRGB decodes it), 16-bit photos' in their own linear unit;
+  // views of both kinds would disagree in brightness by the camera's processing (1.8 times in
+  // the virtual camera's JPEGs against its TIFFs), face against face. (Float views, such as
+  // merged ones, carry their unit.)
+  const View* eightBit = nullptr;
+  const View* deeper = nullptr;
+  for (const View& v : capture.views) {
+    if (v.shots.empty()) continue;
+    const std::string& type = v.shots.front().info.sampleType;
+    if (type == "uint8") eightBit = &v;
+    if (type == "uint16" || type == "uint32") deeper = &v;
+  }
+  if (eightBit && deeper && capture.views.size() > 1) {
+    throw Error(kStage,
+                "the views mix 8-bit photos (view '" + eightBit->name + "', " +
+                    eightBit->shots.front().file.filename().string() + ") and deeper ones (view '" +
+                    deeper->name + "', " + deeper->shots.front().file.filename().string() + ", " +
+                    deeper->shots.front().info.sampleType +
+                    "): their radiance comes out in different units, and the faces would not "
+                    "agree; give every view as one kind of photo",
+                deeper->shots.front().file);
   }
   // A description's camera (grouping takes the photos' own) is the one whose response is used.
   if (firstNamed && !declared.empty() && !sameCamera(firstNamed->info, described)) {

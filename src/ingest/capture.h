@@ -91,8 +91,9 @@ struct ExifGrouping {
 Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options);
 
 // `pattern` is matched against the whole file name: {view} matches the view's key (at least one
-// character), {bracket} and * any text, ? one character; everything else literally. Files that
-// do not match are an error naming the first of them.
+// character, as many as the rest of the pattern leaves: garden_px_1.jpg is view garden_px of
+// {view}_{bracket}.jpg), {bracket} (at least one character) and * any text, ? one character;
+// everything else literally. Files that do not match are an error naming the first of them.
 Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern);
 
 // Reads a JSON capture description and the headers of the files it names.
@@ -128,6 +129,14 @@ bool atOwnExifExposure(const Shot& shot);
 // between two photos differs by more than a third of a stop): a sentence saying so, naming the
 // photos. Empty otherwise. (The given list wins; a wrong one silently scales the radiance.)
 std::string exposureContradiction(const View& view);
+
+// What may make a resolved capture's views disagree, or its views not be views, each said in a
+// sentence: exposures given that contradict EXIF (exposureContradiction()); views whose EXIF
+// exposures rest on different assumptions (one view's photos without an f-number, taken as f/1,
+// beside views whose photos say theirs: off by N²); views whose given exposures stand at another
+// scale to their EXIF than other views' do; and a view holding one exposure several times (the
+// photos of several directions grouped as one view, which a merge would average).
+std::vector<std::string> captureWarnings(const Capture& capture);
 
 // A human-readable summary: one line per view with its shots and exposures in stops.
 std::vector<std::string> describeCapture(const Capture& capture);

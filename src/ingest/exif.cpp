@@ -50,6 +50,8 @@ constexpr Tag kTags[] = {
     {0x9291, Ifd::Exif, kAscii, "Exif:SubsecTimeOriginal"},
     {0x920A, Ifd::Exif, kRational, "Exif:FocalLength"},
     {0xA001, Ifd::Exif, kShort, "Exif:ColorSpace"},
+    {0xA002, Ifd::Exif, kLong, "Exif:PixelXDimension"},
+    {0xA003, Ifd::Exif, kLong, "Exif:PixelYDimension"},
     {0xA20E, Ifd::Exif, kRational, "Exif:FocalPlaneXResolution"},
     {0xA20F, Ifd::Exif, kRational, "Exif:FocalPlaneYResolution"},
     {0xA210, Ifd::Exif, kShort, "Exif:FocalPlaneResolutionUnit"},
@@ -241,6 +243,12 @@ class Writer {
         const double v = i ? double(*i) : d ? std::round(*d) : -1.0;
         if (!(v >= 0.0 && v <= 65535.0)) return std::nullopt;
         w.u16(e.value, uint16_t(v));
+        break;
+      }
+      case kLong: {
+        const double v = i ? double(*i) : d ? std::round(*d) : -1.0;
+        if (!(v >= 0.0 && v <= 4294967295.0)) return std::nullopt;
+        w.u32(e.value, uint32_t(v));
         break;
       }
       case kRational: {

@@ -20,7 +20,8 @@
 //   Exif:  ExposureTime, FNumber, Exif:PhotographicSensitivity (ISOSpeedRatings),
 //          Exif:DateTimeOriginal, Exif:SubsecTimeOriginal, Exif:FocalLength,
 //          Exif:FocalPlaneXResolution, Exif:FocalPlaneYResolution,
-//          Exif:FocalPlaneResolutionUnit, Exif:FocalLengthIn35mmFilm, Exif:ColorSpace
+//          Exif:FocalPlaneResolutionUnit, Exif:FocalLengthIn35mmFilm, Exif:ColorSpace,
+//          Exif:PixelXDimension, Exif:PixelYDimension
 #pragma once
 
 #include <cstdint>

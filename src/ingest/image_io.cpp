@@ -255,14 +255,20 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   // the 36 x 24 mm frame), or EXIF's FocalLengthIn35mmFilm, a whole number of millimetres. Both
   // given, the derived one is taken when it agrees with the tag to the tag's rounding (15 mm for
   // 14.5 mm is 2° of a 100° field of view); otherwise the tag (a resized photo keeps the sensor's
-  // focal-plane resolution, which then gives a wrong sensor size).
+  // focal-plane resolution, which then gives a wrong sensor size). The resolution counts the
+  // pixels of EXIF's PixelXDimension x PixelYDimension when the file gives them, as ExifTool
+  // reads it: a photo resized by a tool that keeps its EXIF keeps both, and its own size would
+  // give a sensor of half the size for half the pixels (twice the focal length).
   std::optional<double> derived;
   std::string derivedText;
   if (info.focalLengthMm && info.focalPlaneXResolution && info.focalPlaneYResolution &&
       unitMillimetres(info.focalPlaneResolutionUnit) > 0.0) {
     const double unit = unitMillimetres(info.focalPlaneResolutionUnit);
-    const double w = h.width / *info.focalPlaneXResolution * unit;
-    const double hgt = h.height / *info.focalPlaneYResolution * unit;
+    const std::optional<double> pixelsX = h.positive("Exif:PixelXDimension");
+    const std::optional<double> pixelsY = h.positive("Exif:PixelYDimension");
+    const bool counted = pixelsX && pixelsY;
+    const double w = (counted ? *pixelsX : h.width) / *info.focalPlaneXResolution * unit;
+    const double hgt = (counted ? *pixelsY : h.height) / *info.focalPlaneYResolution * unit;
     const double diagonal = std::sqrt(w * w + hgt * hgt);
     if (diagonal > 0.5 && diagonal < 500.0) {
       derived = *info.focalLengthMm * 43.266615305567875 / diagonal;
@@ -557,6 +563,12 @@ LoadedImage readExr(const fs::path& path, const std::string& stage, bool picture
     detail::applyOrientation(out.image.pixels, out.image.width, out.image.height,
                              out.image.channels, out.info.orientation);
   }
+  // Luminance-chroma made RGB with the weights of the file's own primaries (OpenEXR's): Rec.
+  // 709's for ACES primaries made green 38 % too bright.
+  decodeLuminanceChroma(
+      out.image, out.info.chromaticities
+                     ? luminanceWeights(*out.info.chromaticities)
+                     : luminanceWeights({0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290}));
   out.image.colorSpace = out.info.fileColorSpace;
   return out;
 }
@@ -847,15 +859,26 @@ void floatsFromCodes(LoadedImage& loaded) {
   loaded.codes = {};
 }
 
+bool isSrgbEncoded(const std::string& space) {
+  std::string s = space;
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  const size_t slash = s.find('/');
+  if (slash == std::string::npos) return s == "srgb";
+  return s.rfind("srgb", 0) == 0 && s.substr(slash + 1) != "raw";
+}
+
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
   checkInputFile(path, stage);
   protectInput(path);
+  bool cmyk = false;
   switch (kindOf(path, stage)) {
     case Kind::Exr:
       return readExr(path, stage, options.picturePart);
     case Kind::Jpeg: {
       jpeg::Decoded decoded = jpeg::readFile(path, false, stage);
       if (decoded.header.native) return fromJpeg(std::move(decoded), options);
+      cmyk = true;
       break;  // CMYK: OpenImageIO converts it
     }
     case Kind::Other:
@@ -868,6 +891,12 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   if (!reader) throw Error(stage, "cannot read image: " + why, path);
   LoadedImage out = readWithOiio(*reader, path, stage, options);
   if (radiance) applyRadianceHeader(*radiance, path, out);
+  if (cmyk && out.info.iccProfile.empty()) {
+    out.notes.push_back(path.filename().string() +
+                        ": a CMYK JPEG without a colour profile: its inks are made RGB as "
+                        "OpenImageIO does, (1 - C)(1 - K), not as a press prints them; an RGB "
+                        "file, or one with its CMYK profile, is read as it looks");
+  }
   return out;
 }
 
@@ -969,18 +998,6 @@ void convertRows(const Image& image, int y0, int rows, oiio::Sample sample, void
         break;
     }
   });
-}
-
-// Whether an image tagged `space` holds sRGB codes: "sRGB", or a display transform's output
-// ("<display>/<view>", ColorConfig::toDisplay) whose display is an sRGB one and whose view is not
-// Raw.
-bool isSrgbEncoded(const std::string& space) {
-  std::string s = space;
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return char(std::tolower(c)); });
-  const size_t slash = s.find('/');
-  if (slash == std::string::npos) return s == "srgb";
-  return s.rfind("srgb", 0) == 0 && s.substr(slash + 1) != "raw";
 }
 
 // A JPEG holds one or three channels, as OpenImageIO writes them: the first three of three or

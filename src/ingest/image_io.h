@@ -197,6 +197,12 @@ inline constexpr float kMaxPhotoValue = 1e32f;
 // Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
 // stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).
 // Otherwise as readImage(); `bytes` need only live for the call.
+// Whether an image tagged `space` holds sRGB codes: "sRGB", or a display transform's output
+// ("<display>/<view>", ColorConfig::toDisplay) whose display is an sRGB one and whose view is not
+// Raw. Such images are tagged sRGB in the JPEGs and PNGs written (EXIF ColorSpace 1, PNG's sRGB
+// chunk); no others are tagged.
+bool isSrgbEncoded(const std::string& space);
+
 LoadedImage readImageFromMemory(std::span<const unsigned char> bytes,
                                 const std::filesystem::path& name,
                                 const std::string& stage = "ingest",

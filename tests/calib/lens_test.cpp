@@ -123,17 +123,26 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
   EXPECT_EQ(lens.turnedFor(9).cx, lens.cx);
   // A portrait tagged 5 or 7 (transposed) fits a landscape lens, as 6 and 8 do (it was refused:
   // "another aspect ratio").
-  EXPECT_TRUE(lensForImage(lens, 480, 640, 5, 0.01));
-  EXPECT_TRUE(lensForImage(lens, 480, 640, 7, 0.01));
+  EXPECT_TRUE(lensForImage(lens, 480, 640, 5));
+  EXPECT_TRUE(lensForImage(lens, 480, 640, 7));
   // lensForImage: turned and scaled for a portrait of half the size; a lens already in the
   // upright frame is taken as it is; another aspect is none.
-  const std::optional<Lens> half = lensForImage(lens, 240, 320, 6, 0.01);
+  const std::optional<Lens> half = lensForImage(lens, 240, 320, 6);
   ASSERT_TRUE(half);
   EXPECT_NEAR(half->cx, lens.turnedFor(6).cx / 2.0, 1e-9);
-  const std::optional<Lens> asIs = lensForImage(lens.turnedFor(6), 480, 640, 6, 0.01);
+  const std::optional<Lens> asIs = lensForImage(lens.turnedFor(6), 480, 640, 6);
   ASSERT_TRUE(asIs);
   EXPECT_EQ(asIs->cx, lens.turnedFor(6).cx);
-  EXPECT_FALSE(lensForImage(lens, 500, 500, 1, 0.01));
+  EXPECT_FALSE(lensForImage(lens, 500, 500, 1));
+  // A resized plate's sides are rounded to whole pixels: 640x480 at 101 px wide is 101x76, a
+  // 0.33 % change of aspect; a crop of four rows of 480, 0.84 %, moves the principal point and is
+  // refused (it was scaled, 1.5 px off at the board's corners on the sample plate).
+  ASSERT_EQ(lens.width, 640);
+  ASSERT_EQ(lens.height, 480);
+  EXPECT_TRUE(lensForImage(lens, 101, 76, 1));
+  EXPECT_TRUE(lensForImage(lens, 1280, 960, 1));
+  EXPECT_FALSE(lensForImage(lens, 640, 476, 1));
+  EXPECT_FALSE(lensForImage(lens, 1280, 956, 1));
 }
 
 TEST(Lens, EquidistantFisheye) {

@@ -28,6 +28,30 @@ TEST(PlateCamera, FocalLengthFromExifElseDefault) {
   EXPECT_NEAR(2.0 * std::atan(1500.0 / wide.lens.fx), std::numbers::pi / 2.0, 1e-6);
 }
 
+// A plate pose's lens was estimated on the plate as shown (upright): it is not turned again by
+// the plate's EXIF orientation. Orientations 2, 3 and 4 keep the aspect ratio, so the turned lens
+// fitted and won: the principal point went to the other side (46 px on a 640x480 plate turned
+// 180°, and the board's corners as far off).
+TEST(PlateCamera, AnUprightLensIsNotTurnedAgain) {
+  Lens lens = Lens::fromFieldOfView(640, 480, 60.0);
+  lens.cx = 296.6;
+  lens.cy = 243.5;
+  ingest::CaptureInfo exif;
+  CameraOptions options;
+  options.lens = lens;
+  options.lensUpright = true;
+  for (int orientation : {1, 2, 3, 4}) {
+    exif.orientation = orientation;
+    const PlateCamera cam = plateCamera(640, 480, exif, options);
+    EXPECT_EQ(cam.lens.cx, lens.cx) << orientation;
+    EXPECT_EQ(cam.lens.cy, lens.cy) << orientation;
+  }
+  // A lens in the sensor's frame (a lens file) is turned.
+  options.lensUpright = false;
+  exif.orientation = 3;
+  EXPECT_NEAR(plateCamera(640, 480, exif, options).lens.cx, 640.0 - lens.cx, 1e-9);
+}
+
 TEST(PlateCamera, RayAndProjectAreInverse) {
   CameraOptions opt;
   opt.pitchDegrees = 10.0;

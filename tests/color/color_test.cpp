@@ -492,6 +492,39 @@ TEST(Chromaticities, ConversionAgreesWithTheConfigsOwn) {
   for (size_t i = 0; i < 6; ++i) EXPECT_NEAR(a.pixels[i], b.pixels[i], 2e-6 * (1 + a.pixels[i]));
 }
 
+// CIE XYZ as OpenEXR tags it (red 1,0, green 0,1, blue 0,0, white E): its X and Z primaries have
+// y = 0, and the primary matrix divided by it (every pixel NaN, the JPEG black, exit 0). The
+// expected ACEScg value is the textbook one: Bradford from E to the ACES white, then the inverse
+// of AP1's normalised primary matrix (SMPTE RP 177), computed apart with numpy. Chromaticities
+// that describe no space are an error naming the file.
+TEST(Chromaticities, CieXyzConvertsAndDegenerateOnesAreErrors) {
+  const ColorConfig c = ColorConfig::builtin();
+  const Chromaticities xyz = {1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0 / 3.0, 1.0 / 3.0};
+  EXPECT_EQ(chromaticitiesProblem(xyz), "");
+  Image a(2, 1, 3, {"R", "G", "B"});
+  const float px[6] = {0.4f, 0.5f, 0.6f, 0.25f, 0.25f, 0.25f};
+  std::copy(px, px + 6, a.pixels.begin());
+  c.convertFromChromaticities(a, xyz, "ACEScg");
+  EXPECT_NEAR(a.pixels[0], 0.31794096, 1e-5);
+  EXPECT_NEAR(a.pixels[1], 0.57087344, 1e-5);
+  EXPECT_NEAR(a.pixels[2], 0.59844799, 1e-5);
+  for (size_t i = 3; i < 6; ++i) EXPECT_NEAR(a.pixels[i], 0.25f, 1e-6) << "white stays white";
+  const Chromaticities zeros{};
+  const Chromaticities equal = {0.3, 0.6, 0.3, 0.6, 0.3, 0.6, 0.3127, 0.329};
+  const Chromaticities flatWhite = {0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3127, 0.0};
+  for (const Chromaticities& bad : {zeros, equal, flatWhite}) {
+    EXPECT_NE(chromaticitiesProblem(bad), "");
+    Image b = a;
+    try {
+      c.convertFromChromaticities(b, bad, "ACEScg", "plate.exr");
+      ADD_FAILURE() << "converted by chromaticities that describe no space";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.file(), "plate.exr");
+      EXPECT_NE(std::string(e.what()).find("describe no RGB space"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // A LUT the config names, edited in place (its time stamp even put back): the config's identity,
 // which keys the caches, changes with it (OpenColorIO's own cache ID does not), and stays the same
 // while nothing changes. The LUT sits in a group and in a look, where it is found too.

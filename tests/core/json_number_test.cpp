@@ -1,5 +1,6 @@
 // Whole numbers from JSON: only whole numbers in range, never a conversion out of range.
 #include "core/json_number.h"
+#include "core/json_keys.h"
 
 #include <gtest/gtest.h>
 
@@ -69,6 +70,18 @@ TEST(JsonMessage, ReadsAsAnErrorForAUser) {
   } catch (const json::exception& e) {
     EXPECT_EQ(jsonMessage(e.what()), "type must be number, but is string");
   }
+}
+
+// nlohmann keeps the last of a repeated key: a hand-edited file's first setting was lost without
+// a word. The first repeat is named with the keys that lead to it; arrays' objects are their own.
+TEST(JsonKeys, ARepeatedKeyIsNamedWithItsPath) {
+  EXPECT_EQ(repeatedJsonKey(R"({"a": 1, "b": {"c": 2}})"), "");
+  EXPECT_EQ(repeatedJsonKey(R"({"a": 1, "a": 2})"), "a");
+  EXPECT_EQ(repeatedJsonKey(R"({"stages": {"render": {"scale": 0.2}, "render": {}}})"),
+            "stages.render");
+  EXPECT_EQ(repeatedJsonKey(R"({"s": {"r": {"scale": 0.2, "x": 1, "scale": 0.5}}})"), "s.r.scale");
+  EXPECT_EQ(repeatedJsonKey(R"({"v": [{"f": 1}, {"f": 2}], "w": [{"f": 1, "f": 2}]})"), "w[].f");
+  EXPECT_EQ(repeatedJsonKey("{not json"), "");
 }
 
 }  // namespace compose

@@ -26,6 +26,7 @@
 
 #include <Imath/half.h>
 #include <OpenImageIO/imageio.h>
+#include <nlohmann/json.hpp>
 
 #include "command_util.h"
 #include "core/numbers.h"
@@ -1142,11 +1143,21 @@ TEST_F(FromPhotos, BadInputIsANamedErrorAndLeavesNoOutput) {
        1,
        {"ingest: not a valid JSON capture description", "broken.json"}},
       {"a view that says nowhere where it looks",
-       edited("nowhere.json", "\"name\": \"px\",\n      \"worldFromCamera\"",
-              "\"name\": \"garden\",\n      \"rotation\""),
+       [&] {
+         nlohmann::json j = nlohmann::json::parse(description);
+         j["views"][0]["name"] = "garden";
+         j["views"][0].erase("worldFromCamera");
+         compose::testing::writeText(dir_ / "shots" / "nowhere.json", j.dump(2));
+         return dir_ / "shots" / "nowhere.json";
+       }(),
        "",
        1,
        {"stitch: cannot tell where view 'garden'"}},
+      {"a field the description does not have (a misspelling)",
+       edited("misspelt.json", "\"worldFromCamera\"", "\"worldfromcamera\""),
+       "",
+       1,
+       {"ingest: view 1: \"worldfromcamera\" is not a field of a capture description"}},
       {"an unknown colour space, refused before anything is read",
        dir_ / "shots" / "capture.json",
        " --env-space no-such-space",

@@ -12,6 +12,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "command_util.h"
+#include "core/channels.h"
 #include "ingest/capture.h"
 #include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
@@ -292,6 +293,45 @@ TEST(ColorCommand, SaysTheSpaceGivenWithFrom) {
     EXPECT_EQ(bad.status, 2) << args << ": " << bad.err;
     EXPECT_EQ(bad.err.find("file not found"), std::string::npos) << bad.err;
     EXPECT_FALSE(fs::exists(dir / "o.exr"));
+  }
+}
+
+// A PNG's colour is unassociated with its alpha, OpenEXR's premultiplied: `color` multiplies,
+// in linear light, as the pipeline reads a plate (it wrote the PNG's colour as it was, and a
+// reader took a transparent pixel's colour for light added over the background).
+TEST(ColorCommand, AStraightAlphaIsPremultipliedInTheExr) {
+  TempDir dir;
+  Image img(4, 2, 4, {"R", "G", "B", "A"});
+  for (size_t i = 0; i < img.pixelCount(); ++i) {
+    const float rgba[4] = {0.8f, 0.2f, 0.4f, i % 2 ? 128.0f / 255.0f : 0.0f};
+    std::copy_n(rgba, 4, &img.pixels[4 * i]);
+  }
+  ingest::WriteOptions straight;  // the colour as the PNG stores it, not divided by its alpha
+  straight.alphaChannel = 3;
+  straight.attributes.push_back({"oiio:UnassociatedAlpha", 1});
+  ingest::writeImage(dir / "in.png", img, straight);
+  const CommandRun c =
+      compose("color " + q(dir / "in.png") +
+                  " --to \"Linear Rec.709 (sRGB)\" --depth float --out " + q(dir / "out.exr"),
+              dir);
+  ASSERT_EQ(c.status, 0) << c.err;
+  EXPECT_NE(c.err.find("premultiplied by its alpha"), std::string::npos) << c.err;
+  const ingest::LoadedImage out = ingest::readImage(dir / "out.exr");
+  ASSERT_EQ(out.image.channels, 4);
+  const PictureChannels picture = pictureChannels(out.image);  // OpenEXR sorts them: A, B, G, R
+  ASSERT_EQ(picture.kind, PictureChannels::Kind::Rgb);
+  ASSERT_GE(picture.alpha, 0);
+  auto linear = [](double v) { return std::pow((v + 0.055) / 1.055, 2.4); };
+  const double channel[3] = {0.8, 0.2, 0.4};
+  for (int x = 0; x < 2; ++x) {
+    const float* p = out.image.at(x, 0);
+    const double a = x % 2 ? 128.0 / 255.0 : 0.0;
+    EXPECT_NEAR(p[picture.alpha], a, 1e-6);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(p[picture.colour[size_t(k)]], linear(std::round(channel[k] * 255.0) / 255.0) * a,
+                  2e-4)
+          << x << k;
+    }
   }
 }
 

@@ -573,6 +573,17 @@ TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
       << overMtl.err;
   EXPECT_EQ(slurp(mtl), "newmtl red\nKd 1 0 0\n");
   EXPECT_EQ(run(common + " --save-scene " + quote(scene), dir_.path()).status, 0);
+
+  // --ocio builtin is kept in the scene: run with $OCIO set, the scene's job still takes the
+  // built-in config (it took $OCIO's, and its colours with it).
+  const fs::path pinned = dir_ / "scenes" / "builtin.json";
+  ASSERT_EQ(run("--ocio builtin " + common + " --save-scene " + quote(pinned), dir_.path()).status,
+            0);
+  EXPECT_NE(slurp(pinned).find("\"ocio\": \"builtin\""), std::string::npos) << slurp(pinned);
+  const RunResult underOcio =
+      compose::testing::runCompose("run " + quote(pinned) + " --no-cache --explain", dir_.path(),
+                                   "OCIO=" + quote(dir_ / "missing.ocio"));
+  EXPECT_EQ(underOcio.status, 0) << underOcio.err;
 }
 
 TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
@@ -880,6 +891,70 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
           dir_.path());
   ASSERT_EQ(one.status, 0) << one.err;
   EXPECT_TRUE(!fs::exists(cache) || fs::is_empty(cache)) << "--explain wrote into the cache";
+
+  // Each command's own outputs are checked, not the one-shot's: a file named `out` in the working
+  // folder (where the one-shot command writes out/compose.*) is no matter to precompute (its
+  // --explain failed: "cannot write into the output folder: it is a file").
+  const fs::path work = dir_ / "work";
+  fs::create_directories(work);
+  compose::testing::writeText(work / "out", "not a folder");
+  const RunResult lighting = run("precompute --explain --env " + quote(samples_ / "forest.exr") +
+                                     " --out l.lighting --no-cache",
+                                 work);
+  EXPECT_EQ(lighting.status, 0) << lighting.err;
+  // An output that is an input is refused before any stage runs, with --explain too (render ran
+  // its shadows and render first; --explain approved it).
+  const fs::path exrPlate = dir_ / "plate.exr";
+  {
+    OIIO::ImageBuf plate(plate_.string());
+    ASSERT_TRUE(plate.write(exrPlate.string()));
+  }
+  const RunResult made = run("precompute --env " + quote(samples_ / "forest.exr") + " --out " +
+                                 quote(dir_ / "f.lighting") + " --no-cache",
+                             dir_.path());
+  ASSERT_EQ(made.status, 0) << made.err;
+  for (const char* explain : {" --explain", ""}) {
+    const RunResult render =
+        run(std::string("render") + explain + " --plate " + quote(exrPlate) + " " +
+                objectOptions() + " --lighting-file " + quote(dir_ / "f.lighting") + " --out " +
+                quote(exrPlate) + " --no-cache",
+            dir_.path());
+    EXPECT_EQ(render.status, 1) << explain << render.err;
+    EXPECT_NE(render.err.find("the output would replace an input"), std::string::npos)
+        << render.err;
+    EXPECT_EQ(render.err.find("compose: render "), std::string::npos)
+        << "a stage ran: " << render.err;
+  }
+}
+
+// A render reused from the cache names the mesh of the job in the files' headers, not the file
+// it was first made from (a copy of the mesh moved elsewhere kept the old name, which another tool
+// rebuilding the scene from the header then could not find).
+TEST_F(StageCommands, AReusedRenderNamesTheMeshGiven) {
+  fs::create_directories(dir_ / "moved");
+  fs::copy_file(samples_ / "monkey.obj", dir_ / "first.obj");
+  fs::copy_file(samples_ / "monkey.obj", dir_ / "moved" / "second.obj");
+  auto compose = [&](const fs::path& mesh, const std::string& name) {
+    return run("--plate " + quote(plate_) + " --object " + quote(mesh) + " --samples 1 --env " +
+                   quote(samples_ / "forest.exr") + " --out " + quote(dir_ / name) + " --cache " +
+                   quote(dir_ / "cache"),
+               dir_.path());
+  };
+  auto meshOf = [](const fs::path& exr) {
+    auto in = OIIO::ImageInput::open(exr.string());
+    return in ? std::string(in->spec().get_string_attribute("compose:object")) : std::string();
+  };
+  const RunResult first = compose(dir_ / "first.obj", "first");
+  ASSERT_EQ(first.status, 0) << first.err;
+  const RunResult second = compose(dir_ / "moved" / "second.obj", "second");
+  ASSERT_EQ(second.status, 0) << second.err;
+  const size_t render = second.err.find("compose: render ");
+  ASSERT_NE(render, std::string::npos) << second.err;
+  EXPECT_NE(second.err.substr(render, second.err.find('\n', render) - render).find("reused"),
+            std::string::npos)
+      << second.err;
+  EXPECT_EQ(meshOf(dir_ / "first.exr"), fs::absolute(dir_ / "first.obj").string());
+  EXPECT_EQ(meshOf(dir_ / "second.exr"), fs::absolute(dir_ / "moved" / "second.obj").string());
 }
 
 // compose --pose: the object stands on the chessboard's plane, seen from where the pose puts the
@@ -943,6 +1018,14 @@ TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
                                  " --pose " + quote(poseFile) + " --pitch 10",
                              dir_.path());
   EXPECT_EQ(both.status, 2) << both.err;
+  // So does --focal35 with --pose (or --calib): the lens was the file's, and --focal35 silently
+  // did nothing.
+  const RunResult focal = run("--plate " + quote(plate_) + " --object " + quote(dir_ / "box.obj") +
+                                  " --pose " + quote(poseFile) + " --focal35 24",
+                              dir_.path());
+  EXPECT_EQ(focal.status, 2) << focal.err;
+  EXPECT_NE(focal.err.find("--pose gives the plate's lens: leave out --focal35"), std::string::npos)
+      << focal.err;
 
   // A plate of another shape than the pose's: the error names the pose file the lens came from.
   Image square(100, 100, 3, {"R", "G", "B"});

@@ -338,7 +338,18 @@ TEST(Capture, GroupsByFileNamePattern) {
   EXPECT_EQ(c.views[0].name, "front");
   EXPECT_EQ(c.views[2].name, "up");
   EXPECT_EQ(c.views[1].shots.size(), 3u);
-  COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "{view}.png"), "does not match");
+  COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "{view}_{bracket}.png"),
+                       "does not match");
+  // A view's name may hold the pattern's separator: garden_px_1.jpg is view garden_px (it was
+  // view garden, bracket px_1: six directions in one view, which a merge averaged).
+  TempDir named;
+  for (const char* v : {"garden_px", "garden_nx"})
+    for (int b = 1; b <= 2; ++b)
+      writeImage(named / (std::string(v) + "_" + std::to_string(b) + ".jpg"), grey(8, 8));
+  const Capture g = groupByPattern(scanShots({named.path()}), "{view}_{bracket}.jpg");
+  ASSERT_EQ(g.views.size(), 2u);
+  EXPECT_EQ(g.views[0].name, "garden_nx");
+  EXPECT_EQ(g.views[1].name, "garden_px");
   COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "*.jpg"), "no {view}");
 }
 
@@ -388,6 +399,79 @@ TEST(Capture, BadDescriptionsAreNamedErrors) {
            {"name": "v", "exposures": [{"file": "a.jpg"}]},
            {"name": "v", "exposures": [{"file": "a.jpg"}]}]})",
          "two views are named 'v'");
+  // A key this reader does not know is named (a misspelt one silently did not count).
+  expect(R"({"format": "compose-capture", "version": 1, "views": [{"name": "v",
+           "exposures": [{"file": "a.jpg", "exposuretime": 0.01}]}]})",
+         "\"exposuretime\" is not a field");
+  expect(R"({"format": "compose-capture", "version": 1, "bogus": 1, "views": [{"name": "v",
+           "exposures": [{"file": "a.jpg"}]}]})",
+         "\"bogus\" is not a field");
+  expect(R"({"format": "compose-capture", "version": 1, "views": [{"name": "v", "yaw": 90,
+           "exposures": [{"file": "a.jpg"}]}]})",
+         "\"yaw\" is not a field");
+}
+
+// What makes a capture's views disagree is said: a view whose photos lack an f-number (taken as
+// f/1, 64 times too dark at f/8) beside views whose photos say theirs; one view's exposures given
+// at another scale to its EXIF than the others'; one exposure several times in a view. A
+// description's ISO alone counts, the rest from EXIF (it was dropped without a time). Views of
+// 8-bit and 16-bit photos are refused (their radiance comes out in different units).
+TEST(Capture, WhatMakesViewsDisagreeIsSaid) {
+  TempDir dir;
+  auto shoot = [&](const std::string& name, double t, bool withFNumber) {
+    CaptureInfo i = cameraShot(t, "2024:05:01 12:00:00");
+    if (!withFNumber) i.fNumber.reset();
+    writeShot(dir / name, i);
+    return dir / name;
+  };
+  Capture c;
+  c.views.push_back(
+      {"px", scanShots({shoot("px_1.jpg", 0.01, true), shoot("px_2.jpg", 0.04, true)}), {}});
+  c.views.push_back(
+      {"nz", scanShots({shoot("nz_1.jpg", 0.01, false), shoot("nz_2.jpg", 0.04, false)}), {}});
+  Capture consistent = c;
+  consistent.views.pop_back();
+  consistent.views.push_back(
+      {"nx", scanShots({shoot("nx_1.jpg", 0.01, true), shoot("nx_2.jpg", 0.04, true)}), {}});
+  resolveExposures(consistent);
+  EXPECT_TRUE(captureWarnings(consistent).empty());
+  resolveExposures(c);
+  const std::vector<std::string> w = captureWarnings(c);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NE(w[0].find("view nz assume f/1"), std::string::npos) << w[0];
+
+  Capture scaled = consistent;
+  setExposures(scaled.views[0], {1.0, 4.0}, "capture description");
+  const std::vector<std::string> s = captureWarnings(scaled);
+  ASSERT_EQ(s.size(), 1u);
+  EXPECT_NE(s[0].find("different scales to the photos' EXIF"), std::string::npos) << s[0];
+
+  Capture merged = consistent;
+  merged.views[0].shots.insert(merged.views[0].shots.end(), merged.views[1].shots.begin(),
+                               merged.views[1].shots.end());
+  merged.views.pop_back();
+  resolveExposures(merged);
+  const std::vector<std::string> m = captureWarnings(merged);
+  ASSERT_EQ(m.size(), 1u);
+  EXPECT_NE(m[0].find("2 of them at an exposure another of its photos has"), std::string::npos)
+      << m[0];
+
+  compose::testing::writeText(dir / "iso.json", R"({"format": "compose-capture", "version": 1,
+      "views": [{"name": "v", "exposures": [{"file": "px_1.jpg", "iso": 800},
+                                            {"file": "px_2.jpg"}]}]})");
+  const Capture iso = readCaptureDescription(dir / "iso.json");
+  ASSERT_TRUE(iso.views[0].shots[0].exposure);
+  EXPECT_NEAR(*iso.views[0].shots[0].exposure, 0.01 * 800.0 / (5.6 * 5.6), 1e-4);
+
+  Capture mixed = consistent;
+  WriteOptions deep;
+  deep.depth = WriteOptions::Depth::UInt16;
+  deep.attributes = exifAttributes(cameraShot(0.01, "2024:05:01 12:00:00"));
+  writeImage(dir / "nx_1.tif", grey(32, 24), deep);
+  deep.attributes = exifAttributes(cameraShot(0.04, "2024:05:01 12:00:00"));
+  writeImage(dir / "nx_2.tif", grey(32, 24), deep);
+  mixed.views[1] = {"nx", scanShots({dir / "nx_1.tif", dir / "nx_2.tif"}), {}};
+  COMPOSE_EXPECT_ERROR(resolveExposures(mixed), "the views mix 8-bit photos");
 }
 
 TEST(ImageIoTruncation, TruncatedJpegIsAnErrorNotAGreyPicture) {

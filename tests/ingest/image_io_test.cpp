@@ -10,6 +10,7 @@
 #include <Imath/half.h>
 #include <OpenImageIO/imageio.h>
 
+#include "core/channels.h"
 #include "core/output_files.h"
 #include "ingest/exif.h"
 #include "ingest/pixel_util.h"
@@ -898,6 +899,75 @@ TEST(ImageIo, ATiffsIsoIsRead) {
   const LoadedImage memory = readImageFromMemory(bytes, "iso800.tif");
   ASSERT_TRUE(memory.info.iso);
   EXPECT_EQ(*memory.info.iso, 800.0);
+}
+
+// A photo resized by a tool that keeps its EXIF keeps the focal-plane resolution of the sensor's
+// pixels and the PixelXDimension x PixelYDimension they count: the sensor is that many pixels at
+// that resolution (ExifTool's rule), not the resized image's (which gave a sensor a twentieth
+// the size for this 64x48 copy of a 1280x960 photo, and a 35 mm equivalent of 461 mm).
+TEST(ImageIo, AResizedPhotosSensorIsCountedInItsExifPixels) {
+  TempDir dir;
+  Image img(64, 48, 3);
+  for (float& v : img.pixels) v = 0.5f;
+  WriteOptions options;
+  options.depth = WriteOptions::Depth::UInt8;
+  const double perInch = 1280.0 / (36.0 / 25.4);  // a 36 x 27 mm sensor of 1280 x 960 pixels
+  options.attributes = {{"Exif:FocalLength", 24.0},
+                        {"Exif:FocalPlaneXResolution", perInch},
+                        {"Exif:FocalPlaneYResolution", perInch},
+                        {"Exif:FocalPlaneResolutionUnit", 2},
+                        {"Exif:PixelXDimension", 1280},
+                        {"Exif:PixelYDimension", 960}};
+  writeImage(dir / "resized.jpg", img, options);
+  const double expected = 24.0 * 43.266615305567875 / 45.0;  // the sensor's diagonal is 45 mm
+  for (const CaptureInfo& info :
+       {readCaptureInfo(dir / "resized.jpg"), readImage(dir / "resized.jpg").info}) {
+    ASSERT_TRUE(info.focalLength35mm);
+    EXPECT_NEAR(*info.focalLength35mm, expected, 0.01) << info.focal35mmSource;
+  }
+  // Without the pixel counts, the image's own size is all there is.
+  options.attributes.resize(4);
+  writeImage(dir / "plain.jpg", img, options);
+  const CaptureInfo plain = readCaptureInfo(dir / "plain.jpg");
+  ASSERT_TRUE(plain.focalLength35mm);
+  EXPECT_NEAR(*plain.focalLength35mm, expected * 20.0, 0.2);
+}
+
+// Luminance-chroma (Y, RY, BY) is made RGB with the weights of the file's primaries, as
+// OpenEXR's RgbaYca does: Rec. 709's for an ACES (AP0) file made green 38 % too bright. The
+// weights are OpenEXR's computeYw: Rec. 709's and AP0's published luminance rows.
+TEST(ImageIo, LuminanceChromaIsDecodedWithTheFilesPrimaries) {
+  const std::array<float, 3> rec709 =
+      luminanceWeights({0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290});
+  EXPECT_NEAR(rec709[0], 0.2126f, 1e-4f);
+  EXPECT_NEAR(rec709[1], 0.7152f, 1e-4f);
+  EXPECT_NEAR(rec709[2], 0.0722f, 1e-4f);
+  const std::array<double, 8> ap0 = {0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.0770, 0.32168, 0.33767};
+  const std::array<float, 3> w = luminanceWeights(ap0);
+  EXPECT_NEAR(w[0], 0.3439664498f, 1e-6f);
+  EXPECT_NEAR(w[1], 0.7281660966f, 1e-6f);
+  EXPECT_NEAR(w[2], -0.0721325464f, 1e-6f);
+
+  TempDir dir;
+  const float r = 0.5f, g = 0.2f, b = 0.1f;
+  const float y = w[0] * r + w[1] * g + w[2] * b;
+  Image yc(2, 1, 4, {"A", "BY", "RY", "Y"});
+  for (size_t i = 0; i < 2; ++i) {
+    const float px[4] = {1.0f, (b - y) / y, (r - y) / y, y};
+    std::copy_n(px, 4, &yc.pixels[4 * i]);
+  }
+  WriteOptions options;
+  options.depth = WriteOptions::Depth::Float;
+  options.chromaticities = ap0;
+  writeImage(dir / "yca.exr", yc, options);
+  const LoadedImage read = readImage(dir / "yca.exr");
+  const PictureChannels picture = pictureChannels(read.image);
+  ASSERT_EQ(picture.kind, PictureChannels::Kind::Rgb);
+  const float* p = read.image.at(1, 0);
+  EXPECT_NEAR(p[picture.colour[0]], r, 1e-5f);
+  EXPECT_NEAR(p[picture.colour[1]], g, 1e-5f);
+  EXPECT_NEAR(p[picture.colour[2]], b, 1e-5f);
+  EXPECT_EQ(p[picture.alpha], 1.0f);
 }
 
 }  // namespace

@@ -238,6 +238,12 @@ TEST(Registry, ScenePathsAreRelativeToTheSceneFile) {
   EXPECT_EQ(job.plate, fs::absolute(dir / "plate.jpg").lexically_normal());
   EXPECT_EQ(job.object, fs::path("/abs/mesh.obj"));
   EXPECT_EQ(job.output, fs::absolute(dir / "scenes" / "out" / "x").lexically_normal());
+  // A key given twice is refused, naming it (the last one counted, without a word).
+  writeText(dir / "scenes" / "twice.json",
+            R"({"compose": "scene", "version": 1,
+                "stages": {"ingest": {"plate": "../plate.jpg", "object": "/abs/mesh.obj"},
+                           "render": {"scale": 0.2}, "render": {"samples": 1}}})");
+  COMPOSE_EXPECT_ERROR(loadScene(dir / "scenes" / "twice.json"), "'stages.render' is given twice");
 }
 
 // plan() over a job: each stage's state and reason, by name.

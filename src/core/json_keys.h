@@ -1,0 +1,77 @@
+// Keys a JSON object holds twice.
+//
+// RFC 8259 leaves an object with a repeated name to the reader; nlohmann::json keeps the last
+// value and says nothing, so that in a hand-edited file ("scale": 0.2, ..., "scale": 0.5, or two
+// "render" blocks) a setting is lost without a word. Our readers of files people edit refuse them.
+#pragma once
+
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace compose {
+
+// The first key that an object of the JSON `text` holds twice, with the keys that lead to it
+// ("stages.render.scale"; an array's elements as "[]"); empty when none, or when `text` is not
+// JSON (the parser says why).
+inline std::string repeatedJsonKey(const std::string& text) {
+  struct Finder : nlohmann::json_sax<nlohmann::json> {
+    struct Level {
+      bool object = false;
+      std::set<std::string> keys;
+      std::string key;  // the key whose value is being read
+    };
+    std::vector<Level> levels;
+    std::string found;
+
+    std::string path(const std::string& last) const {
+      std::string p;
+      for (const Level& l : levels) {
+        if (&l == &levels.back()) break;
+        p += l.object ? (p.empty() ? "" : ".") + l.key : std::string("[]");
+      }
+      return p + (p.empty() ? "" : ".") + last;
+    }
+    bool null() override { return true; }
+    bool boolean(bool) override { return true; }
+    bool number_integer(number_integer_t) override { return true; }
+    bool number_unsigned(number_unsigned_t) override { return true; }
+    bool number_float(number_float_t, const string_t&) override { return true; }
+    bool string(string_t&) override { return true; }
+    bool binary(binary_t&) override { return true; }
+    bool start_object(std::size_t) override {
+      levels.push_back({true, {}, {}});
+      return true;
+    }
+    bool key(string_t& k) override {
+      Level& l = levels.back();
+      if (!l.keys.insert(k).second) {
+        found = path(k);
+        return false;  // enough: stop reading
+      }
+      l.key = k;
+      return true;
+    }
+    bool end_object() override {
+      levels.pop_back();
+      return true;
+    }
+    bool start_array(std::size_t) override {
+      levels.push_back({false, {}, {}});
+      return true;
+    }
+    bool end_array() override {
+      levels.pop_back();
+      return true;
+    }
+    bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+      return false;
+    }
+  } finder;
+  nlohmann::json::sax_parse(text, &finder, nlohmann::json::input_format_t::json, false);
+  return finder.found;
+}
+
+}  // namespace compose
