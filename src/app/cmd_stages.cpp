@@ -115,6 +115,8 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
           stderr, "compose: read %s as %s, wrote '%s'%s\n", printable(o->in).c_str(),
           printable(read).c_str(), target.c_str(),
           premultiplied ? ", its colour premultiplied by its alpha (OpenEXR's convention)" : "");
+      for (const std::string& n : loaded.notes)  // what the reader made of the file
+        std::fprintf(stderr, "compose: note: %s\n", printable(n).c_str());
       if (!leftOut.empty()) {
         std::string names;
         for (const std::string& n : leftOut) names += (names.empty() ? "" : ", ") + n;

@@ -89,12 +89,19 @@ CoverageReport fillUncovered(lighting::CubeMap& cube, const std::vector<float>& 
     parallelFor(0, int64_t(holes.size()), [&](int64_t i) {
       const auto [f, x, y] = holes[size_t(i)];
       const glm::vec3 d = rim.direction(f, x, y);
+      // Distances as squared chords (the chord measures the angle, and is cheaper); the weight
+      // (nearest / distance)^16 keeps the light at the rim: a bright sky twice as far as the
+      // ground around a missing down view weighs 1.5e-5 as much per texel.
+      float nearest2 = 4.0f;
+      for (const Source& s : sources)
+        nearest2 = std::min(nearest2, std::max(2.0f - 2.0f * glm::dot(d, s.d), 1e-8f));
       glm::dvec3 sum(0.0);
       double total = 0.0;
       for (const Source& s : sources) {
-        // The chord's cube (the chord is the angle's measure for near texels, and cheaper).
-        const float chord2 = std::max(2.0f - 2.0f * glm::dot(d, s.d), 1e-6f);
-        const double w = double(s.weight) / (double(chord2) * std::sqrt(double(chord2)));
+        const float chord2 = std::max(2.0f - 2.0f * glm::dot(d, s.d), 1e-8f);
+        const double r = double(nearest2) / double(chord2);  // (nearest / distance)^2
+        const double r2 = r * r, r4 = r2 * r2;
+        const double w = double(s.weight) * r4 * r4;
         sum += w * glm::dvec3(s.radiance);
         total += w;
       }

@@ -10,9 +10,9 @@
 // quarter. Holes are thus filled smoothly with the light around them, with no seams at cube edges.
 // A hole wider than a texel of the pyramid's level of at most 32 texels per face edge (a face no
 // photo saw) is filled from its rim instead: at that level, each of its texels is the average of
-// the well-seen texels weighted by the inverse cube of their distance (the chord), so that the
-// nearest light counts (the coarser levels average whole faces, sky and ground alike: the nadir of
-// a capture without its down view came out 6 times as bright as the ground around it), and F is the
+// the well-seen texels weighted by (nearest distance / distance)^16, so that the light at the rim
+// counts (the coarser levels average whole faces, sky and ground alike: the nadir of a capture
+// without its down view came out 6 times as bright as the ground around it), and F is the
 // bilinear lookup of that level.
 #pragma once
 

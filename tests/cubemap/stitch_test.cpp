@@ -12,6 +12,7 @@
 #include <glm/matrix.hpp>
 
 #include "core/numbers.h"
+#include "cubemap/coverage.h"
 #include "cubemap/render_view.h"
 #include "ingest/image_io.h"
 #include "lighting/filtered_cube.h"
@@ -372,6 +373,36 @@ TEST(Stitch, NarrowLensRingWithHolesFilledAndReported) {
   }
   EXPECT_GE(refined, 5);
   std::printf("ring of 6 + 2 at 75 degrees: %.3f of the sphere filled\n", r.coverage.uncovered);
+}
+
+// A face no photo saw is filled from its rim: a bright sky (10) over dark ground (0.2) with the
+// down view missing fills the nadir with the ground's light. (The pyramid's coarse levels average
+// whole faces, sky and ground alike: the forest capture's nadir came out 6-7 times too bright.)
+TEST(Coverage, AFaceNoPhotoSawIsFilledFromItsRim) {
+  const int n = 64;
+  CubeMap cube(n);
+  std::vector<float> weight(size_t(kCubeFaces) * size_t(n) * size_t(n), 1.0f);
+  for (int f = 0; f < kCubeFaces; ++f) {
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) {
+        float* p = cube.texel(f, x, y);
+        const float v = cube.direction(f, x, y).y > 0.0f ? 10.0f : 0.2f;
+        p[0] = p[1] = p[2] = v;
+        if (f == 3) {  // -Y, the down view
+          p[0] = p[1] = p[2] = 0.0f;
+          weight[(size_t(f) * size_t(n) + size_t(y)) * size_t(n) + size_t(x)] = 0.0f;
+        }
+      }
+    }
+  }
+  ASSERT_LT(cube.direction(3, n / 2, n / 2).y, -0.99f);
+  const CoverageReport report = fillUncovered(cube, weight);
+  EXPECT_NEAR(report.uncovered, 1.0 / 6.0, 1e-6);
+  float worst = 0.0f;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) worst = std::max(worst, cube.texel(3, x, y)[0]);
+  EXPECT_NEAR(cube.texel(3, n / 2, n / 2)[0], 0.2f, 0.02f) << "the nadir";
+  EXPECT_LT(worst, 0.3f) << "the down face holds the ground's light, not the sky's";
 }
 
 }  // namespace

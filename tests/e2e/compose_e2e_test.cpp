@@ -1084,7 +1084,8 @@ TEST_F(ComposeOutputs, AFloatPlateGivesAFloatExr) {
 // 1.0).
 TEST_F(ComposeOutputs, AThreeChannelPlateIsReadByItsChannelsNames) {
   constexpr float kR = 0.5f, kG = 0.25f, kB = 0.125f;
-  const float y = 0.2126f * kR + 0.7152f * kG + 0.0722f * kB;
+  // Y by OpenEXR's weights for a file without chromaticities (Imf::computeYw of Rec. 709's).
+  const float y = 0.2126390f * kR + 0.7151687f * kG + 0.0721923f * kB;
   writeExr(dir_ / "rgb.exr", 320, 240, [](float* p, int, int) { p[0] = kR, p[1] = kG, p[2] = kB; });
   {
     std::vector<float> px(320 * 240 * 3);
