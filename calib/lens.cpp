@@ -195,11 +195,12 @@ Lens Lens::turnedFor(int exifOrientation) const {
 
 std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation) {
   const double aspect = double(width) / height;
-  // Rounding each side of a resized image to whole pixels changes its aspect ratio by up to
-  // 0.5 / width + 0.5 / height, relative (the smaller image's: it rounds more).
+  // Rounding each side of a resized image to whole pixels changes its aspect ratio by up to a
+  // pixel on each side, relative (the smaller image's: it rounds more): half a pixel for rounding
+  // to nearest, a whole one for resizers that truncate (int(h * s)) or round up.
   auto fits = [&](const Lens& l) {
     const double tolerance =
-        0.5 / std::min(width, l.width) + 0.5 / std::min(height, l.height) + 1e-9;
+        1.0 / std::min(width, l.width) + 1.0 / std::min(height, l.height) + 1e-9;
     return std::abs(double(l.width) / l.height / aspect - 1.0) <= tolerance;
   };
   auto sized = [&](const Lens& l) {

@@ -76,8 +76,8 @@ struct Lens {
 // the orientation and resized. A lens that fits the upright image as it is (a lens file
 // calibrated on photos held that way) is taken as it is. Empty when neither fits the aspect
 // ratio: a crop. The aspect ratios may differ by what rounding a resized image's sides to whole
-// pixels makes of them (half a pixel on each side), no more: a crop of a few rows moves the
-// principal point, which scaling the lens cannot follow.
+// pixels makes of them (a pixel on each side, for resizers that truncate), no more: a crop of a
+// few rows moves the principal point, which scaling the lens cannot follow.
 std::optional<Lens> lensForImage(const Lens& lens, int width, int height, int exifOrientation);
 
 // Lens file (JSON): {"model": "rectilinear"|"equidistant", "width", "height", "fx", "fy", "cx",

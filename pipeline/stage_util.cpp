@@ -52,7 +52,7 @@ std::string contentKey(const std::filesystem::path& file, const std::string& sta
   return hash.hex();
 }
 
-Image loadHoldout(const std::filesystem::path& file, int width, int height) {
+Image loadHoldout(const std::filesystem::path& file, int width, int height, std::string* how) {
   ingest::LoadedImage m = ingest::readImage(file, "composite");
   if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
   if (m.image.width != width || m.image.height != height) {
@@ -63,12 +63,31 @@ Image loadHoldout(const std::filesystem::path& file, int width, int height) {
                 file);
   }
   if (m.image.channels == 1) return std::move(m.image);
-  // Only the first channel is used: the others are not kept through the render.
+  // One channel is the matte, as a compositor makes it: the alpha, unless it is opaque everywhere
+  // (a painted mask saved with an alpha it does not use); else the picture's first colour
+  // channel (R, or Y).
   const Image& in = m.image;
-  Image mask =
-      Image::unfilled(width, height, 1, {in.channelNames.empty() ? "Y" : in.channelNames[0]});
+  const PictureChannels picture = pictureChannels(in);
+  int channel = picture.kind == PictureChannels::Kind::ByPosition ? 0 : picture.colour[0];
+  if (picture.alpha >= 0) {
+    bool opaque = true;
+    for (size_t i = 0; i < in.pixelCount() && opaque; ++i)
+      opaque = in.pixels[i * size_t(in.channels) + size_t(picture.alpha)] >= 1.0f;
+    if (!opaque) channel = picture.alpha;
+  }
+  const std::string name = size_t(channel) < in.channelNames.size()
+                               ? in.channelNames[size_t(channel)]
+                               : std::to_string(channel);
+  if (how) {
+    *how = "the holdout mask's channel " + name +
+           (channel == picture.alpha ? std::string(" (its alpha)")
+            : picture.alpha >= 0     ? std::string(" (its alpha is opaque everywhere)")
+                                     : std::string()) +
+           " is the matte";
+  }
+  Image mask = Image::unfilled(width, height, 1, {name});
   parallelFor(0, height, [&](int64_t y) {
-    for (int x = 0; x < width; ++x) mask.at(x, int(y))[0] = in.at(x, int(y))[0];
+    for (int x = 0; x < width; ++x) mask.at(x, int(y))[0] = in.at(x, int(y))[size_t(channel)];
   });
   return mask;
 }

@@ -30,10 +30,13 @@ inline void hashVector(Hash128& hash, const glm::dvec3& v) {
 // channels (alpha, other layers) are dropped.
 Image toRgb(const Image& in);
 
-// A holdout mask: the first channel of any image, as stored (no colour management: it is data).
-// Throws compose::Error (stage "composite") naming the file when it cannot be read, holds a value
-// that is not finite, or is not width x height.
-Image loadHoldout(const std::filesystem::path& file, int width, int height);
+// A holdout mask, as stored (no colour management: it is data): its one channel, else its alpha
+// (unless the alpha is opaque everywhere: a painted mask saved with an alpha it does not use),
+// else its picture's first colour channel (R, or Y); `how`, when given, says which for an image of
+// more than one channel. Throws compose::Error (stage "composite") naming the file when it cannot
+// be read, holds a value that is not finite, or is not width x height.
+Image loadHoldout(const std::filesystem::path& file, int width, int height,
+                  std::string* how = nullptr);
 
 inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

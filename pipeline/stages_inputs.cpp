@@ -184,7 +184,9 @@ class IngestStage final : public Stage {
       if (!ctx.job.holdout.empty()) {
         // The holdout is read with the plate, not by the composite at the end: a missing mask,
         // one of the wrong size or one holding NaN stops the job before the long work.
-        ctx.artefacts.holdout = loadHoldout(ctx.job.holdout, p.image.width, p.image.height);
+        std::string how;
+        ctx.artefacts.holdout = loadHoldout(ctx.job.holdout, p.image.width, p.image.height, &how);
+        if (!how.empty()) ctx.note(how);
       }
     }
     if (ctx.meshSummary) {
@@ -448,7 +450,7 @@ class StitchStage final : public Stage {
     options.faceSize = std::clamp(int(std::lround(2.0 * fx / 8.0)) * 8, 64, 2048);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, ctx.progress);
     for (const std::string& n : result.notes) ctx.note("stitch: " + n);
-    for (const std::string& w : result.warnings) ctx.note("stitch: warning: " + w);
+    for (const std::string& w : result.warnings) ctx.note("warning: stitch: " + w);
     const lighting::Environment env =
         lighting::latLongFromCube(result.cube, 4 * result.cube.size(), ctx.progress);
     Image image(env.width(), env.height(), 3, {"R", "G", "B"});

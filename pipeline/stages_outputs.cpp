@@ -914,7 +914,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     std::string viewName = view;
     std::transform(viewName.begin(), viewName.end(), viewName.begin(),
                    [](unsigned char c) { return char(std::tolower(c)); });
-    if (!ingest::isSrgbEncoded(shown.colorSpace) && viewName != "raw") {
+    if (!ingest::isSrgbEncoded(shown.colorSpace) && viewName != "raw" && viewName != "none") {
       displayNotes.push_back("the display '" + display +
                              "' is not sRGB: " + displayPath.filename().string() +
                              " holds its codes but carries no colour profile that says so, and "

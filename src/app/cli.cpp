@@ -185,8 +185,9 @@ CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
   return command
       .add_option("--compression", compression,
                   std::string("OpenEXR compression: ") + ingest::kExrCompressionNames +
-                      "; lossless but for b44, b44a, dwaa, dwab on half channels and pxr24 on "
-                      "float channels")
+                      "; lossless but for b44 and b44a on half channels, dwaa and dwab on half "
+                      "channels and on float channels named R, G, B or Y (of any layer: P.Y, "
+                      "object.R), and pxr24 on float channels")
       ->check(CLI::Validator(
           [](std::string& text) {
             std::string why;

@@ -312,7 +312,8 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     o->apply(app);
     // The config named on the command line, "builtin" too: a scene saved from it pins it (else
     // `compose run` took $OCIO's).
-    if (!globals.ocio.empty()) o->job.ocio = globals.ocio;
+    if (!globals.ocio.empty())
+      o->job.ocio = globals.ocio == "built-in" ? std::string("builtin") : globals.ocio;
     if (!saveScene->empty()) {
       pipeline::validate(o->job);
       // The scene is written before any input is read: it must not replace one of them.

@@ -61,7 +61,8 @@ CoverageReport fillUncovered(lighting::CubeMap& cube, const std::vector<float>& 
   constexpr float kStep = 0.25f;    // fractional levels, for a fill without visible level steps
 
   // The rim fill at the level of at most 32 texels per face edge (coverage.h): its well-seen
-  // texels as they are, every other one from the well-seen ones by inverse-cube distance.
+  // texels as they are, every other one from the well-seen ones, weighted by
+  // (nearest distance / distance)^16.
   int coarse = 0;
   while (coarse + 1 < pa.levels() && pa.size(coarse) > 32) ++coarse;
   const int m = pa.size(coarse);

@@ -92,8 +92,10 @@ Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options);
 
 // `pattern` is matched against the whole file name: {view} matches the view's key (at least one
 // character, as many as the rest of the pattern leaves: garden_px_1.jpg is view garden_px of
-// {view}_{bracket}.jpg), {bracket} (at least one character) and * any text, ? one character;
-// everything else literally. Files that do not match are an error naming the first of them.
+// {view}_{bracket}.jpg), {bracket} (at least one character, as few as it can) and * any text, ?
+// one character; everything else literally. A bracket part that holds the separator needs the
+// pattern to say so: px_1_m2ev.png is view px of {view}_{bracket}_*.png (of {view}_{bracket}.png
+// it is view px_1). Files that do not match are an error naming the first of them.
 Capture groupByPattern(std::vector<Shot> shots, const std::string& pattern);
 
 // Reads a JSON capture description and the headers of the files it names.

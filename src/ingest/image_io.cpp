@@ -865,7 +865,11 @@ bool isSrgbEncoded(const std::string& space) {
                  [](unsigned char c) { return char(std::tolower(c)); });
   const size_t slash = s.find('/');
   if (slash == std::string::npos) return s == "srgb";
-  return s.rfind("srgb", 0) == 0 && s.substr(slash + 1) != "raw";
+  const std::string display = s.substr(0, slash), view = s.substr(slash + 1);
+  if (view == "raw" || view == "none") return false;
+  // OpenColorIO 2 configs name the encoding by the display ("sRGB - Display"), version 1 configs
+  // by the view (ACES 1.2's display "ACES", view "sRGB"; nuke-default's "default/sRGB").
+  return display.rfind("srgb", 0) == 0 || view.rfind("srgb", 0) == 0;
 }
 
 LoadedImage readImage(const fs::path& path, const std::string& stage, const ReadOptions& options) {
@@ -891,11 +895,14 @@ LoadedImage readImage(const fs::path& path, const std::string& stage, const Read
   if (!reader) throw Error(stage, "cannot read image: " + why, path);
   LoadedImage out = readWithOiio(*reader, path, stage, options);
   if (radiance) applyRadianceHeader(*radiance, path, out);
-  if (cmyk && out.info.iccProfile.empty()) {
-    out.notes.push_back(path.filename().string() +
-                        ": a CMYK JPEG without a colour profile: its inks are made RGB as "
-                        "OpenImageIO does, (1 - C)(1 - K), not as a press prints them; an RGB "
-                        "file, or one with its CMYK profile, is read as it looks");
+  if (cmyk) {
+    // OpenImageIO converts the inks the naive way whatever profile the file carries.
+    out.notes.push_back(
+        path.filename().string() +
+        ": a CMYK JPEG: its inks are made RGB as OpenImageIO does, (1 - C)(1 - K), "
+        "not as a press prints them" +
+        (out.info.iccProfile.empty() ? std::string() : ", its CMYK profile not applied") +
+        "; an RGB file is read as it looks");
   }
   return out;
 }

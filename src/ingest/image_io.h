@@ -194,15 +194,16 @@ void requireFinite(const Image& image, const std::filesystem::path& file, const 
 // half float is 65504; a sun in absolute units about 1e9).
 inline constexpr float kMaxPhotoValue = 1e32f;
 
-// Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
-// stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).
-// Otherwise as readImage(); `bytes` need only live for the call.
 // Whether an image tagged `space` holds sRGB codes: "sRGB", or a display transform's output
-// ("<display>/<view>", ColorConfig::toDisplay) whose display is an sRGB one and whose view is not
-// Raw. Such images are tagged sRGB in the JPEGs and PNGs written (EXIF ColorSpace 1, PNG's sRGB
+// ("<display>/<view>", ColorConfig::toDisplay) whose display or view is an sRGB one (OpenColorIO 2
+// configs name the display so, version 1 configs the view) and whose view is not Raw or None.
+// Such images are tagged sRGB in the JPEGs and PNGs written (EXIF ColorSpace 1, PNG's sRGB
 // chunk); no others are tagged.
 bool isSrgbEncoded(const std::string& space);
 
+// Decodes an image held in memory, such as one embedded in a glTF buffer or data URI. `name`
+// stands for the file in errors, and its extension tells the format (".png", ".jpg", ...).
+// Otherwise as readImage(); `bytes` need only live for the call.
 LoadedImage readImageFromMemory(std::span<const unsigned char> bytes,
                                 const std::filesystem::path& name,
                                 const std::string& stage = "ingest",

@@ -491,9 +491,11 @@ uint32_t GltfReader::material(int gltfMaterial, bool coloured) {
           (e.size() >= 3 && (e[0] > 0.0 || e[1] > 0.0 || e[2] > 0.0)))
         ++unrendered_["emission"];
       for (const auto& [name, value] : gm.extensions)
-        if (name != "KHR_materials_pbrSpecularGlossiness" && name != "KHR_materials_unlit" &&
-            name != "KHR_texture_transform")
-          ++unrendered_[name];
+        if (name != "KHR_materials_pbrSpecularGlossiness" && name != "KHR_texture_transform")
+          ++unrendered_[name == "KHR_materials_unlit"
+                            ? std::string("KHR_materials_unlit (lit as any other: baked light is "
+                                          "lit again)")
+                            : name];
     }
     tinygltf::TextureInfo info = gm.pbrMetallicRoughness.baseColorTexture;
     double factorAlpha = f.size() >= 4 && std::isfinite(f[3]) ? f[3] : 1.0;

@@ -135,12 +135,20 @@ TEST(Lens, TurnedForAnExifOrientationSeesWhatTheStoredPhotoShows) {
   EXPECT_EQ(asIs->cx, lens.turnedFor(6).cx);
   EXPECT_FALSE(lensForImage(lens, 500, 500, 1));
   // A resized plate's sides are rounded to whole pixels: 640x480 at 101 px wide is 101x76, a
-  // 0.33 % change of aspect; a crop of four rows of 480, 0.84 %, moves the principal point and is
-  // refused (it was scaled, 1.5 px off at the board's corners on the sample plate).
+  // 0.33 % change of aspect; a resizer that truncates makes a pixel of it (a 7952x5304 lens on a
+  // 640x426 plate); a crop of four rows of 480, 0.84 %, moves the principal point and is refused
+  // (it was scaled, 1.5 px off at the board's corners on the sample plate).
   ASSERT_EQ(lens.width, 640);
   ASSERT_EQ(lens.height, 480);
   EXPECT_TRUE(lensForImage(lens, 101, 76, 1));
   EXPECT_TRUE(lensForImage(lens, 1280, 960, 1));
+  Lens large = lens;
+  large.width = 7952;
+  large.height = 5304;
+  EXPECT_TRUE(lensForImage(large, 640, 426, 1));  // 426.9 truncated
+  large.width = 1001;
+  large.height = 667;
+  EXPECT_TRUE(lensForImage(large, 500, 334, 1));  // 333.5 rounded up
   EXPECT_FALSE(lensForImage(lens, 640, 476, 1));
   EXPECT_FALSE(lensForImage(lens, 1280, 956, 1));
 }

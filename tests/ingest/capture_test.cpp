@@ -350,6 +350,14 @@ TEST(Capture, GroupsByFileNamePattern) {
   ASSERT_EQ(g.views.size(), 2u);
   EXPECT_EQ(g.views[0].name, "garden_nx");
   EXPECT_EQ(g.views[1].name, "garden_px");
+  // A bracket part holding the separator is said by the pattern.
+  TempDir tagged;
+  for (const char* name : {"px_1_m2ev.jpg", "px_2_0ev.jpg", "nx_1_m2ev.jpg", "nx_2_0ev.jpg"})
+    writeImage(tagged / name, grey(8, 8));
+  const Capture t = groupByPattern(scanShots({tagged.path()}), "{view}_{bracket}_*.jpg");
+  ASSERT_EQ(t.views.size(), 2u);
+  EXPECT_EQ(t.views[0].name, "nx");
+  EXPECT_EQ(t.views[1].shots.size(), 2u);
   COMPOSE_EXPECT_ERROR(groupByPattern(scanShots({dir.path()}), "*.jpg"), "no {view}");
 }
 

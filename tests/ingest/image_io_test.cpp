@@ -970,5 +970,19 @@ TEST(ImageIo, LuminanceChromaIsDecodedWithTheFilesPrimaries) {
   EXPECT_EQ(p[picture.alpha], 1.0f);
 }
 
+// Which display images hold sRGB codes (and are tagged so): OpenColorIO 2 configs name the encoding
+// by the display, version 1 configs by the view (ACES 1.2's "ACES/sRGB" was said not to be sRGB,
+// and its JPEG left untagged).
+TEST(ImageIo, SrgbDisplaysAreKnownByDisplayOrView) {
+  EXPECT_TRUE(isSrgbEncoded("sRGB"));
+  EXPECT_TRUE(isSrgbEncoded("sRGB - Display/ACES 1.0 - SDR Video"));
+  EXPECT_TRUE(isSrgbEncoded("ACES/sRGB"));
+  EXPECT_TRUE(isSrgbEncoded("default/sRGB"));
+  EXPECT_FALSE(isSrgbEncoded("sRGB - Display/Raw"));
+  EXPECT_FALSE(isSrgbEncoded("default/None"));
+  EXPECT_FALSE(isSrgbEncoded("Display P3/Standard"));
+  EXPECT_FALSE(isSrgbEncoded("ACEScg"));
+}
+
 }  // namespace
 }  // namespace compose::ingest

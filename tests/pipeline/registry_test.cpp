@@ -53,6 +53,39 @@ TEST(ToRgb, TakesTheChannelsByName) {
   EXPECT_EQ(values(toRgb(unnamed)), values(unnamed));
 }
 
+// A holdout mask is the matte a compositor makes: its alpha when it has one (an element's alpha
+// over black colour was read by its R: no holdout at all), unless the alpha is opaque everywhere
+// (a painted mask saved with an alpha it does not use), else its first colour channel.
+TEST(Holdout, TheAlphaIsTheMatteUnlessItIsOpaque) {
+  TempDir dir;
+  Image rgba(2, 1, 4, {"R", "G", "B", "A"});
+  rgba.pixels = {0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  options.alphaChannel = 3;
+  ingest::writeImage(dir / "element.exr", rgba, options);
+  std::string how;
+  const Image fromAlpha = loadHoldout(dir / "element.exr", 2, 1, &how);
+  ASSERT_EQ(fromAlpha.channels, 1);
+  EXPECT_EQ(fromAlpha.pixels[0], 1.0f);
+  EXPECT_EQ(fromAlpha.pixels[1], 0.0f);
+  EXPECT_NE(how.find("channel A (its alpha)"), std::string::npos) << how;
+  // A PNG's channels come R, G, B, A (an EXR's sorted A, B, G, R): its black R was the matte.
+  ingest::WriteOptions png;
+  png.alphaChannel = 3;
+  png.attributes.push_back({"oiio:UnassociatedAlpha", 1});
+  ingest::writeImage(dir / "element.png", rgba, png);
+  const Image fromPng = loadHoldout(dir / "element.png", 2, 1);
+  EXPECT_EQ(fromPng.pixels[0], 1.0f);
+  EXPECT_EQ(fromPng.pixels[1], 0.0f);
+  rgba.pixels = {0.25f, 0.0f, 0.0f, 1.0f, 0.75f, 0.0f, 0.0f, 1.0f};
+  ingest::writeImage(dir / "painted.exr", rgba, options);
+  const Image fromRed = loadHoldout(dir / "painted.exr", 2, 1, &how);
+  EXPECT_EQ(fromRed.pixels[0], 0.25f);
+  EXPECT_EQ(fromRed.pixels[1], 0.75f);
+  EXPECT_NE(how.find("channel R (its alpha is opaque everywhere)"), std::string::npos) << how;
+}
+
 // A layered image is read from the layer that is its picture, not from whichever sorts first: a
 // render's beauty beside albedo and irradiance passes (OpenEXR sorts albedo first), bare R, G, B
 // before any layer, a layer named as a beauty pass (Blender's Combined beside its AO), or the
