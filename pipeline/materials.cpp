@@ -5,13 +5,55 @@
 #include <map>
 #include <optional>
 
+#include "color/color.h"
 #include "core/error.h"
 
 namespace compose::pipeline {
 
+namespace {
+
+// The matrix that takes `from` to `to` when the config converts between them by one (linear
+// spaces), found by converting the unit colours and checked on a probe.
+std::optional<glm::mat3> conversionMatrix(const color::ColorConfig& colors, const std::string& from,
+                                          const std::string& to) {
+  Image probe(4, 1, 3, {"R", "G", "B"});
+  probe.pixels = {1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.25f, 0.8f, 0.5f};
+  probe.colorSpace = from;
+  colors.convert(probe, to);
+  glm::mat3 m;
+  for (int c = 0; c < 3; ++c)
+    m[c] = glm::vec3(probe.at(c, 0)[0], probe.at(c, 0)[1], probe.at(c, 0)[2]);
+  const glm::vec3 expected = m * glm::vec3(0.25f, 0.8f, 0.5f);
+  for (int k = 0; k < 3; ++k) {
+    const float got = probe.at(3, 0)[k];
+    if (!std::isfinite(got) || !(std::abs(got - expected[k]) <= 1e-4f * (1.0f + std::abs(got))))
+      return std::nullopt;
+  }
+  return m;
+}
+
+}  // namespace
+
 std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig& colors) {
   if (!mesh.hasMaterials()) return {};
   const std::string working = colors.workingSpace();
+
+  // The space the albedo's product is taken in (render::Mesh::albedoToWorking): the base
+  // colours' own, when the config has it and converts it to the working space by a matrix. The
+  // textures are brought to it, and the product to the working space as it is shaded.
+  std::string productSpace;
+  if (colors.has(mesh.colorSpace))
+    productSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
+  else if (mesh.colorSpace == "lin_rec709")
+    productSpace = colors.spaceWithChromaticities(color::kRec709Chromaticities);
+  const std::optional<glm::mat3> productToWorking =
+      productSpace.empty() || productSpace == working
+          ? std::nullopt
+          : conversionMatrix(colors, productSpace, working);
+  if (productToWorking) {
+    mesh.albedoToWorking = *productToWorking;
+    mesh.convertsAlbedo = true;
+  }
 
   // Base colours, as a row of pixels.
   Image base(int(mesh.materials.size()), 1, 3, {"R", "G", "B"});
@@ -34,24 +76,29 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
                  "' nor the working space's primaries)";
     }
   };
-  toWorking(base);
-  for (size_t i = 0; i < mesh.materials.size(); ++i) {
-    const float* p = base.pixels.data() + 3 * i;
-    mesh.materials[i].baseColor = glm::vec3(p[0], p[1], p[2]);
+  if (productToWorking) {
+    baseRead = "'" + productSpace + "', multiplied by their textures there";
+  } else {
+    toWorking(base);
+    for (size_t i = 0; i < mesh.materials.size(); ++i) {
+      const float* p = base.pixels.data() + 3 * i;
+      mesh.materials[i].baseColor = glm::vec3(p[0], p[1], p[2]);
+    }
+    if (!mesh.colors.empty()) {
+      Image row(int(mesh.colors.size()), 1, 3, {"R", "G", "B"});
+      std::copy_n(&mesh.colors[0].x, 3 * mesh.colors.size(), row.pixels.data());
+      toWorking(row);
+      std::copy_n(row.pixels.data(), 3 * mesh.colors.size(), &mesh.colors[0].x);
+    }
   }
-  if (!mesh.colors.empty()) {
-    Image row(int(mesh.colors.size()), 1, 3, {"R", "G", "B"});
-    std::copy_n(&mesh.colors[0].x, 3 * mesh.colors.size(), row.pixels.data());
-    toWorking(row);
-    std::copy_n(row.pixels.data(), 3 * mesh.colors.size(), &mesh.colors[0].x);
-  }
-  mesh.colorSpace = working;
+  mesh.colorSpace = productToWorking ? productSpace : working;
+  const std::string textureTarget = productToWorking ? productSpace : working;
 
   std::map<std::string, int> textureSpaces;
   size_t clampedTexels = 0;
   for (size_t t = 0; t < mesh.textures.size(); ++t) {
     render::Texture& texture = mesh.textures[t];
-    if (texture.srgbByFormat && texture.image.colorSpace != working) {
+    if (texture.srgbByFormat && texture.image.colorSpace != textureTarget) {
       // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
       texture.image.colorSpace =
           colors.has("sRGB") ? colors.resolve("sRGB", "a glTF texture") : colors.srgbEncodedSpace();
@@ -61,7 +108,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
       texture.image.colorSpace = colors.inputSpaceFor(texture.file, texture.image.colorSpace);
     }
     ++textureSpaces["'" + texture.image.colorSpace + "'"];
-    colors.convert(texture.image, working);
+    colors.convert(texture.image, textureTarget);
     // Albedos, 0..1 as base colours are: a float texture may hold anything.
     for (float& v : texture.image.pixels) {
       const float kept = std::isnan(v) ? 0.0f : std::clamp(v, 0.0f, 1.0f);

@@ -17,7 +17,11 @@
 
 namespace compose::pipeline {
 
-// Converts the base colours and textures of `mesh` to colors.workingSpace() in place. Returns a
+// Converts the base colours and textures of `mesh` to colors.workingSpace() in place: when the
+// config converts the base colours' space to the working space by a matrix (linear Rec.709 to
+// ACEScg), the base and vertex colours stay, the textures are brought to their space, and the
+// matrix goes to Mesh::albedoToWorking, so that factor x texture x vertex colour is multiplied
+// where glTF defines it and then converted; otherwise each is converted on its own. Returns a
 // line for the user that says what they were read as, or an empty string when the mesh has no
 // materials. Throws compose::Error (stage "color") when a conversion fails.
 std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig& colors);

@@ -181,8 +181,9 @@ class RenderStage final : public Stage {
   // 13: sources traced from the smooth surface of the vertex normals; 14: that lift bounded and
   // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
   // the composite and the files; 16: the automatic exposure kept whichever is used; 17: the
-  // card's radiance kept instead, the composite choosing the exposure for its plate
-  static constexpr int kVersion = 17;
+  // card's radiance kept instead, the composite choosing the exposure for its plate; 18: a
+  // material's factor x texture x vertex colour multiplied in their own space, then converted
+  static constexpr int kVersion = 18;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {

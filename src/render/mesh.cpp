@@ -298,7 +298,7 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v) const {
     const uint32_t* c = &indices[3 * size_t(triangle)];
     albedo *= (1.0f - u - v) * colors[c[0]] + u * colors[c[1]] + v * colors[c[2]];
   }
-  return albedo;
+  return convertsAlbedo ? albedoToWorking * albedo : albedo;
 }
 
 glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v, const glm::vec3& dPdx,
@@ -352,7 +352,7 @@ glm::vec3 Mesh::albedoAt(uint32_t triangle, float u, float v, const glm::vec3& d
   albedo *= colour;
   if (!colors.empty())
     albedo *= (1.0f - u - v) * colors[c[0]] + u * colors[c[1]] + v * colors[c[2]];
-  return albedo;
+  return convertsAlbedo ? albedoToWorking * albedo : albedo;
 }
 
 void buildMipLevels(Texture& texture, std::optional<float> keptFrom) {

@@ -154,8 +154,15 @@ struct Mesh {
   std::vector<Material> materials;
   std::vector<Texture> textures;
   // The colour space of the base colours (linear); textures carry their own. The pipeline
-  // converts both to the working space before rendering.
+  // converts both to the working space before rendering, or textures to the base colours' space
+  // and the product by `albedoToWorking`.
   std::string colorSpace = "lin_rec709";
+  // The albedo's last step, factor x texture x vertex colour being multiplied in the space they
+  // are given in (glTF's linear Rec.709) and the product converted, as glTF defines it: the
+  // product of the converted factors is another colour wherever the conversion mixes channels
+  // (a texture's red under a blue-ish factor came out 60 % too bright in ACEScg).
+  glm::mat3 albedoToWorking{1.0f};
+  bool convertsAlbedo = false;
 
   size_t triangleCount() const { return indices.size() / 3; }
   glm::vec3 boundsMin() const;

@@ -94,21 +94,27 @@ TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
   EXPECT_NE(line.find("1 texture (1 as 'sRGB"), std::string::npos) << line;
   EXPECT_NE(line.find("converted to 'ACEScg'"), std::string::npos) << line;
   EXPECT_EQ(line.find("MASK"), std::string::npos) << line;
-  EXPECT_EQ(mesh.colorSpace, "ACEScg");
-  for (int m = 0; m < 2; ++m) {
-    const glm::vec3 expected = toAp1(twoMaterials().materials[size_t(m)].baseColor);
-    EXPECT_LT(glm::length(mesh.materials[size_t(m)].baseColor - expected), kTolerance) << m;
-  }
-  const glm::vec3 texel =
-      toAp1({srgbDecodeFloat(0.5f), srgbDecodeFloat(0.25f), srgbDecodeFloat(1.0f)});
+  // glTF multiplies factor x texture x vertex colour in linear Rec.709: the base colours stay
+  // there, the texture is decoded into it, and the product goes to ACEScg by the matrix. (Each
+  // converted on its own, the product of a texture's pure red under a factor of (0.2, 0.4, 0.8)
+  // was 60 % too bright.)
+  ASSERT_TRUE(mesh.convertsAlbedo);
+  for (int m = 0; m < 2; ++m)
+    EXPECT_EQ(mesh.materials[size_t(m)].baseColor, twoMaterials().materials[size_t(m)].baseColor);
+  const glm::vec3 decoded(srgbDecodeFloat(0.5f), srgbDecodeFloat(0.25f), srgbDecodeFloat(1.0f));
   const float* p = mesh.textures[0].image.pixels.data();
-  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
-  EXPECT_EQ(mesh.textures[0].image.colorSpace, "ACEScg");
+  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - decoded), kTolerance);
+  for (const glm::vec3& rec709 :
+       {glm::vec3(1.0f, 0.0f, 0.0f), glm::vec3(0.2f, 0.4f, 0.6f) * decoded,
+        glm::vec3(0.2f, 0.4f, 0.8f) * glm::vec3(1.0f, 0.0f, 0.0f)}) {
+    EXPECT_LT(glm::length(mesh.albedoToWorking * rec709 - toAp1(rec709)), kTolerance);
+  }
   // A second call converts nothing twice.
   const render::Mesh once = mesh;
   materialsToWorkingSpace(mesh, colors);
   EXPECT_EQ(mesh.materials[1].baseColor, once.materials[1].baseColor);
   EXPECT_EQ(mesh.textures[0].image.pixels, once.textures[0].image.pixels);
+  EXPECT_EQ(mesh.albedoToWorking, once.albedoToWorking);
 }
 
 TEST(MaterialColour, ATextureThatDeclaresNothingFollowsTheFileRules) {
@@ -117,7 +123,7 @@ TEST(MaterialColour, ATextureThatDeclaresNothingFollowsTheFileRules) {
   mesh.textures[0].image.colorSpace.clear();
   mesh.textures[0].file = "albedo.exr";  // the built-in rules: .exr is linear Rec.709
   materialsToWorkingSpace(mesh, colors);
-  const glm::vec3 texel = toAp1({0.5f, 0.25f, 1.0f});
+  const glm::vec3 texel(0.5f, 0.25f, 1.0f);  // linear Rec.709 as the rules say: kept
   const float* p = mesh.textures[0].image.pixels.data();
   EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
 }
