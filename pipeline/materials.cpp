@@ -46,8 +46,14 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     productSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
   else if (mesh.colorSpace == "lin_rec709")
     productSpace = colors.spaceWithChromaticities(color::kRec709Chromaticities);
+  // Only where every texture is sRGB by its format (glTF's base colour textures, whose product
+  // glTF defines in linear Rec.709): another texture may hold colours beyond Rec.709's gamut (a
+  // phone's Display P3 JPEG as an OBJ's map_Kd), which the clamp to an albedo's 0..1 in that
+  // space would clip; converted on its own to the wider working space, it keeps them.
+  const bool sRgbTextures = std::all_of(mesh.textures.begin(), mesh.textures.end(),
+                                        [](const render::Texture& t) { return t.srgbByFormat; });
   const std::optional<glm::mat3> productToWorking =
-      productSpace.empty() || productSpace == working
+      productSpace.empty() || productSpace == working || !sRgbTextures
           ? std::nullopt
           : conversionMatrix(colors, productSpace, working);
   if (productToWorking) {
@@ -77,7 +83,8 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     }
   };
   if (productToWorking) {
-    baseRead = "'" + productSpace + "', multiplied by their textures there";
+    baseRead =
+        "'" + productSpace + "', the albedo multiplied there (factor x texture x vertex colour)";
   } else {
     toWorking(base);
     for (size_t i = 0; i < mesh.materials.size(); ++i) {
@@ -98,7 +105,11 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
   size_t clampedTexels = 0;
   for (size_t t = 0; t < mesh.textures.size(); ++t) {
     render::Texture& texture = mesh.textures[t];
-    if (texture.srgbByFormat && texture.image.colorSpace != textureTarget) {
+    if (texture.converted) {
+      ++textureSpaces["'" + texture.image.colorSpace + "'"];
+      continue;
+    }
+    if (texture.srgbByFormat) {
       // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
       texture.image.colorSpace =
           colors.has("sRGB") ? colors.resolve("sRGB", "a glTF texture") : colors.srgbEncodedSpace();
@@ -122,6 +133,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
       keptFrom = m.blend ? -1.0f : (keptFrom && *keptFrom < 0.0f ? *keptFrom : m.alphaCutoff);
     }
     render::buildMipLevels(texture, keptFrom);
+    texture.converted = true;
   }
   std::string line = "object: " + std::to_string(mesh.materials.size()) + " material" +
                      (mesh.materials.size() == 1 ? "" : "s") +

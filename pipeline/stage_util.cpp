@@ -1,7 +1,9 @@
 #include "pipeline/stage_util.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <vector>
@@ -79,11 +81,19 @@ Image loadHoldout(const std::filesystem::path& file, int width, int height, std:
                                ? in.channelNames[size_t(channel)]
                                : std::to_string(channel);
   if (how) {
+    // How much of the frame it holds the plate in front over: a mask read by the wrong channel
+    // shows as a matte over almost all of the frame or none of it.
+    size_t over = 0;
+    for (size_t i = 0; i < in.pixelCount(); ++i)
+      if (in.pixels[i * size_t(in.channels) + size_t(channel)] >= 0.5f) ++over;
+    char share[96];
+    std::snprintf(share, sizeof share, " (the plate in front over %.1f %% of the frame)",
+                  100.0 * double(over) / double(std::max<size_t>(1, in.pixelCount())));
     *how = "the holdout mask's channel " + name +
            (channel == picture.alpha ? std::string(" (its alpha)")
             : picture.alpha >= 0     ? std::string(" (its alpha is opaque everywhere)")
                                      : std::string()) +
-           " is the matte";
+           " is the matte" + share;
   }
   Image mask = Image::unfilled(width, height, 1, {name});
   parallelFor(0, height, [&](int64_t y) {

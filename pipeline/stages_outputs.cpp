@@ -916,7 +916,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     std::transform(viewName.begin(), viewName.end(), viewName.begin(),
                    [](unsigned char c) { return char(std::tolower(c)); });
     if (!ingest::isSrgbEncoded(shown.colorSpace) && viewName != "raw" && viewName != "none") {
-      displayNotes.push_back("the display '" + display +
+      displayNotes.push_back("the display '" + display + "' with the view '" + view +
                              "' is not sRGB: " + displayPath.filename().string() +
                              " holds its codes but carries no colour profile that says so, and "
                              "viewers will show it as sRGB (the EXR's scene-linear colour is "

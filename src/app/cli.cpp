@@ -186,8 +186,8 @@ CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
       .add_option("--compression", compression,
                   std::string("OpenEXR compression: ") + ingest::kExrCompressionNames +
                       "; lossless but for b44 and b44a on half channels, dwaa and dwab on half "
-                      "channels and on float channels named R, G, B or Y (of any layer: P.Y, "
-                      "object.R), and pxr24 on float channels")
+                      "channels and on float channels named R, G, B, Y, RY or BY (of any layer: "
+                      "P.Y, object.R), and pxr24 on float channels")
       ->check(CLI::Validator(
           [](std::string& text) {
             std::string why;

@@ -65,9 +65,10 @@
 namespace compose::render {
 
 // An albedo texture: RGB float in `image.colorSpace` (the colour space its file declares, or
-// empty when the file declares none; the pipeline converts it to the working space before
-// rendering), sampled bilinearly at texture coordinates (u to the right, v up: v = 0 is the
-// image's bottom row, as in OBJ; the glTF loader stores 1 - v so that this holds).
+// empty when the file declares none; the pipeline converts it to the working space, or to the
+// base colours' space (Mesh::albedoToWorking), before rendering), sampled bilinearly at texture
+// coordinates (u to the right, v up: v = 0 is the image's bottom row, as in OBJ; the glTF loader
+// stores 1 - v so that this holds).
 struct Texture {
   enum class Wrap { Repeat, Clamp, Mirror };
   std::filesystem::path file;  // the image file, or a description of where an embedded one was
@@ -82,6 +83,8 @@ struct Texture {
   // The format says the colour is sRGB-encoded whatever the image file says (glTF's base colour
   // textures): the file's own tag (a PNG's gAMA) is not followed.
   bool srgbByFormat = false;
+  // The pipeline has converted it (pipeline/materials.h): a second conversion leaves it alone.
+  bool converted = false;
   // Its mip levels for minification (buildMipLevels): level k is level k - 1 halved, area
   // averaged, down to 1 x 1; level 0 is `image`. Empty until built: only `image` is then
   // sampled, however small the texture appears.
@@ -93,9 +96,10 @@ struct Texture {
 };
 
 // Builds `texture`'s mip levels from its image as it is: call it once the colour is in the space
-// it is filtered in (linear, the working space). `keptFrom`, for a texture with alpha that a
-// cut-out material uses: its alphaCutoff (MASK: a texel is kept whole where its alpha reaches
-// it), or negative for a semi-transparent material (BLEND: its alpha is what is kept).
+// it is filtered in (linear: the working space, or the base colours' space). `keptFrom`, for a
+// texture with alpha that a cut-out material uses: its alphaCutoff (MASK: a texel is kept whole
+// where its alpha reaches it), or negative for a semi-transparent material (BLEND: its alpha is
+// what is kept).
 void buildMipLevels(Texture& texture, std::optional<float> keptFrom = std::nullopt);
 
 // A diffuse material: the albedo is baseColor times the texture's colour (when there is one).

@@ -88,6 +88,7 @@ TEST(MaterialColour, TheNoteNamesCutOutsAndSemiTransparentMaterials) {
 TEST(MaterialColour, BaseColoursAndTexturesGoToTheWorkingSpace) {
   const color::ColorConfig colors = color::ColorConfig::builtin();
   render::Mesh mesh = twoMaterials();
+  mesh.textures[0].srgbByFormat = true;  // a glTF base colour texture
   const std::string line = materialsToWorkingSpace(mesh, colors);
   EXPECT_NE(line.find("2 materials, base colours read as 'Linear Rec.709"), std::string::npos)
       << line;
@@ -123,7 +124,10 @@ TEST(MaterialColour, ATextureThatDeclaresNothingFollowsTheFileRules) {
   mesh.textures[0].image.colorSpace.clear();
   mesh.textures[0].file = "albedo.exr";  // the built-in rules: .exr is linear Rec.709
   materialsToWorkingSpace(mesh, colors);
-  const glm::vec3 texel(0.5f, 0.25f, 1.0f);  // linear Rec.709 as the rules say: kept
+  // Not sRGB by its format (an OBJ's map_Kd, which may be wider than Rec.709): converted on its
+  // own, as the base colours are.
+  EXPECT_FALSE(mesh.convertsAlbedo);
+  const glm::vec3 texel = toAp1({0.5f, 0.25f, 1.0f});
   const float* p = mesh.textures[0].image.pixels.data();
   EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
 }

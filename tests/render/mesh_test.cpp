@@ -108,6 +108,38 @@ TEST(Mesh, AClampedTextureBeyondItsEdgeIsTheEdgeTexelsWhateverTheFootprint) {
   EXPECT_GT(inside.z, 0.9f);
 }
 
+// The albedo is the product factor x texture x vertex colour, taken in the space they are given
+// in and then converted (Mesh::albedoToWorking), plain and filtered alike.
+TEST(Mesh, TheAlbedosProductIsConvertedAfterItIsTaken) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.normals = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+  m.indices = {0, 1, 2};
+  m.texcoords = {{0, 0}, {1, 0}, {0, 1}};
+  Texture t;
+  t.image = Image(4, 4, 3, {"R", "G", "B"});
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 4; ++x) t.image.at(x, y)[0] = 1.0f;  // pure red
+  buildMipLevels(t);
+  m.textures.push_back(t);
+  Material mat;
+  mat.texture = 0;
+  mat.baseColor = glm::vec3(0.2f, 0.4f, 0.8f);
+  m.materials.push_back(mat);
+  m.colors = {glm::vec3(0.5f), glm::vec3(0.5f), glm::vec3(0.5f)};
+  // A matrix that mixes channels: a product of converted factors would differ.
+  m.albedoToWorking = glm::mat3(glm::vec3(0.6f, 0.1f, 0.0f), glm::vec3(0.3f, 0.8f, 0.1f),
+                                glm::vec3(0.1f, 0.1f, 0.9f));
+  m.convertsAlbedo = true;
+  const glm::vec3 expected = m.albedoToWorking * glm::vec3(0.2f * 0.5f, 0.0f, 0.0f);
+  const glm::vec3 plain = m.albedoAt(0, 0.3f, 0.3f);
+  const glm::vec3 filtered = m.albedoAt(0, 0.3f, 0.3f, {0.5f, 0, 0}, {0, 0.5f, 0});
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(plain[c], expected[c], 1e-6f) << c;
+    EXPECT_NEAR(filtered[c], expected[c], 1e-6f) << c;
+  }
+}
+
 TEST(Mesh, TriangulatesAndComputesNormalsWhenAbsent) {
   TempDir dir;
   writeText(dir / "cube.obj", kCube);
