@@ -9,6 +9,7 @@
 #include "color/color.h"
 #include "core/error.h"
 #include "core/output_files.h"
+#include "ingest/image_io.h"
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/scene.h"
@@ -274,6 +275,23 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
     }
   }
   if (o.explain) {
+    // A holdout of another size than the plate fails the run when the plate is read: said now,
+    // from the two headers (their sizes as shown, after their EXIF orientations).
+    if (const pipeline::ComposeJob& j = o.job; !j.holdout.empty() && !j.plate.empty()) {
+      auto upright = [](const ingest::CaptureInfo& i) {
+        const bool turned = i.orientation >= 5 && i.orientation <= 8;
+        return std::pair{turned ? i.fileHeight : i.fileWidth, turned ? i.fileWidth : i.fileHeight};
+      };
+      const auto [pw, ph] = upright(ingest::readCaptureInfo(j.plate, "ingest"));
+      const auto [mw, mh] = upright(ingest::readCaptureInfo(j.holdout, "composite"));
+      if (pw != mw || ph != mh) {
+        throw Error("composite",
+                    "the holdout mask is " + std::to_string(mw) + "x" + std::to_string(mh) +
+                        ", the plate " + std::to_string(pw) + "x" + std::to_string(ph) +
+                        ": it must be the plate's size",
+                    j.holdout);
+      }
+    }
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),
                   s.reason.c_str());

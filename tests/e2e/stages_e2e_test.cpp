@@ -892,6 +892,20 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
   ASSERT_EQ(one.status, 0) << one.err;
   EXPECT_TRUE(!fs::exists(cache) || fs::is_empty(cache)) << "--explain wrote into the cache";
 
+  // A holdout of another size than the plate: --explain says so, as the run would (it approved
+  // the job, which then failed when the plate was read).
+  {
+    Image mask(320, 210, 1, {"Y"});
+    ingest::writeImage(dir_ / "short_mask.png", mask);
+    const RunResult holdout =
+        run("--explain --plate " + quote(plate_) + " " + objectOptions() + " --holdout " +
+                quote(dir_ / "short_mask.png") + " --no-cache",
+            dir_.path());
+    EXPECT_EQ(holdout.status, 1) << holdout.err;
+    EXPECT_NE(holdout.err.find("the holdout mask is 320x210, the plate 320x213"), std::string::npos)
+        << holdout.err;
+  }
+
   // Each command's own outputs are checked, not the one-shot's: a file named `out` in the working
   // folder (where the one-shot command writes out/compose.*) is no matter to precompute (its
   // --explain failed: "cannot write into the output folder: it is a file").
