@@ -56,6 +56,24 @@ void checkRequiredExtensions(const tinygltf::Model& model, const fs::path& path)
   }
 }
 
+// Percent-decoding of a URI's path (RFC 3986, as glTF's URIs are): '+' is itself. tinygltf 2.7
+// decodes buffer URIs as a URL's query string instead ('+' a space), so that `a+b.bin` is looked
+// for as `a b.bin`.
+std::string decodeUri(const std::string& uri, bool plusIsSpace) {
+  std::string decoded;
+  for (size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '%' && i + 2 < uri.size() &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+      decoded += char(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      decoded += plusIsSpace && uri[i] == '+' ? ' ' : uri[i];
+    }
+  }
+  return decoded;
+}
+
 // Keeps the encoded bytes of data-URI images for our own decoder. Images in buffer views are
 // decoded from the buffer after their bounds are checked, and images in files from the file, so
 // their bytes are not kept (nor read) here.
@@ -365,18 +383,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
   const tinygltf::Image& image = model_.images[size_t(imageIndex)];
   if (!image.uri.empty()) {
     // An image file beside the glTF: its URI is relative and percent-encoded.
-    std::string decoded;
-    for (size_t i = 0; i < image.uri.size(); ++i) {
-      if (image.uri[i] == '%' && i + 2 < image.uri.size() &&
-          std::isxdigit(static_cast<unsigned char>(image.uri[i + 1])) &&
-          std::isxdigit(static_cast<unsigned char>(image.uri[i + 2]))) {
-        decoded += char(std::stoi(image.uri.substr(i + 1, 2), nullptr, 16));
-        i += 2;
-      } else {
-        decoded += image.uri[i];
-      }
-    }
-    file = path_.parent_path() / decoded;
+    file = path_.parent_path() / decodeUri(image.uri, false);
     mesh_.otherFiles.push_back(file);
     where = file.string();
     return readTextureFile(file, "sRGB", alpha);
@@ -928,11 +935,56 @@ bool fileExists(const std::string& file, void*) {
   return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)
 }
 
-// What the callbacks saw: the files read besides the glTF itself.
+// What the callbacks saw: the files read besides the glTF itself. `renamed` holds the buffer
+// files tinygltf would look for under another name, as it will ask for them and as they are.
 struct ReadFiles {
   fs::path main;
   std::vector<fs::path> others;
+  std::map<std::string, std::string> renamed;
 };
+
+// The buffer files whose URI holds a '+', under the path tinygltf will ask for (its base folder
+// joined as it joins it) and their true path. A file that does not parse gives none: tinygltf
+// says what is wrong with it.
+std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool binary) {
+  std::ifstream in(path, std::ios::binary);
+  std::string text;
+  if (binary) {
+    unsigned char header[20];
+    if (!in.read(reinterpret_cast<char*>(header), sizeof header)) return {};
+    const uint32_t length = uint32_t(header[12]) | uint32_t(header[13]) << 8 |
+                            uint32_t(header[14]) << 16 | uint32_t(header[15]) << 24;
+    std::error_code ec;
+    if (length > fs::file_size(path, ec) || ec) return {};
+    text.resize(length);
+    if (!in.read(text.data(), std::streamsize(length))) return {};
+  } else {
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object() || !j.contains("buffers") || !j["buffers"].is_array())
+    return {};
+  const std::string file = path.string();
+  const size_t slash = file.find_last_of("/\\");
+  const std::string base = slash == std::string::npos ? "" : file.substr(0, slash);
+  auto join = [&](const std::string& name) {
+    return base.empty() ? name : base.back() == '/' ? base + name : base + "/" + name;
+  };
+  std::map<std::string, std::string> out;
+  for (const nlohmann::json& buffer : j["buffers"]) {
+    if (!buffer.is_object() || !buffer.contains("uri") || !buffer["uri"].is_string()) continue;
+    const std::string uri = buffer["uri"].get<std::string>();
+    if (uri.rfind("data:", 0) == 0 || uri.find('+') == std::string::npos) continue;
+    out[join(decodeUri(uri, true))] = join(decodeUri(uri, false));
+  }
+  return out;
+}
+
+std::string expandFilePath(const std::string& file, void* user) {
+  const auto* seen = static_cast<const ReadFiles*>(user);
+  if (const auto it = seen->renamed.find(file); it != seen->renamed.end()) return it->second;
+  return file;
+}
 
 bool readRegularFile(std::vector<unsigned char>* out, std::string* err, const std::string& file,
                      void* user) {
@@ -977,15 +1029,15 @@ void checkGlbChunks(const fs::path& path) {
 LoadedMesh loadGltf(const fs::path& path) {
   tinygltf::TinyGLTF parser;
   parser.SetImageLoader(&keepEncodedImage, nullptr);
-  ReadFiles seen{path, {}};
-  parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &tinygltf::ExpandFilePath,
-                                              &readRegularFile, &tinygltf::WriteWholeFile, &seen});
-  tinygltf::Model model;
-  std::string err, warn;
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (ext == ".glb") checkGlbChunks(path);
+  ReadFiles seen{path, {}, renamedBuffers(path, ext == ".glb")};
+  parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &expandFilePath, &readRegularFile,
+                                              &tinygltf::WriteWholeFile, &seen});
+  tinygltf::Model model;
+  std::string err, warn;
   bool ok = false;
   try {
     ok = ext == ".glb" ? parser.LoadBinaryFromFile(&model, &err, &warn, path.string())

@@ -841,7 +841,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
       bool footprints = false;
       if (textured) {
         glm::dvec3 world;
-        glm::vec3 o, d0, d1, d2;
+        glm::vec3 o(0.0f), d0(0.0f), d1(0.0f), d2(0.0f);
         footprints = cameraRays.ray(x + 0.5, y + 0.5, world, o, d0) &&
                      cameraRays.ray(x + 0.5 + textureFootprint, y + 0.5, world, o, d1) &&
                      cameraRays.ray(x + 0.5, y + 0.5 + textureFootprint, world, o, d2);

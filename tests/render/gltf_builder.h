@@ -96,6 +96,9 @@ class GltfBuilder {
     return j.dump(1);
   }
 
+  // The buffer's bytes, for a .gltf whose buffer is a file of its own.
+  const std::vector<uint8_t>& bufferBytes() const { return buffer_; }
+
   // A .glb: the JSON chunk and the buffer as the BIN chunk.
   std::vector<uint8_t> glb() const {
     nlohmann::json j = json;

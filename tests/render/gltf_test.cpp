@@ -589,6 +589,47 @@ TEST(Gltf, ABinaryGlbWithItsTextureInABufferView) {
   EXPECT_EQ(external.textures[0].file.filename(), "my texture.png");
 }
 
+// glTF's URIs are RFC 3986 references: '+' in a file name is itself (tinygltf 2.7 read it as a
+// space, as in a URL's query, and found no buffer), "%2B" too, and "%20" a space.
+TEST(Gltf, BufferFilesNamedWithPlusSigns) {
+  TempDir dir;
+  const std::vector<uint8_t> png = quadrantPng(dir);
+  for (const auto& [uri, name] :
+       std::vector<std::pair<std::string, std::string>>{{"pair+v2.bin", "pair+v2.bin"},
+                                                        {"pair%2Bv3 .bin", "pair+v3 .bin"},
+                                                        {"a+b%20c.bin", "a+b c.bin"}}) {
+    GltfBuilder b = texturedPair(json::object());
+    const int view = b.view(png.data(), png.size());
+    b.json["images"][0] = {{"bufferView", view}, {"mimeType", "image/png"}};
+    const std::vector<uint8_t>& bytes = b.bufferBytes();
+    writeBytes(dir / name, bytes);
+    nlohmann::json j = nlohmann::json::parse(b.gltf());
+    j["buffers"][0]["uri"] = uri;
+    writeText(dir / "plus.gltf", j.dump(1));
+    const Mesh m = loadMesh(dir / "plus.gltf");
+    expectPaintedPair(m);
+    ASSERT_EQ(m.otherFiles.size(), 1u) << uri;
+    EXPECT_EQ(m.otherFiles[0].filename(), name);
+    // The same buffer in a .glb's JSON, as a file beside it (a .glb's first buffer may be one).
+    std::vector<uint8_t> glb = b.glb();
+    uint32_t jsonLength = 0;
+    std::memcpy(&jsonLength, glb.data() + 12, 4);
+    nlohmann::json inGlb =
+        nlohmann::json::parse(std::string(glb.begin() + 20, glb.begin() + 20 + jsonLength));
+    inGlb["buffers"][0]["uri"] = uri;
+    std::string text = inGlb.dump();
+    while (text.size() % 4) text += ' ';
+    // The header, then the JSON chunk alone.
+    const uint32_t words[5] = {0x46546C67u, 2u, uint32_t(20 + text.size()), uint32_t(text.size()),
+                               0x4E4F534Au};
+    std::vector<uint8_t> out(20 + text.size());
+    std::memcpy(out.data(), words, 20);
+    std::memcpy(out.data() + 20, text.data(), text.size());
+    writeBytes(dir / "plus.glb", out);
+    expectPaintedPair(loadMesh(dir / "plus.glb"));
+  }
+}
+
 TEST(Gltf, TextureTransformAndWrapModes) {
   TempDir dir;
   const std::string png = "data:image/png;base64," + base64(quadrantPng(dir));
