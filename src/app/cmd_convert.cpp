@@ -2,6 +2,8 @@
 // and mirror-ball photos to environments.
 #include <cmath>
 #include <cstdio>
+#include <optional>
+#include <utility>
 
 #include "app/cli.h"
 #include "color/color.h"
@@ -41,6 +43,31 @@ double energyDifference(const glm::dvec3& a, const glm::dvec3& b) {
     if (scale > 0.0) worst = std::max(worst, std::abs(a[c] - b[c]) / scale);
   }
   return worst;
+}
+
+// A resampled map's values converted from the linear space they were averaged in to the
+// space its file holds (sRGB codes for a PNG).
+void encodeCube(const color::ColorConfig& colors, lighting::CubeMap& cube, const std::string& from,
+                const std::string& to) {
+  for (int f = 0; f < lighting::kCubeFaces; ++f) {
+    Image face = cube.faceImage(f);
+    face.colorSpace = from;
+    colors.convert(face, to);
+    std::copy(face.pixels.begin(), face.pixels.end(), cube.face(f).begin());
+  }
+  cube.colorSpace = to;
+}
+
+lighting::Environment encodedLatLong(const color::ColorConfig& colors,
+                                     const lighting::Environment& map, const std::string& from,
+                                     const std::string& to) {
+  Image image(map.width(), map.height(), 3, {"R", "G", "B"});
+  image.pixels.assign(map.texels().begin(), map.texels().end());
+  image.colorSpace = from;
+  colors.convert(image, to);
+  lighting::SanitizeReport keep;
+  keep.keepNegative = true;
+  return lighting::Environment::fromLatLong(image, {}, &keep);
 }
 
 }  // namespace
@@ -178,11 +205,13 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     glm::dvec3 energyIn(0.0);
     lighting::SanitizeReport sanitized;
     sanitized.keepNegative = true;  // a conversion of layouts changes no value
+    // Values resampled in linear light, written in a space that is not linear: from, to.
+    std::optional<std::pair<std::string, std::string>> encodeAs;
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
     if (from == Layout::MirrorBall) {
       ingest::LoadedImage photo =
           ingest::readImage(inputs.front(), "ingest", {.picturePart = true});
       // Unwrapping averages pixels: it happens on linear radiance.
-      const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
       const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
                                                      : colors.resolve(o->outSpace, "--out-space");
       ingest::requireColourChannels(photo.image, inputs.front(), "ingest", "the mirror ball");
@@ -195,9 +224,14 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                                  .inputSpace(inputs.front(), photo.info.fileColorSpace, false,
                                              photo.info.integerSamples())
                                  .space;
-      notes.push_back("mirror ball read as '" + rgb.colorSpace + "', unwrapped in '" + target +
-                      "'");
-      colors.convert(rgb, target);
+      // Averaged in linear light: the target's space when it is linear, else the working space
+      // (any linear space averages alike: a matrix commutes with the mean), and encoded as the
+      // file is read afterwards.
+      const std::string through = colors.isLinearOrData(target) ? target : colors.workingSpace();
+      notes.push_back("mirror ball read as '" + rgb.colorSpace + "', unwrapped in '" + through +
+                      "'" + (through != target ? ", written as '" + target + "'" : std::string()));
+      colors.convert(rgb, through);
+      if (through != target) encodeAs = {through, target};
       write.chromaticities = colors.chromaticities(target);
       ball.faceSize = o->size > 0 && *to != Layout::LatLong ? o->size : 0;
       cubemap::MirrorBallResult unwrapped =
@@ -215,8 +249,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       cubemap::EnvironmentFile file = cubemap::readEnvironmentFile(inputs, read);
       notes.insert(notes.end(), file.notes.begin(), file.notes.end());
       notes.push_back("read " + file.describe() + " (" + file.how + ")");
-      // Values are resampled as stored; the colour metadata goes along, and the camera and
-      // exposure unit of a map stitched from merged photos.
+      // Values are resampled as stored when they are linear light; the colour metadata goes
+      // along, and the camera and exposure unit of a map stitched from merged photos.
       write.chromaticities = file.info.chromaticities;
       {
         // Only what every file says (six faces: each of them).
@@ -234,7 +268,6 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       if (file.layout == Layout::MirrorBall) {
         throw UsageError("a mirror ball is unwrapped with --from mirrorball (one photo)");
       }
-      const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
       // An OpenEXR's chromaticities say its primaries, as compose --env reads them: the space
       // of the config with those primaries is the name written, not the generic 'Linear'
       // OpenImageIO gives every EXR without a colorSpace; with no such space, the
@@ -262,6 +295,9 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // are made linear first, as compose reads such a picture with --env: an OpenEXR holds
       // linear light, and other tools take it so. The other way round, linear light written
       // into 8-bit codes is encoded as compose (and other tools) will read those files.
+      // Resampling averages light: values in a space that is not linear are made linear before
+      // it and encoded again after it (sRGB codes averaged as stored lose light: a checkerboard
+      // of 0 and 1 came out 0.21, not 0.5).
       // The files written: for --to faces, the six face files the name gives (a base name
       // without an extension, or a folder, gets OpenEXR's).
       const std::filesystem::path firstOut = *to == Layout::Faces
@@ -270,37 +306,49 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       const std::string ext = ingest::lowerExtension(firstOut);
       const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
+      const bool byMatrix = file.info.chromaticities && declared.empty();
+      const std::string source =
+          byMatrix ? std::string("the RGB space of the chromaticities in its header")
+          : file.info.chromaticities
+              ? declared
+              : colors.inputSpace(file.files.front(), declared, false, file.info.integerSamples())
+                    .space;
       // A Radiance file says no primaries: it is read as the config's rules say, so it is
-      // written in that space.
-      if (floatsOut == codesIn || ext == ".hdr") {
-        const bool byMatrix = file.info.chromaticities && declared.empty();
-        const std::string source =
-            byMatrix ? std::string("the RGB space of the chromaticities in its header")
-            : file.info.chromaticities
-                ? declared
-                : colors.inputSpace(file.files.front(), declared, false, file.info.integerSamples())
-                      .space;
-        const std::string target = colors.inputSpaceFor(firstOut, "");
-        if (source != target) {
-          auto linearise = [&](Image& image) {
-            if (byMatrix) {  // by matrix into the working space, then as any other space
-              colors.convertFromChromaticities(image, *file.info.chromaticities,
-                                               colors.workingSpace(), file.files.front());
-            } else {
-              image.colorSpace = source;
-            }
-            colors.convert(image, target);
-          };
-          if (file.isCube()) {
-            for (Image& face : file.faces) linearise(face);
+      // written in that space. Codes written as codes keep their space.
+      const bool recode = floatsOut == codesIn || ext == ".hdr";
+      const std::string target = recode ? colors.inputSpaceFor(firstOut, "") : source;
+      const bool sourceLinear = byMatrix || colors.isLinearOrData(source);
+      // Linear light is resampled as stored unless its file's space changes.
+      const std::string through = !recode && sourceLinear         ? source
+                                  : colors.isLinearOrData(target) ? target
+                                  : sourceLinear && !byMatrix     ? source
+                                                                  : colors.workingSpace();
+      if (source != through) {
+        auto linearise = [&](Image& image) {
+          if (byMatrix) {  // by matrix into the working space, then as any other space
+            colors.convertFromChromaticities(image, *file.info.chromaticities,
+                                             colors.workingSpace(), file.files.front());
           } else {
-            linearise(file.image);
+            image.colorSpace = source;
           }
-          write.chromaticities = colors.chromaticities(target);
-          notes.push_back("its " + file.info.sampleType + " values read as '" + source +
-                          "' and written as '" + target + "' (as " + firstOut.extension().string() +
-                          " files are read)");
+          colors.convert(image, through);
+        };
+        if (file.isCube()) {
+          for (Image& face : file.faces) linearise(face);
+        } else {
+          linearise(file.image);
         }
+      }
+      if (through != target) encodeAs = {through, target};
+      if (source != target) {
+        write.chromaticities = colors.chromaticities(target);
+        notes.push_back("its " + file.info.sampleType + " values read as '" + source +
+                        "' and written as '" + target + "' (as " + firstOut.extension().string() +
+                        " files are read)" +
+                        (through != target ? ", resampled in '" + through + "'" : std::string()));
+      } else if (through != target) {
+        notes.push_back("its " + file.info.sampleType + " values ('" + source +
+                        "') resampled in '" + through + "'");
       } else if (file.info.chromaticities && declared.empty()) {
         notes.push_back(
             "the header's chromaticities match no space of the colour config: "
@@ -345,6 +393,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
                      : latLong;
       }
       energyOut = lighting::integral(result);
+      if (encodeAs) result = encodedLatLong(colors, result, encodeAs->first, encodeAs->second);
       for (auto& n : cubemap::writeLatLong(outputs, o->out, result, write)) notes.push_back(n);
       written.push_back(o->out);
     } else {
@@ -356,6 +405,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         result = lighting::cubeFromLatLong(latLong, size, printer.callback());
       }
       energyOut = result.integral();
+      if (encodeAs) encodeCube(colors, result, encodeAs->first, encodeAs->second);
       for (auto& n : cubemap::writeCubeMap(outputs, o->out, result, *to, write)) notes.push_back(n);
       if (*to == Layout::Faces) {
         for (const auto& p : cubemap::facePaths(o->out, write.faceNaming)) written.push_back(p);

@@ -885,6 +885,70 @@ TEST(ConvertCommand, CodesBecomeLinearLightInAnExrAndComeBack) {
   EXPECT_EQ(moved, 0) << "codes that moved";
 }
 
+// Resampling averages light: a map written as codes (PNG) is resampled in linear light and
+// encoded afterwards, from a map of floats or of codes alike, and a mirror-ball photo is
+// unwrapped so. A checkerboard of 0 and 1 in blocks of 2x2 texels averages to 0.5 over a texel
+// of an 8x8 cube (its codes averaged as stored gave 0.21: 57 % of the light lost, with a note that
+// the energy agreed). A repacking without resampling keeps the codes.
+TEST(ConvertCommand, CodesAreResampledAsLight) {
+  TempDir dir;
+  Image checker(256, 128, 3, {"R", "G", "B"});
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 256; ++x)
+      for (int c = 0; c < 3; ++c) checker.at(x, y)[c] = float(((x / 2) + (y / 2)) % 2);
+  ingest::WriteOptions floats;
+  floats.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "checker.exr", checker, floats);
+  ingest::writeImage(dir / "checker.png", checker);
+  // The linear mean of a written file of codes (sRGB) or floats.
+  auto linearMean = [](const fs::path& file) {
+    const ingest::LoadedImage read = ingest::readImage(file);
+    const bool codes = read.info.integerSamples();
+    double sum = 0.0;
+    for (float v : read.image.pixels)
+      sum += !codes || v <= 0.04045f ? (codes ? v / 12.92 : v) : std::pow((v + 0.055) / 1.055, 2.4);
+    return sum / double(read.image.pixels.size());
+  };
+  for (const char* in : {"checker.exr", "checker.png"}) {
+    for (const auto& [args, out] :
+         std::vector<std::pair<std::string, std::string>>{{"--to cube --size 8", "cube.png"},
+                                                          {"--to latlong --width 32", "small.png"},
+                                                          {"--to cube --size 8", "cube.exr"}}) {
+      const RunResult r =
+          run("convert " + q(dir / in) + " " + args + " --out " + q(dir / out), dir);
+      ASSERT_EQ(r.status, 0) << in << " " << args << ": " << r.err;
+      EXPECT_NEAR(linearMean(dir / out), 0.5, 0.01) << in << " -> " << out;
+    }
+    // The same size: a change of layout moves codes, resamples nothing.
+    const RunResult cube =
+        run("convert " + q(dir / in) + " --to cube --size 16 --out " + q(dir / "c16.png"), dir);
+    ASSERT_EQ(cube.status, 0) << cube.err;
+    const RunResult cross =
+        run("convert " + q(dir / "c16.png") + " --to vcross --out " + q(dir / "c16cross.png"), dir);
+    ASSERT_EQ(cross.status, 0) << cross.err;
+    const Pixels a = ingest::readImage(dir / "c16.png").image.pixels;
+    std::vector<float> sortedA(a.begin(), a.end()), sortedB;
+    for (float v : ingest::readImage(dir / "c16cross.png").image.pixels)
+      if (v > 0.0f) sortedB.push_back(v);  // the cross's empty corners are black
+    sortedA.erase(std::remove(sortedA.begin(), sortedA.end(), 0.0f), sortedA.end());
+    std::sort(sortedA.begin(), sortedA.end());
+    std::sort(sortedB.begin(), sortedB.end());
+    EXPECT_EQ(sortedA, sortedB) << in << ": codes changed by a repacking";
+  }
+  // A mirror ball of the same checker (in the ball's image) unwrapped into codes.
+  Image ball(128, 128, 3, {"R", "G", "B"});
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 128; ++x)
+      for (int c = 0; c < 3; ++c) ball.at(x, y)[c] = float(((x / 2) + (y / 2)) % 2);
+  ingest::writeImage(dir / "ball.png", ball);
+  const RunResult r =
+      run("convert " + q(dir / "ball.png") + " --from mirrorball --to latlong --width 32 --out " +
+              q(dir / "ball_ll.png"),
+          dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NEAR(linearMean(dir / "ball_ll.png"), 0.5, 0.03);
+}
+
 // 8- and 16-bit TIFFs are codes as PNGs are: convert linearises them the same way (a rule for
 // float images must not take them for linear light); a float TIFF is linear light already.
 TEST(ConvertCommand, IntegerTiffsAreCodesAndFloatTiffsAreLight) {
