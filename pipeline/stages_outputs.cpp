@@ -639,8 +639,10 @@ ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshF
   // (m44d): a mesh far from its file's origin (a scene exported in place, georeferenced) has a
   // translation that float rounds by centimetres, and the rebuilt object would not stand where
   // it was rendered.
-  const glm::dmat4 worldFromFile =
-      geometry.worldFromObject * glm::translate(glm::dmat4(1.0), -fileOrigin);
+  // The format's turn of axes (a .bez is Z up) comes first.
+  const glm::dmat4 worldFromFile = geometry.worldFromObject *
+                                   glm::translate(glm::dmat4(1.0), -fileOrigin) *
+                                   glm::dmat4(render::meshFromFileAxes(meshFile));
   std::array<double, 16> fromFile;
   for (int c = 0; c < 4; ++c)
     for (int r = 0; r < 4; ++r) fromFile[size_t(4 * c + r)] = worldFromFile[c][r];

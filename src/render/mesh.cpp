@@ -1122,6 +1122,7 @@ detail::LoadedMesh loadBezierPatches(const fs::path& path) {
                 path);
   }
   constexpr int kSteps = 16;
+  const glm::dmat3 zUp = meshFromFileAxes(path);  // the patches are Z up
   static_assert(2 * kSteps * kSteps == 512, "the triangle count checked while reading");
   auto bernstein = [](double t, double b[4]) {
     const double s = 1.0 - t;
@@ -1149,7 +1150,8 @@ detail::LoadedMesh loadBezierPatches(const fs::path& path) {
             const double* q = c + 3 * (4 * a + b);
             p += bu[a] * bv[b] * glm::dvec3(q[0], q[1], q[2]);
           }
-        const std::array<float, 3> key = {float(p.x), float(p.z), float(-p.y)};
+        const glm::dvec3 turned = zUp * p;
+        const std::array<float, 3> key = {float(turned.x), float(turned.y), float(turned.z)};
         auto [it, inserted] = weld.try_emplace(key, uint32_t(mesh.positions.size()));
         if (inserted) mesh.positions.emplace_back(key[0], key[1], key[2]);
         ids.push_back(it->second);
@@ -1342,6 +1344,15 @@ int orientConsistently(Mesh& mesh) {
     }
   }
   return flippedTotal;
+}
+
+glm::dmat3 meshFromFileAxes(const fs::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext != ".bez") return glm::dmat3(1.0);
+  // Columns: where the file's x, y and z axes go. Z up -> Y up.
+  return glm::dmat3(glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1), glm::dvec3(0, 1, 0));
 }
 
 Mesh loadMesh(const fs::path& path, const MeshOptions& options) {

@@ -226,6 +226,11 @@ struct MeshOptions {
 
 Mesh loadMesh(const std::filesystem::path& path, const MeshOptions& options = {});
 
+// The turn loadMesh() gives a format's axes, from the file's coordinates to the mesh's (Y up):
+// Geomview's .bez patches are Z up, (x, y, z) -> (x, z, -y); the identity for the others. The
+// mesh's fileOrigin is taken off after it.
+glm::dmat3 meshFromFileAxes(const std::filesystem::path& path);
+
 // Smooth vertex normals for every vertex (see the header comment): the angle-weighted mean of the
 // adjacent face normals across edges of at most `creaseDegrees`, vertices split where sharper
 // edges meet on crease lines. Positions are welded by value first, so that vertices split by

@@ -458,5 +458,31 @@ TEST(SceneHeader, TheObjectsPlacementIsKeptInDouble) {
   }
 }
 
+// A Geomview .bez is Z up and read Y up: the matrix maps the file's own coordinates, so the turn
+// is in it (without it the rebuilt teapot lay on its side, 2 m into the ground).
+TEST(SceneHeader, TheObjectsPlacementTakesAFilesAxes) {
+  Geometry geometry;
+  geometry.camera.width = 640;
+  geometry.camera.height = 480;
+  geometry.camera.lens = calib::Lens::fromFieldOfView(640, 480, 60.0);
+  geometry.worldFromObject = glm::translate(glm::dmat4(1.0), glm::dvec3(0.5, 0.0, -4.0));
+  for (const auto& [file, expected] :
+       std::vector<std::pair<std::string, glm::dvec3>>{{"teapot.bez", {1.5, 3.0, -6.0}},
+                                                       {"TEAPOT.BEZ", {1.5, 3.0, -6.0}},
+                                                       {"bunny.obj", {1.5, 2.0, -1.0}}}) {
+    const ingest::ExrHeader header = sceneHeader(geometry, file, glm::dvec3(0.0));
+    const std::array<double, 16>* m = nullptr;
+    for (const auto& [name, value] : header.doubleMatrices)
+      if (name == "compose:worldFromObject") m = &value;
+    ASSERT_NE(m, nullptr);
+    const double p[3] = {1.0, 2.0, 3.0};  // in the file
+    for (int c = 0; c < 3; ++c) {
+      const double w = p[0] * (*m)[size_t(c)] + p[1] * (*m)[size_t(4 + c)] +
+                       p[2] * (*m)[size_t(8 + c)] + (*m)[size_t(12 + c)];
+      EXPECT_NEAR(w, expected[c], 1e-12) << file << " " << c;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace compose::pipeline
