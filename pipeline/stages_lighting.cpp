@@ -249,6 +249,9 @@ class PrecomputeStage final : public Stage {
           !lighting::LightingCache::finiteIrradiance(*choice.basis))
         return false;
       ctx.artefacts.lighting = std::move(choice.basis);
+      // What order=auto chose goes on to the lighting file (compose precompute) and to the
+      // next store, as when it is computed.
+      ctx.artefacts.lightingOrder = int(*order);
     }
     if (ctx.needs(kShadowLighting)) {
       if (!meta.contains("shadowLighting")) return false;

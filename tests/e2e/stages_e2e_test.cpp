@@ -458,6 +458,25 @@ TEST_F(StageCommands, ATexturedObjectChainedByHandWithAGivenExposure) {
   EXPECT_EQ(slurp(dir_ / "one" / "compose.jpg"), slurp(dir_ / "two" / "compose.jpg"));
 }
 
+// The order order=auto chose travels with a projection reused from the cache: a second
+// precompute wrote order 0 into its lighting file, which render then refused ("the lighting
+// file's contents do not fit its basis").
+TEST_F(StageCommands, AReusedAutomaticOrderIsTheOneChosen) {
+  const std::string env = " --env " + quote(samples_ / "forest.exr") +
+                          " --lighting-params order=auto --cache " + quote(dir_ / "cache");
+  for (const char* name : {"first.lighting", "second.lighting"}) {
+    const RunResult pre = run("precompute" + env + " --out " + quote(dir_ / name), dir_.path());
+    ASSERT_EQ(pre.status, 0) << pre.err;
+  }
+  EXPECT_TRUE(slurp(dir_ / "first.lighting") == slurp(dir_ / "second.lighting"))
+      << "the reused projection's lighting file differs from the computed one's";
+  const RunResult ren = run("-q render --plate " + quote(plate_) + " " + objectOptions() +
+                                " --lighting-file " + quote(dir_ / "second.lighting") + " --out " +
+                                quote(dir_ / "layer.exr") + " --cache " + quote(dir_ / "cache"),
+                            dir_.path());
+  EXPECT_EQ(ren.status, 0) << ren.err;
+}
+
 // An option only the one-shot command has, given to a command, is refused before anything is
 // read (CLI11 would pass it up to the one-shot command's options, where it was taken and not
 // used: compose composite --exposure 1 wrote the same picture as without). The options of every
