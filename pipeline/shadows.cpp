@@ -69,6 +69,12 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
       throw UsageError("order does not apply to method=ao: ambient occlusion projects nothing",
                        "shadows");
     }
+    if (plan.method == render::ShadowMethod::AmbientOcclusion && p.has("sources")) {
+      throw UsageError(
+          "sources does not apply to method=ao: ambient occlusion darkens all light alike and "
+          "traces no source (method=cheb or sh cast directional shadows)",
+          "shadows");
+    }
     plan.transfer.grid = p.getInt("grid", 16, "shadows");
     // The default Chebyshev order is 16, or the grid's size on a coarser grid (k <= s).
     plan.lightingOrder =
@@ -77,6 +83,8 @@ ShadowPlan ShadowPlan::parse(const std::string& text) {
     plan.sources = p.getInt("sources", 64, "shadows");
     plan.refine.spread = float(p.getDouble("refine", plan.refine.spread, "shadows"));
     plan.refine.budget = float(p.getDouble("refine-budget", plan.refine.budget, "shadows"));
+    if (plan.refine.spread == 0.0f && p.has("refine-budget"))
+      throw UsageError("refine-budget does not apply with refine=0 (no refinement)", "shadows");
     const std::string ground = p.getString("ground", "on");
     if (ground != "on" && ground != "off")
       throw UsageError("ground must be on or off, got '" + ground + "'", "shadows");
@@ -173,6 +181,11 @@ ShadowLighting prepareShadowLighting(const lighting::Environment& environment,
   out.split.residual = {};  // projected: the pixels are not needed any more
   out.reason = std::string(reused ? "reused" : "projected") + " its lighting (" +
                out.lighting->describe() + ")";
+  if (plan.method == render::ShadowMethod::AmbientOcclusion) {
+    out.reason +=
+        "; ambient occlusion alone: no source casts a directional shadow, on the object or the "
+        "ground (method=cheb does)";
+  }
   if (!out.split.sources.empty()) {
     char line[160];
     std::snprintf(line, sizeof line, "; %zu bright sources (%.1f%% of the light) shadowed by rays",

@@ -440,6 +440,14 @@ TEST(ShadowPlan, TheGridIsCheckedBeforeTheOrderItBounds) {
   // A parameter the method does not take is refused, not ignored.
   COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("method=ao,order=99"),
                        "order does not apply to method=ao");
+  // Sources are not traced with ambient occlusion (sources=0 and sources=8 wrote the same file),
+  // nor is a budget spent without refinement.
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("method=ao,sources=8"),
+                       "sources does not apply to method=ao");
+  COMPOSE_EXPECT_ERROR(pipeline::ShadowPlan::parse("refine=0,refine-budget=3"),
+                       "refine-budget does not apply with refine=0");
+  EXPECT_EQ(pipeline::ShadowPlan::parse("method=ao").method, ShadowMethod::AmbientOcclusion);
+  EXPECT_EQ(pipeline::ShadowPlan::parse("refine=0").refine.spread, 0.0f);
 }
 
 }  // namespace
