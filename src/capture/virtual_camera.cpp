@@ -281,16 +281,31 @@ void VirtualCameraParams::validate() const {
   if (!(evStep > 0.0 && evStep <= 6.0)) fail("--ev-step must be in (0, 6] stops");
   if (exposureTime && !(*exposureTime >= 1e-9 && *exposureTime <= 3600.0))
     fail("exposure time must be between 1 ns and 3600 s");
+  if (exposureTime && *exposureTime >= 1e-9 && *exposureTime <= 3600.0 && evStep > 0.0 &&
+      brackets >= 1 && brackets <= 15) {
+    // Every shot of the bracket, not only the middle one, within a shutter's range.
+    const double spread = std::exp2(0.5 * (brackets - 1) * evStep);
+    if (!(*exposureTime / spread >= 1e-9 && *exposureTime * spread <= 3600.0)) {
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "the bracket's exposures (%.3g s to %.3g s) must be between 1 ns and 3600 s",
+                    *exposureTime / spread, *exposureTime * spread);
+      fail(text);
+    }
+  }
   if (!(fNumber >= 0.5 && fNumber <= 128.0)) fail("f-number must be between 0.5 and 128");
   if (!(iso >= 1.0 && iso <= 409600.0)) fail("ISO must be between 1 and 409600");
+  if (iso != std::floor(iso)) fail("ISO must be a whole number, as EXIF records it");
   if (!(calibration > 0.0) || !std::isfinite(calibration)) fail("calibration must be positive");
   for (int c = 0; c < 3; ++c)
     if (!(whiteBalance[c] > 0.0) || !std::isfinite(whiteBalance[c]))
       fail("white-balance gains must be positive");
   if (!(curve.gamma > 0.1 && curve.gamma < 10.0)) fail("response gamma must be in (0.1, 10)");
   if (!(curve.shoulder > 0.0 && curve.shoulder < 1e6)) fail("response shoulder must be positive");
-  if (!(fullWellElectrons >= 100.0) || !(readNoiseElectrons >= 0.0))
-    fail("noise: full well must be at least 100 electrons and read noise non-negative");
+  if (!(fullWellElectrons >= 100.0) || !(readNoiseElectrons >= 0.0) ||
+      !std::isfinite(fullWellElectrons) || !std::isfinite(readNoiseElectrons))
+    fail(
+        "noise: full well must be at least 100 electrons and read noise non-negative, both finite");
   if (supersample && (*supersample < 1 || *supersample > 16))
     fail("supersampling must be between 1 and 16");
   if (!(blurPixels >= 0.0 && blurPixels <= 10.0)) fail("optical blur must be 0-10 pixels");

@@ -46,6 +46,8 @@ constexpr Tag kTags[] = {
     {0x829A, Ifd::Exif, kRational, "ExposureTime"},
     {0x829D, Ifd::Exif, kRational, "FNumber"},
     {0x8827, Ifd::Exif, kShort, "Exif:PhotographicSensitivity"},
+    {0x8830, Ifd::Exif, kShort, "Exif:SensitivityType"},
+    {0x8833, Ifd::Exif, kLong, "Exif:ISOSpeed"},
     {0x9003, Ifd::Exif, kAscii, "Exif:DateTimeOriginal"},
     {0x9291, Ifd::Exif, kAscii, "Exif:SubsecTimeOriginal"},
     {0x920A, Ifd::Exif, kRational, "Exif:FocalLength"},
@@ -199,16 +201,30 @@ class Reader {
   bool little_ = false;
 };
 
-// A value as an unsigned rational: exact for whole numbers and for 1/n (exposure times), else
-// the nearest with a denominator that keeps the numerator in range.
+// A value as an unsigned rational: exact for whole numbers and for 1/n (exposure times, n
+// found within rounding: 1 / 1e-9 is not a whole double), else the closest fraction of 32-bit
+// terms (the continued fraction's last convergent that fits: 1.5e-7 s is 3/20000000, where a
+// fixed denominator of 10^6 wrote 0).
 std::pair<uint32_t, uint32_t> rational(double v) {
+  constexpr double kMax = 4294967295.0;
   if (!(v > 0.0) || !std::isfinite(v)) return {0, 1};
-  if (v >= 1.0 && v == std::floor(v) && v < 4294967295.0) return {uint32_t(v), 1};
-  const double inverse = 1.0 / v;
-  if (inverse == std::floor(inverse) && inverse < 4294967295.0) return {1, uint32_t(inverse)};
-  uint32_t den = 1000000;
-  while (den > 1 && v * den > 4294967295.0) den /= 10;
-  return {uint32_t(std::llround(v * den)), den};
+  if (v >= kMax) return {uint32_t(kMax), 1};
+  const double inverse = std::round(1.0 / v);
+  if (v < 1.0 && inverse <= kMax && std::abs(1.0 / v - inverse) <= 1e-9 * inverse)
+    return {1, uint32_t(inverse)};
+  // Convergents h/k of v = a0 + 1/(a1 + 1/(a2 + ...)).
+  double h0 = 0.0, h1 = 1.0, k0 = 1.0, k1 = 0.0, x = v;
+  for (int i = 0; i < 64; ++i) {
+    const double a = std::floor(x);
+    const double h2 = a * h1 + h0, k2 = a * k1 + k0;
+    if (h2 > kMax || k2 > kMax) break;
+    h0 = h1, h1 = h2, k0 = k1, k1 = k2;
+    const double rest = x - a;
+    if (rest <= 1e-12 || std::abs(h1 / k1 - v) <= 1e-12 * v) break;
+    x = 1.0 / rest;
+  }
+  if (k1 == 0.0 || h1 == 0.0) return {1, uint32_t(kMax)};  // below 1/kMax: the smallest there is
+  return {uint32_t(h1), uint32_t(k1)};
 }
 
 class Writer {

@@ -179,6 +179,11 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   info.fNumber = h.positive("FNumber");
   info.iso = h.positive("Exif:PhotographicSensitivity");
   if (!info.iso) info.iso = h.positive("Exif:ISOSpeedRatings");
+  // Above 65535 the 16-bit tag holds 65535 and the sensitivity is in ISOSpeed (Exif 2.3, with
+  // SensitivityType 3 or another that includes it), as cameras write ISO 102400.
+  if (!info.iso || *info.iso >= 65535.0) {
+    if (const std::optional<double> speed = h.positive("Exif:ISOSpeed")) info.iso = speed;
+  }
   info.focalLengthMm = h.positive("Exif:FocalLength");
   info.focalPlaneXResolution = h.positive("Exif:FocalPlaneXResolution");
   info.focalPlaneYResolution = h.positive("Exif:FocalPlaneYResolution");
@@ -950,7 +955,15 @@ std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
   std::vector<ImageAttribute> a;
   if (info.exposureTime) a.push_back({"ExposureTime", *info.exposureTime});
   if (info.fNumber) a.push_back({"FNumber", *info.fNumber});
-  if (info.iso) a.push_back({"Exif:PhotographicSensitivity", int(std::lround(*info.iso))});
+  if (info.iso) {
+    // The 16-bit tag tops out at 65535: above, ISOSpeed holds the value (Exif 2.3).
+    const long iso = std::lround(*info.iso);
+    a.push_back({"Exif:PhotographicSensitivity", int(std::min(iso, 65535L))});
+    if (iso > 65535) {
+      a.push_back({"Exif:SensitivityType", 3});
+      a.push_back({"Exif:ISOSpeed", double(iso)});
+    }
+  }
   if (info.focalLengthMm) a.push_back({"Exif:FocalLength", *info.focalLengthMm});
   a.push_back({"Exif:FocalLengthIn35mmFilm",
                info.focalLength35mm ? int(std::lround(*info.focalLength35mm)) : 0});

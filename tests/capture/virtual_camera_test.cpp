@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <optional>
 
 #include <glm/geometric.hpp>
@@ -275,6 +276,28 @@ TEST(VirtualCamera, BadParametersAreRefused) {
   p = tiny();
   p.evStep = -1;
   COMPOSE_EXPECT_ERROR(p.validate(), "--ev-step");
+  // EXIF's ISO is whole (150.5 was written as 151); infinite noise is no camera (it wrote white
+  // or pure noise); every shot of a bracket is within a shutter's range, not only the middle one
+  // (3600 s, 6 EV apart, 5 shots wrote a shot of 14,745,600 s).
+  p = tiny();
+  p.iso = 150.5;
+  COMPOSE_EXPECT_ERROR(p.validate(), "ISO must be a whole number");
+  p = tiny();
+  p.fullWellElectrons = std::numeric_limits<double>::infinity();
+  COMPOSE_EXPECT_ERROR(p.validate(), "both finite");
+  p = tiny();
+  p.readNoiseElectrons = std::numeric_limits<double>::infinity();
+  COMPOSE_EXPECT_ERROR(p.validate(), "both finite");
+  p = tiny();
+  p.exposureTime = 3600.0;
+  p.evStep = 6.0;
+  p.brackets = 5;
+  COMPOSE_EXPECT_ERROR(p.validate(), "the bracket's exposures (0.879 s to 1.47e+07 s)");
+  p.exposureTime = 2e-9;
+  p.brackets = 3;
+  COMPOSE_EXPECT_ERROR(p.validate(), "must be between 1 ns and 3600 s");
+  p.exposureTime = 1.0;
+  EXPECT_NO_THROW(p.validate());
 }
 
 }  // namespace

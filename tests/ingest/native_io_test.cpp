@@ -171,6 +171,35 @@ TEST(NativeJpeg, ExifWrittenByEitherIsReadTheSameByBoth) {
   EXPECT_NE(bytes.find(oneOver64), std::string::npos);
 }
 
+// Values EXIF's plain tags cannot hold as such: ISO above 65535 goes to ISOSpeed (the 16-bit tag
+// holds 65535, as cameras write ISO 102400; it was dropped, and read as ISO 100), and exposure
+// times below a microsecond or not 1/n are the closest 32-bit fraction (1.5e-7 s was written as
+// 0, 3e-6 s as 2e-6 s), in our JPEGs and as OpenImageIO reads them. (OpenImageIO 2.4 writes no
+// ISO into a TIFF: capture-sim's TIFF descriptions carry it.)
+TEST(NativeJpeg, ExifHoldsHighIsoAndShortExposures) {
+  TempDir dir;
+  int n = 0;  // a file each: one read is not written over
+  for (const double iso : {100.0, 65535.0, 102400.0, 409600.0}) {
+    for (const double t : {1.5e-7, 3e-6, 1e-9, 1.0 / 3.0, 2.5, 3600.0}) {
+      CaptureInfo info;
+      info.exposureTime = t;
+      info.iso = iso;
+      WriteOptions options;
+      options.attributes = exifAttributes(info);
+      const std::filesystem::path file = dir / (std::to_string(n++) + ".jpg");
+      writeImage(file, Image(8, 8, 3), options);
+      SCOPED_TRACE("ISO " + std::to_string(iso) + ", " + std::to_string(t) + " s");
+      const CaptureInfo back = readCaptureInfo(file);
+      ASSERT_TRUE(back.iso && back.exposureTime);
+      EXPECT_EQ(*back.iso, iso);
+      EXPECT_NEAR(*back.exposureTime, t, 1e-9 * t);
+      OIIO::ImageSpec spec;
+      oiioRead(file, &spec);
+      EXPECT_NEAR(spec.get_float_attribute("ExposureTime"), t, 1e-6 * t);
+    }
+  }
+}
+
 // Orientations 1-4, 6 and 8 as OpenImageIO turns them. 5 and 7 as EXIF defines them (5: the
 // stored rows are the picture's columns, a transpose; 7: the transverse): OpenImageIO 2.4 has the
 // two swapped (fixed upstream in OpenImageIO #5350, "reorient() cases for transpose and
