@@ -7,10 +7,12 @@
 
 #include <algorithm>
 
+#include <array>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -85,10 +87,14 @@ std::optional<fs::path> protectedInputAt(const fs::path& destination) {
 
 bool isAbandonedTemporary(const fs::path& file) {
   const std::string name = file.filename().string();
-  const size_t at = name.rfind(".partial-");
+  // A temporary being written (.partial-), or a commit's backup of the file it replaces
+  // (.previous-); the writer's process id follows, then '-'.
+  size_t at = name.rfind(".partial-"), from = at + 9;
+  if (at == std::string::npos) {
+    at = name.rfind(".previous-");
+    from = at + 10;
+  }
   if (at == std::string::npos) return false;
-  // The writer's process id, then '-'.
-  const size_t from = at + 9;
   size_t digits = from;
   while (digits < name.size() && std::isdigit(static_cast<unsigned char>(name[digits]))) ++digits;
   if (digits == from || digits >= name.size() || name[digits] != '-') return false;
@@ -208,11 +214,46 @@ fs::path OutputFiles::add(const fs::path& destination) {
         destination);
   }
   removeStalePartials(dir, "." + destination.stem().string() + ".partial-");
+  // A killed commit's backups of the outputs before it, as stale.
+  removeStalePartials(dir, "." + destination.stem().string() + ".previous-");
   Entry e{temporaryNear(destination, "partial"), destination};
   const std::lock_guard<std::mutex> lock(mutex_);
   entries_.push_back(e);
   return e.temporary;
 }
+
+namespace {
+
+// SIGINT, SIGTERM, SIGHUP and SIGQUIT wait while a commit renames its files into place, and are
+// raised again once they all are: a farm manager's SIGTERM between two renames left a new EXR
+// beside the previous run's JPEG. (SIGKILL cannot wait; the renames follow one another with
+// nothing else between them.) Handlers are the process's, whichever thread a signal reaches.
+class DeferredSignals {
+ public:
+  DeferredSignals() {
+    struct sigaction record {};
+    record.sa_handler = &DeferredSignals::record;
+    sigemptyset(&record.sa_mask);
+    for (size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &record, &previous_[i]);
+  }
+  ~DeferredSignals() {
+    for (size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &previous_[i], nullptr);
+    if (const int signal = pending_) {
+      pending_ = 0;
+      ::raise(signal);
+    }
+  }
+  DeferredSignals(const DeferredSignals&) = delete;
+  DeferredSignals& operator=(const DeferredSignals&) = delete;
+
+ private:
+  static constexpr std::array<int, 4> kSignals = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+  static void record(int signal) { pending_ = signal; }
+  static inline volatile std::sig_atomic_t pending_ = 0;
+  std::array<struct sigaction, 4> previous_{};
+};
+
+}  // namespace
 
 void OutputFiles::commit() {
   COMPOSE_CHECK(!committed_);
@@ -222,35 +263,30 @@ void OutputFiles::commit() {
     folders.push_back(fs::absolute(e.destination, ec).parent_path());
   }
   const FolderLocks locks(std::move(folders));
-  // Keep the previous outputs under backup names (hard links: the originals stay in place until
-  // they are replaced), so that a failed move can put them back.
-  struct Moved {
-    fs::path destination, backup;
+  // First every check, and the previous outputs kept under backup names (hard links: the
+  // originals stay in place until they are replaced), so that a failed move can put them back;
+  // then the renames, one after the other.
+  struct Prepared {
+    fs::path temporary, destination, backup;
     bool hadPrevious;
   };
-  std::vector<Moved> moved;
-  auto rollback = [&] {
+  std::vector<Prepared> prepared;
+  auto removeAll = [&] {
     std::error_code ec;
-    for (auto it = moved.rbegin(); it != moved.rend(); ++it) {
-      if (it->hadPrevious) {
-        fs::rename(it->backup, it->destination, ec);
-      } else {
-        fs::remove(it->destination, ec);
-      }
-    }
+    for (const Prepared& p : prepared)
+      if (p.hadPrevious) fs::remove(p.backup, ec);
     for (const Entry& e : entries_) fs::remove(e.temporary, ec);
   };
-  std::vector<fs::path> backups;
   for (const Entry& e : entries_) {
     std::error_code ec;
     if (fs::is_directory(e.destination, ec)) {
-      rollback();
+      removeAll();
       throw Error(stage_, "output path is an existing folder", e.destination);
     }
     const bool hadPrevious = fs::exists(fs::symlink_status(e.destination, ec));
     if (hadPrevious && fs::is_regular_file(e.destination, ec) &&
         ::access(e.destination.c_str(), W_OK) != 0 && errno == EACCES) {
-      rollback();  // write-protected since the job began (see check())
+      removeAll();  // write-protected since the job began (see check())
       throw Error(stage_, withSystemReason("cannot replace the file", EACCES), e.destination);
     }
     fs::path backup;
@@ -261,25 +297,38 @@ void OutputFiles::commit() {
         fs::copy_file(e.destination, backup, fs::copy_options::overwrite_existing, ec);
         if (ec) {
           const int err = ec.value();
-          rollback();
+          removeAll();
           throw Error(stage_, withSystemReason("cannot keep the previous file", err),
                       e.destination);
         }
       }
     }
-    if (::rename(e.temporary.c_str(), e.destination.c_str()) != 0) {
-      const int err = errno;
-      if (hadPrevious) fs::remove(backup, ec);
-      rollback();
-      throw Error(stage_, withSystemReason("cannot move the finished file into place", err),
-                  e.destination);
-    }
-    moved.push_back({e.destination, backup, hadPrevious});
+    prepared.push_back({e.temporary, e.destination, backup, hadPrevious});
   }
-  committed_ = true;
+  {
+    const DeferredSignals deferred;
+    for (size_t i = 0; i < prepared.size(); ++i) {
+      const Prepared& p = prepared[i];
+      if (::rename(p.temporary.c_str(), p.destination.c_str()) == 0) continue;
+      const int err = errno;
+      // Put back what was moved: the previous files, or nothing where there was none.
+      std::error_code ec;
+      for (size_t j = i; j-- > 0;) {
+        if (prepared[j].hadPrevious) {
+          fs::rename(prepared[j].backup, prepared[j].destination, ec);
+        } else {
+          fs::remove(prepared[j].destination, ec);
+        }
+      }
+      removeAll();
+      throw Error(stage_, withSystemReason("cannot move the finished file into place", err),
+                  p.destination);
+    }
+    committed_ = true;
+  }
   std::error_code ec;
-  for (const Moved& m : moved) {
-    if (m.hadPrevious) fs::remove(m.backup, ec);
+  for (const Prepared& p : prepared) {
+    if (p.hadPrevious) fs::remove(p.backup, ec);
   }
 }
 

@@ -176,6 +176,9 @@ TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {
   make(".out.partial-" + alive + "-0.exr", true);   // its process runs: kept
   make(".other.partial-" + dead + "-0.exr", true);  // another output's: kept
   make("out.exr", true);                            // kept
+  // A killed commit's backup of the output before it.
+  make(".out.previous-" + dead + "-2.exr", true);   // removed
+  make(".out.previous-" + alive + "-2.exr", true);  // kept
   OutputFiles files("test");
   files.add(dir / "out.exr");
   EXPECT_FALSE(std::filesystem::exists(dir / (".out.partial-" + dead + "-0.exr")));
@@ -183,8 +186,55 @@ TEST(OutputFiles, AKilledRunsTemporariesAreRemoved) {
   EXPECT_TRUE(std::filesystem::exists(dir / (".out.partial-" + alive + "-0.exr")));
   EXPECT_TRUE(std::filesystem::exists(dir / (".other.partial-" + dead + "-0.exr")));
   EXPECT_TRUE(std::filesystem::exists(dir / "out.exr"));
+  EXPECT_FALSE(std::filesystem::exists(dir / (".out.previous-" + dead + "-2.exr")));
+  EXPECT_TRUE(std::filesystem::exists(dir / (".out.previous-" + alive + "-2.exr")));
   ::kill(sleeper, SIGKILL);
   ::waitpid(sleeper, nullptr, 0);
+}
+
+// A SIGTERM while a commit renames its files waits until they are all in place: the outputs are
+// all the new ones or all the previous ones, never some of each (a farm manager's SIGTERM between
+// two renames left a new EXR beside the previous run's JPEG). A child commits 300 files over
+// their previous versions and is sent SIGTERM at times through its commit; it dies of it either
+// way.
+TEST(OutputFiles, ASignalDuringACommitLeavesOneRunsFiles) {
+  constexpr int kFiles = 300;
+  // From just before the commit's renames to after them, on this machine and slower ones.
+  for (const int delay : {500, 1000, 1500, 2000, 3000, 4000, 5000, 6500}) {
+    TempDir dir;
+    for (int i = 0; i < kFiles; ++i) writeText(dir / ("f" + std::to_string(i)), "old");
+    int pipe[2];
+    ASSERT_EQ(::pipe(pipe), 0);
+    const pid_t child = ::fork();
+    if (child == 0) {
+      OutputFiles files("test");
+      for (int i = 0; i < kFiles; ++i)
+        std::ofstream(files.add(dir / ("f" + std::to_string(i)))) << "new";
+      const char go = 'g';
+      if (::write(pipe[1], &go, 1) != 1) ::_exit(3);
+      files.commit();
+      ::_exit(0);
+    }
+    ASSERT_GT(child, 0);
+    char go = 0;
+    ASSERT_EQ(::read(pipe[0], &go, 1), 1);
+    ::usleep(useconds_t(delay));
+    ::kill(child, SIGTERM);
+    int status = 0;
+    ::waitpid(child, &status, 0);
+    ::close(pipe[0]);
+    ::close(pipe[1]);
+    int fresh = 0;
+    for (int i = 0; i < kFiles; ++i) {
+      std::ifstream in(dir / ("f" + std::to_string(i)));
+      std::string text;
+      in >> text;
+      fresh += text == "new" ? 1 : 0;
+    }
+    EXPECT_TRUE(fresh == 0 || fresh == kFiles)
+        << fresh << " of " << kFiles << " files are new, SIGTERM after " << delay << " us";
+    EXPECT_TRUE(WIFSIGNALED(status) || (WIFEXITED(status) && WEXITSTATUS(status) == 0));
+  }
 }
 
 TEST(OutputFiles, RefusesAFolderAsDestination) {
