@@ -30,7 +30,8 @@ struct Entry {
   std::string group;  // "stages/render", "visibility", ...
   uintmax_t bytes = 0;
   fs::file_time_type written;
-  bool orphan = false;  // a temporary a killed run left (its process is gone)
+  bool temporary = false;  // an entry being written (KEY.kind.partial-PID-N)
+  bool orphan = false;     // a temporary a killed run left (its process is gone)
 };
 
 // Whether a file is one compose wrote into its cache: a key of 32 hexadecimal digits, a dot and
@@ -125,10 +126,16 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
     if (!fs::is_directory(root, ec)) throw Error("cache", "not a folder", root);
 
     std::vector<Entry> entries;
+    std::vector<std::string> links;
+    size_t running = 0;  // temporaries of runs still writing them: neither listed nor removed
     for (const char* folder : kCacheFolders) {
       const fs::path dir = root / folder;
-      // A folder of compose's, not a link to one elsewhere.
-      if (fs::is_symlink(dir, ec) || !fs::is_directory(dir, ec)) continue;
+      // A folder moved elsewhere and linked here (to a larger disk) is the cache's as runs use
+      // it; links further down are not followed.
+      if (!fs::is_directory(dir, ec)) continue;
+      if (fs::is_symlink(dir, ec))
+        links.push_back(std::string(folder) + " is a link to " +
+                        fs::read_symlink(dir, ec).string());
       for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
         std::error_code e;
         if (!it->is_regular_file(e) || it->is_symlink(e)) continue;
@@ -139,7 +146,12 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
         entry.group = e ? std::string(folder) : relative.generic_string();
         entry.bytes = it->file_size(e);
         entry.written = fs::last_write_time(entry.path, e);
-        entry.orphan = isAbandonedTemporary(entry.path);
+        entry.temporary = entry.path.filename().string().find(".partial-") != std::string::npos;
+        entry.orphan = entry.temporary && isAbandonedTemporary(entry.path);
+        if (entry.temporary && !entry.orphan) {
+          ++running;  // a run writes it now, or did within the minute
+          continue;
+        }
         entries.push_back(std::move(entry));
       }
       if (ec) throw Error("cache", "cannot list the folder: " + ec.message(), dir);
@@ -147,7 +159,7 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
 
     const auto now = fs::file_time_type::clock::now();
     // What goes: temporaries of gone runs, entries older than asked, then the oldest until the
-    // rest fits.
+    // rest fits (never a temporary a run is writing: removing one lost that run's entry).
     std::vector<bool> remove(entries.size(), false);
     if (pruning) {
       for (size_t i = 0; i < entries.size(); ++i) {
@@ -180,20 +192,24 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
     size_t failed = 0;
     for (size_t i = 0; i < entries.size(); ++i) {
       const Entry& e = entries[i];
+      bool removed = remove[i];
+      if (remove[i] && !o->dryRun) {
+        std::error_code r;
+        fs::remove(e.path, r);  // one gone already (renamed by its writer) is as good as removed
+        if (r && fs::exists(e.path)) {
+          ++failed;
+          removed = false;  // said as kept: it is there still
+        }
+      }
       for (Group* g : {&groups[e.group], &total}) {
         ++g->count;
         g->bytes += e.bytes;
         g->oldest = std::min(g->oldest, e.written);
         g->newest = std::max(g->newest, e.written);
-        if (remove[i]) {
+        if (removed) {
           ++g->removed;
           g->removedBytes += e.bytes;
         }
-      }
-      if (remove[i] && !o->dryRun) {
-        std::error_code r;
-        fs::remove(e.path, r);  // one gone already (renamed by its writer) is as good as removed
-        if (r && fs::exists(e.path)) ++failed;
       }
     }
     if (!globals.quiet) {
@@ -205,6 +221,10 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
       }
       std::printf("  %-22s %6zu entries %12s\n", "total", total.count,
                   megabytes(total.bytes).c_str());
+      for (const std::string& link : links) std::printf("  (%s)\n", link.c_str());
+      if (running > 0)
+        std::printf("  (%zu entr%s being written by running jobs: not counted, not removed)\n",
+                    running, running == 1 ? "y" : "ies");
       if (pruning) {
         std::printf("%s %zu entries (%s); %zu kept (%s)\n", o->dryRun ? "would remove" : "removed",
                     total.removed, megabytes(total.removedBytes).c_str(),

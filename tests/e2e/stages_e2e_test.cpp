@@ -1,6 +1,8 @@
 // The stage-by-stage commands end to end: compose precompute → render → composite chained by hand
 // gives the one-shot command's files bit for bit; a scene file saved from a command line runs the
 // same job; --explain and the stage files' errors.
+#include <unistd.h>
+
 #include <sys/wait.h>
 
 #include <chrono>
@@ -849,16 +851,40 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
         fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"))
         << size;
   }
-  // A file of the user's in those folders is not an entry: kept.
+  // A file of the user's in those folders is not an entry: kept. Nor is a temporary a running
+  // job is writing (this test's process stands for it): it was listed as an entry and removed,
+  // and that job lost its entry.
   compose::testing::writeText(cache / "stages" / "precompute" / "notes.txt", "mine");
+  const fs::path writing =
+      cache / "stages" / "precompute" /
+      ("0123456789abcdef0123456789abcdee.stage.partial-" + std::to_string(::getpid()) + "-0");
+  compose::testing::writeText(writing, "being written");
+  fs::last_write_time(writing, old);
   r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(writing));
+  EXPECT_NE(r.out.find("(1 entry being written by running jobs: not counted, not removed)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("removed 1 entries"), std::string::npos) << r.out;
   EXPECT_TRUE(fs::exists(cache / "stages" / "precompute" / "notes.txt"));
   EXPECT_FALSE(
       fs::exists(cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
   EXPECT_TRUE(fs::exists(cache / "samples" / "forest.exr"));
   r = run("cache --cache " + quote(cache) + " --max-size lots", dir_.path());
   EXPECT_EQ(r.status, 2) << r.err;
+  // A folder of the cache moved to another disk and linked back, as runs use it: listed and
+  // pruned there (it was skipped: "0 entries", and could never be trimmed).
+  compose::testing::writeText(
+      cache / "stages" / "precompute" / "0123456789abcdef0123456789abcdef.stage", "x");
+  fs::rename(cache / "stages", dir_ / "elsewhere");
+  fs::create_directory_symlink(dir_ / "elsewhere", cache / "stages");
+  r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("(stages is a link to "), std::string::npos) << r.out;
+  EXPECT_FALSE(
+      fs::exists(dir_ / "elsewhere" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
+  EXPECT_TRUE(fs::exists(dir_ / "elsewhere" / "precompute" / "notes.txt"));
 }
 
 // Bare file names, as one types them in the folder one works in: written there.
