@@ -215,6 +215,34 @@ void ShLighting::project(const Environment& env, const Progress& progress) {
   report(progress, "lighting", 1.0);
 }
 
+bool ShLighting::exportState(std::vector<float>& out) const {
+  if (irradiance_.empty()) return false;
+  out.clear();
+  for (const glm::vec3& e : irradiance_) out.insert(out.end(), {e.x, e.y, e.z});
+  for (const glm::dvec3& L : radiance_) {
+    for (int c = 0; c < 3; ++c) {
+      const float hi = float(L[c]);
+      const float mid = float(L[c] - double(hi));
+      const float lo = float(L[c] - double(hi) - double(mid));
+      out.insert(out.end(), {hi, mid, lo});
+    }
+  }
+  return true;
+}
+
+bool ShLighting::importState(std::span<const float> in) {
+  const size_t count = size_t(shCount(order_));
+  if (in.size() != 3 * count + 9 * count) return false;
+  irradiance_.resize(count);
+  radiance_.resize(count);
+  for (size_t i = 0; i < count; ++i) irradiance_[i] = {in[3 * i], in[3 * i + 1], in[3 * i + 2]};
+  const float* r = in.data() + 3 * count;
+  for (size_t i = 0; i < count; ++i)
+    for (int c = 0; c < 3; ++c, r += 3)
+      radiance_[i][c] = double(r[0]) + double(r[1]) + double(r[2]);
+  return true;
+}
+
 glm::vec3 ShLighting::irradiance(const glm::vec3& n) const {
   COMPOSE_CHECK(!irradiance_.empty());
   std::array<float, shCount(kMaxShOrder)> basis;

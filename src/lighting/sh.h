@@ -44,6 +44,12 @@ class ShLighting final : public DiffuseLighting {
   int coefficientsPerChannel() const override { return shCount(order_); }
   size_t floatsStored() const override { return size_t(3 * shCount(order_)); }
 
+  // The projection for the caches and lighting files: the irradiance coefficients as evaluated,
+  // then each radiance coefficient as three floats whose sum is the double (SH transfer reads
+  // them in double).
+  bool exportState(std::vector<float>& out) const override;
+  bool importState(std::span<const float> in) override;
+
   // Radiance coefficients L_lm per channel (double), after project().
   const std::vector<glm::dvec3>& radianceCoefficients() const { return radiance_; }
 

@@ -479,6 +479,22 @@ TEST_F(StageCommands, AReusedAutomaticOrderIsTheOneChosen) {
   EXPECT_EQ(ren.status, 0) << ren.err;
 }
 
+// A lighting file with SH transfer for the shadows (its basis kept no state: precompute failed,
+// blaming --lighting).
+TEST_F(StageCommands, ALightingFileWithShTransfer) {
+  const fs::path light = dir_ / "sh.lighting";
+  const RunResult pre = run("-q precompute --env " + quote(samples_ / "forest.exr") +
+                                " --shadow-params method=sh --out " + quote(light) + " --cache " +
+                                quote(dir_ / "cache"),
+                            dir_.path());
+  ASSERT_EQ(pre.status, 0) << pre.err;
+  const RunResult ren =
+      run("-q render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(light) + " --out " + quote(dir_ / "layer.exr") + " --no-cache",
+          dir_.path());
+  EXPECT_EQ(ren.status, 0) << ren.err;
+}
+
 // An option only the one-shot command has, given to a command, is refused before anything is
 // read (CLI11 would pass it up to the one-shot command's options, where it was taken and not
 // used: compose composite --exposure 1 wrote the same picture as without). The options of every

@@ -128,6 +128,27 @@ TEST(Sh, WindowingDeringsAndKeepsTheFurnace) {
                        "sh window must be none, hanning or lanczos");
 }
 
+// The projection kept in caches and lighting files comes back exactly: the irradiance as
+// evaluated and the radiance coefficients SH transfer reads in double (a lighting file of
+// compose precompute --shadow-params method=sh could not be written: the basis kept no state).
+TEST(Sh, ItsStateComesBackExactly) {
+  const Environment sky = analyticEnvironment(128, [](glm::vec3 w) {
+    return glm::vec3(1.0f + 30.0f * std::max(0.0f, w.x), 0.7f + 1e-7f * w.z, 0.2f + w.y * w.y);
+  });
+  ShLighting projected(4);
+  std::vector<float> state;
+  EXPECT_FALSE(projected.exportState(state)) << "nothing projected yet";
+  projected.project(sky);
+  ASSERT_TRUE(projected.exportState(state));
+  ShLighting read(4), other(3);
+  EXPECT_FALSE(other.importState(state)) << "another order's state";
+  ASSERT_TRUE(read.importState(state));
+  for (size_t i = 0; i < projected.radianceCoefficients().size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_EQ(read.radianceCoefficients()[i][c], projected.radianceCoefficients()[i][c]) << i;
+  for (const auto& n : randomNormals(20, 3)) EXPECT_EQ(read.irradiance(n), projected.irradiance(n));
+}
+
 TEST(Lighting, CreatesByNameAndReportsMistakes) {
   EXPECT_EQ(createLighting("sh")->coefficientsPerChannel(), 9);
   EXPECT_EQ(createLighting("sh", ParamSet::parse("order=4", "t"))->coefficientsPerChannel(), 25);
