@@ -30,7 +30,7 @@ namespace {
 // them, a byte-order mark skipped, backslash-continued lines joined; 11: a glTF primitive
 // without the texture coordinates its texture needs renders its base colour factor; 12: MTL
 // d and map_d read; 13: glTF's KHR_materials_unlit said.
-constexpr uint32_t kMeshVersion = 13;
+constexpr uint32_t kMeshVersion = 14;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {

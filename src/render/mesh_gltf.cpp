@@ -827,10 +827,16 @@ void GltfReader::read() {
   // A mesh far from its file's origin (a scene exported in place, georeferenced): float positions
   // there are coarse on the object's scale (a 1-unit sphere 5000 units out rounds to 0.0005,
   // enough for its shadows to speckle). Moved to its own middle in double first.
+  // The box of the vertices triangles use (a vertex no triangle uses, at the origin, kept a far
+  // mesh from being moved).
   if (!exact_.empty()) {
+    std::vector<uint8_t> used(exact_.size(), 0);
+    for (const uint32_t i : mesh_.indices)
+      if (i < used.size()) used[i] = 1;
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-    for (const glm::dvec3& p : exact_) {
-      if (!std::isfinite(p.x + p.y + p.z)) continue;
+    for (size_t i = 0; i < exact_.size(); ++i) {
+      const glm::dvec3& p = exact_[i];
+      if (!used[i] || !std::isfinite(p.x + p.y + p.z)) continue;
       lo = glm::min(lo, p);
       hi = glm::max(hi, p);
     }

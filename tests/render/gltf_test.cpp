@@ -274,6 +274,26 @@ TEST(Gltf, AMeshFarFromTheOriginKeepsItsShape) {
       nearest = std::min(nearest, glm::length(glm::dvec3(p) + m.fileOrigin - e));
     EXPECT_LT(nearest, 1e-9) << e.x << " " << e.y << " " << e.z;
   }
+  // A vertex no triangle uses, at the file's origin, does not keep the mesh there (it kept it
+  // from being moved, and float rounding at 5000 flattened it).
+  GltfBuilder stray;
+  const int strayPos = stray.vec3(
+      {0, 0, 0, 0.001f, 0, 0, 0, 0.001f, 0, 0.001f, 0.001f, 0.0005f, -5000.0f, 3000.0f, -2000.0f});
+  const int strayIdx = stray.accessor(std::vector<uint32_t>{0, 1, 2, 1, 3, 2}, 5125, "SCALAR", 6);
+  stray.scene({stray.node(
+      {{"translation", {5000.0, -3000.0, 2000.0}},
+       {"mesh", stray.mesh({{"attributes", {{"POSITION", strayPos}}}, {"indices", strayIdx}})}})});
+  writeText(dir / "stray.gltf", stray.gltf());
+  const Mesh s = loadMesh(dir / "stray.gltf");
+  EXPECT_NEAR(s.fileOrigin.x, 5000.0005, 1e-9);
+  EXPECT_NEAR(s.fileOrigin.z, 2000.00025, 1e-9);
+  ASSERT_EQ(s.triangleCount(), 2u);
+  for (const glm::dvec3& e : expected) {
+    double nearest = 1e30;
+    for (const glm::vec3& p : s.positions)
+      nearest = std::min(nearest, glm::length(glm::dvec3(p) + s.fileOrigin - e));
+    EXPECT_LT(nearest, 1e-9) << e.x << " " << e.y << " " << e.z;
+  }
 }
 
 TEST(Gltf, AMirroringNodeKeepsTrianglesWoundOutwards) {

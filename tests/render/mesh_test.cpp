@@ -192,6 +192,17 @@ TEST(Mesh, AnObjFarFromTheOriginKeepsItsShape) {
       nearest = std::min(nearest, glm::length(glm::dvec3(p) + m.fileOrigin - e));
     EXPECT_LT(nearest, 1e-9) << e.x << " " << e.y << " " << e.z;
   }
+  // A loose vertex at the origin, which no face uses (CAD exports leave them), does not keep it
+  // there: it kept the mesh from being moved, and float rounding at 5000 flattened it.
+  writeText(dir / "stray.obj",
+            "v 0 0 0\nv 5000 -3000 2000\nv 5000.001 -3000 2000\nv 5000 -2999.999 2000\n"
+            "v 5000.001 -2999.999 2000.0005\nf 2 3 4\nf 3 5 4\n");
+  const Mesh stray = loadMesh(dir / "stray.obj");
+  EXPECT_NEAR(stray.fileOrigin.x, 5000.0005, 1e-9);
+  EXPECT_NEAR(stray.fileOrigin.z, 2000.00025, 1e-9);
+  ASSERT_EQ(stray.positions.size(), 4u);
+  for (size_t i = 0; i < 4; ++i)
+    EXPECT_LT(glm::length(glm::dvec3(stray.positions[i]) - glm::dvec3(m.positions[i])), 1e-9);
   // Near its origin, a mesh stays where the file puts it.
   writeText(dir / "near.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   EXPECT_EQ(loadMesh(dir / "near.obj").fileOrigin, glm::dvec3(0.0));
