@@ -229,8 +229,9 @@ class MergeStage final : public Stage {
   // Bump when merging gives other numbers for the same photos.
   // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
   // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
-  // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken
-  static constexpr int kVersion = 5;
+  // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken; 6: ISO above
+  // 65535 read from ISOSpeed
+  static constexpr int kVersion = 6;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -501,8 +502,8 @@ class ColorStage final : public Stage {
   // configs without an interchange role by their spaces' names; 4: environments' channels by name
   // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
   // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
-  // primaries
-  static constexpr int kColorVersion = 5;
+  // primaries; 6: a premultiplied picture of codes made straight before it is decoded
+  static constexpr int kColorVersion = 6;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
@@ -566,6 +567,14 @@ class ColorStage final : public Stage {
           for (int x = plate.info.storedX0; x < std::min(plate.info.storedX1, w); ++x)
             alpha[size_t(y) * size_t(w) + size_t(x)] = 1.0f;
       }
+      // A premultiplied picture of codes (a TIFF whose alpha is associated, as oiiotool and Nuke
+      // write it) holds colour x alpha in its encoding: made straight before it is decoded, and
+      // premultiplied again in linear light (decoding the product darkened half-covered pixels
+      // 2.2 times), as OpenImageIO's colorconvert and Nuke do.
+      const bool encodedPremultiplied = !alpha.empty() && !windowAlpha &&
+                                        !plate.info.unassociatedAlpha &&
+                                        plate.info.integerSamples();
+      if (encodedPremultiplied && !plate.codes.empty()) ingest::floatsFromCodes(plate);
       Image linear;
       if (!plate.codes.empty() && plate.image.channels >= 3 && !plate.info.chromaticities) {
         const bool named = !ctx.job.plateSpace.empty();
@@ -599,13 +608,23 @@ class ColorStage final : public Stage {
         } else {
           linear = toRgb(plate.image);
         }
+        if (encodedPremultiplied) {
+          parallelFor(0, linear.height, [&](int64_t y) {
+            for (int x = 0; x < linear.width; ++x) {
+              const float a = alpha[size_t(y) * size_t(linear.width) + size_t(x)];
+              if (a <= 0.0f) continue;
+              float* c = linear.at(x, int(y));
+              for (int k = 0; k < 3; ++k) c[k] = std::min(c[k] / a, 1.0f);
+            }
+          });
+        }
         reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
                                                    ctx.job.plateSpace, "--plate-space", ctx.colors);
       }
       if (!alpha.empty()) {
         // Premultiplied in linear light, as the composite works: a PNG's or TIFF's unassociated
         // colour times its alpha; an OpenEXR's colour is premultiplied already.
-        const bool straight = plate.info.unassociatedAlpha;
+        const bool straight = plate.info.unassociatedAlpha || encodedPremultiplied;
         Image rgba(linear.width, linear.height, 4, {"R", "G", "B", "A"});
         rgba.colorSpace = linear.colorSpace;
         parallelFor(0, linear.height, [&](int64_t y) {
@@ -626,8 +645,11 @@ class ColorStage final : public Stage {
                       ? std::string(" has no pixels stored outside its data window: no picture "
                                     "there (alpha 0)")
                       : " has an alpha channel (" +
-                            std::string(straight ? "unassociated: premultiplied in linear light"
-                                                 : "premultiplied") +
+                            std::string(encodedPremultiplied
+                                            ? "premultiplied in its encoding: made straight, "
+                                              "decoded and premultiplied in linear light"
+                                        : straight ? "unassociated: premultiplied in linear light"
+                                                   : "premultiplied") +
                             ")") +
                  ": the composite keeps it (the object over the plate, alpha = the object's + (1 "
                  "- the object's) x the plate's); a PNG display image keeps it, a JPEG shows it "

@@ -1375,6 +1375,32 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
   ASSERT_LT(stops(r.err), 50.0) << "no automatic exposure in: " << r.err;
   EXPECT_NEAR(stops(r.err), stops(opaque.err), 0.02);
 
+  // The same plate as a TIFF with associated alpha, as oiiotool and Nuke write it: its codes hold
+  // colour x alpha in the sRGB encoding, made straight before they are decoded (decoding the
+  // product gave 0.051 for 0.108 at half alpha).
+  {
+    std::vector<float> px(size_t(w) * size_t(h) * 4);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        float* p = &px[(size_t(y) * size_t(w) + size_t(x)) * 4];
+        p[3] = x < w / 3 ? 1.0f : x < 2 * w / 3 ? 128.0f / 255.0f : 0.0f;
+        p[0] = p[1] = p[2] = 0.5f * p[3];
+      }
+    writePixels(dir_ / "input-assoc.tif", w, h, 4, OIIO::TypeDesc::UINT8, px);
+    const auto assoc = runCompose(
+        args((dir_ / "assoc").string(), "input-assoc.tif") + " --place 0.16,0.9 --scale 0.3",
+        dir_.path());
+    ASSERT_EQ(assoc.status, 0) << assoc.err;
+    EXPECT_NE(assoc.err.find("premultiplied in its encoding: made straight"), std::string::npos)
+        << assoc.err;
+    const Raster t = readRaster(dir_ / "assoc.exr");
+    for (const int x : {150, 200}) {
+      if (t.at(x, 10, t.channel("object.A")) != 0.0f) continue;
+      EXPECT_NEAR(t.at(x, 10, t.channel("A")), 128.0f / 255.0f, 1e-3);
+      EXPECT_NEAR(t.at(x, 10, t.channel("R")), grey * 128.0f / 255.0f, 2e-3) << x;
+    }
+  }
+
   // A plate transparent everywhere has no brightness to match: 0 stops, said so (it said the
   // placeholder key 1 was "the whole plate's" and put the object 2.4 stops up).
   {
