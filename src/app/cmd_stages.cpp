@@ -85,6 +85,19 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
       converted.colorSpace = image.colorSpace;
       image = std::move(converted);
     }
+    // Codes premultiplied in their encoding (a TIFF with associated alpha) are made straight
+    // before they are decoded, and premultiplied again below, as the pipeline reads a plate.
+    const bool encodedPremultiplied =
+        image.channels == 4 && !loaded.info.unassociatedAlpha && loaded.info.integerSamples();
+    if (encodedPremultiplied) {
+      parallelFor(0, image.height, [&](int64_t y) {
+        for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * 4; p != end;
+             p += 4) {
+          if (p[3] <= 0.0f) continue;
+          for (int c = 0; c < 3; ++c) p[c] = std::min(p[c] / p[3], 1.0f);
+        }
+      });
+    }
     const std::string read =
         pipeline::toWorkingSpace(image, o->in, loaded.info, o->from, "--from", colors);
     if (target != image.colorSpace) colors.convert(image, target);
@@ -92,7 +105,8 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
     // its alpha, after the conversion (in linear light for a linear target), as the pipeline
     // reads a plate. Written as it was, a reader took the colour of a transparent pixel for
     // light added over the background.
-    const bool premultiplied = image.channels == 4 && loaded.info.unassociatedAlpha;
+    const bool premultiplied =
+        image.channels == 4 && (loaded.info.unassociatedAlpha || encodedPremultiplied);
     if (premultiplied) {
       parallelFor(0, image.height, [&](int64_t y) {
         for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * 4; p != end;

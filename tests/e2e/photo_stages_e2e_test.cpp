@@ -335,6 +335,37 @@ TEST(ColorCommand, AStraightAlphaIsPremultipliedInTheExr) {
   }
 }
 
+// A TIFF's associated alpha (oiiotool's and Nuke's): the codes hold colour x alpha in the sRGB
+// encoding, made straight before decoding and premultiplied in linear light (decoding the product
+// gave 0.080 for 0.175).
+TEST(ColorCommand, AnAssociatedAlphaIsMadeStraightBeforeDecoding) {
+  TempDir dir;
+  Image img(2, 1, 4, {"R", "G", "B", "A"});
+  const float a = 128.0f / 255.0f;
+  const float rgba[8] = {0.8f * a, 0.2f * a, 0.4f * a, a, 0.0f, 0.0f, 0.0f, 0.0f};
+  std::copy_n(rgba, 8, img.pixels.data());
+  ingest::WriteOptions associated;  // as stored: colour x alpha
+  associated.alphaChannel = 3;
+  ingest::writeImage(dir / "in.tif", img, associated);
+  const CommandRun c =
+      compose("color " + q(dir / "in.tif") +
+                  " --to \"Linear Rec.709 (sRGB)\" --depth float --out " + q(dir / "out.exr"),
+              dir);
+  ASSERT_EQ(c.status, 0) << c.err;
+  const ingest::LoadedImage out = ingest::readImage(dir / "out.exr");
+  const PictureChannels picture = pictureChannels(out.image);
+  ASSERT_GE(picture.alpha, 0);
+  auto linear = [](double v) { return std::pow((v + 0.055) / 1.055, 2.4); };
+  const double channel[3] = {0.8, 0.2, 0.4};
+  const float* p = out.image.at(0, 0);
+  EXPECT_NEAR(p[picture.alpha], a, 1e-6);
+  for (int k = 0; k < 3; ++k) {
+    // The codes stored: round(colour x alpha x 255), made straight.
+    const double code = std::round(channel[k] * a * 255.0) / 255.0 / a;
+    EXPECT_NEAR(p[picture.colour[size_t(k)]], linear(code) * a, 2e-4) << k;
+  }
+}
+
 // `color` converts the picture's colour, taken by channel name, and keeps its alpha: a render
 // layer's beauty (object.R, G, B, A) beside its passes (albedo sorts first) is what is converted,
 // the passes are left out and named; a file of passes alone is refused, naming the layers.
