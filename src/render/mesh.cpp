@@ -861,13 +861,15 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
   const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
   const float size = std::max({extent.x, extent.y, extent.z});
   if (!(size > 0.0f)) throw Error("mesh", "mesh has zero size (all vertices coincide)", path);
-  // Areas and normals are products of two coordinates: beyond 1e18 they overflow single
-  // precision, and every triangle would look degenerate.
-  if (!(size < 1e18f)) {
+  // Areas and normals are products of two coordinates, a ray's test against a triangle of three
+  // (edge x edge . direction, the direction carried into the object's frame as long as the
+  // object is large): beyond about 5e12 units they overflow single precision, and the object
+  // rendered as a streak (2e13) or not at all. 1e12 keeps a margin.
+  if (!(size < 1e12f)) {
     throw Error("mesh",
                 "mesh spans " + numberText(size) +
-                    " units: coordinates this large overflow single precision; scale the file "
-                    "down (--scale sets the size in the plate)",
+                    " units: coordinates this large overflow single precision (up to 1e12 "
+                    "render); scale the file down (--scale sets the size in the plate)",
                 path);
   }
 

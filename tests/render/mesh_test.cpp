@@ -454,6 +454,12 @@ TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
   writeText(dir / "wide.obj", "v -1e38 0 0\nv 1e38 0 0\nv 0 1e38 0\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "wide.obj"),
                        "mesh spans 2e+38 units: coordinates this large overflow single precision");
+  // Spans from about 5e12 rendered as a streak or nothing: refused from 1e12.
+  writeText(dir / "large.obj", "v 0 0 0\nv 2e13 0 0\nv 0 2e13 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "large.obj"),
+                       "mesh spans 2e+13 units: coordinates this large overflow single precision");
+  writeText(dir / "fine.obj", "v 0 0 0\nv 5e11 0 0\nv 0 5e11 0\nf 1 2 3\n");
+  EXPECT_EQ(loadMesh(dir / "fine.obj").triangleCount(), 1u);
   writeText(dir / "huge.obj", "v 0 0 0\nv 1e308 0 0\nv 0 1 0\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
                        "nothing renderable: the one triangle has a corner whose coordinates are "
