@@ -32,8 +32,9 @@ namespace {
 
 // What the first pass over the text found besides malformed numbers.
 struct ObjScan {
-  bool smoothingGroups = false;  // an `s` statement
-  size_t linesAndPoints = 0;     // `l` and `p` elements (not rendered)
+  bool smoothingGroups = false;               // an `s` statement
+  size_t linesAndPoints = 0;                  // `l` and `p` elements (not rendered)
+  size_t vertices = 0, colouredVertices = 0;  // `v` lines, those with a colour (x y z r g b)
   // What follows each `mtllib`, whole: one file whose name has spaces, or several names.
   std::vector<std::string> materialLines;
   // Each face's number of corners, in the file's order (tinyobjloader keeps them in 8 bits).
@@ -158,6 +159,10 @@ ObjScan scanObj(const fs::path& path) {
     if (fields.empty() || fields[0].front() == '#') continue;
     const std::string_view key = fields[0];
     if (key == "v" || key == "vn" || key == "vt") {
+      if (key == "v") {
+        ++scan.vertices;
+        if (fields.size() >= 7) ++scan.colouredVertices;
+      }
       const size_t needed = key == "vt" ? 1 : 3;
       if (fields.size() < needed + 1) {
         fail("'" + std::string(key) + "' needs " + std::to_string(needed) + " numbers, has " +
@@ -560,8 +565,11 @@ LoadedMesh loadObj(const fs::path& path) {
   MaterialLibraries libraries(path.parent_path(), scan.materialLines);
   // Polygons are triangulated below, in their own plane (tinyobjloader's fans and
   // shorter-diagonal quads can leave a concave polygon's outline).
+  // Colours on some vertices only: the others white (tinyobjloader's fallback), where it would
+  // drop them all; said below.
+  const bool partialColours = scan.colouredVertices > 0 && scan.colouredVertices < scan.vertices;
   if (!tinyobj::LoadObj(&attrib, &shapes, &objMaterials, &warn, &err, in, &libraries,
-                        /*triangulate=*/false, /*default_vcols_fallback=*/false)) {
+                        /*triangulate=*/false, /*default_vcols_fallback=*/partialColours)) {
     while (!err.empty() && (err.back() == '\n' || err.back() == '\r')) err.pop_back();
     throw Error("mesh", "cannot parse OBJ: " + (err.empty() ? std::string("unknown reason") : err),
                 path);
@@ -592,6 +600,10 @@ LoadedMesh loadObj(const fs::path& path) {
       mesh.warnings.push_back(
           count(clamped, "vertex colour component", "vertex colour components") +
           " outside 0..1 (or not finite) clamped");
+    if (partialColours)
+      mesh.warnings.push_back(std::to_string(scan.colouredVertices) + " of " +
+                              std::to_string(scan.vertices) +
+                              " vertices have a colour (v x y z r g b): the others are white");
   }
   mesh.otherFiles = libraries.looked;
 

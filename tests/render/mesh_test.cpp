@@ -932,6 +932,20 @@ TEST(Mesh, ObjVertexColoursAreTheAlbedo) {
   const Mesh over = loadMesh(dir / "over.obj");
   ASSERT_EQ(over.warnings.size(), 1u);
   EXPECT_EQ(over.warnings[0], "2 vertex colour components outside 0..1 (or not finite) clamped");
+  // Colours on some vertices only: the others white, said (all were dropped without a word).
+  writeText(dir / "some.obj", "v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
+  const Mesh some = loadMesh(dir / "some.obj");
+  ASSERT_EQ(some.colors.size(), 3u);
+  ASSERT_EQ(some.warnings.size(), 1u);
+  EXPECT_EQ(some.warnings[0],
+            "2 of 3 vertices have a colour (v x y z r g b): the others are white");
+  for (size_t v = 0; v < 3; ++v) {
+    const glm::vec3 p = some.positions[v];
+    const glm::vec3 want = p.x > 0.5f   ? glm::vec3(1)
+                           : p.y > 0.5f ? glm::vec3(0, 0, 1)
+                                        : glm::vec3(1, 0, 0);
+    EXPECT_EQ(some.colors[v], want) << v;
+  }
   writeText(dir / "plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   const Mesh plain = loadMesh(dir / "plain.obj");
   EXPECT_TRUE(plain.colors.empty());
