@@ -163,6 +163,14 @@ void validate(const ComposeJob& job) {
   try {
     ParamSet params = ParamSet::parse(job.lightingParams, "lighting");
     if (params.is("order", "auto")) {
+      // As lighting/order_selector.cpp selects: for sh and cheb-*, Lambertian only.
+      if (job.lighting != "sh" && job.lighting.rfind("cheb-", 0) != 0)
+        throw Error("lighting",
+                    "no order selection for basis '" + job.lighting + "' (sh and cheb-* have one)");
+      if (ParamSet probe = params;  // read without marking it used for createLighting
+          probe.has("brdf") && probe.getString("brdf", "lambert") != "lambert")
+        throw Error("lighting", "order=auto estimates Lambertian truncation only; give brdf=" +
+                                    probe.getString("brdf", "") + " an explicit order");
       params.getDouble("target", 45.0, "lighting");
       params.erase("order");
       params.erase("target");

@@ -87,9 +87,12 @@ void ComposeOptions::addEnvironment(CLI::App& app, bool parallax) {
 void ComposeOptions::addLighting(CLI::App& app) {
   app.add_option("--lighting", job.lighting, "Lighting basis: " + join(lighting::lightingNames()))
       ->capture_default_str();
-  app.add_option("--lighting-params", lightingParams,
-                 "Basis parameters as key=value,... (cheb-*: order, samples, rows, cols, "
-                 "subsamples; sh: order=0..8; mc: samples, seed)");
+  app.add_option(
+      "--lighting-params", lightingParams,
+      "Basis parameters as key=value,... (cheb-*: order (or auto, with target=dB), "
+      "samples, rows, cols; cheb-latlong and cheb-face: subsamples; cheb-local: "
+      "brdf=lambert|oren-nayar, sigma with oren-nayar; sh: order=0..8 (or auto), window; "
+      "mc: samples, seed)");
 }
 
 void ComposeOptions::addShadows(CLI::App& app, bool parameters) {
@@ -212,6 +215,12 @@ void ComposeOptions::apply(const CLI::App& app) {
   if (!j.poseFile.empty() && (given("--camera-height") || given("--pitch")))
     throw UsageError(
         "--pose sets the camera's height and tilt: leave out --camera-height and --pitch");
+  if (given("--jpeg-quality") && pipeline::displayPathFor(j).extension() == ".png")
+    throw UsageError("--jpeg-quality applies to a JPEG display image; --out " + j.output.string() +
+                     " writes a PNG (lossless)");
+  if (given("--shadow-params") && !j.shadows && !j.groundShadow)
+    throw UsageError(
+        "--shadow-params: no shadow is drawn (--shadows off and --no-shadow); leave it out");
   if (exposure != "auto") {
     try {
       j.exposureStops = parseNumber(exposure, "--exposure");

@@ -91,8 +91,15 @@ ChebParams ChebParams::from(ParamSet& params, const std::string& basis, ChebPara
   p.samples = params.getInt("samples", d.samples, "lighting");
   p.normalRows = params.getInt("rows", d.normalRows, "lighting");
   p.normalCols = params.getInt("cols", d.normalCols, "lighting");
+  // A parameter the basis or the BRDF does not use is refused, not ignored.
+  if (basis == "cheb-local" && params.has("subsamples"))
+    throw Error("lighting",
+                "subsamples applies to cheb-latlong and cheb-face (cheb-local samples each "
+                "normal's hemisphere: samples=)");
   p.subsamples = params.getInt("subsamples", d.subsamples, "lighting");
   p.brdf = params.getString("brdf", d.brdf);
+  if (p.brdf != "oren-nayar" && params.has("sigma"))
+    throw Error("lighting", "sigma (roughness) applies to brdf=oren-nayar only");
   p.sigma = params.getDouble("sigma", p.brdf == "oren-nayar" ? 0.3 : 0.0, "lighting");
   p.validate(basis);
   return p;

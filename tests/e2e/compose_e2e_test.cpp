@@ -1496,6 +1496,14 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
       {"--yaw ''", "--yaw is given an empty value"},
       {"--room 4,3", "--room expects three numbers as W,H,D"},
       {"--shadow-params method=ao,order=3", "order does not apply to method=ao"},
+      // Parameters nothing would read, refused, not ignored; order=auto where no basis selects.
+      {"--shadow-params method=ao,sources=8", "sources does not apply to method=ao"},
+      {"--shadows off --no-shadow --shadow-params grid=8", "--shadow-params: no shadow is drawn"},
+      {"--lighting-params sigma=1", "sigma (roughness) applies to brdf=oren-nayar only"},
+      {"--lighting-params subsamples=2", "subsamples applies to cheb-latlong and cheb-face"},
+      {"--lighting mc --lighting-params order=auto", "no order selection for basis 'mc'"},
+      {"--lighting-params order=auto,brdf=oren-nayar",
+       "order=auto estimates Lambertian truncation only"},
       {"--pitch 95", "--pitch must be within"},
       {"--camera-height -1", "--camera-height must be a positive"},
       {"--focal35 0", "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm"},
@@ -1511,6 +1519,13 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
     EXPECT_NE(r.err.find(message), std::string::npos) << option << "\n" << r.err;
     EXPECT_EQ(r.err.find("file not found"), std::string::npos) << option << "\n" << r.err;
   }
+  // A JPEG's quality for a PNG display image (it was ignored: the PNG the same byte for byte).
+  const auto png = runCompose("--plate /no/such/plate.jpg --object /no/such/mesh.obj --out " +
+                                  quote((dir.path() / "x.png").string()) + " --jpeg-quality 10",
+                              dir.path());
+  EXPECT_EQ(png.status, 2) << png.err;
+  EXPECT_NE(png.err.find("--jpeg-quality applies to a JPEG display image"), std::string::npos)
+      << png.err;
 }
 
 }  // namespace
