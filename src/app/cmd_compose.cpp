@@ -342,7 +342,9 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     if (!globals.ocio.empty())
       o->job.ocio = globals.ocio == "built-in" ? std::string("builtin") : globals.ocio;
     if (!saveScene->empty()) {
-      pipeline::validate(o->job);
+      // Checked as the run checks it, colour names included (a misspelt --exr-space was saved,
+      // and compose run failed on it).
+      validateJob(o->job, jobConfig(o->job, globals));
       // The scene is written before any input is read: it must not replace one of them.
       for (const std::filesystem::path& input : {o->job.plate, o->job.object, o->job.environment,
                                                  o->job.holdout, o->job.lensFile, o->job.poseFile})

@@ -573,6 +573,14 @@ TEST_F(StageCommands, ASavedSceneRunsTheSameJob) {
           dir_.path());
   ASSERT_EQ(save.status, 0) << save.err;
   EXPECT_FALSE(fs::exists(dir_ / "a" / "compose.exr")) << "--save-scene writes the scene only";
+  // Checked as the run checks it: a colour space, display or view the config does not know is
+  // refused before the scene is written (it was saved, and compose run failed on it).
+  for (const char* bad : {"--exr-space Bogus", "--view Bogus", "--plate-space Bogus"}) {
+    const RunResult refused = run(
+        common + " " + bad + " --save-scene " + quote(dir_ / "scenes" / "bad.json"), dir_.path());
+    EXPECT_EQ(refused.status, 2) << bad << "\n" << refused.err;
+    EXPECT_FALSE(fs::exists(dir_ / "scenes" / "bad.json")) << bad;
+  }
   const std::string text = slurp(scene);
   EXPECT_NE(text.find("\"plate\": \"../plate.jpg\""), std::string::npos)
       << "paths near the scene are relative to it:\n"
