@@ -1,12 +1,17 @@
 // The pipeline's stages as commands, file in, file out: compose color, precompute, render,
 // composite, and compose run (a whole job from a scene file). Chained by hand they give what the
 // one-shot command gives (tests/e2e/stages_e2e_test.cpp checks it).
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <istream>
 #include <string>
+#include <string_view>
 
 #include "app/cli.h"
 #include "app/compose_options.h"
@@ -430,8 +435,29 @@ Runner setupBench(CLI::App& cmd, const Globals& globals) {
     if (o->job.plate.empty() || o->job.object.empty())
       throw UsageError("compose bench needs --plate and --object");
     std::error_code ec;
-    const fs::path scratch =
-        fs::temp_directory_path() / ("compose-bench-" + std::to_string(::getpid()));
+    const fs::path temporary = fs::temp_directory_path(ec);
+    if (ec) {
+      const char* tmpdir = std::getenv("TMPDIR");
+      throw Error("bench", "no folder for its temporary files" +
+                               (tmpdir ? std::string(" (TMPDIR=") + tmpdir + ")" : std::string()) +
+                               ": " + ec.message());
+    }
+    // What an interrupted bench left (Ctrl-C, a SIGTERM: its folder of caches and outputs,
+    // hundreds of megabytes), once its process is gone.
+    for (fs::directory_iterator it(temporary, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      constexpr std::string_view kPrefix = "compose-bench-";
+      if (name.size() <= kPrefix.size() || name.compare(0, kPrefix.size(), kPrefix) != 0 ||
+          !std::all_of(name.begin() + ptrdiff_t(kPrefix.size()), name.end(),
+                       [](unsigned char c) { return std::isdigit(c) != 0; }))
+        continue;
+      const long pid = std::strtol(name.c_str() + kPrefix.size(), nullptr, 10);
+      std::error_code e;
+      if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH && it->is_directory(e))
+        fs::remove_all(it->path(), e);
+    }
+    ec.clear();
+    const fs::path scratch = temporary / ("compose-bench-" + std::to_string(::getpid()));
     fs::remove_all(scratch, ec);
     struct Cleanup {
       fs::path path;

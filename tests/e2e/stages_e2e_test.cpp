@@ -912,6 +912,42 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
 }
 
 // Bare file names, as one types them in the folder one works in: written there.
+// compose bench times a job cold and warm in a folder of its own under $TMPDIR, removed after;
+// the folder an interrupted bench left (its process gone) is removed by the next one (they
+// stayed, hundreds of megabytes each); a $TMPDIR that is not a folder is named.
+TEST_F(StageCommands, BenchTimesAJobAndCleansUpAfterItself) {
+  const fs::path tmp = dir_ / "tmp";
+  // A process id that no process has now: a child that has exited and been waited for.
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ::waitpid(child, nullptr, 0);
+  const fs::path stale = tmp / ("compose-bench-" + std::to_string(child));
+  fs::create_directories(stale / "cache");
+  compose::testing::writeText(stale / "cache" / "x", "left");
+  const std::string compose = quote(COMPOSE_EXECUTABLE);
+  const std::string job = " bench --plate " + quote(plate_) + " " + objectOptions() + " --env " +
+                          quote(samples_ / "forest.exr") +
+                          " --shadows off --lighting-params order=2 --repeat 1";
+  auto shell = [&](const std::string& env, const std::string& command) {
+    const int raw = std::system((env + " " + command + " >" + quote(dir_ / "out.txt") + " 2>" +
+                                 quote(dir_ / "err.txt") + " </dev/null")
+                                    .c_str());
+    return std::pair(WIFEXITED(raw) ? WEXITSTATUS(raw) : -1,
+                     slurp(dir_ / "out.txt") + slurp(dir_ / "err.txt"));
+  };
+  auto [status, text] = shell("TMPDIR=" + quote(tmp), compose + job);
+  ASSERT_EQ(status, 0) << text;
+  EXPECT_NE(text.find("render"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(stale)) << "the interrupted bench's folder";
+  EXPECT_TRUE(fs::is_empty(tmp)) << "the bench's own folder";
+  std::tie(status, text) = shell("TMPDIR=" + quote(dir_ / "none"), compose + job);
+  EXPECT_EQ(status, 1) << text;
+  EXPECT_NE(text.find("no folder for its temporary files (TMPDIR=" + (dir_ / "none").string()),
+            std::string::npos)
+      << text;
+}
+
 TEST_F(StageCommands, BareFileNamesAreWrittenInTheWorkingFolder) {
   const fs::path work = dir_ / "work";
   fs::create_directories(work);
