@@ -230,7 +230,7 @@ class MergeStage final : public Stage {
   // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
   // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
   // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken; 6: ISO above
-  // 65535 read from ISOSpeed
+  // 65535 read from ISOSpeed, a photo's colour by its bytes' format
   static constexpr int kVersion = 6;
 
   std::string name() const override { return "merge"; }
@@ -318,8 +318,8 @@ class StitchStage final : public Stage {
  public:
   // 2: the 35 mm focal length derived where EXIF rounds it; 3: float TIFFs linear, a Radiance
   // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7; 4: a wide hole filled
-  // from its rim
-  static constexpr int kVersion = 4;
+  // from its rim; 5: a photo's colour by its bytes' format, not a name they contradict
+  static constexpr int kVersion = 5;
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {
@@ -502,7 +502,8 @@ class ColorStage final : public Stage {
   // configs without an interchange role by their spaces' names; 4: environments' channels by name
   // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
   // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
-  // primaries; 6: a premultiplied picture of codes made straight before it is decoded
+  // primaries; 6: a premultiplied picture of codes made straight before it is decoded, a file's
+  // colour by its bytes' format, not a name they contradict
   static constexpr int kColorVersion = 6;
 
   void keys(Context& ctx) const override {
@@ -736,8 +737,9 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
 
 color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::filesystem::path& file,
                                const ingest::CaptureInfo& info) {
-  color::InputSpace s = colors.inputSpace(file, info.fileColorSpace, info.colorSpaceByConvention,
-                                          info.integerSamples());
+  color::InputSpace s =
+      colors.inputSpace(ingest::nameForRules(file, info.format), info.fileColorSpace,
+                        info.colorSpaceByConvention, info.integerSamples());
   if (!info.iccProfile.empty() && s.how == "as the file says")
     s.how = "by its ICC profile '" + info.iccProfile + "'";
   if (info.exifUncalibrated) {

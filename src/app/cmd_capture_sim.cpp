@@ -171,7 +171,9 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
           !envSpace.empty() ? envSpace
           : !byPrimaries.empty()
               ? byPrimaries
-              : colors.inputSpace(o->env, env.info.fileColorSpace, false, env.info.integerSamples())
+              : colors
+                    .inputSpace(ingest::nameForRules(o->env, env.info.format),
+                                env.info.fileColorSpace, false, env.info.integerSamples())
                     .space;
       colors.convert(env.image, cameraSpace);
     }

@@ -218,12 +218,13 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       notes.insert(notes.end(), photo.notes.begin(), photo.notes.end());
       const int ballWidth = photo.image.width, ballHeight = photo.image.height;
       Image rgb = pictureRgb(std::move(photo.image));  // by channel name, not as stored
-      rgb.colorSpace = !o->photoSpace.empty()
-                           ? colors.resolve(o->photoSpace, "--photo-space")
-                           : colors
-                                 .inputSpace(inputs.front(), photo.info.fileColorSpace, false,
-                                             photo.info.integerSamples())
-                                 .space;
+      rgb.colorSpace =
+          !o->photoSpace.empty()
+              ? colors.resolve(o->photoSpace, "--photo-space")
+              : colors
+                    .inputSpace(ingest::nameForRules(inputs.front(), photo.info.format),
+                                photo.info.fileColorSpace, false, photo.info.integerSamples())
+                    .space;
       // Averaged in linear light: the target's space when it is linear, else the working space
       // (any linear space averages alike: a matrix commutes with the mean), and encoded as the
       // file is read afterwards.
@@ -283,10 +284,11 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
         // Floats with no primaries in the header: the space the config takes them as (OpenEXR's
         // convention, linear Rec.709 with the built-in config), written by its name and with its
         // chromaticities rather than OpenImageIO's generic 'Linear'.
-        declared = colors
-                       .inputSpace(file.files.front(), file.info.fileColorSpace,
-                                   file.info.colorSpaceByConvention, false)
-                       .space;
+        declared =
+            colors
+                .inputSpace(ingest::nameForRules(file.files.front(), file.info.format),
+                            file.info.fileColorSpace, file.info.colorSpaceByConvention, false)
+                .space;
         if (!write.chromaticities) write.chromaticities = colors.chromaticities(declared);
       }
       file.image.colorSpace = declared;
@@ -311,7 +313,9 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
           byMatrix ? std::string("the RGB space of the chromaticities in its header")
           : file.info.chromaticities
               ? declared
-              : colors.inputSpace(file.files.front(), declared, false, file.info.integerSamples())
+              : colors
+                    .inputSpace(ingest::nameForRules(file.files.front(), file.info.format),
+                                declared, false, file.info.integerSamples())
                     .space;
       // A Radiance file says no primaries: it is read as the config's rules say, so it is
       // written in that space. Codes written as codes keep their space.

@@ -285,13 +285,13 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       const std::optional<std::array<double, 8>> primaries =
           forced.empty() && img.hasPixels() ? img.info.chromaticities : std::nullopt;
       const std::string byPrimaries = primaries ? colors.spaceWithChromaticities(*primaries) : "";
-      const std::string space = !forced.empty() ? forced
-                                : primaries
-                                    ? byPrimaries
-                                    : colors
-                                          .inputSpace(args[size_t(i)].file, img.info.fileColorSpace,
-                                                      false, img.info.integerSamples())
-                                          .space;
+      const std::string space =
+          !forced.empty() ? forced
+          : primaries     ? byPrimaries
+                          : colors
+                            .inputSpace(ingest::nameForRules(args[size_t(i)].file, img.info.format),
+                                        img.info.fileColorSpace, false, img.info.integerSamples())
+                            .space;
       spaces[size_t(i)] = space.empty() ? "the primaries in its header" : space;
       const int channels = img.image.channels;
       if (!img.hasPixels() && channels >= 3) {

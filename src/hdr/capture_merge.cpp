@@ -246,8 +246,9 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         space = colors.resolve(shot.colorSpace, "the colour space of " + shot.file.string());
       if (space.empty()) {
         space = colors
-                    .inputSpace(shot.file, shot.info.fileColorSpace,
-                                shot.info.colorSpaceByConvention, shot.info.integerSamples())
+                    .inputSpace(ingest::nameForRules(shot.file, shot.info.format),
+                                shot.info.fileColorSpace, shot.info.colorSpaceByConvention,
+                                shot.info.integerSamples())
                     .space;
         // Deeper integer photos (16-bit TIFF, PNG) whose file names no colour space: decoded
         // by the config's rules, which a linear file (a raw converter's linear output) defeats.

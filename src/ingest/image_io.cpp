@@ -66,6 +66,27 @@ std::string lowerExtension(const fs::path& path) {
   return ext;
 }
 
+fs::path nameForRules(const fs::path& file, const std::string& format) {
+  static const std::pair<const char*, std::vector<const char*>> kExtensions[] = {
+      {"openexr", {".exr", ".sxr", ".mxr"}},
+      {"jpeg", {".jpg", ".jpeg", ".jpe", ".jfif", ".jif"}},
+      {"png", {".png"}},
+      {"tiff", {".tif", ".tiff", ".tx", ".env", ".sm", ".vsm"}},
+      {"hdr", {".hdr", ".rgbe"}},
+      {"webp", {".webp"}},
+  };
+  const std::string ext = lowerExtension(file);
+  for (const auto& [name, extensions] : kExtensions) {
+    if (format != name) continue;
+    for (const char* e : extensions)
+      if (ext == e) return file;
+    fs::path renamed = file;
+    renamed.replace_extension(extensions.front());
+    return renamed;
+  }
+  return file;  // a format without a known extension: its name as it is
+}
+
 namespace {
 
 std::string trimmed(std::string s) {

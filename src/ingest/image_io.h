@@ -141,6 +141,12 @@ bool looksLikeImageFile(const std::filesystem::path& path);
 // The path's extension in lower case, with its dot (".exr"; "" when it has none).
 std::string lowerExtension(const std::filesystem::path& path);
 
+// The name the colour config's file rules are to see for `file`, whose bytes are `info.format`:
+// the file's own, or, when its extension names another format (a PNG named .exr, a JPEG named
+// .hdr), the same name with its format's extension. Files go to a reader by their bytes; their
+// colour must not follow a name the bytes contradict (a PNG's codes read as linear light).
+std::filesystem::path nameForRules(const std::filesystem::path& file, const std::string& format);
+
 struct LoadedImage {
   Image image;  // float, channels as stored (1-4 or more), orientation applied
   CaptureInfo info;

@@ -335,6 +335,27 @@ TEST(ColorCommand, AStraightAlphaIsPremultipliedInTheExr) {
   }
 }
 
+// A file goes to a reader by its bytes, and its colour follows them, not a name they contradict:
+// a PNG named .exr is sRGB codes (the config's rule for .exr read them as linear light: 46 codes
+// too bright in the display image).
+TEST(ColorCommand, AFilesColourFollowsItsBytesNotItsName) {
+  TempDir dir;
+  Image img(2, 1, 3, {"R", "G", "B"});
+  img.pixels = {0.5f, 0.5f, 0.5f, 1.0f, 0.25f, 0.0f};
+  ingest::writeImage(dir / "in.png", img);
+  std::filesystem::copy_file(dir / "in.png", dir / "png.exr");
+  for (const char* name : {"in.png", "png.exr"}) {
+    const CommandRun c =
+        compose("color " + q(dir / name) + " --to \"Linear Rec.709 (sRGB)\" --depth float --out " +
+                    q(dir / (std::string(name) + ".out.exr")),
+                dir);
+    ASSERT_EQ(c.status, 0) << c.err;
+    EXPECT_NE(c.err.find("as 'sRGB - Texture'"), std::string::npos) << name << ": " << c.err;
+    const ingest::LoadedImage out = ingest::readImage(dir / (std::string(name) + ".out.exr"));
+    EXPECT_NEAR(out.image.pixels[0], std::pow((128.0 / 255.0 + 0.055) / 1.055, 2.4), 2e-4) << name;
+  }
+}
+
 // A TIFF's associated alpha (oiiotool's and Nuke's): the codes hold colour x alpha in the sRGB
 // encoding, made straight before decoding and premultiplied in linear light (decoding the product
 // gave 0.080 for 0.175).
