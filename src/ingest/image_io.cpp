@@ -223,9 +223,11 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
     info.fileColorSpace.clear();
   info.colorSpaceByConvention =
       (info.fileColorSpace == "Linear" && (h.format == "openexr" || h.format == "hdr")) ||
-      (info.fileColorSpace == "sRGB" && (h.format == "jpeg" || h.format == "png"));
+      (info.fileColorSpace == "sRGB" &&
+       (h.format == "jpeg" || h.format == "png" || h.format == "webp"));
   info.iccProfile = trimmed(h.text("ICCProfile:profile_description"));
-  if (!info.iccProfile.empty() && (h.format == "jpeg" || h.format == "png" || h.format == "tiff")) {
+  if (!info.iccProfile.empty() &&
+      (h.format == "jpeg" || h.format == "png" || h.format == "tiff" || h.format == "webp")) {
     std::string lower = info.iccProfile;
     std::transform(lower.begin(), lower.end(), lower.begin(),
                    [](unsigned char c) { return std::tolower(c); });
@@ -362,17 +364,79 @@ class MappedFile {
   std::span<const unsigned char> bytes_;
 };
 
+// The description an ICC profile gives itself (its 'desc' tag, of type 'desc' in version 2 or
+// 'mluc' in version 4, the first record), as OpenImageIO names a JPEG's or PNG's profile; empty
+// if it has none that reads.
+std::string iccDescription(std::span<const unsigned char> icc) {
+  auto u32 = [&](size_t at) -> uint64_t {
+    if (at + 4 > icc.size()) return ~uint64_t(0);
+    return uint64_t(icc[at]) << 24 | uint64_t(icc[at + 1]) << 16 | uint64_t(icc[at + 2]) << 8 |
+           uint64_t(icc[at + 3]);
+  };
+  const uint64_t tags = u32(128);
+  for (uint64_t t = 0; t < tags && t < 1000; ++t) {
+    const size_t entry = 132 + size_t(t) * 12;
+    if (u32(entry) != 0x64657363u) continue;  // 'desc'
+    const uint64_t at = u32(entry + 4), size = u32(entry + 8);
+    if (at >= icc.size() || size > icc.size() - at || size < 12) return {};
+    const std::span<const unsigned char> tag = icc.subspan(size_t(at), size_t(size));
+    std::string text;
+    if (std::equal(tag.begin(), tag.begin() + 4, "desc")) {
+      const uint64_t n = u32(size_t(at) + 8);
+      if (n > size - 12) return {};
+      for (size_t i = 0; i < n && tag[12 + i] != 0; ++i) text += char(tag[12 + i]);
+    } else if (std::equal(tag.begin(), tag.begin() + 4, "mluc") && size >= 28) {
+      const uint64_t length = u32(size_t(at) + 20), offset = u32(size_t(at) + 24);
+      if (offset > size || length > size - offset) return {};
+      for (size_t i = 0; i + 1 < length; i += 2) {  // UTF-16BE: the ASCII of it
+        const unsigned hi = tag[size_t(offset) + i], lo = tag[size_t(offset) + i + 1];
+        if (hi == 0 && lo != 0) text += char(lo);
+      }
+    }
+    return text;
+  }
+  return {};
+}
+
+// A WebP's EXIF and ICC profile, which OpenImageIO 2.4's WebP reader does not give: its
+// RIFF chunks read here (EXIF: a TIFF structure, as exif.h reads; ICCP: the profile, named by
+// its description). Nothing if the file is not a RIFF WebP.
+std::vector<ImageAttribute> webpAttributes(std::span<const unsigned char> riff) {
+  std::vector<ImageAttribute> out;
+  if (riff.size() < 12 || !std::equal(riff.begin(), riff.begin() + 4, "RIFF") ||
+      !std::equal(riff.begin() + 8, riff.begin() + 12, "WEBP"))
+    return out;
+  for (size_t at = 12; at + 8 <= riff.size();) {
+    const uint64_t size = uint64_t(riff[at + 4]) | uint64_t(riff[at + 5]) << 8 |
+                          uint64_t(riff[at + 6]) << 16 | uint64_t(riff[at + 7]) << 24;
+    if (size > riff.size() - at - 8) break;  // a truncated chunk: the decoder says so
+    std::span<const unsigned char> payload = riff.subspan(at + 8, size_t(size));
+    const std::string kind(riff.begin() + ptrdiff_t(at), riff.begin() + ptrdiff_t(at) + 4);
+    if (kind == "EXIF") {
+      if (payload.size() >= 6 && std::equal(payload.begin(), payload.begin() + 6, "Exif\0\0"))
+        payload = payload.subspan(6);  // as some writers prefix it
+      for (ImageAttribute& a : exif::decode(payload)) out.push_back(std::move(a));
+    } else if (kind == "ICCP") {
+      if (const std::string name = iccDescription(payload); !name.empty())
+        out.push_back({"ICCProfile:profile_description", name});
+    }
+    at += 8 + size_t(size) + (size & 1);
+  }
+  return out;
+}
+
 // A file's attributes as OpenImageIO read them, with the EXIF tags its TIFF reader leaves out
 // read from the TIFF structure itself (exif.h: a TIFF file is one). OpenImageIO 2.4 drops the
 // Exif IFD's ISO (tag 0x8827), which raw converters write into their 16-bit TIFFs and which an
-// exposure needs. `tiff` is the file's bytes (empty: the file is mapped).
+// exposure needs; its WebP reader gives neither EXIF nor the ICC profile (webpAttributes).
+// `bytes` is the file's bytes (empty: the file is mapped).
 std::vector<ImageAttribute> attributesOf(const oiio::Header& h, const fs::path& file,
-                                         std::span<const unsigned char> tiff = {}) {
+                                         std::span<const unsigned char> bytes = {}) {
   std::vector<ImageAttribute> attributes = h.attributes;
-  if (h.format != "tiff") return attributes;
+  if (h.format != "tiff" && h.format != "webp") return attributes;
   std::optional<MappedFile> mapped;
-  if (tiff.empty()) tiff = mapped.emplace(file).bytes();
-  for (ImageAttribute& a : exif::decode(tiff)) {
+  if (bytes.empty()) bytes = mapped.emplace(file).bytes();
+  for (ImageAttribute& a : h.format == "tiff" ? exif::decode(bytes) : webpAttributes(bytes)) {
     if (!FileHeader{0, 0, 0, {}, {}, 0, &attributes}.find(a.name.c_str()))
       attributes.push_back(std::move(a));
   }

@@ -77,6 +77,65 @@ TEST(ImageIo, AppliesExifOrientation) {
   EXPECT_EQ(img.image.at(0, 0)[0], 0.0f);
 }
 
+// A WebP's EXIF orientation and ICC profile, in its RIFF chunks, which OpenImageIO 2.4's WebP
+// reader does not give: read here (a WebP with Orientation 6 came out sideways, one with a
+// Display P3 profile was read as sRGB "as the file says").
+TEST(ImageIo, AWebpsExifAndIccProfileAreRead) {
+  TempDir dir;
+  const auto plain = dir / "plain.webp";
+  {
+    std::vector<uint8_t> px(8 * 4 * 3, 0);
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 8; ++x) px[size_t(y * 8 + x) * 3 + (x < 4 ? 0 : 2)] = 255;
+    auto out = OIIO::ImageOutput::create(plain.string());
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(8, 4, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("compression", "lossless");
+    ASSERT_TRUE(out->open(plain.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+  }
+  std::ifstream in(plain, std::ios::binary);
+  const std::string webp((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(webp.substr(8, 4), "WEBP");
+  const std::string image = webp.substr(12);  // the image's chunk (VP8 or VP8L)
+  auto le32 = [](uint32_t v) {
+    return std::string{char(v), char(v >> 8), char(v >> 16), char(v >> 24)};
+  };
+  auto chunk = [&](const std::string& kind, std::string payload) {
+    const uint32_t size = uint32_t(payload.size());
+    if (size & 1) payload += '\0';
+    return kind + le32(size) + payload;
+  };
+  // A profile of a header and its 'desc' tag alone: what names it.
+  std::string icc(128, '\0');
+  const std::string name = "Display P3";
+  auto be32 = [](uint32_t v) {
+    return std::string{char(v >> 24), char(v >> 16), char(v >> 8), char(v)};
+  };
+  icc += be32(1) + "desc" + be32(144) + be32(uint32_t(12 + name.size() + 1));
+  icc += "desc" + be32(0) + be32(uint32_t(name.size() + 1)) + name + '\0';
+  const std::vector<unsigned char> exifBlock = exif::encode({{"Orientation", 6}});
+  const std::string extended = std::string{char(0x28), 0, 0, 0} +  // ICC and EXIF present
+                               std::string{7, 0, 0, 3, 0, 0};      // 8 x 4, less one
+  std::string body = "WEBP" + chunk("VP8X", extended) + chunk("ICCP", icc) + image +
+                     chunk("EXIF", std::string(exifBlock.begin(), exifBlock.end()));
+  const auto tagged = dir / "tagged.webp";
+  std::ofstream(tagged, std::ios::binary) << "RIFF" + le32(uint32_t(body.size())) + body;
+  const LoadedImage img = readImage(tagged);
+  EXPECT_EQ(img.info.orientation, 6);
+  ASSERT_EQ(img.image.width, 4);
+  ASSERT_EQ(img.image.height, 8);
+  EXPECT_GT(img.image.at(0, 0)[0], 0.9f) << "the stored left (red) half at the top once turned";
+  EXPECT_GT(img.image.at(0, 7)[2], 0.9f);
+  EXPECT_EQ(img.info.iccProfile, "Display P3");
+  EXPECT_EQ(img.info.fileColorSpace, "Display P3");
+  // Without them: sRGB by the format's convention, upright as stored.
+  const LoadedImage bare = readImage(plain);
+  EXPECT_EQ(bare.image.width, 8);
+  EXPECT_TRUE(bare.info.colorSpaceByConvention);
+}
+
 // An OpenEXR whose data window is not its display window is read as the display window: the
 // stored pixels where the data window puts them, 0 around them, overscan left out, and a note.
 TEST(ImageIo, AnExrIsItsDisplayWindow) {
