@@ -68,6 +68,11 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   PlateCamera cam;
   cam.width = width;
   cam.height = height;
+  const double aspect = exif.pixelAspectRatio;
+  if (!(aspect >= 0.01 && aspect <= 100.0))
+    throw Error("camera", "the plate's pixel aspect ratio " + numberText(aspect) +
+                              " is not one a picture has (0.01 to 100)");
+  cam.pixelAspect = aspect;
   const double diagonalPx = std::hypot(double(width), double(height));
   if (options.lens) {
     // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
@@ -99,10 +104,14 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
       cam.focal35mm = kDefaultFocal35mm;
       cam.focalSource = "default (no 35 mm equivalent focal length in EXIF)";
     }
-    const double focalPx = cam.focal35mm / kFullFrameDiagonalMm * diagonalPx;
+    // The diagonal of the picture as shown: a squeezed plate's stored pixels are wider than high,
+    // and the focal length across them shorter by as much.
+    const double focalPx =
+        cam.focal35mm / kFullFrameDiagonalMm * std::hypot(width * aspect, double(height));
     cam.lens.width = width;
     cam.lens.height = height;
-    cam.lens.fx = cam.lens.fy = focalPx;
+    cam.lens.fy = focalPx;
+    cam.lens.fx = focalPx / aspect;
     cam.lens.cx = 0.5 * width;
     cam.lens.cy = 0.5 * height;
     cam.lens.source = cam.focalSource;

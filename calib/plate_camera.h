@@ -32,6 +32,9 @@ struct PlateCamera {
   Lens lens;                // intrinsics and distortion, at the plate's size
   double focal35mm = 0.0;   // the focal length as a 35 mm equivalent (across the diagonal)
   std::string focalSource;  // where the focal length came from, for the notes
+  // A stored pixel's width over its height as shown (an anamorphic plate's 2): fx = fy / it for
+  // a lens not calibrated on the plate's own pixels.
+  double pixelAspect = 1.0;
   glm::dmat4 worldFromCamera{1.0};
 
   // World-space ray through continuous pixel position (px, py); direction is unit length. Returns

@@ -52,6 +52,7 @@ Hash128 plateCameraKey(int uprightWidth, int uprightHeight, const ingest::Captur
   h.word(uint32_t(info.sensorOrientation));
   h.number(info.focalLength35mm.value_or(-1.0));
   h.bytes(info.focal35mmSource);
+  h.number(info.pixelAspectRatio);
   return h;
 }
 
@@ -68,8 +69,9 @@ Hash128 Context::geometryKey() const {
   // 2: the plate's 35 mm focal length derived from EXIF where the tag rounds it; 3: a cut-out
   // object stands on what its cut-outs keep (Mesh::keptBounds); 4: the plate camera, not the
   // plate's bytes; 5: a lens mirrored for a plate tagged 2, 4, 5 or 7; 6: a pose's lens is not
-  // turned by the plate's orientation, and a lens file fits a plate only to a resize's rounding
-  h.word(6);
+  // turned by the plate's orientation, and a lens file fits a plate only to a resize's rounding;
+  // 7: a plate's pixel aspect ratio
+  h.word(7);
   key(artefact::kPlate);  // a job without a plate has no geometry: the usage error says so
   COMPOSE_CHECK(plateCamera.has_value());
   h.combine(*plateCamera);
@@ -139,6 +141,11 @@ const Geometry& Context::geometry() {
         "plate camera: a 35 mm equivalent focal length of %.1f mm (fx %.1f px at %dx%d): ",
         camera.focal35mm, camera.lens.fx, camera.width, camera.height);
     std::string said = text + camera.focalSource;
+    if (camera.pixelAspect != 1.0)
+      said += "; its pixels are " + numberText(camera.pixelAspect) +
+              " times as wide as high (the plate's pixelAspectRatio): fx " +
+              numberText(camera.lens.fx) + ", fy " + numberText(camera.lens.fy) +
+              " px; the EXR keeps the ratio, the display image shows the stored pixels";
     if (options.lens == std::nullopt && !options.focal35mm && !plate.info.focalLength35mm)
       said += "; give --focal35 or --calib";
     note(said);

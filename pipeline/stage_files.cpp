@@ -67,6 +67,7 @@ nlohmann::json geometryToJson(const Geometry& g) {
             {"lens", calib::lensToJson(c.lens)},
             {"focal35mm", c.focal35mm},
             {"focalSource", c.focalSource},
+            {"pixelAspect", c.pixelAspect},
             {"worldFromCamera", matrixToJson(c.worldFromCamera)}}},
           {"worldFromObject", matrixToJson(g.worldFromObject)},
           {"envFromWorld", matrixToJson(g.envFromWorld)},
@@ -84,6 +85,9 @@ Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
   g.camera.lens = calib::lensFromJson(c.at("lens"), file);
   g.camera.focal35mm = c.at("focal35mm").get<double>();
   g.camera.focalSource = c.at("focalSource").get<std::string>();
+  g.camera.pixelAspect = c.value("pixelAspect", 1.0);  // layers before it: square pixels
+  if (!(g.camera.pixelAspect >= 0.01 && g.camera.pixelAspect <= 100.0))
+    throw Error("composite", "the layer's camera has a pixel aspect ratio out of range", file);
   g.camera.worldFromCamera = matrixFromJson<glm::dmat4>(c.at("worldFromCamera"));
   g.worldFromObject = matrixFromJson<glm::dmat4>(j.at("worldFromObject"));
   g.envFromWorld = matrixFromJson<glm::mat3>(j.at("envFromWorld"));

@@ -613,6 +613,7 @@ class OutputStage final : public Stage {
 ingest::ExrHeader sceneHeader(const Geometry& geometry, const std::string& meshFile,
                               const glm::dvec3& fileOrigin) {
   ingest::ExrHeader header;
+  header.pixelAspectRatio = float(geometry.camera.pixelAspect);
   auto asImath = [](const glm::dmat4& m) {
     // glm stores columns of a column-vector matrix: the same numbers, in the same order, as
     // Imath's rows of the row-vector matrix (translation in the last row).

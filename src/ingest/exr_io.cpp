@@ -487,6 +487,7 @@ Imf::Header headerOf(const ExrPart& part, const detail::ChannelSources& sources,
       header.insert(as, Attribute(matrix));
     }
   };
+  if (shared.pixelAspectRatio != 1.0f) header.pixelAspectRatio() = shared.pixelAspectRatio;
   insertMatrices.operator()<Imath::M44f, Imf::M44fAttribute>(shared.matrices);
   insertMatrices.operator()<Imath::M44d, Imf::M44dAttribute>(shared.doubleMatrices);
   for (const auto& [name, value] : shared.strings) {

@@ -198,6 +198,7 @@ void fillCaptureInfo(const FileHeader& h, CaptureInfo& info) {
   if (info.orientation < 1 || info.orientation > 8) info.orientation = 1;  // not an EXIF value
   info.exposureTime = h.positive("ExposureTime");
   info.fNumber = h.positive("FNumber");
+  if (h.format == "openexr") info.pixelAspectRatio = h.positive("PixelAspectRatio").value_or(1.0);
   info.iso = h.positive("Exif:PhotographicSensitivity");
   if (!info.iso) info.iso = h.positive("Exif:ISOSpeedRatings");
   // Above 65535 the 16-bit tag holds 65535 and the sensitivity is in ISOSpeed (Exif 2.3, with

@@ -71,6 +71,9 @@ struct CaptureInfo {
   // missing; else FocalLengthIn35mmFilm (see focal35mmSource).
   std::optional<double> focalLength35mm;
   std::string focal35mmSource;  // where focalLength35mm came from; empty when it is unknown
+  // An OpenEXR's pixelAspectRatio: a stored pixel's width over its height as shown (2 for an
+  // anamorphic plate squeezed 2:1); 1 for square pixels and for other formats.
+  double pixelAspectRatio = 1.0;
   // EXIF FocalPlaneX/YResolution: sensor pixels per unit of FocalPlaneResolutionUnit (2 inch,
   // 3 centimetre; 4 millimetre and 5 micrometre are non-standard but written by some cameras).
   std::optional<double> focalPlaneXResolution, focalPlaneYResolution;
@@ -310,6 +313,7 @@ struct ExrPart {
 // for `doubleMatrices`, stored as Imath reads them: row vectors, translation in the last row)
 // and strings.
 struct ExrHeader {
+  float pixelAspectRatio = 1.0f;  // OpenEXR's pixelAspectRatio of every part
   std::vector<std::pair<std::string, std::array<float, 16>>> matrices;
   std::vector<std::pair<std::string, std::array<double, 16>>> doubleMatrices;
   std::vector<std::pair<std::string, std::string>> strings;

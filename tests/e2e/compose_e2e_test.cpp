@@ -772,6 +772,49 @@ TEST_F(ComposeOutputs, APlaceTheCalibratedLensCannotSeeNamesTheLensFile) {
   EXPECT_FALSE(fs::exists(dir_ / "folded.exr"));
 }
 
+// An anamorphic plate (an OpenEXR whose pixelAspectRatio is 2: each stored pixel shown twice
+// as wide as high): the object is seen through a camera whose focal length across is half its
+// focal length down, so that it is half as many stored pixels wide as on square pixels and as
+// high, and the EXR keeps the ratio (the object came out twice too wide once shown, and the
+// output said its pixels were square).
+TEST_F(ComposeOutputs, AnAnamorphicPlatesPixelsAreHonoured) {
+  for (const float aspect : {1.0f, 2.0f}) {
+    std::vector<float> px(size_t(320) * 240 * 3, 0.2f);
+    const fs::path plate = dir_ / (aspect == 1.0f ? "square.exr" : "squeezed.exr");
+    auto out = OIIO::ImageOutput::create(plate.string());
+    OIIO::ImageSpec spec(320, 240, 3, OIIO::TypeDesc::FLOAT);
+    spec.attribute("PixelAspectRatio", aspect);
+    ASSERT_TRUE(out->open(plate.string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
+    out->close();
+  }
+  int width[2] = {0, 0}, height[2] = {0, 0};
+  for (int i = 0; i < 2; ++i) {
+    const std::string name = i == 0 ? "square" : "squeezed";
+    const auto r = runCompose(args((dir_ / ("out-" + name)).string(), name + ".exr"), dir_.path());
+    ASSERT_EQ(r.status, 0) << r.err;
+    if (i == 1) {
+      EXPECT_NE(r.err.find("its pixels are 2 times as wide as high"), std::string::npos) << r.err;
+    }
+    const Raster e = readRaster(dir_ / ("out-" + name + ".exr"));
+    const int a = e.channel("object.A");
+    int x0 = e.width, x1 = -1, y0 = e.height, y1 = -1;
+    for (int y = 0; y < e.height; ++y)
+      for (int x = 0; x < e.width; ++x)
+        if (e.at(x, y, a) > 0.5f) {
+          x0 = std::min(x0, x), x1 = std::max(x1, x);
+          y0 = std::min(y0, y), y1 = std::max(y1, y);
+        }
+    width[i] = x1 - x0 + 1;
+    height[i] = y1 - y0 + 1;
+    auto in = OIIO::ImageInput::open((dir_ / ("out-" + name + ".exr")).string());
+    ASSERT_TRUE(in);
+    EXPECT_FLOAT_EQ(in->spec().get_float_attribute("PixelAspectRatio", 1.0f), i == 0 ? 1.0f : 2.0f);
+  }
+  EXPECT_NEAR(double(width[1]) / width[0], 0.5, 0.05) << width[0] << " " << width[1];
+  EXPECT_NEAR(height[1], height[0], 2);
+}
+
 TEST_F(ComposeOutputs, AFailedDisplayWriteKeepsThePreviousExr) {
   compose::testing::writeText(dir_ / "x.exr", "previous result");
   fs::create_directory(dir_ / "x.jpg");  // the JPEG cannot be written: a folder has its name
