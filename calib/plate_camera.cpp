@@ -68,12 +68,13 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   PlateCamera cam;
   cam.width = width;
   cam.height = height;
-  const double aspect = exif.pixelAspectRatio;
-  if (!(aspect >= 0.01 && aspect <= 100.0))
-    throw Error("camera", "the plate's pixel aspect ratio " + numberText(aspect) +
+  if (!(exif.pixelAspectRatio >= 0.01 && exif.pixelAspectRatio <= 100.0))
+    throw Error("camera", "the plate's pixel aspect ratio " + numberText(exif.pixelAspectRatio) +
                               " is not one a picture has (0.01 to 100)");
+  // Of the stored pixels: a quarter turn by the EXIF orientation (5 to 8) inverts it.
+  const bool turned = exif.orientation >= 5 && exif.orientation <= 8;
+  const double aspect = turned ? 1.0 / exif.pixelAspectRatio : exif.pixelAspectRatio;
   cam.pixelAspect = aspect;
-  const double diagonalPx = std::hypot(double(width), double(height));
   if (options.lens) {
     // Turned by the plate's EXIF orientation (the lens is in the sensor's frame) and scaled.
     const Lens& file = *options.lens;
@@ -87,7 +88,9 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
                                 "orientation that says so?)");
     }
     cam.lens = *fitted;
-    cam.focal35mm = 0.5 * (cam.lens.fx + cam.lens.fy) / diagonalPx * kFullFrameDiagonalMm;
+    // On the picture as shown (a squeezed plate's stored pixels are `aspect` times as wide).
+    cam.focal35mm = 0.5 * (cam.lens.fx * aspect + cam.lens.fy) /
+                    std::hypot(width * aspect, double(height)) * kFullFrameDiagonalMm;
     cam.focalSource = cam.lens.source.empty() ? std::string("calibration") : cam.lens.source;
     const bool sameSize = (file.width == width && file.height == height) ||
                           (file.width == height && file.height == width);

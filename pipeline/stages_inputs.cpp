@@ -230,7 +230,7 @@ class MergeStage final : public Stage {
   // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
   // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
   // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken; 6: ISO above
-  // 65535 read from ISOSpeed, a photo's colour by its bytes' format
+  // 65535 read from ISOSpeed, a photo's colour by its bytes' format, a WebP's EXIF and ICC read
   static constexpr int kVersion = 6;
 
   std::string name() const override { return "merge"; }
@@ -434,9 +434,12 @@ class StitchStage final : public Stage {
         anyLdr = true;
         Image white(1, 1, 3, {"R", "G", "B"});
         white.pixels = {1.0f, 1.0f, 1.0f};
-        white.colorSpace = first.colorSpace.empty()
-                               ? ctx.colors.inputSpace(first.file, "", false, true).space
-                               : first.colorSpace;
+        white.colorSpace =
+            first.colorSpace.empty()
+                ? ctx.colors
+                      .inputSpace(ingest::nameForRules(first.file, header.format), "", false, true)
+                      .space
+                : first.colorSpace;
         ctx.colors.convert(white, working);
         const float scale = first.exposure ? float(1.0 / *first.exposure) : 1.0f;
         p.saturation =
@@ -503,7 +506,7 @@ class ColorStage final : public Stage {
   // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
   // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
   // primaries; 6: a premultiplied picture of codes made straight before it is decoded, a file's
-  // colour by its bytes' format, not a name they contradict
+  // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read
   static constexpr int kColorVersion = 6;
 
   void keys(Context& ctx) const override {
@@ -610,17 +613,26 @@ class ColorStage final : public Stage {
           linear = toRgb(plate.image);
         }
         if (encodedPremultiplied) {
+          // Where alpha is 0 the colour is light added over what is behind (a glow): kept as it
+          // is, and not multiplied by the alpha below, as OpenImageIO's colorconvert keeps it.
           parallelFor(0, linear.height, [&](int64_t y) {
             for (int x = 0; x < linear.width; ++x) {
               const float a = alpha[size_t(y) * size_t(linear.width) + size_t(x)];
               if (a <= 0.0f) continue;
               float* c = linear.at(x, int(y));
-              for (int k = 0; k < 3; ++k) c[k] = std::min(c[k] / a, 1.0f);
+              for (int k = 0; k < 3; ++k) c[k] /= a;
             }
           });
         }
         reason = "plate read as " + toWorkingSpace(linear, ctx.job.plate, plate.info,
                                                    ctx.job.plateSpace, "--plate-space", ctx.colors);
+        if (ctx.job.plateSpace.empty() && !plate.info.chromaticities) {
+          // As the codes' branch says it: a space guessed is a note, not only a stage record.
+          const color::InputSpace space = inputSpaceOf(ctx.colors, ctx.job.plate, plate.info);
+          if (space.assumed)
+            ctx.note("the plate " + ctx.job.plate.filename().string() + " is read as '" +
+                     space.space + "' (" + space.how + "); give --plate-space to say which it is");
+        }
       }
       if (!alpha.empty()) {
         // Premultiplied in linear light, as the composite works: a PNG's or TIFF's unassociated
@@ -633,7 +645,8 @@ class ColorStage final : public Stage {
             const size_t i = size_t(y) * size_t(linear.width) + size_t(x);
             const float* c = linear.at(x, int(y));
             float* o = rgba.at(x, int(y));
-            const float k = straight ? alpha[i] : 1.0f;
+            const float k =
+                !straight || (encodedPremultiplied && alpha[i] <= 0.0f) ? 1.0f : alpha[i];
             o[0] = c[0] * k;
             o[1] = c[1] * k;
             o[2] = c[2] * k;

@@ -142,8 +142,9 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
         if (!isEntryName(it->path().filename().string())) continue;  // not an entry of compose's
         Entry entry;
         entry.path = it->path();
-        const fs::path relative = fs::relative(entry.path.parent_path(), root, e);
-        entry.group = e ? std::string(folder) : relative.generic_string();
+        // By name: a folder linked elsewhere keeps its name in the cache ("stages/render").
+        const fs::path relative = entry.path.parent_path().lexically_relative(root);
+        entry.group = relative.empty() ? std::string(folder) : relative.generic_string();
         entry.bytes = it->file_size(e);
         entry.written = fs::last_write_time(entry.path, e);
         entry.temporary = entry.path.filename().string().find(".partial-") != std::string::npos;

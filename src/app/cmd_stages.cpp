@@ -98,8 +98,8 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
       parallelFor(0, image.height, [&](int64_t y) {
         for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * 4; p != end;
              p += 4) {
-          if (p[3] <= 0.0f) continue;
-          for (int c = 0; c < 3; ++c) p[c] = std::min(p[c] / p[3], 1.0f);
+          if (p[3] <= 0.0f) continue;  // light added over what is behind (a glow): kept
+          for (int c = 0; c < 3; ++c) p[c] /= p[3];
         }
       });
     }
@@ -116,6 +116,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
       parallelFor(0, image.height, [&](int64_t y) {
         for (float *p = image.row(int(y)).data(), *end = p + size_t(image.width) * 4; p != end;
              p += 4) {
+          if (encodedPremultiplied && p[3] <= 0.0f) continue;  // kept, as made straight above
           p[0] *= p[3];
           p[1] *= p[3];
           p[2] *= p[3];

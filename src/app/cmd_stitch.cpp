@@ -354,7 +354,10 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       if (headers[i].floatingPoint) continue;
       Image white(1, 1, 3, {"R", "G", "B"});
       white.pixels = {1.0f, 1.0f, 1.0f};
-      white.colorSpace = forced.empty() ? colors.inputSpaceFor(args[i].file, "") : forced;
+      white.colorSpace =
+          forced.empty()
+              ? colors.inputSpaceFor(ingest::nameForRules(args[i].file, headers[i].format), "")
+              : forced;
       colors.convert(white, target);
       photos[i].saturation = 0.98f * std::min({white.pixels[0], white.pixels[1], white.pixels[2]});
     }

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <optional>
 
 #include "core/error.h"
@@ -231,17 +232,24 @@ namespace {
 class DeferredSignals {
  public:
   DeferredSignals() {
+    const std::lock_guard<std::mutex> lock(mutex());
+    if (depth_++ > 0) return;  // another commit holds them already
     struct sigaction record {};
     record.sa_handler = &DeferredSignals::record;
+    record.sa_flags = SA_RESTART;
     sigemptyset(&record.sa_mask);
     for (size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &record, &previous_[i]);
   }
   ~DeferredSignals() {
-    for (size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &previous_[i], nullptr);
-    if (const int signal = pending_) {
+    int signal = 0;
+    {
+      const std::lock_guard<std::mutex> lock(mutex());
+      if (--depth_ > 0) return;
+      for (size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &previous_[i], nullptr);
+      signal = pending_;
       pending_ = 0;
-      ::raise(signal);
     }
+    if (signal != 0) ::raise(signal);
   }
   DeferredSignals(const DeferredSignals&) = delete;
   DeferredSignals& operator=(const DeferredSignals&) = delete;
@@ -249,8 +257,14 @@ class DeferredSignals {
  private:
   static constexpr std::array<int, 4> kSignals = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
   static void record(int signal) { pending_ = signal; }
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
   static inline volatile std::sig_atomic_t pending_ = 0;
-  std::array<struct sigaction, 4> previous_{};
+  // Commits in several threads at once: the first installs the handlers, the last restores them.
+  static inline int depth_ = 0;
+  static inline std::array<struct sigaction, 4> previous_{};
 };
 
 }  // namespace
@@ -325,10 +339,11 @@ void OutputFiles::commit() {
                   p.destination);
     }
     committed_ = true;
-  }
-  std::error_code ec;
-  for (const Prepared& p : prepared) {
-    if (p.hadPrevious) fs::remove(p.backup, ec);
+    // The backups go before a held signal is raised: they are the previous outputs' copies.
+    std::error_code ec;
+    for (const Prepared& p : prepared) {
+      if (p.hadPrevious) fs::remove(p.backup, ec);
+    }
   }
 }
 

@@ -365,40 +365,6 @@ class MappedFile {
   std::span<const unsigned char> bytes_;
 };
 
-// The description an ICC profile gives itself (its 'desc' tag, of type 'desc' in version 2 or
-// 'mluc' in version 4, the first record), as OpenImageIO names a JPEG's or PNG's profile; empty
-// if it has none that reads.
-std::string iccDescription(std::span<const unsigned char> icc) {
-  auto u32 = [&](size_t at) -> uint64_t {
-    if (at + 4 > icc.size()) return ~uint64_t(0);
-    return uint64_t(icc[at]) << 24 | uint64_t(icc[at + 1]) << 16 | uint64_t(icc[at + 2]) << 8 |
-           uint64_t(icc[at + 3]);
-  };
-  const uint64_t tags = u32(128);
-  for (uint64_t t = 0; t < tags && t < 1000; ++t) {
-    const size_t entry = 132 + size_t(t) * 12;
-    if (u32(entry) != 0x64657363u) continue;  // 'desc'
-    const uint64_t at = u32(entry + 4), size = u32(entry + 8);
-    if (at >= icc.size() || size > icc.size() - at || size < 12) return {};
-    const std::span<const unsigned char> tag = icc.subspan(size_t(at), size_t(size));
-    std::string text;
-    if (std::equal(tag.begin(), tag.begin() + 4, "desc")) {
-      const uint64_t n = u32(size_t(at) + 8);
-      if (n > size - 12) return {};
-      for (size_t i = 0; i < n && tag[12 + i] != 0; ++i) text += char(tag[12 + i]);
-    } else if (std::equal(tag.begin(), tag.begin() + 4, "mluc") && size >= 28) {
-      const uint64_t length = u32(size_t(at) + 20), offset = u32(size_t(at) + 24);
-      if (offset > size || length > size - offset) return {};
-      for (size_t i = 0; i + 1 < length; i += 2) {  // UTF-16BE: the ASCII of it
-        const unsigned hi = tag[size_t(offset) + i], lo = tag[size_t(offset) + i + 1];
-        if (hi == 0 && lo != 0) text += char(lo);
-      }
-    }
-    return text;
-  }
-  return {};
-}
-
 // A WebP's EXIF and ICC profile, which OpenImageIO 2.4's WebP reader does not give: its
 // RIFF chunks read here (EXIF: a TIFF structure, as exif.h reads; ICCP: the profile, named by
 // its description). Nothing if the file is not a RIFF WebP.
@@ -418,7 +384,7 @@ std::vector<ImageAttribute> webpAttributes(std::span<const unsigned char> riff) 
         payload = payload.subspan(6);  // as some writers prefix it
       for (ImageAttribute& a : exif::decode(payload)) out.push_back(std::move(a));
     } else if (kind == "ICCP") {
-      if (const std::string name = iccDescription(payload); !name.empty())
+      if (const std::string name = exif::iccDescription(payload); !name.empty())
         out.push_back({"ICCProfile:profile_description", name});
     }
     at += 8 + size_t(size) + (size & 1);

@@ -56,8 +56,8 @@ class DiffuseLighting {
   // Everything that determines the projection besides the environment ("cheb-local order=1
   // samples=8 ..."): part of the on-disk cache key (lighting_cache.h).
   virtual std::string parameterKey() const { return describe(); }
-  // The projected state as plain floats, for the on-disk cache. A basis not worth caching (its
-  // projection costs less than reading it back) keeps the defaults and is always recomputed.
+  // The projected state as plain floats, for the on-disk cache and lighting files. A basis that
+  // keeps no projection (it reads the environment while shading) keeps the defaults.
   virtual bool exportState(std::vector<float>& /*out*/) const { return false; }
   // Restores a state written by exportState for the same parameterKey(); false if it does not fit.
   virtual bool importState(std::span<const float> /*in*/) { return false; }

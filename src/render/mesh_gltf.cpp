@@ -57,9 +57,9 @@ void checkRequiredExtensions(const tinygltf::Model& model, const fs::path& path)
 }
 
 // Percent-decoding of a URI's path (RFC 3986, as glTF's URIs are): '+' is itself. tinygltf 2.7
-// decodes buffer URIs as a URL's query string instead ('+' a space), so that `a+b.bin` is looked
-// for as `a b.bin`.
-std::string decodeUri(const std::string& uri, bool plusIsSpace) {
+// decodes buffer URIs as a URL's query string instead ('+' a space, tinygltfDecode), so that
+// `a+b.bin` is looked for as `a b.bin`.
+std::string decodeUri(const std::string& uri) {
   std::string decoded;
   for (size_t i = 0; i < uri.size(); ++i) {
     if (uri[i] == '%' && i + 2 < uri.size() &&
@@ -68,7 +68,7 @@ std::string decodeUri(const std::string& uri, bool plusIsSpace) {
       decoded += char(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
       i += 2;
     } else {
-      decoded += plusIsSpace && uri[i] == '+' ? ' ' : uri[i];
+      decoded += uri[i];
     }
   }
   return decoded;
@@ -383,7 +383,7 @@ Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where
   const tinygltf::Image& image = model_.images[size_t(imageIndex)];
   if (!image.uri.empty()) {
     // An image file beside the glTF: its URI is relative and percent-encoded.
-    file = path_.parent_path() / decodeUri(image.uri, false);
+    file = path_.parent_path() / decodeUri(image.uri);
     mesh_.otherFiles.push_back(file);
     where = file.string();
     return readTextureFile(file, "sRGB", alpha);
@@ -949,6 +949,30 @@ struct ReadFiles {
   std::map<std::string, std::string> renamed;
 };
 
+// A buffer URI as tinygltf 2.7 decodes it (dlib's urldecode): '+' a space, and '%' with the two
+// characters after it taken as hexadecimal digits whatever they are (a digit that is not one
+// counts 0).
+std::string tinygltfDecode(const std::string& uri) {
+  auto hex = [](char c) {
+    return c >= '0' && c <= '9'   ? c - '0'
+           : c >= 'a' && c <= 'f' ? c - 'a' + 10
+           : c >= 'A' && c <= 'F' ? c - 'A' + 10
+                                  : 0;
+  };
+  std::string out;
+  for (size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '+') {
+      out += ' ';
+    } else if (uri[i] == '%' && uri.size() > i + 2) {
+      out += char((hex(uri[i + 1]) << 4) | hex(uri[i + 2]));
+      i += 2;
+    } else {
+      out += uri[i];
+    }
+  }
+  return out;
+}
+
 // The buffer files whose URI holds a '+', under the path tinygltf will ask for (its base folder
 // joined as it joins it) and their true path. A file that does not parse gives none: tinygltf
 // says what is wrong with it.
@@ -976,13 +1000,18 @@ std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool bin
   auto join = [&](const std::string& name) {
     return base.empty() ? name : base.back() == '/' ? base + name : base + "/" + name;
   };
-  std::map<std::string, std::string> out;
+  // Every buffer file by the name tinygltf will ask for; a name two files share ("a+b.bin" and
+  // "a%20b.bin" both ask for "a b.bin") is left as tinygltf reads it rather than redirected.
+  std::map<std::string, std::set<std::string>> asked;
   for (const nlohmann::json& buffer : j["buffers"]) {
     if (!buffer.is_object() || !buffer.contains("uri") || !buffer["uri"].is_string()) continue;
     const std::string uri = buffer["uri"].get<std::string>();
-    if (uri.rfind("data:", 0) == 0 || uri.find('+') == std::string::npos) continue;
-    out[join(decodeUri(uri, true))] = join(decodeUri(uri, false));
+    if (uri.rfind("data:", 0) == 0) continue;
+    asked[join(tinygltfDecode(uri))].insert(join(decodeUri(uri)));
   }
+  std::map<std::string, std::string> out;
+  for (const auto& [name, files] : asked)
+    if (files.size() == 1 && *files.begin() != name) out[name] = *files.begin();
   return out;
 }
 

@@ -1427,7 +1427,8 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
       for (int x = 0; x < w; ++x) {
         float* p = &px[(size_t(y) * size_t(w) + size_t(x)) * 4];
         p[3] = x < w / 3 ? 1.0f : x < 2 * w / 3 ? 128.0f / 255.0f : 0.0f;
-        p[0] = p[1] = p[2] = 0.5f * p[3];
+        // Where alpha is 0, light added over what is behind (a glow): kept as it is.
+        p[0] = p[1] = p[2] = p[3] > 0.0f ? 0.5f * p[3] : 0.2f;
       }
     writePixels(dir_ / "input-assoc.tif", w, h, 4, OIIO::TypeDesc::UINT8, px);
     const auto assoc = runCompose(
@@ -1442,6 +1443,9 @@ TEST_F(ComposeOutputs, APlateWithAlphaKeepsItInTheComposite) {
       EXPECT_NEAR(t.at(x, 10, t.channel("A")), 128.0f / 255.0f, 1e-3);
       EXPECT_NEAR(t.at(x, 10, t.channel("R")), grey * 128.0f / 255.0f, 2e-3) << x;
     }
+    const float glow = std::pow((51.0f / 255.0f + 0.055f) / 1.055f, 2.4f);  // code 51 decoded
+    EXPECT_NEAR(t.at(300, 10, t.channel("A")), 0.0f, 1e-6);
+    EXPECT_NEAR(t.at(300, 10, t.channel("R")), glow, 1e-3);
   }
 
   // A plate transparent everywhere has no brightness to match: 0 stops, said so (it said the

@@ -906,12 +906,12 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
   r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("(stages is a link to "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  stages/precompute "), std::string::npos) << r.out;
   EXPECT_FALSE(
       fs::exists(dir_ / "elsewhere" / "precompute" / "0123456789abcdef0123456789abcdef.stage"));
   EXPECT_TRUE(fs::exists(dir_ / "elsewhere" / "precompute" / "notes.txt"));
 }
 
-// Bare file names, as one types them in the folder one works in: written there.
 // compose bench times a job cold and warm in a folder of its own under $TMPDIR, removed after;
 // the folder an interrupted bench left (its process gone) is removed by the next one (they
 // stayed, hundreds of megabytes each); a $TMPDIR that is not a folder is named.
@@ -948,6 +948,7 @@ TEST_F(StageCommands, BenchTimesAJobAndCleansUpAfterItself) {
       << text;
 }
 
+// Bare file names, as one types them in the folder one works in: written there.
 TEST_F(StageCommands, BareFileNamesAreWrittenInTheWorkingFolder) {
   const fs::path work = dir_ / "work";
   fs::create_directories(work);

@@ -203,10 +203,17 @@ TEST(LightingCache, StoresAndRestoresAProjection) {
   std::filesystem::resize_file(cache.pathFor(key), 100);
   auto third = createLighting("cheb-local", ParamSet::parse("rows=9,cols=16", "t"));
   EXPECT_FALSE(cache.load(key, *third));
-  // Bases that are cheaper to project than to read are not cached.
+  // SH keeps its state (lighting files hold it): stored and read back exactly. A basis that
+  // reads the environment while shading keeps none: not cached.
   ShLighting sh(2);
   sh.project(env);
-  EXPECT_FALSE(cache.store(LightingCache::key(env, sh), sh));
+  ASSERT_TRUE(cache.store(LightingCache::key(env, sh), sh));
+  ShLighting back(2);
+  ASSERT_TRUE(cache.load(LightingCache::key(env, sh), back));
+  for (const auto& n : randomNormals(20, 4)) EXPECT_EQ(back.irradiance(n), sh.irradiance(n));
+  auto exact = createLighting("exact");
+  exact->project(env);
+  EXPECT_FALSE(cache.store(LightingCache::key(env, *exact), *exact));
 }
 
 }  // namespace
