@@ -872,6 +872,15 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
                     "render); scale the file down (--scale sets the size in the plate)",
                 path);
   }
+  // At the other end, a normal's squared length underflows: from about 3e-10 units every
+  // triangle looked degenerate ("nothing renderable", a wrong reason).
+  if (size < 1e-7f) {
+    throw Error("mesh",
+                "mesh spans " + numberText(size) +
+                    " units: coordinates this small underflow single precision (from 1e-7 "
+                    "render); scale the file up (--scale sets the size in the plate)",
+                path);
+  }
 
   // Area below (1e-7 of the object's size)² is rounding noise in float coordinates.
   const float minDoubleArea = 1e-14f * size * size;

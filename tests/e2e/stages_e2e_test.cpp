@@ -95,6 +95,17 @@ class StageCommands : public ::testing::Test {
         OIIO::ImageBufAlgo::resize(full, "", 0.0f, OIIO::ROI(0, 320, 0, 213, 0, 1, 0, 3));
     ASSERT_TRUE(small.write(plate_.string()));
   }
+  // The forest at 128 x 64, for tests of what goes around the lighting rather than of it.
+  fs::path smallEnvironment() const {
+    const fs::path small = dir_ / "forest-small.exr";
+    if (!fs::exists(small)) {
+      OIIO::ImageBuf full((samples_ / "forest.exr").string());
+      OIIO::ImageBuf resized =
+          OIIO::ImageBufAlgo::resize(full, "", 0.0f, OIIO::ROI(0, 128, 0, 64, 0, 1, 0, 3));
+      EXPECT_TRUE(resized.write(small.string()));
+    }
+    return small;
+  }
   // The options the one-shot and the stages share, the monkey facing the camera at 2x2 samples.
   std::string objectOptions() const {
     return "--object " + quote(samples_ / "monkey.obj") + " --samples 2 --scale 0.4 --yaw 20";
@@ -464,8 +475,10 @@ TEST_F(StageCommands, ATexturedObjectChainedByHandWithAGivenExposure) {
 // precompute wrote order 0 into its lighting file, which render then refused ("the lighting
 // file's contents do not fit its basis").
 TEST_F(StageCommands, AReusedAutomaticOrderIsTheOneChosen) {
-  const std::string env = " --env " + quote(samples_ / "forest.exr") +
-                          " --lighting-params order=auto --cache " + quote(dir_ / "cache");
+  // A small map and a coarse shadow basis keep it quick (under the sanitizers too).
+  const std::string env = " --env " + quote(smallEnvironment()) +
+                          " --lighting-params order=auto --shadow-params grid=4 --cache " +
+                          quote(dir_ / "cache");
   for (const char* name : {"first.lighting", "second.lighting"}) {
     const RunResult pre = run("precompute" + env + " --out " + quote(dir_ / name), dir_.path());
     ASSERT_EQ(pre.status, 0) << pre.err;
@@ -483,9 +496,9 @@ TEST_F(StageCommands, AReusedAutomaticOrderIsTheOneChosen) {
 // blaming --lighting).
 TEST_F(StageCommands, ALightingFileWithShTransfer) {
   const fs::path light = dir_ / "sh.lighting";
-  const RunResult pre = run("-q precompute --env " + quote(samples_ / "forest.exr") +
-                                " --shadow-params method=sh --out " + quote(light) + " --cache " +
-                                quote(dir_ / "cache"),
+  const RunResult pre = run("-q precompute --env " + quote(smallEnvironment()) +
+                                " --shadow-params method=sh,order=2,grid=4 --out " + quote(light) +
+                                " --cache " + quote(dir_ / "cache"),
                             dir_.path());
   ASSERT_EQ(pre.status, 0) << pre.err;
   const RunResult ren =

@@ -460,6 +460,12 @@ TEST(Mesh, DegenerateAndDuplicateTrianglesAreDroppedWithAWarning) {
                        "mesh spans 2e+13 units: coordinates this large overflow single precision");
   writeText(dir / "fine.obj", "v 0 0 0\nv 5e11 0 0\nv 0 5e11 0\nf 1 2 3\n");
   EXPECT_EQ(loadMesh(dir / "fine.obj").triangleCount(), 1u);
+  // And too small: refused by its size, not "degenerate" (the area test underflowed).
+  writeText(dir / "tiny.obj", "v 0 0 0\nv 2e-12 0 0\nv 0 2e-12 0\nf 1 2 3\n");
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "tiny.obj"),
+                       "mesh spans 2e-12 units: coordinates this small underflow single precision");
+  writeText(dir / "small.obj", "v 0 0 0\nv 2e-7 0 0\nv 0 2e-7 0\nf 1 2 3\n");
+  EXPECT_EQ(loadMesh(dir / "small.obj").triangleCount(), 1u);
   writeText(dir / "huge.obj", "v 0 0 0\nv 1e308 0 0\nv 0 1 0\nf 1 2 3\n");
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "huge.obj"),
                        "nothing renderable: the one triangle has a corner whose coordinates are "
