@@ -945,8 +945,9 @@ bool fileExists(const std::string& file, void*) {
 // files tinygltf would look for under another name, as it will ask for them and as they are.
 struct ReadFiles {
   fs::path main;
+  bool binary = false;
   std::vector<fs::path> others;
-  std::map<std::string, std::string> renamed;
+  std::optional<std::map<std::string, std::string>> renamed;  // read when first needed
 };
 
 // A buffer URI as tinygltf 2.7 decodes it (dlib's urldecode): '+' a space, and '%' with the two
@@ -1015,9 +1016,13 @@ std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool bin
   return out;
 }
 
+// Only a name with a space can come from a '+': the glTF's JSON is read again for those alone
+// (a .gltf of embedded data URIs can be hundreds of megabytes).
 std::string expandFilePath(const std::string& file, void* user) {
-  const auto* seen = static_cast<const ReadFiles*>(user);
-  if (const auto it = seen->renamed.find(file); it != seen->renamed.end()) return it->second;
+  auto* seen = static_cast<ReadFiles*>(user);
+  if (file.find(' ') == std::string::npos) return file;
+  if (!seen->renamed) seen->renamed = renamedBuffers(seen->main, seen->binary);
+  if (const auto it = seen->renamed->find(file); it != seen->renamed->end()) return it->second;
   return file;
 }
 
@@ -1068,7 +1073,7 @@ LoadedMesh loadGltf(const fs::path& path) {
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (ext == ".glb") checkGlbChunks(path);
-  ReadFiles seen{path, {}, renamedBuffers(path, ext == ".glb")};
+  ReadFiles seen{path, ext == ".glb", {}, std::nullopt};
   parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &expandFilePath, &readRegularFile,
                                               &tinygltf::WriteWholeFile, &seen});
   tinygltf::Model model;
