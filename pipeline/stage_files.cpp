@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 
 #include "calib/lens_json.h"
@@ -364,11 +365,19 @@ StageInput objectLayerInput(const fs::path& file) {
     if (frameWidth <= 0 || frameHeight <= 0)
       throw Error("composite", "the object layer's header has no frame size", file);
     checkImageSize(frameWidth, frameHeight, 1, "composite", file);
-    // Reads the part of that name, in float, with its data window, which must lie in the frame.
-    auto readPart = [&](const std::string& name, int& x, int& y) {
+    // Reads the part of that name, in float, with its data window, which must lie in the frame;
+    // `partHeader` is set to the part's header.
+    auto readPart = [&](const std::string& name, int& x, int& y,
+                        const ingest::ExrPartHeader** partHeader = nullptr) {
       for (int part = 0; part < input.parts(); ++part) {
         const ingest::ExrPartHeader& h = input.header(part);
         if (h.name != name) continue;
+        if (h.fullWidth != frameWidth || h.fullHeight != frameHeight)
+          throw Error("composite",
+                      format("part '%s' of the object layer has a %dx%d display window; the "
+                             "camera it was rendered for has a %dx%d frame",
+                             name.c_str(), h.fullWidth, h.fullHeight, frameWidth, frameHeight),
+                      file);
         if (h.x < 0 || h.y < 0 || int64_t(h.x) + h.width > frameWidth ||
             int64_t(h.y) + h.height > frameHeight)
           throw Error("composite",
@@ -378,9 +387,42 @@ StageInput objectLayerInput(const fs::path& file) {
                       file);
         x = h.x;
         y = h.y;
+        if (partHeader) *partHeader = &h;
         return input.read(part);
       }
       throw Error("composite", "the object layer has no part '" + name + "'", file);
+    };
+    // Values a render cannot hold, which would reach every output unseen: NaN or infinity
+    // anywhere, an alpha outside 0..1, a negative shadow ratio. Said at the frame's pixel.
+    auto requireValid = [&](const Image& image, int x0, int y0, const std::string& part, int alpha,
+                            bool nonNegative) {
+      for (int yy = 0; yy < image.height; ++yy) {
+        const std::span<const float> row = image.row(yy);
+        for (int xx = 0; xx < image.width; ++xx) {
+          for (int c = 0; c < image.channels; ++c) {
+            const float v = row[size_t(xx) * size_t(image.channels) + size_t(c)];
+            const bool bad = !std::isfinite(v) ||
+                             (c == alpha && !(v >= -1e-3f && v <= 1.0f + 1e-3f)) ||
+                             (nonNegative && v < 0.0f);
+            if (!bad) continue;
+            const std::string channel = c < int(image.channelNames.size())
+                                            ? image.channelNames[size_t(c)]
+                                            : std::to_string(c);
+            throw Error(
+                "composite",
+                format("%s in channel %s of the %s part at pixel (%d, %d)%s",
+                       std::isnan(v)   ? "NaN"
+                       : std::isinf(v) ? "infinity"
+                       : c == alpha    ? format("alpha %g", double(v)).c_str()
+                                       : format("ratio %g", double(v)).c_str(),
+                       channel.c_str(), part.c_str(), x0 + xx, y0 + yy,
+                       std::isfinite(v) ? (c == alpha ? ": an alpha lies in 0..1"
+                                                      : ": a shadow's ratio is not negative")
+                                        : ": a layer's values must be finite"),
+                file);
+          }
+        }
+      }
     };
     try {
       const nlohmann::json& rj = header.at("render");
@@ -412,12 +454,28 @@ StageInput objectLayerInput(const fs::path& file) {
         object.layerPlateKey = plate->value("content", "");
       }
       int x = 0, y = 0;
-      const Image layer = readPart("object", x, y);
+      const ingest::ExrPartHeader* objectHeader = nullptr;
+      const Image layer = readPart("object", x, y, &objectHeader);
       const auto beautyNames = rj.at("beautyChannels").get<std::vector<std::string>>();
       const auto aovNames = rj.at("aovChannels").get<std::vector<std::string>>();
-      if (x != r.x0 || y != r.y0 || layer.width != r.x1 - r.x0 || layer.height != r.y1 - r.y0 ||
-          beautyNames.size() != 4 || layer.channels != int(4 + aovNames.size()))
-        throw Error("composite", "the object part does not match its header", file);
+      if (beautyNames.size() != 4 || layer.channels != int(4 + aovNames.size()))
+        throw Error("composite",
+                    format("the object part has %d channels; its header lists %zu", layer.channels,
+                           beautyNames.size() + aovNames.size()),
+                    file);
+      // A tool that saved the layer again may have cropped the part to what it holds
+      // (oiiotool --autotrim) or padded it to the frame (--croptofull): OpenEXR holds nothing
+      // outside a data window, so the part's window is the object's.
+      if (x != r.x0 || y != r.y0 || layer.width != r.x1 - r.x0 || layer.height != r.y1 - r.y0) {
+        ctx.note(
+            format("the object part holds %dx%d pixels at %d,%d, the render wrote %dx%d at "
+                   "%d,%d: read as the file holds it (saved again by another tool?)",
+                   layer.width, layer.height, x, y, r.x1 - r.x0, r.y1 - r.y0, r.x0, r.y0));
+        r.x0 = x;
+        r.y0 = y;
+        r.x1 = x + layer.width;
+        r.y1 = y + layer.height;
+      }
       r.beauty = Image(layer.width, layer.height, 4, beautyNames);
       r.aovs = Image(layer.width, layer.height, int(aovNames.size()), aovNames);
       r.beauty.colorSpace = rj.at("colorSpace").get<std::string>();
@@ -450,6 +508,57 @@ StageInput objectLayerInput(const fs::path& file) {
         for (size_t c = 0; c < 4; ++c) r.beauty.pixels[4 * i + c] = s[from[c]];
         for (size_t c = 0; c < n; ++c) r.aovs.pixels[n * i + c] = s[from[4 + c]];
       }
+      requireValid(layer, x, y, "object", int(from[3]), false);
+      // The colour may have been converted after the render (a compositing tool's working space):
+      // the part's chromaticities then differ from the working space's, and the colours (the
+      // object's light, its albedo and irradiance) are brought back by matrix, as a plate is.
+      if (const ingest::ImageAttribute* a = objectHeader->find("chromaticities")) {
+        const auto* v = std::get_if<std::vector<float>>(&a->value);
+        const auto working = ctx.colors.chromaticities(ctx.colors.workingSpace());
+        if (v && v->size() == 8 && working) {
+          color::Chromaticities primaries{};
+          double off = 0.0;
+          for (size_t i = 0; i < 8; ++i) {
+            primaries[i] = double((*v)[i]);
+            off = std::max(off, std::abs(primaries[i] - (*working)[i]));
+          }
+          if (off > 1e-4) {  // float's rounding of the values written is far below
+            color::requireRgbSpace(primaries, file);
+            auto convert = [&](Image& image, int first) {
+              Image rgb(image.width, image.height, 3);
+              for (size_t i = 0; i < image.pixelCount(); ++i)
+                for (int c = 0; c < 3; ++c)
+                  rgb.pixels[3 * i + size_t(c)] =
+                      image.pixels[i * size_t(image.channels) + size_t(first + c)];
+              ctx.colors.convertFromChromaticities(rgb, primaries, ctx.colors.workingSpace(), file);
+              for (size_t i = 0; i < image.pixelCount(); ++i)
+                for (int c = 0; c < 3; ++c)
+                  image.pixels[i * size_t(image.channels) + size_t(first + c)] =
+                      rgb.pixels[3 * i + size_t(c)];
+            };
+            convert(r.beauty, 0);
+            std::vector<std::string> converted = {"object"};
+            for (size_t c = 0; c + 2 < n; ++c) {
+              const std::string& name = aovNames[c];
+              if (name.size() < 2 || name.substr(name.size() - 2) != ".R" ||
+                  aovNames[c + 1] != name.substr(0, name.size() - 1) + "G" ||
+                  aovNames[c + 2] != name.substr(0, name.size() - 1) + "B")
+                continue;
+              convert(r.aovs, int(c));
+              converted.push_back(name.substr(0, name.size() - 2));
+              c += 2;
+            }
+            const std::string named = ctx.colors.spaceWithChromaticities(primaries);
+            std::string list;
+            for (const std::string& c : converted) list += (list.empty() ? "" : ", ") + c;
+            ctx.note("the object part's chromaticities are " +
+                     (named.empty() ? std::string("another space's") : "those of '" + named + "'") +
+                     ", not those of '" + r.beauty.colorSpace +
+                     "' it was rendered in (converted after the render?): " + list +
+                     " brought to the working space by matrix");
+          }
+        }
+      }
       // How the render chose the exposure (the layer's own --exposure, if any, was given there).
       for (const auto& note : object.notes) ctx.note("the layer's render: " + note);
       ctx.artefacts.object = std::move(object);
@@ -463,11 +572,38 @@ StageInput objectLayerInput(const fs::path& file) {
         ground.grid.y1 = int(whole(gj, "y1"));
         ground.ratio = readPart("shadow", x, y);
         ground.ratio.channelNames = gj.at("channels").get<std::vector<std::string>>();
+        // Padded by a tool that saved the layer again (oiiotool --croptofull): the grid's pixels
+        // are taken from it; outside the grid there is no shadow, whatever the padding holds.
+        const int gridWidth = ground.grid.x1 - ground.grid.x0,
+                  gridHeight = ground.grid.y1 - ground.grid.y0;
+        if ((x != ground.grid.x0 || y != ground.grid.y0 || ground.ratio.width != gridWidth ||
+             ground.ratio.height != gridHeight) &&
+            x <= ground.grid.x0 && y <= ground.grid.y0 && gridWidth > 0 && gridHeight > 0 &&
+            x + ground.ratio.width >= ground.grid.x1 && y + ground.ratio.height >= ground.grid.y1) {
+          Image cropped(gridWidth, gridHeight, ground.ratio.channels, ground.ratio.channelNames);
+          const size_t rowFloats = size_t(gridWidth) * size_t(ground.ratio.channels);
+          for (int yy = 0; yy < gridHeight; ++yy)
+            std::memcpy(cropped.row(yy).data(),
+                        ground.ratio.row(ground.grid.y0 - y + yy).data() +
+                            size_t(ground.grid.x0 - x) * size_t(ground.ratio.channels),
+                        rowFloats * sizeof(float));
+          ground.ratio = std::move(cropped);
+          x = ground.grid.x0;
+          y = ground.grid.y0;
+        }
         if (x != ground.grid.x0 || y != ground.grid.y0 ||
             ground.ratio.width != ground.grid.x1 - ground.grid.x0 ||
             ground.ratio.height != ground.grid.y1 - ground.grid.y0 || ground.ratio.channels < 3 ||
             int(ground.ratio.channelNames.size()) != ground.ratio.channels)
-          throw Error("composite", "the shadow part does not match its header", file);
+          throw Error("composite",
+                      format("the shadow part holds %dx%d pixels at %d,%d in %d channels; its "
+                             "header says %dx%d at %d,%d in %zu (a ratio of 1 is no shadow: "
+                             "the part cannot be cropped, only padded)",
+                             ground.ratio.width, ground.ratio.height, x, y, ground.ratio.channels,
+                             ground.grid.x1 - ground.grid.x0, ground.grid.y1 - ground.grid.y0,
+                             ground.grid.x0, ground.grid.y0, ground.ratio.channelNames.size()),
+                      file);
+        requireValid(ground.ratio, x, y, "shadow", -1, true);
         ground.ratio.colorSpace = gj.value("colorSpace", "");
       }
       if (gj.is_object()) {

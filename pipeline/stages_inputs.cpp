@@ -506,8 +506,9 @@ class ColorStage final : public Stage {
   // in every layout, a Radiance header's EXPOSURE, COLORCORR and PRIMARIES, float TIFFs linear
   // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
   // primaries; 6: a premultiplied picture of codes made straight before it is decoded, a file's
-  // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read
-  static constexpr int kColorVersion = 6;
+  // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read; 7: of a
+  // multi-part OpenEXR the part named as the picture, Nuke's long channel names (rgba.red, alpha)
+  static constexpr int kColorVersion = 7;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {

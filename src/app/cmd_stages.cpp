@@ -62,7 +62,8 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
       target = o->to.empty() ? colors.workingSpace() : colors.resolve(o->to, "--to");
       if (!o->from.empty()) colors.resolve(o->from, "--from");
     });
-    ingest::LoadedImage loaded = ingest::readImage(o->in, "color");
+    // Of a multi-part OpenEXR the part that holds the picture, as a plate's (a note says which).
+    ingest::LoadedImage loaded = ingest::readImage(o->in, "color", {.picturePart = true});
     Image& image = loaded.image;
     ingest::requireFinite(image, o->in, "color", "the image");
     // Colour by channel name, as the pipeline reads plates and environments (core/channels.h:
@@ -78,6 +79,7 @@ Runner setupColor(CLI::App& cmd, const Globals& globals) {
           leftOut.push_back(c < int(image.channelNames.size()) ? image.channelNames[size_t(c)]
                                                                : std::to_string(c));
       Image converted = pipeline::toRgb(image);
+      converted.channelNames = {"R", "G", "B"};  // rgba.red, beauty.R: written as R, G, B
       if (picture.alpha >= 0) {
         Image withAlpha(image.width, image.height, 4, {"R", "G", "B", "A"});
         for (size_t i = 0; i < image.pixelCount(); ++i) {

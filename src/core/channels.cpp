@@ -13,11 +13,14 @@ std::string upper(std::string s) {
   return s;
 }
 
-// "beauty.R" -> layer "beauty.", kind "R"; "R" -> "", "R".
+// "beauty.R" -> layer "beauty.", kind "R"; "R" -> "", "R". Nuke's long names are its short ones:
+// "rgba.red" -> "rgba.", "R"; "alpha" -> "", "A".
 void split(const std::string& name, std::string& layer, std::string& kind) {
   const size_t dot = name.rfind('.');
   layer = dot == std::string::npos ? std::string() : name.substr(0, dot + 1);
   kind = upper(dot == std::string::npos ? name : name.substr(dot + 1));
+  if (kind == "RED" || kind == "GREEN" || kind == "BLUE" || kind == "ALPHA")
+    kind = kind.substr(0, 1);
 }
 
 struct Layer {
@@ -36,6 +39,10 @@ bool beautyName(const std::string& layer) {
 }
 
 }  // namespace
+
+bool isBeautyName(const std::string& name) {
+  return !name.empty() && beautyName(name + ".");
+}
 
 PictureChannels pictureChannels(const Image& image) {
   std::vector<Layer> layers;

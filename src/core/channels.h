@@ -32,6 +32,10 @@ struct PictureChannels {
 // pass, then the one layer with an alpha, then the only layer with a colour.
 PictureChannels pictureChannels(const Image& image);
 
+// Whether a layer's or an OpenEXR part's name says it holds the picture: its last dot-separated
+// part is beauty, combined, rgba, rgb, color or colour (any case): "ViewLayer.Combined".
+bool isBeautyName(const std::string& name);
+
 // Any image made RGB from its picture's channels: R, G, B in that order wherever they are; Y
 // alone replicated as grey; Y with OpenEXR's chroma RY, BY converted (Rec. 709 luminance
 // weights); channels without colour names by position (one replicated). Other channels (alpha,

@@ -536,24 +536,31 @@ bool isColourChannel(const std::string& name) {
          base == "BLUE" || upper == "Y";
 }
 
-// The part of a multi-part OpenEXR that holds the picture: the first with R, G and B, else the
-// first with a colour channel of a layer (beauty.R) or Y, else the first; and a note saying which
-// when there is a choice.
+// The part of a multi-part OpenEXR that holds the picture: of the parts with R, G and B the one
+// named as a picture (beauty, rgba, combined: core/channels.h), else the first; else of those
+// with a colour channel of a layer (beauty.R) or Y the one so named, else the first; else the
+// first; and a note saying which when there is a choice.
 int pictureExrPart(const ExrReader& reader, const fs::path& path, std::vector<std::string>& notes) {
   auto has = [](const ExrPartHeader& h, const char* name) {
     return std::find(h.channelNames.begin(), h.channelNames.end(), name) != h.channelNames.end();
   };
+  auto rgb = [&](const ExrPartHeader& h) { return has(h, "R") && has(h, "G") && has(h, "B"); };
+  auto colour = [](const ExrPartHeader& h) {
+    return std::any_of(h.channelNames.begin(), h.channelNames.end(), isColourChannel);
+  };
   int chosen = -1;
-  std::string why = "the first with R, G and B";
-  for (int p = 0; p < reader.parts() && chosen < 0; ++p) {
-    const ExrPartHeader& h = reader.header(p);
-    if (has(h, "R") && has(h, "G") && has(h, "B")) chosen = p;
-  }
-  for (int p = 0; p < reader.parts() && chosen < 0; ++p) {
-    const std::vector<std::string>& names = reader.header(p).channelNames;
-    if (std::any_of(names.begin(), names.end(), isColourChannel))
+  std::string why;
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p)
+    if (rgb(reader.header(p)) && isBeautyName(reader.header(p).name))
+      chosen = p, why = "named as the picture, with R, G and B";
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p)
+    if (rgb(reader.header(p))) chosen = p, why = "the first with R, G and B";
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p)
+    if (colour(reader.header(p)) && isBeautyName(reader.header(p).name))
+      chosen = p, why = "named as the picture, with a colour channel (none has R, G and B)";
+  for (int p = 0; p < reader.parts() && chosen < 0; ++p)
+    if (colour(reader.header(p)))
       chosen = p, why = "the first with a colour channel (none has R, G and B)";
-  }
   if (chosen < 0) chosen = 0, why = "the first (none has a colour channel)";
   if (reader.parts() > 1) {
     std::string names;

@@ -14,6 +14,7 @@
 #include "command_util.h"
 #include "core/channels.h"
 #include "ingest/capture.h"
+#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
@@ -433,6 +434,48 @@ TEST(ColorCommand, ConvertsThePicturesLayerAndNamesWhatItLeavesOut) {
   EXPECT_FAILS_WITH(c, 1, "has colour in several layers ('albedo', 'normal')");
   EXPECT_NE(c.err.find("passes.exr"), std::string::npos) << c.err;
   EXPECT_FALSE(fs::exists(dir / "c.exr"));
+}
+
+// Pictures as other tools write them: of a multi-part OpenEXR the part named as the picture
+// (a pass before it was read, with no note), Nuke's long channel names with their alpha (the
+// alpha was left out), written as R, G, B, A.
+TEST(ColorCommand, ThePicturePartAndNukesChannelNames) {
+  TempDir dir;
+  Image beauty(4, 3, 4, {"R", "G", "B", "A"}), pass(4, 3, 3, {"R", "G", "B"});
+  Image nuke(4, 3, 4, {"rgba.red", "rgba.green", "rgba.blue", "rgba.alpha"});
+  for (size_t i = 0; i < beauty.pixelCount(); ++i) {
+    const float v = 0.1f + 0.05f * float(i);
+    const float rgba[4] = {v, 2.0f * v, 0.5f * v, 0.5f};
+    std::copy_n(rgba, 4, &beauty.pixels[4 * i]);
+    std::copy_n(rgba, 4, &nuke.pixels[4 * i]);
+    for (int c = 0; c < 3; ++c) pass.pixels[3 * i + size_t(c)] = 0.9f - 0.2f * float(c);
+  }
+  ingest::WriteOptions options;
+  options.depth = ingest::WriteOptions::Depth::Float;
+  ingest::writeImage(dir / "plain.exr", beauty, options);
+  ingest::writeImage(dir / "nuke.exr", nuke, options);
+  ingest::writeExrFile(dir / "parts.exr", dir / "parts.exr",
+                       {ingest::ExrPart("diffuse", &pass, 0, 0, 4, 3, options),
+                        ingest::ExrPart("beauty", &beauty, 0, 0, 4, 3, options)});
+  const std::string to = " --from ACEScg --to \"Linear Rec.709 (sRGB)\" --depth float --out ";
+  const CommandRun plain = compose("color " + q(dir / "plain.exr") + to + q(dir / "a.exr"), dir);
+  ASSERT_EQ(plain.status, 0) << plain.err;
+  const ingest::LoadedImage expected = ingest::readImage(dir / "a.exr");
+  ASSERT_EQ(expected.image.channelNames, (std::vector<std::string>{"R", "G", "B", "A"}));
+  for (const char* name : {"parts", "nuke"}) {
+    SCOPED_TRACE(name);
+    const fs::path out = dir / (std::string("out_") + name + ".exr");
+    const CommandRun r =
+        compose("color " + q(dir / (std::string(name) + ".exr")) + to + q(out), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    const ingest::LoadedImage got = ingest::readImage(out);
+    EXPECT_EQ(got.image.channelNames, expected.image.channelNames);
+    EXPECT_EQ(got.image.pixels, expected.image.pixels);
+    if (std::string(name) == "parts") {
+      EXPECT_NE(r.err.find("read part 1 'beauty', named as the picture"), std::string::npos)
+          << r.err;
+    }
+  }
 }
 
 TEST_F(PhotoStages, EveryBadInputIsANamedErrorAndWritesNothing) {

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <sstream>
 
 #include <OpenImageIO/imagebuf.h>
@@ -20,7 +21,10 @@
 
 #include "calib/chessboard.h"
 #include "calib/plate_camera.h"
+#include "color/color.h"
 #include "command_util.h"
+#include "ingest/exr_io.h"
+#include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
 #include "test_util.h"
 
@@ -741,6 +745,164 @@ TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
   EXPECT_NE(r.err.find("render: lighting file is a folder, not a file"), std::string::npos)
       << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
+}
+
+// A layer saved again by another tool: the object part padded to the frame (oiiotool
+// --croptofull) composites as the layer did; its colour converted to another space, with the
+// part's chromaticities saying so, is brought back by matrix; a NaN, an alpha above 1 or a
+// negative shadow ratio is refused naming the part and the frame's pixel, and nothing is written.
+TEST_F(StageCommands, ALayerSavedAgainByAnotherToolIsReadAsItsFileHoldsIt) {
+  const fs::path light = dir_ / "forest.lighting", layer = dir_ / "monkey.exr";
+  const std::string cache = " --cache " + quote(dir_ / "cache");
+  ASSERT_EQ(run("-q precompute --env " + quote(smallEnvironment()) +
+                    " --shadow-params order=4,grid=8 --out " + quote(light) + cache,
+                dir_.path())
+                .status,
+            0);
+  ASSERT_EQ(run("-q render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+                    quote(light) + " --out " + quote(layer) + cache,
+                dir_.path())
+                .status,
+            0);
+  auto composite = [&](const fs::path& file, const std::string& name) {
+    return run("composite --depth float --plate " + quote(plate_) + " --layer " + quote(file) +
+                   " --out " + quote(dir_ / "out" / name) + cache,
+               dir_.path());
+  };
+  const RunResult base = composite(layer, "base");
+  ASSERT_EQ(base.status, 0) << base.err;
+
+  // Every part again (compose:layer kept), after `edit` changed the parts' pixels, windows or
+  // chromaticities.
+  struct Saved {
+    std::string name;
+    Image image;
+    int x = 0, y = 0, fullWidth = 0, fullHeight = 0;
+    std::array<double, 8> chromaticities = color::kAcesAp1Chromaticities;
+  };
+  std::vector<Saved> original;
+  std::string header;
+  {
+    ingest::ExrReader in(layer, "test");
+    for (int p = 0; p < in.parts(); ++p) {
+      const ingest::ExrPartHeader& h = in.header(p);
+      original.push_back({h.name, in.read(p), h.x, h.y, h.fullWidth, h.fullHeight});
+      if (const ingest::ImageAttribute* a = h.find("compose:layer"))
+        header = std::get<std::string>(a->value);
+    }
+  }
+  ASSERT_EQ(original.size(), 2u);
+  ASSERT_FALSE(header.empty());
+  auto save = [&](const std::string& name, const std::function<void(std::vector<Saved>&)>& edit) {
+    std::vector<Saved> parts = original;
+    edit(parts);
+    std::vector<ingest::ExrPart> out;
+    for (const Saved& s : parts) {
+      ingest::WriteOptions options;
+      options.depth = ingest::WriteOptions::Depth::Float;
+      options.chromaticities = s.chromaticities;
+      options.attributes = {{"compose:layer", header}};
+      out.emplace_back(s.name, &s.image, s.x, s.y, s.fullWidth, s.fullHeight, options);
+    }
+    const fs::path file = dir_ / (name + ".exr");
+    ingest::writeExrFile(file, file, out);
+    return file;
+  };
+  auto channel = [](const Image& image, const std::string& name) {
+    const auto it = std::find(image.channelNames.begin(), image.channelNames.end(), name);
+    EXPECT_NE(it, image.channelNames.end()) << name;
+    return int(it - image.channelNames.begin());
+  };
+  auto compositePart = [](const fs::path& file) {
+    for (Part& p : readParts(file))
+      if (p.name == "composite") return p;
+    ADD_FAILURE() << "no composite part in " << file;
+    return Part{};
+  };
+  const Part expected = compositePart(dir_ / "out" / "base.exr");
+
+  // Padded to the frame, the padding zero.
+  const fs::path padded = save("padded", [](std::vector<Saved>& parts) {
+    Saved& o = parts[0];
+    Image full(o.fullWidth, o.fullHeight, o.image.channels, o.image.channelNames);
+    for (int y = 0; y < o.image.height; ++y)
+      for (int x = 0; x < o.image.width; ++x)
+        std::copy_n(o.image.at(x, y), o.image.channels, full.at(o.x + x, o.y + y));
+    o.image = std::move(full);
+    o.x = o.y = 0;
+  });
+  const RunResult fromPadded = composite(padded, "padded");
+  ASSERT_EQ(fromPadded.status, 0) << fromPadded.err;
+  EXPECT_NE(fromPadded.err.find("read as the file holds it"), std::string::npos) << fromPadded.err;
+  const Part paddedPart = compositePart(dir_ / "out" / "padded.exr");
+  EXPECT_EQ(paddedPart.pixels, expected.pixels) << "the padding changed the composite";
+
+  // The colours in linear Rec. 709, the part's chromaticities Rec. 709's.
+  const fs::path rec709 = save("rec709", [&](std::vector<Saved>& parts) {
+    Saved& o = parts[0];
+    const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    for (const char* name : {"object", "albedo", "irradiance", "irradianceShadowed"}) {
+      const std::string prefix = name + std::string(".");
+      const int r = channel(o.image, prefix + "R"), g = channel(o.image, prefix + "G"),
+                b = channel(o.image, prefix + "B");
+      Image rgb(o.image.width, o.image.height, 3);
+      for (size_t i = 0; i < o.image.pixelCount(); ++i)
+        for (int c = 0; c < 3; ++c)
+          rgb.pixels[3 * i + size_t(c)] =
+              o.image.pixels[i * size_t(o.image.channels) + size_t(c == 0   ? r
+                                                                   : c == 1 ? g
+                                                                            : b)];
+      rgb.colorSpace = "ACEScg";
+      colors.convert(rgb, "Linear Rec.709 (sRGB)");
+      for (size_t i = 0; i < o.image.pixelCount(); ++i)
+        for (int c = 0; c < 3; ++c)
+          o.image.pixels[i * size_t(o.image.channels) + size_t(c == 0   ? r
+                                                               : c == 1 ? g
+                                                                        : b)] =
+              rgb.pixels[3 * i + size_t(c)];
+    }
+    // OpenEXR's chromaticities are shared by every part of a file.
+    for (Saved& s : parts) s.chromaticities = color::kRec709Chromaticities;
+  });
+  const RunResult from709 = composite(rec709, "rec709");
+  ASSERT_EQ(from709.status, 0) << from709.err;
+  EXPECT_NE(from709.err.find("brought to the working space by matrix"), std::string::npos)
+      << from709.err;
+  const Part part709 = compositePart(dir_ / "out" / "rec709.exr");
+  ASSERT_EQ(part709.pixels.size(), expected.pixels.size());
+  double worst = 0.0;
+  for (size_t i = 0; i < expected.pixels.size(); ++i)
+    worst = std::max(worst, double(std::abs(part709.pixels[i] - expected.pixels[i])));
+  EXPECT_LT(worst, 1e-5) << "taken as ACEScg, the object's colour was up to 8 % off";
+
+  // Values no render holds.
+  struct Bad {
+    const char* name;
+    int part;
+    const char* channel;
+    float value;
+    const char* message;
+  };
+  for (const Bad& bad : {Bad{"nan", 0, "object.R", std::nanf(""), "NaN in channel object.R"},
+                         Bad{"alpha", 0, "object.A", 3.0f, "alpha 3 in channel object.A"},
+                         Bad{"ratio", 1, "shadow.G", -2.0f, "ratio -2 in channel shadow.G"}}) {
+    SCOPED_TRACE(bad.name);
+    int atX = 0, atY = 0;
+    const fs::path file = save(bad.name, [&](std::vector<Saved>& parts) {
+      Saved& s = parts[size_t(bad.part)];
+      const int x = s.image.width / 2, y = s.image.height / 2;
+      s.image.at(x, y)[channel(s.image, bad.channel)] = bad.value;
+      atX = s.x + x;
+      atY = s.y + y;
+    });
+    const RunResult r = composite(file, bad.name);
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_NE(r.err.find(bad.message), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("at pixel (" + std::to_string(atX) + ", " + std::to_string(atY) + ")"),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out" / (std::string(bad.name) + ".exr")));
+  }
 }
 
 // precompute never replaces its environment, refuses options that would change nothing in its
