@@ -230,8 +230,9 @@ class MergeStage final : public Stage {
   // 2: a stored response is checked against the photos; 3: aligned before recovery (--align);
   // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
   // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken; 6: ISO above
-  // 65535 read from ISOSpeed, a photo's colour by its bytes' format, a WebP's EXIF and ICC read
-  static constexpr int kVersion = 6;
+  // 65535 read from ISOSpeed, a photo's colour by its bytes' format, a WebP's EXIF and ICC read;
+  // 7: a photo's missing ISO or f-number taken from the other photos of its bracket
+  static constexpr int kVersion = 7;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {

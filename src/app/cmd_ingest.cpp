@@ -197,6 +197,10 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
     }
     std::printf("\ngrouped by %s: %zu view%s\n", capture.method.c_str(), capture.views.size(),
                 capture.views.size() == 1 ? "" : "s");
+    try {  // a field one photo of a bracket lacks, from the others (merge does the same)
+      ingest::fillFromBracket(capture);
+    } catch (const Error&) {  // said below, as what merge will refuse
+    }
     for (auto& v : capture.views)
       for (auto& s : v.shots)
         if (!s.exposure && s.info.relativeExposure()) {

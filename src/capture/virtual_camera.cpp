@@ -575,7 +575,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
         w.depth = ingest::WriteOptions::Depth::UInt8;
         ingest::writeImage(outputs, dst, s.codes, w);
         files.photos.push_back(dst);
-        jv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.jpegSpace});
+        jv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.jpegSpace, {}});
         js["file"] = dst.filename().string();
       }
       if (p.writeTiff16) {
@@ -589,7 +589,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
         w.attributes.push_back({"ICCProfile", std::string(profile.begin(), profile.end())});
         ingest::writeImage(outputs, dst, linear, w);
         files.photos.push_back(dst);
-        tv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.linearSpace});
+        tv.shots.push_back({dst, s.exif, s.relativeExposure, "EXIF", options.linearSpace, {}});
         js["tiff"] = dst.filename().string();
       }
       js["exposureTime"] = s.exposureTime;

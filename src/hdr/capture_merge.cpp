@@ -20,6 +20,15 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// A camera's make or model as compared: ASCII letters in lower case, spaces trimmed.
+std::string lowerTrimmed(const std::string& s) {
+  const size_t first = s.find_first_not_of(" \t\r\n"), last = s.find_last_not_of(" \t\r\n");
+  std::string out = first == std::string::npos ? std::string() : s.substr(first, last - first + 1);
+  for (char& c : out)
+    if (c >= 'A' && c <= 'Z') c = char(c - 'A' + 'a');
+  return out;
+}
+
 bool isEightBit(const ingest::CaptureInfo& info) {
   return info.sampleType == "uint8";
 }
@@ -428,8 +437,26 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         const fs::path cached =
             responseFileFor(options.responseFolder, capture.cameraMake, capture.cameraModel);
         std::error_code ec;
+        // A curve stored for another camera (a file copied in by hand, or named by an older
+        // compose for two cameras alike) is not this camera's: recovered instead, nothing stored.
+        std::optional<ResponseCurve> kept;
+        bool foreign = false;
         if (!cached.empty() && fs::exists(cached, ec)) {
-          result.response = readResponse(cached);
+          kept = readResponse(cached);
+          auto same = [](const std::string& a, const std::string& b) {
+            return a.empty() || b.empty() || lowerTrimmed(a) == lowerTrimmed(b);
+          };
+          if (!same(kept->make, capture.cameraMake) || !same(kept->model, capture.cameraModel)) {
+            result.notes.push_back("the response in " + cached.string() + " is stored for '" +
+                                   kept->make + " " + kept->model + "', not for '" + camera +
+                                   "': not used; a curve is recovered from these photos and not "
+                                   "stored there");
+            kept.reset();
+            foreign = true;
+          }
+        }
+        if (kept) {
+          result.response = std::move(*kept);
           result.linearisation =
               "8-bit photos linearised by the stored response of " + camera + " (" +
               cached.string() +
@@ -485,6 +512,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
           }
         } else {
           recover();
+          if (foreign) result.responseCacheFile.clear();
           result.linearisation = "8-bit photos linearised by the camera response " +
                                  result.response.source + (camera.empty() ? "" : " for " + camera);
         }

@@ -105,6 +105,10 @@ void MergeParams::validate() const {
                     numberText(ghostStops));
   if (!(clipLow >= 0.0 && clipLow < clipHigh && clipHigh <= 1.0))
     throw Error(kStage, "clipping thresholds must satisfy 0 <= low < high <= 1");
+  if (deghost && method == MergeMethod::Robertson)
+    throw Error(kStage,
+                "--merge-method robertson is OpenCV's merge, which --deghost replaces by a "
+                "weighted average that leaves out what moved: give one or the other");
 }
 
 Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
@@ -210,6 +214,12 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     for (const Codes8& c : ownCodes) codePtr.push_back(&c);
   }
   COMPOSE_CHECK(codePtr.size() == n);
+  if (!input.eightBit && params.method == MergeMethod::Robertson)
+    throw Error(kStage,
+                "--merge-method robertson is OpenCV's merge of 8-bit photos; these are deeper "
+                "(16-bit or float), merged by a weighted average of their linear values: leave "
+                "--merge-method out",
+                name(0));
   const bool useOpenCvMerge = input.eightBit && !params.deghost && n > 1;
   std::vector<cv::Mat> codes(n);  // for OpenCV: views of the codes, or shifted copies
   for (size_t i = 0; i < n; ++i) codes[i] = wrap(*codePtr[i]);
@@ -495,8 +505,12 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     }
   }
   if (params.deghost) {
-    result.notes.push_back("ghost suppression left shots out at " + std::to_string(result.ghosted) +
-                           " pixels (" + percent(result.ghosted, total) + ")");
+    result.notes.push_back(
+        "ghost suppression left shots out at " + std::to_string(result.ghosted) + " pixels (" +
+        percent(result.ghosted, total) + ")" +
+        (input.eightBit ? std::string("; with --deghost every pixel is a weighted average of the "
+                                      "shots' linear values, not OpenCV's MergeDebevec")
+                        : std::string()));
   }
   report(progress, kStage, 1.0);
   result.openCvSeconds = opencv.seconds;

@@ -14,6 +14,7 @@
 #include <opencv2/photo.hpp>
 
 #include "core/error.h"
+#include "core/hash.h"
 #include "core/json_number.h"
 #include "core/limits.h"
 #include "core/numbers.h"
@@ -453,6 +454,17 @@ void ResponseCurve::validate(const fs::path& file) const {
                         " (a camera's response never does)",
                     file);
     }
+    // From black to white a camera's codes span stops of light, not none (a flat curve decodes
+    // every code alike) nor more than 40 (a value edited to 3e38 overflowed the merge).
+    const double span = double(v.back()) / double(v.front());
+    if (!(span >= 2.0) || !(span <= 1e12)) {
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "response curve of channel %d spans %.3g stops from code 0 to 255 (%g to %g): "
+                    "a camera's spans between 1 and 40",
+                    c, std::log2(span), double(v.front()), double(v.back()));
+      throw Error(kStage, text, file);
+    }
   }
 }
 
@@ -762,17 +774,28 @@ fs::path responseFileFor(const fs::path& folder, const std::string& make,
                          const std::string& model) {
   if (make.empty() && model.empty()) return {};
   std::string name;
+  bool lost = false;  // a character the name cannot hold (not ASCII, a control, a slash, ...)
   for (char c : make + "_" + model) {
     const unsigned char u = static_cast<unsigned char>(c);
     if (std::isalnum(u) || c == '-' || c == '.') {
       name.push_back(char(std::tolower(u)));
-    } else if (name.empty() || name.back() != '_') {
-      name.push_back('_');
+      continue;
     }
+    lost = lost || !(c == ' ' || c == '_' || c == ',' || c == '(' || c == ')');
+    if (name.empty() || name.back() != '_') name.push_back('_');
   }
   while (!name.empty() && name.back() == '_') name.pop_back();
   while (!name.empty() && (name.front() == '_' || name.front() == '.')) name.erase(name.begin());
-  if (name.empty()) name = "camera";
+  // Two cameras whose names differ only where the file name cannot show it (Камера X1 and Зенит
+  // X1 were both x1.json), or a name longer than a file name may be, get the exact names' hash.
+  constexpr size_t kLongest = 96;
+  if (lost || name.size() > kLongest || name.empty()) {
+    if (name.size() > kLongest) name.resize(kLongest);
+    Hash128 h;
+    h.bytes(make);
+    h.bytes(model);
+    name = (name.empty() ? "camera" : name) + "-" + h.hex().substr(0, 12);
+  }
   return folder / (name + ".json");
 }
 

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <regex>
 #include <set>
@@ -118,7 +119,7 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
         if (!entry.is_regular_file(ec) || !looksLikeImageFile(entry.path()) ||
             entry.path().filename().string().front() == '.')
           continue;
-        inFolder.push_back(Shot{entry.path(), {}, {}, {}, {}});
+        inFolder.push_back(Shot{entry.path(), {}, {}, {}, {}, {}});
       }
       if (ec) throw Error(stage, "cannot list the folder: " + ec.message(), p);
       if (inFolder.empty()) throw Error(stage, "no image files in the folder", p);
@@ -129,7 +130,7 @@ std::vector<Shot> scanShots(const std::vector<fs::path>& paths, const std::strin
       }
       ++folders;
     } else {
-      shots.push_back(Shot{p, {}, {}, {}, {}});
+      shots.push_back(Shot{p, {}, {}, {}, {}, {}});
       folderOf.push_back(-1);
     }
   }
@@ -246,11 +247,35 @@ Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options) {
     }
     if (!startNew && timed && *s.info.captureSeconds - previousTime > options.maxGapSeconds)
       startNew = true;
-    const auto e = s.info.relativeExposure();
+    // A photo without the ISO or f-number the view's photos state is taken at theirs, as
+    // fillFromBracket() takes it (at ISO 100 or f/1 it would seem stops off the bracket).
+    auto exposureOf = [&](const Shot& shot) {
+      CaptureInfo info = shot.info;
+      for (auto it = current->shots.rbegin(); it != current->shots.rend(); ++it) {
+        if (!info.iso) info.iso = it->info.iso;
+        if (!info.fNumber) info.fNumber = it->info.fNumber;
+      }
+      return info.relativeExposure();
+    };
+    const auto e = startNew ? s.info.relativeExposure() : exposureOf(s);
     if (!startNew && e) {
+      // An exposure the view has already: the next direction's bracket.
+      double step = std::numeric_limits<double>::infinity();
+      std::optional<double> first;
       for (const Shot& o : current->shots) {
-        const auto oe = o.info.relativeExposure();
-        if (oe && std::abs(std::log2(*e / *oe)) < options.sameExposureStops) startNew = true;
+        const auto oe = exposureOf(o);
+        if (!oe) continue;
+        if (std::abs(std::log2(*e / *oe)) < options.sameExposureStops) startNew = true;
+        if (!first) first = oe;
+        const double apart = std::abs(std::log2(*oe / *first));
+        if (apart >= options.sameExposureStops) step = std::min(step, apart);
+      }
+      // Off the steps of the bracket so far (a stop off a bracket 2 EV apart): the next
+      // direction's bracket, metered anew (auto-exposure bracketing on a panoramic head). Shutter
+      // speeds' third-stop rounding stays well within a third of a stop.
+      if (!startNew && first && step >= 0.9 && std::isfinite(step)) {
+        const double at = std::log2(*e / *first) / step;
+        if (std::abs(at - std::round(at)) * step > 1.0 / 3.0) startNew = true;
       }
     }
     if (startNew) {
@@ -607,6 +632,11 @@ std::vector<std::string> captureWarnings(const Capture& capture) {
                     "--pattern, --max-gap, --brackets, or the capture description)");
     }
   }
+  for (const View& v : capture.views)
+    for (const Shot& s : v.shots)
+      if (!s.filledFromBracket.empty())
+        out.push_back(s.file.filename().string() + "'s EXIF lacks what the other photos of view '" +
+                      v.name + "' state: taken as " + s.filledFromBracket + ", as theirs");
   if (capture.views.size() < 2) return out;
   // The views' scale: their exposures must rest on the same facts. An exposure from EXIF that
   // assumed a missing f-number or ISO is off by N² or the ISO ratio against views whose EXIF
@@ -665,7 +695,46 @@ std::vector<std::string> captureWarnings(const Capture& capture) {
   return out;
 }
 
+void fillFromBracket(Capture& capture) {
+  for (View& v : capture.views) {
+    if (v.shots.size() < 2) continue;
+    auto fill = [&](std::optional<double> CaptureInfo::*field, const char* tag, auto&& show) {
+      std::vector<double> stated;
+      for (const Shot& s : v.shots)
+        if (s.info.*field) stated.push_back(*(s.info.*field));
+      if (stated.empty() || stated.size() == v.shots.size()) return;
+      const auto [lo, hi] = std::minmax_element(stated.begin(), stated.end());
+      const Shot* missing = nullptr;
+      for (const Shot& s : v.shots)
+        if (!(s.info.*field) && !missing) missing = &s;
+      if (*hi > *lo * 1.01)
+        throw Error(kStage,
+                    "no " + std::string(tag) + " in EXIF, and the other photos of view '" + v.name +
+                        "' state different ones (" + show(*lo) + " to " + show(*hi) +
+                        "): its exposure cannot be known (pass --exposures t1,t2,... in the "
+                        "order of the photos, or a capture description)",
+                    missing->file);
+      for (Shot& s : v.shots) {
+        if (s.info.*field) continue;
+        s.info.*field = *lo;
+        s.filledFromBracket += (s.filledFromBracket.empty() ? "" : ", ") + show(*lo);
+      }
+    };
+    fill(&CaptureInfo::iso, "ISO", [](double iso) {
+      char text[32];
+      std::snprintf(text, sizeof text, "ISO %g", iso);
+      return std::string(text);
+    });
+    fill(&CaptureInfo::fNumber, "FNumber", [](double n) {
+      char text[32];
+      std::snprintf(text, sizeof text, "f/%g", n);
+      return std::string(text);
+    });
+  }
+}
+
 void resolveExposures(Capture& capture) {
+  fillFromBracket(capture);
   // One photo, one shot: a file given twice would count as two exposures (or two views).
   std::vector<std::pair<fs::path, fs::path>> seen;  // canonical, as given
   // One camera: a response belongs to one (it is stored under its Make and Model).

@@ -53,6 +53,7 @@ struct Shot {
   std::optional<double> exposure;  // relative exposure used for merging; empty = unknown
   std::string exposureSource;      // "EXIF", "capture description", "--exposures", ...
   std::string colorSpace;          // colour space declared by a capture description, else empty
+  std::string filledFromBracket;   // "ISO 200": what EXIF lacked, taken from the bracket's others
 };
 
 struct View {
@@ -111,6 +112,12 @@ std::string captureDescriptionText(const std::filesystem::path& file, const Capt
 // suggesting --exposures), and a view of more than one shot needs at least two different
 // exposures (error naming the view's files). A file given twice, photos whose EXIF names two
 // cameras, or a camera other than the description's are errors naming the file.
+// A shot whose EXIF lacks the ISO or the f-number that the other photos of its view state
+// (a tool that dropped a tag, a lens without contacts) takes theirs when they agree: its exposure
+// assumed ISO 100 or f/1, stops off the others'. Shot::filledFromBracket says what was taken,
+// and captureWarnings() says it. Photos of the view that state different values are an error
+// naming the file. Called by resolveExposures(); again is harmless.
+void fillFromBracket(Capture& capture);
 void resolveExposures(Capture& capture);
 
 // The range of relative exposures (t·ISO/N², or the values of --exposures) the merge accepts:

@@ -95,7 +95,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     } catch (const Error& e) {
       fuzz::checkNamed(e);
     }
-    shots.push_back(ingest::Shot{"shot" + std::to_string(shot) + ".jpg", info, {}, {}, {}});
+    shots.push_back(ingest::Shot{"shot" + std::to_string(shot) + ".jpg", info, {}, {}, {}, {}});
   }
   if (shots.empty()) return 0;
   try {

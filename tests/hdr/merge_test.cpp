@@ -206,9 +206,21 @@ TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   EXPECT_EQ(back.inverse[1], c.inverse[1]);
   EXPECT_EQ(back.model, "X 1");
   EXPECT_EQ(back.observed, c.observed);
-  EXPECT_EQ(responseFileFor(dir.path(), "Acme Corp.", "X/1 (mk II)").filename(),
+  EXPECT_EQ(responseFileFor(dir.path(), "Acme Corp.", "X 1 (mk II)").filename(),
             "acme_corp._x_1_mk_ii.json");
   EXPECT_TRUE(responseFileFor(dir.path(), "", "").empty());
+  // Names a file name cannot keep get the exact names' hash: two cameras never share a file
+  // (both were x1.json, the second's curve replacing the first's), nor is a long name refused.
+  const std::filesystem::path first = responseFileFor(dir.path(), "Камера", "X1"),
+                              second = responseFileFor(dir.path(), "Зенит", "X1"),
+                              slashed = responseFileFor(dir.path(), "Acme", "X/1"),
+                              spaced = responseFileFor(dir.path(), "Acme", "X 1");
+  EXPECT_NE(first, second);
+  EXPECT_EQ(first.filename().string().rfind("x1-", 0), 0u) << first;
+  EXPECT_NE(slashed, spaced);
+  const std::filesystem::path longName = responseFileFor(dir.path(), std::string(300, 'A'), "B");
+  EXPECT_LE(longName.filename().string().size(), 120u);
+  EXPECT_NE(longName, responseFileFor(dir.path(), std::string(299, 'A'), "B"));
   c.inverse[0][200] = c.inverse[0][199] * 0.5f;
   COMPOSE_EXPECT_ERROR(writeResponse(dir / "bad.json", c), "decreases at code 200");
   compose::testing::writeText(dir / "bad.json", R"({"format": "compose-response", "version": 1,
@@ -230,6 +242,14 @@ TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   compose::testing::writeText(dir / "bad.json",
                               text.substr(0, at) + text.substr(text.find("\"inverse\"")));
   EXPECT_EQ(readResponse(dir / "bad.json").observed[0], (std::array<int, 2>{0, 255}));
+  // A flat curve decodes every code alike; one value edited to 3e38 overflowed the merge.
+  ResponseCurve flat = ResponseCurve::srgb();
+  std::fill(flat.inverse[1].begin(), flat.inverse[1].end(), 0.5f);
+  COMPOSE_EXPECT_ERROR(writeResponse(dir / "flat.json", flat),
+                       "response curve of channel 1 spans 0 stops from code 0 to 255");
+  ResponseCurve huge = ResponseCurve::srgb();
+  huge.inverse[2][255] = 3e38f;
+  COMPOSE_EXPECT_ERROR(writeResponse(dir / "huge.json", huge), "a camera's spans between 1 and 40");
 }
 
 TEST(Response, RecoveredOnceThenReusedFromThePerCameraStore) {

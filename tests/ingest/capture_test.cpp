@@ -273,6 +273,71 @@ TEST(Capture, GroupsByCaptureTimeAndExposureSequence) {
                        "9 photos do not make brackets of 4 (the bracket size given): 1 left over");
 }
 
+// A panoramic head with auto-exposure bracketing: each direction is metered anew, and the next
+// bracket follows without a pause. Its exposures (a stop brighter here) lie off the first
+// bracket's 2 EV steps: a new view (the six photos were one view of 5 EV, merged as one).
+// Shutter speeds rounded to a third of a stop (1/250 for 1/240) stay on the steps.
+TEST(Capture, ABracketMeteredAnewIsTheNextView) {
+  TempDir dir;
+  const double t[6] = {1.0 / 60, 1.0 / 250, 1.0 / 15, 1.0 / 30, 1.0 / 125, 1.0 / 8};
+  for (int i = 0; i < 6; ++i) {
+    char name[16], when[32];
+    std::snprintf(name, sizeof name, "IMG_%04d.jpg", 300 + i);
+    std::snprintf(when, sizeof when, "2024:05:01 12:00:%02d", i);
+    writeShot(dir / name, cameraShot(t[i], when));
+  }
+  const Capture c = groupByExif(scanShots({dir.path()}), {});
+  ASSERT_EQ(c.views.size(), 2u);
+  EXPECT_EQ(c.views[0].shots.size(), 3u);
+  EXPECT_EQ(c.views[1].shots[0].file.filename(), "IMG_0303.jpg");
+}
+
+// One photo of a bracket without the ISO (or the f-number) the others state: it takes theirs,
+// and merge says so (ISO 100 was assumed: that photo a stop off, the merge 34 % off the truth).
+// Photos that state different ones leave it unknown: an error naming the file.
+TEST(Capture, AFieldOnePhotoOfABracketLacksIsTakenFromTheOthers) {
+  TempDir dir;
+  const double t[3] = {1.0 / 240, 1.0 / 60, 1.0 / 15};
+  for (int i = 0; i < 3; ++i) {
+    CaptureInfo info = cameraShot(t[i], "2024:05:01 12:00:0" + std::to_string(i));
+    if (i == 2) info.iso.reset();
+    if (i == 0) info.fNumber.reset();
+    writeShot(dir / ("IMG_" + std::to_string(i) + ".jpg"), info);
+  }
+  Capture c = groupByExif(scanShots({dir.path()}), {});
+  ASSERT_EQ(c.views.size(), 1u);
+  resolveExposures(c);
+  const View& v = c.views[0];
+  ASSERT_EQ(v.shots.size(), 3u);
+  EXPECT_NEAR(*v.shots[1].exposure / *v.shots[0].exposure, 4.0, 4.0 * kExifRational);
+  EXPECT_NEAR(*v.shots[2].exposure / *v.shots[1].exposure, 4.0, 4.0 * kExifRational);
+  std::string warnings;
+  for (const std::string& w : captureWarnings(c)) warnings += w + "\n";
+  EXPECT_NE(warnings.find("IMG_2.jpg's EXIF lacks what the other photos of view 'view1' state: "
+                          "taken as ISO 200"),
+            std::string::npos)
+      << warnings;
+  EXPECT_NE(warnings.find("IMG_0.jpg's EXIF lacks what the other photos of view 'view1' state: "
+                          "taken as f/5.6"),
+            std::string::npos)
+      << warnings;
+
+  CaptureInfo other = cameraShot(1.0 / 120, "2024:05:01 12:00:01");
+  other.iso = 400;
+  const std::filesystem::path mixedDir = dir / "mixed";
+  std::filesystem::create_directories(mixedDir);
+  writeShot(mixedDir / "IMG_0.jpg", cameraShot(1.0 / 240, "2024:05:01 12:00:00"));
+  writeShot(mixedDir / "IMG_1.jpg", other);
+  CaptureInfo last = cameraShot(1.0 / 30, "2024:05:01 12:00:02");
+  last.iso.reset();
+  writeShot(mixedDir / "IMG_2.jpg", last);
+  Capture mixed = groupByExif(scanShots({mixedDir}), {});
+  ASSERT_EQ(mixed.views.size(), 1u);
+  COMPOSE_EXPECT_ERROR(resolveExposures(mixed),
+                       "no ISO in EXIF, and the other photos of view 'view1' state different "
+                       "ones (ISO 200 to ISO 400)");
+}
+
 // A pause is from the end of one exposure to the start of the next: a night bracket of 4, 1 and
 // 16 s shots, each started half a second after the last one ended, is one view (the starts
 // 4.5 and 1.3 s apart split it into three), and the next bracket, 35 s later, another.
