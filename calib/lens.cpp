@@ -79,7 +79,40 @@ bool Lens::direction(double px, double py, glm::dvec3& dir) const {
         p -= err;
         converged = std::abs(err.x) + std::abs(err.y) < 1e-12;
       }
-      if (!converged || !std::isfinite(p.x) || !std::isfinite(p.y)) return false;
+      // It diverges where the distortion's slope passes 2 (a strong pincushion, k1 = 1 at half
+      // the frame's width), though the distortion is invertible there: damped Newton then, from
+      // the distorted point. A point the distortion folds back (its Jacobian not positive) has
+      // no inverse.
+      if (!converged || !std::isfinite(p.x) || !std::isfinite(p.y)) {
+        p = distorted;
+        auto residual = [&](const glm::dvec2& q) {
+          return distortRectilinear(distortion, q) - distorted;
+        };
+        glm::dvec2 err = residual(p);
+        for (int it = 0; it < 100 && !converged; ++it) {
+          constexpr double h = 1e-7;
+          const glm::dvec2 dx =
+              (residual(p + glm::dvec2(h, 0.0)) - residual(p - glm::dvec2(h, 0.0))) / (2.0 * h);
+          const glm::dvec2 dy =
+              (residual(p + glm::dvec2(0.0, h)) - residual(p - glm::dvec2(0.0, h))) / (2.0 * h);
+          const double det = dx.x * dy.y - dy.x * dx.y;
+          if (!(det > 0.0)) return false;
+          const glm::dvec2 step((dy.y * err.x - dy.x * err.y) / det,
+                                (dx.x * err.y - dx.y * err.x) / det);
+          double scale = 1.0;
+          glm::dvec2 next = p - step, nextErr = residual(next);
+          for (int halve = 0; halve < 40 && !(glm::length(nextErr) < glm::length(err)); ++halve) {
+            scale *= 0.5;
+            next = p - scale * step;
+            nextErr = residual(next);
+          }
+          if (!(glm::length(nextErr) < glm::length(err)) && glm::length(err) >= 1e-12) return false;
+          p = next;
+          err = nextErr;
+          converged = std::abs(err.x) + std::abs(err.y) < 1e-12;
+        }
+        if (!converged || !std::isfinite(p.x) || !std::isfinite(p.y)) return false;
+      }
     }
     dir = glm::normalize(glm::dvec3(p.x, -p.y, -1.0));
     return true;

@@ -109,9 +109,12 @@ const Geometry& Context::geometry() {
     options.lens = calib::readLens(job.lensFile);
     lensFrom = job.lensFile;
   }
+  int poseWidth = 0, poseHeight = 0;  // the plate the pose was estimated on
   if (!job.poseFile.empty()) {
     // The board's plane is the ground; the pose's lens is the plate's unless --calib says else.
     const calib::PlatePose pose = calib::readPose(job.poseFile);
+    poseWidth = pose.width;
+    poseHeight = pose.height;
     if (!options.lens) {
       options.lens = pose.lens;
       options.lens->source = "the lens of pose file " + job.poseFile.string();
@@ -130,6 +133,23 @@ const Geometry& Context::geometry() {
       throw Error(e.stage(), e.what(), lensFrom);  // a plate that does not fit the lens
     }
   }();
+  // A pose is of one shot's framing: another aspect ratio is another framing (a crop); the same
+  // at another size is taken as the shot resized.
+  if (poseWidth > 0 && poseHeight > 0 &&
+      (poseWidth != camera.width || poseHeight != camera.height)) {
+    const double ratio = (double(poseWidth) / poseHeight) / (double(camera.width) / camera.height);
+    if (std::abs(ratio - 1.0) > 0.01)
+      throw Error("camera",
+                  "the pose was estimated on a " + std::to_string(poseWidth) + "x" +
+                      std::to_string(poseHeight) + " plate; this one is " +
+                      std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+                      " (another aspect ratio: another framing, or cropped): estimate the pose "
+                      "on this plate (compose calib pose)",
+                  job.poseFile);
+    note("the pose was estimated on a " + std::to_string(poseWidth) + "x" +
+         std::to_string(poseHeight) + " plate; this one is " + std::to_string(camera.width) + "x" +
+         std::to_string(camera.height) + ": taken as the same shot resized");
+  }
   Geometry g{camera};
   {
     // Which lens the object is seen through: the plate's facts are untrusted, and a default or

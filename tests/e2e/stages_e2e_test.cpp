@@ -1335,6 +1335,23 @@ TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
             std::string::npos)
       << other.err;
   EXPECT_NE(other.err.find(poseFile.string()), std::string::npos) << other.err;
+
+  // A pose whose own plate is of another shape than this plate (its lens of this one's): another
+  // framing. It was taken without a word.
+  calib::PlatePose tall = pose;
+  tall.width = 320;
+  tall.height = 999;
+  calib::writePose(dir_ / "tall.json", tall);
+  const RunResult framing =
+      run("--plate " + quote(plate_) + " --object " + quote(dir_ / "box.obj") + " --pose " +
+              quote(dir_ / "tall.json") + " --place " + place + " --no-cache --out " +
+              quote(dir_ / "tall" / "compose"),
+          dir_.path());
+  EXPECT_EQ(framing.status, 1) << framing.err;
+  EXPECT_NE(framing.err.find("the pose was estimated on a 320x999 plate; this one is 320x213"),
+            std::string::npos)
+      << framing.err;
+  EXPECT_FALSE(fs::exists(dir_ / "tall" / "compose.exr"));
 }
 
 // Zero is a value, not the default: calib pose took --square 0 and --focal35 0 as "not given".
