@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdlib>
 
+#include "calib/plate_camera.h"
 #include "core/error.h"
 #include "core/numbers.h"
 #include "core/params.h"
@@ -139,6 +140,33 @@ void validate(const ComposeJob& job) {
   job.camera.validate();
   job.placement.validate();
   ShadowPlan::parse(job.shadowParams);
+  // Values that would change nothing, refused as the one-shot command refuses them, so that a
+  // scene (whose values are all present) and a --set say so too.
+  if (!job.poseFile.empty() && (job.camera.height != calib::CameraOptions{}.height ||
+                                job.camera.pitchDegrees != calib::CameraOptions{}.pitchDegrees))
+    throw UsageError(
+        "--pose sets the camera's height and tilt: leave out --camera-height and --pitch "
+        "(render.camera-height, render.pitch)");
+  if (job.jpegQuality != ComposeJob{}.jpegQuality && displayPathFor(job).extension() == ".png")
+    throw UsageError("--jpeg-quality applies to a JPEG display image; --out " +
+                     job.output.string() + " writes a PNG (lossless)");
+  if (!job.shadowParams.empty()) {
+    if (!job.shadows && !job.groundShadow)
+      throw UsageError(
+          "--shadow-params: no shadow is drawn (--shadows off and --no-shadow); leave it out");
+    if (!job.shadows) {
+      // The ground shadow takes the method, its order, grid and sources; the rest is the
+      // object's shadows on itself.
+      ParamSet p = ParamSet::parse(job.shadowParams, "shadows");
+      for (const char* key : {"refine", "refine-budget", "boundary", "ground"})
+        if (p.has(key))
+          throw UsageError(std::string(key) +
+                               " is for the object's shadows on itself, which --shadows off "
+                               "leaves out (the ground shadow takes method, order, grid and "
+                               "sources); leave it out",
+                           "shadows");
+    }
+  }
   if (job.room && job.environmentRadius) throw UsageError("give either --room or --env-radius");
   if (job.camera.focal35mm && (!job.lensFile.empty() || !job.poseFile.empty())) {
     throw UsageError(std::string(job.lensFile.empty() ? "--pose" : "--calib") +

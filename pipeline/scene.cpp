@@ -169,7 +169,21 @@ void setParameter(ComposeJob& job, const std::string& assignment) {
     if (!list.is_discarded()) value = list;
   }
   if (value.is_discarded()) value = text;
-  setOne(job, stage, name, value, {});  // relative to where compose runs
+  try {
+    setOne(job, stage, name, value, {});  // relative to where compose runs
+  } catch (const UsageError&) {
+    // Text that reads as JSON (a path 2024, a name 1,2) is text where the parameter is text.
+    if (value.is_string()) throw;
+    ComposeJob tried = job;
+    bool asText = true;
+    try {
+      setOne(tried, stage, name, nlohmann::json(text), {});
+    } catch (const UsageError&) {
+      asText = false;
+    }
+    if (!asText) throw;  // the value's own error, as it was read
+    job = std::move(tried);
+  }
 }
 
 }  // namespace compose::pipeline

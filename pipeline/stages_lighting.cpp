@@ -339,6 +339,24 @@ class PrecomputeStage final : public Stage {
     {
       BasisChoice choice = createBasis(ctx.job, &environment);
       if (!choice.note.empty()) ctx.note(choice.note);
+      // Lambertian cheb-local shading takes the zeroth moment alone (every other moment of the
+      // Lambertian BRDF vanishes): a higher order or another grid changes nothing in the picture.
+      if (ctx.job.lighting == "cheb-local") {
+        ParamSet p = ParamSet::parse(ctx.job.lightingParams, "lighting");
+        if (!p.has("brdf") || p.is("brdf", "lambert")) {
+          std::string given;
+          if (p.has("order") && !p.is("order", "1") && !p.is("order", "auto")) given = "order";
+          if (p.has("samples")) given += given.empty() ? "samples" : " and samples";
+          if (!given.empty())
+            ctx.note(
+                "cheb-local with the Lambertian BRDF shades by the zeroth Chebyshev moment "
+                "alone (the BRDF's other moments vanish): " +
+                given + (given == "order" || given == "samples" ? " changes" : " change") +
+                " nothing in the picture, only the table's size; its accuracy is "
+                "set by rows and cols (the self-shadowing's order is --shadow-params "
+                "order)");
+        }
+      }
       ctx.artefacts.lightingOrder = choice.order;
       choice.basis->project(environment, ctx.progress);
       reason = "projected the environment: " + choice.basis->describe();

@@ -784,15 +784,29 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   const Image* compositeOut = &composite;
   const Image* beautyOut = &rendered.beauty;
   const Image* aovsOut = &rendered.aovs;
+  float pending = object.pending;  // the exposure still to apply to the object's light
   if (space != working) {
     compositeIn = composite;
     compositeIn.colorSpace = working;
     colors.convert(compositeIn, space);
     beautyIn = rendered.beauty;
-    beautyIn.colorSpace = working;
-    colors.convert(beautyIn, space);
     aovsIn = rendered.aovs;
     const std::vector<std::string>& names = render::aovChannelNames();
+    // The exposure first, then the matrix, as an object layer (which holds its light exposed)
+    // is converted by `compose composite`: the chained stages give these files bit for bit.
+    if (pending != 1.0f) {
+      for (size_t i = 0; i < beautyIn.pixelCount(); ++i)
+        for (size_t c = 0; c < 3; ++c) beautyIn.pixels[4 * i + c] *= pending;
+      for (const std::string& name : exposedChannels()) {
+        const auto it = std::find(names.begin(), names.end(), name);
+        if (it == names.end()) continue;  // the object's own light, above
+        const size_t at = size_t(it - names.begin()), stride = size_t(aovsIn.channels);
+        for (size_t i = 0; i < aovsIn.pixelCount(); ++i) aovsIn.pixels[i * stride + at] *= pending;
+      }
+      pending = 1.0f;
+    }
+    beautyIn.colorSpace = working;
+    colors.convert(beautyIn, space);
     for (const char* layer : {"albedo", "irradiance", "irradianceShadowed"}) {
       const auto first = std::find(names.begin(), names.end(), std::string(layer) + ".R");
       COMPOSE_CHECK(first != names.end());
@@ -839,9 +853,9 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   // Positions and depth in float whatever the depth of the rest: in half, P put a point 10 m away
   // up to a pixel off where it shows on a 3088-pixel-wide plate.
   objectPart.floatChannels = {"P.X", "P.Y", "P.Z", "depth.Z"};
-  if (object.pending != 1.0f)
+  if (pending != 1.0f)
     for (const std::string& name : exposedChannels())
-      objectPart.channelScales.emplace_back(name, object.pending);
+      objectPart.channelScales.emplace_back(name, pending);
   if (!compositePart.options.chromaticities) {
     notes.push_back("the config (" + colors.source() + ") does not say what the primaries of " +
                     (space == working ? "the working space" : "--exr-space") + " '" + space +

@@ -8,6 +8,7 @@
 #include "app/compose_options.h"
 #include "color/color.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/output_files.h"
 #include "ingest/image_io.h"
 #include "lighting/lighting.h"
@@ -284,6 +285,17 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
     }
   }
   if (o.explain) {
+    // Images beyond --max-pixels fail the run when they are read: said now, from their headers.
+    for (const auto& [file, stage] :
+         {std::pair{o.job.plate, "ingest"}, std::pair{o.job.environment, "ingest"},
+          std::pair{o.job.holdout, "composite"}}) {
+      std::error_code ec;
+      if (file.empty() || !std::filesystem::is_regular_file(file, ec) ||
+          !ingest::looksLikeImageFile(file))
+        continue;
+      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, stage);
+      checkImageSize(info.fileWidth, info.fileHeight, 1, stage, file);
+    }
     // A holdout of another size than the plate fails the run when the plate is read: said now,
     // from the two headers (their sizes as shown, after their EXIF orientations).
     if (const pipeline::ComposeJob& j = o.job; !j.holdout.empty() && !j.plate.empty()) {
@@ -342,6 +354,10 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
     if (!globals.ocio.empty())
       o->job.ocio = globals.ocio == "built-in" ? std::string("builtin") : globals.ocio;
     if (!saveScene->empty()) {
+      if (o->explain)
+        throw UsageError(
+            "--save-scene writes the scene and exits; --explain plans a run: give one (compose "
+            "run SCENE --explain plans the scene's)");
       // Checked as the run checks it, colour names included (a misspelt --exr-space was saved,
       // and compose run failed on it).
       validateJob(o->job, jobConfig(o->job, globals));
@@ -350,6 +366,11 @@ Runner setupCompose(CLI::App& app, const Globals& globals) {
                                                  o->job.holdout, o->job.lensFile, o->job.poseFile})
         protectInput(input);
       pipeline::saveScene(o->job, *saveScene);
+      if (!globals.quiet && (j.plate.empty() || j.object.empty()))
+        std::fprintf(stderr,
+                     "compose: note: the scene gives no %s: compose run needs one (--set "
+                     "ingest.%s=FILE)\n",
+                     j.plate.empty() ? "plate" : "object", j.plate.empty() ? "plate" : "object");
       std::printf("%s\n", saveScene->c_str());
       return 0;
     }

@@ -217,6 +217,24 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   for (size_t k = 3; k < object.pixels.size(); k += stride) alpha += object.pixels[k];
   EXPECT_GT(alpha, 100.0);
 
+  // The same in another linear space (--exr-space): the one-shot command exposes the object's
+  // light before its matrix, as the layer holds it (the matrix first left a third of the object's
+  // pixels a float step off, and some of its half values one half step).
+  const RunResult one709 =
+      run("-q --plate " + quote(plate_) + " " + objectOptions() + env + lighting +
+              " --exr-space lin_rec709 --depth float --out " + quote(dir_ / "one709" / "compose") +
+              " --cache " + quote(dir_ / "cache1"),
+          dir_.path());
+  ASSERT_EQ(one709.status, 0) << one709.err;
+  const RunResult comp709 =
+      run("-q composite --exr-space lin_rec709 --depth float --plate " + quote(plate_) +
+              " --layer " + quote(layer) + " --out " + quote(dir_ / "two709" / "compose") +
+              " --cache " + quote(dir_ / "cache2"),
+          dir_.path());
+  ASSERT_EQ(comp709.status, 0) << comp709.err;
+  expectSameParts(readParts(dir_ / "one709" / "compose.exr"),
+                  readParts(dir_ / "two709" / "compose.exr"));
+
   // On another plate of the same size (here the plate darkened, as a grade would) the layer is
   // composited as it is, and a note says that its exposure and shadow were matched to the plate
   // it was rendered on; on its own plate there is no such note.
@@ -701,6 +719,32 @@ TEST_F(StageCommands, SceneErrorsNameTheStageAndListTheValidOnes) {
   EXPECT_EQ(r.status, 2) << r.err;
   EXPECT_NE(r.err.find("--samples must be in 1..64, got 65"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "o.exr"));
+
+  // What the one-shot command refuses as changing nothing, a scene run refuses too (it ran,
+  // the values ignored): a JPEG quality for a PNG, self-shadowing parameters with --shadows off.
+  for (const auto& [sets, message] : std::vector<std::pair<std::string, std::string>>{
+           {" --set output.jpeg-quality=20 --set output.out=" + quote(dir_ / "p.png"),
+            "--jpeg-quality applies to a JPEG display image"},
+           {" --set shadows.shadows=off --set shadows.shadow-params=refine=0.1",
+            "refine is for the object's shadows on itself, which --shadows off leaves out"}}) {
+    r = run("run " + quote(saved) + sets, dir_.path());
+    EXPECT_EQ(r.status, 2) << sets << ": " << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+  }
+  // A path that reads as a number is a path (it was "out must be a path (a string)").
+  r = run("run " + quote(saved) + " --explain --set output.out=2024", dir_.path());
+  EXPECT_EQ(r.status, 0) << r.err;
+  // --explain with --save-scene did not explain; it is one or the other.
+  r = run("--plate " + quote(plate_) + " " + objectOptions() + " --explain --save-scene " +
+              quote(dir_ / "explained.json"),
+          dir_.path());
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "explained.json"));
+  // --explain approved a plate the run refuses at once for its size.
+  r = run("--max-pixels 1000 --plate " + quote(plate_) + " " + objectOptions() + " --explain",
+          dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("more than the limit"), std::string::npos) << r.err;
 }
 
 TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
