@@ -72,10 +72,9 @@ std::vector<cv::Point2f> findCorners(const cv::Mat& grey, const Board& board) {
             std::min(spacing, double(cv::norm(corners[size_t((r + 1) * board.columns + c)] - p)));
     }
   }
-  const int half =
-      std::clamp(std::min(int(std::lround(11.0 * std::max(grey.cols, grey.rows) / 640.0)),
-                          std::isfinite(spacing) ? int(0.45 * spacing) : 31),
-                 2, 31);
+  const int scaled =
+      std::clamp(int(std::lround(11.0 * std::max(grey.cols, grey.rows) / 640.0)), 5, 31);
+  const int half = std::max(2, std::min(scaled, std::isfinite(spacing) ? int(0.45 * spacing) : 31));
   cv::cornerSubPix(grey, corners, cv::Size(half, half), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 0.001));
   return corners;
@@ -359,8 +358,15 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
   std::vector<cv::Point2d> normalised;
   for (const cv::Point2f& c : corners) {
     glm::dvec3 d;
-    if (!lens.direction(c.x + 0.5, c.y + 0.5, d) || !(d.z < 0.0))
-      throw Error(kStage, "a chessboard corner lies outside what the lens model can invert", file);
+    if (!lens.direction(c.x + 0.5, c.y + 0.5, d) || !(d.z < 0.0)) {
+      char at[64];
+      std::snprintf(at, sizeof at, "(%.1f, %.1f)", double(c.x), double(c.y));
+      throw Error(kStage,
+                  std::string("the chessboard corner at ") + at +
+                      " lies where the lens's distortion folds the frame back (the lens cannot "
+                      "see it): a lens of another camera, or distortion coefficients out of range",
+                  file);
+    }
     normalised.emplace_back(d.x / -d.z, -d.y / -d.z);
   }
   const auto objectF = boardPoints(board);

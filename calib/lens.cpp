@@ -106,12 +106,19 @@ bool Lens::direction(double px, double py, glm::dvec3& dir) const {
             next = p - scale * step;
             nextErr = residual(next);
           }
-          if (!(glm::length(nextErr) < glm::length(err)) && glm::length(err) >= 1e-12) return false;
+          if (!(glm::length(nextErr) < glm::length(err))) return false;  // no nearer root
           p = next;
           err = nextErr;
           converged = std::abs(err.x) + std::abs(err.y) < 1e-12;
         }
         if (!converged || !std::isfinite(p.x) || !std::isfinite(p.y)) return false;
+        // A root where the distortion folds back is not the point's direction.
+        constexpr double h = 1e-7;
+        const glm::dvec2 dx =
+            (residual(p + glm::dvec2(h, 0.0)) - residual(p - glm::dvec2(h, 0.0))) / (2.0 * h);
+        const glm::dvec2 dy =
+            (residual(p + glm::dvec2(0.0, h)) - residual(p - glm::dvec2(0.0, h))) / (2.0 * h);
+        if (!(dx.x * dy.y - dy.x * dx.y > 0.0)) return false;
       }
     }
     dir = glm::normalize(glm::dvec3(p.x, -p.y, -1.0));

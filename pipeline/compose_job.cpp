@@ -145,8 +145,8 @@ void validate(const ComposeJob& job) {
   if (!job.poseFile.empty() && (job.camera.height != calib::CameraOptions{}.height ||
                                 job.camera.pitchDegrees != calib::CameraOptions{}.pitchDegrees))
     throw UsageError(
-        "--pose sets the camera's height and tilt: leave out --camera-height and --pitch "
-        "(render.camera-height, render.pitch)");
+        "--pose sets the camera's height and tilt: leave out --camera-height and --pitch (in a "
+        "scene, render.camera-height and render.pitch at their defaults, 1.6 and 0)");
   if (job.jpegQuality != ComposeJob{}.jpegQuality && displayPathFor(job).extension() == ".png")
     throw UsageError("--jpeg-quality applies to a JPEG display image; --out " +
                      job.output.string() + " writes a PNG (lossless)");
@@ -158,12 +158,12 @@ void validate(const ComposeJob& job) {
       // The ground shadow takes the method, its order, grid and sources; the rest is the
       // object's shadows on itself.
       ParamSet p = ParamSet::parse(job.shadowParams, "shadows");
-      for (const char* key : {"refine", "refine-budget", "boundary", "ground"})
+      for (const char* key : {"refine", "refine-budget", "ground"})
         if (p.has(key))
           throw UsageError(std::string(key) +
                                " is for the object's shadows on itself, which --shadows off "
-                               "leaves out (the ground shadow takes method, order, grid and "
-                               "sources); leave it out",
+                               "leaves out (the ground shadow takes method, order, grid, "
+                               "boundary and sources); leave it out",
                            "shadows");
     }
   }

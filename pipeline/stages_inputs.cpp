@@ -508,8 +508,9 @@ class ColorStage final : public Stage {
   // whatever their EXIF ColorSpace says; 5: luminance-chroma decoded with the weights of the file's
   // primaries; 6: a premultiplied picture of codes made straight before it is decoded, a file's
   // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read; 7: of a
-  // multi-part OpenEXR the part named as the picture, Nuke's long channel names (rgba.red, alpha)
-  static constexpr int kColorVersion = 7;
+  // multi-part OpenEXR the part named as the picture, Nuke's long channel names (rgba.red, alpha);
+  // 8: a Radiance picture's mantissas decoded as the format defines them (half a step up)
+  static constexpr int kColorVersion = 8;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {

@@ -590,8 +590,9 @@ class GroundStage final : public Stage {
   // 2: the ratio cut to where it is below 1; 3: refined across sharp shadow edges; 4: the
   // object's rotation normalised in double (pipeline/context.cpp); 5: a shadow edge's cell keeps
   // its first ray as one of its strata; 6: points placed coarse to fine (render/ground.h);
-  // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses.
-  static constexpr int kVersion = 7;
+  // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses;
+  // 8: keyed by the boundary rays (--shadow-params boundary), which the ground's points take
+  static constexpr int kVersion = 8;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {
@@ -617,7 +618,9 @@ class GroundStage final : public Stage {
     h.bytes("ground-shadow");
     h.word(kVersion);
     h.combine(ctx.key(kShadowLighting));
-    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describeLighting());
+    const ShadowPlan plan = ShadowPlan::parse(ctx.job.shadowParams);
+    h.bytes(plan.describeLighting());
+    h.word(uint32_t(plan.transfer.boundaryRays));
     h.combine(ctx.geometryKey());
     ctx.keys[kGroundShadow] = h;
   }

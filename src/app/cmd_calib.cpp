@@ -159,8 +159,18 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
                       pin.focalSource + " (" + std::to_string(int(std::lround(pin.focal35mm))) +
                       " mm equivalent); calibrate the lens for an accurate pose");
     }
-    const calib::PlatePose result =
-        calib::estimatePlatePose(plate.image, o->plate, lensModel, board, plate.info.orientation);
+    const calib::PlatePose result = [&] {
+      try {
+        return calib::estimatePlatePose(plate.image, o->plate, lensModel, board,
+                                        plate.info.orientation);
+      } catch (const Error& e) {
+        // What the lens cannot see is the lens file's fault: named with it.
+        if (o->lensFile.empty() ||
+            std::string(e.what()).find("the lens's distortion") == std::string::npos)
+          throw;
+        throw Error(e.stage(), std::string(e.what()) + " (" + o->plate.string() + ")", o->lensFile);
+      }
+    }();
     calib::writePose(o->poseOut, result);
     if (!globals.quiet) {
       const glm::dvec3 c = result.cameraPosition();

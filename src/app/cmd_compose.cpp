@@ -293,7 +293,8 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
       if (file.empty() || !std::filesystem::is_regular_file(file, ec) ||
           !ingest::looksLikeImageFile(file))
         continue;
-      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, stage);
+      // Of a multi-part OpenEXR the part the run reads.
+      const ingest::CaptureInfo info = ingest::readCaptureInfo(file, stage, true);
       checkImageSize(info.fileWidth, info.fileHeight, 1, stage, file);
     }
     // A holdout of another size than the plate fails the run when the plate is read: said now,

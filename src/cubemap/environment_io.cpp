@@ -90,12 +90,40 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   out.how = how;
   std::array<fs::path, kCubeFaces> files;
   for (int f = 0; f < kCubeFaces; ++f) files[size_t(f)] = *byFace[size_t(f)];
+  // The set is read in one colour space, the one its +X face says: a face stored otherwise
+  // (another format's encoding, other primaries, another profile) would be read as +X's (five
+  // linear Rec. 709 faces were taken as ACEScg by +X's chromaticities; a PNG face's sRGB codes
+  // as linear light). How a face says its colour, to compare.
+  auto colourOf = [](const ingest::CaptureInfo& info) {
+    std::string s = info.integerSamples() ? "integer codes" : "floats";
+    if (!info.fileColorSpace.empty()) s += ", '" + info.fileColorSpace + "'";
+    if (info.chromaticities) {
+      char text[96];
+      const auto& c = *info.chromaticities;
+      std::snprintf(text, sizeof text, ", chromaticities %.4g %.4g %.4g %.4g %.4g %.4g", c[0], c[1],
+                    c[2], c[3], c[4], c[5]);
+      s += text;
+    }
+    if (!info.iccProfile.empty())
+      s += ", an ICC profile of " + std::to_string(info.iccProfile.size()) + " bytes";
+    return s;
+  };
   for (int f = 0; f < kCubeFaces; ++f) {
     ingest::LoadedImage img = ingest::readImage(files[size_t(f)], "ingest", {.picturePart = true});
     ingest::requireColourChannels(img.image, files[size_t(f)], "ingest", "the environment's face");
     img.image = pictureRgb(std::move(img.image));  // by channel name, not as stored
     out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
+    if (f > 0 &&
+        (colourOf(img.info) != colourOf(out.info) || img.info.iccProfile != out.info.iccProfile)) {
+      throw Error("ingest",
+                  std::string("cube faces store their colour differently: ") +
+                      lighting::faceName(f) + " is " + colourOf(img.info) + "; +X (" +
+                      files[0].filename().string() + ") is " + colourOf(out.info) +
+                      ": the set is read in one space; give six faces of one kind (compose "
+                      "color converts each to the working space)",
+                  files[size_t(f)]);
+    }
     checkShape(Layout::Faces, img.image.width, img.image.height, files[size_t(f)]);
     if (f > 0 && img.image.width != out.faces[0].width) {
       throw Error("ingest",
@@ -423,11 +451,26 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                         "six face files beside " + path.filename().string());
   } else if (w == h) {
     throw Error("ingest",
-                "a square image could be a mirror ball or a single cube face: " +
-                    layoutAdvice(options, path, "mirrorball|faces"),
+                "a square image could be a mirror ball or a single cube face: a mirror ball? " +
+                    layoutAdvice(options, path, "mirrorball") +
+                    "; a face? give the six face files (a folder, or names ending _px ... _nz)",
                 path);
   } else if (const std::string advice = nearlyLatLong(w, h, path); !advice.empty()) {
     throw Error("ingest", advice, path);
+  } else if (const int n = std::max(w, h) / 4;
+             n > 0 && std::abs(std::max(w, h) - 4 * n) <= std::max(2, n / 25) &&
+             std::abs(std::min(w, h) - 3 * n) <= std::max(2, n / 25)) {
+    // A cross a few pixels off 4N x 3N (an editor's canvas, a border): each face must be N x N.
+    const bool wide = w > h;
+    throw Error("ingest",
+                "a " + std::to_string(w) + "x" + std::to_string(h) + " image looks like a " +
+                    (wide ? "horizontal" : "vertical") +
+                    " cross a few pixels off; a cross must be exactly " +
+                    (wide ? "4N x 3N" : "3N x 4N") + " (" +
+                    std::to_string(wide ? 4 * n : 3 * n) + "x" +
+                    std::to_string(wide ? 3 * n : 4 * n) +
+                    " for faces of " + std::to_string(n) + "): crop it to that first",
+                path);
   } else {
     throw Error("ingest",
                 "cannot tell the environment's layout from a " + std::to_string(w) + "x" +

@@ -781,14 +781,15 @@ fs::path responseFileFor(const fs::path& folder, const std::string& make,
       name.push_back(char(std::tolower(u)));
       continue;
     }
-    lost = lost || !(c == ' ' || c == '_' || c == ',' || c == '(' || c == ')');
+    lost = lost || u >= 0x80 || u < 0x20;  // not ASCII, or a control character
     if (name.empty() || name.back() != '_') name.push_back('_');
   }
   while (!name.empty() && name.back() == '_') name.pop_back();
   while (!name.empty() && (name.front() == '_' || name.front() == '.')) name.erase(name.begin());
-  // Two cameras whose names differ only where the file name cannot show it (Камера X1 and Зенит
-  // X1 were both x1.json), or a name longer than a file name may be, get the exact names' hash.
-  constexpr size_t kLongest = 96;
+  // Two cameras whose names differ only in letters the file name cannot show (Камера X1 and
+  // Зенит X1 were both x1.json), or a name longer than a file name may be (a 300-character make
+  // failed the merge), get the exact names' hash. ASCII names keep the names they always had.
+  constexpr size_t kLongest = 200;
   if (lost || name.size() > kLongest || name.empty()) {
     if (name.size() > kLongest) name.resize(kLongest);
     Hash128 h;

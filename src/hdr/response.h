@@ -143,9 +143,9 @@ std::string responseText(const ResponseCurve& curve);
 // The folder of per-camera response files (see above).
 std::filesystem::path responseDirectory();
 // The file for a camera in `folder`: "<make>_<model>.json", lower case, anything but letters,
-// digits, '-' and '.' replaced by '_'; a name with characters a file name cannot keep (not ASCII,
-// a slash) or longer than 96 characters ends in a hash of the exact make and model, so that two
-// cameras never share a file. Empty when the camera has neither make nor model.
+// digits, '-' and '.' replaced by '_'; a name with characters beyond ASCII (or control ones) or
+// longer than 200 characters ends in a hash of the exact make and model, so that two cameras
+// named in another script do not share a file. Empty when the camera has neither make nor model.
 std::filesystem::path responseFileFor(const std::filesystem::path& folder, const std::string& make,
                                       const std::string& model);
 

@@ -260,21 +260,27 @@ Capture groupByExif(std::vector<Shot> shots, const ExifGrouping& options) {
     const auto e = startNew ? s.info.relativeExposure() : exposureOf(s);
     if (!startNew && e) {
       // An exposure the view has already: the next direction's bracket.
-      double step = std::numeric_limits<double>::infinity();
-      std::optional<double> first;
-      for (const Shot& o : current->shots) {
-        const auto oe = exposureOf(o);
-        if (!oe) continue;
-        if (std::abs(std::log2(*e / *oe)) < options.sameExposureStops) startNew = true;
-        if (!first) first = oe;
-        const double apart = std::abs(std::log2(*oe / *first));
-        if (apart >= options.sameExposureStops) step = std::min(step, apart);
-      }
+      std::vector<double> stops;  // the view's exposures so far, in stops
+      for (const Shot& o : current->shots)
+        if (const auto oe = exposureOf(o)) stops.push_back(std::log2(*oe));
+      const double here = std::log2(*e);
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const double x : stops) nearest = std::min(nearest, std::abs(here - x));
+      if (nearest < options.sameExposureStops) startNew = true;
       // Off the steps of the bracket so far (a stop off a bracket 2 EV apart): the next
-      // direction's bracket, metered anew (auto-exposure bracketing on a panoramic head). Shutter
-      // speeds' third-stop rounding stays well within a third of a stop.
-      if (!startNew && first && step >= 0.9 && std::isfinite(step)) {
-        const double at = std::log2(*e / *first) / step;
+      // direction's bracket, metered anew (auto-exposure bracketing on a panoramic head). The
+      // step is the closest two exposures' distance, to the nearest third of a stop (shutter
+      // speeds are rounded: 1/125 to 1/60 is 1.06 stops), and the new one is measured from its
+      // nearest neighbour, so that the rounding of a long bracket does not add up.
+      double step = std::numeric_limits<double>::infinity();
+      for (size_t a = 0; a < stops.size(); ++a)
+        for (size_t b = a + 1; b < stops.size(); ++b)
+          if (const double apart = std::abs(stops[a] - stops[b]);
+              apart >= options.sameExposureStops)
+            step = std::min(step, apart);
+      step = std::round(step * 3.0) / 3.0;
+      if (!startNew && std::isfinite(step) && step >= 0.9) {
+        const double at = nearest / step;
         if (std::abs(at - std::round(at)) * step > 1.0 / 3.0) startNew = true;
       }
     }
@@ -696,26 +702,36 @@ std::vector<std::string> captureWarnings(const Capture& capture) {
 }
 
 void fillFromBracket(Capture& capture) {
+  // Every view is filled; the first conflict is thrown after them (ingest lists the others).
+  std::optional<Error> conflict;
   for (View& v : capture.views) {
     if (v.shots.size() < 2) continue;
     auto fill = [&](std::optional<double> CaptureInfo::*field, const char* tag, auto&& show) {
+      // Only shots whose exposure is still to come from EXIF (not given by --exposures or a
+      // capture description) need the field.
       std::vector<double> stated;
-      for (const Shot& s : v.shots)
-        if (s.info.*field) stated.push_back(*(s.info.*field));
-      if (stated.empty() || stated.size() == v.shots.size()) return;
-      const auto [lo, hi] = std::minmax_element(stated.begin(), stated.end());
       const Shot* missing = nullptr;
-      for (const Shot& s : v.shots)
-        if (!(s.info.*field) && !missing) missing = &s;
-      if (*hi > *lo * 1.01)
-        throw Error(kStage,
+      for (const Shot& s : v.shots) {
+        if (s.info.*field)
+          stated.push_back(*(s.info.*field));
+        else if (!s.exposure && !missing)
+          missing = &s;
+      }
+      if (stated.empty() || !missing) return;
+      const auto [lo, hi] = std::minmax_element(stated.begin(), stated.end());
+      if (*hi > *lo * 1.01) {
+        if (!conflict)
+          conflict =
+              Error(kStage,
                     "no " + std::string(tag) + " in EXIF, and the other photos of view '" + v.name +
                         "' state different ones (" + show(*lo) + " to " + show(*hi) +
-                        "): its exposure cannot be known (pass --exposures t1,t2,... in the "
-                        "order of the photos, or a capture description)",
+                        "): its exposure cannot be known (pass --exposures t1,t2,... in "
+                        "the order of the photos, or a capture description)",
                     missing->file);
+        return;
+      }
       for (Shot& s : v.shots) {
-        if (s.info.*field) continue;
+        if (s.info.*field || s.exposure) continue;
         s.info.*field = *lo;
         s.filledFromBracket += (s.filledFromBracket.empty() ? "" : ", ") + show(*lo);
       }
@@ -731,6 +747,7 @@ void fillFromBracket(Capture& capture) {
       return std::string(text);
     });
   }
+  if (conflict) throw *conflict;
 }
 
 void resolveExposures(Capture& capture) {

@@ -16,6 +16,7 @@
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <glm/geometric.hpp>
 
+#include "color/color.h"
 #include "core/numbers.h"
 #include "cubemap/layouts.h"
 #include "lighting/sphere_resample.h"
@@ -326,6 +327,24 @@ TEST(EnvironmentFiles, BadInputIsNamed) {
     write(std::string(f) + ".exr", 16, 16);
   write("b_nz.exr", 16, 12);
   COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "b_%.exr"}), "square face");
+  // A face whose colour is stored otherwise than +X's: the set is read in +X's space, and five
+  // faces were read as another space's (a PNG face's codes as linear light).
+  fs::create_directories(dir / "c");
+  fs::create_directories(dir / "d");
+  for (const char* f :
+       {"c/px", "c/nx", "c/ny", "c/pz", "c/nz", "d/nx", "d/py", "d/ny", "d/pz", "d/nz"})
+    write(std::string(f) + ".exr", 16, 16);
+  write("c/py.png", 16, 16);
+  COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "c"}),
+                       "cube faces store their colour differently: +Y is integer codes");
+  {
+    Image img(16, 16, 3, {"R", "G", "B"});
+    ingest::WriteOptions o;
+    o.chromaticities = color::kAcesAp1Chromaticities;
+    ingest::writeImage(dir / "d" / "px.exr", img, o);
+  }
+  COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "d"}),
+                       "cube faces store their colour differently: -X is floats");
   // A missing face, beside a named face file and in a folder.
   fs::create_directories(dir / "five");
   for (const char* f : {"px", "nx", "py", "ny", "pz"}) {

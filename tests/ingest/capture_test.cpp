@@ -290,6 +290,23 @@ TEST(Capture, ABracketMeteredAnewIsTheNextView) {
   ASSERT_EQ(c.views.size(), 2u);
   EXPECT_EQ(c.views[0].shots.size(), 3u);
   EXPECT_EQ(c.views[1].shots[0].file.filename(), "IMG_0303.jpg");
+
+  // Long brackets of rounded shutter speeds stay one view: seven 1 EV apart (1/125 to 1/60 is
+  // 1.06 stops, and measured from the first shot the rounding added up to 0.39 stops), five
+  // 2 EV apart in a camera's order 0, -, +, --, ++ (1/6, 1/25, 0.6, 1/100, 2.5 s).
+  for (const std::vector<double>& bracket :
+       {std::vector<double>{1.0 / 125, 1.0 / 60, 1.0 / 30, 1.0 / 15, 1.0 / 8, 1.0 / 4, 1.0 / 2},
+        std::vector<double>{1.0 / 6, 1.0 / 25, 0.6, 1.0 / 100, 2.5}}) {
+    TempDir long_;
+    for (size_t i = 0; i < bracket.size(); ++i) {
+      char name[40], when[48];
+      std::snprintf(name, sizeof name, "IMG_%04zu.jpg", 400 + i);
+      std::snprintf(when, sizeof when, "2024:05:01 12:00:%02zu", i);
+      writeShot(long_ / name, cameraShot(bracket[i], when));
+    }
+    const Capture one = groupByExif(scanShots({long_.path()}), {});
+    EXPECT_EQ(one.views.size(), 1u) << bracket.size() << " shots";
+  }
 }
 
 // One photo of a bracket without the ISO (or the f-number) the others state: it takes theirs,
