@@ -466,10 +466,9 @@ EnvironmentFile readEnvironmentFile(const std::vector<fs::path>& inputs,
                 "a " + std::to_string(w) + "x" + std::to_string(h) + " image looks like a " +
                     (wide ? "horizontal" : "vertical") +
                     " cross a few pixels off; a cross must be exactly " +
-                    (wide ? "4N x 3N" : "3N x 4N") + " (" +
-                    std::to_string(wide ? 4 * n : 3 * n) + "x" +
-                    std::to_string(wide ? 3 * n : 4 * n) +
-                    " for faces of " + std::to_string(n) + "): crop it to that first",
+                    (wide ? "4N x 3N" : "3N x 4N") + " (" + std::to_string(wide ? 4 * n : 3 * n) +
+                    "x" + std::to_string(wide ? 3 * n : 4 * n) + " for faces of " +
+                    std::to_string(n) + "): crop it to that first",
                 path);
   } else {
     throw Error("ingest",

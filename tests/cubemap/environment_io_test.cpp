@@ -345,6 +345,11 @@ TEST(EnvironmentFiles, BadInputIsNamed) {
   }
   COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "d"}),
                        "cube faces store their colour differently: -X is floats");
+  // A cross a pixel off 4N x 3N: the size it must be (the advice was a convert that refused it).
+  write("near.exr", 161, 121);
+  COMPOSE_EXPECT_ERROR(readEnvironmentFile({dir / "near.exr"}),
+                       "a 161x121 image looks like a horizontal cross a few pixels off; a cross "
+                       "must be exactly 4N x 3N (160x120 for faces of 40)");
   // A missing face, beside a named face file and in a folder.
   fs::create_directories(dir / "five");
   for (const char* f : {"px", "nx", "py", "ny", "pz"}) {
