@@ -94,18 +94,19 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
   // (another format's encoding, other primaries, another profile) would be read as +X's (five
   // linear Rec. 709 faces were taken as ACEScg by +X's chromaticities; a PNG face's sRGB codes
   // as linear light). How a face says its colour, to compare.
+  // (An OpenEXR's chromaticities decide its space whatever name it gives; an ICC profile shows
+  // in the space the reader names.)
   auto colourOf = [](const ingest::CaptureInfo& info) {
     std::string s = info.integerSamples() ? "integer codes" : "floats";
-    if (!info.fileColorSpace.empty()) s += ", '" + info.fileColorSpace + "'";
     if (info.chromaticities) {
       char text[96];
       const auto& c = *info.chromaticities;
       std::snprintf(text, sizeof text, ", chromaticities %.4g %.4g %.4g %.4g %.4g %.4g", c[0], c[1],
                     c[2], c[3], c[4], c[5]);
       s += text;
+    } else if (!info.fileColorSpace.empty()) {
+      s += ", '" + info.fileColorSpace + "'";
     }
-    if (!info.iccProfile.empty())
-      s += ", an ICC profile of " + std::to_string(info.iccProfile.size()) + " bytes";
     return s;
   };
   for (int f = 0; f < kCubeFaces; ++f) {
@@ -114,8 +115,7 @@ EnvironmentFile readSixFaces(const std::vector<fs::path>& paths, std::string how
     img.image = pictureRgb(std::move(img.image));  // by channel name, not as stored
     out.notes.insert(out.notes.end(), img.notes.begin(), img.notes.end());
     if (f == 0) out.info = img.info;
-    if (f > 0 &&
-        (colourOf(img.info) != colourOf(out.info) || img.info.iccProfile != out.info.iccProfile)) {
+    if (f > 0 && colourOf(img.info) != colourOf(out.info)) {
       throw Error("ingest",
                   std::string("cube faces store their colour differently: ") +
                       lighting::faceName(f) + " is " + colourOf(img.info) + "; +X (" +
