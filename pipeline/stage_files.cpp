@@ -524,29 +524,16 @@ StageInput objectLayerInput(const fs::path& file) {
           }
           if (off > 1e-4) {  // float's rounding of the values written is far below
             color::requireRgbSpace(primaries, file);
-            auto convert = [&](Image& image, int first) {
-              Image rgb(image.width, image.height, 3);
-              for (size_t i = 0; i < image.pixelCount(); ++i)
-                for (int c = 0; c < 3; ++c)
-                  rgb.pixels[3 * i + size_t(c)] =
-                      image.pixels[i * size_t(image.channels) + size_t(first + c)];
+            auto toWorking = [&](Image& rgb) {
               ctx.colors.convertFromChromaticities(rgb, primaries, ctx.colors.workingSpace(), file);
-              for (size_t i = 0; i < image.pixelCount(); ++i)
-                for (int c = 0; c < 3; ++c)
-                  image.pixels[i * size_t(image.channels) + size_t(first + c)] =
-                      rgb.pixels[3 * i + size_t(c)];
             };
-            convert(r.beauty, 0);
+            convertChannels(r.beauty, 0, toWorking);
             std::vector<std::string> converted = {"object"};
-            for (size_t c = 0; c + 2 < n; ++c) {
-              const std::string& name = aovNames[c];
-              if (name.size() < 2 || name.substr(name.size() - 2) != ".R" ||
-                  aovNames[c + 1] != name.substr(0, name.size() - 1) + "G" ||
-                  aovNames[c + 2] != name.substr(0, name.size() - 1) + "B")
-                continue;
-              convert(r.aovs, int(c));
-              converted.push_back(name.substr(0, name.size() - 2));
-              c += 2;
+            for (const std::string& aov : colourAovLayers()) {
+              const auto at = std::find(aovNames.begin(), aovNames.end(), aov + ".R");
+              if (at == aovNames.end()) continue;
+              convertChannels(r.aovs, size_t(at - aovNames.begin()), toWorking);
+              converted.push_back(aov);
             }
             const std::string named = ctx.colors.spaceWithChromaticities(primaries);
             std::string list;

@@ -106,6 +106,21 @@ Image toRgb(const Image& in) {
   return pictureRgb(in);
 }
 
+const std::vector<std::string>& colourAovLayers() {
+  static const std::vector<std::string> layers = {"albedo", "irradiance", "irradianceShadowed"};
+  return layers;
+}
+
+void convertChannels(Image& image, size_t first, const std::function<void(Image&)>& convert) {
+  Image rgb(image.width, image.height, 3);
+  const size_t stride = size_t(image.channels);
+  for (size_t i = 0; i < image.pixelCount(); ++i)
+    std::copy_n(&image.pixels[i * stride + first], 3, &rgb.pixels[3 * i]);
+  convert(rgb);
+  for (size_t i = 0; i < image.pixelCount(); ++i)
+    std::copy_n(&rgb.pixels[3 * i], 3, &image.pixels[i * stride + first]);
+}
+
 StageParameter pathParameter(std::string name, std::string help,
                              std::filesystem::path ComposeJob::*member) {
   StageParameter p{

@@ -4,7 +4,9 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <string>
+#include <vector>
 
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
@@ -29,6 +31,14 @@ inline void hashVector(Hash128& hash, const glm::dvec3& v) {
 // Any image made RGB from its picture's channels (core/channels.h): grey is replicated, other
 // channels (alpha, other layers) are dropped.
 Image toRgb(const Image& in);
+
+// The AOV layers of a rendered object that hold colour (layer.R, .G, .B): converted with the
+// object's own colour between colour spaces.
+const std::vector<std::string>& colourAovLayers();
+
+// Applies `convert` (a 3-channel image, converted in place) to the three channels of `image`
+// from `first` on: a colour among other channels.
+void convertChannels(Image& image, size_t first, const std::function<void(Image&)>& convert);
 
 // A holdout mask, as stored (no colour management: it is data): its one channel, else its alpha
 // (unless the alpha is opaque everywhere: a painted mask saved with an alpha it does not use),

@@ -807,19 +807,13 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
     }
     beautyIn.colorSpace = working;
     colors.convert(beautyIn, space);
-    for (const char* layer : {"albedo", "irradiance", "irradianceShadowed"}) {
-      const auto first = std::find(names.begin(), names.end(), std::string(layer) + ".R");
+    for (const std::string& layer : colourAovLayers()) {
+      const auto first = std::find(names.begin(), names.end(), layer + ".R");
       COMPOSE_CHECK(first != names.end());
-      const size_t at = size_t(first - names.begin());
-      Image rgb(aovsIn.width, aovsIn.height, 3);
-      const size_t pixels = size_t(aovsIn.width) * size_t(aovsIn.height);
-      const size_t stride = size_t(aovsIn.channels);
-      for (size_t i = 0; i < pixels; ++i)
-        std::copy_n(&aovsIn.pixels[i * stride + at], 3, &rgb.pixels[3 * i]);
-      rgb.colorSpace = working;
-      colors.convert(rgb, space);
-      for (size_t i = 0; i < pixels; ++i)
-        std::copy_n(&rgb.pixels[3 * i], 3, &aovsIn.pixels[i * stride + at]);
+      convertChannels(aovsIn, size_t(first - names.begin()), [&](Image& rgb) {
+        rgb.colorSpace = working;
+        colors.convert(rgb, space);
+      });
     }
     compositeOut = &compositeIn;
     beautyOut = &beautyIn;

@@ -258,6 +258,23 @@ glm::dmat4 lookAt(const glm::dvec3& eye, const glm::dvec3& target) {
   return m;
 }
 
+// The camera's position a pose gives, as near the truth as the board's symmetry allows: the board
+// looks the same turned by 180 degrees about its normal, so the detected corner order may run the
+// other way, and then the world is turned by 180 degrees about +Y.
+glm::dvec3 cameraNear(const PlatePose& pose, const glm::dvec3& eye) {
+  const glm::dvec3 p = pose.cameraPosition(), turned(-p.x, p.y, -p.z);
+  return glm::length(p - eye) > glm::length(turned - eye) ? turned : p;
+}
+
+// The pose of a 9x6 board of `square` metres rendered through `lens` from `eye`, looking at it.
+PlatePose poseOfBoardSeenFrom(const Lens& lens, const glm::dvec3& eye, double square,
+                              const char* name) {
+  Board board = Board::parse("9x6");
+  board.square = square;
+  return estimatePlatePose(renderBoard(lens, lookAt(eye, glm::dvec3(0.0)), square), name, lens,
+                           board);
+}
+
 TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
   // A slightly distorted lens, so that the pose goes through the lens model's inversion.
   Lens lens = Lens::fromFieldOfView(640, 480, 60.0);
@@ -269,10 +286,7 @@ TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
   Board board = Board::parse("9x6");
   board.square = square;
   const PlatePose pose = estimatePlatePose(photo, "synthetic.png", lens, board);
-  // The board looks the same turned by 180 degrees about its normal, so the detected corner
-  // order may run the other way: then the world is turned by 180 degrees about +Y.
-  glm::dvec3 p = pose.cameraPosition();
-  if (glm::length(p - eye) > glm::length(glm::dvec3(-p.x, p.y, -p.z) - eye)) p = {-p.x, p.y, -p.z};
+  const glm::dvec3 p = cameraNear(pose, eye);
   std::printf(
       "[ figures ] pose: camera at (%.4f, %.4f, %.4f), truth (%.4f, %.4f, %.4f), "
       "reprojection %.3f px\n",
@@ -296,8 +310,7 @@ TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
       for (int c = 0; c < photo.channels; ++c)
         portrait.at(photo.height - 1 - y, x)[c] = photo.at(x, y)[c];
   const PlatePose turned = estimatePlatePose(portrait, "portrait.png", lens, board, 6);
-  glm::dvec3 q = turned.cameraPosition();
-  if (glm::length(q - eye) > glm::length(glm::dvec3(-q.x, q.y, -q.z) - eye)) q = {-q.x, q.y, -q.z};
+  const glm::dvec3 q = cameraNear(turned, eye);
   EXPECT_NEAR(glm::length(q - eye), 0.0, 0.002);
   EXPECT_LT(turned.rms, 0.2);
   EXPECT_NE(std::find(turned.notes.begin(), turned.notes.end(),
@@ -323,15 +336,9 @@ TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
 TEST(Chessboard, ASmallBoardInThePlateGivesItsPose) {
   Lens lens = Lens::fromFieldOfView(640, 480, 45.0);
   lens.distortion = {-0.05, 0.01, 0.0, 0.0, 0.0};
-  const double square = 0.025;
   const glm::dvec3 eye(0.1, 0.9, 0.7);
-  const glm::dmat4 truth = lookAt(eye, glm::dvec3(0.0));
-  const Image photo = renderBoard(lens, truth, square);
-  Board board = Board::parse("9x6");
-  board.square = square;
-  const PlatePose pose = estimatePlatePose(photo, "small.png", lens, board);
-  glm::dvec3 p = pose.cameraPosition();
-  if (glm::length(p - eye) > glm::length(glm::dvec3(-p.x, p.y, -p.z) - eye)) p = {-p.x, p.y, -p.z};
+  const PlatePose pose = poseOfBoardSeenFrom(lens, eye, 0.025, "small.png");
+  const glm::dvec3 p = cameraNear(pose, eye);
   const glm::dvec3 forward = -glm::dvec3(pose.worldFromCamera[2]);
   const double off =
       std::acos(std::min(1.0, glm::dot(forward, glm::normalize(-pose.cameraPosition())))) * 180.0 /
