@@ -199,8 +199,15 @@ class IngestStage final : public Stage {
     // The colour stage asks for the environment file or the stitched map, whichever this job has:
     // a capture description has no environment file to read.
     if (ctx.needs(kEnvironmentFile) && ctx.hasKey(kEnvironmentFile)) {
-      ctx.artefacts.environmentFile =
-          cubemap::loadEnvironment(ctx.environmentInput.path, {}, ctx.progress);
+      // A cube's faces are made linear in the working space before they are resampled (what
+      // the colour stage does to a lat-long map).
+      ctx.artefacts.environmentFile = cubemap::loadEnvironment(
+          ctx.environmentInput.path, {}, ctx.progress,
+          [&](Image& face, const ingest::CaptureInfo& info, const std::filesystem::path& file) {
+            face = toRgb(face);
+            return toWorkingSpace(face, file, info, ctx.job.environmentSpace, "--env-space",
+                                  ctx.colors);
+          });
       const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
       for (const std::string& n : env.notes) ctx.note(n);
       if (env.info.integerSamples() && env.info.format != "raw") {
@@ -509,8 +516,9 @@ class ColorStage final : public Stage {
   // primaries; 6: a premultiplied picture of codes made straight before it is decoded, a file's
   // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read; 7: of a
   // multi-part OpenEXR the part named as the picture, Nuke's long channel names (rgba.red, alpha);
-  // 8: a Radiance picture's mantissas decoded as the format defines them (half a step up)
-  static constexpr int kColorVersion = 8;
+  // 8: a Radiance picture's mantissas decoded as the format defines them (half a step up);
+  // 9: a cube's faces made linear before they are resampled to a lat-long map
+  static constexpr int kColorVersion = 9;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
@@ -684,8 +692,10 @@ class ColorStage final : public Stage {
         const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
         Image linear = toRgb(env.image);
         reason += std::string(reason.empty() ? "" : ", ") + "environment as " +
-                  toWorkingSpace(linear, env.file, env.info, ctx.job.environmentSpace,
-                                 "--env-space", ctx.colors);
+                  (!env.linearised.empty()
+                       ? env.linearised + ", its faces made linear before they were resampled"
+                       : toWorkingSpace(linear, env.file, env.info, ctx.job.environmentSpace,
+                                        "--env-space", ctx.colors));
         ctx.artefacts.environment = std::move(linear);
         ctx.artefacts.environmentFile.reset();
       }

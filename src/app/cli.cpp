@@ -181,6 +181,28 @@ cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
   return write;
 }
 
+std::filesystem::path firstEnvironmentFile(const std::string& out, cubemap::Layout to,
+                                           const cubemap::WriteOptions& write) {
+  return to == cubemap::Layout::Faces ? cubemap::facePaths(out, write.faceNaming)[0]
+                                      : std::filesystem::path(out);
+}
+
+void refuseUnusedWriteOptions(const CLI::App& command, cubemap::Layout to,
+                              const std::filesystem::path& firstFile) {
+  if (command.count("--face-names") && to != cubemap::Layout::Faces)
+    throw UsageError("--face-names names face files: it goes with --to faces");
+  const std::string ext = ingest::lowerExtension(firstFile);
+  for (const char* option : {"--depth", "--compression"}) {
+    if (command.count(option) && ext != ".exr") {
+      throw UsageError(std::string(option) + " says how an OpenEXR file is written; " +
+                       firstFile.filename().string() + " is " +
+                       (ext.empty() ? std::string("no image file") : "a " + ext + " file") +
+                       " (Radiance .hdr: shared-exponent floats, PNG and TIFF: 8 or 16-bit codes, "
+                       "as the input's)");
+    }
+  }
+}
+
 CLI::Option* addCompressionOption(CLI::App& command, std::string& compression) {
   return command
       .add_option("--compression", compression,

@@ -102,6 +102,13 @@ std::string rawPairsNote(const std::vector<std::filesystem::path>& jpegs);
 // (layouts.h); throws UsageError for a value that is neither.
 cubemap::WriteOptions environmentWriteOptions(const std::string& depth,
                                               const std::string& faceNames);
+// The file convert and stitch write first: --out, or for --to faces the first face's name.
+std::filesystem::path firstEnvironmentFile(const std::string& out, cubemap::Layout to,
+                                           const cubemap::WriteOptions& write);
+// Refuses (UsageError) the writing options of `command` that the output would ignore:
+// --face-names but for --to faces, --depth and --compression but for OpenEXR files.
+void refuseUnusedWriteOptions(const CLI::App& command, cubemap::Layout to,
+                              const std::filesystem::path& firstFile);
 
 // --compression: the OpenEXR compression of the EXRs a command writes, as OpenImageIO and oiiotool
 // name it ("piz", "zip:4", "dwaa:45", "none"); a name it does not know is a bad command line.

@@ -156,27 +156,32 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     const std::string cameraSpace = hdr::linearSpaceFor(colors, "sRGB", "", &why);
 
     // Any layout --env takes (a cube, a cross, six faces), as a lat-long map; its colour space
-    // as compose --env reads it (an OpenEXR's chromaticities first).
-    cubemap::LoadedEnvironment env = cubemap::loadEnvironment(o->env, {});
+    // as compose --env reads it (an OpenEXR's chromaticities first), made linear before a cube's
+    // faces are resampled.
+    const auto toCamera = [&](Image& image, const ingest::CaptureInfo& info,
+                              const std::filesystem::path&) {
+      const std::string byPrimaries = envSpace.empty() && info.chromaticities
+                                          ? colors.spaceWithChromaticities(*info.chromaticities)
+                                          : std::string();
+      if (envSpace.empty() && info.chromaticities && byPrimaries.empty()) {
+        colors.convertFromChromaticities(image, *info.chromaticities, cameraSpace, o->env);
+      } else {
+        image.colorSpace = !envSpace.empty() ? envSpace
+                           : !byPrimaries.empty()
+                               ? byPrimaries
+                               : colors
+                                     .inputSpace(ingest::nameForRules(o->env, info.format),
+                                                 info.fileColorSpace, false, info.integerSamples())
+                                     .space;
+        colors.convert(image, cameraSpace);
+      }
+      return cameraSpace;
+    };
+    cubemap::LoadedEnvironment env = cubemap::loadEnvironment(o->env, {}, {}, toCamera);
     if (!globals.quiet)
       for (const std::string& n : env.notes)
         std::fprintf(stderr, "compose: note: %s\n", printable(n).c_str());
-    const std::string byPrimaries = envSpace.empty() && env.info.chromaticities
-                                        ? colors.spaceWithChromaticities(*env.info.chromaticities)
-                                        : std::string();
-    if (envSpace.empty() && env.info.chromaticities && byPrimaries.empty()) {
-      colors.convertFromChromaticities(env.image, *env.info.chromaticities, cameraSpace, o->env);
-    } else {
-      env.image.colorSpace =
-          !envSpace.empty() ? envSpace
-          : !byPrimaries.empty()
-              ? byPrimaries
-              : colors
-                    .inputSpace(ingest::nameForRules(o->env, env.info.format),
-                                env.info.fileColorSpace, false, env.info.integerSamples())
-                    .space;
-      colors.convert(env.image, cameraSpace);
-    }
+    if (env.linearised.empty()) toCamera(env.image, env.info, o->env);
     lighting::SanitizeReport sanitize;
     const lighting::Environment environment =
         lighting::Environment::fromLatLong(env.image, o->env, &sanitize);

@@ -121,7 +121,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
              "their surroundings instead of read")
           ->capture_default_str();
 
-  return [o, &globals]() -> int {
+  return [o, &cmd, &globals]() -> int {
     using cubemap::Layout;
     // Every value is checked before any file is read.
     const auto to = cubemap::parseLayout(o->to);
@@ -177,6 +177,11 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       throw tooLarge("--width", o->width, int64_t(o->width) * (o->width / 2));
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
     write.exrCompression = o->compression;
+    // The files written: for --to faces, the six face files the name gives (a base name
+    // without an extension, or a folder, gets OpenEXR's).
+    const std::filesystem::path firstOut = firstEnvironmentFile(o->out, *to, write);
+    refuseUnusedWriteOptions(cmd, *to, firstOut);
+    ingest::requireImageWriter(firstOut);
     cubemap::MirrorBallOptions ball;
     ball.blindSpotDegrees = o->blindSpot;
     ball.validate();
@@ -212,11 +217,12 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       ingest::LoadedImage photo =
           ingest::readImage(inputs.front(), "ingest", {.picturePart = true});
       // Unwrapping averages pixels: it happens on linear radiance.
-      const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
+      const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(firstOut, "")
                                                      : colors.resolve(o->outSpace, "--out-space");
       ingest::requireColourChannels(photo.image, inputs.front(), "ingest", "the mirror ball");
       notes.insert(notes.end(), photo.notes.begin(), photo.notes.end());
       const int ballWidth = photo.image.width, ballHeight = photo.image.height;
+      write.sixteenBit = photo.info.sampleType == "uint16";
       Image rgb = pictureRgb(std::move(photo.image));  // by channel name, not as stored
       rgb.colorSpace =
           !o->photoSpace.empty()
@@ -300,11 +306,7 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       // Resampling averages light: values in a space that is not linear are made linear before
       // it and encoded again after it (sRGB codes averaged as stored lose light: a checkerboard
       // of 0 and 1 came out 0.21, not 0.5).
-      // The files written: for --to faces, the six face files the name gives (a base name
-      // without an extension, or a folder, gets OpenEXR's).
-      const std::filesystem::path firstOut = *to == Layout::Faces
-                                                 ? cubemap::facePaths(o->out, write.faceNaming)[0]
-                                                 : std::filesystem::path(o->out);
+      write.sixteenBit = file.info.sampleType == "uint16";
       const std::string ext = ingest::lowerExtension(firstOut);
       const bool floatsOut = ext == ".exr" || ext == ".hdr";
       const bool codesIn = file.info.sampleType == "uint8" || file.info.sampleType == "uint16";
@@ -390,6 +392,15 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
       lighting::Environment result;
       if (!cube.empty()) {
         const int width = o->width > 0 ? o->width : 4 * cube.size();
+        // The default, 4N x 2N for faces of N, is a third more texels than the cube's 6N^2.
+        if (int64_t(width) * (width / 2) > limit) {
+          throw Error("output",
+                      "a lat-long map of faces " + std::to_string(cube.size()) + " wide is " +
+                          std::to_string(width) + "x" + std::to_string(width / 2) +
+                          ", more pixels than the limit (--max-pixels " + std::to_string(limit) +
+                          "): give a smaller --width, or raise the limit",
+                      o->out);
+        }
         result = lighting::latLongFromCube(cube, width, printer.callback());
       } else {
         result = o->width > 0 && o->width != latLong.width()
@@ -420,7 +431,8 @@ Runner setupConvert(CLI::App& cmd, const Globals& globals) {
     outputs.commit();
     char energy[160];
     std::snprintf(energy, sizeof energy,
-                  "radiance integrated over the sphere agrees with the input to %.1e (relative)",
+                  "radiance integrated over the sphere, resampled, agrees with the input to "
+                  "%.1e (relative)",
                   energyDifference(energyIn, energyOut));
     notes.push_back(energy);
     if (!globals.quiet) {

@@ -172,10 +172,13 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     }
     if (cmd.count("--width") && *to != Layout::LatLong)
       throw UsageError("--width is the width of a lat-long map: it goes with --to latlong");
-    if (cmd.count("--face-names") && *to != Layout::Faces)
-      throw UsageError("--face-names names face files: it goes with --to faces");
     if (cmd.count("--max-correction") && o->noRefine)
       throw UsageError("--max-correction bounds the refinement, which --no-refine turns off");
+    // Exposure gains are measured on the features the refinement matches.
+    if (o->noRefine && (o->gains == "on" || cmd.count("--feature-size"))) {
+      throw UsageError(std::string(o->gains == "on" ? "--gains on" : "--feature-size") +
+                       " needs the refinement's feature matching, which --no-refine turns off");
+    }
     const int64_t limit = resourceLimits().maxPixels;
     if ((cmd.count("--size") && 6 * int64_t(o->size) * o->size > limit) ||
         (cmd.count("--width") && int64_t(o->width) * (o->width / 2) > limit)) {
@@ -185,6 +188,9 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     }
     cubemap::WriteOptions write = environmentWriteOptions(o->depth, o->faceNames);
     write.exrCompression = o->compression;
+    const std::filesystem::path firstOut = firstEnvironmentFile(o->out, *to, write);
+    refuseUnusedWriteOptions(cmd, *to, firstOut);
+    ingest::requireImageWriter(firstOut);
     cubemap::StitchOptions options;
     options.faceSize = o->size > 0 ? o->size : 1024;
     options.refine = !o->noRefine;
@@ -255,7 +261,7 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       photos.push_back(p);
     }
     options.gains = o->gains == "on" ||
-                    (o->gains == "auto" &&
+                    (o->gains == "auto" && !o->noRefine &&
                      std::any_of(headers.begin(), headers.end(),
                                  [](const cubemap::PhotoHeader& h) { return !h.floatingPoint; }));
     std::string faceSizeFrom;  // the photo whose pixels set the face size
@@ -271,7 +277,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
 
     // Colour: photos are linearised into the space the result will be read as.
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
-    const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(o->out, "")
+    // (For --to faces, as the face files are read: a base name gets OpenEXR's extension.)
+    const std::string target = o->outSpace.empty() ? colors.inputSpaceFor(firstOut, "")
                                                    : colors.resolve(o->outSpace, "--out-space");
     const std::string forced =
         o->photoSpace.empty() ? std::string() : colors.resolve(o->photoSpace, "--photo-space");
@@ -382,6 +389,8 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
     }
     write.fromCodes =
         std::none_of(headers.begin(), headers.end(), [](const auto& h) { return h.floatingPoint; });
+    write.sixteenBit =
+        std::any_of(headers.begin(), headers.end(), [](const auto& h) { return h.sixteenBit; });
     ProgressPrinter printer(globals);
     const cubemap::StitchResult result = cubemap::stitch(photos, load, options, printer.callback());
 

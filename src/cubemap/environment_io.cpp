@@ -273,31 +273,61 @@ bool chooseHalf(WriteOptions::Depth depth, float maximum, const fs::path& path,
   return true;
 }
 
+// Values below 0 that a file of the format cannot hold: how many were written as 0, the lowest.
+struct Clamped {
+  size_t count = 0;
+  float lowest = 0.0f;
+  void note(const fs::path& file, const std::string& space, std::vector<std::string>& notes) const {
+    if (count == 0) return;
+    char line[160];
+    std::snprintf(line, sizeof line, "%zu values below 0 (as low as %.3g", count, double(lowest));
+    notes.push_back(std::string(line) + ": colours outside the gamut of " +
+                    (space.empty() ? std::string("the file's space") : "'" + space + "'") +
+                    ", or a resampling's ringing) are written as 0: a " + lowerExtension(file) +
+                    " file holds no negative values (OpenEXR does)");
+  }
+};
+
 void writeAny(const fs::path& temporary, const fs::path& destination, const Image& rgb,
               bool useHalf, std::optional<Layout> envmap, const WriteOptions& options,
-              std::vector<std::string>& notes) {
-  if (lowerExtension(destination).empty()) {
-    throw Error("output",
-                "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
-                destination);
-  }
+              std::vector<std::string>& notes, Clamped& clamped) {
+  ingest::requireImageWriter(destination);
   // Radiance above 1 needs a format of floats that is read as linear light: OpenEXR or Radiance.
   // An 8- or 16-bit PNG, JPEG or TIFF would clip it (and say nothing); a float TIFF would be read
   // back as sRGB, as the colour config's file rules take TIFFs.
   const std::string ext = lowerExtension(destination);
   const bool floats = ext == ".exr" || ext == ".hdr";
+  // Only OpenEXR holds negative values: Radiance's shared exponent has no sign (OpenImageIO's
+  // encoder wraps a negative channel round to a large positive one), codes start at 0.
+  Image nonNegative;
+  const Image* written = &rgb;
+  if (ext != ".exr" &&
+      std::any_of(rgb.pixels.begin(), rgb.pixels.end(), [](float v) { return v < 0.0f; })) {
+    nonNegative = rgb;
+    for (float& v : nonNegative.pixels) {
+      if (!(v < 0.0f)) continue;
+      // Float noise of a conversion (-5e-10) is no colour to speak of.
+      if (v < -1e-6f) ++clamped.count;
+      clamped.lowest = std::min(clamped.lowest, v);
+      v = 0.0f;
+    }
+    written = &nonNegative;
+  }
   if (!floats) {
+    // Within float rounding of 1 is white: 8-bit codes that went to linear light and back
+    // (a clipped sky, resampled) come back a step or two above it.
+    constexpr float kWhite = 1.0f + 1e-5f;
     const float most = maxValue(rgb.pixels);
-    if (most > 1.0f && options.fromCodes) {
+    if (most > kWhite && options.fromCodes) {
       size_t above = 0;
-      for (const float v : rgb.pixels) above += v > 1.0f;
+      for (const float v : rgb.pixels) above += v > kWhite;
       char line[200];
       std::snprintf(line, sizeof line,
                     "%zu values above 1 (up to %.4g: clipped white times an exposure gain) are "
                     "written as white in %s",
                     above, double(most), destination.filename().c_str());
       notes.push_back(line);
-    } else if (most > 1.0f) {
+    } else if (most > kWhite) {
       // Said in the file's own encoding (the caller has encoded linear light for it).
       const std::string in =
           rgb.colorSpace.empty() ? std::string() : " (in '" + rgb.colorSpace + "', as written)";
@@ -315,8 +345,11 @@ void writeAny(const fs::path& temporary, const fs::path& destination, const Imag
                options.strings);
     } else {
       ingest::WriteOptions write;
-      if (floats) write.depth = ingest::WriteOptions::Depth::Float;
-      ingest::writeImage(temporary, rgb, write);
+      if (floats)
+        write.depth = ingest::WriteOptions::Depth::Float;
+      else if (options.sixteenBit && ext != ".jpg" && ext != ".jpeg")
+        write.depth = ingest::WriteOptions::Depth::UInt16;
+      ingest::writeImage(temporary, *written, write);
     }
   } catch (const Error& e) {
     // The temporary is ours: the user knows the file by the name they gave.
@@ -539,7 +572,7 @@ lighting::CubeMap cubeMapOf(const EnvironmentFile& file, lighting::SanitizeRepor
 }
 
 LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& options,
-                                  const Progress& progress) {
+                                  const Progress& progress, const FaceToLinear& toLinear) {
   ReadOptions read = options;
   read.adviseConvert = true;  // the one-shot command has no --layout
   EnvironmentFile file = readEnvironmentFile({path}, read);
@@ -558,12 +591,17 @@ LoadedEnvironment loadEnvironment(const fs::path& path, const ReadOptions& optio
     if (file.how != "aspect 2:1") out.notes.push_back("environment layout: " + file.how);
     return out;
   }
+  std::string space = file.info.fileColorSpace;
+  if (toLinear) {
+    for (Image& face : file.faces) out.linearised = toLinear(face, file.info, out.file);
+    space = file.faces.front().colorSpace;
+  }
   lighting::SanitizeReport sanitized;
   lighting::CubeMap cube = cubeMapOf(file, &sanitized);
   if (sanitized.negativeTexels > 0) out.notes.push_back(sanitized.negativeNote("cube "));
   const lighting::Environment env = lighting::latLongFromCube(cube, 4 * cube.size(), progress);
   out.image = Image(env.width(), env.height(), 3, {"R", "G", "B"});
-  out.image.colorSpace = file.info.fileColorSpace;
+  out.image.colorSpace = space;
   out.image.pixels.assign(env.texels().begin(), env.texels().end());
   out.notes.push_back("environment: " + file.describe() + " (" + file.how +
                       "), resampled exactly to a " + std::to_string(env.width()) + "x" +
@@ -638,7 +676,9 @@ std::vector<std::string> writeLatLong(OutputFiles& outputs, const fs::path& path
   img.colorSpace = env.colorSpace();
   img.pixels.assign(env.texels().begin(), env.texels().end());
   const bool half = chooseHalf(options.depth, maxValue(img.pixels), path, notes);
-  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options, notes);
+  Clamped clamped;
+  writeAny(outputs.add(path), path, img, half, Layout::LatLong, options, notes, clamped);
+  clamped.note(path, img.colorSpace, notes);
   return notes;
 }
 
@@ -676,19 +716,23 @@ std::vector<std::string> writeCubeMap(OutputFiles& outputs, const fs::path& path
   if (layout == Layout::Faces) {
     const auto paths = facePaths(path, options.faceNaming);
     const bool half = chooseHalf(options.depth, maximum, paths[0], notes);
+    Clamped clamped;
     for (int f = 0; f < kCubeFaces; ++f) {
       writeAny(outputs.add(paths[size_t(f)]), paths[size_t(f)], cube.faceImage(f), half,
-               std::nullopt, options, notes);
+               std::nullopt, options, notes, clamped);
     }
+    clamped.note(paths[0], cube.colorSpace, notes);
     return notes;
   }
   COMPOSE_CHECK(layout == Layout::Cube || layout == Layout::HorizontalCross ||
                 layout == Layout::VerticalCross);
   const bool half = chooseHalf(options.depth, maximum, path, notes);
   const Image packed = packFaces(cube, layout);
+  Clamped clamped;
   writeAny(outputs.add(path), path, packed, half,
            layout == Layout::Cube ? std::optional<Layout>(Layout::Cube) : std::nullopt, options,
-           notes);
+           notes, clamped);
+  clamped.note(path, cube.colorSpace, notes);
   return notes;
 }
 

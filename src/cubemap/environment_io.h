@@ -20,6 +20,7 @@
 
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <utility>
@@ -77,14 +78,24 @@ lighting::CubeMap cubeMapOf(const EnvironmentFile& file,
 // the colour rules should look at, and notes for the user. Cube layouts are resampled exactly
 // (lighting/sphere_resample.h) to a lat-long map of width 4N; mirror balls are refused (convert
 // them first: compose convert --from mirrorball).
+// Resampling averages light, so a cube's faces are brought to linear light first when `toLinear`
+// is given: it converts a face in place (its colour space set; `info` and `file` are the set's,
+// as the colour rules read them) and says how it read it. Without
+// it, faces are resampled as stored (right for linear light only: the sRGB codes of a PNG cross
+// averaged as stored lose light, a checker of 0 and 255 by 30 %).
 struct LoadedEnvironment {
   Image image;
   ingest::CaptureInfo info;
   std::filesystem::path file;
   std::vector<std::string> notes;
+  // What toLinear said of the faces: the image is already in its space. Empty: values as stored.
+  std::string linearised;
 };
+using FaceToLinear = std::function<std::string(Image& face, const ingest::CaptureInfo& info,
+                                               const std::filesystem::path& file)>;
 LoadedEnvironment loadEnvironment(const std::filesystem::path& path,
-                                  const ReadOptions& options = {}, const Progress& progress = {});
+                                  const ReadOptions& options = {}, const Progress& progress = {},
+                                  const FaceToLinear& toLinear = {});
 
 struct WriteOptions {
   enum class Depth {
@@ -104,6 +115,8 @@ struct WriteOptions {
   // (PNG, JPEG, TIFF), values above 1 (a clipped sky times an exposure gain) are clipped to 1 with
   // a note. Otherwise such a file is refused when the map holds values above 1.
   bool fromCodes = false;
+  // The map was made from 16-bit codes: a PNG or TIFF is written with 16 bits (else 8).
+  bool sixteenBit = false;
   // OpenEXR only: string attributes to carry (Make, Model, compose:exposureUnit).
   std::vector<std::pair<std::string, std::string>> strings;
 };

@@ -27,6 +27,7 @@ PhotoHeader readPhotoHeader(const std::filesystem::path& file) {
   h.orientation = info.orientation != 1 ? info.orientation : info.sensorOrientation;
   h.floatingPoint =
       info.sampleType == "float" || info.sampleType == "half" || info.sampleType == "double";
+  h.sixteenBit = info.sampleType == "uint16";
   h.format = info.format;
   if (h.width <= 0 || h.height <= 0) throw Error("ingest", "image has no pixels", file);
   return h;

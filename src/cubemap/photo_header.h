@@ -20,6 +20,7 @@ struct PhotoHeader {
   bool focalLength35mmDerived = false;
   std::optional<double> focalLengthMm;  // EXIF FocalLength
   bool floatingPoint = false;           // float or half samples (HDR), else integer (LDR)
+  bool sixteenBit = false;              // 16-bit integer samples
   std::string format;                   // reader name, e.g. "jpeg", "openexr"
   // EXIF Make and Model, and a merged photo's compose:exposureUnit (ingest::CaptureInfo).
   std::string cameraMake, cameraModel, exposureUnit;

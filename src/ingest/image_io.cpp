@@ -1213,16 +1213,20 @@ WriteReport writeInto(const fs::path& file, const fs::path& shown, const Image& 
 
 }  // namespace
 
-WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& image,
-                       const WriteOptions& options) {
+void requireImageWriter(const fs::path& path, const std::string& stage) {
   const std::string ext = lowerExtension(path);
   if (ext.empty()) {
-    throw Error("output",
+    throw Error(stage,
                 "the file name has no extension to say its format (.exr, .png, .tif, .hdr, .jpg)",
                 path);
   }
-  if (ext != ".exr" && !isJpegName(ext) && !oiio::module("output", path).canWrite(path.string()))
-    throw Error("output", "no image writer for the extension '" + ext + "'", path);
+  if (ext != ".exr" && !isJpegName(ext) && !oiio::module(stage, path).canWrite(path.string()))
+    throw Error(stage, "no image writer for the extension '" + ext + "'", path);
+}
+
+WriteReport writeImage(OutputFiles& outputs, const fs::path& path, const Image& image,
+                       const WriteOptions& options) {
+  requireImageWriter(path);
   return writeInto(outputs.add(path), path, image, options);
 }
 

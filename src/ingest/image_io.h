@@ -263,6 +263,10 @@ std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info);
 CaptureInfo captureInfoFromAttributes(int width, int height, int channels,
                                       const std::vector<ImageAttribute>& attributes);
 
+// Throws compose::Error (stage `stage`) when no writer takes `path`'s extension (or it has
+// none), before anything is computed for it.
+void requireImageWriter(const std::filesystem::path& path, const std::string& stage = "output");
+
 // Writes `image` to `path`, format chosen from the extension. Atomic: temp file + rename.
 WriteReport writeImage(const std::filesystem::path& path, const Image& image,
                        const WriteOptions& options = {});

@@ -188,6 +188,18 @@ TEST(StitchCommand, PhotosOfCodesMayBeStitchedIntoAJpeg) {
             std::string::npos)
       << hdr.err;
   EXPECT_FALSE(fs::exists(dir / "hdr.jpg"));
+  // Faces named by a base name get OpenEXR's extension and hold linear light, as a pattern's do
+  // (the base name's file rules made them sRGB-encoded: 0.176 written as 0.456).
+  for (const char* out : {"base", "pattern_%.exr"}) {
+    const RunResult faces =
+        run("stitch --fov 100 --size 32 --no-refine --to faces --out " + q(dir / out) + exrs, dir);
+    ASSERT_EQ(faces.status, 0) << faces.err;
+  }
+  const ingest::LoadedImage byBase = ingest::readImage(dir / "base_pz.exr");
+  const ingest::LoadedImage byPattern = ingest::readImage(dir / "pattern_pz.exr");
+  EXPECT_EQ(byBase.image.pixels, byPattern.image.pixels);
+  EXPECT_EQ(byBase.info.fileColorSpace, byPattern.info.fileColorSpace);
+  EXPECT_EQ(byBase.info.fileColorSpace.find("sRGB - Texture"), std::string::npos);
 }
 
 TEST(StitchCommand, SixNamedPhotosToACube) {
@@ -579,6 +591,56 @@ TEST(ComposeWithCubeEnvironments, CrossesAndFaceFoldersLightTheObject) {
   EXPECT_TRUE(fs::exists(dir / "out.exr"));
 }
 
+// A cross of 8-bit codes lights the object as its lat-long map in linear light does: its faces
+// are made linear before they are resampled (a checker of codes 0 and 255 averaged as stored
+// is code 128, 0.22 of the light where the faces hold 0.5: the object came out 30 % dark).
+TEST(ComposeWithCubeEnvironments, ACrossOfCodesLightsAsItsLatLongMap) {
+  if (!fs::exists(sample("bunny.obj"))) GTEST_SKIP() << "samples missing";
+  TempDir dir;
+  Image plate(160, 120, 3, {"R", "G", "B"});
+  for (float& v : plate.pixels) v = 0.4f;
+  ingest::writeImage(dir / "plate.png", plate);
+  // A horizontal cross of 16-texel faces: a checker of 2-texel squares in its cells, black
+  // outside them.
+  Image cross(64, 48, 3, {"R", "G", "B"});
+  const int cells[kCubeFaces][2] = {{2, 1}, {0, 1}, {1, 0}, {1, 2}, {1, 1}, {3, 1}};
+  for (const auto& cell : cells)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x)
+        for (int c = 0; c < 3; ++c)
+          cross.at(cell[0] * 16 + x, cell[1] * 16 + y)[c] = float((x / 2 + y / 2) % 2);
+  ingest::writeImage(dir / "cross.png", cross);
+  ASSERT_EQ(run("convert " + q(dir / "cross.png") + " --to latlong --out " + q(dir / "ll.exr"), dir)
+                .status,
+            0);
+  std::map<std::string, Image> composites;
+  for (const char* env : {"cross.png", "ll.exr"}) {
+    const RunResult r = run("--plate " + q(dir / "plate.png") + " --object " +
+                                q(sample("bunny.obj")) + " --env " + q(dir / env) +
+                                " --exposure 0 --shadows off --no-shadow --samples 1 --no-cache "
+                                "--out " +
+                                q(dir / ("lit_by_" + fs::path(env).stem().string())),
+                            dir);
+    ASSERT_EQ(r.status, 0) << env << ": " << r.err;
+    composites[env] = ingest::readImage(dir / ("lit_by_" + fs::path(env).stem().string() + ".exr"),
+                                        "ingest", {.picturePart = true})
+                          .image;
+  }
+  const Image &a = composites["cross.png"], &b = composites["ll.exr"];
+  ASSERT_EQ(a.pixels.size(), b.pixels.size());
+  ASSERT_GE(a.channels, 3);
+  double sumA = 0.0, sumB = 0.0, worst = 0.0;  // of the colour, less the plate's
+  for (size_t i = 0; i < a.pixels.size(); ++i) {
+    if (int(i % size_t(a.channels)) >= 3) continue;
+    sumA += a.pixels[i] - 0.4;
+    sumB += b.pixels[i] - 0.4;
+    worst = std::max(worst, double(std::abs(a.pixels[i] - b.pixels[i])));
+  }
+  EXPECT_GT(std::abs(sumB), 10.0) << "the object should stand out of the plate";
+  EXPECT_NEAR(sumA / sumB, 1.0, 0.01);
+  EXPECT_LT(worst, 0.01);
+}
+
 // The issue's bad input: each a named error, a non-zero exit and nothing written.
 class BadEnvironmentInput : public ::testing::Test {
  protected:
@@ -719,6 +781,20 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
                 "--photo-space");
   expectRefused("convert missing.exr --to cube --blind-spot 5 --out " + q(dir_ / "x.exr"), 2,
                 "--blind-spot applies to a mirror-ball photo only", "--blind-spot");
+  // Options of how an OpenEXR or face files are written, given for other files, were ignored;
+  // a format nothing writes is said before any file is read.
+  expectRefused("convert missing.exr --to cube --face-names words --out " + q(dir_ / "x.exr"), 2,
+                "--face-names names face files: it goes with --to faces", "--face-names");
+  expectRefused("convert missing.exr --to latlong --compression zip:9 --out " + q(dir_ / "x.hdr"),
+                2, "--compression says how an OpenEXR file is written; x.hdr is a .hdr file",
+                "x.hdr");
+  expectRefused("convert missing.exr --to hcross --depth half --out " + q(dir_ / "x.png"), 2,
+                "--depth says how an OpenEXR file is written; x.png is a .png file", "x.png");
+  expectRefused(
+      "stitch --fov 90 --to faces --depth float --out " + q(dir_ / "f_%.tif") + " a_px.jpg", 2,
+      "--depth says how an OpenEXR file is written; f_px.tif is a .tif file", "f_px.tif");
+  expectRefused("convert missing.exr --to latlong --out " + q(dir_ / "x.xyz"), 1,
+                "no image writer for the extension '.xyz'", "x.xyz");
   // The same in stitch.
   expectRefused("stitch --fov 90 --size 0 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
                 "--size must be 8..8192; got 0", "--size");
@@ -727,6 +803,13 @@ TEST_F(BadEnvironmentInput, BadCommandLinesExitTwoBeforeReadingFiles) {
   expectRefused(
       "stitch --fov 90 --no-refine --max-correction 5 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
       "--max-correction bounds the refinement", "--no-refine");
+  // Exposure gains are measured on the refinement's matches: with --no-refine the photos kept
+  // their exposures, each gain 1, exit 0.
+  expectRefused("stitch --fov 90 --no-refine --gains on --out " + q(dir_ / "x.exr") + " a_px.jpg",
+                2, "--gains on needs the refinement's feature matching", "--no-refine");
+  expectRefused(
+      "stitch --fov 90 --no-refine --feature-size 300 --out " + q(dir_ / "x.exr") + " a_px.jpg", 2,
+      "--feature-size needs the refinement's feature matching", "--no-refine");
   // An EXR codec it does not know, in every command that writes EXRs.
   expectRefused("convert missing.exr --to cube --compression lzw --out " + q(dir_ / "x.exr"), 2,
                 "unknown OpenEXR compression 'lzw'", "--compression");
@@ -983,6 +1066,54 @@ TEST(ConvertCommand, IntegerTiffsAreCodesAndFloatTiffsAreLight) {
   EXPECT_NEAR(out["light.tif"][128], 128.0f / 255.0f, 1e-4);
 }
 
+// A map of 16-bit codes is written with 16 bits (it came out 8-bit, 256 codes made one, even
+// through a repacking), and the clipped white of a photo stays white through linear light and
+// back (a value a float step above 1 refused the map as HDR).
+TEST(ConvertCommand, SixteenBitCodesStaySixteenBitAndClippedWhiteStaysWhite) {
+  TempDir dir;
+  Image ramp(128, 64, 3, {"R", "G", "B"});
+  for (size_t i = 0; i < ramp.pixels.size(); ++i)
+    ramp.pixels[i] = float((i * 97) % 65536) / 65535.0f;
+  ingest::WriteOptions sixteen;
+  sixteen.depth = ingest::WriteOptions::Depth::UInt16;
+  ingest::writeImage(dir / "ramp.png", ramp, sixteen);
+  for (const auto& [in, args, out] :
+       std::vector<std::array<std::string, 3>>{{"ramp.png", "--to hcross", "cross.png"},
+                                               {"cross.png", "--to vcross", "vcross.png"},
+                                               {"cross.png", "--to faces", "face_%.tif"}}) {
+    const RunResult r = run("convert " + q(dir / in) + " " + args + " --out " + q(dir / out), dir);
+    ASSERT_EQ(r.status, 0) << args << ": " << r.err;
+  }
+  for (const char* out : {"cross.png", "vcross.png", "face_px.tif"})
+    EXPECT_EQ(ingest::readCaptureInfo(dir / out, "ingest").sampleType, "uint16") << out;
+  // A repacking moves codes: the same values, 16-bit ones among them.
+  auto sortedNonZero = [](const fs::path& file) {
+    std::vector<float> v;
+    for (float x : ingest::readImage(file).image.pixels)
+      if (x > 0.0f) v.push_back(x);
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  const std::vector<float> cross = sortedNonZero(dir / "cross.png");
+  EXPECT_EQ(sortedNonZero(dir / "vcross.png"), cross);
+  size_t fine = 0;
+  for (float x : cross) fine += std::abs(x * 255.0f - std::round(x * 255.0f)) > 1e-3f;
+  EXPECT_GT(fine, cross.size() / 2) << "codes between 8-bit steps";
+
+  // A bright photo clipped at white, as a lat-long JPEG; its cube in PNG codes.
+  Image bright(512, 256, 3, {"R", "G", "B"});
+  for (int y = 0; y < 256; ++y)
+    for (int x = 0; x < 512; ++x)
+      for (int c = 0; c < 3; ++c)
+        bright.at(x, y)[c] = std::min(1.0f, 0.3f + 0.9f * float((x * 7 + y * 3 + c) % 64) / 63.0f);
+  ingest::writeImage(dir / "bright.jpg", bright);
+  for (const char* out : {"bright_cross.png", "bright_cube.tif"}) {
+    const RunResult r =
+        run("convert " + q(dir / "bright.jpg") + " --to hcross --out " + q(dir / out), dir);
+    ASSERT_EQ(r.status, 0) << out << ": " << r.err;
+  }
+}
+
 // A conversion of layouts changes no value: negative texels (the ringing of a resize around the
 // sun, out-of-gamut colours) are kept, with a note, through the cube and back, and the energy
 // with them (they were clamped: the map came back brighter).
@@ -1011,6 +1142,19 @@ TEST(ConvertCommand, NegativeTexelsAreKept) {
   EXPECT_LT(relativeEnergy(lighting::integral(Environment::fromLatLong(back, {}, &keep)),
                            lighting::integral(Environment::fromLatLong(map, {}, &keep))),
             1e-4);
+  // Radiance's shared exponent holds no sign: negative texels are written as 0, said so (they
+  // came back as large positive values, -0.25 red as 1.46, the map brighter by a third).
+  r = run("convert " + q(dir / "neg.exr") + " --to latlong --out " + q(dir / "neg.hdr"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("values below 0 (as low as -0.25: colours outside the gamut"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("are written as 0: a .hdr file holds no negative values"), std::string::npos)
+      << r.err;
+  const Image hdr = ingest::readImage(dir / "neg.hdr").image;
+  ASSERT_EQ(hdr.pixels.size(), map.pixels.size());
+  for (size_t i = 0; i < hdr.pixels.size(); ++i)
+    ASSERT_NEAR(hdr.pixels[i], std::max(map.pixels[i], 0.0f), 0.01f) << "value " << i;
   // Red mostly negative: more negative light than light is no environment.
   for (float& v : map.pixels) v = v < 0.0f ? -2.0f : v;
   ingest::writeImage(dir / "worse.exr", map, floats);
