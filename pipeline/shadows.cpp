@@ -147,6 +147,18 @@ std::string ShadowPlan::describe() const {
   return s;
 }
 
+std::string ShadowPlan::key() const {
+  return std::string(render::shadowMethodName(method)) + " order=" + std::to_string(lightingOrder) +
+         " sources=" + std::to_string(sources) + " " + transfer.key() + " " + refine.key() +
+         (ground ? " " + groundParams.key() : std::string(" ground=off"));
+}
+
+std::string ShadowPlan::lightingKey() const {
+  ShadowPlan plan = *this;
+  plan.ground = false;
+  return plan.key();
+}
+
 std::string ShadowPlan::describeLighting() const {
   ShadowPlan plan = *this;
   plan.ground = false;

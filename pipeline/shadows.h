@@ -45,6 +45,11 @@ struct ShadowPlan {
   // What the shadow lighting and the plate's ground shadow depend on: describe() without the
   // ground beneath the object (which changes only the object's own shading).
   std::string describeLighting() const;
+  // Every parameter that changes the numbers, for the cache keys (describe() is for people: it
+  // leaves out what the method does not show, such as sh's and ao's grid, the boundary rays, the
+  // refinement's budget); lightingKey() without the ground beneath the object.
+  std::string key() const;
+  std::string lightingKey() const;
 };
 
 struct ShadowResult {

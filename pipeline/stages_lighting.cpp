@@ -227,7 +227,7 @@ class PrecomputeStage final : public Stage {
       s.word(lighting::LightingCache::kProjectionVersion);
       s.word(kSourcesVersion);
       s.combine(ctx.key(kEnvironment));
-      s.bytes(ShadowPlan::parse(ctx.job.shadowParams).describeLighting());
+      s.bytes(ShadowPlan::parse(ctx.job.shadowParams).lightingKey());
       hashProxy(ctx, s);
       ctx.keys[kShadowLighting] = s;
     }
@@ -389,8 +389,10 @@ class ShadowsStage final : public Stage {
   // 7: the ground beneath a cut-out at what it keeps; 8: sources traced again across their
   // penumbrae, the points that see them in part marked; 9: points inside another part of the
   // object left out of the interpolation; 10: triangles' grid points on the smooth surface of
-  // the vertex normals; 11: that lift bounded and checked for parts in the way
-  static constexpr int kVersion = 11;
+  // the vertex normals; 11: that lift bounded and checked for parts in the way; 12: keyed by
+  // every shadow parameter (sh's and ao's grid, the boundary rays and the refinement's budget
+  // reused the shadows of other values)
+  static constexpr int kVersion = 12;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {
@@ -432,7 +434,7 @@ class ShadowsStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.key(kMesh));
     h.combine(ctx.key(kShadowLighting));
-    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).describe());
+    h.bytes(ShadowPlan::parse(ctx.job.shadowParams).key());
     h.number(ctx.job.placement.yawDegrees);
     h.number(ctx.job.environmentYawDegrees);
     ctx.keys[kSelfShadowing] = h;
@@ -591,8 +593,9 @@ class GroundStage final : public Stage {
   // object's rotation normalised in double (pipeline/context.cpp); 5: a shadow edge's cell keeps
   // its first ray as one of its strata; 6: points placed coarse to fine (render/ground.h);
   // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses;
-  // 8: keyed by the boundary rays (--shadow-params boundary), which the ground's points take
-  static constexpr int kVersion = 8;
+  // 8: keyed by the boundary rays (--shadow-params boundary), which the ground's points take;
+  // 9: keyed by every shadow parameter
+  static constexpr int kVersion = 9;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {
@@ -619,8 +622,7 @@ class GroundStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.key(kShadowLighting));
     const ShadowPlan plan = ShadowPlan::parse(ctx.job.shadowParams);
-    h.bytes(plan.describeLighting());
-    h.word(uint32_t(plan.transfer.boundaryRays));
+    h.bytes(plan.lightingKey());
     h.combine(ctx.geometryKey());
     ctx.keys[kGroundShadow] = h;
   }

@@ -351,6 +351,42 @@ TEST_F(RegistrySkips, NoShadowNeedsNoGroundPass) {
   EXPECT_EQ(p["shadows"].state, StageState::Run);
 }
 
+// Every shadow parameter that changes the numbers keys the stages it changes: sh's and ao's
+// grid, the boundary rays and the refinement's budget and spread did not (a job with another
+// value took the shadows, ground shadow and render of the one before from the cache).
+TEST_F(RegistrySkips, EveryShadowParameterKeysTheStagesItChanges) {
+  const auto entries = [&](const std::string& params) {
+    ComposeJob job = job_;
+    job.shadowParams = params;
+    // plan() names the entry each stage would be cached in.
+    std::map<std::string, std::string> out;
+    for (auto& [name, record] : planned(job)) {
+      const size_t at = record.reason.find("cached in ");
+      if (at != std::string::npos) out[name] = record.reason.substr(at);
+    }
+    return out;
+  };
+  const std::vector<std::pair<std::string, std::string>> pairs = {
+      {"method=sh", "method=sh,grid=8"},
+      {"method=ao", "method=ao,grid=4"},
+      {"boundary=2", "boundary=6"},
+      {"refine-budget=1", "refine-budget=0.2"},
+      {"refine=0.35", "refine=0.351"}};
+  for (const auto& [a, b] : pairs) {
+    const auto first = entries(a), second = entries(b);
+    for (const char* stage : {"shadows", "ground", "render"}) {
+      ASSERT_FALSE(first.at(stage).empty()) << stage;
+      EXPECT_NE(first.at(stage), second.at(stage)) << stage << ": " << a << " vs " << b;
+    }
+  }
+  // The ground beneath the object darkens the object only: the plate's ground shadow is the same.
+  const auto on = entries("ground=on"), off = entries("ground=off");
+  EXPECT_NE(on.at("shadows"), off.at("shadows"));
+  EXPECT_EQ(on.at("ground"), off.at("ground"));
+  // The same parameters written otherwise are the same job.
+  EXPECT_EQ(entries("method=cheb,order=16").at("shadows"), entries("").at("shadows"));
+}
+
 TEST_F(RegistrySkips, AJobWithoutAPlateSaysSo) {
   ComposeJob job = job_;
   job.plate.clear();
