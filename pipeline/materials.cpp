@@ -32,6 +32,35 @@ std::optional<glm::mat3> conversionMatrix(const color::ColorConfig& colors, cons
   return m;
 }
 
+// True when `from` differs from `to` by an encoding alone, with the same primaries: each
+// primary stays pure (an sRGB-encoded texture and linear Rec.709). A texture of wider primaries
+// (Display P3's red is (1.22, -0.04, -0.02) in Rec.709) is not.
+bool samePrimaries(const color::ColorConfig& colors, const std::string& from,
+                   const std::string& to) {
+  Image probe(6, 1, 3, {"R", "G", "B"});
+  for (int i = 0; i < 6; ++i) probe.at(i, 0)[i % 3] = i < 3 ? 1.0f : 0.5f;
+  probe.colorSpace = from;
+  colors.convert(probe, to);
+  for (int i = 0; i < 6; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      const float v = probe.at(i, 0)[c];
+      if (!std::isfinite(v) || (c == i % 3 ? !(v > 0.0f) : !(std::abs(v) <= 1e-4f))) return false;
+    }
+  }
+  return true;
+}
+
+// The colour space a texture's values are in as stored: glTF's base colour textures are sRGB;
+// others as their files say, else as the config's rules read them.
+std::string textureSpace(const color::ColorConfig& colors, const render::Texture& texture) {
+  if (texture.srgbByFormat) {
+    const std::string s =
+        colors.has("sRGB") ? colors.resolve("sRGB", "a glTF texture") : colors.srgbEncodedSpace();
+    return s.empty() ? colors.inputSpaceFor(texture.file, "") : s;
+  }
+  return colors.inputSpaceFor(texture.file, texture.image.colorSpace);
+}
+
 }  // namespace
 
 std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig& colors) {
@@ -46,14 +75,22 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
     productSpace = colors.resolve(mesh.colorSpace, "the object's base colours");
   else if (mesh.colorSpace == "lin_rec709")
     productSpace = colors.spaceWithChromaticities(color::kRec709Chromaticities);
-  // Only where every texture is sRGB by its format (glTF's base colour textures, whose product
-  // glTF defines in linear Rec.709): another texture may hold colours beyond Rec.709's gamut (a
-  // phone's Display P3 JPEG as an OBJ's map_Kd), which the clamp to an albedo's 0..1 in that
-  // space would clip; converted on its own to the wider working space, it keeps them.
-  const bool sRgbTextures = std::all_of(mesh.textures.begin(), mesh.textures.end(),
-                                        [](const render::Texture& t) { return t.srgbByFormat; });
+  // Only where every texture has the product space's primaries (glTF's base colour textures,
+  // whose product glTF defines in linear Rec.709; an OBJ's sRGB PNG): another texture may hold
+  // colours beyond its gamut (a phone's Display P3 JPEG as an OBJ's map_Kd), which the clamp to
+  // an albedo's 0..1 in that space would clip; converted on its own to the wider working space,
+  // it keeps them.
+  std::vector<std::string> spaces(mesh.textures.size());
+  for (size_t t = 0; t < mesh.textures.size(); ++t) {
+    const render::Texture& texture = mesh.textures[t];
+    spaces[t] = texture.converted ? texture.image.colorSpace : textureSpace(colors, texture);
+  }
+  const bool texturesInGamut =
+      !productSpace.empty() && std::all_of(spaces.begin(), spaces.end(), [&](const std::string& s) {
+        return s == productSpace || samePrimaries(colors, s, productSpace);
+      });
   const std::optional<glm::mat3> productToWorking =
-      productSpace.empty() || productSpace == working || !sRgbTextures
+      productSpace.empty() || productSpace == working || !texturesInGamut
           ? std::nullopt
           : conversionMatrix(colors, productSpace, working);
   if (productToWorking) {
@@ -109,15 +146,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
       ++textureSpaces["'" + texture.image.colorSpace + "'"];
       continue;
     }
-    if (texture.srgbByFormat) {
-      // glTF says sRGB: the config's sRGB-encoded space, by name or by what it does.
-      texture.image.colorSpace =
-          colors.has("sRGB") ? colors.resolve("sRGB", "a glTF texture") : colors.srgbEncodedSpace();
-      if (texture.image.colorSpace.empty())
-        texture.image.colorSpace = colors.inputSpaceFor(texture.file, "");
-    } else {
-      texture.image.colorSpace = colors.inputSpaceFor(texture.file, texture.image.colorSpace);
-    }
+    texture.image.colorSpace = spaces[t];
     ++textureSpaces["'" + texture.image.colorSpace + "'"];
     colors.convert(texture.image, textureTarget);
     // Albedos, 0..1 as base colours are: a float texture may hold anything.

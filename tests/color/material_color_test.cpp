@@ -123,13 +123,42 @@ TEST(MaterialColour, ATextureThatDeclaresNothingFollowsTheFileRules) {
   render::Mesh mesh = twoMaterials();
   mesh.textures[0].image.colorSpace.clear();
   mesh.textures[0].file = "albedo.exr";  // the built-in rules: .exr is linear Rec.709
-  materialsToWorkingSpace(mesh, colors);
-  // Not sRGB by its format (an OBJ's map_Kd, which may be wider than Rec.709): converted on its
-  // own, as the base colours are.
-  EXPECT_FALSE(mesh.convertsAlbedo);
-  const glm::vec3 texel = toAp1({0.5f, 0.25f, 1.0f});
+  const std::string line = materialsToWorkingSpace(mesh, colors);
+  EXPECT_NE(line.find("1 texture (1 as 'Linear Rec.709"), std::string::npos) << line;
+  // Linear Rec.709, the base colours' space: the product is taken there, the texel as stored.
+  EXPECT_TRUE(mesh.convertsAlbedo);
   const float* p = mesh.textures[0].image.pixels.data();
-  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - texel), kTolerance);
+  EXPECT_LT(glm::length(glm::vec3(p[0], p[1], p[2]) - glm::vec3(0.5f, 0.25f, 1.0f)), kTolerance);
+}
+
+// An OBJ's map_Kd in sRGB has the base colours' primaries: Kd x texture is multiplied in linear
+// Rec.709, as glTF's product is (each converted to ACEScg on its own, Kd (0.2, 0.4, 0.8) over a
+// pure red texel gave (0.291, 0.008, 0.010) in Rec.709, not (0.2, 0, 0); and one such texture
+// in a file moved the colours of every material). A texture of wider primaries is converted on
+// its own, so that the clamp to 0..1 does not cut its gamut.
+TEST(MaterialColour, ATextureOfTheBaseColoursPrimariesMultipliesThere) {
+  const color::ColorConfig colors = color::ColorConfig::builtin();
+  render::Mesh mesh = twoMaterials();  // wood.png, sRGB, not sRGB by its format
+  mesh.materials[1].baseColor = glm::vec3(0.2f, 0.4f, 0.8f);
+  mesh.textures[0].image.pixels = {1.0f, 0.0f, 0.0f};
+  materialsToWorkingSpace(mesh, colors);
+  ASSERT_TRUE(mesh.convertsAlbedo);
+  const float* p = mesh.textures[0].image.pixels.data();
+  const glm::vec3 product = mesh.materials[1].baseColor * glm::vec3(p[0], p[1], p[2]);
+  EXPECT_LT(glm::length(mesh.albedoToWorking * product - toAp1({0.2f, 0.0f, 0.0f})), kTolerance);
+  // The untextured material's colour is Kd alone, however the others are textured.
+  EXPECT_LT(glm::length(mesh.albedoToWorking * mesh.materials[0].baseColor -
+                        toAp1({1.0f, 0.0f, 0.0f})),
+            kTolerance);
+
+  render::Mesh wide = twoMaterials();
+  wide.textures[0].file = "paint.exr";
+  wide.textures[0].image.colorSpace = "ACEScg";
+  materialsToWorkingSpace(wide, colors);
+  EXPECT_FALSE(wide.convertsAlbedo);
+  const float* w = wide.textures[0].image.pixels.data();
+  EXPECT_LT(glm::length(glm::vec3(w[0], w[1], w[2]) - glm::vec3(0.5f, 0.25f, 1.0f)), kTolerance);
+  EXPECT_LT(glm::length(wide.materials[1].baseColor - toAp1({0.2f, 0.4f, 0.6f})), kTolerance);
 }
 
 TEST(MaterialColour, AMeshWithoutMaterialsIsLeftAlone) {
