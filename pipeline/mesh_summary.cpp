@@ -112,7 +112,7 @@ std::vector<std::string> meshNotes(const render::Mesh& mesh) {
 MeshSummary summarize(const render::Mesh& mesh, double creaseDegrees) {
   MeshSummary s;
   s.key = meshKey(mesh, creaseDegrees);
-  mesh.keptBounds(s.boundsMin, s.boundsMax);  // without what cut-outs take away
+  s.nothingKept = !mesh.keptBounds(s.boundsMin, s.boundsMax);  // without what cut-outs take away
   s.triangles = mesh.triangleCount();
   s.convex = render::isConvex(mesh);
   s.notes = meshNotes(mesh);
@@ -205,7 +205,7 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   MeshSummary& s = out.summary;
   s.key = meshKey(mesh, creaseDegrees);
   if (s.key.a != *a || s.key.b != *b) return std::nullopt;
-  mesh.keptBounds(s.boundsMin, s.boundsMax);
+  s.nothingKept = !mesh.keptBounds(s.boundsMin, s.boundsMax);
   s.triangles = mesh.triangleCount();
   s.convex = m["convex"].get<bool>();
   s.notes = meshNotes(mesh);

@@ -27,6 +27,7 @@ struct MeshSummary {
   glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};  // Mesh::keptBounds: what cut-outs keep
   size_t triangles = 0;
   bool convex = false;
+  bool nothingKept = false;        // its cut-outs take every surface away
   std::vector<std::string> notes;  // what reading the mesh said (normals, repairs), for the user
   bool fromCache = false;          // taken from the cache rather than read from the file
 };

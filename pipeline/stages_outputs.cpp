@@ -429,6 +429,21 @@ class RenderStage final : public Stage {
                       " puts it, it is out of the camera's view (the pose of another photo?)",
                   job.object);
     }
+    if (!(r.output.coverage > 0.0) && ctx.meshSummary && ctx.meshSummary->nothingKept) {
+      // No placement would show it: say what cuts it away.
+      std::string cut;
+      for (const render::Material& m : ctx.mesh().materials) {
+        if (m.alphaCutoff < 0.0f) continue;
+        cut += format("%s'%s' (alpha %.3g%s, cutoff %.3g)", cut.empty() ? "" : ", ", m.name.c_str(),
+                      double(m.baseAlpha), m.texture >= 0 ? " times its texture's" : "",
+                      double(m.alphaCutoff));
+      }
+      throw Error("render",
+                  "the object's cut-out (MASK) materials take every surface of it away: their "
+                  "alpha is below their alphaCutoff everywhere, so nothing is drawn (" +
+                      cut + "); was the alpha meant for BLEND, or the cutoff lower?",
+                  job.object);
+    }
     if (!(r.output.coverage > 0.0)) {
       throw Error("render",
                   "the object covers no pixel of the plate (--scale " +

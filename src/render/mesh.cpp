@@ -385,13 +385,13 @@ void buildMipLevels(Texture& texture, std::optional<float> keptFrom) {
   }
 }
 
-void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
+bool Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
   lo = glm::vec3(std::numeric_limits<float>::max());
   hi = glm::vec3(-std::numeric_limits<float>::max());
   if (!hasCutouts()) {
     lo = boundsMin();
     hi = boundsMax();
-    return;
+    return true;
   }
   // Per cut-out triangle, the steps of its test grid: about two per texel of its alpha along
   // its longest edge in texture space; 0 where its alpha cannot vary (no alpha texture, or
@@ -465,7 +465,9 @@ void Mesh::keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget) const {
   if (!(lo.x <= hi.x)) {  // everything cut away: nothing is drawn, the whole mesh stands in
     lo = boundsMin();
     hi = boundsMax();
+    return false;
   }
+  return true;
 }
 
 namespace detail {

@@ -215,7 +215,8 @@ struct Mesh {
   // per texel of its alpha along its longest edge (grids coarsened to keep to about `budget`
   // points in all, but never below a triangle's corners; what is kept between grid points is not
   // seen). The object stands on, and is sized by, these bounds.
-  void keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget = 1u << 20) const;
+  // Returns false when the cut-outs keep nothing (the whole mesh's box is given then).
+  bool keptBounds(glm::vec3& lo, glm::vec3& hi, size_t budget = 1u << 20) const;
 };
 
 struct MeshOptions {

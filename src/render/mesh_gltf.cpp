@@ -40,7 +40,8 @@ const std::set<std::string>& supportedRequiredExtensions() {
                                               "KHR_materials_unlit",
                                               "KHR_materials_ior",
                                               "KHR_materials_specular",
-                                              "KHR_materials_pbrSpecularGlossiness"};
+                                              "KHR_materials_pbrSpecularGlossiness",
+                                              "EXT_mesh_gpu_instancing"};
   return names;
 }
 
@@ -190,6 +191,9 @@ class GltfReader {
   std::vector<uint32_t> indices(int index, const std::string& what) const;
 
   glm::dmat4 localTransform(const tinygltf::Node& node, int index) const;
+  // EXT_mesh_gpu_instancing: the node's mesh drawn once per instance, each at its TRANSLATION,
+  // ROTATION and SCALE within the node; the identity alone for a node without instances.
+  std::vector<glm::dmat4> instances(const tinygltf::Node& node, int index) const;
   void addPrimitive(const tinygltf::Primitive& primitive, const glm::dmat4& objectFromNode);
   // The mesh's material for glTF material `gltfMaterial` (-1: none); a primitive with vertex
   // colours and no material gets glTF's default, white, so that its colours are its albedo.
@@ -373,6 +377,65 @@ glm::dmat4 GltfReader::localTransform(const tinygltf::Node& node, int index) con
                        glm::dvec4(0, 0, node.scale[2], 0), glm::dvec4(0, 0, 0, 1));
   }
   return m;
+}
+
+std::vector<glm::dmat4> GltfReader::instances(const tinygltf::Node& node, int index) const {
+  const auto ext = node.extensions.find("EXT_mesh_gpu_instancing");
+  if (ext == node.extensions.end() || !ext->second.Has("attributes")) return {glm::dmat4(1.0)};
+  const tinygltf::Value& attributes = ext->second.Get("attributes");
+  const std::string name =
+      "node " + std::to_string(index) + (node.name.empty() ? "" : " '" + node.name + "'");
+  // Each attribute's values, `components` per instance; empty where the attribute is absent.
+  size_t count = 0;
+  bool counted = false;
+  auto read = [&](const char* attribute, int components) {
+    if (!attributes.Has(attribute)) return std::vector<double>();
+    const tinygltf::Value& v = attributes.Get(attribute);
+    if (!v.IsInt()) {
+      throw Error("mesh", name + ": EXT_mesh_gpu_instancing's " + attribute + " is no accessor",
+                  path_);
+    }
+    std::vector<double> values;
+    try {
+      values = accessor(v.Get<int>(), components, std::string("instance ") + attribute);
+    } catch (const PrimitiveError& e) {
+      throw Error("mesh", name + ": EXT_mesh_gpu_instancing: " + e.what, path_);
+    }
+    for (double x : values)
+      if (!std::isfinite(x))
+        throw Error("mesh", name + ": an instance's " + attribute + " is not finite", path_);
+    const size_t n = values.size() / size_t(components);
+    if (counted && n != count) {
+      throw Error("mesh",
+                  name + ": EXT_mesh_gpu_instancing's attributes count " + std::to_string(count) +
+                      " and " + std::to_string(n) + " instances",
+                  path_);
+    }
+    count = n;
+    counted = true;
+    return values;
+  };
+  const std::vector<double> t = read("TRANSLATION", 3), r = read("ROTATION", 4),
+                            s = read("SCALE", 3);
+  if (!counted) return {glm::dmat4(1.0)};
+  std::vector<glm::dmat4> out;
+  out.reserve(count);
+  for (size_t i = 0; i < count; ++i) {
+    glm::dmat4 m(1.0);
+    if (!t.empty()) m[3] = glm::dvec4(t[3 * i], t[3 * i + 1], t[3 * i + 2], 1.0);
+    if (!r.empty()) {
+      glm::dquat q(r[4 * i + 3], r[4 * i], r[4 * i + 1], r[4 * i + 2]);
+      const double len = glm::length(q);
+      if (!(len > 0.0)) throw Error("mesh", name + ": an instance's rotation is zero", path_);
+      m = m * glm::mat4_cast(q / len);
+    }
+    if (!s.empty()) {
+      m = m * glm::dmat4(glm::dvec4(s[3 * i], 0, 0, 0), glm::dvec4(0, s[3 * i + 1], 0, 0),
+                         glm::dvec4(0, 0, s[3 * i + 2], 0), glm::dvec4(0, 0, 0, 1));
+    }
+    out.push_back(m);
+  }
+  return out;
 }
 
 Image GltfReader::decodeImage(int imageIndex, fs::path& file, std::string& where, Image* alpha) {
@@ -800,12 +863,16 @@ void GltfReader::read() {
       const tinygltf::Mesh& m = model_.meshes[size_t(node.mesh)];
       const std::string meshName =
           "mesh " + std::to_string(node.mesh) + (m.name.empty() ? "" : " '" + m.name + "'");
-      for (size_t p = 0; p < m.primitives.size(); ++p) {
-        const std::string where = meshName + " primitive " + std::to_string(p);
-        try {
-          addPrimitive(m.primitives[p], objectFromNode);
-        } catch (const PrimitiveError& e) {
-          skipped.push_back(where + ": " + e.what);
+      const std::vector<glm::dmat4> drawn = instances(node, index);
+      for (size_t i = 0; i < drawn.size(); ++i) {
+        for (size_t p = 0; p < m.primitives.size(); ++p) {
+          try {
+            addPrimitive(m.primitives[p], objectFromNode * drawn[i]);
+          } catch (const PrimitiveError& e) {
+            // Said once: every instance draws the same primitives.
+            if (i == 0)
+              skipped.push_back(meshName + " primitive " + std::to_string(p) + ": " + e.what);
+          }
         }
       }
     }
@@ -934,13 +1001,6 @@ void GltfReader::read() {
   }
 }
 
-// tinygltf's file callbacks, for regular files only: a buffer or image URI naming a FIFO would
-// block forever (tinygltf's own existence check opens the file), a device be read without end.
-bool fileExists(const std::string& file, void*) {
-  std::error_code ec;
-  return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)
-}
-
 // What the callbacks saw: the files read besides the glTF itself. `renamed` holds the buffer
 // files tinygltf would look for under another name, as it will ask for them and as they are.
 struct ReadFiles {
@@ -949,6 +1009,19 @@ struct ReadFiles {
   std::vector<fs::path> others;
   std::optional<std::map<std::string, std::string>> renamed;  // read when first needed
 };
+
+// tinygltf's file callbacks, for regular files only: a buffer or image URI naming a FIFO would
+// block forever (tinygltf's own existence check opens the file), a device be read without end.
+// A URI is relative to the glTF's folder: tinygltf 2.7 looks in the working directory after it
+// ("./name"), where another export's file of the same name was read without a word.
+bool fileExists(const std::string& file, void* user) {
+  if (const auto* seen = static_cast<const ReadFiles*>(user)) {
+    const fs::path folder = seen->main.parent_path();
+    if (file.rfind("./", 0) == 0 && !folder.empty() && folder != ".") return false;
+  }
+  std::error_code ec;
+  return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)
+}
 
 // A buffer URI as tinygltf 2.7 decodes it (dlib's urldecode): '+' a space, and '%' with the two
 // characters after it taken as hexadecimal digits whatever they are (a digit that is not one

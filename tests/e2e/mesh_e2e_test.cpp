@@ -13,6 +13,7 @@
 
 #include "command_util.h"
 #include "pipeline/compose_job.h"
+#include "render/gltf_builder.h"
 #include "test_util.h"
 
 namespace compose {
@@ -122,6 +123,22 @@ TEST_F(MeshEndToEnd, BadMeshesAndCreaseAnglesAreErrors) {
     EXPECT_NE(r.err.find("--crease"), std::string::npos) << crease << "\n" << r.err;
     EXPECT_EQ(r.err.find("file not found"), std::string::npos) << r.err;
   }
+  // A MASK material whose alpha is below its cutoff everywhere: no placement shows it, and the
+  // error says why (it advised a larger --scale).
+  compose::testing::GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  b.json["materials"] = {{{"name", "leaf"},
+                          {"alphaMode", "MASK"},
+                          {"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.3}}}}}};
+  b.scene({b.node({{"mesh", b.mesh({{"attributes", {{"POSITION", pos}}}, {"material", 0}})}})});
+  writeText(dir_ / "cut.gltf", b.gltf());
+  const RunResult cut = run(args(dir_ / "cut.gltf", "cut"), dir_.path());
+  EXPECT_EQ(cut.status, 1) << cut.err;
+  EXPECT_NE(cut.err.find("the object's cut-out (MASK) materials take every surface of it away"),
+            std::string::npos)
+      << cut.err;
+  EXPECT_NE(cut.err.find("'leaf' (alpha 0.3, cutoff 0.5)"), std::string::npos) << cut.err;
+  EXPECT_FALSE(fs::exists(dir_ / "cut.exr"));
 }
 
 }  // namespace

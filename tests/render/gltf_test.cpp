@@ -242,6 +242,44 @@ TEST(Gltf, TheNodeHierarchyIsFlattenedIntoObjectSpace) {
   EXPECT_EQ(loadMesh(dir / "noscene.gltf").triangleCount(), 2u);
 }
 
+// EXT_mesh_gpu_instancing (glTF-Transform and Blender write it for scattered copies): the node's
+// mesh drawn at each instance's translation, rotation and scale, within the node's transform
+// (one copy of three was drawn, without a word).
+TEST(Gltf, GpuInstancesAreEachDrawn) {
+  TempDir dir;
+  GltfBuilder b;
+  const int pos = b.vec3({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int mesh = b.mesh({{"attributes", {{"POSITION", pos}}}});
+  const float h = std::sqrt(0.5f);
+  const int translation = b.vec3({0, 0, 0, 5, 0, 0, 10, 0, 0});
+  const int rotation =
+      b.accessor(std::vector<float>{0, 0, 0, 1, 0, 0, h, h, 0, 0, 0, 1}, 5126, "VEC4", 3);
+  const int scale = b.vec3({1, 1, 1, 1, 1, 1, 3, 3, 3});
+  const int node =
+      b.node({{"mesh", mesh},
+              {"translation", {0, 0, 2}},
+              {"extensions",
+               {{"EXT_mesh_gpu_instancing",
+                 {{"attributes",
+                   {{"TRANSLATION", translation}, {"ROTATION", rotation}, {"SCALE", scale}}}}}}}});
+  b.scene({node});
+  b.json["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  b.json["extensionsRequired"] = {"EXT_mesh_gpu_instancing"};
+  writeText(dir / "instanced.gltf", b.gltf());
+  const Mesh m = loadMesh(dir / "instanced.gltf");
+  ASSERT_EQ(m.triangleCount(), 3u);
+  EXPECT_TRUE(m.warnings.empty()) << m.warnings.front();
+  EXPECT_TRUE(hasPosition(m, {1, 0, 2}));  // the first as it is, within the node
+  EXPECT_TRUE(
+      hasPosition(m, {4, 0, 2}));  // the second turned 90° about +Z: (0, 1, 0) to (-1, 0, 0)
+  EXPECT_TRUE(hasPosition(m, {13, 0, 2}));  // the third scaled 3 times
+  // Attributes of different counts are a broken file.
+  b.json["accessors"][size_t(scale)]["count"] = 2;
+  writeText(dir / "uneven.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "uneven.gltf"),
+                       "EXT_mesh_gpu_instancing's attributes count 3 and 2 instances");
+}
+
 // A small mesh far from the file's origin (a node translation of 5000 for a 1 mm triangle pair):
 // moved to its own middle in double before its positions become float, so that its shape keeps
 // float's precision on its own scale (at 5000, float's step is half a millimetre), and the file
@@ -808,6 +846,20 @@ TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   external["buffers"][0]["uri"] = "geometry.bin";
   writeText(dir / "external.gltf", external.dump());
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "external.gltf"), "cannot parse glTF: ");
+  // Not taken from the working directory either, where another export's file of that name was
+  // read without a word (tinygltf looks there after the glTF's folder).
+  std::filesystem::create_directories(dir / "elsewhere");
+  writeBytes(dir / "elsewhere" / "geometry.bin", b.bufferBytes());
+  const std::filesystem::path before = std::filesystem::current_path();
+  std::filesystem::current_path(dir / "elsewhere");
+  std::string fromHere;
+  try {
+    loadMesh("../external.gltf");
+  } catch (const Error& e) {
+    fromHere = e.describe();
+  }
+  std::filesystem::current_path(before);
+  EXPECT_NE(fromHere.find("File not found : geometry.bin"), std::string::npos) << fromHere;
   // A data URI that does not decode to the buffer's length: the message quotes the start of the
   // URI, not its 40,000 characters.
   json longUri = json::parse(b.gltf());
