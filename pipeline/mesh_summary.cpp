@@ -31,8 +31,8 @@ namespace {
 // without the texture coordinates its texture needs renders its base colour factor; 12: MTL
 // d and map_d read; 13: glTF's KHR_materials_unlit said; 14: a far mesh moved by the vertices
 // its triangles use; 15: meshes of 1e12 units or more refused, OBJ colours on some vertices kept;
-// 16: meshes under 1e-7 units refused.
-constexpr uint32_t kMeshVersion = 16;
+// 16: meshes under 1e-7 units refused; 17: glTF's EXT_mesh_gpu_instancing drawn.
+constexpr uint32_t kMeshVersion = 17;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
