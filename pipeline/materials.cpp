@@ -32,24 +32,6 @@ std::optional<glm::mat3> conversionMatrix(const color::ColorConfig& colors, cons
   return m;
 }
 
-// True when `from` differs from `to` by an encoding alone, with the same primaries: each
-// primary stays pure (an sRGB-encoded texture and linear Rec.709). A texture of wider primaries
-// (Display P3's red is (1.22, -0.04, -0.02) in Rec.709) is not.
-bool samePrimaries(const color::ColorConfig& colors, const std::string& from,
-                   const std::string& to) {
-  Image probe(6, 1, 3, {"R", "G", "B"});
-  for (int i = 0; i < 6; ++i) probe.at(i, 0)[i % 3] = i < 3 ? 1.0f : 0.5f;
-  probe.colorSpace = from;
-  colors.convert(probe, to);
-  for (int i = 0; i < 6; ++i) {
-    for (int c = 0; c < 3; ++c) {
-      const float v = probe.at(i, 0)[c];
-      if (!std::isfinite(v) || (c == i % 3 ? !(v > 0.0f) : !(std::abs(v) <= 1e-4f))) return false;
-    }
-  }
-  return true;
-}
-
 // The colour space a texture's values are in as stored: glTF's base colour textures are sRGB;
 // others as their files say, else as the config's rules read them.
 std::string textureSpace(const color::ColorConfig& colors, const render::Texture& texture) {
@@ -87,7 +69,7 @@ std::string materialsToWorkingSpace(render::Mesh& mesh, const color::ColorConfig
   }
   const bool texturesInGamut =
       !productSpace.empty() && std::all_of(spaces.begin(), spaces.end(), [&](const std::string& s) {
-        return s == productSpace || samePrimaries(colors, s, productSpace);
+        return s == productSpace || colors.samePrimaries(s, productSpace);
       });
   const std::optional<glm::mat3> productToWorking =
       productSpace.empty() || productSpace == working || !texturesInGamut

@@ -238,8 +238,10 @@ class MergeStage final : public Stage {
   // 4: a bracket's shots turned as its first says, a deeper photo's clipping judged as stored;
   // 5: a TIFF's ISO read, a capture description's ISO or f-number alone taken; 6: ISO above
   // 65535 read from ISOSpeed, a photo's colour by its bytes' format, a WebP's EXIF and ICC read;
-  // 7: a photo's missing ISO or f-number taken from the other photos of its bracket
-  static constexpr int kVersion = 7;
+  // 7: a photo's missing ISO or f-number taken from the other photos of its bracket; 8: 8-bit
+  // photos made linear in the space of their own primaries (Display P3's, not Rec.709's), the
+  // photos' space from --env-space
+  static constexpr int kVersion = 8;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -262,6 +264,7 @@ class MergeStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.key(kCapture));
     h.bytes(ctx.colors.identity());
+    h.bytes(ctx.job.environmentSpace);  // the photos' space (--env-space)
     // A camera response stored for this camera is used instead of recovering one.
     const ingest::Capture& capture = *ctx.artefacts.capture;
     const fs::path response =
@@ -304,6 +307,9 @@ class MergeStage final : public Stage {
     size_t total = 0;
     for (const auto& v : capture.views) total += v.shots.size();
     hdr::CaptureMergeOptions options;
+    // --env-space says the photos' space, over what the description and the files say.
+    options.inputSpace = ctx.job.environmentSpace;
+    options.inputSpaceOption = "--env-space";
     hdr::CaptureMergeResult merged =
         hdr::mergeCapture(capture, photos, options, ctx.colors, ctx.progress);
     for (const std::string& n : merged.notes) ctx.note("merge: " + n);
@@ -326,8 +332,9 @@ class StitchStage final : public Stage {
  public:
   // 2: the 35 mm focal length derived where EXIF rounds it; 3: float TIFFs linear, a Radiance
   // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7; 4: a wide hole filled
-  // from its rim; 5: a photo's colour by its bytes' format, not a name they contradict
-  static constexpr int kVersion = 5;
+  // from its rim; 5: a photo's colour by its bytes' format, not a name they contradict; 6: the
+  // photos' space from --env-space
+  static constexpr int kVersion = 6;
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {
@@ -349,6 +356,7 @@ class StitchStage final : public Stage {
     h.word(kVersion);
     h.combine(ctx.keys.count(kMergedViews) ? ctx.key(kMergedViews) : ctx.key(kCapture));
     h.bytes(ctx.colors.identity());
+    h.bytes(ctx.job.environmentSpace);
     ctx.keys[kStitched] = h;
   }
   bool cached() const override { return true; }
@@ -378,8 +386,11 @@ class StitchStage final : public Stage {
       const ingest::Shot& shot = capture.views[size_t(i)].shots.front();
       ingest::LoadedImage img = ingest::readImage(shot.file, "stitch", {.codesForEightBit = true});
       const std::string space =
-          shot.colorSpace.empty() ? inputSpaceOf(ctx.colors, shot.file, img.info).space
-                                  : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
+          !ctx.job.environmentSpace.empty()
+              ? ctx.colors.resolve(ctx.job.environmentSpace, "--env-space")
+          : shot.colorSpace.empty()
+              ? inputSpaceOf(ctx.colors, shot.file, img.info).space
+              : ctx.colors.resolve(shot.colorSpace, "the capture's colorSpace");
       Image rgb;
       if (!img.hasPixels() && img.image.channels >= 3) {
         // An 8-bit photo: linearised from its codes (a table of the 256 codes per channel).

@@ -716,6 +716,31 @@ std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& spa
   return chromaticitiesOf(xyz);
 }
 
+bool ColorConfig::samePrimaries(const std::string& from, const std::string& to) const {
+  Image probe(6, 1, 3, {"R", "G", "B"});
+  for (int i = 0; i < 6; ++i) probe.at(i, 0)[i % 3] = i < 3 ? 1.0f : 0.5f;
+  probe.colorSpace = from;
+  convert(probe, to);
+  for (int i = 0; i < 6; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      const float v = probe.at(i, 0)[c];
+      if (!std::isfinite(v) || (c == i % 3 ? !(v > 0.0f) : !(std::abs(v) <= 1e-4f))) return false;
+    }
+  }
+  return true;
+}
+
+std::string ColorConfig::linearSpaceWithPrimariesOf(const std::string& space) const {
+  const std::string resolved = resolve(space, "a colour space");
+  if (isLinearOrData(resolved)) return isData(resolved) ? std::string() : resolved;
+  for (const Chromaticities* known : {&kRec709Chromaticities, &kP3D65, &kRec2020,
+                                      &kAcesAp1Chromaticities, &kAcesAp0Chromaticities}) {
+    const std::string linear = spaceWithChromaticities(*known);
+    if (!linear.empty() && samePrimaries(resolved, linear)) return linear;
+  }
+  return {};
+}
+
 std::string ColorConfig::spaceWithChromaticities(const Chromaticities& c) const {
   const OCIO::ConstConfigRcPtr& config = impl_->config;
   for (int i = 0; i < config->getNumColorSpaces(); ++i) {

@@ -123,6 +123,14 @@ class ColorConfig {
   glm::dvec3 lumaWeights(const std::string& space) const;
   // A linear colour space of the config with these chromaticities (within 1e-3), or empty.
   std::string spaceWithChromaticities(const Chromaticities& c) const;
+  // True when converting `from` to `to` keeps each primary pure: the two differ by an encoding
+  // alone (sRGB and linear Rec.709), not by their primaries (Display P3's red is
+  // (1.22, -0.04, -0.02) in Rec.709).
+  bool samePrimaries(const std::string& from, const std::string& to) const;
+  // The linear space of the config with the primaries of `space` (an encoded one: 'sRGB - Texture'
+  // gives linear Rec.709, 'Display P3' linear P3-D65; a linear one: itself), among those of
+  // well-known primaries; empty when there is none.
+  std::string linearSpaceWithPrimariesOf(const std::string& space) const;
   // Converts the first three channels of `image` from the linear RGB space with chromaticities
   // `from` to the config space `to` (whose chromaticities must be known), with Bradford
   // adaptation between the white points; tags the image `to`. Throws compose::Error (stage

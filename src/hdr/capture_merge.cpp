@@ -119,10 +119,16 @@ std::string linearSpaceFor(const color::ColorConfig& colors, const std::string& 
     if (why) *why = "as given";
     return colors.resolve(override, "the camera's linear colour space");
   }
-  // By its primaries, when the config can tell (it has an interchange role), else by name.
+  // The linear space of the encoded one's primaries (Display P3 photos: linear P3-D65; they were
+  // taken as Rec.709's, their colours less saturated), when the config can tell; else linear
+  // Rec.709, a camera's sRGB, by its primaries or by name.
+  if (const std::string same = colors.linearSpaceWithPrimariesOf(encodedSpace); !same.empty()) {
+    if (why) *why = "linear with the primaries of " + encodedSpace;
+    return same;
+  }
   if (const std::string byPrimaries = colors.spaceWithChromaticities(color::kRec709Chromaticities);
       !byPrimaries.empty()) {
-    if (why) *why = "linear with the primaries of " + encodedSpace;
+    if (why) *why = "linear Rec.709, taken for the primaries of " + encodedSpace;
     return byPrimaries;
   }
   for (const char* name : {"lin_rec709", "Linear Rec.709 (sRGB)", "Linear Rec.709", "Linear",
@@ -218,9 +224,9 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
   COMPOSE_CHECK(photos.size() == capture.views.size());
   CaptureMergeResult result;
   const std::string working = colors.workingSpace();
-  const std::string overrideSpace = options.inputSpace.empty()
-                                        ? std::string()
-                                        : colors.resolve(options.inputSpace, "--input-space");
+  const std::string overrideSpace =
+      options.inputSpace.empty() ? std::string()
+                                 : colors.resolve(options.inputSpace, options.inputSpaceOption);
 
   // Colour space of every shot, and which views are 8-bit.
   std::vector<std::vector<std::string>> spaces(capture.views.size());

@@ -51,7 +51,8 @@ struct CaptureMergeOptions {
   std::filesystem::path responseFolder = responseDirectory();  // per-camera curves (Auto)
   RecoveryParams recovery;
   MergeParams merge;
-  std::string inputSpace;   // colour space of the photos; empty: from the files / description
+  std::string inputSpace;  // colour space of the photos; empty: from the files / description
+  std::string inputSpaceOption = "--input-space";  // the option that gave it, for messages
   std::string linearSpace;  // the camera's linear RGB for 8-bit photos; empty: linearSpaceFor()
   void validate() const;    // compose::Error (stage "merge")
 };

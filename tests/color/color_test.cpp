@@ -377,6 +377,20 @@ TEST(Chromaticities, OfTheBuiltinSpacesThroughTheInterchangeRole) {
   EXPECT_EQ(c.spaceWithChromaticities(odd), "");
 }
 
+// An encoded space's linear counterpart is the linear space of its primaries: what an 8-bit
+// photo's camera RGB is once its response is undone (Display P3 photos were taken as Rec.709's).
+TEST(Chromaticities, AnEncodedSpacesLinearSpaceHasItsPrimaries) {
+  const ColorConfig c = ColorConfig::builtin();
+  EXPECT_EQ(c.linearSpaceWithPrimariesOf("sRGB - Texture"), "Linear Rec.709 (sRGB)");
+  EXPECT_EQ(c.linearSpaceWithPrimariesOf("ACEScg"), "ACEScg");
+  EXPECT_EQ(c.linearSpaceWithPrimariesOf("Raw"), "");
+  const std::string p3 = c.linearSpaceWithPrimariesOf("Display P3");
+  ASSERT_FALSE(p3.empty());
+  EXPECT_TRUE(c.samePrimaries("Display P3", p3));
+  EXPECT_FALSE(c.samePrimaries("Display P3", "Linear Rec.709 (sRGB)"));
+  EXPECT_FALSE(c.samePrimaries("sRGB - Texture", "ACEScg"));
+}
+
 TEST(Chromaticities, OfAThirdPartyConfig) {
   const auto file = pipeline::samplesDirectory() / "ocio" / "blender" / "config.ocio";
   if (!std::filesystem::exists(file)) GTEST_FAIL() << "sample data missing: " << file;

@@ -530,6 +530,34 @@ TEST_F(StageCommands, ALightingFileWithShTransfer) {
   EXPECT_EQ(ren.status, 0) << ren.err;
 }
 
+// --env-space says the colour space of a capture's photos, as of any environment file (it was
+// hashed into the keys and not used: the lighting of 'Display P3' photos was byte for byte that
+// of sRGB ones), whether their brackets are merged or each view is one photo.
+TEST_F(StageCommands, EnvSpaceSaysTheSpaceOfACapturesPhotos) {
+  for (const char* brackets : {"1", "3"}) {
+    SCOPED_TRACE(std::string("brackets ") + brackets);
+    const fs::path shots = dir_ / (std::string("shots") + brackets);
+    const RunResult sim =
+        run("-q capture-sim --env " + quote(smallEnvironment()) +
+                " --size 64x48 --no-noise --brackets " + brackets + " --out " + quote(shots),
+            dir_.path());
+    ASSERT_EQ(sim.status, 0) << sim.err;
+    std::map<std::string, std::string> bytes;
+    for (const char* space : {"", "Display P3"}) {
+      const fs::path out =
+          dir_ / (std::string("capture") + brackets + (*space ? "p3" : "") + ".lighting");
+      const RunResult pre = run("-q precompute --env " + quote(shots / "capture.json") +
+                                    (*space ? " --env-space " + quote(space) : std::string()) +
+                                    " --out " + quote(out) + " --cache " + quote(dir_ / "cache"),
+                                dir_.path());
+      ASSERT_EQ(pre.status, 0) << pre.err;
+      std::ifstream in(out, std::ios::binary);
+      bytes[space] = std::string(std::istreambuf_iterator<char>(in), {});
+    }
+    EXPECT_TRUE(bytes[""] != bytes["Display P3"]) << "the same lighting for both spaces";
+  }
+}
+
 // An option only the one-shot command has, given to a command, is refused before anything is
 // read (CLI11 would pass it up to the one-shot command's options, where it was taken and not
 // used: compose composite --exposure 1 wrote the same picture as without). The options of every
