@@ -54,17 +54,39 @@ std::string contentKey(const std::filesystem::path& file, const std::string& sta
   return hash.hex();
 }
 
-Image loadHoldout(const std::filesystem::path& file, int width, int height, std::string* how) {
-  ingest::LoadedImage m = ingest::readImage(file, "composite");
-  if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
-  if (m.image.width != width || m.image.height != height) {
-    throw Error("composite",
-                "the holdout mask is " + std::to_string(m.image.width) + "x" +
-                    std::to_string(m.image.height) + ", the plate " + std::to_string(width) + "x" +
-                    std::to_string(height) + ": it must be the plate's size",
-                file);
+std::string holdoutSizeProblem(int maskWidth, int maskHeight, int width, int height,
+                               int plateOrientation) {
+  if (maskWidth == width && maskHeight == height) return {};
+  std::string why = "the holdout mask is " + std::to_string(maskWidth) + "x" +
+                    std::to_string(maskHeight) + ", the plate " + std::to_string(width) + "x" +
+                    std::to_string(height);
+  // A plate turned by its EXIF orientation, and a mask painted on its pixels as stored (by a
+  // tool that does not turn it).
+  const bool turned = plateOrientation >= 5 && plateOrientation <= 8;
+  if (plateOrientation != 1) {
+    why += " as shown (its EXIF orientation " + std::to_string(plateOrientation) + "; stored " +
+           std::to_string(turned ? height : width) + "x" + std::to_string(turned ? width : height) +
+           ")";
   }
-  if (m.image.channels == 1) return std::move(m.image);
+  why += ": it must be the plate's size";
+  if (plateOrientation != 1 && turned && maskWidth == height && maskHeight == width)
+    why +=
+        " as shown: turn the mask upright as the plate is shown, or tag it with the plate's "
+        "orientation";
+  return why;
+}
+
+Image loadHoldout(const std::filesystem::path& file, int width, int height, std::string* how,
+                  int plateOrientation) {
+  ingest::LoadedImage m = ingest::readImage(file, "composite");
+  if (const std::string why =
+          holdoutSizeProblem(m.image.width, m.image.height, width, height, plateOrientation);
+      !why.empty())
+    throw Error("composite", why, file);
+  if (m.image.channels == 1) {
+    if (m.hasPixels()) ingest::requireFinite(m.image, file, "composite", "the holdout mask");
+    return std::move(m.image);
+  }
   // One channel is the matte, as a compositor makes it: the alpha, unless it is opaque everywhere
   // (a painted mask saved with an alpha it does not use); else the picture's first colour
   // channel (R, or Y).
@@ -99,6 +121,8 @@ Image loadHoldout(const std::filesystem::path& file, int width, int height, std:
   parallelFor(0, height, [&](int64_t y) {
     for (int x = 0; x < width; ++x) mask.at(x, int(y))[0] = in.at(x, int(y))[size_t(channel)];
   });
+  // Only the matte must be finite: a depth channel beside it may hold infinity where nothing is.
+  ingest::requireFinite(mask, file, "composite", "the holdout mask's channel " + name);
   return mask;
 }
 

@@ -46,7 +46,11 @@ void convertChannels(Image& image, size_t first, const std::function<void(Image&
 // more than one channel. Throws compose::Error (stage "composite") naming the file when it cannot
 // be read, holds a value that is not finite, or is not width x height.
 Image loadHoldout(const std::filesystem::path& file, int width, int height,
-                  std::string* how = nullptr);
+                  std::string* how = nullptr, int plateOrientation = 1);
+// Why a holdout mask of maskWidth x maskHeight (as shown, after its EXIF orientation) does not fit
+// a plate of width x height as shown after its EXIF orientation `plateOrientation`, or empty.
+std::string holdoutSizeProblem(int maskWidth, int maskHeight, int width, int height,
+                               int plateOrientation);
 
 inline double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

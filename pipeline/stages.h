@@ -53,12 +53,12 @@ EnvironmentExif environmentExif(const Context& ctx);
 // its own data window, the ground shadow's ratio in its own) and the display image, together or
 // not at all, the object's pending exposure applied on the way. Returns notes for the user.
 // `floatSamples`: the EXR's parts in 32-bit float, else half (float where a value exceeds half).
-std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, const ComposeJob& job,
-                                           const Geometry& geometry, const Image& composite,
-                                           const RenderedObject& object,
-                                           const GroundShadowResult* ground,
-                                           const std::filesystem::path& exrPath,
-                                           const std::filesystem::path& displayPath,
-                                           bool floatSamples = false);
+// `holdout` (the mask, the plate's size): the object and shadow parts held out as the composite
+// was, so that they give it again, and the mask's file named in the header.
+std::vector<std::string> writeComposeFiles(
+    const color::ColorConfig& colors, const ComposeJob& job, const Geometry& geometry,
+    const Image& composite, const RenderedObject& object, const GroundShadowResult* ground,
+    const std::filesystem::path& exrPath, const std::filesystem::path& displayPath,
+    bool floatSamples = false, const Image* holdout = nullptr);
 
 }  // namespace compose::pipeline

@@ -185,7 +185,8 @@ class IngestStage final : public Stage {
         // The holdout is read with the plate, not by the composite at the end: a missing mask,
         // one of the wrong size or one holding NaN stops the job before the long work.
         std::string how;
-        ctx.artefacts.holdout = loadHoldout(ctx.job.holdout, p.image.width, p.image.height, &how);
+        ctx.artefacts.holdout =
+            loadHoldout(ctx.job.holdout, p.image.width, p.image.height, &how, p.info.orientation);
         if (!how.empty()) ctx.note(how);
       }
     }

@@ -540,12 +540,11 @@ class CompositeStage final : public Stage {
     composite::overInPlace(out, object.output.beauty, object.output.x0, object.output.y0,
                            object.pending);
     if (holdout) {
-      // Read with the plate, so that a bad mask stopped the job before the render.
-      const Image mask = ctx.artefacts.holdout
-                             ? std::move(*ctx.artefacts.holdout)
-                             : loadHoldout(ctx.job.holdout, out.width, out.height);
-      ctx.artefacts.holdout.reset();
-      out = composite::holdout(out, *ctx.artefacts.plateLinear, mask);
+      // Read with the plate, so that a bad mask stopped the job before the render; kept for the
+      // files, whose object and shadow parts it holds out too.
+      if (!ctx.artefacts.holdout)
+        ctx.artefacts.holdout = loadHoldout(ctx.job.holdout, out.width, out.height);
+      out = composite::holdout(out, *ctx.artefacts.plateLinear, *ctx.artefacts.holdout);
       reason += ", the holdout's plate in front";
     }
     ctx.artefacts.composite = std::move(out);
@@ -610,9 +609,9 @@ class OutputStage final : public Stage {
         ctx.artefacts.plate && (ctx.artefacts.plate->info.sampleType == "float" ||
                                 ctx.artefacts.plate->info.sampleType == "double");
     const bool floatSamples = job.exrDepth == "float" || (job.exrDepth == "auto" && floatPlate);
-    const std::vector<std::string> notes =
-        writeComposeFiles(ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object, ground,
-                          exrPath, displayPath, floatSamples);
+    const std::vector<std::string> notes = writeComposeFiles(
+        ctx.colors, job, ctx.geometry(), *ctx.artefacts.composite, object, ground, exrPath,
+        displayPath, floatSamples, ctx.artefacts.holdout ? &*ctx.artefacts.holdout : nullptr);
     for (const auto& n : notes) ctx.note(n);
     report(ctx.progress, "output", 1.0);
     const std::string ext = ingest::lowerExtension(displayPath);
@@ -785,9 +784,53 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                                            const RenderedObject& object,
                                            const GroundShadowResult* ground,
                                            const fs::path& exrPath, const fs::path& displayPath,
-                                           bool floatSamples) {
+                                           bool floatSamples, const Image* holdout) {
   const render::RenderOutput& rendered = object.output;
   std::vector<std::string> notes;
+  // A holdout in front: the object and the shadow parts are held out as the composite is, so that
+  // the plate times the shadow part, the object part over it, gives the composite part (it gave
+  // the object in front of what holds it out). With m the mask, a the object's alpha and s the
+  // ratio: the object times 1 - m; the ratio (m + (1 - m) s (1 - a)) / (1 - (1 - m) a), the plate
+  // then showing through by m + (1 - m) s (1 - a), as in the composite.
+  Image heldBeauty, heldRatio;
+  const render::RenderOutput* renderedOut = &rendered;
+  render::RenderOutput heldOutput;
+  if (holdout) {
+    COMPOSE_CHECK(holdout->width == composite.width && holdout->height == composite.height &&
+                  holdout->channels == 1);
+    auto maskAt = [&](int x, int y) { return std::clamp(holdout->at(x, y)[0], 0.0f, 1.0f); };
+    auto alphaAt = [&](int x, int y) {
+      const int bx = x - rendered.x0, by = y - rendered.y0;
+      if (bx < 0 || by < 0 || bx >= rendered.beauty.width || by >= rendered.beauty.height)
+        return 0.0f;
+      return rendered.beauty.at(bx, by)[3];
+    };
+    heldOutput.x0 = rendered.x0;
+    heldOutput.y0 = rendered.y0;
+    heldOutput.beauty = rendered.beauty;
+    Image& b = heldOutput.beauty;
+    parallelFor(0, int64_t(b.height), [&](int64_t y) {
+      for (int x = 0; x < b.width; ++x) {
+        const float keep = 1.0f - maskAt(x + rendered.x0, int(y) + rendered.y0);
+        for (int c = 0; c < 4; ++c) b.at(x, int(y))[c] *= keep;
+      }
+    });
+    if (ground) {
+      heldRatio = ground->ratio;
+      const int gx = ground->grid.x0, gy = ground->grid.y0;
+      parallelFor(0, int64_t(heldRatio.height), [&](int64_t y) {
+        for (int x = 0; x < heldRatio.width; ++x) {
+          const float m = maskAt(x + gx, int(y) + gy), a = alphaAt(x + gx, int(y) + gy);
+          const float through = 1.0f - (1.0f - m) * a;
+          if (!(through > 1e-6f)) continue;  // the object covers it: the ratio is not seen
+          float* s = heldRatio.at(x, int(y));
+          for (int c = 0; c < heldRatio.channels; ++c)
+            s[c] = std::min(1.0f, (m + (1.0f - m) * s[c] * (1.0f - a)) / through);
+        }
+      });
+    }
+    renderedOut = &heldOutput;
+  }
   const std::string working = colors.workingSpace();
   COMPOSE_CHECK((composite.channels == 3 || composite.channels == 4) &&
                 rendered.beauty.channels == 4);
@@ -797,14 +840,14 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
       job.exrSpace.empty() ? working : colors.resolve(job.exrSpace, "--exr-space");
   Image compositeIn, beautyIn, aovsIn;
   const Image* compositeOut = &composite;
-  const Image* beautyOut = &rendered.beauty;
+  const Image* beautyOut = &renderedOut->beauty;
   const Image* aovsOut = &rendered.aovs;
   float pending = object.pending;  // the exposure still to apply to the object's light
   if (space != working) {
     compositeIn = composite;
     compositeIn.colorSpace = working;
     colors.convert(compositeIn, space);
-    beautyIn = rendered.beauty;
+    beautyIn = renderedOut->beauty;
     aovsIn = rendered.aovs;
     const std::vector<std::string>& names = render::aovChannelNames();
     // The exposure first, then the matrix, as an object layer (which holds its light exposed)
@@ -871,6 +914,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
                     "' are: the EXR carries its name but no chromaticities");
   }
   ingest::ExrHeader header = sceneHeader(geometry, object.meshFile, object.fileOrigin);
+  if (holdout) header.strings.emplace_back("compose:holdout", fs::absolute(job.holdout).string());
 
   const std::string display = job.display.empty() ? colors.defaultDisplay() : job.display;
   const std::string view = job.view.empty() ? colors.defaultView(display) : job.view;
@@ -880,9 +924,13 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
   Image ratioIn;
   if (ground) {
     // The ground shadow's ratio, in its own data window (where it is below 1): 1 elsewhere.
-    ingest::ExrPart shadowPart{
-        "shadow",        &ground->ratio,   ground->grid.x0,      ground->grid.y0,
-        composite.width, composite.height, compositePart.options};
+    ingest::ExrPart shadowPart{"shadow",
+                               holdout ? &heldRatio : &ground->ratio,
+                               ground->grid.x0,
+                               ground->grid.y0,
+                               composite.width,
+                               composite.height,
+                               compositePart.options};
     shadowPart.options.alphaChannel = -1;
     // Labelled as the colour it multiplies, in the space written (it said 'Raw', which tells a
     // colour-managed reader to leave it alone, beside the primaries of the working space).
@@ -891,7 +939,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
       // Per channel of the working space the plate was darkened by it. In other primaries a
       // tinted ratio has no exact counterpart (it would depend on the plate's colour): it is
       // converted as a colour is, exact for a grey ratio (white stays white).
-      ratioIn = ground->ratio;
+      ratioIn = holdout ? heldRatio : ground->ratio;
       ratioIn.colorSpace = working;
       colors.convert(ratioIn, space);
       shadowPart.image = &ratioIn;
@@ -934,7 +982,8 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
       shown = colors.toDisplay(composite, display, view);
       if (shown.channels == 4) shown = toRgb(shown);
     }
-    if (const std::optional<std::string> n = clippedObjectNote(rendered, shown, displayPath, view))
+    if (const std::optional<std::string> n =
+            clippedObjectNote(*renderedOut, shown, displayPath, view))
       displayNotes.push_back(*n);
     // Only sRGB is said in the file (EXIF ColorSpace, PNG's sRGB chunk): another display's codes
     // go untagged, and viewers take them for sRGB (Display P3's red shows duller).

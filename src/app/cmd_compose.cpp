@@ -14,6 +14,7 @@
 #include "lighting/lighting.h"
 #include "pipeline/compose_job.h"
 #include "pipeline/scene.h"
+#include "pipeline/stage_util.h"
 
 namespace compose::app {
 
@@ -304,15 +305,12 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
         const bool turned = i.orientation >= 5 && i.orientation <= 8;
         return std::pair{turned ? i.fileHeight : i.fileWidth, turned ? i.fileWidth : i.fileHeight};
       };
-      const auto [pw, ph] = upright(ingest::readCaptureInfo(j.plate, "ingest"));
+      const ingest::CaptureInfo plate = ingest::readCaptureInfo(j.plate, "ingest");
+      const auto [pw, ph] = upright(plate);
       const auto [mw, mh] = upright(ingest::readCaptureInfo(j.holdout, "composite"));
-      if (pw != mw || ph != mh) {
-        throw Error("composite",
-                    "the holdout mask is " + std::to_string(mw) + "x" + std::to_string(mh) +
-                        ", the plate " + std::to_string(pw) + "x" + std::to_string(ph) +
-                        ": it must be the plate's size",
-                    j.holdout);
-      }
+      if (const std::string why = pipeline::holdoutSizeProblem(mw, mh, pw, ph, plate.orientation);
+          !why.empty())
+        throw Error("composite", why, j.holdout);
     }
     for (const auto& s : pipeline::plan(o.job, colors, request)) {
       std::printf("%-10s %-7s %s\n", s.name.c_str(), pipeline::stateName(s.state),

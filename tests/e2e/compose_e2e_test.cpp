@@ -2,12 +2,14 @@
 // bunny, the forest HDRI) and checks the result against an independently computed reference.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <sstream>
 
@@ -665,6 +667,70 @@ TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
   EXPECT_EQ(plateLeft, w / 2 * h) << "the plate in front where the mask is white";
   EXPECT_EQ(sameRight, w / 2 * h) << "the composite without a holdout where the mask is black";
   EXPECT_EQ(rgbMask, masked) << "only the first channel of an RGB mask counts";
+}
+
+// The EXR's parts give the composite again with a holdout in front, soft edges included: the
+// plate times the shadow part, the object part over it (they gave the object in front of what
+// holds it out, and the shadow where the plate was not darkened); the header names the mask.
+TEST_F(ComposeErrors, AHoldoutHoldsOutTheObjectAndShadowPartsToo) {
+  const int w = 96, h = 72;
+  {
+    std::vector<float> plate(size_t(w) * h * 3, 0.4f), ramp(size_t(w) * h);
+    writePixels(dir_ / "input-plate.png", w, h, 3, OIIO::TypeDesc::UINT8, plate);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        ramp[size_t(y) * w + x] = std::clamp(float(x - 30) / 36.0f, 0.0f, 1.0f);
+    writePixels(dir_ / "input-mask.exr", w, h, 1, OIIO::TypeDesc::FLOAT, ramp);
+  }
+  const auto r = runCompose("--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
+                                quote((samples_ / "monkey.obj").string()) +
+                                " --scale 0.7 --samples 1 --depth float --no-cache --holdout " +
+                                quote((dir_ / "input-mask.exr").string()) + " --out " +
+                                quote((dir_ / "held").string()),
+                            dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  // Each part over the whole frame (1 outside its data window for the shadow, 0 for the object).
+  auto in = OIIO::ImageInput::open((dir_ / "held.exr").string());
+  ASSERT_TRUE(in);
+  std::map<std::string, std::vector<float>> frame;  // channel name -> w x h
+  for (int sub = 0; in->seek_subimage(sub, 0); ++sub) {
+    const OIIO::ImageSpec spec = in->spec();
+    const std::string name = spec.get_string_attribute("oiio:subimagename");
+    if (sub == 0) {
+      EXPECT_EQ(spec.get_string_attribute("compose:holdout"),
+                fs::absolute(dir_ / "input-mask.exr").string());
+    }
+    std::vector<float> px(size_t(spec.width) * spec.height * spec.nchannels);
+    ASSERT_TRUE(in->read_image(sub, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, px.data()));
+    for (int c = 0; c < spec.nchannels; ++c) {
+      const std::string channel = name + ":" + std::string(spec.channel_name(c));
+      std::vector<float>& f = frame[channel];
+      f.assign(size_t(w) * h, name == "shadow" ? 1.0f : 0.0f);
+      for (int y = 0; y < spec.height; ++y)
+        for (int x = 0; x < spec.width; ++x)
+          f[size_t(y + spec.y) * w + size_t(x + spec.x)] =
+              px[(size_t(y) * spec.width + x) * spec.nchannels + c];
+    }
+  }
+  ASSERT_TRUE(frame.count("shadow:shadow.R")) << "the monkey's ground shadow";
+  // The plate's grey in linear light: code 102 decoded.
+  const float plate = std::pow((102.0f / 255.0f + 0.055f) / 1.055f, 2.4f);
+  double worst = 0.0;
+  int soft = 0, heldOut = 0;
+  for (size_t i = 0; i < size_t(w) * h; ++i) {
+    const float a = frame["object:object.A"][i];
+    for (const char* c : {"R", "G", "B"}) {
+      const float rebuilt = plate * frame[std::string("shadow:shadow.") + c][i] * (1.0f - a) +
+                            frame[std::string("object:object.") + c][i];
+      worst = std::max(worst, double(std::abs(rebuilt - frame[std::string("composite:") + c][i])));
+    }
+    const int x = int(i % size_t(w));
+    soft += a > 0.0f && x > 30 && x < 66;
+    heldOut += x >= 66 && a > 0.0f;
+  }
+  EXPECT_LT(worst, 2e-3) << "the parts give the composite";
+  EXPECT_GT(soft, 50) << "the object should reach the mask's soft edge";
+  EXPECT_EQ(heldOut, 0) << "no object where the plate is wholly in front";
 }
 
 // A plate whose header names a colour space the config does not have was read as the default

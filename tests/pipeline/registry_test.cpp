@@ -84,6 +84,23 @@ TEST(Holdout, TheAlphaIsTheMatteUnlessItIsOpaque) {
   EXPECT_EQ(fromRed.pixels[0], 0.25f);
   EXPECT_EQ(fromRed.pixels[1], 0.75f);
   EXPECT_NE(how.find("channel R (its alpha is opaque everywhere)"), std::string::npos) << how;
+  // Only the matte must be finite: a depth channel beside it may be infinite where nothing is
+  // (the mask was refused for it), colour that is NaN where alpha is 0 too.
+  Image withDepth(2, 1, 5, {"R", "G", "B", "A", "Z"});
+  const float inf = std::numeric_limits<float>::infinity();
+  withDepth.pixels = {0.0f, 0.0f, 0.0f, 1.0f, 2.0f, std::nanf(""), 0.0f, 0.0f, 0.0f, inf};
+  ingest::writeImage(dir / "depth.exr", withDepth, options);
+  const Image fromDepth = loadHoldout(dir / "depth.exr", 2, 1);
+  EXPECT_EQ(fromDepth.pixels[0], 1.0f);
+  EXPECT_EQ(fromDepth.pixels[1], 0.0f);
+  withDepth.pixels[3] = std::nanf("");
+  ingest::writeImage(dir / "bad.exr", withDepth, options);
+  COMPOSE_EXPECT_ERROR(loadHoldout(dir / "bad.exr", 2, 1),
+                       "NaN in the holdout mask's channel A at pixel (0, 0)");
+  // A plate turned by its EXIF orientation: the sizes as shown and as stored are said.
+  COMPOSE_EXPECT_ERROR(loadHoldout(dir / "depth.exr", 1, 2, nullptr, 6),
+                       "the holdout mask is 2x1, the plate 1x2 as shown (its EXIF orientation 6; "
+                       "stored 2x1): it must be the plate's size as shown: turn the mask upright");
 }
 
 // A layered image is read from the layer that is its picture, not from whichever sorts first: a
