@@ -441,12 +441,15 @@ class StitchStage final : public Stage {
         p.worldFromCamera = *v.worldFromCamera;
       } else if (const auto token = cubemap::faceFromName(v.name)) {
         p.worldFromCamera = cubemap::faceCameraRotation(token->face);
+      } else if (const std::optional<double> yaw = cubemap::yawFromName(v.name)) {
+        p.worldFromCamera = cubemap::cameraRotation(*yaw, 0.0, 0.0);  // a level view of a ring
       } else {
         throw Error("stitch",
                     "cannot tell where view '" + v.name +
                         "' points: give it a worldFromCamera rotation in the capture description "
-                        "or name it for a cube face (px, nx, py, ny, pz, nz); compose ingest "
-                        "names views so when their photos' names end in a face (px_1.jpg)",
+                        "or name it for a cube face (px, nx, py, ny, pz, nz) or a level view's "
+                        "turn (yaw120); compose ingest names views so when their photos' names "
+                        "say it (px_1.jpg, yaw120_1.jpg)",
                     ctx.environmentInput.path);
       }
       p.lens = cubemap::photoLens(first.file, header, lensFile);

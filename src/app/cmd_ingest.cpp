@@ -173,13 +173,18 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
       }
     }
     if (group == "exif") {
-      // Views whose photos' names all say one cube face (px_1.jpg px_2.jpg px_3.jpg) are named
-      // for it, so that the description tells compose --env and stitch where they point.
+      // Views whose photos' names all say one cube face (px_1.jpg px_2.jpg px_3.jpg) or one turn
+      // of a ring (yaw120_1.jpg, as capture-sim names them) are named for it, so that the
+      // description tells compose --env and stitch where they point.
       std::vector<std::string> faces(capture.views.size());
       for (size_t v = 0; v < capture.views.size(); ++v) {
         for (const ingest::Shot& s : capture.views[v].shots) {
           const auto token = cubemap::faceFromPhotoName(s.file);
-          const std::string name = token ? token->token : std::string();
+          const std::string stem = s.file.stem().string();
+          const std::optional<double> yaw = cubemap::yawFromName(stem);
+          char turn[16];
+          std::snprintf(turn, sizeof turn, "yaw%03d", yaw ? int(*yaw) : 0);
+          const std::string name = token ? token->token : yaw ? std::string(turn) : std::string();
           if (name.empty() || (!faces[v].empty() && name != faces[v])) {
             faces[v].clear();
             break;
@@ -193,7 +198,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         capture.views[v].name = faces[v];
         ++named;
       }
-      if (named > 0) capture.method += "; views named for the cube face in their photos' names";
+      if (named > 0)
+        capture.method += "; views named for the cube face or turn in their photos' names";
     }
     std::printf("\ngrouped by %s: %zu view%s\n", capture.method.c_str(), capture.views.size(),
                 capture.views.size() == 1 ? "" : "s");

@@ -26,18 +26,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A level view named by its turn, as compose capture-sim names a ring of views: "yaw120" (or
-// yaw120_2, yaw120.exr) is 120° from -Z towards -X, as @120,0 says it.
+// A level view named by its turn (cubemap::yawFromName): yaw120_2.jpg.
 std::optional<double> yawFromPhotoName(const fs::path& file) {
-  const std::string stem = file.stem().string();
-  if (stem.size() < 4 || stem.compare(0, 3, "yaw") != 0) return std::nullopt;
-  size_t end = 3;
-  while (end < stem.size() && end < 6 && std::isdigit(static_cast<unsigned char>(stem[end]))) ++end;
-  if (end == 3 || (end < stem.size() && std::isalnum(static_cast<unsigned char>(stem[end]))))
-    return std::nullopt;
-  const int degrees = std::stoi(stem.substr(3, end - 3));
-  if (degrees >= 360) return std::nullopt;
-  return double(degrees);
+  return cubemap::yawFromName(file.stem().string());
 }
 
 struct StitchCommandOptions {
@@ -115,7 +106,9 @@ Runner setupStitch(CLI::App& cmd, const Globals& globals) {
       ->required();
   cmd.add_option("--out", o->out, "Output file (for --to faces: a name with %, see convert)")
       ->required();
-  cmd.add_option("--fov", o->fov, "Horizontal field of view of the photos, degrees");
+  cmd.add_option("--fov", o->fov,
+                 "Field of view across the camera sensor's width, degrees: a photo's horizontal "
+                 "one, a portrait's (turned by its EXIF orientation) across its height");
   cmd.add_option("--calib", o->calib, "Lens file (JSON) from compose calib lens");
   cmd.add_flag("--fisheye", o->fisheye,
                "With --fov: an equidistant fisheye instead of rectilinear");

@@ -252,6 +252,17 @@ std::optional<FaceToken> faceFromName(const std::string& stem) {
   return best;
 }
 
+std::optional<double> yawFromName(const std::string& stem) {
+  if (stem.size() < 4 || stem.compare(0, 3, "yaw") != 0) return std::nullopt;
+  size_t end = 3;
+  while (end < stem.size() && end < 6 && std::isdigit(static_cast<unsigned char>(stem[end]))) ++end;
+  if (end == 3 || (end < stem.size() && std::isalnum(static_cast<unsigned char>(stem[end]))))
+    return std::nullopt;
+  const int degrees = std::stoi(stem.substr(3, end - 3));
+  if (degrees >= 360) return std::nullopt;
+  return double(degrees);
+}
+
 std::optional<FaceToken> faceFromPhotoName(const std::filesystem::path& file) {
   const std::string stem = file.stem().string();
   if (auto token = faceFromName(stem)) return token;

@@ -82,6 +82,10 @@ std::optional<FaceToken> faceFromName(const std::string& stem);
 // The face a photo's file name points it at: a face token at the end of the stem (room_px.jpg),
 // or before a bracket number (px_2.jpg, room-nz-3.jpg, as compose capture-sim names them).
 std::optional<FaceToken> faceFromPhotoName(const std::filesystem::path& file);
+// A level view named by its turn, as compose capture-sim names a ring of views: "yaw120" (or
+// yaw120_2, yaw120.exr) is 120° from -Z towards -X (as stitch's @120,0 says it); `name` is a
+// file's stem or a view's name. Returns the degrees (0..359), or nullopt.
+std::optional<double> yawFromName(const std::string& name);
 // The token for `face` in naming family `family`, in the letter case of `like`.
 std::string faceNameIn(int family, int face, const std::string& like);
 

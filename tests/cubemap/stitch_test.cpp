@@ -13,6 +13,7 @@
 
 #include "core/numbers.h"
 #include "cubemap/coverage.h"
+#include "cubemap/photo_header.h"
 #include "cubemap/render_view.h"
 #include "ingest/image_io.h"
 #include "lighting/filtered_cube.h"
@@ -97,6 +98,31 @@ double medianRelative(const CubeMap& truth, const CubeMap& x) {
 // The seam measure's own geometry: across every face edge, the first texel beyond is the
 // neighbouring face's edge texel and the second is the one next to it, one texel further from the
 // edge (the measure compares the step across the edge with those inner steps).
+// --fov is the field of view across the sensor's width: a portrait photo of the camera (stored
+// 320x240, EXIF orientation 6, shown 240x320) has it across its height, as a lens file turned for
+// it would (it had it across its 240 pixels: a focal length of 100.7 pixels, not 134.3).
+TEST(PhotoLens, AFieldOfViewIsTheSensorsAndTurnsWithThePhoto) {
+  PhotoHeader landscape;
+  landscape.width = 320;
+  landscape.height = 240;
+  PhotoHeader portrait = landscape;
+  portrait.width = 240;
+  portrait.height = 320;
+  const double expected = 160.0 / std::tan(50.0 * std::numbers::pi / 180.0);
+  const calib::Lens wide = photoLens("a.jpg", landscape, std::nullopt, 100.0, false);
+  EXPECT_NEAR(wide.fx, expected, 1e-6);
+  for (int orientation : {6, 8, 5, 7}) {
+    portrait.orientation = orientation;
+    const calib::Lens turned = photoLens("b.jpg", portrait, std::nullopt, 100.0, false);
+    EXPECT_NEAR(turned.fx, expected, 1e-6) << "orientation " << orientation;
+    EXPECT_NEAR(turned.fy, expected, 1e-6) << "orientation " << orientation;
+    EXPECT_EQ(turned.width, 240);
+    EXPECT_EQ(turned.height, 320);
+    EXPECT_NEAR(turned.cx, 120.0, 1e-6);
+    EXPECT_NEAR(turned.cy, 160.0, 1e-6);
+  }
+}
+
 TEST(SeamMeasure, StepsOffAFaceOneTexelAtATime) {
   for (const int n : {16, 128, 256}) {
     for (int f = 0; f < lighting::kCubeFaces; ++f) {

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <sstream>
 
 #include <OpenImageIO/imagebuf.h>
@@ -18,6 +19,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <glm/gtc/matrix_transform.hpp>
+#include <nlohmann/json.hpp>
 
 #include "calib/chessboard.h"
 #include "calib/plate_camera.h"
@@ -555,6 +557,38 @@ TEST_F(StageCommands, EnvSpaceSaysTheSpaceOfACapturesPhotos) {
       bytes[space] = std::string(std::istreambuf_iterator<char>(in), {});
     }
     EXPECT_TRUE(bytes[""] != bytes["Display P3"]) << "the same lighting for both spaces";
+  }
+}
+
+// A ring of level views, as capture-sim names them (yaw000_1.jpg ...): compose ingest names the
+// views for their turn, and the capture description lights the object (its views were named
+// view1 ..., and --env refused them: "cannot tell where view 'view1' points"; a view named
+// yaw000 by a --pattern was refused too).
+TEST_F(StageCommands, ARingCaptureDescribedByIngestIsStitched) {
+  const fs::path shots = dir_ / "ring";
+  const RunResult sim = run("-q capture-sim --env " + quote(smallEnvironment()) +
+                                " --views 8 --size 64x48 --no-noise --out " + quote(shots),
+                            dir_.path());
+  ASSERT_EQ(sim.status, 0) << sim.err;
+  std::string photos;
+  for (const auto& e : fs::directory_iterator(shots))
+    if (e.path().extension() == ".jpg") photos += " " + quote(e.path());
+  for (const std::string& grouping :
+       {std::string(), std::string(" --group pattern --pattern '{view}_{bracket}.jpg'")}) {
+    SCOPED_TRACE(grouping);
+    const fs::path described = dir_ / "ring.json";
+    const RunResult ingest =
+        run("ingest" + grouping + " --json " + quote(described) + photos, dir_.path());
+    ASSERT_EQ(ingest.status, 0) << ingest.err;
+    std::ifstream in(described);
+    const nlohmann::json capture = nlohmann::json::parse(in);
+    ASSERT_EQ(capture["views"].size(), 8u) << capture.dump();
+    EXPECT_EQ(capture["views"][0]["name"], "yaw000") << capture.dump();
+    const RunResult pre =
+        run("-q precompute --env " + quote(described) + " --out " + quote(dir_ / "ring.lighting") +
+                " --cache " + quote(dir_ / "cache"),
+            dir_.path());
+    EXPECT_EQ(pre.status, 0) << pre.err;
   }
 }
 
