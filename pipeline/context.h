@@ -98,6 +98,7 @@ struct RenderedObject {
   // Read from an object layer (compose render): the plate it was rendered on (absolute) and the
   // hash of that plate's bytes (contentKey); empty for a layer that does not say.
   std::string layerPlateFile, layerPlateKey;
+  bool fromLayer = false;  // read from an object layer (compose composite), not rendered here
 };
 
 // What calib::plateCamera() makes of a plate: its upright size and the header's facts it reads

@@ -445,6 +445,7 @@ StageInput objectLayerInput(const fs::path& file) {
       r.coverage = rj.at("coverage");
       object.exposure = rj.at("exposure");
       object.exposureChosen = true;  // its values carry it: pending stays 1
+      object.fromLayer = true;
       object.notes = rj.at("notes").get<std::vector<std::string>>();
       object.meshFile = rj.value("mesh", "");
       if (const auto o = rj.find("fileOrigin"); o != rj.end() && o->is_array() && o->size() == 3)

@@ -131,7 +131,7 @@ std::optional<double> exifExposure(const Context& ctx, std::string& why) {
 // (their shading is lost).
 std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendered,
                                              const Image& shown, const fs::path& displayPath,
-                                             const std::string& view) {
+                                             const std::string& view, bool fromLayer) {
   const Image& beauty = rendered.beauty;
   // Within half a code of the top two 8-bit codes: a view that rolls highlights off (Soft Clip)
   // approaches white without reaching it, and its last codes hold no shading any more.
@@ -154,10 +154,13 @@ std::optional<std::string> clippedObjectNote(const render::RenderOutput& rendere
   if (allCovered == 0 || double(allClipped) <= kClippedShare * double(allCovered))
     return std::nullopt;
   return format(
-      "warning: %.1f%% of the object's pixels are clipped to white in %s (view %s): lower "
-      "--exposure to keep their shading%s",
+      "warning: %.1f%% of the object's pixels are clipped to white in %s (view %s): %s to keep "
+      "their shading%s",
       100.0 * double(allClipped) / double(allCovered), displayPath.filename().string().c_str(),
       view.c_str(),
+      // A layer's exposure is in its values: compose composite has no --exposure.
+      fromLayer ? "render the layer again with a lower --exposure (compose render)"
+                : "lower --exposure",
       view == "Standard" ? ", or --view 'Soft Clip' to roll the highlights off (the plate's "
                            "brightest levels with them)"
                          : "");
@@ -516,8 +519,9 @@ class CompositeStage final : public Stage {
         object.layerPlateKey != contentKey(ctx.job.plate, "composite")) {
       ctx.note(
           format("the object layer was rendered on another plate (%s): its exposure (%+.2f "
-                 "stops) and its ground shadow were matched to that plate and are applied "
-                 "here as they are; render it again on %s to match this one",
+                 "stops, chosen for that plate or given) and its ground shadow, made on that "
+                 "plate, are applied here as they are; to match this one, render it again on %s "
+                 "(with its automatic exposure)",
                  object.layerPlateFile.c_str(), std::log2(double(object.exposure)),
                  ctx.job.plate.filename().string().c_str()));
     }
@@ -983,7 +987,7 @@ std::vector<std::string> writeComposeFiles(const color::ColorConfig& colors, con
       if (shown.channels == 4) shown = toRgb(shown);
     }
     if (const std::optional<std::string> n =
-            clippedObjectNote(*renderedOut, shown, displayPath, view))
+            clippedObjectNote(*renderedOut, shown, displayPath, view, object.fromLayer))
       displayNotes.push_back(*n);
     // Only sRGB is said in the file (EXIF ColorSpace, PNG's sRGB chunk): another display's codes
     // go untagged, and viewers take them for sRGB (Display P3's red shows duller).

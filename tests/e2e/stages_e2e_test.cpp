@@ -254,6 +254,22 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
                              dir_.path());
   ASSERT_EQ(same.status, 0) << same.err;
   EXPECT_EQ(same.err.find("rendered on another plate"), std::string::npos) << same.err;
+  // A layer rendered too bright: the warning says how to change it (compose composite has no
+  // --exposure, which it advised).
+  const fs::path bright = dir_ / "bright.exr";
+  ASSERT_EQ(run("-q render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+                    quote(light) + " --exposure 6 --out " + quote(bright) + " --cache " +
+                    quote(dir_ / "cache2"),
+                dir_.path())
+                .status,
+            0);
+  const RunResult clipped = run("composite --plate " + quote(plate_) + " --layer " + quote(bright) +
+                                    " --out " + quote(dir_ / "bright" / "compose") + " --no-cache",
+                                dir_.path());
+  ASSERT_EQ(clipped.status, 0) << clipped.err;
+  EXPECT_NE(clipped.err.find("render the layer again with a lower --exposure (compose render)"),
+            std::string::npos)
+      << clipped.err;
   // Nor on a copy of it under another name: the bytes are compared, not the names.
   fs::copy_file(plate_, dir_ / "copy of plate.jpg");
   const RunResult copy =
