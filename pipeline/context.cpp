@@ -107,12 +107,14 @@ const Geometry& Context::geometry() {
   std::filesystem::path lensFrom;  // the file the lens comes from, for errors about it
   if (!job.lensFile.empty()) {
     options.lens = calib::readLens(job.lensFile);
+    requireUnchangedSinceHashed(job.lensFile, "camera");
     lensFrom = job.lensFile;
   }
   int poseWidth = 0, poseHeight = 0;  // the plate the pose was estimated on
   if (!job.poseFile.empty()) {
     // The board's plane is the ground; the pose's lens is the plate's unless --calib says else.
     const calib::PlatePose pose = calib::readPose(job.poseFile);
+    requireUnchangedSinceHashed(job.poseFile, "camera");
     poseWidth = pose.width;
     poseHeight = pose.height;
     if (!options.lens) {

@@ -6,7 +6,12 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <mutex>
+#include <optional>
 #include <vector>
+
+#include <sys/stat.h>
 
 #include "core/channels.h"
 #include "core/error.h"
@@ -20,9 +25,44 @@ namespace compose::pipeline {
 
 namespace {
 
+// What tells one file from another at a path: another file moved over it has another inode, one
+// rewritten in place another change time.
+struct FileStamp {
+  dev_t device = 0;
+  ino_t inode = 0;
+  off_t size = 0;
+  int64_t modified = 0, changed = 0;  // nanoseconds
+  bool operator==(const FileStamp&) const = default;
+};
+
+std::optional<FileStamp> stampOf(const std::filesystem::path& file) {
+  struct stat st {};
+  if (::stat(file.c_str(), &st) != 0) return std::nullopt;
+  FileStamp s;
+  s.device = st.st_dev;
+  s.inode = st.st_ino;
+  s.size = st.st_size;
+  s.modified = int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
+  s.changed = int64_t(st.st_ctim.tv_sec) * 1000000000 + st.st_ctim.tv_nsec;
+  return s;
+}
+
+std::mutex stampsMutex;
+std::map<std::string, FileStamp>& hashedStamps() {
+  static std::map<std::string, FileStamp> stamps;
+  return stamps;
+}
+
+std::string stampName(const std::filesystem::path& file) {
+  std::error_code ec;
+  const std::filesystem::path absolute = std::filesystem::absolute(file, ec);
+  return (ec ? file : absolute).lexically_normal().string();
+}
+
 void hashBytes(Hash128& hash, const std::filesystem::path& file, const std::string& stage,
                bool withName) {
   protectInput(file);
+  const std::optional<FileStamp> before = stampOf(file);
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw Error(stage, "file not found", file);
   if (std::filesystem::is_directory(file, ec)) throw Error(stage, "is a folder, not a file", file);
@@ -40,12 +80,31 @@ void hashBytes(Hash128& hash, const std::filesystem::path& file, const std::stri
     if (n > 0) hash.data(buffer.data(), size_t(n));
   }
   if (in.bad()) throw Error(stage, "read error", file);
+  if (before) {
+    const std::lock_guard<std::mutex> lock(stampsMutex);
+    hashedStamps()[stampName(file)] = *before;
+  }
 }
 
 }  // namespace
 
 void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage) {
   hashBytes(hash, file, stage, true);
+}
+
+void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::string& stage) {
+  std::optional<FileStamp> hashed;
+  {
+    const std::lock_guard<std::mutex> lock(stampsMutex);
+    const auto it = hashedStamps().find(stampName(file));
+    if (it == hashedStamps().end()) return;
+    hashed = it->second;
+  }
+  if (stampOf(file) == hashed) return;
+  throw Error(stage,
+              "the file changed while compose ran (it is not the file whose bytes keyed the "
+              "cache: replaced or rewritten since): nothing made from it was kept; run again",
+              file);
 }
 
 std::string contentKey(const std::filesystem::path& file, const std::string& stage) {

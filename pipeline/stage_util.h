@@ -21,6 +21,12 @@ namespace compose::pipeline {
 void hashFile(Hash128& hash, const std::filesystem::path& file, const std::string& stage);
 // The hash of the file's bytes alone (its name left out), as hex: the same for a renamed copy.
 std::string contentKey(const std::filesystem::path& file, const std::string& stage);
+// Inputs are hashed when a job is planned and read later: a file replaced or rewritten in between
+// would be cached under the key of the bytes it had (every later run with the first file would
+// take the second's results). hashFile() notes each file's identity (device, inode, size,
+// modification and change times) before it reads it; this throws compose::Error (stage `stage`)
+// when `file` is not that file any more. Call it after reading a file the keys hashed.
+void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::string& stage);
 
 inline void hashVector(Hash128& hash, const glm::dvec3& v) {
   hash.number(v.x);

@@ -143,6 +143,7 @@ class IngestStage final : public Stage {
         ctx.meshSummary = std::move(cached->summary);
       } else {
         ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
+        requireUnchangedSinceHashed(job.object, "mesh");
         ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
         if (!ctx.planning &&
             !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
@@ -178,6 +179,7 @@ class IngestStage final : public Stage {
       ctx.artefacts.plate = ingest::readImage(ctx.job.plate, "ingest",
                                               {.codesForEightBit = true, .picturePart = true});
       const ingest::LoadedImage& p = *ctx.artefacts.plate;
+      requireUnchangedSinceHashed(ctx.job.plate, "ingest");
       ingest::requireColourChannels(p.image, ctx.job.plate, "ingest", "the plate");
       for (const std::string& n : p.notes) ctx.note("the plate " + n);
       reason = format("the plate %dx%d (%s)", p.image.width, p.image.height, p.info.format.c_str());
@@ -187,6 +189,7 @@ class IngestStage final : public Stage {
         std::string how;
         ctx.artefacts.holdout =
             loadHoldout(ctx.job.holdout, p.image.width, p.image.height, &how, p.info.orientation);
+        requireUnchangedSinceHashed(ctx.job.holdout, "composite");
         if (!how.empty()) ctx.note(how);
       }
     }
@@ -210,6 +213,7 @@ class IngestStage final : public Stage {
                                   ctx.colors);
           });
       const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
+      for (const fs::path& f : ctx.environmentInput.files) requireUnchangedSinceHashed(f, "ingest");
       for (const std::string& n : env.notes) ctx.note(n);
       if (env.info.integerSamples() && env.info.format != "raw") {
         ctx.note("the environment is a " + env.info.format +
@@ -305,6 +309,8 @@ class MergeStage final : public Stage {
     const ingest::Capture& capture = *ctx.artefacts.capture;
     const std::vector<std::vector<ingest::LoadedImage>> photos =
         hdr::readCapturePhotos(capture, ctx.progress);
+    for (const ingest::View& v : capture.views)
+      for (const ingest::Shot& s : v.shots) requireUnchangedSinceHashed(s.file, "merge");
     size_t total = 0;
     for (const auto& v : capture.views) total += v.shots.size();
     hdr::CaptureMergeOptions options;
@@ -386,6 +392,7 @@ class StitchStage final : public Stage {
       }
       const ingest::Shot& shot = capture.views[size_t(i)].shots.front();
       ingest::LoadedImage img = ingest::readImage(shot.file, "stitch", {.codesForEightBit = true});
+      requireUnchangedSinceHashed(shot.file, "stitch");
       const std::string space =
           !ctx.job.environmentSpace.empty()
               ? ctx.colors.resolve(ctx.job.environmentSpace, "--env-space")
@@ -457,8 +464,11 @@ class StitchStage final : public Stage {
         anyLdr = true;
         Image white(1, 1, 3, {"R", "G", "B"});
         white.pixels = {1.0f, 1.0f, 1.0f};
+        // In the space the photos are decoded in (load above).
         white.colorSpace =
-            first.colorSpace.empty()
+            !ctx.job.environmentSpace.empty()
+                ? ctx.colors.resolve(ctx.job.environmentSpace, "--env-space")
+            : first.colorSpace.empty()
                 ? ctx.colors
                       .inputSpace(ingest::nameForRules(first.file, header.format), "", false, true)
                       .space

@@ -185,8 +185,9 @@ class RenderStage final : public Stage {
   // checked for parts in the way; 15: kept in the environment's units, the exposure applied by
   // the composite and the files; 16: the automatic exposure kept whichever is used; 17: the
   // card's radiance kept instead, the composite choosing the exposure for its plate; 18: a
-  // material's factor x texture x vertex colour multiplied in their own space, then converted
-  static constexpr int kVersion = 18;
+  // material's factor x texture x vertex colour multiplied in their own space, then converted;
+  // 19: an OBJ's Kd x map_Kd multiplied in linear Rec.709 when its textures have those primaries
+  static constexpr int kVersion = 19;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -436,15 +437,19 @@ class RenderStage final : public Stage {
       // No placement would show it: say what cuts it away.
       std::string cut;
       for (const render::Material& m : ctx.mesh().materials) {
-        if (m.alphaCutoff < 0.0f) continue;
-        cut += format("%s'%s' (alpha %.3g%s, cutoff %.3g)", cut.empty() ? "" : ", ", m.name.c_str(),
-                      double(m.baseAlpha), m.texture >= 0 ? " times its texture's" : "",
-                      double(m.alphaCutoff));
+        if (!m.cutOut()) continue;
+        const std::string alpha = format("alpha %.3g%s", double(m.baseAlpha),
+                                         m.texture >= 0 ? " times its texture's" : "");
+        cut += (cut.empty() ? "" : ", ") +
+               (m.blend ? format("'%s' (BLEND, %s)", m.name.c_str(), alpha.c_str())
+                        : format("'%s' (MASK, %s, cutoff %.3g)", m.name.c_str(), alpha.c_str(),
+                                 double(m.alphaCutoff)));
       }
       throw Error("render",
-                  "the object's cut-out (MASK) materials take every surface of it away: their "
-                  "alpha is below their alphaCutoff everywhere, so nothing is drawn (" +
-                      cut + "); was the alpha meant for BLEND, or the cutoff lower?",
+                  "the object's see-through materials take every surface of it away, so nothing "
+                  "is drawn: a MASK material's alpha is below its alphaCutoff everywhere, a BLEND "
+                  "material's 0 (" +
+                      cut + ")",
                   job.object);
     }
     if (!(r.output.coverage > 0.0)) {

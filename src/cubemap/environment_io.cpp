@@ -281,10 +281,11 @@ struct Clamped {
     if (count == 0) return;
     char line[160];
     std::snprintf(line, sizeof line, "%zu values below 0 (as low as %.3g", count, double(lowest));
-    notes.push_back(std::string(line) + ": colours outside the gamut of " +
-                    (space.empty() ? std::string("the file's space") : "'" + space + "'") +
-                    ", or a resampling's ringing) are written as 0: a " + lowerExtension(file) +
-                    " file holds no negative values (OpenEXR does)");
+    notes.push_back(std::string(line) +
+                    (space.empty() ? std::string() : " in '" + space + "', as written") +
+                    ": colours outside the gamut of the file's space, or a resampling's ringing) "
+                    "are written as 0: a " +
+                    lowerExtension(file) + " file holds no negative values (OpenEXR does)");
   }
 };
 

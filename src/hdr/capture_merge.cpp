@@ -159,11 +159,13 @@ ResponseCurve curveFromColorSpace(const color::ColorConfig& colors, const std::s
       if (!(ch[size_t(z)] > ch[size_t(z) - 1]))
         throw Error("color", "the colour space " + encodedSpace +
                                  " does not decode 8-bit codes "
-                                 "to increasing linear values; pass --response or --input-space");
+                                 "to increasing linear values; pass --response, or say the "
+                                 "photos' space (--input-space; --env-space with compose --env)");
     }
     if (!(ch[1] > 0.0f))
       throw Error("color", "the colour space " + encodedSpace +
-                               " decodes code 1 to a non-positive value; pass --input-space");
+                               " decodes code 1 to a non-positive value; say the photos' space "
+                               "(--input-space; --env-space with compose --env)");
     ch[0] = 0.5f * ch[1];
   }
   curve.method = "colorspace";
@@ -269,12 +271,12 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         // by the config's rules, which a linear file (a raw converter's linear output) defeats.
         if (!eightBit[v] && shot.info.integerSamples() && deepByRule.empty() &&
             shot.info.iccProfile.empty() && !colors.isLinearOrData(space))
-          deepByRule = "16-bit photos such as " + shot.file.filename().string() + " read as '" +
-                       space +
-                       "' by the config's rules (the files name no colour space); linear ones "
-                       "(a raw converter's linear output) need --input-space '" +
-                       linearSpaceFor(colors, space, "", nullptr) +
-                       "' or a capture description that says so";
+          deepByRule =
+              "16-bit photos such as " + shot.file.filename().string() + " read as '" + space +
+              "' by the config's rules (the files name no colour space); linear ones "
+              "(a raw converter's linear output) need " +
+              options.inputSpaceOption + " '" + linearSpaceFor(colors, space, "", nullptr) +
+              "' or a capture description that says so";
       }
       spaces[v].push_back(space);
       if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;

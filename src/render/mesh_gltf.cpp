@@ -395,6 +395,10 @@ std::vector<glm::dmat4> GltfReader::instances(const tinygltf::Node& node, int in
       throw Error("mesh", name + ": EXT_mesh_gpu_instancing's " + attribute + " is no accessor",
                   path_);
     }
+    // Each instance draws at least a triangle: held to the limit before anything is allocated
+    // for them (an accessor without a buffer view may claim 2^28 of them).
+    if (const int a = v.Get<int>(); a >= 0 && size_t(a) < model_.accessors.size())
+      checkTriangleCount(int64_t(model_.accessors[size_t(a)].count), path_);
     std::vector<double> values;
     try {
       values = accessor(v.Get<int>(), components, std::string("instance ") + attribute);
@@ -864,7 +868,9 @@ void GltfReader::read() {
       const std::string meshName =
           "mesh " + std::to_string(node.mesh) + (m.name.empty() ? "" : " '" + m.name + "'");
       const std::vector<glm::dmat4> drawn = instances(node, index);
+      size_t skippedByFirst = skippedLines;
       for (size_t i = 0; i < drawn.size(); ++i) {
+        if (i == 1) skippedByFirst = skippedLines;  // every instance skips the same primitives
         for (size_t p = 0; p < m.primitives.size(); ++p) {
           try {
             addPrimitive(m.primitives[p], objectFromNode * drawn[i]);
@@ -875,6 +881,7 @@ void GltfReader::read() {
           }
         }
       }
+      if (drawn.size() > 1) skippedLines = skippedByFirst;
     }
     for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
       stack.emplace_back(*c, objectFromNode);
@@ -1016,8 +1023,14 @@ struct ReadFiles {
 // ("./name"), where another export's file of the same name was read without a word.
 bool fileExists(const std::string& file, void* user) {
   if (const auto* seen = static_cast<const ReadFiles*>(user)) {
-    const fs::path folder = seen->main.parent_path();
-    if (file.rfind("./", 0) == 0 && !folder.empty() && folder != ".") return false;
+    // The folder as tinygltf takes it from the glTF's path (GetBaseDir): its candidates in that
+    // folder start with it ("./asset/model.bin" for ./asset/model.gltf); the working directory's
+    // is "./" + the URI.
+    const std::string main = seen->main.string();
+    const size_t slash = main.find_last_of('/');
+    const std::string base = slash == std::string::npos ? std::string() : main.substr(0, slash);
+    if (!base.empty() && base != "." && file.rfind("./", 0) == 0 && file.rfind(base + "/", 0) != 0)
+      return false;
   }
   std::error_code ec;
   return fs::exists(file, ec);  // without opening it (readRegularFile refuses what is not a file)

@@ -95,9 +95,6 @@ double medianRelative(const CubeMap& truth, const CubeMap& x) {
   return rel[rel.size() / 2];
 }
 
-// The seam measure's own geometry: across every face edge, the first texel beyond is the
-// neighbouring face's edge texel and the second is the one next to it, one texel further from the
-// edge (the measure compares the step across the edge with those inner steps).
 // --fov is the field of view across the sensor's width: a portrait photo of the camera (stored
 // 320x240, EXIF orientation 6, shown 240x320) has it across its height, as a lens file turned for
 // it would (it had it across its 240 pixels: a focal length of 100.7 pixels, not 134.3).
@@ -123,6 +120,9 @@ TEST(PhotoLens, AFieldOfViewIsTheSensorsAndTurnsWithThePhoto) {
   }
 }
 
+// The seam measure's own geometry: across every face edge, the first texel beyond is the
+// neighbouring face's edge texel and the second is the one next to it, one texel further from the
+// edge (the measure compares the step across the edge with those inner steps).
 TEST(SeamMeasure, StepsOffAFaceOneTexelAtATime) {
   for (const int n : {16, 128, 256}) {
     for (int f = 0; f < lighting::kCubeFaces; ++f) {

@@ -1146,9 +1146,7 @@ TEST(ConvertCommand, NegativeTexelsAreKept) {
   // came back as large positive values, -0.25 red as 1.46, the map brighter by a third).
   r = run("convert " + q(dir / "neg.exr") + " --to latlong --out " + q(dir / "neg.hdr"), dir);
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_NE(r.err.find("values below 0 (as low as -0.25: colours outside the gamut"),
-            std::string::npos)
-      << r.err;
+  EXPECT_NE(r.err.find("values below 0 (as low as -0.25 in"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("are written as 0: a .hdr file holds no negative values"), std::string::npos)
       << r.err;
   const Image hdr = ingest::readImage(dir / "neg.hdr").image;

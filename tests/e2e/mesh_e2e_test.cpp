@@ -134,10 +134,16 @@ TEST_F(MeshEndToEnd, BadMeshesAndCreaseAnglesAreErrors) {
   writeText(dir_ / "cut.gltf", b.gltf());
   const RunResult cut = run(args(dir_ / "cut.gltf", "cut"), dir_.path());
   EXPECT_EQ(cut.status, 1) << cut.err;
-  EXPECT_NE(cut.err.find("the object's cut-out (MASK) materials take every surface of it away"),
+  EXPECT_NE(cut.err.find("the object's see-through materials take every surface of it away"),
             std::string::npos)
       << cut.err;
-  EXPECT_NE(cut.err.find("'leaf' (alpha 0.3, cutoff 0.5)"), std::string::npos) << cut.err;
+  EXPECT_NE(cut.err.find("'leaf' (MASK, alpha 0.3, cutoff 0.5)"), std::string::npos) << cut.err;
+  b.json["materials"][0]["alphaMode"] = "BLEND";
+  b.json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 0};
+  writeText(dir_ / "clear.gltf", b.gltf());
+  const RunResult clear = run(args(dir_ / "clear.gltf", "clear"), dir_.path());
+  EXPECT_EQ(clear.status, 1) << clear.err;
+  EXPECT_NE(clear.err.find("'leaf' (BLEND, alpha 0)"), std::string::npos) << clear.err;
   EXPECT_FALSE(fs::exists(dir_ / "cut.exr"));
 }
 

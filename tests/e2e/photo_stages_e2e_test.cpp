@@ -84,7 +84,8 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     const CommandRun m =
         compose("merge --capture " + q(dir / "grouped.json") + " --out " + q(dir / "m"), dir);
     EXPECT_EQ(m.status, 0) << m.err;
-    EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"view1.exr", "view2.exr"}));
+    // capture-sim's ring (yaw000_1.jpg ...): the views are named for their turn.
+    EXPECT_EQ(filesIn(dir / "m"), (std::vector<std::string>{"yaw000.exr", "yaw180.exr"}));
 
     // Photos named for the cube face they look at give their views that name, so that the
     // description says where each points (compose --env and stitch read it).

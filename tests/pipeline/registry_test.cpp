@@ -1,8 +1,10 @@
 // The stage registry: a consistent graph, named errors, the skips a scene implies, the stage cache
 // and scene files.
+#include <chrono>
 #include <fstream>
 #include <map>
 #include <set>
+#include <thread>
 
 #include <glm/gtc/matrix_transform.hpp>
 
@@ -413,6 +415,31 @@ TEST_F(RegistrySkips, AJobWithoutAPlateSaysSo) {
   } catch (const UsageError& e) {
     EXPECT_NE(std::string(e.what()).find("--plate"), std::string::npos) << e.what();
   }
+}
+
+// An input replaced between hashing it for the keys and reading it is said, and stops the job
+// (the results of the new file were cached under the old file's key: every later run with the
+// old file took them, an object lit by another map, a lens's distortion from another lens).
+TEST(InputFiles, AFileReplacedAfterItWasHashedIsSaid) {
+  TempDir dir;
+  writeText(dir / "lens.json", "{\"fx\": 1}");
+  writeText(dir / "other.json", "{\"fx\": 2}");
+  Hash128 h;
+  hashFile(h, dir / "lens.json", "camera");
+  requireUnchangedSinceHashed(dir / "lens.json", "camera");  // the same file: nothing said
+  // Another file moved over it.
+  fs::rename(dir / "other.json", dir / "lens.json");
+  COMPOSE_EXPECT_ERROR(requireUnchangedSinceHashed(dir / "lens.json", "camera"),
+                       "camera: the file changed while compose ran");
+  // Hashed again: that file is the one now; rewritten in place, it is another again.
+  hashFile(h, dir / "lens.json", "camera");
+  requireUnchangedSinceHashed(dir / "lens.json", "camera");
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  writeText(dir / "lens.json", "{\"fx\": 3}");
+  COMPOSE_EXPECT_ERROR(requireUnchangedSinceHashed(dir / "lens.json", "camera"),
+                       "nothing made from it was kept; run again");
+  // A file never hashed is not checked.
+  requireUnchangedSinceHashed(dir / "never.json", "camera");
 }
 
 TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {

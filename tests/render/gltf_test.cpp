@@ -278,6 +278,14 @@ TEST(Gltf, GpuInstancesAreEachDrawn) {
   writeText(dir / "uneven.gltf", b.gltf());
   COMPOSE_EXPECT_ERROR(loadMesh(dir / "uneven.gltf"),
                        "EXT_mesh_gpu_instancing's attributes count 3 and 2 instances");
+  // More instances than the triangle limit: refused before anything is allocated for them (an
+  // accessor without a buffer view holds zeros for as many as it claims).
+  b.json["accessors"][size_t(scale)]["count"] = 3;
+  b.json["accessors"].push_back({{"componentType", 5126}, {"count", 1 << 27}, {"type", "VEC3"}});
+  b.json["nodes"][size_t(node)]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = {
+      {"TRANSLATION", int(b.json["accessors"].size()) - 1}};
+  writeText(dir / "many.gltf", b.gltf());
+  COMPOSE_EXPECT_ERROR(loadMesh(dir / "many.gltf"), "mesh has at least 134217728 triangles");
 }
 
 // A small mesh far from the file's origin (a node translation of 5000 for a 1 mm triangle pair):
@@ -860,6 +868,18 @@ TEST(Gltf, BrokenFilesAreErrorsNamingWhatIsWrong) {
   }
   std::filesystem::current_path(before);
   EXPECT_NE(fromHere.find("File not found : geometry.bin"), std::string::npos) << fromHere;
+  // Beside it, named from the working directory with a leading "./": found.
+  writeBytes(dir / "geometry.bin", b.bufferBytes());
+  std::filesystem::current_path(dir.path().parent_path());
+  size_t found = 0;
+  try {
+    found = loadMesh("./" + dir.path().filename().string() + "/external.gltf").triangleCount();
+  } catch (const Error& e) {
+    ADD_FAILURE() << e.describe();
+  }
+  std::filesystem::current_path(before);
+  EXPECT_EQ(found, 1u);
+  std::filesystem::remove(dir / "geometry.bin");
   // A data URI that does not decode to the buffer's length: the message quotes the start of the
   // URI, not its 40,000 characters.
   json longUri = json::parse(b.gltf());
