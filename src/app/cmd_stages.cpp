@@ -20,6 +20,7 @@
 #include "core/error.h"
 #include "core/output_files.h"
 #include "core/parallel.h"
+#include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "pipeline/context.h"
 #include "pipeline/scene.h"
@@ -302,6 +303,25 @@ Runner setupComposite(CLI::App& cmd, const Globals& globals) {
   cmd.add_option("--layer", *layer, "Object layer (compose render)")->required();
   return [o, layer, &cmd, &globals]() -> int {
     o->apply(cmd);
+    // A layer rendered for a plate of another size fails the run when the plate is read: said
+    // by --explain too, from the two headers (it approved the job).
+    std::error_code ec;
+    if (o->explain && !o->job.plate.empty() && fs::is_regular_file(*layer, ec) &&
+        ingest::hasExrMagic(*layer) && fs::is_regular_file(o->job.plate, ec)) {
+      const ingest::ExrReader reader(*layer, "composite");
+      const ingest::ExrPartHeader& frame = reader.header(0);
+      const ingest::CaptureInfo plate = ingest::readCaptureInfo(o->job.plate, "ingest", true);
+      const bool turned = plate.orientation >= 5 && plate.orientation <= 8;
+      const int width = turned ? plate.fileHeight : plate.fileWidth;
+      const int height = turned ? plate.fileWidth : plate.fileHeight;
+      if (frame.fullWidth != width || frame.fullHeight != height) {
+        throw Error("composite",
+                    "the object was rendered for a " + std::to_string(frame.fullWidth) + "x" +
+                        std::to_string(frame.fullHeight) + " plate; this plate is " +
+                        std::to_string(width) + "x" + std::to_string(height),
+                    o->job.plate);
+      }
+    }
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::objectLayerInput(*layer));
     request.inputFiles = {*layer};

@@ -254,6 +254,20 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
                              dir_.path());
   ASSERT_EQ(same.status, 0) << same.err;
   EXPECT_EQ(same.err.find("rendered on another plate"), std::string::npos) << same.err;
+  // A plate of another size: --explain says the run will refuse it (it approved the job).
+  const fs::path larger = dir_ / "larger.jpg";
+  ASSERT_TRUE(OIIO::ImageBufAlgo::resize(OIIO::ImageBuf(plate_.string()), "", 0.0f,
+                                         OIIO::ROI(0, 640, 0, 426, 0, 1, 0, 3))
+                  .write(larger.string()));
+  const RunResult explained =
+      run("composite --explain --plate " + quote(larger) + " --layer " + quote(layer) + " --out " +
+              quote(dir_ / "larger" / "compose") + " --no-cache",
+          dir_.path());
+  EXPECT_EQ(explained.status, 1) << explained.err;
+  EXPECT_NE(
+      explained.err.find("the object was rendered for a 320x213 plate; this plate is 640x426"),
+      std::string::npos)
+      << explained.err;
   // A layer rendered too bright: the warning says how to change it (compose composite has no
   // --exposure, which it advised).
   const fs::path bright = dir_ / "bright.exr";
