@@ -718,7 +718,9 @@ class ColorStage final : public Stage {
         Image linear = toRgb(env.image);
         reason += std::string(reason.empty() ? "" : ", ") + "environment as " +
                   (!env.linearised.empty()
-                       ? env.linearised + ", its faces made linear before they were resampled"
+                       ? env.linearised +
+                             ", its faces brought to the working space before they were "
+                             "resampled"
                        : toWorkingSpace(linear, env.file, env.info, ctx.job.environmentSpace,
                                         "--env-space", ctx.colors));
         ctx.artefacts.environment = std::move(linear);
