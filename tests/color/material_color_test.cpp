@@ -147,9 +147,9 @@ TEST(MaterialColour, ATextureOfTheBaseColoursPrimariesMultipliesThere) {
   const glm::vec3 product = mesh.materials[1].baseColor * glm::vec3(p[0], p[1], p[2]);
   EXPECT_LT(glm::length(mesh.albedoToWorking * product - toAp1({0.2f, 0.0f, 0.0f})), kTolerance);
   // The untextured material's colour is Kd alone, however the others are textured.
-  EXPECT_LT(glm::length(mesh.albedoToWorking * mesh.materials[0].baseColor -
-                        toAp1({1.0f, 0.0f, 0.0f})),
-            kTolerance);
+  EXPECT_LT(
+      glm::length(mesh.albedoToWorking * mesh.materials[0].baseColor - toAp1({1.0f, 0.0f, 0.0f})),
+      kTolerance);
 
   render::Mesh wide = twoMaterials();
   wide.textures[0].file = "paint.exr";
