@@ -57,10 +57,8 @@ Hash128 plateCameraKey(int uprightWidth, int uprightHeight, const ingest::Captur
 }
 
 Hash128 plateCameraKey(const ingest::CaptureInfo& header) {
-  // EXIF orientations 5 to 8 turn the picture by a quarter turn.
-  const bool turned = header.orientation >= 5 && header.orientation <= 8;
-  return plateCameraKey(turned ? header.fileHeight : header.fileWidth,
-                        turned ? header.fileWidth : header.fileHeight, header);
+  const auto [width, height] = header.shownSize();
+  return plateCameraKey(width, height, header);
 }
 
 Hash128 Context::geometryKey() const {

@@ -301,13 +301,9 @@ int runJob(const ComposeOptions& o, const Globals& globals, const pipeline::RunR
     // A holdout of another size than the plate fails the run when the plate is read: said now,
     // from the two headers (their sizes as shown, after their EXIF orientations).
     if (const pipeline::ComposeJob& j = o.job; !j.holdout.empty() && !j.plate.empty()) {
-      auto upright = [](const ingest::CaptureInfo& i) {
-        const bool turned = i.orientation >= 5 && i.orientation <= 8;
-        return std::pair{turned ? i.fileHeight : i.fileWidth, turned ? i.fileWidth : i.fileHeight};
-      };
       const ingest::CaptureInfo plate = ingest::readCaptureInfo(j.plate, "ingest");
-      const auto [pw, ph] = upright(plate);
-      const auto [mw, mh] = upright(ingest::readCaptureInfo(j.holdout, "composite"));
+      const auto [pw, ph] = plate.shownSize();
+      const auto [mw, mh] = ingest::readCaptureInfo(j.holdout, "composite").shownSize();
       if (const std::string why = pipeline::holdoutSizeProblem(mw, mh, pw, ph, plate.orientation);
           !why.empty())
         throw Error("composite", why, j.holdout);

@@ -311,9 +311,7 @@ Runner setupComposite(CLI::App& cmd, const Globals& globals) {
       const ingest::ExrReader reader(*layer, "composite");
       const ingest::ExrPartHeader& frame = reader.header(0);
       const ingest::CaptureInfo plate = ingest::readCaptureInfo(o->job.plate, "ingest", true);
-      const bool turned = plate.orientation >= 5 && plate.orientation <= 8;
-      const int width = turned ? plate.fileHeight : plate.fileWidth;
-      const int height = turned ? plate.fileWidth : plate.fileHeight;
+      const auto [width, height] = plate.shownSize();
       if (frame.fullWidth != width || frame.fullHeight != height) {
         throw Error("composite",
                     "the object was rendered for a " + std::to_string(frame.fullWidth) + "x" +

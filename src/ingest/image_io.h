@@ -113,6 +113,11 @@ struct CaptureInfo {
   std::string sampleType;             // pixel type as stored: "uint8", "uint16", "half", "float"...
   int bitsPerSample = 0;              // 8, 16, 32...
   int fileWidth = 0, fileHeight = 0;  // as stored, before orientation
+  // The size as shown, after the EXIF orientation (5 to 8 turn the picture a quarter turn).
+  std::pair<int, int> shownSize() const {
+    const bool turned = orientation >= 5 && orientation <= 8;
+    return {turned ? fileHeight : fileWidth, turned ? fileWidth : fileHeight};
+  }
   // An OpenEXR whose data window is smaller than its display window: the part of the frame that
   // holds stored pixels, [x0, x1) x [y0, y1) (the rest of the image is 0, no picture). Empty
   // (partlyStored false) when every pixel is stored.
