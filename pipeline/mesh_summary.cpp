@@ -31,8 +31,9 @@ namespace {
 // without the texture coordinates its texture needs renders its base colour factor; 12: MTL
 // d and map_d read; 13: glTF's KHR_materials_unlit said; 14: a far mesh moved by the vertices
 // its triangles use; 15: meshes of 1e12 units or more refused, OBJ colours on some vertices kept;
-// 16: meshes under 1e-7 units refused; 17: glTF's EXT_mesh_gpu_instancing drawn.
-constexpr uint32_t kMeshVersion = 17;
+// 16: meshes under 1e-7 units refused; 17: glTF's EXT_mesh_gpu_instancing drawn; 18: open
+// pieces get back sides of their own (render::addBackSides).
+constexpr uint32_t kMeshVersion = 18;
 constexpr uint32_t kConvexityVersion = 2;  // 2: corners welded to a millionth of the size
 
 StageCache meshEntry(const fs::path& cacheRoot, const Hash128& contentKey) {
@@ -113,7 +114,7 @@ MeshSummary summarize(const render::Mesh& mesh, double creaseDegrees) {
   MeshSummary s;
   s.key = meshKey(mesh, creaseDegrees);
   s.nothingKept = !mesh.keptBounds(s.boundsMin, s.boundsMax);  // without what cut-outs take away
-  s.triangles = mesh.triangleCount();
+  s.triangles = mesh.frontTriangleCount();
   s.convex = render::isConvex(mesh);
   s.notes = meshNotes(mesh);
   return s;
@@ -173,6 +174,7 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   const std::span<const float> indices = entry.get("indices");
   const std::span<const float> texcoords = entry.get("texcoords");
   const std::span<const float> colours = entry.get("colours");
+  const std::span<const float> sides = entry.get("sides");
   const size_t n = positions.size() / 3;
   if (n == 0 || positions.size() != 3 * n || normals.size() != 3 * n || indices.empty() ||
       indices.size() % 3 != 0 || (!texcoords.empty() && texcoords.size() != 2 * n) ||
@@ -181,13 +183,22 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
     return std::nullopt;
   for (const float i : indices)
     if (!(i >= 0.0f && i < float(n) && i == std::floor(i))) return std::nullopt;
-  // The limit holds for the mesh as kept, as for one read (--max-triangles).
-  checkTriangleCount(int64_t(indices.size() / 3), file);
+  if (!sides.empty() && sides.size() != indices.size() / 3) return std::nullopt;
+  size_t backSides = 0;
+  for (const float s : sides) {
+    if (s != 0.0f && s != float(render::Mesh::kFrontSide) && s != float(render::Mesh::kBackSide))
+      return std::nullopt;
+    backSides += s == float(render::Mesh::kBackSide);
+  }
+  // The limit holds for the mesh as kept, as for one read (--max-triangles: the file's
+  // triangles, without the back sides loading gave them).
+  checkTriangleCount(int64_t(indices.size() / 3 - backSides), file);
   mesh.positions.resize(n);
   mesh.normals.resize(n);
   std::memcpy(&mesh.positions[0].x, positions.data(), positions.size() * sizeof(float));
   std::memcpy(&mesh.normals[0].x, normals.data(), normals.size() * sizeof(float));
   mesh.indices.assign(indices.begin(), indices.end());
+  mesh.sides.assign(sides.begin(), sides.end());
   if (!texcoords.empty()) {
     mesh.texcoords.resize(n);
     std::memcpy(&mesh.texcoords[0].x, texcoords.data(), texcoords.size() * sizeof(float));
@@ -206,7 +217,7 @@ std::optional<CachedMesh> cachedMesh(const fs::path& cacheRoot, const fs::path& 
   s.key = meshKey(mesh, creaseDegrees);
   if (s.key.a != *a || s.key.b != *b) return std::nullopt;
   s.nothingKept = !mesh.keptBounds(s.boundsMin, s.boundsMax);
-  s.triangles = mesh.triangleCount();
+  s.triangles = mesh.frontTriangleCount();
   s.convex = m["convex"].get<bool>();
   s.notes = meshNotes(mesh);
   s.fromCache = true;
@@ -242,6 +253,8 @@ bool storeMesh(const fs::path& cacheRoot, const Hash128& contentKey, const rende
   entry.put("positions", floats(mesh.positions, 3));
   entry.put("normals", floats(mesh.normals, 3));
   entry.put("indices", std::vector<float>(mesh.indices.begin(), mesh.indices.end()));
+  if (!mesh.sides.empty())
+    entry.put("sides", std::vector<float>(mesh.sides.begin(), mesh.sides.end()));
   if (!mesh.texcoords.empty()) entry.put("texcoords", floats(mesh.texcoords, 2));
   if (!mesh.colors.empty()) {
     entry.put("colours", floats(mesh.colors, 3));

@@ -53,7 +53,8 @@ std::optional<CachedMesh> cachedMesh(const std::filesystem::path& cacheRoot,
                                      const std::filesystem::path& file, double creaseDegrees,
                                      Hash128& contentKey, std::string& problem);
 
-// Keeps the mesh and its summary for `contentKey` when the mesh came from its file alone; false
+// Keeps the mesh (as read, with the back sides render::addBackSides gave it) and its summary for
+// `contentKey` when the mesh came from its file alone; false
 // (with the reason in `problem`) if the entry could not be written. Does nothing for any other
 // mesh.
 bool storeMesh(const std::filesystem::path& cacheRoot, const Hash128& contentKey,

@@ -144,6 +144,9 @@ class IngestStage final : public Stage {
       } else {
         ctx.artefacts.mesh = render::loadMesh(job.object, {.creaseDegrees = job.creaseDegrees});
         requireUnchangedSinceHashed(job.object, "mesh");
+        // Surfaces seen from both sides get a back side of their own (kept in the cache with
+        // the mesh).
+        render::addBackSides(*ctx.artefacts.mesh);
         ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
         if (!ctx.planning &&
             !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))

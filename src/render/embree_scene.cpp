@@ -50,8 +50,9 @@ struct TransmitContext {
 };
 constexpr int kCounted = 4;
 
-// Rejects hits where the mesh is cut away, or where a semi-transparent surface lets this ray
-// through or turns its back to it (the geometry's user data is the Mesh). A ray's random number
+// Rejects hits where the mesh is cut away, where a semi-transparent surface lets this ray
+// through, or where a triangle with a back side of its own (Mesh::oneSided) turns its back to it
+// (the geometry's user data is the Mesh). A ray's random number
 // for a semi-transparent triangle is hashed from the ray's origin, direction and the triangle
 // (independent between rays and between the layers one ray meets); a kLayered ray meets it
 // wherever its alpha is above 0.
@@ -79,7 +80,7 @@ void cutoutFilter(const RTCFilterFunctionNArguments* args) {
       const float u = RTCHitN_u(args->hit, n, i), v = RTCHitN_v(args->hit, n, i);
       if (mesh->cutAway(triangle, u, v)) {
         args->valid[i] = 0;
-      } else if (mesh->oneSided(triangle)) {
+      } else if (mesh->semiTransparent(triangle)) {
         args->valid[i] = 0;
         // The hit's distance (Embree puts it in tfar while the filter decides).
         const float t = RTCRayN_tfar(args->ray, n, i);
@@ -188,7 +189,9 @@ EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
     vertices[3 * i + 2] = positions[i].z;
   }
   std::copy(indices.begin(), indices.end(), triangles);
-  if (cutouts && cutouts->hasCutouts()) {
+  COMPOSE_CHECK(!cutouts || cutouts->sides.empty() ||
+                cutouts->sides.size() == cutouts->triangleCount());
+  if (cutouts && (cutouts->hasCutouts() || !cutouts->sides.empty())) {
     rtcSetGeometryUserData(geom, const_cast<Mesh*>(cutouts));
     rtcSetGeometryIntersectFilterFunction(geom, &cutoutFilter);
     rtcSetGeometryOccludedFilterFunction(geom, &cutoutFilter);

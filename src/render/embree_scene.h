@@ -19,8 +19,9 @@ class EmbreeScene {
   EmbreeScene(const std::vector<glm::vec3>& positions, const std::vector<uint32_t>& indices);
   // The mesh's triangles; where its materials cut it out (Mesh::cutAway) every ray passes
   // through, where they are semi-transparent a ray passes with a probability of 1 - alpha
-  // (Mesh::passes; Embree's filter functions) unless it is `layered` (below). `mesh` must
-  // outlive the scene.
+  // (Mesh::passes; Embree's filter functions) unless it is `layered` (below); a triangle with a
+  // back side of its own is met from its front only (Mesh::oneSided). `mesh` must outlive the
+  // scene.
   explicit EmbreeScene(const Mesh& mesh);
   EmbreeScene(const Mesh&& mesh) = delete;  // the scene keeps a pointer to it
   ~EmbreeScene();

@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <numeric>
 #include <optional>
 #include <unordered_map>
 #include <unordered_set>
@@ -273,7 +274,17 @@ float Mesh::alphaAt(uint32_t triangle, float u, float v) const {
 }
 
 bool Mesh::oneSided(uint32_t triangle) const {
+  return !sides.empty() && sides[triangle] != 0;
+}
+
+bool Mesh::semiTransparent(uint32_t triangle) const {
   return !materials.empty() && materialOf(*this, triangle).blend;
+}
+
+size_t Mesh::frontTriangleCount() const {
+  if (sides.empty()) return triangleCount();
+  return size_t(
+      std::count_if(sides.begin(), sides.end(), [](uint8_t s) { return s != kBackSide; }));
 }
 
 bool Mesh::passes(uint32_t triangle, float u, float v, float xi) const {
@@ -950,15 +961,99 @@ void dropUnrenderableTriangles(detail::LoadedMesh& loaded, const fs::path& path)
 // Validation and normals shared by every format (see the header comment).
 }  // namespace
 
-void addBackSides(Mesh& mesh) {
-  if (std::none_of(mesh.materials.begin(), mesh.materials.end(),
-                   [](const Material& m) { return m.blend; }))
-    return;
+size_t addBackSides(Mesh& mesh) {
   const size_t triangles = mesh.triangleCount();
+  COMPOSE_CHECK(mesh.sides.empty());  // once
+  if (triangles == 0) return 0;
+  auto materialAt = [&](size_t t) -> const Material* {
+    if (mesh.materials.empty()) return nullptr;
+    const uint32_t m = mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[t];
+    return &mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)];
+  };
+  std::vector<uint8_t> twoSided(triangles, 0), blend(triangles, 0);
+  for (size_t t = 0; t < triangles; ++t) {
+    const Material* m = materialAt(t);
+    blend[t] = twoSided[t] = uint8_t(m && m->blend);
+  }
+
+  // The pieces of the other triangles, joined across edges whose corners are one by position:
+  // vertices split for normals or texture seams are one corner, and so are an exporter's seam
+  // vertices a few bits apart (positions snapped to a millionth of the object's size, as
+  // isConvex() snaps them; a pair the snapping splits opens the piece, which costs time only).
+  const size_t n = mesh.positions.size();
+  std::vector<uint32_t> order(n), corner(n);
+  std::iota(order.begin(), order.end(), 0u);
+  const glm::vec3 size = mesh.boundsMax() - mesh.boundsMin();
+  const double snap = std::max(1e-30, 1e-6 * double(std::max({size.x, size.y, size.z})));
+  std::vector<std::array<int64_t, 3>> cells(n);
+  for (size_t v = 0; v < n; ++v)
+    for (int c = 0; c < 3; ++c)
+      cells[v][size_t(c)] =
+          std::llround(std::clamp(double(mesh.positions[v][c]) / snap, -4e18, 4e18));
+  auto key = [&](uint32_t v) { return cells[v]; };
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+  for (size_t i = 0; i < n; ++i)
+    corner[order[i]] =
+        i > 0 && key(order[i]) == key(order[i - 1]) ? corner[order[i - 1]] : order[i];
+  struct Edge {
+    uint64_t corners;
+    uint32_t triangle;
+  };
+  std::vector<Edge> edges;
+  edges.reserve(3 * triangles);
+  for (size_t t = 0; t < triangles; ++t) {
+    if (blend[t]) continue;
+    for (size_t k = 0; k < 3; ++k) {
+      const uint32_t a = corner[mesh.indices[3 * t + k]];
+      const uint32_t b = corner[mesh.indices[3 * t + (k + 1) % 3]];
+      if (a != b) edges.push_back({uint64_t(std::min(a, b)) << 32 | std::max(a, b), uint32_t(t)});
+    }
+  }
+  std::sort(edges.begin(), edges.end(), [](const Edge& p, const Edge& q) {
+    return p.corners < q.corners || (p.corners == q.corners && p.triangle < q.triangle);
+  });
+  std::vector<uint32_t> parent(triangles);
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto find = [&](uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  // What opens a piece: an edge of one triangle, a cut-out material.
+  std::vector<uint8_t> opens(triangles, 0);
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i + 1;
+    while (j < edges.size() && edges[j].corners == edges[i].corners) ++j;
+    if (j - i == 1) opens[edges[i].triangle] = 1;
+    for (size_t e = i + 1; e < j; ++e) parent[find(edges[e].triangle)] = find(edges[i].triangle);
+    i = j;
+  }
+  for (size_t t = 0; t < triangles; ++t) {
+    const Material* m = materialAt(t);
+    if (!blend[t] && m && m->cutOut()) opens[t] = 1;
+  }
+  std::vector<uint8_t> open(triangles, 0);
+  for (size_t t = 0; t < triangles; ++t)
+    if (opens[t]) open[find(uint32_t(t))] = 1;
+  size_t opened = 0;
+  for (size_t t = 0; t < triangles; ++t) {
+    if (blend[t] || !open[find(uint32_t(t))]) continue;
+    twoSided[t] = 1;
+    ++opened;
+  }
+  if (std::none_of(twoSided.begin(), twoSided.end(), [](uint8_t s) { return s != 0; })) return 0;
+
+  mesh.sides.assign(triangles, 0);
   std::vector<uint32_t> copyOf(mesh.positions.size(), UINT32_MAX);
   for (size_t t = 0; t < triangles; ++t) {
+    if (!twoSided[t]) continue;
+    mesh.sides[t] = Mesh::kFrontSide;
+    // Its front is the side its normals face: rays meet only that side of it.
+    uint32_t* tri = &mesh.indices[3 * t];
+    const glm::vec3 facing = glm::cross(mesh.positions[tri[1]] - mesh.positions[tri[0]],
+                                        mesh.positions[tri[2]] - mesh.positions[tri[0]]);
+    if (glm::dot(facing, mesh.normals[tri[0]] + mesh.normals[tri[1]] + mesh.normals[tri[2]]) < 0.0f)
+      std::swap(tri[1], tri[2]);
     const uint32_t m = mesh.triangleMaterial.empty() ? 0u : mesh.triangleMaterial[t];
-    if (!mesh.materials[std::min<size_t>(m, mesh.materials.size() - 1)].blend) continue;
     uint32_t c[3];
     for (int k = 0; k < 3; ++k) {
       const uint32_t v = mesh.indices[3 * t + size_t(k)];
@@ -974,7 +1069,17 @@ void addBackSides(Mesh& mesh) {
     }
     mesh.indices.insert(mesh.indices.end(), {c[0], c[2], c[1]});
     if (!mesh.triangleMaterial.empty()) mesh.triangleMaterial.push_back(m);
+    mesh.sides.push_back(Mesh::kBackSide);
   }
+  if (opened > 0) {
+    mesh.warnings.push_back(
+        (opened == triangles
+             ? std::string("every triangle is")
+             : std::to_string(opened) + " of " + std::to_string(triangles) + " triangles are") +
+        " in an open piece (an edge of one triangle, or a cut-out material): its inside can be "
+        "seen, and is shaded and shadowed as a surface of its own");
+  }
+  return opened;
 }
 
 namespace {
@@ -1096,7 +1201,6 @@ Mesh finish(detail::LoadedMesh loaded, const MeshOptions& options, const fs::pat
   if (!mesh.hasCutouts() ||
       std::all_of(mesh.alphas.begin(), mesh.alphas.end(), [](float a) { return a == 1.0f; }))
     mesh.alphas.clear();
-  addBackSides(mesh);
   return std::move(loaded.mesh);
 }
 

@@ -120,7 +120,7 @@ struct Material {
   // texture's) of what lies behind it. The camera's rays go on through it layer by layer, shadow
   // rays carry 1 - alpha through it, and boolean queries find it with a probability of alpha
   // (Mesh::passes; embree_scene.h). Where alpha is 0 it is not there at all. Seen from
-  // both sides: loading gives each of its triangles a back side of its own (Mesh::oneSided).
+  // both sides: loading gives each of its triangles a back side of its own (addBackSides).
   bool blend = false;
   // Rays can pass through the surface somewhere (MASK or BLEND).
   bool cutOut() const { return alphaCutoff >= 0.0f || blend; }
@@ -155,6 +155,11 @@ struct Mesh {
   // uses it or it is 1 everywhere.
   std::vector<float> alphas;
   std::vector<uint32_t> triangleMaterial;  // one per triangle, or empty (all material 0)
+  // Per triangle, or empty when none has a back side of its own (addBackSides): 0 for a
+  // triangle that rays meet from either side, kFrontSide for one met from its front only because
+  // the triangle after the mesh's others, kBackSide, stands for its back.
+  std::vector<uint8_t> sides;
+  static constexpr uint8_t kFrontSide = 1, kBackSide = 2;
   std::vector<Material> materials;
   std::vector<Texture> textures;
   // The colour space of the base colours (linear); textures carry their own. The pipeline
@@ -169,6 +174,8 @@ struct Mesh {
   bool convertsAlbedo = false;
 
   size_t triangleCount() const { return indices.size() / 3; }
+  // The triangles without the back sides addBackSides() added: those the file gave.
+  size_t frontTriangleCount() const;
   glm::vec3 boundsMin() const;
   glm::vec3 boundsMax() const;
   bool hasMaterials() const { return !materials.empty(); }
@@ -206,9 +213,11 @@ struct Mesh {
   // The alpha at the point: its material's base alpha times its texture's (1 for a material
   // that is neither a cut-out nor semi-transparent, and where there are no materials).
   float alphaAt(uint32_t triangle, float u, float v) const;
-  // Rays meet the triangle from its front only: it is semi-transparent, and loading gave its
-  // back side a triangle of its own (wound the other way, with its normals turned round).
+  // Rays meet the triangle from its front only: it has a back side of its own (addBackSides),
+  // or is one.
   bool oneSided(uint32_t triangle) const;
+  // Its material is semi-transparent (Material::blend).
+  bool semiTransparent(uint32_t triangle) const;
   // The bounds of the surface that is there: boundsMin/Max, but with cut-outs those of what they
   // keep. A cut-out triangle whose alpha cannot vary (no alpha texture, texture coordinates that
   // do not move) is there whole or not at all; another is tested on a grid of about two points
@@ -238,12 +247,22 @@ glm::dmat3 meshFromFileAxes(const std::filesystem::path& path);
 // texture seams are smoothed as one.
 void computeVertexNormals(Mesh& mesh, double creaseDegrees = 180.0);
 
-// A semi-transparent surface (Material::blend) is seen from both sides: through it, the inside
-// of a glass box faces the camera. Gives each of its triangles a back side of its own, with its
-// own vertices (normals turned round) and wound the other way, so that each side has its own
-// surface points and its own shadows; rays meet only the side that faces them
-// (Mesh::oneSided). loadMesh() does this; for meshes built otherwise.
-void addBackSides(Mesh& mesh);
+// Surfaces seen from both sides get a back side of their own: a triangle after the mesh's
+// others, over its own vertices (normals turned round) and wound the other way, so that each
+// side has its own surface points and its own shadows; rays meet only the side that faces them
+// (Mesh::oneSided, Mesh::sides). Without it the inside of an open box would be shaded with the
+// visibility of its outside: lit as if nothing hid the sky from it. These are
+// - semi-transparent triangles (Material::blend): through them the inside of a glass box
+//   faces the camera;
+// - every connected piece of the others (triangles joined by edges, corners by position) that
+//   is open: one with an edge of a single triangle (a sheet, a cup without thickness, a mesh
+//   with a hole), or where a semi-transparent triangle or a cut-out material (a window, a
+//   leaf's outline) lets the camera see in. A triangle whose vertex normals point against its
+//   winding is first wound to agree with them, so that its front is the side its normals face.
+// Returns the number of triangles of open pieces given a back side (and says so in the mesh's
+// warnings). For rendering: loadMesh() gives the triangles the file has, the pipeline adds their
+// back sides once it has read the mesh.
+size_t addBackSides(Mesh& mesh);
 
 // Winds every connected piece of the mesh one way (each triangle against its neighbours across
 // shared edges), then outwards (a positive signed volume about the piece's centre). Used for

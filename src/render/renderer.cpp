@@ -137,9 +137,15 @@ void markEdges(const Mesh& mesh, const std::vector<glm::dvec2>& projected, int x
   const size_t n = mesh.positions.size();
   std::vector<uint32_t> order(n), corner(n);
   for (size_t v = 0; v < n; ++v) order[v] = uint32_t(v);
+  // The back sides (Mesh::sides) have their own vertices: their corners are their own, so that
+  // an edge inside a surface seen from both sides is one side's edge between two triangles.
+  std::vector<uint8_t> back(mesh.sides.empty() ? 0 : n, 0);
+  for (size_t t = 0; t < mesh.sides.size(); ++t)
+    if (mesh.sides[t] == Mesh::kBackSide)
+      for (size_t k = 0; k < 3; ++k) back[mesh.indices[3 * t + k]] = 1;
   auto key = [&](uint32_t v) {
     const glm::vec3& p = mesh.positions[v];
-    return std::make_tuple(p.x, p.y, p.z);
+    return std::make_tuple(back.empty() ? uint8_t(0) : back[v], p.x, p.y, p.z);
   };
   std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
   for (size_t i = 0; i < n; ++i)
@@ -1019,7 +1025,7 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
             const EmbreeScene::Hit& hit = found[b];
             if (!((tracing >> b) & 1u) || !hit.found) continue;
             float cover = left[b];
-            if (translucent && mesh.oneSided(hit.triangle) && layer[b] < kMaxLayers &&
+            if (translucent && mesh.semiTransparent(hit.triangle) && layer[b] < kMaxLayers &&
                 left[b] > kLeastLeft) {
               cover *= std::clamp(mesh.alphaAt(hit.triangle, hit.u, hit.v), 0.0f, 1.0f);
               left[b] -= cover;

@@ -97,14 +97,30 @@ void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
   const uint32_t* v = &mesh.indices[3 * t];
   const glm::vec3 p[3] = {mesh.positions[v[0]], mesh.positions[v[1]], mesh.positions[v[2]]};
   const glm::vec3 n[3] = {out.normals[v[0]], out.normals[v[1]], out.normals[v[2]]};
+  const float onEdge = 0.5f / float(L);
   forEachGridPoint(mesh, t, L, [&](float b0, float b1, float b2, const glm::vec3& flat) {
     // On the smooth surface of the vertex normals: a flat triangle's own point could be
     // shadowed by its neighbours where the shading says it faces the light.
     out.positions.push_back(mesh.smoothPoint(uint32_t(t), b1, b2, flat));
     const glm::vec3 nn = b0 * n[0] + b1 * n[1] + b2 * n[2];
     const float len = glm::length(nn);
-    out.normals.push_back(len > 1e-12f ? nn / len
-                                       : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0])));
+    const glm::vec3 normal =
+        len > 1e-12f ? nn / len : glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0]));
+    out.normals.push_back(normal);
+    // A point on the triangle's edge steps into the triangle, across the edge
+    // (SurfacePoints::inward).
+    glm::vec3 in(0.0f);
+    const int edge = b0 < onEdge ? 0 : b1 < onEdge ? 1 : b2 < onEdge ? 2 : -1;
+    if (edge >= 0) {
+      // The edge opposite corner `edge`, and the way from it to that corner.
+      const glm::vec3 a = p[(edge + 1) % 3], b = p[(edge + 2) % 3], c = p[edge];
+      const glm::vec3 along = glm::normalize(b - a);
+      in = (c - a) - along * glm::dot(c - a, along);
+      in -= normal * glm::dot(normal, in);
+      const float l = glm::length(in);
+      in = l > 0.0f ? in / l : glm::vec3(0.0f);
+    }
+    out.inward.push_back(in);
   });
 }
 
@@ -125,7 +141,7 @@ void TransferParams::validate() const {
 std::string TransferParams::key() const {
   return "grid=" + std::to_string(grid) + " order=" + std::to_string(order) +
          " boundary=" + std::to_string(boundaryRays) + " sh=" + std::to_string(shBands) +
-         " seed=" + std::to_string(seed) + " lift=1e-4 frame=longitude" +
+         " seed=" + std::to_string(seed) + " lift=1e-4 inward frame=longitude" +
          (shBands > 0 ? " sh-projection=cells" : "") + (selfOcclusion ? "" : " no-self-occlusion");
 }
 
@@ -189,6 +205,33 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budg
   out.positions = mesh.positions;
   out.normals.resize(mesh.normals.size());
   for (size_t i = 0; i < mesh.normals.size(); ++i) out.normals[i] = glm::normalize(mesh.normals[i]);
+  // A vertex steps into its triangles (SurfacePoints::inward): half the integral of the unit
+  // direction over the angles its triangles span there (a wedge of angle Δ gives 2 sin(Δ/2)
+  // along its bisector), along the surface. Zero inside a flat fan; where the fan is half a
+  // turn (a straight boundary or hard crease), length 1 across it; at a square corner, 0.71
+  // along the diagonal.
+  out.inward.assign(mesh.positions.size(), glm::vec3(0.0f));
+  for (size_t t = 0; t < triangles; ++t) {
+    const uint32_t* v = &mesh.indices[3 * t];
+    for (int k = 0; k < 3; ++k) {
+      const glm::vec3 o = mesh.positions[v[k]];
+      const glm::vec3 d1 = mesh.positions[v[(k + 1) % 3]] - o;
+      const glm::vec3 d2 = mesh.positions[v[(k + 2) % 3]] - o;
+      const float l1 = glm::length(d1), l2 = glm::length(d2);
+      if (!(l1 > 0.0f && l2 > 0.0f)) continue;
+      const glm::vec3 sum = d1 / l1 + d2 / l2;  // along the bisector, length 2 cos(Δ/2)
+      const float cosHalf = 0.5f * glm::length(sum);
+      if (!(cosHalf > 1e-6f)) continue;
+      const float sinHalf = std::sqrt(std::max(0.0f, 1.0f - cosHalf * cosHalf));
+      out.inward[v[k]] += sum * (sinHalf / cosHalf);  // 2 sin(Δ/2) along the bisector, halved
+    }
+  }
+  for (size_t i = 0; i < out.inward.size(); ++i) {
+    glm::vec3 in = out.inward[i];
+    in -= out.normals[i] * glm::dot(out.normals[i], in);
+    const float l = glm::length(in);
+    out.inward[i] = l > 1.0f ? in / l : in;
+  }
   out.first.assign(triangles, 0);
   out.level.assign(triangles, 1);
   for (size_t t = 0; t < triangles; ++t) {
@@ -331,6 +374,8 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
   extra.radius = points.radius;
   extra.positions.assign(points.positions.begin() + ptrdiff_t(first), points.positions.end());
   extra.normals.assign(points.normals.begin() + ptrdiff_t(first), points.normals.end());
+  if (!points.inward.empty())
+    extra.inward.assign(points.inward.begin() + ptrdiff_t(first), points.inward.end());
   transfer.append(computeTransfer(mesh, scene, extra, params, part(kFirstShare, 1.0), ground));
   points.buried = transfer.buried;
   return transfer;
@@ -823,7 +868,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         glm::dvec3 east, north;
         tangentFrame(n, east, north);
         const glm::vec3 nf(n), eastF(east), northF(north);
-        const glm::vec3 origin = points.positions[v] + lift * nf;
+        const glm::vec3 origin = points.origin(v, lift);
         std::fill(sc.visible.begin(), sc.visible.end(), 0.0f);
         if (ground) std::fill(sc.visibleSelf.begin(), sc.visibleSelf.end(), 0.0f);
         std::fill(sc.shSum.begin(), sc.shSum.end(), 0.0);
@@ -1126,6 +1171,10 @@ std::string meshHash(const Mesh& mesh) {
   h.floats(std::span<const float>(&mesh.positions[0].x, 3 * mesh.positions.size()));
   h.floats(std::span<const float>(&mesh.normals[0].x, 3 * mesh.normals.size()));
   for (uint32_t i : mesh.indices) h.word(i);
+  if (!mesh.sides.empty()) {  // which triangles rays meet from their front only
+    h.bytes("sides");
+    h.data(mesh.sides.data(), mesh.sides.size());
+  }
   // Where it is cut out, what cuts it (the rest of the materials does not change visibility).
   if (mesh.hasCutouts()) {
     h.bytes("cutouts");
@@ -1221,7 +1270,7 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
       [&](int64_t vi) {
         const size_t v = size_t(vi);
         const glm::vec3 n = points.normals[v];
-        const glm::vec3 origin = points.positions[v] + lift * n;
+        const glm::vec3 origin = points.origin(v, lift);
         // The point's rays, traced together as one stream at the end.
         thread_local std::vector<glm::vec3> batch;
         thread_local std::vector<uint32_t> index;
@@ -1338,7 +1387,7 @@ int64_t refineSourcePenumbrae(const Mesh& mesh, const SurfacePoints& points,
         uint64_t sourcesAgain = again[p];
         if (sourcesAgain == 0) return;
         const glm::vec3 normal = points.normals[p];
-        const glm::vec3 origin = points.positions[p] + lift * normal;
+        const glm::vec3 origin = points.origin(p, lift);
         thread_local std::vector<glm::vec3> batch;
         thread_local std::vector<uint32_t> index;
         thread_local std::vector<float> through;

@@ -92,11 +92,22 @@ struct SurfacePoints {
   // point sees nothing, but the surface next to it, where the parts meet, does: locate() leaves
   // it out of a hit's interpolation unless all three points are buried. Empty: none known.
   std::vector<uint8_t> buried;
+  // Per point (empty: none), a step along the surface into the triangles the point lies on, of
+  // length up to 1 (0 inside a flat fan). Rays leave from origin(): off the surface by the lift
+  // along the normal and along this. A point on an edge where two faces meet at a concave hard
+  // crease (a box's inner corner, whose floor and wall have vertices of their own) lies in the
+  // other face's plane: lifted along its normal only, its rays towards that face start on it and
+  // pass behind it, and the point sees through the wall.
+  std::vector<glm::vec3> inward;
   float size = 0.0f;       // the object's size: its bounding box's largest extent
   glm::vec3 centre{0.0f};  // the object's bounding sphere (object space), to cull rays
   float radius = 0.0f;
 
   size_t count() const { return positions.size(); }
+  // Where point p's rays leave from, `lift` off the surface.
+  glm::vec3 origin(size_t p, float lift) const {
+    return positions[p] + lift * (inward.empty() ? normals[p] : normals[p] + inward[p]);
+  }
   // The point at grid node (i, j) of triangle t (barycentrics i/L, j/L of its corners 1 and 2;
   // i + j <= L, the triangle's level): a corner is the mesh's vertex.
   uint32_t gridPoint(const Mesh& mesh, uint32_t triangle, int i, int j) const;

@@ -100,7 +100,11 @@ int main(int argc, char** argv) {
   const char* envs[] = {"courtyard", "forest", "interior", "sunset"};
   for (const char* meshName : meshes) {
     if (!onlyMesh.empty() && onlyMesh != meshName) continue;
-    const render::Mesh mesh = render::loadMesh(samples / meshName);
+    const render::Mesh mesh = [&] {  // as the pipeline reads it: open pieces with back sides
+      render::Mesh read = render::loadMesh(samples / meshName);
+      render::addBackSides(read);
+      return read;
+    }();
     const render::EmbreeScene scene(mesh.positions, mesh.indices);
     const calib::PlateCamera camera = calib::plateCamera(width, height, {}, {});
     calib::Placement place;

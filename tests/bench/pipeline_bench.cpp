@@ -270,7 +270,11 @@ int childBaseline(const fs::path& plate, const fs::path& env, const fs::path& ex
 int childRender(const fs::path& cache, int repeat) {
   const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
   const fs::path samples = pipeline::samplesDirectory();
-  const render::Mesh mesh = render::loadMesh(samples / "bunny.obj");
+  const render::Mesh mesh = [&] {  // as the pipeline reads it: open pieces with back sides
+    render::Mesh read = render::loadMesh(samples / "bunny.obj");
+    render::addBackSides(read);
+    return read;
+  }();
   // The environment in the working space, as the pipeline has it.
   cubemap::LoadedEnvironment loaded = cubemap::loadEnvironment(samples / "forest.exr", {});
   Image envImage = std::move(loaded.image);

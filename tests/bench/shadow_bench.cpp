@@ -167,7 +167,11 @@ int main(int argc, char** argv) {
   const char* envs[] = {"courtyard", "forest", "interior", "sunset"};
   for (const char* meshName : meshes) {
     if (!onlyMesh.empty() && onlyMesh != meshName) continue;
-    const render::Mesh mesh = render::loadMesh(samples / meshName);
+    const render::Mesh mesh = [&] {  // as the pipeline reads it: open pieces with back sides
+      render::Mesh read = render::loadMesh(samples / meshName);
+      render::addBackSides(read);
+      return read;
+    }();
     const render::EmbreeScene scene(mesh.positions, mesh.indices);
     const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
     const float size = std::max({extent.x, extent.y, extent.z});

@@ -33,6 +33,7 @@ class MeshCache : public ::testing::Test {
     ASSERT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
     ASSERT_TRUE(problem.empty()) << problem;
     read_ = render::loadMesh(file_, {.creaseDegrees = 60.0});
+    render::addBackSides(read_);  // as the pipeline does
     summary_ = summarize(read_, 60.0);
     ASSERT_TRUE(storeMesh(cache_, key, read_, summary_, problem)) << problem;
   }
@@ -73,6 +74,26 @@ TEST_F(MeshCache, ASecondRunTakesTheSameMeshAndSummaryFromTheCache) {
   writeText(file_, std::string(kPyramid) + "v 0 3 0\n");
   EXPECT_FALSE(cachedMesh(cache_, file_, 60.0, key, problem));
   EXPECT_TRUE(problem.empty());
+}
+
+// An open mesh (the pyramid without its base) is kept with the back sides loading gave it: read
+// back, the same triangles, each side where it was, and the file's triangle count.
+TEST_F(MeshCache, AnOpenMeshIsKeptWithItsBackSides) {
+  writeText(file_,
+            "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv 0 1.5 0\n"
+            "f 1 5 2\nf 2 5 3\nf 3 5 4\nf 4 5 1\n");
+  readAndStore();
+  ASSERT_EQ(read_.triangleCount(), 8u);
+  ASSERT_EQ(read_.sides.size(), 8u);
+  EXPECT_EQ(summary_.triangles, 4u);
+  Hash128 key;
+  std::string problem;
+  const std::optional<CachedMesh> cached = cachedMesh(cache_, file_, 60.0, key, problem);
+  ASSERT_TRUE(cached) << problem;
+  EXPECT_EQ(cached->mesh.indices, read_.indices);
+  EXPECT_EQ(cached->mesh.sides, read_.sides);
+  EXPECT_EQ(cached->summary.triangles, 4u);
+  EXPECT_EQ(render::meshHash(cached->mesh), render::meshHash(read_));
 }
 
 // A mesh whose vertex colours are its albedo (an OBJ's v x y z r g b, no material library) is

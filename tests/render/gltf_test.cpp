@@ -461,9 +461,16 @@ TEST(Gltf, TextureAlphaLeavesTheColourAlone) {
   EXPECT_TRUE(blended.warnings.empty()) << blended.warnings[0];
   ASSERT_TRUE(blended.hasCutouts());
   EXPECT_TRUE(blended.materials[0].blend);
-  ASSERT_EQ(blended.triangleCount(), 3u) << "the semi-transparent triangle's back side added";
-  EXPECT_TRUE(blended.oneSided(2));
-  EXPECT_FALSE(blended.oneSided(1 - first));
+  ASSERT_EQ(blended.triangleCount(), 2u) << "the file's triangles";
+  // For rendering, each gets a back side of its own: the semi-transparent one, and the opaque
+  // one, a sheet (after the others, in their order).
+  Mesh sided = blended;
+  EXPECT_EQ(addBackSides(sided), 1u) << "the opaque sheet";
+  ASSERT_EQ(sided.triangleCount(), 4u);
+  for (uint32_t t = 0; t < 4; ++t) {
+    EXPECT_TRUE(sided.oneSided(t)) << t;
+    EXPECT_EQ(sided.semiTransparent(t), t % 2 == first) << t;
+  }
   EXPECT_FALSE(blended.materials[1].cutOut()) << "the plain material is opaque";
   EXPECT_FALSE(blended.cutAway(first, 0, 0)) << "red, opaque";
   EXPECT_TRUE(blended.cutAway(first, 1, 0)) << "green, transparent";

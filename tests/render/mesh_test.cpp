@@ -816,8 +816,12 @@ TEST(Mesh, SeeThroughObjMaterials) {
   EXPECT_FALSE(material("other").blend);
   EXPECT_FALSE(material("ghost").blend);
   EXPECT_TRUE(material("veil").blend);
-  // Triangles in file order, each see-through one's back side after them: 8 + 3.
-  EXPECT_EQ(m.triangleCount(), 11u);
+  // The file's triangles, in its order; for rendering each gets a back side of its own (every
+  // one is a sheet; three are see-through), after them.
+  EXPECT_EQ(m.triangleCount(), 8u);
+  Mesh sided = m;
+  EXPECT_EQ(addBackSides(sided), 5u) << "the opaque sheets";
+  EXPECT_EQ(sided.triangleCount(), 16u);
   // d alone: its texture's alpha does not cut it (no map_d names it).
   EXPECT_FLOAT_EQ(m.alphaAt(7, 1.0f, 0.0f), 0.5f);
   EXPECT_FLOAT_EQ(m.alphaAt(0, 0.3f, 0.3f), 0.25f);

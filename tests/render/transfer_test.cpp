@@ -80,8 +80,11 @@ lighting::Environment skyWithSun(const glm::vec3& sunDirection) {
 }
 
 // Per-vertex reference: the exact unshadowed irradiance minus a converged Monte Carlo estimate
-// of the light the object blocks (its noise is a fraction of the blocked part only).
-std::vector<glm::dvec3> reference(const Mesh& mesh, const lighting::Environment& envWorld,
+// of the light the object blocks (its noise is a fraction of the blocked part only), its rays
+// leaving from where the transfer's leave (SurfacePoints::origin: a vertex where the floor
+// meets the end of the wall is a point of the floor beside the wall, not one on its edge).
+std::vector<glm::dvec3> reference(const Mesh& mesh, const SurfacePoints& points,
+                                  const lighting::Environment& envWorld,
                                   const glm::mat3& envFromObject, const std::vector<size_t>& at) {
   lighting::ExactLighting exact;
   exact.project(envWorld);
@@ -94,7 +97,7 @@ std::vector<glm::dvec3> reference(const Mesh& mesh, const lighting::Environment&
   std::vector<glm::dvec3> out;
   for (size_t v : at) {
     const glm::vec3 n = glm::normalize(mesh.normals[v]);
-    const glm::vec3 origin = mesh.positions[v] + 1e-4f * size * n;
+    const glm::vec3 origin = points.origin(v, 1e-4f * size);
     const lighting::MonteCarloLighting::VisibilityFn blocked = [&](const glm::vec3& dEnv) {
       return scene.occluded(origin, objectFromEnv * dEnv, 1e-5f * size);
     };
@@ -200,7 +203,7 @@ TEST_F(FloorAndWall, ChebyshevTransferMatchesRayTracingAtThePole) {
   for (const double yawDegrees : {0.0, 30.0, -115.0}) {
     const glm::mat3 envFromObject =
         glm::mat3(glm::rotate(glm::dmat4(1.0), yawDegrees * kPi / 180.0, glm::dvec3(0, 1, 0)));
-    const auto ref = reference(mesh_, env, envFromObject, floor_);
+    const auto ref = reference(mesh_, points_, env, envFromObject, floor_);
     // Without bright sources: the moments alone.
     lighting::ChebParams cp;
     cp.order = 12;
@@ -247,7 +250,7 @@ TEST_F(FloorAndWall, HarmonicTransferTurnsWithTheYaw) {
   for (const double yawDegrees : {0.0, 70.0}) {
     const glm::mat3 envFromObject =
         glm::mat3(glm::rotate(glm::dmat4(1.0), yawDegrees * kPi / 180.0, glm::dvec3(0, 1, 0)));
-    const auto ref = reference(mesh_, env, envFromObject, floor_);
+    const auto ref = reference(mesh_, points_, env, envFromObject, floor_);
     ShadowInputs in;
     in.method = ShadowMethod::Harmonics;
     in.transfer = &transfer_;
@@ -1335,6 +1338,160 @@ Mesh cutRoof() {
   return m;
 }
 
+// A box [0, 1]^3 without its top face (y = 1): open.
+Mesh openBox() {
+  Mesh m;
+  addBox(m, {0.0f, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f});
+  // addBox's faces: -Z, +Z, -Y, +Y, -X, +X; the +Y face's two triangles go.
+  m.indices.erase(m.indices.begin() + 18, m.indices.begin() + 24);
+  m.normalsFromFile = true;
+  return m;
+}
+
+TEST(BackSides, OpenPiecesAndOnlyThemGetABackSide) {
+  Mesh closed;
+  addBox(closed, {0.0f, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f});
+  Mesh seams = closed;  // an exporter's seam vertices a few bits apart: still closed
+  for (size_t i = 0; i < seams.positions.size(); i += 2)
+    seams.positions[i].y = std::nextafter(seams.positions[i].y, 5.0f);
+  for (Mesh* m : {&closed, &seams}) {
+    EXPECT_EQ(addBackSides(*m), 0u) << (m == &closed ? "closed" : "seams");
+    EXPECT_TRUE(m->sides.empty());
+    EXPECT_EQ(m->triangleCount(), 12u);
+  }
+  // A closed box beside an open one: the open one's 10 triangles get back sides.
+  Mesh both = closed;
+  const Mesh open = openBox();
+  const uint32_t base = uint32_t(both.positions.size());
+  for (size_t v = 0; v < open.positions.size(); ++v) {
+    both.positions.push_back(open.positions[v] + glm::vec3(3.0f, 0.0f, 0.0f));
+    both.normals.push_back(open.normals[v]);
+  }
+  for (uint32_t i : open.indices) both.indices.push_back(base + i);
+  const Mesh front = both;
+  ASSERT_EQ(addBackSides(both), 10u);
+  ASSERT_EQ(both.triangleCount(), 32u);
+  EXPECT_EQ(both.frontTriangleCount(), 22u);
+  ASSERT_EQ(both.sides.size(), 32u);
+  for (size_t t = 0; t < 32; ++t) {
+    const uint8_t want = t < 12 ? 0 : t < 22 ? Mesh::kFrontSide : Mesh::kBackSide;
+    EXPECT_EQ(both.sides[t], want) << t;
+    EXPECT_EQ(both.oneSided(uint32_t(t)), want != 0) << t;
+  }
+  auto facing = [](const Mesh& m, size_t t) {
+    const uint32_t* c = &m.indices[3 * t];
+    return glm::cross(m.positions[c[1]] - m.positions[c[0]], m.positions[c[2]] - m.positions[c[0]]);
+  };
+  for (size_t t = 0; t < 10; ++t) {
+    const size_t f = 12 + t, b = 22 + t;
+    EXPECT_GT(glm::dot(facing(both, f), facing(front, f)), 0.0f) << "the front is as it was";
+    EXPECT_LT(glm::dot(facing(both, b), facing(front, f)), 0.0f) << "the back faces the other way";
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = both.indices[3 * b + size_t(k)];
+      EXPECT_GE(v, front.positions.size()) << "its own vertices";
+      EXPECT_LT(glm::dot(both.normals[v], facing(front, f)), 0.0f) << "its normals turned round";
+    }
+  }
+  // A cut-out material opens a closed piece: its inside can be seen through the holes.
+  Mesh cut = closed;
+  cut.materials.resize(2);
+  cut.materials[1].alphaCutoff = 0.5f;
+  cut.triangleMaterial.assign(12, 0u);
+  cut.triangleMaterial[0] = 1;
+  EXPECT_EQ(addBackSides(cut), 12u);
+  EXPECT_EQ(cut.triangleMaterial.size(), 24u);
+  // A sheet whose normals face against its winding: its front is wound to face where they do.
+  Mesh sheet;
+  sheet.positions = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}};
+  sheet.normals.assign(4, glm::vec3(0.0f, -1.0f, 0.0f));
+  sheet.indices = {0, 2, 1, 0, 3, 2};  // wound to face +Y
+  ASSERT_GT(facing(sheet, 0).y, 0.0f);
+  EXPECT_EQ(addBackSides(sheet), 2u);
+  for (size_t t = 0; t < 2; ++t) {
+    EXPECT_LT(facing(sheet, t).y, 0.0f) << t;
+    EXPECT_GT(facing(sheet, 2 + t).y, 0.0f) << t;
+    EXPECT_GT(sheet.normals[sheet.indices[3 * (2 + t)]].y, 0.0f) << t;
+  }
+}
+
+// The view factor from a point (x, 0, z) of the open box's floor, facing up, to its opening (the
+// square [0, 1]^2 at y = 1): four rectangles with a corner above the point.
+double openingViewFactor(double x, double z) {
+  auto corner = [](double a, double b) {
+    const double ra = std::sqrt(1.0 + a * a), rb = std::sqrt(1.0 + b * b);
+    return (a / ra * std::atan(b / ra) + b / rb * std::atan(a / rb)) / (2.0 * kPi);
+  };
+  return corner(x, z) + corner(1.0 - x, z) + corner(x, 1.0 - z) + corner(1.0 - x, 1.0 - z);
+}
+
+TEST(BackSides, TheInsideOfAnOpenBoxIsShadowedOnItsOwn) {
+  // Radiance 1 from every direction. Outside, nothing of the box hides the sky from its walls
+  // and floor: E = π. Inside, the floor sees the sky through the opening only: E = π F, F its
+  // view factor (0.239 at the centre). Shaded with the outside's visibility, the inside came out
+  // as bright as the outside, four times too bright at the floor.
+  Mesh box = openBox();
+  ASSERT_EQ(addBackSides(box), 10u);
+  const EmbreeScene scene(box);
+  const SurfacePoints points = surfacePoints(box, 1.0f / 16.0f);
+  TransferParams params;
+  params.grid = 16;
+  params.order = 8;
+  const VertexTransfer transfer = computeTransfer(box, points, params);
+  const lighting::Environment env = lighting::Environment::constant(glm::vec3(1.0f), 64);
+  lighting::ChebParams cp;
+  cp.order = 8;
+  cp.samples = 16;
+  lighting::ChebLocalLighting lit(cp);
+  lit.project(env);
+  ShadowInputs in;
+  in.transfer = &transfer;
+  in.shadowLighting = &lit;
+  const VertexIrradiance shaded = shadeVertices(points, glm::mat3(1.0f), in);
+  // Each pixel's irradiance against the truth, on the floor seen from above (80° down) and on
+  // the near wall's outside seen from a camera at its height.
+  auto check = [&](double height, double pitch, int& floor, int& outside) {
+    calib::CameraOptions options;
+    options.height = height;
+    options.pitchDegrees = pitch;
+    const calib::PlateCamera camera = calib::plateCamera(320, 240, {}, options);
+    calib::Placement place;
+    place.imagePoint = {0.5, 0.55};
+    place.heightFraction = 0.3;
+    const glm::dmat4 worldFromObject = calib::placeOnGround(
+        camera, place, glm::dvec3(box.boundsMin()), glm::dvec3(box.boundsMax()));
+    const glm::dmat4 objectFromWorld = glm::inverse(worldFromObject);
+    const glm::dmat3 normalToObject = glm::transpose(glm::dmat3(worldFromObject));
+    RenderSettings settings;
+    settings.samplesPerAxis = 1;
+    settings.jitter = false;
+    settings.points = &points;
+    settings.shadows = &shaded;
+    const RenderOutput out = renderDiffuse(box, scene, worldFromObject, camera, lit, settings);
+    for (int y = 0; y < out.aovs.height; ++y)
+      for (int x = 0; x < out.aovs.width; ++x) {
+        if (out.beauty.at(x, y)[3] < 1.0f) continue;
+        const float* a = out.aovs.at(x, y);
+        const glm::dvec3 p(objectFromWorld * glm::dvec4(a[3], a[4], a[5], 1.0));
+        const glm::dvec3 n = glm::normalize(normalToObject * glm::dvec3(a[0], a[1], a[2]));
+        const double shadowed = a[14] / kPi;  // irradianceShadowed.G
+        if (std::abs(p.y) < 0.01 && n.y > 0.99 && std::abs(p.x - 0.5) < 0.49 &&
+            std::abs(p.z - 0.5) < 0.49) {
+          ++floor;
+          EXPECT_NEAR(shadowed, openingViewFactor(p.x, p.z), 0.01) << p.x << ", " << p.z;
+        }
+        if (std::abs(p.z - 1.0) < 0.01 && n.z > 0.99) {
+          ++outside;
+          EXPECT_NEAR(shadowed, 1.0, 0.01) << p.x << ", " << p.y;
+        }
+      }
+  };
+  int floor = 0, outside = 0;
+  check(3.0, 80.0, floor, outside);
+  EXPECT_GT(floor, 1000);
+  check(0.5, 0.0, floor, outside);
+  EXPECT_GT(outside, 1000);
+}
+
 TEST(Cutouts, RaysPassWhereTheMaterialCutsTheSurfaceAway) {
   const Mesh roof = cutRoof();
   ASSERT_TRUE(roof.hasCutouts());
@@ -1557,10 +1714,13 @@ TEST(SemiTransparent, RaysFindTheSurfaceWithAProbabilityOfItsAlpha) {
   for (const int stopped : {stream, single, found, packets})
     EXPECT_NEAR(double(stopped) / double(dirs.size()), 0.3, 0.03);
   // Each side is met from its front only: the roof's back side is its own (four triangles, the
-  // second two wound the other way, normals down); without it, rays from below pass.
+  // second two wound the other way, normals down). Rays from below meet the back side alone:
+  // with the front side's triangles taken out, none is stopped from below, 30 % from above.
   ASSERT_EQ(roof.triangleCount(), 4u);
   EXPECT_EQ(roof.normals[4], glm::vec3(0.0f, -1.0f, 0.0f));
-  const Mesh front = blendRoof(0.5f, 0.3f, false);
+  Mesh front = roof;
+  front.indices.resize(6);
+  front.sides.resize(2);
   const EmbreeScene frontOnly(front);
   frontOnly.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
   EXPECT_EQ(std::count(hit.begin(), hit.end(), uint8_t(1)), 0);
@@ -1568,6 +1728,12 @@ TEST(SemiTransparent, RaysFindTheSurfaceWithAProbabilityOfItsAlpha) {
   for (const glm::vec3& d : dirs)
     fromAbove += frontOnly.intersect(glm::vec3(0.0f, 1.0f, 0.0f), -d).found ? 1 : 0;
   EXPECT_NEAR(double(fromAbove) / double(dirs.size()), 0.3, 0.03);
+  // A semi-transparent surface without a back side of its own is met from both sides.
+  const Mesh oneLayer = blendRoof(0.5f, 0.3f, false);
+  const EmbreeScene bare(oneLayer);
+  bare.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
+  EXPECT_NEAR(double(std::count(hit.begin(), hit.end(), uint8_t(1))) / double(dirs.size()), 0.3,
+              0.03);
   // Two layers of alpha 0.5 stop 75 %: a ray's chances at each are independent.
   Mesh two = blendRoof(0.5f, 0.5f);
   const Mesh upper = blendRoof(0.7f, 0.5f);
@@ -1575,6 +1741,7 @@ TEST(SemiTransparent, RaysFindTheSurfaceWithAProbabilityOfItsAlpha) {
   for (const uint32_t i : upper.indices) two.indices.push_back(i + offset);
   two.positions.insert(two.positions.end(), upper.positions.begin(), upper.positions.end());
   two.normals.insert(two.normals.end(), upper.normals.begin(), upper.normals.end());
+  two.sides.insert(two.sides.end(), upper.sides.begin(), upper.sides.end());
   const EmbreeScene layers(two);
   layers.occludedStream(glm::vec3(0.0f), dirs.data(), dirs.size(), 0.0f, hit.data());
   int both = 0;
