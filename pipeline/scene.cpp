@@ -32,13 +32,21 @@ const StageParameter& findParameter(const Stage& stage,
                                        : "; its parameters are " + namesOf(parameters)));
 }
 
+// The path as the operating system finds it: symbolic links followed before a ".." is taken
+// (proj/../in, proj a link to store/a/proj, is store/a/in, not in), as far as the path exists.
+fs::path physical(const fs::path& path) {
+  std::error_code ec;
+  fs::path resolved = fs::weakly_canonical(fs::absolute(path), ec);
+  return ec ? fs::absolute(path).lexically_normal() : resolved;
+}
+
 void setOne(ComposeJob& job, const Stage& stage, const std::string& name, nlohmann::json value,
             const fs::path& folder) {
   const std::vector<StageParameter> parameters = stage.parameters();
   const StageParameter& p = findParameter(stage, parameters, name);
   if (p.isFile(value) && !folder.empty()) {
     const fs::path path = value.get<std::string>();
-    if (path.is_relative()) value = (folder / path).lexically_normal().string();
+    if (path.is_relative()) value = physical(folder / path).string();
   }
   try {
     p.set(job, value);
@@ -54,8 +62,10 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
   scene["compose"] = "scene";
   scene["version"] = kSceneVersion;
   nlohmann::ordered_json all = nlohmann::ordered_json::object();
-  // A scene file named without a folder ("x.json") lies in the working folder.
-  const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : folder).lexically_normal();
+  // A scene file named without a folder ("x.json") lies in the working folder. Paths are taken
+  // as the operating system finds them, links followed: the relative path from the scene's true
+  // folder is the one that leads to the file, however the scene is reached later.
+  const fs::path base = physical(folder.empty() ? fs::path(".") : folder);
   const ComposeJob defaults;
   for (const auto& stage : stages()) {
     nlohmann::ordered_json values = nlohmann::ordered_json::object();
@@ -67,7 +77,7 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
       if (p.isPath && value == p.get(defaults)) continue;
       if (p.isFile(value)) {
         // Relative when the file is near the scene (below the same top folder), else absolute.
-        const fs::path path = fs::absolute(value.get<std::string>()).lexically_normal();
+        const fs::path path = physical(value.get<std::string>());
         auto top = [](const fs::path& full) {
           auto it = full.begin();
           return it != full.end() && ++it != full.end() ? *it : fs::path();
@@ -76,6 +86,17 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
           value = path.lexically_proximate(base).string();
         else
           value = path.string();
+      }
+      // JSON holds UTF-8 text: a file name in another encoding (Latin-1's "café") cannot be
+      // written (the JSON library's own exception said so without naming the file).
+      if (value.is_string()) {
+        try {
+          (void)value.dump();
+        } catch (const nlohmann::json::type_error&) {
+          throw Error("scene", stage->name() + "." + p.name + ": '" + value.get<std::string>() +
+                                   "' is not UTF-8 text, which a scene file (JSON) cannot hold: "
+                                   "rename it, or run the job without a scene file");
+        }
       }
       values[p.name] = value;
     }
@@ -136,6 +157,11 @@ ComposeJob loadScene(const fs::path& file) {
   std::stringstream text;
   text << in.rdbuf();
   if (!in) throw Error("scene", "cannot read the scene file", file);
+  if (jsonNestedDeeperThan(text.str()))
+    throw Error(
+        "scene",
+        "its JSON nests deeper than " + std::to_string(kMaxJsonDepth) + " levels: not a scene file",
+        file);
   nlohmann::json scene;
   try {
     scene = nlohmann::json::parse(text.str());

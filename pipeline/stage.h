@@ -13,6 +13,7 @@
 //  5. In stage order: run() (then store() into the cache) for those that run.
 #pragma once
 
+#include <algorithm>
 #include <functional>
 #include <memory>
 #include <string>
@@ -37,11 +38,12 @@ struct StageParameter {
   std::function<void(ComposeJob&, const nlohmann::json&)> set;
   // A file or folder: a scene file holds it relative to the scene file's folder.
   bool isPath = false;
-  // A path's value that names no file and is kept as it is (the ocio parameter's "builtin").
-  std::string literal{};
+  // A path's values that name no file and are kept as they are (the ocio parameter's "builtin",
+  // and "built-in" as the command line takes it too).
+  std::vector<std::string> literals{};
   bool isFile(const nlohmann::json& value) const {
     return isPath && value.is_string() && !value.get<std::string>().empty() &&
-           (literal.empty() || value.get<std::string>() != literal);
+           std::find(literals.begin(), literals.end(), value.get<std::string>()) == literals.end();
   }
 };
 

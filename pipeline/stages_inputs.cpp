@@ -528,7 +528,7 @@ class ColorStage final : public Stage {
                       "the OpenColorIO config file (builtin: the built-in config; empty: $OCIO, "
                       "else the built-in one)",
                       &ComposeJob::ocio);
-    ocio.literal = "builtin";
+    ocio.literals = {"builtin", "built-in"};
     return {ocio,
             textParameter("plate-space", "colour space of the plate (empty: from the file)",
                           &ComposeJob::plateSpace),

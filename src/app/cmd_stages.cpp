@@ -463,6 +463,13 @@ Runner setupBench(CLI::App& cmd, const Globals& globals) {
                                (tmpdir ? std::string(" (TMPDIR=") + tmpdir + ")" : std::string()) +
                                ": " + ec.message());
     }
+    // A bench's folder holds this file, written first: only such folders are ever removed (a
+    // folder of the user's own that happens to have the name stays).
+    constexpr const char* kMarker = ".compose-bench";
+    auto madeByBench = [&](const fs::path& folder) {
+      std::error_code e;
+      return fs::is_directory(folder, e) && fs::is_regular_file(folder / kMarker, e);
+    };
     // What an interrupted bench left (Ctrl-C, a SIGTERM: its folder of caches and outputs,
     // hundreds of megabytes), once its process is gone.
     for (fs::directory_iterator it(temporary, ec), end; !ec && it != end; it.increment(ec)) {
@@ -474,12 +481,21 @@ Runner setupBench(CLI::App& cmd, const Globals& globals) {
         continue;
       const long pid = std::strtol(name.c_str() + kPrefix.size(), nullptr, 10);
       std::error_code e;
-      if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH && it->is_directory(e))
+      if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH && madeByBench(it->path()))
         fs::remove_all(it->path(), e);
     }
     ec.clear();
     const fs::path scratch = temporary / ("compose-bench-" + std::to_string(::getpid()));
+    if (fs::exists(scratch, ec) && !madeByBench(scratch))
+      throw Error("bench",
+                  "its temporary folder's name is taken by something it did not make: move it, "
+                  "or give another folder in TMPDIR",
+                  scratch);
     fs::remove_all(scratch, ec);
+    fs::create_directories(scratch, ec);
+    if (ec) throw Error("bench", "cannot make its temporary folder: " + ec.message(), scratch);
+    writeTextFile(scratch / kMarker, "compose bench's temporary folder, removed when it ends\n",
+                  "bench");
     struct Cleanup {
       fs::path path;
       ~Cleanup() {
@@ -489,8 +505,10 @@ Runner setupBench(CLI::App& cmd, const Globals& globals) {
     } cleanup{scratch};
     o->job.cache = scratch / "cache";
     o->job.output = scratch / "out" / "compose";
-    pipeline::validate(o->job);
+    // Checked as the one-shot command checks it: a colour space the config does not know is a
+    // bad command line (exit 2), before anything runs.
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();
+    validateJob(o->job, colors);
     std::vector<pipeline::ComposeResult> runs;
     for (int i = 0; i <= *repeat; ++i) {
       if (!globals.quiet)

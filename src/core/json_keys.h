@@ -74,4 +74,47 @@ inline std::string repeatedJsonKey(const std::string& text) {
   return finder.found;
 }
 
+// Files people edit or download nest a few levels deep; nlohmann::json copies and tinygltf reads
+// a value recursively, so a hostile file nested a hundred thousand levels deep overflowed the
+// stack (a crash, not an error). Readers refuse JSON nested deeper than this.
+inline constexpr size_t kMaxJsonDepth = 256;
+
+// Whether the JSON `text` nests objects and arrays more than `limit` deep (read without building
+// anything; stops at the first level too many). False for text that is not JSON: the parser says
+// why.
+inline bool jsonNestedDeeperThan(const std::string& text, size_t limit = kMaxJsonDepth) {
+  struct Depth : nlohmann::json_sax<nlohmann::json> {
+    size_t limit = 0, depth = 0;
+    bool deeper = false;
+    bool enter() {
+      deeper = ++depth > limit;
+      return !deeper;
+    }
+    bool null() override { return true; }
+    bool boolean(bool) override { return true; }
+    bool number_integer(number_integer_t) override { return true; }
+    bool number_unsigned(number_unsigned_t) override { return true; }
+    bool number_float(number_float_t, const string_t&) override { return true; }
+    bool string(string_t&) override { return true; }
+    bool binary(binary_t&) override { return true; }
+    bool start_object(std::size_t) override { return enter(); }
+    bool key(string_t&) override { return true; }
+    bool end_object() override {
+      --depth;
+      return true;
+    }
+    bool start_array(std::size_t) override { return enter(); }
+    bool end_array() override {
+      --depth;
+      return true;
+    }
+    bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+      return false;
+    }
+  } counter;
+  counter.limit = limit;
+  nlohmann::json::sax_parse(text, &counter, nlohmann::json::input_format_t::json, false);
+  return counter.deeper;
+}
+
 }  // namespace compose

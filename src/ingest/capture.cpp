@@ -359,6 +359,11 @@ Capture readCaptureDescription(const fs::path& file) try {
   std::ifstream in(file);
   if (!in) throw Error(kStage, "cannot open the capture description", file);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (jsonNestedDeeperThan(text))
+    throw Error(kStage,
+                "its JSON nests deeper than " + std::to_string(kMaxJsonDepth) +
+                    " levels: not a capture description",
+                file);
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);

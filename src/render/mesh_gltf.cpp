@@ -15,6 +15,7 @@
 #include <glm/mat4x4.hpp>
 
 #include "core/error.h"
+#include "core/json_keys.h"
 #include "core/json_number.h"
 #include "core/limits.h"
 #include "ingest/image_io.h"
@@ -1060,10 +1061,9 @@ std::string tinygltfDecode(const std::string& uri) {
   return out;
 }
 
-// The buffer files whose URI holds a '+', under the path tinygltf will ask for (its base folder
-// joined as it joins it) and their true path. A file that does not parse gives none: tinygltf
-// says what is wrong with it.
-std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool binary) {
+// The JSON of a .gltf, or of a .glb's first chunk; empty when it cannot be read (tinygltf says
+// why).
+std::string gltfJson(const fs::path& path, bool binary) {
   std::ifstream in(path, std::ios::binary);
   std::string text;
   if (binary) {
@@ -1078,6 +1078,14 @@ std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool bin
   } else {
     text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   }
+  return text;
+}
+
+// The buffer files whose URI holds a '+', under the path tinygltf will ask for (its base folder
+// joined as it joins it) and their true path. A file that does not parse gives none: tinygltf
+// says what is wrong with it.
+std::map<std::string, std::string> renamedBuffers(const fs::path& path, bool binary) {
+  const std::string text = gltfJson(path, binary);
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object() || !j.contains("buffers") || !j["buffers"].is_array())
     return {};
@@ -1159,6 +1167,13 @@ LoadedMesh loadGltf(const fs::path& path) {
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (ext == ".glb") checkGlbChunks(path);
+  // tinygltf reads values recursively: a file nested a hundred thousand levels deep overflowed
+  // the stack.
+  if (jsonNestedDeeperThan(gltfJson(path, ext == ".glb")))
+    throw Error("mesh",
+                "cannot parse glTF: its JSON nests deeper than " + std::to_string(kMaxJsonDepth) +
+                    " levels",
+                path);
   ReadFiles seen{path, ext == ".glb", {}, std::nullopt};
   parser.SetFsCallbacks(tinygltf::FsCallbacks{&fileExists, &expandFilePath, &readRegularFile,
                                               &tinygltf::WriteWholeFile, &seen});

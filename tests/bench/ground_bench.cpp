@@ -105,7 +105,7 @@ int main(int argc, char** argv) {
       render::addBackSides(read);
       return read;
     }();
-    const render::EmbreeScene scene(mesh.positions, mesh.indices);
+    const render::EmbreeScene scene(mesh);
     const calib::PlateCamera camera = calib::plateCamera(width, height, {}, {});
     calib::Placement place;
     place.imagePoint = at;

@@ -287,11 +287,11 @@ int childRender(const fs::path& cache, int repeat) {
   std::vector<double> bvh;
   for (int i = 0; i < repeat; ++i) {
     const auto t = bench::Clock::now();
-    const render::EmbreeScene s(mesh.positions, mesh.indices);
+    const render::EmbreeScene s(mesh);
     bvh.push_back(bench::secondsSince(t));
   }
   std::printf("bvh %.6f\n", median(bvh));
-  const render::EmbreeScene scene(mesh.positions, mesh.indices);
+  const render::EmbreeScene scene(mesh);
   const pipeline::ShadowPlan plan = pipeline::ShadowPlan::parse("");
   auto t = bench::Clock::now();
   const pipeline::ShadowLighting coldLighting =

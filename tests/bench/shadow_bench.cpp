@@ -172,7 +172,7 @@ int main(int argc, char** argv) {
       render::addBackSides(read);
       return read;
     }();
-    const render::EmbreeScene scene(mesh.positions, mesh.indices);
+    const render::EmbreeScene scene(mesh);
     const glm::vec3 extent = mesh.boundsMax() - mesh.boundsMin();
     const float size = std::max({extent.x, extent.y, extent.z});
     // The visibility pass once, at the largest order measured (lower orders are its top-left

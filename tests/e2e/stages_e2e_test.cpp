@@ -1225,7 +1225,8 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
 
 // compose bench times a job cold and warm in a folder of its own under $TMPDIR, removed after;
 // the folder an interrupted bench left (its process gone) is removed by the next one (they
-// stayed, hundreds of megabytes each); a $TMPDIR that is not a folder is named.
+// stayed, hundreds of megabytes each), but a folder of the same name that no bench made stays
+// (any was removed, a user's own files with it); a $TMPDIR that is not a folder is named.
 TEST_F(StageCommands, BenchTimesAJobAndCleansUpAfterItself) {
   const fs::path tmp = dir_ / "tmp";
   // A process id that no process has now: a child that has exited and been waited for.
@@ -1236,6 +1237,10 @@ TEST_F(StageCommands, BenchTimesAJobAndCleansUpAfterItself) {
   const fs::path stale = tmp / ("compose-bench-" + std::to_string(child));
   fs::create_directories(stale / "cache");
   compose::testing::writeText(stale / "cache" / "x", "left");
+  compose::testing::writeText(stale / ".compose-bench", "");
+  const fs::path users = tmp / ("compose-bench-" + std::to_string(child) + "0");
+  fs::create_directories(users);
+  compose::testing::writeText(users / "results.csv", "mine");
   const std::string compose = quote(COMPOSE_EXECUTABLE);
   const std::string job = " bench --plate " + quote(plate_) + " " + objectOptions() + " --env " +
                           quote(samples_ / "forest.exr") +
@@ -1251,6 +1256,8 @@ TEST_F(StageCommands, BenchTimesAJobAndCleansUpAfterItself) {
   ASSERT_EQ(status, 0) << text;
   EXPECT_NE(text.find("render"), std::string::npos) << text;
   EXPECT_FALSE(fs::exists(stale)) << "the interrupted bench's folder";
+  EXPECT_EQ(slurp(users / "results.csv"), "mine") << "a folder no bench made";
+  fs::remove_all(users);
   EXPECT_TRUE(fs::is_empty(tmp)) << "the bench's own folder";
   std::tie(status, text) = shell("TMPDIR=" + quote(dir_ / "none"), compose + job);
   EXPECT_EQ(status, 1) << text;

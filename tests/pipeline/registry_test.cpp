@@ -290,12 +290,48 @@ TEST(Registry, ScenePathsAreRelativeToTheSceneFile) {
   EXPECT_EQ(job.plate, fs::absolute(dir / "plate.jpg").lexically_normal());
   EXPECT_EQ(job.object, fs::path("/abs/mesh.obj"));
   EXPECT_EQ(job.output, fs::absolute(dir / "scenes" / "out" / "x").lexically_normal());
+  // The built-in colour config by either name the command line takes: not a file beside it.
+  for (const std::string name : {"builtin", "built-in"}) {
+    writeText(
+        dir / "scenes" / "ocio.json",
+        R"({"compose": "scene", "version": 1, "stages": {"color": {"ocio": ")" + name + R"("}}})");
+    EXPECT_EQ(loadScene(dir / "scenes" / "ocio.json").ocio, fs::path(name));
+  }
   // A key given twice is refused, naming it (the last one counted, without a word).
   writeText(dir / "scenes" / "twice.json",
             R"({"compose": "scene", "version": 1,
                 "stages": {"ingest": {"plate": "../plate.jpg", "object": "/abs/mesh.obj"},
                            "render": {"scale": 0.2}, "render": {"samples": 1}}})");
   COMPOSE_EXPECT_ERROR(loadScene(dir / "scenes" / "twice.json"), "'stages.render' is given twice");
+}
+
+// A scene in a folder reached through a symbolic link (proj -> store/a/proj) names its inputs by
+// the path that leads to them from its true folder, and is read back so: ".." follows the link,
+// as the operating system takes it. It was worked out on the text of the paths: the scene saved
+// through the link named ../in/plate.jpg, which from store/a/proj is store/a/in.
+TEST(Registry, ScenePathsFollowSymbolicLinks) {
+  TempDir dir;
+  fs::create_directories(dir / "store" / "a" / "proj");
+  fs::create_directories(dir / "in");
+  writeText(dir / "in" / "plate.jpg", "a plate");
+  fs::create_directory_symlink(dir / "store" / "a" / "proj", dir / "proj");
+  ComposeJob job;
+  job.plate = dir / "in" / "plate.jpg";
+  for (const fs::path& savedIn : {dir / "proj", dir / "store" / "a" / "proj"}) {
+    writeText(savedIn / "s.json", sceneFromJob(job, savedIn).dump(2));
+    for (const fs::path& readFrom : {dir / "proj", dir / "store" / "a" / "proj"}) {
+      const ComposeJob read = loadScene(readFrom / "s.json");
+      EXPECT_TRUE(fs::exists(read.plate)) << read.plate << " saved in " << savedIn;
+      if (fs::exists(read.plate)) {
+        EXPECT_TRUE(fs::equivalent(read.plate, job.plate)) << read.plate;
+      }
+    }
+  }
+  // A file name that is not UTF-8 (Latin-1's café) cannot be written into JSON: the parameter
+  // is named (the JSON library's exception was the message, naming nothing).
+  job.plate = dir / "caf\xe9.jpg";
+  COMPOSE_EXPECT_ERROR(sceneFromJob(job, dir / "proj"), "ingest.plate: ");
+  COMPOSE_EXPECT_ERROR(sceneFromJob(job, dir / "proj"), "is not UTF-8 text");
 }
 
 // plan() over a job: each stage's state and reason, by name.
