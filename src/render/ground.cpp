@@ -147,6 +147,11 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
   const int w = std::max(0, grid.x1 - grid.x0), h = std::max(0, grid.y1 - grid.y0);
   if (w == 0 || h == 0) return grid;
   grid.stride = std::max(1, int(std::ceil(std::sqrt(double(w) * h / double(settings.maxPoints)))));
+  // A region a few pixels across (a small or far object seen at a grazing angle: a band of a few
+  // rows) is sampled at every few of them: its first nodes, 2^coarse strides apart, fell outside
+  // it (no shadow at all, "no ground in view"), or a handful fell where the lattice happened to.
+  const int shorter = std::min(w, h);
+  grid.stride = std::min(grid.stride, std::max(1, shorter / 4));
   // Below the base stride, halvings down to about fineStride pixels (at most 3: the lattice stays
   // within 64 times the base grid's nodes).
   grid.fine = 0;
@@ -154,6 +159,7 @@ GroundGrid groundGrid(const Mesh& mesh, const glm::dmat4& worldFromObject,
          double(grid.stride) / double(1 << (grid.fine + 1)) >= 1.0)
     ++grid.fine;
   grid.coarse = std::clamp(settings.coarseLevels, 0, 6);
+  while (grid.coarse > 0 && (grid.stride << grid.coarse) * 8 > shorter) --grid.coarse;
   grid.unit = double(grid.stride) / double(1 << grid.fine);
   const int first = grid.firstStride(), cells = 1 << grid.levels();
   const int firstColumns = (w + first - 1) / first + 1, firstRows = (h + first - 1) / first + 1;

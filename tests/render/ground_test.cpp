@@ -372,6 +372,35 @@ TEST(GroundShadow, ARegionReachingBehindTheCameraCoversOnlyWhatTheFrameShows) {
   EXPECT_EQ(outsideShowingRegion, 0);
 }
 
+// A small object far off, seen at a grazing angle: the ground around it is a band of a few rows.
+// Its first nodes were 4 pixels apart: none fell on the band's ground (no shadow at all, and "no
+// ground around the object is in view"), or a few did, where the lattice happened to. Every
+// row and every second column of the band is sampled now.
+TEST(GroundShadow, AThinBandOfGroundIsSampledRowByRow) {
+  const Mesh box = cube();
+  const Shot shot = shoot(box, 320, 240, 0.0, {0.5, 0.56}, 0.05);
+  const GroundGrid grid = groundGrid(box, shot.worldFromObject, shot.camera, {});
+  ASSERT_GT(grid.x1 - grid.x0, 20) << "the band is wide";
+  ASSERT_LT(grid.y1 - grid.y0, 16) << "and a few rows high";
+  ASSERT_FALSE(grid.empty());
+  // Each plate row showing the region's ground has nodes on it.
+  for (int y = grid.y0; y < grid.y1; ++y) {
+    int ground = 0;
+    for (int x = grid.x0; x < grid.x1; ++x) {
+      glm::dvec3 origin, dir;
+      if (!shot.camera.ray(x + 0.5, y + 0.5, origin, dir) || !(dir.y < -1e-9)) continue;
+      const glm::dvec3 g = origin + dir * (-origin.y / dir.y);
+      ground += g.x >= grid.regionX0 && g.x <= grid.regionX1 && g.z >= grid.regionZ0 &&
+                g.z <= grid.regionZ1;
+    }
+    if (ground == 0) continue;
+    int nodes = 0;
+    for (const uint32_t n : grid.pointNode)
+      nodes += grid.y0 + int(n / size_t(grid.columns)) * grid.unit == y;
+    EXPECT_GE(nodes, ground / 2) << "row " << y << ": " << ground << " pixels show the region";
+  }
+}
+
 // The ground the object stands on lights its underside less next to it (GroundContact): under a
 // uniform sky, a side face's lowest points receive less than its highest, which see the ground
 // further out; the top sees no ground and is unchanged; ground=off is the object alone.
