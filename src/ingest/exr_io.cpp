@@ -712,7 +712,30 @@ std::vector<WriteReport> writeExrFile(const fs::path& file, const fs::path& show
     }
     types[i] = part.options.depth == WriteOptions::Depth::Float ? Imf::FLOAT : Imf::HALF;
     if (types[i] == Imf::HALF) {
-      reports[i].largestMagnitude = detail::largestFiniteMagnitude(s);
+      // The channels written as float whatever the depth (floatChannels: positions, depth) do
+      // not count: a depth beyond half's range made every other channel float too.
+      detail::ChannelSources probe = s;
+      if (!part.floatChannels.empty()) {
+        probe.scales.resize(s.images.size());
+        size_t c = 0;
+        for (size_t k = 0; k < s.images.size(); ++k) {
+          std::vector<float> factors =
+              s.scalesOf(k) ? *s.scalesOf(k)
+                            : std::vector<float>(size_t(s.images[k]->channels), 1.0f);
+          for (float& f : factors) {
+            if (std::find(part.floatChannels.begin(), part.floatChannels.end(), n[c]) !=
+                part.floatChannels.end())
+              f = 0.0f;
+            ++c;
+          }
+          probe.scales[k] = std::move(factors);
+        }
+        for (size_t k = 0; k < s.constants.size(); ++k, ++c)
+          if (std::find(part.floatChannels.begin(), part.floatChannels.end(), n[c]) !=
+              part.floatChannels.end())
+            probe.constants[k] = 0.0f;
+      }
+      reports[i].largestMagnitude = detail::largestFiniteMagnitude(probe);
       if (reports[i].largestMagnitude > kHalfMax) {
         types[i] = Imf::FLOAT;
         reports[i].promotedToFloat = true;

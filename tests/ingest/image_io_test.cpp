@@ -507,6 +507,40 @@ bool sameBits(std::span<const float> a, std::span<const float> b) {
 // Each part reads back with its data window and names, and with exactly the values the plain
 // OpenImageIO write of the same pixels, interleaved in memory, stores. The full frame is wide and
 // tall enough to be written in several bands of rows.
+// Channels written as float whatever the depth (an object layer's position and depth) hold
+// values beyond half's range without making the part's other channels float: a depth of 80 km
+// made the whole object layer float (and said its colours exceeded half's range).
+TEST(ImageIo, FloatChannelsBeyondHalfLeaveTheOthersHalf) {
+  TempDir dir;
+  Image beauty = mixedValues(40, 30, 4, {"R", "G", "B", "A"}, 2);
+  Image aovs = mixedValues(40, 30, 2, {"N.X", "depth.Z"}, 3);
+  aovs.pixels[1] = 80729.0f;  // depth.Z, beyond half
+  ExrPart object{"object", &beauty, 0, 0, 40, 30, {}};
+  object.options.depth = WriteOptions::Depth::Half;
+  object.moreImages = {&aovs};
+  object.channelNames = {"object.R", "object.G", "object.B", "object.A", "N.X", "depth.Z"};
+  object.floatChannels = {"depth.Z"};
+  {
+    OutputFiles outputs("output");
+    const std::vector<WriteReport> reports = writeExrParts(outputs, dir / "o.exr", {object});
+    outputs.commit();
+    ASSERT_EQ(reports.size(), 1u);
+    EXPECT_FALSE(reports[0].promotedToFloat) << reports[0].largestMagnitude;
+  }
+  const std::vector<ReadPart> parts = readParts(dir / "o.exr");
+  ASSERT_EQ(parts.size(), 1u);
+  const OIIO::ImageSpec& spec = parts[0].spec;
+  ASSERT_EQ(spec.nchannels, 6);
+  for (int c = 0; c < 6; ++c) {
+    const bool depth = spec.channelnames[size_t(c)] == "depth.Z";
+    EXPECT_EQ(spec.channelformat(c), depth ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF)
+        << spec.channelnames[size_t(c)];
+    if (depth) {
+      EXPECT_EQ(parts[0].pixels[size_t(c)], 80729.0f);
+    }
+  }
+}
+
 TEST(ImageIo, MultiPartExrReadsBackExactlyAsWritten) {
   TempDir dir;
   const int fullW = 2100, fullH = 700;
