@@ -366,6 +366,15 @@ std::string lensText(const Lens& lens) {
 
 void writeLens(const fs::path& file, const Lens& lens) {
   lens.validate(file);
+  // An older lens file may be replaced, nothing else (a capture description or a scene named by
+  // mistake was overwritten).
+  requireReplaceable(
+      file, "lens file",
+      [](std::istream& in) {
+        const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+        return j.is_object() && j.contains("model") && j.contains("fx") && j.contains("fy");
+      },
+      "calib");
   writeTextFile(file, lensToJson(lens).dump(2) + "\n", "calib");
 }
 

@@ -193,10 +193,13 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budg
     return std::clamp(int(std::ceil(longest / edge)), 1, 32);
   };
   float maxEdge = maxEdgeFraction * out.size;
+  // The budget is the front sides': a back side (Mesh::sides) gets the grid of its front, so that
+  // giving an open surface its inside does not coarsen its outside.
   for (int attempt = 0; attempt < 64; ++attempt) {
     size_t count = mesh.positions.size();
-    for (float e : longestEdge) {
-      const size_t L = size_t(levelFor(e, maxEdge));
+    for (size_t t = 0; t < triangles; ++t) {
+      if (!mesh.sides.empty() && mesh.sides[t] == Mesh::kBackSide) continue;
+      const size_t L = size_t(levelFor(longestEdge[t], maxEdge));
       if (L > 1) count += (L + 1) * (L + 2) / 2 - 3;
     }
     if (count <= std::max(budget, mesh.positions.size())) break;

@@ -81,8 +81,9 @@ struct TransferParams {
 // each triangle whose longest edge is longer than `maxEdge` a grid of `level` segments per edge
 // (level = ceil(longest edge / maxEdge), at most 32), its corners being the triangle's vertices.
 // maxEdge is `maxEdgeFraction` of the object's size, widened as needed to keep the number of
-// points within `budget` (a finely tessellated mesh keeps its vertices only). Grid points lie on
-// the smooth surface (Mesh::smoothPoint); normals are the interpolated vertex normals, normalised.
+// points within `budget` (a finely tessellated mesh keeps its vertices only; back sides of their
+// own, Mesh::sides, are not counted: each has the grid of its front). Grid points lie on the
+// smooth surface (Mesh::smoothPoint); normals are the interpolated vertex normals, normalised.
 struct SurfacePoints {
   std::vector<glm::vec3> positions, normals;  // object space
   std::vector<uint32_t> first;                // per triangle: index of its first own grid point

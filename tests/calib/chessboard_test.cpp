@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <numbers>
 
 #include <glm/geometric.hpp>
@@ -15,6 +17,11 @@
 
 namespace compose::calib {
 namespace {
+
+std::string fileText(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
 
 using compose::testing::TempDir;
 
@@ -67,6 +74,11 @@ TEST(Chessboard, CalibratesTheOpenCvLeftCameraWithinTheIssueTargets) {
   // Written through the lens file and read back unchanged (OpenCV convention in the file).
   TempDir dir;
   writeLens(dir / "camera.json", l);
+  writeLens(dir / "camera.json", l);  // an older lens file is replaced
+  // Another kind of file given by mistake is not.
+  compose::testing::writeText(dir / "scene.json", "{\"compose\": \"scene\"}");
+  COMPOSE_EXPECT_ERROR(writeLens(dir / "scene.json", l), "scene.json");
+  EXPECT_EQ(fileText(dir / "scene.json"), "{\"compose\": \"scene\"}");
   const Lens back = readLens(dir / "camera.json");
   EXPECT_DOUBLE_EQ(back.fx, l.fx);
   EXPECT_DOUBLE_EQ(back.cx, l.cx);
@@ -328,6 +340,27 @@ TEST(Chessboard, PlatePoseRecoversTheCameraAboveTheBoard) {
       EXPECT_NEAR(back.worldFromCamera[c][r], pose.worldFromCamera[c][r], 1e-12);
   EXPECT_NEAR(back.lens.fx, lens.fx, 1e-9);
   EXPECT_EQ(back.board.columns, 9);
+
+  // Written over an older pose file only: not over another kind of file given by mistake.
+  writePose(dir / "older.json", pose);
+  writePose(dir / "older.json", pose);
+  compose::testing::writeText(dir / "capture.json", "{\"format\": \"compose-capture\"}");
+  COMPOSE_EXPECT_ERROR(writePose(dir / "capture.json", pose), "capture.json");
+  EXPECT_EQ(fileText(dir / "capture.json"), "{\"format\": \"compose-capture\"}");
+}
+
+// A board size short of the plate's board is part of it, and its pose another frame (shifted by
+// squares, or turned half round): refused, naming the board the plate shows. It was taken without
+// a word (7x6 on left12's 9x6 board put the camera at -x, -z: the frame turned half round).
+TEST(Chessboard, APlatePoseOfPartOfTheBoardIsRefused) {
+  const auto file = pipeline::samplesDirectory() / "chessboard" / "left12.jpg";
+  ASSERT_TRUE(std::filesystem::exists(file)) << "sample chessboard photos missing";
+  const ingest::LoadedImage plate = ingest::readImage(file);
+  const Lens lens = Lens::fromFieldOfView(640, 480, 60.0);
+  EXPECT_NO_THROW(estimatePlatePose(plate.image, file, lens, Board::parse("9x6")));
+  for (const char* part : {"7x6", "8x6"})
+    COMPOSE_EXPECT_ERROR(estimatePlatePose(plate.image, file, lens, Board::parse(part)),
+                         "more than --board " + std::string(part) + " says");
 }
 
 // A board small in the plate (squares of 13 to 17 pixels, as a board on the ground of a wide
