@@ -1,7 +1,9 @@
 #include "pipeline/compose_job.h"
 
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <string>
 
 #include "calib/plate_camera.h"
 #include "core/error.h"
@@ -119,8 +121,13 @@ void validate(const ComposeJob& job) {
   if (!std::isfinite(job.environmentYawDegrees))
     throw UsageError("--env-yaw must be a finite number of degrees");
   for (int c = 0; job.albedo && c < 3; ++c) {
-    if (!((*job.albedo)[c] >= 0.0f && (*job.albedo)[c] <= 1.0f))
-      throw UsageError("--albedo must be within [0, 1], got " + givenText((*job.albedo)[c]));
+    if (!((*job.albedo)[c] >= 0.0f && (*job.albedo)[c] <= 1.0f)) {
+      // The float as typed (the shortest text that reads back as it): widened to double, 1.01
+      // was said as 1.0099999904632568.
+      char text[32];
+      const auto end = std::to_chars(text, text + sizeof text, (*job.albedo)[c]).ptr;
+      throw UsageError("--albedo must be within [0, 1], got " + std::string(text, end));
+    }
   }
   if (!(job.creaseDegrees >= 0.0 && job.creaseDegrees <= 180.0))
     throw UsageError("--crease must be an angle within [0, 180] degrees, got " +

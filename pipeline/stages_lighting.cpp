@@ -328,10 +328,22 @@ class PrecomputeStage final : public Stage {
                       "%.2f) m; surroundings: ",
                       centre.x, centre.y, centre.z) +
                proxy.describe());
+      // The object is inside the surroundings, or it would show through their walls.
+      bool inside = true;
+      for (int corner = 0; corner < 8; ++corner) {
+        const glm::dvec3 local((corner & 1) ? mesh.boundsMax.x : mesh.boundsMin.x,
+                               (corner & 2) ? mesh.boundsMax.y : mesh.boundsMin.y,
+                               (corner & 4) ? mesh.boundsMax.z : mesh.boundsMin.z);
+        inside = inside && proxy.contains(glm::dvec3(g.worldFromObject * glm::dvec4(local, 1.0)));
+      }
       if (!proxy.contains(centre)) {
         ctx.note(
-            "the object's centre is outside the surroundings given: it is lit as from the "
-            "nearest point inside them");
+            "warning: the object's centre is outside the surroundings given: it is lit as from "
+            "the nearest point inside them");
+      } else if (!inside) {
+        ctx.note(
+            "warning: the object reaches outside the surroundings given (through a wall, the "
+            "ceiling or the sphere): a smaller --scale, or larger surroundings");
       }
     }
     // Every output this job has is computed, so that the cache entry is whole.

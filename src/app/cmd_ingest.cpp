@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 #include "app/cli.h"
 #include "cubemap/layouts.h"
@@ -67,7 +68,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                   "this many photos in capture order)")
       ->check(positiveNumber());
   command.add_option("--exposures", o->exposures,
-                     "Relative exposures t1,t2,... overriding EXIF (one view only)");
+                     "Relative exposures t1,t2,... overriding EXIF, in the order the photos are "
+                     "given (a folder's by name), as compose merge takes them (one view only)");
   command.add_option("--json", o->json, "Write the grouping as a JSON capture description");
 
   return [o, &command, &globals]() -> int {
@@ -92,6 +94,11 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
                          group + ")");
       }
     }
+    // A bracket size is the grouping (runs of that many photos): pauses are not looked at.
+    if (command.count("--brackets") > 0 && command.count("--max-gap") > 0)
+      throw UsageError(
+          "--max-gap and --brackets are two ways of finding the views: --brackets takes runs of "
+          "that many photos and looks at no pause; give one of them");
     if (group != "pattern" && !o->pattern.empty())
       throw UsageError("--pattern goes with --group pattern (or auto); the grouping here is " +
                        group);
@@ -111,6 +118,10 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         throw UsageError("--exposures must be relative exposures between 1e-12 and 1e12");
 
     ingest::Capture capture;
+    // --exposures by the photos' order on the command line: grouping sorts them by capture time
+    // (or name), and the list was taken in that order (the shortest exposure given to the photo
+    // named second when it was taken first), where compose merge takes the order given.
+    std::map<std::filesystem::path, double> givenExposure;
     if (group == "json") {
       capture = ingest::readCaptureDescription(o->capture);
     } else {
@@ -120,6 +131,8 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         std::fprintf(stderr, "compose: note: %s\n", printable(leftOutNote(leftOut)).c_str());
       if (!rawPairs.empty() && !globals.quiet)
         std::fprintf(stderr, "compose: note: %s\n", printable(rawPairsNote(rawPairs)).c_str());
+      if (!exposures.empty() && exposures.size() == shots.size())
+        for (size_t i = 0; i < shots.size(); ++i) givenExposure[shots[i].file] = exposures[i];
       capture = group == "pattern" ? ingest::groupByPattern(std::move(shots), o->pattern)
                                    : ingest::groupByExif(std::move(shots), exif);
     }
@@ -128,7 +141,16 @@ Runner setupIngest(CLI::App& command, const Globals& globals) {
         throw UsageError("--exposures applies to one view, but the photos form " +
                          std::to_string(capture.views.size()) + " views");
       }
-      ingest::setExposures(capture.views[0], exposures, "--exposures");  // checked below
+      ingest::View& view = capture.views[0];
+      if (!givenExposure.empty()) {
+        for (size_t i = 0; i < view.shots.size(); ++i)
+          exposures[i] = givenExposure[view.shots[i].file];
+      }
+      ingest::setExposures(view, exposures, "--exposures");  // checked below
+      // The bracket by increasing exposure, as grouping orders it.
+      std::stable_sort(
+          view.shots.begin(), view.shots.end(),
+          [](const ingest::Shot& a, const ingest::Shot& b) { return *a.exposure < *b.exposure; });
     }
 
     // The table: one line per photo, as found.

@@ -502,10 +502,13 @@ SimulatedCapture simulateCapture(const lighting::Environment& env, const Virtual
       exif.focalPlaneResolutionUnit = 3;
       exif.cameraMake = p.make;
       exif.cameraModel = p.model;
-      // One second between shots, half a minute between views, from 2024-06-01 12:00:00.
+      // One second between shots, half a minute between views, from 2024-06-01 12:00:00 (360
+      // views end three hours later: the minutes carry into the hours, as they did not past
+      // 12:59, and 12:62:00 is no time).
       const int seconds = int(vi) * 30 + b;
       char when[40];
-      std::snprintf(when, sizeof when, "2024:06:01 12:%02d:%02d", seconds / 60, seconds % 60);
+      std::snprintf(when, sizeof when, "2024:06:01 %02d:%02d:%02d", 12 + seconds / 3600,
+                    seconds / 60 % 60, seconds % 60);
       exif.dateTimeOriginal = when;
     }
   }

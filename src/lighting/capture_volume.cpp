@@ -33,12 +33,14 @@ void CaptureProxy::validate() const {
     return std::abs(v.x) <= kLargest && std::abs(v.y) <= kLargest && std::abs(v.z) <= kLargest;
   };
   if (!finite(capturePoint) || !within(capturePoint))
-    throw Error("lighting", "the capture point must be finite, within 1000 km of the camera");
+    throw Error("lighting",
+                "the capture point must be finite, each of its coordinates within 1000 km of the "
+                "ground point below the plate camera");
   if ((shape == Shape::Box && (!within(boxMin) || !within(boxMax))) ||
       (shape == Shape::Sphere && radius > kLargest)) {
     throw Error("lighting",
-                "surroundings more than 1000 km across: use a distant environment (no --room, "
-                "no --env-radius)");
+                "surroundings reaching more than 1000 km from the ground point below the plate "
+                "camera: use a distant environment (no --room, no --env-radius)");
   }
   switch (shape) {
     case Shape::Distant:
@@ -49,10 +51,12 @@ void CaptureProxy::validate() const {
         throw Error("lighting", "the room must have a positive width, height and depth");
       }
       if (!contains(capturePoint)) {
-        char s[300];
+        char s[640];
         std::snprintf(s, sizeof s,
                       "the capture point (%g, %g, %g) is not inside the room (x %g..%g, y %g..%g, "
-                      "z %g..%g m): parallax needs the camera inside",
+                      "z %g..%g m): parallax needs the camera inside (without --capture-at it is "
+                      "the plate camera's position: give a taller or larger room, or "
+                      "--capture-at)",
                       capturePoint.x, capturePoint.y, capturePoint.z, boxMin.x, boxMax.x, boxMin.y,
                       boxMax.y, boxMin.z, boxMax.z);
         throw Error("lighting", s);
@@ -64,6 +68,15 @@ void CaptureProxy::validate() const {
                     "the environment's radius (--env-radius) must be a positive number of metres, "
                     "got " +
                         numberText(radius));
+      // As for a room: the photos were taken above the ground the object stands on.
+      if (capturePoint.y < 0.0) {
+        char s[200];
+        std::snprintf(s, sizeof s,
+                      "the capture point (%g, %g, %g) is below the ground (y < 0): the "
+                      "environment was captured above the ground the object stands on",
+                      capturePoint.x, capturePoint.y, capturePoint.z);
+        throw Error("lighting", s);
+      }
       return;
   }
 }

@@ -266,6 +266,23 @@ TEST(VirtualCamera, FilesCarryExifTheDescriptionAndTheGroundTruth) {
   EXPECT_EQ(files, 18 + 4);
 }
 
+// A shot's capture time is a time of day: 125 views half a minute apart end at 13:02, which was
+// written 12:62:00 (no time, so that ingest could not group the photos by their times).
+TEST(VirtualCamera, CaptureTimesCarryIntoTheHours) {
+  VirtualCameraParams p = tiny();
+  p.width = 16;
+  p.height = 16;
+  p.supersample = 1;
+  p.brackets = 1;
+  p.fovDegrees = 20.0;
+  p.views = 125;
+  const SimulatedCapture c =
+      simulateCapture(lighting::Environment::constant(glm::vec3(0.5f), 16), p);
+  ASSERT_EQ(c.views.size(), 125u);
+  EXPECT_EQ(c.views[1].shots[0].exif.dateTimeOriginal, "2024:06:01 12:00:30");
+  EXPECT_EQ(c.views[124].shots[0].exif.dateTimeOriginal, "2024:06:01 13:02:00");
+}
+
 TEST(VirtualCamera, BadParametersAreRefused) {
   VirtualCameraParams p = tiny();
   p.brackets = 0;

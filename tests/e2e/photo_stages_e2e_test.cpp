@@ -780,6 +780,31 @@ TEST_F(PhotoStages, BadCommandLinesExitTwoBeforeReadingAnything) {
                     "--max-gap is the EXIF grouping's");
   EXPECT_FAILS_WITH(compose("ingest --pattern 'x_{bracket}.jpg' a.jpg", dir), 2,
                     "--pattern needs a {view} placeholder");
+  // A bracket size looks at no pause: a --max-gap beside it was taken and ignored.
+  EXPECT_FAILS_WITH(compose("ingest --brackets 3 --max-gap 0.1 a.jpg", dir), 2, "give one of them");
+}
+
+// ingest --exposures takes the photos in the order given, as merge does: grouping sorts them by
+// capture time, and the list was applied in that order (the shortest exposure of three photos
+// given 3, 1, 2 went to the second).
+TEST_F(PhotoStages, IngestTakesExposuresInTheOrderOfThePhotos) {
+  makeCapture();
+  TempDir dir;
+  const CommandRun r = compose("ingest --json " + q(dir / "o.json") + " --exposures 16,1,4 " +
+                                   q(shot("yaw000_3.jpg")) + " " + q(shot("yaw000_1.jpg")) + " " +
+                                   q(shot("yaw000_2.jpg")),
+                               dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("order"), std::string::npos) << "no doubt about the order: " << r.err;
+  const ingest::Capture c = ingest::readCaptureDescription(dir / "o.json");
+  ASSERT_EQ(c.views.size(), 1u);
+  ASSERT_EQ(c.views[0].shots.size(), 3u);
+  for (const ingest::Shot& s : c.views[0].shots) {
+    const std::string name = s.file.filename().string();
+    const double want = name == "yaw000_1.jpg" ? 1.0 : name == "yaw000_2.jpg" ? 4.0 : 16.0;
+    ASSERT_TRUE(s.exposure) << name;
+    EXPECT_EQ(*s.exposure, want) << name;
+  }
 }
 
 }  // namespace

@@ -143,12 +143,15 @@ TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   COMPOSE_EXPECT_ERROR(s.validate(), "radius (--env-radius) must be a positive number");
   // Beyond 1000 km the surroundings are distant (and at 1e308 the projections overflowed).
   s.radius = 1e308;
-  COMPOSE_EXPECT_ERROR(s.validate(), "more than 1000 km across");
+  COMPOSE_EXPECT_ERROR(s.validate(), "more than 1000 km from the ground point");
   s.radius = 5e5;
   EXPECT_NO_THROW(s.validate());
+  // A sphere's capture point below the ground is refused, as a room's is (it was taken).
+  s.capturePoint = {0.0, -3.0, 0.0};
+  COMPOSE_EXPECT_ERROR(s.validate(), "the capture point (0, -3, 0) is below the ground");
   p = room();
   p.boxMax.x = 1e308;
-  COMPOSE_EXPECT_ERROR(p.validate(), "more than 1000 km across");
+  COMPOSE_EXPECT_ERROR(p.validate(), "more than 1000 km from the ground point");
   p = room();
   p.capturePoint.x = -1e300;
   COMPOSE_EXPECT_ERROR(p.validate(), "within 1000 km");
