@@ -51,15 +51,16 @@ std::vector<cv::Point3f> boardPoints(const Board& board) {
 }
 
 // Corners in OpenCV's pixel convention (centres on integers), refined; empty if not found.
-std::vector<cv::Point2f> findCorners(const cv::Mat& grey, const Board& board) {
+std::vector<cv::Point2f> findCorners(const cv::Mat& grey, const Board& board, bool bent = false) {
   std::vector<cv::Point2f> corners;
   const cv::Size size(board.columns, board.rows);
-  // The fast check first (it rejects a photo without a board at once); it also rejects a board
-  // that a fisheye lens bends strongly (none found in 72 fisheye views where OpenCV finds 13
-  // without it), so a photo it rejects is searched again without it.
+  // OpenCV's fast check rejects a photo without a board at once; it also rejects a board that a
+  // fisheye lens bends strongly (none found in 72 fisheye views where OpenCV finds 13 without
+  // it). So with a fisheye (`bent`) a photo it rejects is searched again without it: the full
+  // search is slow, and a rectilinear lens does not need it.
   const int flags = cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE;
   if (!cv::findChessboardCorners(grey, size, corners, flags | cv::CALIB_CB_FAST_CHECK) &&
-      !cv::findChessboardCorners(grey, size, corners, flags))
+      !(bent && cv::findChessboardCorners(grey, size, corners, flags)))
     return {};
   // The refinement window grows with the image, as squares do (11 x 11 half-size at VGA), but
   // stays within 0.45 of the closest corners' spacing: a window over the neighbouring corners
@@ -85,57 +86,42 @@ std::vector<cv::Point2f> findCorners(const cv::Mat& grey, const Board& board) {
   return corners;
 }
 
-// A board with a column or a row more than `board` in the photo, of which `corners` (board's,
-// found and refined) are part: OpenCV finds part of a larger board when asked for a smaller one.
-// It also "finds" a larger board along a board's printed edge (10x6 on the 9x6 board of the
-// opencv-doc photo left12, 8x7 on left05's when asked for 8x6): such a row or column does not
-// continue the grid. So each corner beyond `corners` must lie within 8 % of a square of where
-// the three before it along its line put it (quadratic extrapolation: perspective and the lens's
-// distortion bend the spacing smoothly). On the opencv-doc photos the corners of real larger
-// boards lie 1-4 % of a square from it, the edges' 14-44 %.
-std::optional<cv::Size> largerBoard(const cv::Mat& grey, const Board& board,
-                                    const std::vector<cv::Point2f>& corners) {
+// A board with a column or a row more than `board` in the photo: OpenCV finds part of a larger
+// board when asked for a smaller one. It also "finds" a larger board along a board's printed
+// edge (10x6 on the 9x6 board of the opencv-doc photo left12, 8x7 on left05's when asked for
+// 8x6): such a row or column does not continue the grid. So both end lines of the larger board
+// (its first and last column, or row) must continue it: each corner within 8 % of a square, at
+// the median, of where the three before it along its line put it (quadratic extrapolation:
+// perspective and the lens's distortion bend the spacing smoothly; linear where the board is
+// three deep). On the opencv-doc photos the corners of real larger boards lie 1-4 % of a square
+// from it, the edges' 14-44 %.
+std::optional<cv::Size> largerBoard(const cv::Mat& grey, const Board& board) {
   for (const bool column : {true, false}) {
     Board larger = board;
     (column ? larger.columns : larger.rows) += 1;
     const std::vector<cv::Point2f> found = findCorners(grey, larger);
     if (found.empty()) continue;
     const int C = larger.columns, R = larger.rows;
-    auto at = [&](int r, int c) { return found[size_t(r * C + c)]; };
-    auto known = [&](const cv::Point2f& p) {
-      for (const cv::Point2f& q : corners)
-        if (cv::norm(p - q) < 2.0) return true;
-      return false;
-    };
-    // The new line: the first or the last column (row); every other corner one of `corners`.
-    int line = -1;
-    for (const int candidate : {0, column ? C - 1 : R - 1}) {
-      bool others = true, all = true;
-      for (int r = 0; r < R; ++r)
-        for (int c = 0; c < C; ++c) {
-          const bool onLine = (column ? c : r) == candidate;
-          const bool isKnown = known(at(r, c));
-          if (onLine && isKnown) all = false;
-          if (!onLine && !isKnown) others = false;
-        }
-      if (others && all) line = candidate;
-    }
-    if (line < 0) continue;
-    const int step = line == 0 ? 1 : -1;
     const int n = column ? R : C, depth = column ? C : R;
     if (depth < 3) continue;  // too short to tell
-    std::vector<double> off;
-    for (int k = 0; k < n; ++k) {
-      auto point = [&](int i) {  // i steps in from the new line
-        return column ? at(k, line + i * step) : at(line + i * step, k);
-      };
-      const cv::Point2f p1 = point(1), p2 = point(2);
-      // Linear where the board is only three corners deep.
-      const cv::Point2f predicted = depth >= 4 ? 3.0f * p1 - 3.0f * p2 + point(3) : 2.0f * p1 - p2;
-      off.push_back(cv::norm(predicted - point(0)) / std::max(1e-6, cv::norm(p1 - p2)));
+    auto at = [&](int r, int c) { return found[size_t(r * C + c)]; };
+    bool continues = true;
+    for (const int line : {0, depth - 1}) {
+      const int step = line == 0 ? 1 : -1;
+      std::vector<double> off;
+      for (int k = 0; k < n; ++k) {
+        auto point = [&](int i) {  // i steps in from the end line
+          return column ? at(k, line + i * step) : at(line + i * step, k);
+        };
+        const cv::Point2f p1 = point(1), p2 = point(2);
+        const cv::Point2f predicted =
+            depth >= 4 ? 3.0f * p1 - 3.0f * p2 + point(3) : 2.0f * p1 - p2;
+        off.push_back(cv::norm(predicted - point(0)) / std::max(1e-6, cv::norm(p1 - p2)));
+      }
+      std::nth_element(off.begin(), off.begin() + ptrdiff_t(off.size() / 2), off.end());
+      continues = continues && off[off.size() / 2] < 0.08;
     }
-    std::nth_element(off.begin(), off.begin() + ptrdiff_t(off.size() / 2), off.end());
-    if (off[off.size() / 2] < 0.08) return cv::Size(C, R);
+    if (continues) return cv::Size(C, R);
   }
   return std::nullopt;
 }
@@ -240,11 +226,11 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
   size_t repeated = 0;  // photos of a view another photo shows
   for (size_t i = 0; i < photos.size(); ++i) {
     report(progress, "calib", double(i) / double(photos.size() + 1));
-    auto corners = findCorners(grey8(*photos[i].image), board);
+    auto corners =
+        findCorners(grey8(*photos[i].image), board, params.model == Projection::Equidistant);
     if (corners.empty()) {
       out.rejected.push_back(photos[i].file);
     } else {
-      const std::vector<cv::Point2f> shown = corners;  // in the photo as shown
       if (photos[i].orientation != 1)
         for (cv::Point2f& c : corners) c = toSensor(c, photos[i].orientation);
       // The same view twice (a photo copied, a burst of a still camera) adds nothing the
@@ -270,7 +256,7 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
       // A board with a row or a column more also holds the one asked for: OpenCV finds part of
       // it, and the calibration is plausible but not what the photos show. Checked once.
       if (out.used.size() == 1) {
-        if (const auto larger = largerBoard(grey8(*photos[i].image), board, shown)) {
+        if (const auto larger = largerBoard(grey8(*photos[i].image), board)) {
           out.notes.push_back(photos[i].file.filename().string() + " shows a board of " +
                               std::to_string(larger->width) + "x" + std::to_string(larger->height) +
                               " inner corners, more than --board " + board.name() +
@@ -400,7 +386,7 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
                          std::to_string(lensIn.height) + ") was scaled to the plate's size");
   pose.lens = lens;
   const cv::Mat grey = grey8(plate);
-  const auto corners = findCorners(grey, board);
+  const auto corners = findCorners(grey, board, lens.projection == Projection::Equidistant);
   if (corners.empty()) {
     throw Error(kStage,
                 "no " + board.name() +
@@ -409,7 +395,7 @@ PlatePose estimatePlatePose(const Image& plate, const fs::path& file, const Lens
   }
   // Part of a larger board is a frame that does not stand where the board does: shifted by
   // squares, or turned half round (a 9x6 board taken as 7x6 put the camera at -x, -z).
-  if (const auto larger = largerBoard(grey, board, corners)) {
+  if (const auto larger = largerBoard(grey, board)) {
     throw Error(kStage,
                 "the plate shows a board of " + std::to_string(larger->width) + "x" +
                     std::to_string(larger->height) + " inner corners, more than --board " +

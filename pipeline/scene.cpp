@@ -34,10 +34,19 @@ const StageParameter& findParameter(const Stage& stage,
 
 // The path as the operating system finds it: symbolic links followed before a ".." is taken
 // (proj/../in, proj a link to store/a/proj, is store/a/in, not in), as far as the path exists.
-fs::path physical(const fs::path& path) {
+// A file that is itself a link stays the link (a mesh's material library and textures are found
+// beside the name it was given); `folder` resolves the last name too.
+fs::path physical(const fs::path& path, bool folder = false) {
+  const fs::path absolute = fs::absolute(path).lexically_normal();
+  const fs::path name = absolute.filename();
+  if (folder || name.empty() || name == "." || name == "..") {
+    std::error_code ec;
+    fs::path resolved = fs::weakly_canonical(absolute, ec);
+    return ec ? absolute : resolved;
+  }
   std::error_code ec;
-  fs::path resolved = fs::weakly_canonical(fs::absolute(path), ec);
-  return ec ? fs::absolute(path).lexically_normal() : resolved;
+  const fs::path parent = fs::weakly_canonical(fs::absolute(path).parent_path(), ec);
+  return ec ? absolute : parent / name;
 }
 
 void setOne(ComposeJob& job, const Stage& stage, const std::string& name, nlohmann::json value,
@@ -65,7 +74,7 @@ nlohmann::ordered_json sceneFromJob(const ComposeJob& job, const fs::path& folde
   // A scene file named without a folder ("x.json") lies in the working folder. Paths are taken
   // as the operating system finds them, links followed: the relative path from the scene's true
   // folder is the one that leads to the file, however the scene is reached later.
-  const fs::path base = physical(folder.empty() ? fs::path(".") : folder);
+  const fs::path base = physical(folder.empty() ? fs::path(".") : folder, true);
   const ComposeJob defaults;
   for (const auto& stage : stages()) {
     nlohmann::ordered_json values = nlohmann::ordered_json::object();

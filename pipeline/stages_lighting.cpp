@@ -328,13 +328,17 @@ class PrecomputeStage final : public Stage {
                       "%.2f) m; surroundings: ",
                       centre.x, centre.y, centre.z) +
                proxy.describe());
-      // The object is inside the surroundings, or it would show through their walls.
+      // The object is inside the surroundings, or it would show through their walls. Its
+      // corners are taken a millionth of its size towards its centre: it stands on the floor
+      // (y = 0, the room's floor too), which is not outside.
       bool inside = true;
+      const glm::dvec3 middle = 0.5 * glm::dvec3(mesh.boundsMin + mesh.boundsMax);
       for (int corner = 0; corner < 8; ++corner) {
         const glm::dvec3 local((corner & 1) ? mesh.boundsMax.x : mesh.boundsMin.x,
                                (corner & 2) ? mesh.boundsMax.y : mesh.boundsMin.y,
                                (corner & 4) ? mesh.boundsMax.z : mesh.boundsMin.z);
-        inside = inside && proxy.contains(glm::dvec3(g.worldFromObject * glm::dvec4(local, 1.0)));
+        const glm::dvec3 in = local + 1e-6 * (middle - local);
+        inside = inside && proxy.contains(glm::dvec3(g.worldFromObject * glm::dvec4(in, 1.0)));
       }
       if (!proxy.contains(centre)) {
         ctx.note(
@@ -606,8 +610,8 @@ class GroundStage final : public Stage {
   // its first ray as one of its strata; 6: points placed coarse to fine (render/ground.h);
   // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses;
   // 8: keyed by the boundary rays (--shadow-params boundary), which the ground's points take;
-  // 9: keyed by every shadow parameter
-  static constexpr int kVersion = 9;
+  // 9: keyed by every shadow parameter; 10: a band of ground a few rows high sampled row by row
+  static constexpr int kVersion = 10;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

@@ -13,11 +13,27 @@
 
 namespace compose {
 
+// A reader of JSON events that takes every value and stops at a parse error (the parser says
+// why): the readers below override what they look at.
+struct JsonEvents : nlohmann::json_sax<nlohmann::json> {
+  bool null() override { return true; }
+  bool boolean(bool) override { return true; }
+  bool number_integer(number_integer_t) override { return true; }
+  bool number_unsigned(number_unsigned_t) override { return true; }
+  bool number_float(number_float_t, const string_t&) override { return true; }
+  bool string(string_t&) override { return true; }
+  bool binary(binary_t&) override { return true; }
+  bool key(string_t&) override { return true; }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    return false;
+  }
+};
+
 // The first key that an object of the JSON `text` holds twice, with the keys that lead to it
 // ("stages.render.scale"; an array's elements as "[]"); empty when none, or when `text` is not
 // JSON (the parser says why).
 inline std::string repeatedJsonKey(const std::string& text) {
-  struct Finder : nlohmann::json_sax<nlohmann::json> {
+  struct Finder : JsonEvents {
     struct Level {
       bool object = false;
       std::set<std::string> keys;
@@ -34,13 +50,6 @@ inline std::string repeatedJsonKey(const std::string& text) {
       }
       return p + (p.empty() ? "" : ".") + last;
     }
-    bool null() override { return true; }
-    bool boolean(bool) override { return true; }
-    bool number_integer(number_integer_t) override { return true; }
-    bool number_unsigned(number_unsigned_t) override { return true; }
-    bool number_float(number_float_t, const string_t&) override { return true; }
-    bool string(string_t&) override { return true; }
-    bool binary(binary_t&) override { return true; }
     bool start_object(std::size_t) override {
       levels.push_back({true, {}, {}});
       return true;
@@ -66,9 +75,6 @@ inline std::string repeatedJsonKey(const std::string& text) {
       levels.pop_back();
       return true;
     }
-    bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
-      return false;
-    }
   } finder;
   nlohmann::json::sax_parse(text, &finder, nlohmann::json::input_format_t::json, false);
   return finder.found;
@@ -83,22 +89,14 @@ inline constexpr size_t kMaxJsonDepth = 256;
 // anything; stops at the first level too many). False for text that is not JSON: the parser says
 // why.
 inline bool jsonNestedDeeperThan(const std::string& text, size_t limit = kMaxJsonDepth) {
-  struct Depth : nlohmann::json_sax<nlohmann::json> {
+  struct Depth : JsonEvents {
     size_t limit = 0, depth = 0;
     bool deeper = false;
     bool enter() {
       deeper = ++depth > limit;
       return !deeper;
     }
-    bool null() override { return true; }
-    bool boolean(bool) override { return true; }
-    bool number_integer(number_integer_t) override { return true; }
-    bool number_unsigned(number_unsigned_t) override { return true; }
-    bool number_float(number_float_t, const string_t&) override { return true; }
-    bool string(string_t&) override { return true; }
-    bool binary(binary_t&) override { return true; }
     bool start_object(std::size_t) override { return enter(); }
-    bool key(string_t&) override { return true; }
     bool end_object() override {
       --depth;
       return true;
@@ -107,9 +105,6 @@ inline bool jsonNestedDeeperThan(const std::string& text, size_t limit = kMaxJso
     bool end_array() override {
       --depth;
       return true;
-    }
-    bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
-      return false;
     }
   } counter;
   counter.limit = limit;

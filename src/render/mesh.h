@@ -120,7 +120,7 @@ struct Material {
   // texture's) of what lies behind it. The camera's rays go on through it layer by layer, shadow
   // rays carry 1 - alpha through it, and boolean queries find it with a probability of alpha
   // (Mesh::passes; embree_scene.h). Where alpha is 0 it is not there at all. Seen from
-  // both sides: loading gives each of its triangles a back side of its own (addBackSides).
+  // both sides: the pipeline gives each of its triangles a back side of its own (addBackSides).
   bool blend = false;
   // Rays can pass through the surface somewhere (MASK or BLEND).
   bool cutOut() const { return alphaCutoff >= 0.0f || blend; }
@@ -156,8 +156,9 @@ struct Mesh {
   std::vector<float> alphas;
   std::vector<uint32_t> triangleMaterial;  // one per triangle, or empty (all material 0)
   // Per triangle, or empty when none has a back side of its own (addBackSides): 0 for a
-  // triangle that rays meet from either side, kFrontSide for one met from its front only because
-  // the triangle after the mesh's others, kBackSide, stands for its back.
+  // triangle that rays meet from either side; kFrontSide for one that rays meet from its front
+  // only, its back being a triangle of its own, appended after the mesh's others and marked
+  // kBackSide.
   std::vector<uint8_t> sides;
   static constexpr uint8_t kFrontSide = 1, kBackSide = 2;
   std::vector<Material> materials;

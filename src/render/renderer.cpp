@@ -124,7 +124,8 @@ struct PixelSurfaces {
 // Marks the pixels of the edges across which a pixel's coverage or shading can jump
 // (PixelSurfaces::edges), points every tenth of a pixel along each (clipped to the rectangle),
 // and the pixels within a twentieth of a pixel of each point. Corners are identified by position
-// (vertices split for normals or texture coordinates are one corner). An edge is marked when:
+// (vertices split for normals or texture coordinates are one corner) and side (a back side's own
+// vertices, Mesh::sides, are corners of their own). An edge is marked when:
 // - it is a contour: its two triangles' third corners project on the same side of it (one folds
 //   behind the other as seen from the camera; this holds whatever their winding), or it has one
 //   triangle (a boundary) or more than two;

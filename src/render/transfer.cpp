@@ -120,7 +120,8 @@ void appendGrid(const Mesh& mesh, SurfacePoints& out, size_t t, int L) {
       const float l = glm::length(in);
       in = l > 0.0f ? in / l : glm::vec3(0.0f);
     }
-    out.inward.push_back(in);
+    // Only beside a step for every earlier point (SurfacePoints::inward: empty is none).
+    if (out.inward.size() + 1 == out.positions.size()) out.inward.push_back(in);
   });
 }
 
@@ -141,7 +142,7 @@ void TransferParams::validate() const {
 std::string TransferParams::key() const {
   return "grid=" + std::to_string(grid) + " order=" + std::to_string(order) +
          " boundary=" + std::to_string(boundaryRays) + " sh=" + std::to_string(shBands) +
-         " seed=" + std::to_string(seed) + " lift=1e-4 inward frame=longitude" +
+         " seed=" + std::to_string(seed) + " lift=1e-4 inward=half frame=longitude" +
          (shBands > 0 ? " sh-projection=cells" : "") + (selfOcclusion ? "" : " no-self-occlusion");
 }
 
@@ -226,7 +227,7 @@ SurfacePoints surfacePoints(const Mesh& mesh, float maxEdgeFraction, size_t budg
       const float cosHalf = 0.5f * glm::length(sum);
       if (!(cosHalf > 1e-6f)) continue;
       const float sinHalf = std::sqrt(std::max(0.0f, 1.0f - cosHalf * cosHalf));
-      out.inward[v[k]] += sum * (sinHalf / cosHalf);  // 2 sin(Δ/2) along the bisector, halved
+      out.inward[v[k]] += sum * (0.5f * sinHalf / cosHalf);  // half of 2 sin(Δ/2), bisector
     }
   }
   for (size_t i = 0; i < out.inward.size(); ++i) {

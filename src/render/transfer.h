@@ -248,9 +248,10 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
 inline constexpr char kTransferCacheMagic[] = "COMPVISB";
 
 // Visibility of every surface point of `mesh` against the mesh itself. Rays leave each point
-// from a spot lifted by 1e-4 of the mesh's size along its normal. `scene` is the mesh's own
-// (EmbreeScene(mesh.positions, mesh.indices)); without it one is built. With `ground`, rays that
-// miss the object and go down count the ground's open(g) (GroundContact).
+// from a spot lifted by 1e-4 of the mesh's size (SurfacePoints::origin). `scene` is the mesh's
+// own (EmbreeScene(mesh): built from the positions and indices alone it would not know which
+// triangles are met from their front only, Mesh::sides); without it one is built. With `ground`,
+// rays that miss the object and go down count the ground's open(g) (GroundContact).
 VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
                                const SurfacePoints& points, const TransferParams& params,
                                const Progress& progress = {},

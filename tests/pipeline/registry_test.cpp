@@ -327,6 +327,12 @@ TEST(Registry, ScenePathsFollowSymbolicLinks) {
       }
     }
   }
+  // A file that is itself a link keeps its name (an OBJ's material library and textures are
+  // found beside the name it was given, not beside its target).
+  fs::create_symlink(dir / "in" / "plate.jpg", dir / "in" / "linked.jpg");
+  job.plate = dir / "in" / "linked.jpg";
+  writeText(dir / "proj" / "l.json", sceneFromJob(job, dir / "proj").dump(2));
+  EXPECT_EQ(loadScene(dir / "proj" / "l.json").plate.filename(), "linked.jpg");
   // A file name that is not UTF-8 (Latin-1's café) cannot be written into JSON: the parameter
   // is named (the JSON library's exception was the message, naming nothing).
   job.plate = dir / "caf\xe9.jpg";
