@@ -98,6 +98,9 @@ void cutoutFilter(const RTCFilterFunctionNArguments* args) {
       }
       continue;
     }
+    // An opaque mesh is here for its one-sided triangles alone: nothing else to decide, and no
+    // ray's random number to hash.
+    if (!mesh->hasCutouts()) continue;
     float xi;
     if (id == kLayered) {
       xi = 0.0f;  // met wherever it is there at all
