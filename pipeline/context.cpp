@@ -146,9 +146,9 @@ const Geometry& Context::geometry() {
                       " (another aspect ratio: another framing, or cropped): estimate the pose "
                       "on this plate (compose calib pose)",
                   job.poseFile);
-    note("the pose was estimated on a " + std::to_string(poseWidth) + "x" +
-         std::to_string(poseHeight) + " plate; this one is " + std::to_string(camera.width) + "x" +
-         std::to_string(camera.height) + ": taken as the same shot resized");
+    runNote("the pose was estimated on a " + std::to_string(poseWidth) + "x" +
+            std::to_string(poseHeight) + " plate; this one is " + std::to_string(camera.width) +
+            "x" + std::to_string(camera.height) + ": taken as the same shot resized");
   }
   Geometry g{camera};
   {
@@ -168,7 +168,7 @@ const Geometry& Context::geometry() {
               " px; the EXR keeps the ratio, the display image shows the stored pixels";
     if (options.lens == std::nullopt && !options.focal35mm && !plate.info.focalLength35mm)
       said += "; give --focal35 or --calib";
-    note(said);
+    runNote(said);
   }
   try {
     g.worldFromObject = calib::placeOnGround(g.camera, job.placement, glm::dvec3(mesh.boundsMin),

@@ -181,6 +181,15 @@ class Context {
   // render and the ground shadow.
   Hash128 geometryKey() const;
   void note(std::string text) { notes.push_back(std::move(text)); }
+  // A note about this run rather than about one stage's outputs: its own caching (an entry found
+  // damaged, one that could not be written), or what the context works out for whichever stage
+  // asks first (the plate camera). Said now, and not kept with a stage's outputs for the runs that
+  // reuse them.
+  void runNote(std::string text) {
+    runNotes.insert(notes.size());
+    notes.push_back(std::move(text));
+  }
+  std::set<size_t> runNotes;  // which of `notes` are run notes
 
   // The world as the plate and the mesh place it (needs the plate and the mesh).
   const Geometry& geometry();

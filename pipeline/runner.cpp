@@ -48,7 +48,22 @@ struct Planned {
   std::vector<StageRecord> records;
   std::vector<std::optional<StageCache>> entries;  // per stage: its cache entry, if it is cached
   std::vector<std::string> problems;  // per stage: what is wrong with its entry (planning only)
+  // Per stage reused from the cache: the notes its run made (kept in the entry), said again in
+  // their place among the stages' notes.
+  std::vector<std::vector<std::string>> replay;
 };
+
+// The notes an entry keeps (StageCache::meta()["notes"]); none when it keeps none or they are
+// not a list of strings.
+std::vector<std::string> notesKeptIn(const nlohmann::json& meta) {
+  if (!meta.is_object() || !meta.contains("notes") || !meta["notes"].is_array()) return {};
+  std::vector<std::string> notes;
+  for (const nlohmann::json& n : meta["notes"]) {
+    if (!n.is_string()) return {};
+    notes.push_back(n.get<std::string>());
+  }
+  return notes;
+}
 
 // The entry of a cached stage: keyed by the keys of all the outputs this job has.
 std::optional<StageCache> entryFor(const Context& ctx, const Stage& stage) {
@@ -83,6 +98,7 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
   p.records.resize(list.size());
   p.entries.resize(list.size());
   p.problems.resize(list.size());
+  p.replay.resize(list.size());
 
   // Which artefacts the wanted ones can come from, through the stages that are not read from a
   // file: a stage none of whose outputs is among them is not part of this run.
@@ -148,6 +164,11 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
     if (wanted.empty()) {
       r.state = StageState::Skipped;
       r.reason = "nothing needs its outputs: the stages that use them are reused from the cache";
+      // What it said when it made what those stages were made from (the room warning of the
+      // lighting a reused render was lit by), from its entry's header alone.
+      if (load)
+        if (const std::optional<StageCache> entry = entryFor(ctx, stage))
+          p.replay[i] = notesKeptIn(entry->peekMeta());
       continue;
     }
     p.entries[i] = entryFor(ctx, stage);
@@ -171,9 +192,12 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
           reused = false;
           why = std::string(" (") + e.what() + ")";
         }
-        if (!reused) {
+        if (reused) {
+          p.replay[i] = notesKeptIn(entry.meta());
+        } else {
           ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() +
                    ") does not fit this job" + why + ": ignored, computed again and rewritten");
+          entry.clear();  // rewritten from nothing of what it held
         }
       } else if (!entry.problem().empty()) {
         ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
@@ -279,10 +303,15 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   std::vector<std::pair<size_t, std::future<Stored>>> storing;
   for (size_t i = 0; i < list.size(); ++i) {
     StageRecord& r = p.records[i];
+    // A stage reused from the cache, or not needed because what it fed is, says again what it
+    // said when it ran (a warning about the placement, a merge's clipped pixels), in the order
+    // the stages come.
+    for (std::string& n : p.replay[i]) ctx.note(std::move(n));
     if (r.state != StageState::Run) continue;
     const Stage& stage = *list[i];
     if (i > 0) resetPeak();
     const auto start = std::chrono::steady_clock::now();
+    const size_t firstNote = ctx.notes.size();
     try {
       r.reason = stage.run(ctx);
     } catch (const MemoryShortfall& e) {
@@ -298,6 +327,11 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
                       stage.memoryAdvice());
     }
     if (p.entries[i]) {
+      // Kept with the outputs, for the runs that reuse them (stores add to the entry's meta).
+      std::vector<std::string> kept;
+      for (size_t n = firstNote; n < ctx.notes.size(); ++n)
+        if (!ctx.runNotes.count(n)) kept.push_back(ctx.notes[n]);
+      p.entries[i]->meta()["notes"] = std::move(kept);
       if (stage.storesWhileLaterStagesRun()) {
         storing.emplace_back(i, std::async(std::launch::async, [&store, &stage, &ctx, i] {
                                return store(stage, ctx, i);

@@ -58,9 +58,9 @@ struct ShadowResult {
   // The bright sources whose per-point visibility `irradiance` holds (environment frame), for the
   // renderer to trace where their shadow edges cross a triangle; empty for ambient occlusion.
   std::vector<lighting::LightSource> sources;
-  std::vector<float> occlusion;  // per-point ambient occlusion
-  std::string reason;            // what ran or was reused, for the stage report
-  std::vector<std::string> notes;
+  std::vector<float> occlusion;    // per-point ambient occlusion
+  std::string reason;              // what ran or was reused, for the stage report
+  std::vector<std::string> notes;  // what was wrong with the visibility cache, for the user
 };
 
 // The cache folders under a cache root.

@@ -36,6 +36,62 @@ std::array<uint64_t, 2> checksum(const std::string& header,
   for (const auto& [name, values] : arrays) h.combine(checksumFloats(values));
   return {h.a, h.b};
 }
+
+// An entry's fixed part read and checked: its size, the magic, the header's length and JSON, the
+// stage and the key it names (`key` empty: any). `problem` says what is wrong, else is empty.
+struct EntryHeader {
+  uint64_t size = 0;
+  uint64_t end = 0;  // where the arrays begin
+  std::string text;
+  nlohmann::json json;
+  std::string problem;
+};
+
+EntryHeader readHeader(const EntryFile& file, const std::string& stage, const std::string& key) {
+  EntryHeader h;
+  const auto invalid = [&](std::string why) {
+    h.problem = std::move(why);
+    return h;
+  };
+  const auto cannotRead = [&]() {
+    return invalid(errno != 0 ? std::string("cannot be read: ") + std::strerror(errno)
+                              : std::string("cannot be read to the end"));
+  };
+  // The size first; every field is then checked against the bytes actually present.
+  bool regular = false;
+  if (!file.stat(h.size, regular)) return cannotRead();
+  if (!regular) return invalid("is not a regular file");
+  if (h.size == 0) return invalid("is empty (0 bytes)");
+  char magic[8] = {};
+  if (h.size < sizeof magic + 8 || !file.readAt(magic, sizeof magic, 0))
+    return invalid("is truncated (" + std::to_string(h.size) + " bytes, shorter than its header)");
+  if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
+    if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
+      return invalid("is zeroed (no header)");
+    if (std::memcmp(magic, kMagic, 7) == 0) {
+      return invalid(std::string("is of format version '") + magic[7] +
+                     "', this compose reads version '" + kMagic[7] + "'");
+    }
+    return invalid("is not a compose stage cache entry (unknown header)");
+  }
+  uint64_t length = 0;
+  if (!file.readAt(&length, sizeof length, sizeof magic)) return cannotRead();
+  if (length > kMaxHeader) return invalid("has a damaged header (header length)");
+  h.end = sizeof magic + 8 + length;
+  if (h.size < h.end + kChecksumBytes)
+    return invalid("is truncated (" + std::to_string(h.size) + " bytes)");
+  h.text.assign(length, '\0');
+  if (!file.readAt(h.text.data(), length, sizeof magic + 8)) return cannotRead();
+  h.json = nlohmann::json::parse(h.text, nullptr, false);
+  if (h.json.is_discarded() || !h.json.is_object())
+    return invalid("has a damaged header (not JSON)");
+  const auto it = h.json.find("stage"), keyIt = h.json.find("key");
+  if (it == h.json.end() || !it->is_string() || it->get<std::string>() != stage ||
+      (!key.empty() &&
+       (keyIt == h.json.end() || !keyIt->is_string() || keyIt->get<std::string>() != key)))
+    return invalid("holds another stage's or key's outputs than its name says");
+  return h;
+}
 }  // namespace
 
 StageCache::StageCache(fs::path folder, std::string stage, std::string key)
@@ -57,9 +113,23 @@ bool StageCache::exists() const {
 
 bool StageCache::verify() {
   const bool ok = open();
+  clear();
+  return ok;
+}
+
+nlohmann::json StageCache::peekMeta() const {
+  std::error_code ec;
+  if (!enabled() || !fs::exists(path_, ec)) return nullptr;
+  const EntryFile file(path_);
+  if (!file.isOpen()) return nullptr;
+  EntryHeader h = readHeader(file, stage_, anyKey_ ? std::string() : key_);
+  if (!h.problem.empty() || !h.json.contains("meta")) return nullptr;
+  return std::move(h.json["meta"]);
+}
+
+void StageCache::clear() {
   arrays_.clear();
   meta_ = nlohmann::json::object();
-  return ok;
 }
 
 bool StageCache::open() {
@@ -79,41 +149,15 @@ bool StageCache::open() {
                               : std::string("cannot be read to the end"));
   };
   const auto readAt = [&](void* to, size_t n, uint64_t at) { return file.readAt(to, n, at); };
-  // The size first; every field is then checked against the bytes actually present.
-  uint64_t size = 0;
-  bool regular = false;
-  if (!file.stat(size, regular)) return cannotRead();
-  if (!regular) return invalid("is not a regular file");
-  if (size == 0) return invalid("is empty (0 bytes)");
-  char magic[8] = {};
-  if (size < sizeof magic + 8 || !readAt(magic, sizeof magic, 0))
-    return invalid("is truncated (" + std::to_string(size) + " bytes, shorter than its header)");
-  if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
-    if (std::all_of(std::begin(magic), std::end(magic), [](char c) { return c == 0; }))
-      return invalid("is zeroed (no header)");
-    if (std::memcmp(magic, kMagic, 7) == 0) {
-      return invalid(std::string("is of format version '") + magic[7] +
-                     "', this compose reads version '" + kMagic[7] + "'");
-    }
-    return invalid("is not a compose stage cache entry (unknown header)");
-  }
-  uint64_t length = 0;
-  if (!readAt(&length, sizeof length, sizeof magic)) return cannotRead();
-  if (length > kMaxHeader) return invalid("has a damaged header (header length)");
-  const uint64_t headerEnd = sizeof magic + 8 + length;
-  if (size < headerEnd + kChecksumBytes)
-    return invalid("is truncated (" + std::to_string(size) + " bytes)");
-  std::string text(length, '\0');
-  if (!readAt(text.data(), length, sizeof magic + 8)) return cannotRead();
-  const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
-  if (header.is_discarded() || !header.is_object())
-    return invalid("has a damaged header (not JSON)");
+  EntryHeader h = readHeader(file, stage_, anyKey_ ? std::string() : key_);
+  if (!h.problem.empty()) return invalid(std::move(h.problem));
+  const uint64_t size = h.size, headerEnd = h.end;
+  const std::string& text = h.text;
+  const nlohmann::json& header = h.json;
   const auto text_of = [&](const char* name) {
     const auto it = header.find(name);
     return it != header.end() && it->is_string() ? it->get<std::string>() : std::string();
   };
-  if (text_of("stage") != stage_ || (!anyKey_ && text_of("key") != key_))
-    return invalid("holds another stage's or key's outputs than its name says");
   const auto arraysIt = header.find("arrays");
   if (arraysIt == header.end() || !arraysIt->is_array() || !header.contains("meta"))
     return invalid("has a damaged header (no arrays or meta)");

@@ -45,6 +45,11 @@ class StageCache {
   bool open();
   // open(), keeping nothing of the entry's contents: whether it would open.
   bool verify();
+  // The stage's meta as the entry's header holds it, without reading or checking the arrays: for
+  // what the entry says (its notes), never for its outputs. Null on a miss or a wrong header.
+  nlohmann::json peekMeta() const;
+  // Forgets what open() read (the header's meta and the arrays), for an entry to be written anew.
+  void clear();
   // Writes the entry atomically; false (nothing left behind) if it could not be written, with the
   // operating system's reason in error() ("Permission denied", "No space left on device").
   bool write() const;
@@ -54,6 +59,8 @@ class StageCache {
   // (no entry).
   const std::string& problem() const { return problem_; }
 
+  // The stage's own fields; a store adds to it (the runner keeps the notes of the stage's run
+  // under "notes").
   nlohmann::json& meta() { return meta_; }
   const nlohmann::json& meta() const { return meta_; }
 

@@ -381,7 +381,7 @@ class PrecomputeStage final : public Stage {
     if (ctx.hasKey(kShadowLighting)) {
       ctx.artefacts.shadowLighting = prepareShadowLighting(
           environment, ShadowPlan::parse(ctx.job.shadowParams), {}, ctx.progress);
-      for (std::string& n : ctx.artefacts.shadowLighting->notes) ctx.note(std::move(n));
+      for (std::string& n : ctx.artefacts.shadowLighting->notes) ctx.runNote(std::move(n));
       ctx.artefacts.shadowLighting->notes.clear();
       reason +=
           (reason.empty() ? "" : "; shadow lighting: ") + ctx.artefacts.shadowLighting->reason;
@@ -543,7 +543,7 @@ class ShadowsStage final : public Stage {
     ShadowResult r = computeSelfShadowing(
         ctx.mesh(), ctx.objectScene(), *ctx.artefacts.shadowLighting, ctx.geometry().envFromObject,
         plan, ctx.job.cache, ctx.progress, ctx.meshSummary && ctx.meshSummary->convex);
-    for (std::string& n : r.notes) ctx.note(std::move(n));
+    for (std::string& n : r.notes) ctx.runNote(std::move(n));
     r.notes.clear();
     if (r.irradiance.clamped > 0) {
       ctx.note(std::to_string(r.irradiance.clamped) +
@@ -668,8 +668,12 @@ class GroundStage final : public Stage {
   }
   bool store(const Context& ctx, StageCache& cache) const override {
     const GroundShadowResult& r = *ctx.artefacts.groundShadow;
-    cache.meta() = {{"x0", r.grid.x0}, {"y0", r.grid.y0},    {"x1", r.grid.x1},
-                    {"y1", r.grid.y1}, {"reason", r.reason}, {"hasRatio", !r.ratio.empty()}};
+    cache.meta().update({{"x0", r.grid.x0},
+                         {"y0", r.grid.y0},
+                         {"x1", r.grid.x1},
+                         {"y1", r.grid.y1},
+                         {"reason", r.reason},
+                         {"hasRatio", !r.ratio.empty()}});
     if (!r.ratio.empty()) cache.putImage("ratio", r.ratio);
     return cache.write();
   }

@@ -351,15 +351,15 @@ class RenderStage final : public Stage {
   }
   bool store(const Context& ctx, StageCache& cache) const override {
     const RenderedObject& r = *ctx.artefacts.object;
-    cache.meta() = {{"x0", r.output.x0},
-                    {"y0", r.output.y0},
-                    {"x1", r.output.x1},
-                    {"y1", r.output.y1},
-                    {"rays", r.output.rays},
-                    {"coverage", r.output.coverage},
-                    {"cardRadiance", r.cardRadiance},
-                    {"mesh", r.meshFile},
-                    {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}};
+    cache.meta().update({{"x0", r.output.x0},
+                         {"y0", r.output.y0},
+                         {"x1", r.output.x1},
+                         {"y1", r.output.y1},
+                         {"rays", r.output.rays},
+                         {"coverage", r.output.coverage},
+                         {"cardRadiance", r.cardRadiance},
+                         {"mesh", r.meshFile},
+                         {"fileOrigin", {r.fileOrigin.x, r.fileOrigin.y, r.fileOrigin.z}}});
     cache.putImage("beauty", r.output.beauty);
     cache.putImage("aovs", r.output.aovs);
     return cache.write();

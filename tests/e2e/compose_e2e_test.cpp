@@ -1358,6 +1358,30 @@ TEST_F(ComposeOutputs, ACameraInsideTheObjectIsWarnedAbout) {
   EXPECT_EQ(outside.err.find("inside the object"), std::string::npos) << outside.err;
 }
 
+// A stage reused from the cache says again what it said when it ran, and so does one not needed
+// because what it fed is reused: the same job a second time warns as the first did (the camera
+// inside the object, from the render; the object outside the room, from the lighting). It was
+// silent, and a note the context makes for whichever stage asks first is not said twice.
+TEST_F(ComposeOutputs, AJobRunAgainFromTheCacheWarnsAgain) {
+  std::string a = args((dir_ / "c").string()) + " --scale 8 --place 0.5,0.95 --room 3,3,3";
+  a.replace(a.find("--no-cache"), 10, "--cache " + quote((dir_ / "cache").string()));
+  const char* warnings[] = {"warning: the camera is inside the object",
+                            "warning: the object's centre is outside the surroundings given",
+                            "plate camera: a 35 mm equivalent focal length"};
+  const auto first = runCompose(a, dir_.path());
+  ASSERT_EQ(first.status, 0) << first.err;
+  for (const char* w : warnings) EXPECT_NE(first.err.find(w), std::string::npos) << first.err;
+  const auto second = runCompose(a, dir_.path());
+  ASSERT_EQ(second.status, 0) << second.err;
+  EXPECT_NE(stageLine(second.err, "render").find("reused"), std::string::npos) << second.err;
+  EXPECT_NE(stageLine(second.err, "precompute").find("skipped"), std::string::npos) << second.err;
+  for (const char* w : warnings) {
+    EXPECT_NE(second.err.find(w), std::string::npos) << second.err;
+    // Once, as the first run said them.
+    EXPECT_EQ(second.err.find(w), second.err.rfind(w)) << second.err;
+  }
+}
+
 TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
   EXPECT_EQ(r.status, 1);
