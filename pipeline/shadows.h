@@ -95,8 +95,13 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
 // The shadow the object casts on the ground (render/ground.h): the ratio E_with / E_without over
 // the plate pixels where it can fall, by the same transfer at ground points.
 struct GroundShadowResult {
+  // The lattice the ratio was computed on; when supersampled, its rectangle is put back in plate
+  // pixels (grid.x0 ... grid.y1) and the rest is the finer lattice's.
   render::GroundGrid grid;
   Image ratio;  // RGB over [grid.x0, grid.x1) x [grid.y0, grid.y1) of the plate; 1 = no shadow
+  // The plate's pixels were split into supersample x supersample (a small region, whose shadow
+  // changes within a pixel) and the ratio box-filtered over them.
+  int supersample = 1;
   std::string reason;
   size_t points = 0;  // ground points shaded
   int64_t rays = 0;   // rays traced for them
