@@ -1057,13 +1057,13 @@ std::vector<ImageAttribute> exifAttributes(const CaptureInfo& info) {
   if (info.exposureTime) a.push_back({"ExposureTime", *info.exposureTime});
   if (info.fNumber) a.push_back({"FNumber", *info.fNumber});
   if (info.iso) {
-    // The 16-bit tag tops out at 65535: above, ISOSpeed holds the value (Exif 2.3).
+    // The 16-bit tag tops out at 65535: above, ISOSpeed holds the value (Exif 2.3). ISOSpeed is
+    // written whatever the value: OpenImageIO 2.4's TIFF writer drops PhotographicSensitivity
+    // and keeps ISOSpeed (a TIFF of ISO 400 photos was read as ISO 100: two stops off).
     const long iso = std::lround(*info.iso);
     a.push_back({"Exif:PhotographicSensitivity", int(std::min(iso, 65535L))});
-    if (iso > 65535) {
-      a.push_back({"Exif:SensitivityType", 3});
-      a.push_back({"Exif:ISOSpeed", double(iso)});
-    }
+    a.push_back({"Exif:SensitivityType", 3});
+    a.push_back({"Exif:ISOSpeed", int(std::min(iso, long(INT32_MAX)))});
   }
   if (info.focalLengthMm) a.push_back({"Exif:FocalLength", *info.focalLengthMm});
   a.push_back({"Exif:FocalLengthIn35mmFilm",
