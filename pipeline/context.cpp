@@ -100,6 +100,18 @@ const Geometry& Context::geometry() {
                 "file replaced while compose ran?): run again",
                 job.plate);
   }
+  geometry_ = makeGeometry(plate.image.width, plate.image.height, plate.info);
+  return *geometry_;
+}
+
+void Context::checkPlacement() {
+  if (job.plate.empty() || !meshSummary) return;
+  const ingest::CaptureInfo header = ingest::readCaptureInfo(job.plate, "ingest", true);
+  const auto [width, height] = header.shownSize();
+  makeGeometry(width, height, header);
+}
+
+Geometry Context::makeGeometry(int plateWidth, int plateHeight, const ingest::CaptureInfo& info) {
   const MeshSummary& mesh = *meshSummary;
   calib::CameraOptions options = job.camera;
   std::filesystem::path lensFrom;  // the file the lens comes from, for errors about it
@@ -125,7 +137,7 @@ const Geometry& Context::geometry() {
   }
   const calib::PlateCamera camera = [&] {
     try {
-      return calib::plateCamera(plate.image.width, plate.image.height, plate.info, options);
+      return calib::plateCamera(plateWidth, plateHeight, info, options);
     } catch (const UsageError&) {
       throw;
     } catch (const Error& e) {
@@ -166,7 +178,7 @@ const Geometry& Context::geometry() {
               " times as wide as high (the plate's pixelAspectRatio): fx " +
               numberText(camera.lens.fx) + ", fy " + numberText(camera.lens.fy) +
               " px; the EXR keeps the ratio, the display image shows the stored pixels";
-    if (options.lens == std::nullopt && !options.focal35mm && !plate.info.focalLength35mm)
+    if (options.lens == std::nullopt && !options.focal35mm && !info.focalLength35mm)
       said += "; give --focal35 or --calib";
     runNote(said);
   }
@@ -193,8 +205,7 @@ const Geometry& Context::geometry() {
   glm::dmat3 rotation = glm::dmat3(g.worldFromObject);
   for (int c = 0; c < 3; ++c) rotation[c] = glm::normalize(rotation[c]);
   g.envFromObject = g.envFromWorld * glm::mat3(rotation);
-  geometry_ = g;
-  return *geometry_;
+  return g;
 }
 
 const render::Mesh& Context::mesh() {

@@ -193,6 +193,10 @@ class Context {
 
   // The world as the plate and the mesh place it (needs the plate and the mesh).
   const Geometry& geometry();
+  // Planning (--explain): the geometry as the plate's header makes it, for its errors alone (a
+  // --place above the horizon, a lens that cannot see it, a pose of another framing), as the run
+  // would give them; nothing when the job has no plate or no object.
+  void checkPlacement();
   // The geometry as a file recorded it (compose composite reads it from the object's layer).
   void setGeometry(const Geometry& g) { geometry_ = g; }
   // What ingest knows of the object (its key, bounds, size, convexity), read or cached.
@@ -206,6 +210,7 @@ class Context {
 
  private:
   std::optional<Geometry> geometry_;
+  Geometry makeGeometry(int plateWidth, int plateHeight, const ingest::CaptureInfo& info);
   std::unique_ptr<render::EmbreeScene> objectScene_;
 };
 

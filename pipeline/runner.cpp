@@ -229,6 +229,13 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
   validate(job);
   Context ctx(job, colors, {});
   Planned p = planJob(ctx, false, request);
+  // A placement the run would refuse as soon as it places the object is refused now (the plan
+  // said "run" to a --place above the horizon).
+  for (const StageRecord& r : p.records)
+    if ((r.name == "ground" || r.name == "render") && r.state == StageState::Run) {
+      ctx.checkPlacement();
+      break;
+    }
   // A cache folder the run could not write (read-only): it would say so, and cache nothing.
   std::string unwritable;
   if (!job.cache.empty()) {

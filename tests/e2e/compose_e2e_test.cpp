@@ -1382,6 +1382,25 @@ TEST_F(ComposeOutputs, AJobRunAgainFromTheCacheWarnsAgain) {
   }
 }
 
+// --explain refuses a placement the run would refuse as soon as it places the object, with the
+// run's error (it planned "run" for every stage), from the plate's header alone.
+TEST_F(ComposeOutputs, ExplainRefusesAPlacementAboveTheHorizon) {
+  const std::string above = args((dir_ / "a").string()) + " --place 0.5,0.3";
+  const auto run = runCompose(above, dir_.path());
+  const auto plan = runCompose(above + " --explain", dir_.path());
+  EXPECT_EQ(run.status, 1) << run.err;
+  EXPECT_EQ(plan.status, 1) << plan.out << plan.err;
+  const std::string error = "camera: --place 0.5,0.3 is at or above the horizon";
+  EXPECT_NE(run.err.find(error), std::string::npos) << run.err;
+  EXPECT_NE(plan.err.find(error), std::string::npos) << plan.err;
+  EXPECT_EQ(plan.out.find("render"), std::string::npos) << "no plan printed: " << plan.out;
+  // Below it: planned.
+  const auto below =
+      runCompose(args((dir_ / "b").string()) + " --place 0.5,0.8 --explain", dir_.path());
+  EXPECT_EQ(below.status, 0) << below.err;
+  EXPECT_NE(below.out.find("render"), std::string::npos) << below.out;
+}
+
 TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   const auto r = runCompose(args((dir_ / "n").string()) + " --scale 1e-6", dir_.path());
   EXPECT_EQ(r.status, 1);
