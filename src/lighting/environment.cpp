@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -30,6 +31,22 @@ void Environment::buildTables() {
     sinLon_[size_t(x)] = float(std::sin(lon));
     cosLon_[size_t(x)] = float(std::cos(lon));
   }
+}
+
+double Environment::belowOverAbove() const {
+  double sum[2] = {0.0, 0.0}, area[2] = {0.0, 0.0};  // above, below
+  for (int y = 0; y < height_; ++y) {
+    // Row y spans latitudes π(1/2 - [y, y+1]/H): above the horizon for y + 1 <= H/2.
+    const int half = 2 * (y + 1) <= height_ ? 0 : 2 * y >= height_ ? 1 : -1;
+    if (half < 0) continue;
+    double row = 0.0;
+    const float* p = texels_.data() + size_t(y) * size_t(width_) * 3;
+    for (size_t i = 0; i < size_t(width_) * 3; ++i) row += double(p[i]);
+    sum[half] += row / 3.0 * rowSolidAngle(y);
+    area[half] += double(width_) * rowSolidAngle(y);
+  }
+  if (!(sum[0] > 0.0) || !(area[1] > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+  return (sum[1] / area[1]) / (sum[0] / area[0]);
 }
 
 glm::vec3 Environment::direction(int x, int y) const {

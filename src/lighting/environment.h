@@ -92,6 +92,12 @@ class Environment {
   // longitude. Used by sampling bases; not prefiltered.
   glm::vec3 lookup(const glm::vec3& direction) const;
 
+  // The mean radiance (the mean of R, G and B) over the lower hemisphere over that over the upper
+  // one, each by solid angle (rows wholly above or below the horizon); NaN when the upper one is
+  // black. Below 1 for a map the right way up: ground lit by the sky reflects at most what falls
+  // on it (the sample maps: 0.08-0.44).
+  double belowOverAbove() const;
+
  private:
   int width_ = 0, height_ = 0;
   std::vector<float> texels_;  // RGB, row-major

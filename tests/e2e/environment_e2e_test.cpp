@@ -566,6 +566,35 @@ TEST_P(StitchFromPhotos, SixJitteredViewsWithinFivePercent) {
 INSTANTIATE_TEST_SUITE_P(SampleHdris, StitchFromPhotos,
                          ::testing::Values("courtyard", "forest", "interior", "sunset"));
 
+// A lat-long map stored upside down lit the object from below without a word: it is warned
+// about (its lower half brighter than its upper one), and the map the right way up is not.
+TEST(ComposeWithLatLongEnvironments, AnUpsideDownMapIsWarnedAbout) {
+  if (!fs::exists(sample("forest.exr")) || !fs::exists(sample("bunny.obj")))
+    GTEST_SKIP() << "samples missing";
+  TempDir dir;
+  Image plate(160, 120, 3, {"R", "G", "B"});
+  for (float& v : plate.pixels) v = 0.4f;
+  ingest::writeImage(dir / "plate.png", plate);
+  const Image forest = ingest::readImage(sample("forest.exr")).image;
+  Image flipped = forest;
+  for (int y = 0; y < forest.height; ++y)
+    for (int x = 0; x < forest.width; ++x)
+      for (int c = 0; c < forest.channels; ++c)
+        flipped.at(x, forest.height - 1 - y)[c] = forest.at(x, y)[c];
+  ingest::writeImage(dir / "flipped.exr", flipped);
+  for (const auto& [env, warned] :
+       {std::pair{dir / "flipped.exr", true}, std::pair{sample("forest.exr"), false}}) {
+    const RunResult r = run(
+        "--plate " + q(dir / "plate.png") + " --object " + q(sample("bunny.obj")) + " --env " +
+            q(env) + " --shadows off --no-shadow --samples 1 --no-cache --out " + q(dir / "out"),
+        dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_EQ(r.err.find("times as bright below its horizon as above it") != std::string::npos,
+              warned)
+        << r.err;
+  }
+}
+
 TEST(ComposeWithCubeEnvironments, CrossesAndFaceFoldersLightTheObject) {
   if (!fs::exists(sample("forest.exr")) || !fs::exists(sample("bunny.obj")))
     GTEST_SKIP() << "samples missing";

@@ -27,6 +27,27 @@ TEST(Environment, SolidAnglesSumToFourPi) {
   }
 }
 
+// Mean radiance below the horizon over that above it, each by solid angle: a map of 1 above and
+// 0.25 below gives 0.25, upside down 4, whatever the rows' solid angles; an odd number of rows
+// leaves the one across the horizon out.
+TEST(Environment, BelowOverAboveIsTheHalvesMeanRatio) {
+  for (const int h : {8, 9, 64}) {
+    Image img(2 * h, h, 3, {"R", "G", "B"});
+    Image flipped = img;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < 2 * h; ++x)
+        for (int c = 0; c < 3; ++c) {
+          const float above = c == 1 ? 3.0f : 0.0f, below = 0.25f;  // means 1 and 0.25
+          const float v = 2 * y + 1 < h ? above : 2 * y + 1 > h ? below : 100.0f;
+          img.at(x, y)[c] = v;
+          flipped.at(x, h - 1 - y)[c] = v;
+        }
+    EXPECT_NEAR(Environment::fromLatLong(img).belowOverAbove(), 0.25, 1e-12) << h;
+    EXPECT_NEAR(Environment::fromLatLong(flipped).belowOverAbove(), 4.0, 1e-12) << h;
+  }
+  EXPECT_TRUE(std::isnan(Environment::constant(glm::vec3(0.0f), 16).belowOverAbove()));
+}
+
 TEST(Environment, AxesFollowOpenExrLatLong) {
   const Environment env = Environment::constant(glm::vec3(1.0f), 64);
   const int w = env.width(), h = env.height();

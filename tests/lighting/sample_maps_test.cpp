@@ -85,6 +85,24 @@ double snrDb(const DiffuseLighting& basis, const std::vector<glm::dvec3>& refere
   return 10.0 * std::log10(signal / noise);
 }
 
+// The sample maps, the right way up, are darker below the horizon than above; upside down, more
+// than the 1.5 times at which compose warns (precompute stage).
+TEST(SampleMaps, AreDarkerBelowTheHorizonUnlessUpsideDown) {
+  for (const char* name : kMaps) {
+    Image map = loadSample(name);
+    if (map.empty()) return;
+    const double ratio = Environment::fromLatLong(map).belowOverAbove();
+    Image flipped = map;
+    for (int y = 0; y < map.height; ++y)
+      for (int x = 0; x < map.width; ++x)
+        for (int c = 0; c < 3; ++c) flipped.at(x, map.height - 1 - y)[c] = map.at(x, y)[c];
+    const double upsideDown = Environment::fromLatLong(flipped).belowOverAbove();
+    std::printf("%s: below / above the horizon %.3f, upside down %.2f\n", name, ratio, upsideDown);
+    EXPECT_LT(ratio, 0.5) << name;
+    EXPECT_GT(upsideDown, 2.0) << name;
+  }
+}
+
 TEST(DefaultLightingOnSampleMaps, AgreesWithAnIndependentBruteForceQuadrature) {
   const auto normals = compose::testing::randomNormals(150, 11);
   for (const char* name : kMaps) {
