@@ -152,9 +152,14 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
             " or pitch the camera down");
   }
   const glm::dvec3 ground = origin + dir * (-origin.y / dir.y);
-  // Depth of the ground point along the optical axis sets the world size of one pixel there.
+  // The world size of one pixel there: a rectilinear image scales with the ground point's depth
+  // along the optical axis, a fisheye's (angle = radius / f) with its distance along the ray. (A
+  // fisheye sees points more than 90° off its axis, behind the image plane: their depth is
+  // negative, and the object came out scaled by a negative number, turned inside out.)
   const glm::dvec3 axis = glm::dvec3(camera.worldFromCamera * glm::dvec4(0, 0, -1, 0));
-  const double depth = glm::dot(ground - origin, axis);
+  const double depth = camera.lens.projection == Projection::Rectilinear
+                           ? glm::dot(ground - origin, axis)
+                           : glm::length(ground - origin);
   const double worldHeight = placement.heightFraction * camera.height * depth / camera.lens.fy;
   const double meshHeight = hi.y - lo.y;
   const double meshSize = std::max({hi.x - lo.x, meshHeight, hi.z - lo.z});

@@ -190,6 +190,14 @@ class Context {
     notes.push_back(std::move(text));
   }
   std::set<size_t> runNotes;  // which of `notes` are run notes
+  // A note of a stage that is not cached about what a later, cached stage is made from (ingest's
+  // about the environment's file, whose pixels are not read again once the lighting made from
+  // them is cached): said now, and kept with that stage's outputs too.
+  void noteFor(const std::string& stage, std::string text) {
+    keptFor[stage].push_back(text);
+    notes.push_back(std::move(text));
+  }
+  std::map<std::string, std::vector<std::string>> keptFor;  // by stage
 
   // The world as the plate and the mesh place it (needs the plate and the mesh).
   const Geometry& geometry();

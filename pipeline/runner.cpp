@@ -1,6 +1,7 @@
 // The runner: plans a job over the registered stages (stage.h) and runs what it must.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -313,7 +314,9 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     // A stage reused from the cache, or not needed because what it fed is, says again what it
     // said when it ran (a warning about the placement, a merge's clipped pixels), in the order
     // the stages come.
-    for (std::string& n : p.replay[i]) ctx.note(std::move(n));
+    for (std::string& n : p.replay[i])
+      if (std::find(ctx.notes.begin(), ctx.notes.end(), n) == ctx.notes.end())
+        ctx.note(std::move(n));  // not when what it was made from said it again
     if (r.state != StageState::Run) continue;
     const Stage& stage = *list[i];
     if (i > 0) resetPeak();
@@ -335,7 +338,7 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
     }
     if (p.entries[i]) {
       // Kept with the outputs, for the runs that reuse them (stores add to the entry's meta).
-      std::vector<std::string> kept;
+      std::vector<std::string> kept = ctx.keptFor[stage.name()];
       for (size_t n = firstNote; n < ctx.notes.size(); ++n)
         if (!ctx.runNotes.count(n)) kept.push_back(ctx.notes[n]);
       p.entries[i]->meta()["notes"] = std::move(kept);

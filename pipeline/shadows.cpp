@@ -350,7 +350,7 @@ namespace {
 // ground each pixel shows, as the cube moved by a fraction of a pixel (test: GroundShadow.
 // ASmallObjectsShadowIsThePixelsAverage). A region whose every pixel the budget of points would
 // sample has its pixels split into 4 x 4 (the grid then spaces its nodes within the same budget)
-// and the ratio box-filtered: 0.97-1.02 times. A larger one is sampled a pixel or more apart
+// and the ratio box-filtered: 0.98-1.01 times. A larger one is sampled a pixel or more apart
 // anyway.
 int groundSupersampling(const render::GroundGrid& grid, const render::GroundSettings& settings) {
   const double area = double(grid.x1 - grid.x0) * double(grid.y1 - grid.y0);
@@ -414,8 +414,13 @@ GroundShadowResult computeGroundShadow(const render::Mesh& mesh, const render::E
   out.supersample = groundSupersampling(out.grid, settings);
   const calib::PlateCamera camera =
       out.supersample > 1 ? finerCamera(plateCamera, out.supersample) : plateCamera;
-  if (out.supersample > 1)
+  if (out.supersample > 1) {
     out.grid = render::groundGrid(mesh, worldFromObject, camera, worldSources, settings);
+    if (out.grid.empty()) {  // what the frame shows of the region is under a pixel's parts
+      out.reason = "no ground around the object is in view";
+      return out;
+    }
+  }
   render::TransferParams params = plan.transfer;
   params.shBands = plan.method == render::ShadowMethod::Harmonics ? plan.transfer.shBands : 0;
   // Coarse to fine: the points of each level shaded, then the cells that need it split.

@@ -217,11 +217,14 @@ class IngestStage final : public Stage {
           });
       const cubemap::LoadedEnvironment& env = *ctx.artefacts.environmentFile;
       for (const fs::path& f : ctx.environmentInput.files) requireUnchangedSinceHashed(f, "ingest");
-      for (const std::string& n : env.notes) ctx.note(n);
+      // The lighting made from the pixels keeps what is said of them (a later run reuses it
+      // without reading them).
+      for (const std::string& n : env.notes) ctx.noteFor("precompute", n);
       if (env.info.integerSamples() && env.info.format != "raw") {
-        ctx.note("the environment is a " + env.info.format +
-                 " file, not HDR: bright light sources are clipped and the lighting will be too "
-                 "dark");
+        ctx.noteFor("precompute",
+                    "the environment is a " + env.info.format +
+                        " file, not HDR: bright light sources are clipped and the lighting will be "
+                        "too dark");
       }
       reason += format(", the environment %dx%d", env.image.width, env.image.height);
     } else if (ctx.environmentInput.kind == EnvironmentInput::Kind::Capture) {

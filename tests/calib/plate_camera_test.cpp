@@ -106,6 +106,28 @@ TEST(PlateCamera, PlacementStandsOnTheGroundPointAtTheRequestedSize) {
   EXPECT_NEAR((top.y - base.y) * cam.lens.fy / depth, 0.25 * 800, 1e-6);
 }
 
+// Through a fisheye, a point more than 90° off the axis sees ground behind the image plane: the
+// object stands there at the size the lens's angles give it (its depth along the axis is
+// negative: it was scaled by a negative number, turned inside out, and the shadows stopped on an
+// internal check).
+TEST(PlateCamera, AFisheyePlacementBehindTheImagePlaneIsNotTurnedInsideOut) {
+  CameraOptions options;
+  options.lens = Lens::fromFieldOfView(320, 240, 220.0, Projection::Equidistant);
+  const PlateCamera cam = plateCamera(320, 240, {}, options);
+  Placement place;
+  place.heightFraction = 0.05;
+  for (const glm::dvec2 at : {glm::dvec2(0.5, 0.6), glm::dvec2(0.1, 0.9), glm::dvec2(0.02, 0.98)}) {
+    place.imagePoint = at;
+    const glm::dmat4 m = placeOnGround(cam, place, {0, 0, 0}, {1, 1, 1});
+    EXPECT_GT(glm::determinant(glm::dmat3(m)), 0.0) << at.x << "," << at.y;
+    // The object's height subtends its share of the frame's height in the lens's angles.
+    const glm::dvec3 base = glm::dvec3(m * glm::dvec4(0.5, 0, 0.5, 1));
+    const glm::dvec3 top = glm::dvec3(m * glm::dvec4(0.5, 1, 0.5, 1));
+    EXPECT_NEAR(glm::length(top - base) / glm::length(base - cam.position()) * cam.lens.fy,
+                0.05 * 240, 1e-6);
+  }
+}
+
 // A yaw is an angle whatever its size: 1e308 degrees turns the object as 1e308 mod 360 does (it
 // overflowed to NaN before, and Embree aborted on the NaN rays).
 TEST(PlateCamera, AYawOfAnySizeIsReducedToATurn) {

@@ -1360,14 +1360,20 @@ TEST_F(ComposeOutputs, ACameraInsideTheObjectIsWarnedAbout) {
 
 // A stage reused from the cache says again what it said when it ran, and so does one not needed
 // because what it fed is reused: the same job a second time warns as the first did (the camera
-// inside the object, from the render; the object outside the room, from the lighting). It was
-// silent, and a note the context makes for whichever stage asks first is not said twice.
+// inside the object, from the render; the object outside the room, from the lighting; the
+// environment's file, from ingest, kept with the lighting). It was silent, and a note the context
+// makes for whichever stage asks first is not said twice.
 TEST_F(ComposeOutputs, AJobRunAgainFromTheCacheWarnsAgain) {
-  std::string a = args((dir_ / "c").string()) + " --scale 8 --place 0.5,0.95 --room 3,3,3";
+  // An 8-bit environment: ingest says so when it reads it, and does not read it again once the
+  // lighting made from it is cached.
+  writeGreyPlate(dir_ / "env.jpg", 64, 32, 0.6f);
+  std::string a = args((dir_ / "c").string()) + " --scale 8 --place 0.5,0.95 --room 3,3,3 --env " +
+                  quote((dir_ / "env.jpg").string());
   a.replace(a.find("--no-cache"), 10, "--cache " + quote((dir_ / "cache").string()));
   const char* warnings[] = {"warning: the camera is inside the object",
                             "warning: the object's centre is outside the surroundings given",
-                            "plate camera: a 35 mm equivalent focal length"};
+                            "plate camera: a 35 mm equivalent focal length",
+                            "the environment is a jpeg file, not HDR"};
   const auto first = runCompose(a, dir_.path());
   ASSERT_EQ(first.status, 0) << first.err;
   for (const char* w : warnings) EXPECT_NE(first.err.find(w), std::string::npos) << first.err;

@@ -93,6 +93,8 @@ TEST(GroundShadow, MatchesRayTracingAndFollowsTheSun) {
   const pipeline::GroundShadowResult ground = pipeline::computeGroundShadow(
       box, scene, worldFromObject, camera, lighting, identity, envFromObject, plan);
   ASSERT_FALSE(ground.grid.empty());
+  // The lattice below is the plate's own (a small region's is finer: supersample > 1).
+  ASSERT_EQ(ground.supersample, 1);
   EXPECT_EQ(ground.ratio.width, ground.grid.x1 - ground.grid.x0);
 
   // Reference at grid points: exact unshadowed minus Monte Carlo of the blocked light, in world.
