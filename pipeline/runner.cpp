@@ -196,13 +196,13 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
         if (reused) {
           p.replay[i] = notesKeptIn(entry.meta());
         } else {
-          ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() +
-                   ") does not fit this job" + why + ": ignored, computed again and rewritten");
+          ctx.runNote("the cache entry " + entry.path().string() + " (stage " + stage.name() +
+                      ") does not fit this job" + why + ": ignored, computed again and rewritten");
           entry.clear();  // rewritten from nothing of what it held
         }
       } else if (!entry.problem().empty()) {
-        ctx.note("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
-                 entry.problem() + ": ignored, computed again and rewritten");
+        ctx.runNote("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
+                    entry.problem() + ": ignored, computed again and rewritten");
       }
       r.seconds += secondsSince(start);
       if (reused) {
@@ -242,9 +242,14 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
   if (!job.cache.empty()) {
     fs::path folder = job.cache / "stages";
     std::error_code ec;
-    while (!folder.empty() && !fs::exists(folder, ec) && folder.has_parent_path() &&
-           folder.parent_path() != folder)
+    // The nearest folder that exists: the current one above a relative path's first folder.
+    while (!fs::exists(folder, ec)) {
+      if (!folder.has_parent_path() || folder.parent_path() == folder) {
+        folder = folder.is_relative() ? fs::path(".") : fs::path();
+        break;
+      }
       folder = folder.parent_path();
+    }
     if (!folder.empty() && ::access(folder.c_str(), W_OK | X_OK) != 0)
       unwritable = "; not cached: the cache folder " + (job.cache / "stages").string() +
                    " cannot be written (" + std::strerror(errno) + ")";
@@ -360,8 +365,8 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   for (const auto& [why, names] : unstored) {
     std::string which;
     for (const std::string& n : names) which += (which.empty() ? "" : ", ") + n;
-    ctx.note("the cache folder " + (job.cache / "stages").string() + " cannot be written (" + why +
-             "): the outputs of " + which + " were not cached");
+    ctx.runNote("the cache folder " + (job.cache / "stages").string() + " cannot be written (" +
+                why + "): the outputs of " + which + " were not cached");
   }
   result.stages = std::move(p.records);
   result.notes = std::move(ctx.notes);

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <sstream>
+#include <string>
 
 #include "calib/lens_json.h"
 #include "core/error.h"
@@ -93,6 +95,21 @@ Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
   g.worldFromObject = matrixFromJson<glm::dmat4>(j.at("worldFromObject"));
   g.envFromWorld = matrixFromJson<glm::mat3>(j.at("envFromWorld"));
   g.envFromObject = matrixFromJson<glm::mat3>(j.at("envFromObject"));
+  // The camera's and the object's placements are turned into the header's worldToCamera and
+  // worldToNDC: finite and invertible, or they came out NaN in every part (a forged header).
+  for (const auto& [name, m] : {std::pair{"worldFromCamera", &g.camera.worldFromCamera},
+                                std::pair{"worldFromObject", &g.worldFromObject}}) {
+    const double det = glm::determinant(glm::dmat3(*m));
+    bool finite = std::isfinite(det);
+    for (int col = 0; col < 4; ++col)
+      for (int row = 0; row < 4; ++row) finite = finite && std::isfinite((*m)[col][row]);
+    if (!finite || std::abs(det) < 1e-300)
+      throw Error("composite",
+                  std::string("the layer's ") + name +
+                      " is not a placement (not finite, or not "
+                      "invertible): the header is damaged",
+                  file);
+  }
   return g;
 }
 
@@ -104,6 +121,25 @@ nlohmann::json lightingParameters(const ComposeJob& job) {
           {"lighting-params", job.lightingParams},
           {"shadow-params", job.shadowParams},
           {"env-yaw", job.environmentYawDegrees}};
+}
+
+// The lighting file's shadow parameters as far as this render draws shadows: all of them with
+// the object's shadows on itself, the ground shadow's without (method, order, grid, boundary,
+// sources), none without either. The one-shot command refuses values that change nothing when the
+// user gives them; a lighting file made for shadows served a render without them.
+std::string drawnShadowParams(const ComposeJob& job, const std::string& params) {
+  if (job.shadows) return params;
+  if (!job.groundShadow) return {};
+  std::string kept, item;
+  std::istringstream in(params);
+  while (std::getline(in, item, ',')) {
+    std::string key = item.substr(0, item.find('='));
+    key.erase(0, key.find_first_not_of(" \t"));
+    key.erase(key.find_last_not_of(" \t") + 1);
+    if (key == "refine" || key == "refine-budget" || key == "ground") continue;
+    kept += (kept.empty() ? "" : ",") + item;
+  }
+  return kept;
 }
 
 }  // namespace
@@ -135,6 +171,13 @@ void savePrecompute(const Context& ctx, const fs::path& file) {
   const EnvironmentExif exif = environmentExif(ctx);
   entry.meta()["environmentExif"] = {
       {"camera", exif.camera}, {"whyNot", exif.whyNot}, {"whose", exif.whose}};
+  // What the run said of what the lighting is made from (the environment's file, a merge's
+  // clipped pixels, a map upside down), for compose render to say again; not what it said of its
+  // own caching.
+  std::vector<std::string> said;
+  for (size_t n = 0; n < ctx.notes.size(); ++n)
+    if (!ctx.runNotes.count(n)) said.push_back(ctx.notes[n]);
+  entry.meta()["notes"] = said;
   if (!findStage("precompute").store(ctx, entry)) {
     if (!entry.error().empty())
       throw Error("precompute", "cannot write the lighting file: " + entry.error(), file);
@@ -163,7 +206,7 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   try {
     job.lighting = p.value("lighting", job.lighting);
     job.lightingParams = p.value("lighting-params", std::string());
-    job.shadowParams = p.value("shadow-params", std::string());
+    job.shadowParams = drawnShadowParams(job, p.value("shadow-params", std::string()));
     job.environmentYawDegrees = p.value("env-yaw", 0.0);
     if (!std::isfinite(job.environmentYawDegrees))
       throw Error("render", "the lighting file's env-yaw is not a number of degrees", file);
@@ -221,10 +264,16 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
       text("whose", exif.whose);
     }
     ctx.environmentExif = exif;
+    // What compose precompute said of the lighting's sources, said again for this render.
+    if (const auto n = made.find("notes"); n != made.end() && n->is_array())
+      for (const nlohmann::json& said : *n)
+        if (said.is_string()) ctx.note(said.get<std::string>());
     std::vector<std::string> outputs = {kLighting};
-    if (entry->meta().contains("shadowLighting")) {
+    if (!ctx.job.shadows && !ctx.job.groundShadow) {
+      // No shadow drawn: the file's shadow lighting is not read.
+    } else if (entry->meta().contains("shadowLighting")) {
       outputs.push_back(kShadowLighting);
-    } else if (ctx.job.shadows || ctx.job.groundShadow) {
+    } else {
       throw Error("render",
                   "the lighting file was made with --shadows off --no-shadow: it holds no light "
                   "sources for the shadows (render with --shadows off --no-shadow, or precompute "

@@ -312,7 +312,9 @@ Runner setupComposite(CLI::App& cmd, const Globals& globals) {
       const ingest::ExrPartHeader& frame = reader.header(0);
       const ingest::CaptureInfo plate = ingest::readCaptureInfo(o->job.plate, "ingest", true);
       const auto [width, height] = plate.shownSize();
-      if (frame.fullWidth != width || frame.fullHeight != height) {
+      // An EXR that is not a layer is named as such when the plan reads it (below), not blamed
+      // for its size.
+      if (frame.find("compose:layer") && (frame.fullWidth != width || frame.fullHeight != height)) {
         throw Error("composite",
                     "the object was rendered for a " + std::to_string(frame.fullWidth) + "x" +
                         std::to_string(frame.fullHeight) + " plate; this plate is " +

@@ -174,7 +174,9 @@ void OutputFiles::check(const fs::path& destination, const std::string& stage) {
                 destination);
   }
   // The nearest folder on the path that exists must be a folder (a/b/out.exr with a a file
-  // cannot be made).
+  // cannot be made) that this process may write into: found now, not after the work (a read-only
+  // folder failed the run when its outputs were written, its caches filled).
+  fs::path nearest = ".";
   for (fs::path dir = destination.parent_path(); !dir.empty(); dir = dir.parent_path()) {
     if (!fs::exists(dir, ec)) {
       if (dir == dir.parent_path()) break;
@@ -182,8 +184,12 @@ void OutputFiles::check(const fs::path& destination, const std::string& stage) {
     }
     if (!fs::is_directory(dir, ec))
       throw Error(stage, "cannot write into the output folder: it is a file, not a folder", dir);
+    nearest = dir;
     break;
   }
+  if (fs::is_directory(nearest, ec) && ::access(nearest.c_str(), W_OK | X_OK) != 0 &&
+      (errno == EACCES || errno == EROFS))
+    throw Error(stage, withSystemReason("cannot write into the output folder", errno), nearest);
   // A file its owner write-protected is kept, as cp and the shell's > keep it: moving the new
   // file over it needs only the folder's permission, which would go past the protection.
   if (fs::is_regular_file(destination, ec) && ::access(destination.c_str(), W_OK) != 0 &&

@@ -101,6 +101,41 @@ TEST(OutputFiles, AWriteProtectedFileIsKept) {
   EXPECT_EQ(slurp(dir / "other.jpg"), "new");
 }
 
+// An output in a folder this process cannot write into is refused when it is checked, before any
+// work (it failed when the outputs were written, after the whole run). In a child that gives
+// root's rights up.
+TEST(OutputFiles, AFolderThatCannotBeWrittenIsRefusedUpFront) {
+  TempDir dir;
+  fs::create_directory(dir / "ro");
+  fs::permissions(dir / "ro", fs::perms::owner_read | fs::perms::owner_exec |
+                                  fs::perms::group_read | fs::perms::group_exec |
+                                  fs::perms::others_read | fs::perms::others_exec);
+  fs::permissions(dir.path(), fs::perms::all);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    if (geteuid() == 0 && (setgid(65534) != 0 || setuid(65534) != 0)) _exit(3);
+    for (const fs::path& out : {dir / "ro" / "a.exr", dir / "ro" / "sub" / "a.exr"}) {
+      try {
+        OutputFiles::check(out, "output");
+        _exit(1);  // accepted
+      } catch (const Error& e) {
+        if (e.describe().find("cannot write into the output folder: Permission denied") ==
+            std::string::npos)
+          _exit(2);
+      }
+    }
+    OutputFiles::check(dir / "a.exr", "output");  // the writable folder beside it
+    _exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: accepted; 2: another error; 3: could not give up "
+                                       "root's rights";
+  fs::permissions(dir / "ro", fs::perms::all);
+}
+
 TEST(OutputFiles, AFailedMoveRestoresThePreviousFiles) {
   TempDir dir;
   writeText(dir / "a.exr", "old a");

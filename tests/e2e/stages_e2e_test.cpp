@@ -562,6 +562,32 @@ TEST_F(StageCommands, ALightingFileWithShTransfer) {
   EXPECT_EQ(ren.status, 0) << ren.err;
 }
 
+// A lighting file made with the object's own shadow parameters serves a render that draws fewer
+// shadows (it was refused, exit 2, naming --shadow-params, which compose render does not take),
+// and what compose precompute warned of the environment is said again by the render that uses
+// the file (a map upside down: the render was silent).
+TEST_F(StageCommands, ALightingFileServesRendersWithFewerShadowsAndKeepsItsWarnings) {
+  const fs::path flipped = dir_ / "flipped.exr";
+  OIIO::ImageBuf env(smallEnvironment().string());
+  ASSERT_TRUE(OIIO::ImageBufAlgo::flip(env).write(flipped.string()));
+  const fs::path light = dir_ / "l.lighting";
+  const std::string warning = "times as bright below its horizon as above it";
+  const RunResult pre = run("precompute --env " + quote(flipped) +
+                                " --shadow-params order=8,grid=8,refine=0.1,ground=off --out " +
+                                quote(light) + " --no-cache",
+                            dir_.path());
+  ASSERT_EQ(pre.status, 0) << pre.err;
+  EXPECT_NE(pre.err.find(warning), std::string::npos) << pre.err;
+  for (const char* fewer : {"", " --shadows off", " --shadows off --no-shadow"}) {
+    const RunResult ren =
+        run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+                quote(light) + fewer + " --out " + quote(dir_ / "layer.exr") + " --no-cache",
+            dir_.path());
+    EXPECT_EQ(ren.status, 0) << fewer << ": " << ren.err;
+    EXPECT_NE(ren.err.find(warning), std::string::npos) << fewer << ": " << ren.err;
+  }
+}
+
 // --env-space says the colour space of a capture's photos, as of any environment file (it was
 // hashed into the keys and not used: the lighting of 'Display P3' photos was byte for byte that
 // of sRGB ones), whether their brackets are merged or each view is one photo.
@@ -860,6 +886,13 @@ TEST_F(StageCommands, StageFilesThatAreNotOnesAreNamedErrors) {
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("not an object layer"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "c.exr"));
+  // Of another size than the plate, and planned: named as not a layer either (--explain blamed
+  // its size).
+  r = run("composite --explain --plate " + quote(plate_) + " --layer " + quote(smallEnvironment()) +
+              " --out " + quote(dir_ / "c"),
+          dir_.path());
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("not an object layer"), std::string::npos) << r.err;
 
   // A folder, a device and a missing file are each called what they are (all were "not found").
   fs::create_directories(dir_ / "folder.exr");
@@ -1039,6 +1072,16 @@ TEST_F(StageCommands, ALayerSavedAgainByAnotherToolIsReadAsItsFileHoldsIt) {
         << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "out" / (std::string(bad.name) + ".exr")));
   }
+  // A header whose camera is not a placement (a singular matrix): refused (the composite's
+  // worldToCamera and worldToNDC came out NaN in every part, exit 0).
+  nlohmann::json forged = nlohmann::json::parse(header);
+  forged["geometry"]["camera"]["worldFromCamera"] = std::vector<double>(16, 0.0);
+  header = forged.dump();
+  const RunResult singular = composite(save("singular", [](std::vector<Saved>&) {}), "singular");
+  EXPECT_EQ(singular.status, 1) << singular.err;
+  EXPECT_NE(singular.err.find("the layer's worldFromCamera is not a placement"), std::string::npos)
+      << singular.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out" / "singular.exr"));
 }
 
 // precompute never replaces its environment, refuses options that would change nothing in its
