@@ -50,7 +50,8 @@ struct Lens {
   bool direction(double px, double py, glm::dvec3& dir) const;
   // Continuous pixel of a direction in the camera frame (need not be unit). Returns false for a
   // direction the lens cannot see (behind a rectilinear lens, beyond 180° for a fisheye). The
-  // pixel may lie outside the image; the caller checks.
+  // pixel may lie outside the image; the caller checks. Past the turning point of a distortion
+  // model the pixel is the polynomial's, folded back (PlateCamera::project refuses those).
   bool project(const glm::dvec3& dir, glm::dvec2& pixel) const;
 
   bool hasDistortion() const;

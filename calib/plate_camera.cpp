@@ -31,7 +31,18 @@ glm::dmat4 PlateCamera::cameraFromWorld() const {
 bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
   const glm::dvec3 c = glm::dvec3(cameraFromWorld() * glm::dvec4(world, 1.0));
   if (lens.projection == Projection::Rectilinear && c.z >= -1e-9) return false;
-  return lens.project(c, pixel);
+  if (!lens.project(c, pixel)) return false;
+  // Past the turning point of a distortion model (a fisheye calibration's θ_d(θ) peaks at 40° or
+  // so; k1 = -0.2 turns back at 1.29 of the focal length) the polynomial folds the direction back
+  // towards the centre, onto a pixel whose ray is another: not seen. The ground shadow's
+  // rectangle, bounded by such pixels, stopped above the object's base.
+  if (lens.hasDistortion()) {
+    glm::dvec3 back;
+    if (!lens.direction(pixel.x, pixel.y, back) ||
+        glm::dot(glm::normalize(back), glm::normalize(c)) < 1.0 - 1e-9)
+      return false;
+  }
+  return true;
 }
 
 void CameraOptions::validate() const {
@@ -132,10 +143,13 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
   const glm::dvec2 p = placement.imagePoint;
   glm::dvec3 origin, dir;
   if (!camera.ray(p.x * camera.width, p.y * camera.height, origin, dir)) {
-    throw Error("camera",
-                "--place " + givenText(p.x) + "," + givenText(p.y) +
-                    " is outside what the calibrated lens can see (its distortion folds that part "
-                    "of the frame back: it maps no direction there)");
+    throw Error("camera", "--place " + givenText(p.x) + "," + givenText(p.y) +
+                              (camera.lens.hasDistortion()
+                                   ? " is outside what the calibrated lens can see (its "
+                                     "distortion folds that part of the frame back: it maps no "
+                                     "direction there)"
+                                   : " is outside what the lens can see (more than 180° off its "
+                                     "axis: it maps no direction there)"));
   }
   if (!(origin.y > 0.0)) {
     // Only a pose (a chessboard seen from behind, or the pose of another photo) puts it there.

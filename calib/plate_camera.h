@@ -41,7 +41,7 @@ struct PlateCamera {
   // false where the lens has no ray (outside a distortion model's valid range).
   bool ray(double px, double py, glm::dvec3& origin, glm::dvec3& direction) const;
   // Projects a world point to continuous pixel coordinates; returns false if the lens cannot see
-  // it (behind the camera).
+  // it (behind the camera, or past where its distortion model turns back).
   bool project(const glm::dvec3& world, glm::dvec2& pixel) const;
   glm::dvec3 position() const { return glm::dvec3(worldFromCamera[3]); }
   glm::dmat4 cameraFromWorld() const;

@@ -189,9 +189,13 @@ Geometry Context::makeGeometry(int plateWidth, int plateHeight, const ingest::Ca
     throw;
   } catch (const Error& e) {
     if (!e.file().empty()) throw;
-    // The pose puts the ground there; else the calibration's lens maps the point nowhere.
+    // The pose puts the ground there; else the calibration's lens maps the point nowhere (a
+    // point it maps, above the horizon, is --place's doing, not the lens file's).
     if (!job.poseFile.empty()) throw Error(e.stage(), e.what(), job.poseFile);
-    if (!job.lensFile.empty() && g.camera.lens.hasDistortion())
+    glm::dvec3 origin, dir;
+    const glm::dvec2 at = job.placement.imagePoint;
+    if (!job.lensFile.empty() &&
+        !g.camera.ray(at.x * g.camera.width, at.y * g.camera.height, origin, dir))
       throw Error(e.stage(), e.what(), job.lensFile);
     throw;
   }

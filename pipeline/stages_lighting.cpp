@@ -622,8 +622,9 @@ class GroundStage final : public Stage {
   // 7: a strong source's shadow edge traced at the pixels of the finest cells it crosses;
   // 8: keyed by the boundary rays (--shadow-params boundary), which the ground's points take;
   // 9: keyed by every shadow parameter; 10: a band of ground a few rows high sampled row by row;
-  // 11: a small region's pixels split into 4 x 4 and the ratio box-filtered
-  static constexpr int kVersion = 11;
+  // 11: a small region's pixels split into 4 x 4 and the ratio box-filtered; 12: a region
+  // bounded by what the lens sees (not past its distortion's turning point)
+  static constexpr int kVersion = 12;
 
   std::string name() const override { return "ground"; }
   std::string summary() const override {

@@ -186,8 +186,9 @@ class RenderStage final : public Stage {
   // the composite and the files; 16: the automatic exposure kept whichever is used; 17: the
   // card's radiance kept instead, the composite choosing the exposure for its plate; 18: a
   // material's factor x texture x vertex colour multiplied in their own space, then converted;
-  // 19: an OBJ's Kd x map_Kd multiplied in linear Rec.709 when its textures have those primaries
-  static constexpr int kVersion = 19;
+  // 19: an OBJ's Kd x map_Kd multiplied in linear Rec.709 when its textures have those primaries;
+  // 20: a fisheye's depth along the ray
+  static constexpr int kVersion = 20;
 
   std::string name() const override { return "render"; }
   std::string summary() const override {
@@ -425,14 +426,8 @@ class RenderStage final : public Stage {
     r.output = render::renderDiffuse(ctx.mesh(), ctx.objectScene(), g.worldFromObject, g.camera,
                                      *ctx.artefacts.lighting, settings, ctx.progress);
     r.output.beauty.colorSpace = ctx.colors.workingSpace();
-    if (!(r.output.coverage > 0.0) && !job.poseFile.empty()) {
-      throw Error("render",
-                  "the object covers no pixel of the plate: standing on the chessboard's plane "
-                  "where the pose file " +
-                      job.poseFile.filename().string() +
-                      " puts it, it is out of the camera's view (the pose of another photo?)",
-                  job.object);
-    }
+    // With a pose too the object's base stands where --place says, in the frame: covering no
+    // pixel, it is too small (this blamed the pose file: "the pose of another photo?").
     if (!(r.output.coverage > 0.0) && ctx.meshSummary && ctx.meshSummary->nothingKept) {
       // No placement would show it: say what cuts it away.
       std::string cut;

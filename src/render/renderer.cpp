@@ -1138,7 +1138,13 @@ RenderOutput renderDiffuse(const Mesh& mesh, const EmbreeScene& scene,
         a[kShadowed + c] = shadowedSum[c] * inv * settings.exposure;
       }
       // Depth is linear in the position: the mean position's depth is the samples' mean depth.
-      a[kDepth] = float(-(cameraFromWorld * glm::dvec4(positionSum / covered, 1.0)).z);
+      // Through a fisheye, the mean position's distance along the ray: its points 90° or more
+      // off the axis are not in front of it (their depth along the axis came out negative).
+      const glm::dvec3 atCamera =
+          glm::dvec3(cameraFromWorld * glm::dvec4(positionSum / covered, 1.0));
+      a[kDepth] =
+          float(camera.lens.projection == calib::Projection::Rectilinear ? -atCamera.z
+                                                                         : glm::length(atCamera));
       a[kAo] = aoSum * inv;
     }
     hitsTotal += rowHits;

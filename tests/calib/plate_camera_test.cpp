@@ -128,6 +128,36 @@ TEST(PlateCamera, AFisheyePlacementBehindTheImagePlaneIsNotTurnedInsideOut) {
   }
 }
 
+// A direction past where the lens's distortion model turns back is not seen: the polynomial's
+// pixel for it is another direction's (k1 = -0.2 peaks at 1.29 focal lengths off axis; a
+// fisheye's θ_d(θ) with k1 = -0.3 at 1.054 rad, 60°). Before the turning point the projection
+// inverts.
+TEST(PlateCamera, DirectionsPastTheDistortionsTurningPointAreNotSeen) {
+  for (const Projection projection : {Projection::Rectilinear, Projection::Equidistant}) {
+    CameraOptions options;
+    options.lens = Lens::fromFieldOfView(640, 480, 90.0, projection);
+    options.lens->distortion = projection == Projection::Rectilinear
+                                   ? std::vector<double>{-0.2, 0, 0, 0, 0}
+                                   : std::vector<double>{-0.3, 0, 0, 0};
+    const PlateCamera cam = plateCamera(640, 480, {}, options);
+    // Off axis by tan or by the angle: 1.0 and 1.2 before the turn, 1.5 and 2.0 past it.
+    const double turn = projection == Projection::Rectilinear ? 1.29 : 1.054;
+    for (const double off : {0.3, 1.0, 1.2, 1.5, 2.0}) {
+      const double angle = projection == Projection::Rectilinear ? std::atan(off) : off;
+      const glm::dvec3 d(std::sin(angle), 0.0, -std::cos(angle));
+      const glm::dvec3 world = glm::dvec3(cam.worldFromCamera * glm::dvec4(d, 1.0));
+      glm::dvec2 px;
+      const bool seen = cam.project(world, px);
+      const double ref = projection == Projection::Rectilinear ? off : angle;
+      EXPECT_EQ(seen, ref < turn) << int(projection) << " " << off;
+      if (!seen) continue;
+      glm::dvec3 origin, back;
+      ASSERT_TRUE(cam.ray(px.x, px.y, origin, back));
+      EXPECT_NEAR(glm::dot(back, glm::normalize(world - origin)), 1.0, 1e-9);
+    }
+  }
+}
+
 // A yaw is an angle whatever its size: 1e308 degrees turns the object as 1e308 mod 360 does (it
 // overflowed to NaN before, and Embree aborted on the NaN rays).
 TEST(PlateCamera, AYawOfAnySizeIsReducedToATurn) {

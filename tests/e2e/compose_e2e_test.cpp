@@ -14,6 +14,8 @@
 #include <sstream>
 
 #include <OpenImageIO/imageio.h>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
 
 #include "command_util.h"
 #include "core/numbers.h"
@@ -820,6 +822,32 @@ class ComposeOutputs : public ::testing::Test {
   TempDir dir_;
 };
 
+// Through a 220° fisheye, the object placed 124° off the axis: depth.Z is the distance along the
+// ray to P (it was the depth along the axis: negative, -1.2 to -0.13 where P was 0.9 to 3.6 m
+// away).
+TEST_F(ComposeOutputs, AFisheyesDepthIsTheDistanceAlongTheRay) {
+  compose::testing::writeText(dir_ / "fisheye.json",
+                              R"({"model": "equidistant", "width": 320, "height": 240,
+                                  "fx": 83.3, "fy": 83.3, "cx": 160, "cy": 120, "dist": [],
+                                  "rms": 0.1})");
+  const auto r = runCompose(args((dir_ / "fe").string()) + " --scale 0.1 --place 0.05,0.95 " +
+                                "--calib " + quote((dir_ / "fisheye.json").string()),
+                            dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Raster out = readRaster(dir_ / "fe.exr");
+  const int a = out.channel("object.A"), depth = out.channel("depth.Z"), px = out.channel("P.X");
+  int covered = 0;
+  for (int y = 0; y < out.height; ++y)
+    for (int x = 0; x < out.width; ++x) {
+      if (!(out.at(x, y, a) > 0.99f)) continue;
+      ++covered;
+      // The camera stands 1.6 m above the origin (no pose).
+      const glm::dvec3 p(out.at(x, y, px), out.at(x, y, px + 1) - 1.6, out.at(x, y, px + 2));
+      ASSERT_NEAR(out.at(x, y, depth), glm::length(p), 1e-3 * glm::length(p)) << x << "," << y;
+    }
+  EXPECT_GT(covered, 10);
+}
+
 // A lens whose distortion folds the frame where --place points (r - 100 r³ turns back at
 // r = 0.058, distorted 0.038: the point, at 0.18, is past it): the error names the lens file and
 // the point (it named neither).
@@ -837,6 +865,19 @@ TEST_F(ComposeOutputs, APlaceTheCalibratedLensCannotSeeNamesTheLensFile) {
       << r.err;
   EXPECT_NE(r.err.find("folded.json)"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "folded.exr"));
+  // A point the lens sees, above the horizon: --place's doing, not the lens file's (it was
+  // named whenever the lens had distortion).
+  compose::testing::writeText(dir_ / "mild.json",
+                              R"({"model": "rectilinear", "width": 320, "height": 240, "fx": 300,
+                                  "fy": 300, "cx": 159.5, "cy": 119.5,
+                                  "dist": [-0.1, 0, 0, 0, 0], "rms": 0.1})");
+  const auto sky = runCompose(args((dir_ / "sky").string()) + " --place 0.5,0.3 --calib " +
+                                  quote((dir_ / "mild.json").string()),
+                              dir_.path());
+  EXPECT_EQ(sky.status, 1) << sky.err;
+  EXPECT_NE(sky.err.find("camera: --place 0.5,0.3 is at or above the horizon"), std::string::npos)
+      << sky.err;
+  EXPECT_EQ(sky.err.find("mild.json"), std::string::npos) << sky.err;
 }
 
 // An anamorphic plate (an OpenEXR whose pixelAspectRatio is 2: each stored pixel shown twice
