@@ -49,8 +49,8 @@ struct Planned {
   std::vector<StageRecord> records;
   std::vector<std::optional<StageCache>> entries;  // per stage: its cache entry, if it is cached
   std::vector<std::string> problems;  // per stage: what is wrong with its entry (planning only)
-  // Per stage reused from the cache: the notes its run made (kept in the entry), said again in
-  // their place among the stages' notes.
+  // Per stage reused from the cache, or skipped because what it fed is: the notes its run made
+  // (kept in the entry), said again in their place among the stages' notes.
   std::vector<std::vector<std::string>> replay;
 };
 

@@ -106,8 +106,7 @@ Geometry geometryFromJson(const nlohmann::json& j, const fs::path& file) {
     if (!finite || std::abs(det) < 1e-300)
       throw Error("composite",
                   std::string("the layer's ") + name +
-                      " is not a placement (not finite, or not "
-                      "invertible): the header is damaged",
+                      " is not a placement (not finite, or not invertible): the header is damaged",
                   file);
   }
   return g;
