@@ -141,8 +141,10 @@ Geometry Context::makeGeometry(int plateWidth, int plateHeight, const ingest::Ca
     } catch (const UsageError&) {
       throw;
     } catch (const Error& e) {
-      if (!e.file().empty() || lensFrom.empty()) throw;
-      throw Error(e.stage(), e.what(), lensFrom);  // a plate that does not fit the lens
+      if (!e.file().empty()) throw;
+      // A plate that does not fit the lens; without a lens file, the plate's own facts (a pixel
+      // aspect ratio of 1000).
+      throw Error(e.stage(), e.what(), lensFrom.empty() ? job.plate : lensFrom);
     }
   }();
   // A pose is of one shot's framing: another aspect ratio is another framing (a crop); the same

@@ -8,6 +8,7 @@
 #include <optional>
 
 #include <glm/gtc/matrix_transform.hpp>
+#include <glm/vector_relational.hpp>
 
 #include "composite/composite.h"
 #include "core/error.h"
@@ -448,12 +449,25 @@ class RenderStage final : public Stage {
                   job.object);
     }
     if (!(r.output.coverage > 0.0)) {
+      // So large that the camera stands within its bounds (under the monkey's chin at --scale
+      // 9): smaller, not larger.
+      bool cameraWithin = false;
+      if (ctx.meshSummary) {
+        const glm::dvec3 c =
+            glm::dvec3(glm::inverse(g.worldFromObject) * glm::dvec4(g.camera.position(), 1.0));
+        const glm::dvec3 lo(ctx.meshSummary->boundsMin), hi(ctx.meshSummary->boundsMax);
+        cameraWithin =
+            glm::all(glm::greaterThanEqual(c, lo)) && glm::all(glm::lessThanEqual(c, hi));
+      }
       throw Error("render",
                   "the object covers no pixel of the plate (--scale " +
                       givenText(job.placement.heightFraction) + " of the plate height at " +
                       "--place " + givenText(job.placement.imagePoint.x) + "," +
                       givenText(job.placement.imagePoint.y) +
-                      "): make it larger or place it inside the frame",
+                      (cameraWithin ? "): the camera stands within its bounds, between its parts; "
+                                      "make it smaller or place it further away (higher in the "
+                                      "frame)"
+                                    : "): make it larger or place it inside the frame"),
                   job.object);
     }
     std::string sampling;

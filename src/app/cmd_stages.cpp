@@ -265,6 +265,26 @@ Runner setupRender(CLI::App& cmd, const Globals& globals) {
     requireLosslessCompression(*compression, "compose composite reads the layer's numbers back");
     requireExrName(*out, "the object's layer is a multi-part OpenEXR");
     OutputFiles::check(*out, "render");
+    // An older layer may be replaced, nothing else (an HDRI or a graded plate named by mistake
+    // was overwritten): an OpenEXR whose first header names compose:layer. One of the job's
+    // inputs there is refused as such by runJob.
+    bool anInput = false;
+    for (const fs::path& in :
+         {o->job.plate, o->job.holdout, o->job.environment, fs::path(*lightingFile)}) {
+      std::error_code same;
+      anInput = anInput || (!in.empty() && fs::equivalent(*out, in, same));
+    }
+    if (!anInput)
+      requireReplaceable(
+          *out, "compose object layer",
+          [](std::istream& in) {
+            std::string head(1 << 16, '\0');
+            in.read(head.data(), std::streamsize(head.size()));
+            head.resize(size_t(in.gcount()));
+            return head.rfind("\x76\x2f\x31\x01", 0) == 0 &&
+                   head.find("compose:layer") != std::string::npos;
+          },
+          "render");
     pipeline::RunRequest request;
     request.inputs.push_back(pipeline::precomputeInput(*lightingFile, o->job));
     // The layer's header carries the camera, made from the plate and the mesh: those are read

@@ -886,9 +886,11 @@ TEST_F(ComposeOutputs, APlaceTheCalibratedLensCannotSeeNamesTheLensFile) {
 // high, and the EXR keeps the ratio (the object came out twice too wide once shown, and the
 // output said its pixels were square).
 TEST_F(ComposeOutputs, AnAnamorphicPlatesPixelsAreHonoured) {
-  for (const float aspect : {1.0f, 2.0f}) {
+  for (const float aspect : {1.0f, 2.0f, 1000.0f}) {
     std::vector<float> px(size_t(320) * 240 * 3, 0.2f);
-    const fs::path plate = dir_ / (aspect == 1.0f ? "square.exr" : "squeezed.exr");
+    const fs::path plate = dir_ / (aspect == 1.0f   ? "square.exr"
+                                   : aspect == 2.0f ? "squeezed.exr"
+                                                    : "stretched.exr");
     auto out = OIIO::ImageOutput::create(plate.string());
     OIIO::ImageSpec spec(320, 240, 3, OIIO::TypeDesc::FLOAT);
     spec.attribute("PixelAspectRatio", aspect);
@@ -896,6 +898,13 @@ TEST_F(ComposeOutputs, AnAnamorphicPlatesPixelsAreHonoured) {
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()));
     out->close();
   }
+  // A ratio no picture has is refused naming the plate (it named no file).
+  const auto stretched = runCompose(args((dir_ / "s").string(), "stretched.exr"), dir_.path());
+  EXPECT_EQ(stretched.status, 1) << stretched.err;
+  EXPECT_NE(stretched.err.find("pixel aspect ratio 1000 is not one a picture has (0.01 to 100) (" +
+                               (dir_ / "stretched.exr").string() + ")"),
+            std::string::npos)
+      << stretched.err;
   int width[2] = {0, 0}, height[2] = {0, 0};
   for (int i = 0; i < 2; ++i) {
     const std::string name = i == 0 ? "square" : "squeezed";
@@ -1453,7 +1462,21 @@ TEST_F(ComposeOutputs, AnObjectCoveringNoPixelIsAnError) {
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("render: the object covers no pixel of the plate"), std::string::npos)
       << r.err;
+  EXPECT_NE(r.err.find("make it larger"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "n.exr"));
+  // So large that the camera stands within its bounds, under Suzanne's chin: smaller (it was
+  // told to make it larger).
+  std::string huge = args((dir_ / "h").string()) + " --scale 9";
+  huge.replace(huge.find(quote((samples_ / "bunny.obj").string())),
+               quote((samples_ / "bunny.obj").string()).size(),
+               quote((samples_ / "monkey.obj").string()));
+  const auto within = runCompose(huge, dir_.path());
+  EXPECT_EQ(within.status, 1);
+  EXPECT_NE(within.err.find("the camera stands within its bounds, between its parts; make it "
+                            "smaller"),
+            std::string::npos)
+      << within.err;
+  EXPECT_FALSE(fs::exists(dir_ / "h.exr"));
 }
 
 // The automatic exposure matches a mid-grey card on the ground to the plate's ground: it does not

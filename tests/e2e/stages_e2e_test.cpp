@@ -565,7 +565,8 @@ TEST_F(StageCommands, ALightingFileWithShTransfer) {
 // A lighting file made with the object's own shadow parameters serves a render that draws fewer
 // shadows (it was refused, exit 2, naming --shadow-params, which compose render does not take),
 // and what compose precompute warned of the environment is said again by the render that uses
-// the file (a map upside down: the render was silent).
+// the file (a map upside down: the render was silent). The render's --out replaces a layer, not
+// another OpenEXR (it overwrote any).
 TEST_F(StageCommands, ALightingFileServesRendersWithFewerShadowsAndKeepsItsWarnings) {
   const fs::path flipped = dir_ / "flipped.exr";
   OIIO::ImageBuf env(smallEnvironment().string());
@@ -578,6 +579,18 @@ TEST_F(StageCommands, ALightingFileServesRendersWithFewerShadowsAndKeepsItsWarni
                             dir_.path());
   ASSERT_EQ(pre.status, 0) << pre.err;
   EXPECT_NE(pre.err.find(warning), std::string::npos) << pre.err;
+  // An OpenEXR there that is not a layer (an HDRI named by mistake) is not replaced.
+  fs::copy_file(smallEnvironment(), dir_ / "hdri.exr");
+  const RunResult over =
+      run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
+              quote(light) + " --out " + quote(dir_ / "hdri.exr") + " --no-cache",
+          dir_.path());
+  EXPECT_EQ(over.status, 1) << over.err;
+  EXPECT_NE(over.err.find("render: is not a compose object layer and would be replaced"),
+            std::string::npos)
+      << over.err;
+  EXPECT_EQ(slurp(dir_ / "hdri.exr"), slurp(smallEnvironment())) << "the file is untouched";
+  // Layers are (three renders into one file below).
   for (const char* fewer : {"", " --shadows off", " --shadows off --no-shadow"}) {
     const RunResult ren =
         run("render --plate " + quote(plate_) + " " + objectOptions() + " --lighting-file " +
