@@ -98,6 +98,12 @@ struct RenderedObject {
   // Read from an object layer (compose render): the plate it was rendered on (absolute) and the
   // hash of that plate's bytes (contentKey); empty for a layer that does not say.
   std::string layerPlateFile, layerPlateKey;
+  // The exposure matched to the plate's pixels (the automatic match, not --exposure or EXIF): set
+  // by chooseExposure. A layer records how its plate was decoded for it (the linear plate's key,
+  // and --plate-space as given, empty when read as its file says), so that a composite that
+  // decodes the plate otherwise says what that does to the match.
+  bool exposureMatchedToPlate = false;
+  std::string layerPlateDecoded, layerPlateSpace;
   bool fromLayer = false;  // read from an object layer (compose composite), not rendered here
 };
 

@@ -350,6 +350,11 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
        {{"file", fs::absolute(ctx.job.plate).string()},
         {"content", contentKey(ctx.job.plate, "render")}}},
       {"ground", nullptr}};
+  if (object.exposureMatchedToPlate && ctx.hasKey(kPlateLinear)) {
+    header["plate"]["decoded"] = ctx.key(kPlateLinear).hex();
+    header["plate"]["space"] = ctx.job.plateSpace;
+    header["render"]["cardRadiance"] = object.cardRadiance;
+  }
   const GroundShadowResult* ground =
       ctx.artefacts.groundShadow && !ctx.artefacts.groundShadow->ratio.empty()
           ? &*ctx.artefacts.groundShadow
@@ -501,6 +506,13 @@ StageInput objectLayerInput(const fs::path& file) {
       if (const auto plate = header.find("plate"); plate != header.end() && plate->is_object()) {
         object.layerPlateFile = plate->value("file", "");
         object.layerPlateKey = plate->value("content", "");
+        const auto card = rj.find("cardRadiance");
+        if (card != rj.end() && card->is_number() && card->get<double>() > 0.0 &&
+            std::isfinite(card->get<double>())) {
+          object.cardRadiance = card->get<double>();
+          object.layerPlateDecoded = plate->value("decoded", "");
+          object.layerPlateSpace = plate->value("space", "");
+        }
       }
       int x = 0, y = 0;
       const ingest::ExrPartHeader* objectHeader = nullptr;

@@ -538,6 +538,30 @@ class CompositeStage final : public Stage {
                  "(with its automatic exposure)",
                  object.layerPlateFile.c_str(), std::log2(double(object.exposure)),
                  ctx.job.plate.filename().string().c_str()));
+    } else if (!object.layerPlateDecoded.empty() && ctx.hasKey(kPlateLinear) &&
+               object.layerPlateDecoded != ctx.key(kPlateLinear).hex()) {
+      // The same plate decoded otherwise (--plate-space given to one command only, another
+      // colour config): the layer's automatic exposure was matched to the other decoding.
+      const ExposureMatch here =
+          autoExposure(*ctx.artefacts.plateLinear, ctx.geometry().camera, object.cardRadiance,
+                       ctx.colors.lumaWeights(ctx.colors.workingSpace()));
+      const double off = here.nothingVisible || !(here.scale > 0.0)
+                             ? 0.0
+                             : std::log2(here.scale / double(object.exposure));
+      auto reading = [](const std::string& space) {
+        return space.empty() ? std::string("as its file says")
+                             : "as '" + space + "' (--plate-space)";
+      };
+      if (std::abs(off) >= 0.01) {
+        ctx.note(format(
+            "the object layer's automatic exposure (%+.2f stops) was matched to the plate read "
+            "%s; this run reads it %s%s, for which the match is %+.2f stops: the object is %.2f "
+            "stops too %s here; give compose render and compose composite the same --plate-space",
+            std::log2(double(object.exposure)), reading(object.layerPlateSpace).c_str(),
+            reading(ctx.job.plateSpace).c_str(),
+            object.layerPlateSpace == ctx.job.plateSpace ? " (another colour config)" : "",
+            std::log2(here.scale), std::abs(off), off > 0.0 ? "dark" : "bright"));
+      }
     }
     std::string reason = "the object over the plate";
     // Made in place in the linear plate, which no later stage reads; a holdout needs the plate
@@ -750,6 +774,7 @@ EnvironmentExif environmentExif(const Context& ctx) {
 void chooseExposure(Context& ctx, RenderedObject& object) {
   COMPOSE_CHECK(!object.exposureChosen);
   object.notes.clear();
+  object.exposureMatchedToPlate = false;
   if (ctx.job.exposureStops) {
     object.exposure = float(std::exp2(*ctx.job.exposureStops));
   } else {
@@ -776,6 +801,7 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
           "--exposure";
     } else {
       object.exposure = float(match.scale);
+      object.exposureMatchedToPlate = true;
       note = format(
           "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
           "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "

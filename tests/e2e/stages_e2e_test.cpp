@@ -254,6 +254,54 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
                              dir_.path());
   ASSERT_EQ(same.status, 0) << same.err;
   EXPECT_EQ(same.err.find("rendered on another plate"), std::string::npos) << same.err;
+  // The same plate decoded otherwise by the composite alone (--plate-space): the layer's
+  // automatic exposure was matched to the plate read as its file says, and a note says by how
+  // much it misses the plate as read here (the match a render reading it so makes). It passed in
+  // silence, 1.5 stops off. Read alike by both commands, or with the exposure given, no note.
+  const std::string linear = " --plate-space lin_rec709";
+  const RunResult reread =
+      run("composite --plate " + quote(plate_) + linear + " --layer " + quote(layer) + " --out " +
+              quote(dir_ / "reread" / "compose") + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(reread.status, 0) << reread.err;
+  const fs::path linearLayer = dir_ / "linear layer.exr";
+  const RunResult linearRender =
+      run("render --plate " + quote(plate_) + linear + " " + objectOptions() + " --lighting-file " +
+              quote(light) + " --out " + quote(linearLayer) + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(linearRender.status, 0) << linearRender.err;
+  auto stops = [](const std::string& err, const std::string& before) {
+    const size_t at = err.find(before);
+    return at == std::string::npos ? std::nan("") : std::stod(err.substr(at + before.size()));
+  };
+  auto fixed = [](const char* pattern, double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, pattern, v);
+    return std::string(text);
+  };
+  const double layerStops = stops(same.err, "auto exposure: ");
+  const double linearStops = stops(linearRender.err, "auto exposure: ");
+  EXPECT_GT(std::abs(linearStops - layerStops), 1.0);  // the two readings do differ
+  const std::string said = "the object layer's automatic exposure (" + fixed("%+.2f", layerStops) +
+                           " stops) was matched to the plate read as its file says; this run "
+                           "reads it as 'lin_rec709' (--plate-space), for which the match is " +
+                           fixed("%+.2f", linearStops) + " stops: the object is ";
+  EXPECT_NE(reread.err.find(said), std::string::npos) << reread.err;
+  EXPECT_NEAR(stops(reread.err, said), std::abs(linearStops - layerStops), 0.011) << reread.err;
+  const RunResult alike =
+      run("composite --plate " + quote(plate_) + linear + " --layer " + quote(linearLayer) +
+              " --out " + quote(dir_ / "alike" / "compose") + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(alike.status, 0) << alike.err;
+  EXPECT_EQ(alike.err.find("was matched to the plate read"), std::string::npos) << alike.err;
+  const RunResult backwards =
+      run("composite --plate " + quote(plate_) + " --layer " + quote(linearLayer) + " --out " +
+              quote(dir_ / "backwards" / "compose") + " --no-cache",
+          dir_.path());
+  EXPECT_NE(backwards.err.find("read as 'lin_rec709' (--plate-space); this run reads it as its "
+                               "file says"),
+            std::string::npos)
+      << backwards.err;
   // A plate of another size: --explain says the run will refuse it (it approved the job).
   const fs::path larger = dir_ / "larger.jpg";
   ASSERT_TRUE(OIIO::ImageBufAlgo::resize(OIIO::ImageBuf(plate_.string()), "", 0.0f,
