@@ -251,8 +251,9 @@ class MergeStage final : public Stage {
   // 65535 read from ISOSpeed, a photo's colour by its bytes' format, a WebP's EXIF and ICC read;
   // 7: a photo's missing ISO or f-number taken from the other photos of its bracket; 8: 8-bit
   // photos made linear in the space of their own primaries (Display P3's, not Rec.709's), the
-  // photos' space from --env-space
-  static constexpr int kVersion = 8;
+  // photos' space from --env-space; 9: a deep pixel no shot is trusted at bounded and flagged,
+  // ghost suppression's reference agrees with the over-exposed shots
+  static constexpr int kVersion = 9;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {

@@ -428,13 +428,30 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           value[i * 3 + size_t(c)] = float(linearOf(shots[i], x, y, c) / shots[i].exposure);
       }
       if (params.deghost) {
-        // Reference: the middle shot, or the covered shot with weight nearest to it.
+        // Reference: the middle shot, or the covered shot with weight nearest to it, among the
+        // shots that agree with the over-exposed ones: a shot over-exposed here saw at least its
+        // clip level, so a shot saying much less light (a thing that moved in front) is not the
+        // reference. (With the middle shot over-exposed, the longer shot, a ghost darker than
+        // the scene, was taken, and the shorter shot that saw the scene dropped.) When no shot
+        // agrees, the nearest one with weight.
+        auto luminance = [&](size_t i) {
+          return std::max(1e-20f, value[i * 3] + value[i * 3 + 1] + value[i * 3 + 2]);
+        };
+        const float ghostRatio = float(std::exp2(-params.ghostStops));
+        auto agrees = [&](size_t i) {
+          for (size_t j = 0; j < n; ++j)
+            if (j != i && covered[j] && over[j] && luminance(i) < ghostRatio * luminance(j))
+              return false;
+          return true;
+        };
         size_t ref = n;
-        for (size_t d = 0; d < n && ref == n; ++d) {
-          if (pivot + d < n && weight[pivot + d] > 0.0f)
-            ref = pivot + d;
-          else if (d <= pivot && weight[pivot - d] > 0.0f)
-            ref = pivot - d;
+        for (int pass = 0; pass < 2 && ref == n; ++pass) {
+          for (size_t d = 0; d < n && ref == n; ++d) {
+            if (pivot + d < n && weight[pivot + d] > 0.0f && (pass == 1 || agrees(pivot + d)))
+              ref = pivot + d;
+            else if (d <= pivot && weight[pivot - d] > 0.0f && (pass == 1 || agrees(pivot - d)))
+              ref = pivot - d;
+          }
         }
         if (ref < n) {
           const float refLum =
@@ -468,6 +485,16 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           total += weight[i];
         }
         for (int c = 0; c < 3; ++c) o[c] = total > 0.0 ? float(sum[c] / total) : 0.0f;
+      }
+      if (!(total > 0.0)) {
+        // No shot trusted here although not every one reads as over-exposed (a deep shot just
+        // below the clip level in its own encoding, near full scale as stored): the shortest
+        // covering shot gives a bound, flagged as clipped. (It was written as black, unflagged.)
+        size_t pick = 0;
+        while (!covered[pick]) ++pick;
+        for (int c = 0; c < 3; ++c) o[c] = value[pick * 3 + size_t(c)];
+        o[3] = 1.0f;
+        saturatedRows[size_t(y)]++;
       }
     }
   });

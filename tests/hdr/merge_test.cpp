@@ -378,6 +378,48 @@ TEST(Merge, ADeepShotClippedInOneChannelIsNotTrusted) {
   }
 }
 
+// A pixel that no shot of a 16-bit bracket can be trusted at although not every shot reads as
+// over-exposed: the shortest shot just below its clip level as stored (64240 of 65535, where the
+// weight has fallen to 0), the longer ones clipped. It is bounded by the shortest shot and flagged
+// as clipped (it was written as black, unflagged).
+TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
+  TempDir dir;
+  const double exposures[3] = {0.25, 1.0, 4.0};
+  const glm::vec3 radiance(float(64240.0 / 65535.0 / 0.25), 0.3f, 0.1f);  // linear Rec. 709
+  std::vector<ingest::Shot> shots;
+  for (int k = 0; k < 3; ++k) {
+    Image shot(16, 8, 3, {"R", "G", "B"});
+    for (size_t i = 0; i < shot.pixelCount(); ++i)
+      for (int c = 0; c < 3; ++c)
+        shot.pixels[3 * i + size_t(c)] = std::min(1.0f, radiance[c] * float(exposures[k]));
+    ingest::WriteOptions options;
+    options.depth = ingest::WriteOptions::Depth::UInt16;
+    const auto file = dir / ("s" + std::to_string(k) + ".tif");
+    ingest::writeImage(file, shot, options);
+    shots.push_back(ingest::scanShots({file}).front());
+  }
+  ingest::Capture capture;
+  capture.views.push_back({"view", shots, {}});
+  ingest::setExposures(capture.views[0], {0.25, 1.0, 4.0}, "test");
+  std::vector<std::vector<ingest::LoadedImage>> photos(1);
+  for (const ingest::Shot& s : capture.views[0].shots)
+    photos[0].push_back(ingest::readImage(s.file));
+  const auto colors = color::ColorConfig::builtin();
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  options.inputSpace = "lin_rec709";
+  const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
+  Image truth(1, 1, 3, {"R", "G", "B"});
+  for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
+  truth.colorSpace = "lin_rec709";
+  colors.convert(truth, colors.workingSpace());
+  const float* m = merged.views[0].radiance.at(8, 4);
+  EXPECT_EQ(m[3], 1.0f) << "flagged as clipped";
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
+  EXPECT_EQ(merged.views[0].stats.saturated, 16 * 8);
+}
+
 TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {
   // Linear 16-bit data, no JPEG: only noise and quantisation remain.
   constexpr double kMedianError = 0.01;
@@ -463,6 +505,21 @@ TEST(Merge, GhostSuppressionKeepsTheReferenceShotWhereSomethingMoved) {
   EXPECT_NEAR(with.radiance.at(50, 16)[1] / t[1], 1.0, 0.03);
   EXPECT_GT(std::abs(without.radiance.at(50, 16)[1] / t[1] - 1.0), 0.2);
   EXPECT_GE(with.ghosted, 16 * 20);
+
+  // The same where the middle shot is over-exposed (and the longest, but for the dark square):
+  // the reference is the shortest shot, which agrees with the clipped middle one, not the
+  // longest, which says less light than the middle shot's clip level (merged 0.002 of the truth).
+  SyntheticBracket bright = syntheticBracket(128, 32, {0.25, 1.0, 4.0});
+  for (int y = 4; y < 12; ++y)
+    for (int x = 88; x < 98; ++x)
+      for (int c = 0; c < 3; ++c) bright.images[2].at(x, y)[c] = 0.1f;
+  ASSERT_GE(bright.images[1].at(88, 4)[0], 250.0f / 255.0f) << "the middle shot is clipped there";
+  ASSERT_LT(bright.images[0].at(97, 11)[0], 250.0f / 255.0f) << "the shortest one is not";
+  const MergeResult brightWith = mergeBracket(inputOf(bright, &srgb), deghost);
+  for (const auto& [x, y] : {std::pair{88, 4}, std::pair{93, 8}, std::pair{97, 11}})
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(brightWith.radiance.at(x, y)[c] / bright.radiance.at(x, y)[c], 1.0, 0.03)
+          << x << "," << y << " channel " << c;
 }
 
 }  // namespace
