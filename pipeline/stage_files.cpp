@@ -192,6 +192,9 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   protectInput(file);
   auto entry = std::make_shared<StageCache>(StageCache::atFile(file, "precompute"));
   requireInputFile(file, "render", "lighting file");
+  // Read now and hashed when the job is keyed: the file read must be the file hashed (a
+  // precompute writing it again in between left the old lighting cached under the new key).
+  const std::string identity = fileIdentity(file);
   if (!entry->open())
     throw Error("render",
                 "not a lighting file of compose precompute (or a damaged one" +
@@ -218,7 +221,7 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
   StageInput in;
   in.stages = {"precompute"};
   in.file = file;
-  in.load = [entry, file](Context& ctx) {
+  in.load = [entry, file, identity](Context& ctx) {
     // Made in another working space (another $OCIO): its numbers are not this run's.
     const nlohmann::json& made = entry->meta();
     const std::string working = ctx.colors.workingSpace();
@@ -292,6 +295,7 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
     ctx.needed = needed;
     if (!loaded) throw Error("render", "the lighting file's contents do not fit its basis", file);
     keyFromFile(ctx, file, outputs, "render");
+    requireSameFile(file, identity, "render");
   };
   return in;
 }
@@ -390,6 +394,7 @@ StageInput objectLayerInput(const fs::path& file) {
   in.file = file;
   in.load = [file](Context& ctx) {
     requireInputFile(file, "composite", "object layer");
+    const std::string identity = fileIdentity(file);  // the file read is the file hashed
     const ingest::ExrReader input = [&] {
       if (!ingest::hasExrMagic(file))
         throw Error("composite", "cannot read the object layer: not an OpenEXR file", file);
@@ -665,6 +670,7 @@ StageInput objectLayerInput(const fs::path& file) {
                   file);
     }
     keyFromFile(ctx, file, {kObject, kGroundShadow, kSelfShadowing}, "composite");
+    requireSameFile(file, identity, "composite");
   };
   return in;
 }

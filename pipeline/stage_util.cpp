@@ -107,6 +107,23 @@ void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::s
               file);
 }
 
+std::string fileIdentity(const std::filesystem::path& file) {
+  const std::optional<FileStamp> s = stampOf(file);
+  if (!s) return {};
+  return std::to_string(s->device) + ":" + std::to_string(s->inode) + ":" +
+         std::to_string(s->size) + ":" + std::to_string(s->modified) + ":" +
+         std::to_string(s->changed);
+}
+
+void requireSameFile(const std::filesystem::path& file, const std::string& identity,
+                     const std::string& stage) {
+  if (!identity.empty() && fileIdentity(file) == identity) return;
+  throw Error(stage,
+              "the file changed while compose ran (it is not the file it read: replaced or "
+              "rewritten since): nothing made from it was kept; run again",
+              file);
+}
+
 std::string contentKey(const std::filesystem::path& file, const std::string& stage) {
   Hash128 hash;
   hashBytes(hash, file, stage, false);

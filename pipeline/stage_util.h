@@ -27,6 +27,12 @@ std::string contentKey(const std::filesystem::path& file, const std::string& sta
 // modification and change times) before it reads it; this throws compose::Error (stage `stage`)
 // when `file` is not that file any more. Call it after reading a file the keys hashed.
 void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::string& stage);
+// The same for a file read before it is hashed (a lighting file or an object layer, opened when
+// the command is set up or loaded): fileIdentity() before reading it, requireSameFile() after
+// hashing it throws compose::Error (stage `stage`) when the file at the path is not the one read.
+std::string fileIdentity(const std::filesystem::path& file);
+void requireSameFile(const std::filesystem::path& file, const std::string& identity,
+                     const std::string& stage);
 
 inline void hashVector(Hash128& hash, const glm::dvec3& v) {
   hash.number(v.x);

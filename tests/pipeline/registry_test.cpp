@@ -484,6 +484,35 @@ TEST(InputFiles, AFileReplacedAfterItWasHashedIsSaid) {
   requireUnchangedSinceHashed(dir / "never.json", "camera");
 }
 
+// A file read before it is hashed (a lighting file, an object layer): replaced in between (a
+// precompute writing it again), the bytes hashed are not those read, and the run is stopped
+// (it cached the old lighting's render under the new file's key, which every later run reused).
+TEST(InputFiles, AFileReplacedBetweenReadingAndHashingIsSaid) {
+  TempDir dir;
+  writeText(dir / "scene.lighting", "first");
+  writeText(dir / "new.lighting", "second");
+  const std::string read = fileIdentity(dir / "scene.lighting");
+  EXPECT_FALSE(read.empty());
+  Hash128 h;
+  hashFile(h, dir / "scene.lighting", "render");
+  requireSameFile(dir / "scene.lighting", read, "render");  // the same file: nothing said
+  fs::rename(dir / "new.lighting", dir / "scene.lighting");
+  hashFile(h, dir / "scene.lighting", "render");
+  COMPOSE_EXPECT_ERROR(requireSameFile(dir / "scene.lighting", read, "render"),
+                       "render: the file changed while compose ran (it is not the file it read");
+  // Rewritten in place (same inode, other times and size).
+  const std::string again = fileIdentity(dir / "scene.lighting");
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  writeText(dir / "scene.lighting", "third, longer");
+  COMPOSE_EXPECT_ERROR(requireSameFile(dir / "scene.lighting", again, "composite"),
+                       "nothing made from it was kept; run again");
+  // Gone, or never there.
+  EXPECT_TRUE(fileIdentity(dir / "missing.lighting").empty());
+  fs::remove(dir / "scene.lighting");
+  COMPOSE_EXPECT_ERROR(requireSameFile(dir / "scene.lighting", again, "render"),
+                       "the file changed while compose ran");
+}
+
 TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {
   TempDir dir;
   StageCache entry(dir.path(), "render", "0123abcd");
