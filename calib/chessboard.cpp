@@ -162,8 +162,11 @@ void Board::validate() const {
   // OpenCV's detector needs more than two inner corners each way.
   if (columns < 3 || rows < 3 || columns > 100 || rows > 100)
     throw Error(kStage, "a chessboard needs 3 to 100 inner corners each way, got " + name());
-  if (!(square > 0.0) || !std::isfinite(square))
-    throw Error(kStage, "the chessboard's square size must be positive");
+  // At a micrometre or less the scene's lengths reach the tracer's limits (Embree refuses rays
+  // whose object-space directions are that long, and stopped the process).
+  if (!(square >= 1e-6) || !std::isfinite(square))
+    throw Error(kStage, "the chessboard's square size must be at least 1e-6, got " +
+                            std::to_string(square));
 }
 
 void CalibrationParams::validate() const {

@@ -46,9 +46,12 @@ bool PlateCamera::project(const glm::dvec3& world, glm::dvec2& pixel) const {
 }
 
 void CameraOptions::validate() const {
-  if (!(height > 0.0 && height <= 1e4)) {
-    throw UsageError("--camera-height must be a positive number of metres (at most 10 km), got " +
-                     givenText(height));
+  // Below a micrometre the scene's lengths reach the tracer's limits (Embree stopped the process
+  // on a camera 1e-19 m high; from 1e-10 m the ground shadow was wrong).
+  if (!(height >= 1e-6 && height <= 1e4)) {
+    throw UsageError(
+        "--camera-height must be a positive number of metres (1 micrometre to 10 km), got " +
+        givenText(height));
   }
   if (!(std::abs(pitchDegrees) <= 89.0)) {
     throw UsageError("--pitch must be within ±89 degrees, got " + givenText(pitchDegrees));
@@ -137,6 +140,15 @@ PlateCamera plateCamera(int width, int height, const ingest::CaptureInfo& exif,
   return cam;
 }
 
+double sizedExtent(const glm::dvec3& lo, const glm::dvec3& hi, bool* flat) {
+  const double height = hi.y - lo.y;
+  const double size = std::max({hi.x - lo.x, height, hi.z - lo.z});
+  COMPOSE_CHECK(size > 0.0);
+  const bool isFlat = !(height >= 0.01 * size);
+  if (flat) *flat = isFlat;
+  return isFlat ? size : height;
+}
+
 glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
                          const glm::dvec3& lo, const glm::dvec3& hi) {
   placement.validate();
@@ -175,10 +187,7 @@ glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,
                            ? glm::dot(ground - origin, axis)
                            : glm::length(ground - origin);
   const double worldHeight = placement.heightFraction * camera.height * depth / camera.lens.fy;
-  const double meshHeight = hi.y - lo.y;
-  const double meshSize = std::max({hi.x - lo.x, meshHeight, hi.z - lo.z});
-  COMPOSE_CHECK(meshSize > 0.0);
-  const double scale = worldHeight / (meshHeight > 1e-6 * meshSize ? meshHeight : meshSize);
+  const double scale = worldHeight / sizedExtent(lo, hi);
   const glm::dvec3 base(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
   // Reduced to a turn first: a finite angle of any size (1e308 degrees) is still an angle.
   const double yaw = std::fmod(placement.yawDegrees, 360.0) * std::numbers::pi / 180.0;

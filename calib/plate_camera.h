@@ -81,6 +81,12 @@ struct Placement {
   void validate() const;
 };
 
+// What --scale sizes of an object with these bounds: its height, or for a flat object (its height
+// under 1 % of its largest extent: a rug, a sheet, a coin lying down) its largest extent; `flat`
+// is set to which. (Sized by its height, a quad with one corner raised by 1e-5 of its width
+// filled the frame, where the flat quad beside it took a tenth of it.)
+double sizedExtent(const glm::dvec3& lo, const glm::dvec3& hi, bool* flat = nullptr);
+
 // worldFromObject for a mesh with the given object-space bounds. Throws compose::Error (stage
 // "camera") if the point is above the horizon or the numbers are out of range.
 glm::dmat4 placeOnGround(const PlateCamera& camera, const Placement& placement,

@@ -68,8 +68,9 @@ Hash128 Context::geometryKey() const {
   // object stands on what its cut-outs keep (Mesh::keptBounds); 4: the plate camera, not the
   // plate's bytes; 5: a lens mirrored for a plate tagged 2, 4, 5 or 7; 6: a pose's lens is not
   // turned by the plate's orientation, and a lens file fits a plate only to a resize's rounding;
-  // 7: a plate's pixel aspect ratio
-  h.word(7);
+  // 7: a plate's pixel aspect ratio; 8: an object under 1 % as high as it is large sized by its
+  // largest extent (calib::sizedExtent)
+  h.word(8);
   key(artefact::kPlate);  // a job without a plate has no geometry: the usage error says so
   COMPOSE_CHECK(plateCamera.has_value());
   h.combine(*plateCamera);
@@ -201,6 +202,12 @@ Geometry Context::makeGeometry(int plateWidth, int plateHeight, const ingest::Ca
       throw Error(e.stage(), e.what(), job.lensFile);
     throw;
   }
+  bool flat = false;
+  calib::sizedExtent(glm::dvec3(mesh.boundsMin), glm::dvec3(mesh.boundsMax), &flat);
+  if (flat)
+    runNote("the object is flat (its height " +
+            numberText(double(mesh.boundsMax.y) - double(mesh.boundsMin.y)) +
+            " is under 1 % of its largest extent): --scale sizes its largest extent instead");
   // Reduced to a turn first, as the object's yaw: any finite angle is an angle.
   const double envYaw = -std::fmod(job.environmentYawDegrees, 360.0) * std::numbers::pi / 180.0;
   g.envFromWorld = glm::mat3(glm::rotate(glm::dmat4(1.0), envYaw, glm::dvec3(0, 1, 0)));

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 #include <future>
+#include <limits>
 #include <numbers>
 #include <optional>
 
@@ -62,16 +63,23 @@ double cardRadiance(const lighting::DiffuseLighting& lighting, const glm::mat3& 
 ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& camera,
                            double cardRadiance, const glm::dvec3& luma) {
   ExposureMatch m;
-  // Plate: log-average over an even spread of pixels, with a floor well below any 8-bit level;
-  // of those whose camera ray looks down by more than a degree (the ground is y = 0: rows are
-  // not the horizon for a rolled camera or a distorting lens), unless fewer than 1 % do.
+  // Plate: log-average over an even spread of pixels, of those whose camera ray looks down by
+  // more than a degree (the ground is y = 0: rows are not the horizon for a rolled camera or a
+  // distorting lens), unless fewer than 1 % do. Black pixels (a letterbox, a code 0) say nothing
+  // of the scene's level and are left out; the others are floored at 1e-4 of the median, so
+  // that a few near-black ones do not rule the average, whatever the plate's units (a floor of
+  // 1e-4 itself was the level of a dim float plate: 2.9 stops off at 1e-4 of the usual units).
   constexpr double kFloor = 1e-4;
   const double below = -std::sin(std::numbers::pi / 180.0);
   const double sx = double(camera.width) / plateLinear.width,
                sy = double(camera.height) / plateLinear.height;
   const int step = std::max(1, int(std::sqrt(double(plateLinear.pixelCount()) / 65536.0)));
-  double logSum[2] = {0.0, 0.0};  // the whole plate, its ground
-  int64_t count[2] = {0, 0};
+  struct Sample {
+    double luminance;
+    bool ground;
+  };
+  std::vector<Sample> samples;
+  int64_t visible[2] = {0, 0};  // the whole plate, its ground
   for (int y = step / 2; y < plateLinear.height; y += step) {
     for (int x = step / 2; x < plateLinear.width; x += step) {
       glm::dvec3 origin, direction;
@@ -81,20 +89,34 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
       // A plate with alpha: its visible pixels, their colour unpremultiplied.
       const double a = plateLinear.channels == 4 ? double(p[3]) : 1.0;
       if (!(a >= 0.01)) continue;
-      const double v =
-          std::log(std::max(kFloor, (luma.x * p[0] + luma.y * p[1] + luma.z * p[2]) / a));
-      logSum[0] += v;
-      ++count[0];
-      if (ground) logSum[1] += v, ++count[1];
+      ++visible[0];
+      if (ground) ++visible[1];
+      const double l = (luma.x * p[0] + luma.y * p[1] + luma.z * p[2]) / a;
+      if (l > 0.0) samples.push_back({l, ground});
     }
   }
-  if (count[0] == 0) {
+  if (visible[0] == 0) {
     m.nothingVisible = true;
     return m;
   }
-  const int use = count[1] > 0 && count[1] >= count[0] / 100 ? 1 : 0;
-  m.plateKey = std::exp(logSum[use] / double(std::max<int64_t>(count[use], 1)));
-  m.groundShare = double(count[1]) / double(std::max<int64_t>(count[0], 1));
+  double floor = kFloor;  // a plate black wherever it is seen: matched to that floor
+  if (!samples.empty()) {
+    std::vector<double> levels(samples.size());
+    for (size_t i = 0; i < samples.size(); ++i) levels[i] = samples[i].luminance;
+    std::nth_element(levels.begin(), levels.begin() + ptrdiff_t(levels.size() / 2), levels.end());
+    floor = kFloor * levels[levels.size() / 2];
+  }
+  double logSum[2] = {0.0, 0.0};
+  int64_t count[2] = {0, 0};
+  for (const Sample& s : samples) {
+    const double v = std::log(std::max(floor, s.luminance));
+    logSum[0] += v;
+    ++count[0];
+    if (s.ground) logSum[1] += v, ++count[1];
+  }
+  const int use = count[1] > 0 && visible[1] >= visible[0] / 100 ? 1 : 0;
+  m.plateKey = count[use] > 0 ? std::exp(logSum[use] / double(count[use])) : floor;
+  m.groundShare = double(visible[1]) / double(visible[0]);
   m.wholePlate = use == 0;
   m.cardRadiance = cardRadiance;
   if (m.cardRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.cardRadiance;
@@ -818,6 +840,33 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
     }
     ctx.note(note);
     object.notes.push_back(note);
+  }
+  // The object's light times the exposure must stay a float (an environment of 9e31 at
+  // --exposure 30 was written as infinity, shown black, exit 0).
+  const render::RenderOutput& r = object.output;
+  float peak = 0.0f;
+  for (size_t i = 0; i < r.beauty.pixelCount(); ++i)
+    for (int c = 0; c < 3; ++c)
+      peak = std::max(peak, std::abs(r.beauty.pixels[i * size_t(r.beauty.channels) + size_t(c)]));
+  for (const std::string& name : exposedChannels()) {
+    const auto at = std::find(r.aovs.channelNames.begin(), r.aovs.channelNames.end(), name);
+    if (at == r.aovs.channelNames.end()) continue;
+    const size_t c = size_t(at - r.aovs.channelNames.begin());
+    for (size_t i = 0; i < r.aovs.pixelCount(); ++i)
+      peak = std::max(peak, std::abs(r.aovs.pixels[i * size_t(r.aovs.channels) + c]));
+  }
+  constexpr double kLargest = double(std::numeric_limits<float>::max());
+  if (!(std::isfinite(object.exposure) && object.exposure > 0.0f) ||
+      !(double(peak) * double(object.exposure) <= kLargest)) {
+    throw Error("render",
+                format("the object's light (up to %g in the environment's units) times its "
+                       "exposure (%+.1f stops%s) exceeds what a float holds (%g): %s",
+                       double(peak), std::log2(double(object.exposure)),
+                       ctx.job.exposureStops ? ", --exposure" : ", chosen automatically", kLargest,
+                       ctx.job.exposureStops
+                           ? "lower --exposure, or bring the environment to smaller values"
+                           : "give --exposure, or bring the plate and the environment to "
+                             "comparable units"));
   }
   object.pending = object.exposure;
   object.exposureChosen = true;

@@ -128,10 +128,10 @@ Runner setupCalib(CLI::App& command, const Globals& globals) {
     calib::Board board;
     asUsage([&] { board = calib::Board::parse(o->poseBoard); });
     if (squareGiven) {
-      if (!(o->square > 0.0 && o->square < 1000.0)) {
+      if (!(o->square >= 1e-6 && o->square < 1000.0)) {
         throw UsageError(
-            "--square must be the side of one square in metres, more than 0 and "
-            "less than 1000; got " +
+            "--square must be the side of one square in metres, at least 1e-6 (a micrometre) "
+            "and less than 1000; got " +
             numberText(o->square));
       }
       board.square = o->square;

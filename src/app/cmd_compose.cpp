@@ -125,7 +125,8 @@ void ComposeOptions::addObject(CLI::App& app) {
   app.add_option("--place", place,
                  "Image point X,Y in [0,1] where the object stands [default: 0.5,0.72]");
   app.add_option("--scale", job.placement.heightFraction,
-                 "Object height as a fraction of the plate height")
+                 "Object height as a fraction of the plate height (a flat object's largest extent: "
+                 "one whose height is under 1 % of it)")
       ->capture_default_str();
   app.add_option("--yaw", job.placement.yawDegrees,
                  "Turn the object about the vertical axis, degrees")

@@ -177,6 +177,29 @@ TEST(PlateCamera, AYawOfAnySizeIsReducedToATurn) {
   }
 }
 
+// --scale sizes an object's height, or a flat object's largest extent (its height under 1 % of
+// it). A quad with one corner raised by 1e-5 of its width is as large as the flat quad (sized
+// by its height, it was 218,000 times as large and filled the frame); one 2 % as high as it is
+// wide is sized by its height.
+TEST(PlateCamera, AFlatObjectIsSizedByItsLargestExtent) {
+  const PlateCamera cam = plateCamera(1000, 800, {}, {});
+  Placement place;
+  auto scaleOf = [&](double height) {
+    const glm::dmat4 m = placeOnGround(cam, place, {-1, 0, -1}, {1, height, 1});
+    return glm::length(glm::dvec3(m[0]));
+  };
+  bool flat = false;
+  EXPECT_EQ(sizedExtent({-1, 0, -1}, {1, 0, 1}, &flat), 2.0);
+  EXPECT_TRUE(flat);
+  EXPECT_EQ(sizedExtent({-1, 0, -1}, {1, 2e-5, 1}, &flat), 2.0);
+  EXPECT_TRUE(flat);
+  EXPECT_EQ(sizedExtent({-1, 0, -1}, {1, 0.04, 1}, &flat), 0.04);
+  EXPECT_FALSE(flat);
+  EXPECT_DOUBLE_EQ(scaleOf(2e-5), scaleOf(0.0));
+  EXPECT_NEAR(scaleOf(0.04) / scaleOf(1.0), 1.0 / 0.04, 1e-9);
+  EXPECT_NEAR(scaleOf(0.0) / scaleOf(1.0), 1.0 / 2.0, 1e-9);
+}
+
 TEST(PlateCamera, RejectsImpossiblePlacements) {
   const PlateCamera cam = plateCamera(1000, 800, {}, {});
   Placement sky;

@@ -1114,6 +1114,55 @@ TEST_F(ComposeOutputs, APlatesDataWindowIsItsPicture) {
   EXPECT_EQ(w.at(kX0 + 2, kY0 + 2, w.channel("A")), 1.0f);
 }
 
+// A float plate in other units (here 1e-4 and 1e-6 of the usual ones) is matched by its own
+// level: the exposure moves by the units' stops (a fixed floor of 1e-4 was the level of the
+// dimmer plate: 2.9 stops off). Black pixels (letterbox bars) say nothing of the scene's level
+// and leave the match as it is (they pulled it down to that floor).
+TEST_F(ComposeOutputs, AutoExposureFollowsAFloatPlatesUnitsAndSkipsBlack) {
+  auto texture = [](int x, int y) { return 0.05f + 0.15f * float((x * 7 + y * 13) % 17) / 16.0f; };
+  for (const float units : {1.0f, 1e-4f, 1e-6f})
+    writeExr(dir_ / ("units" + std::to_string(int(std::round(-std::log10(units)))) + ".exr"), 320,
+             240, [&](float* p, int x, int y) { p[0] = p[1] = p[2] = units * texture(x, y); });
+  writeExr(dir_ / "letterbox.exr", 320, 240, [&](float* p, int x, int y) {
+    p[0] = p[1] = p[2] = y < 30 || y >= 210 ? 0.0f : texture(x, y);
+  });
+  auto stops = [](const std::string& err) {
+    const size_t at = err.find("auto exposure: ");
+    return at == std::string::npos ? 99.0 : std::atof(err.c_str() + at + 15);
+  };
+  const std::string linear = " --plate-space lin_rec709";
+  std::map<std::string, double> got;
+  for (const std::string name : {"units0", "units4", "units6", "letterbox"}) {
+    const auto r =
+        runCompose(args((dir_ / ("out-" + name)).string(), name + ".exr") + linear, dir_.path());
+    ASSERT_EQ(r.status, 0) << r.err;
+    got[name] = stops(r.err);
+    ASSERT_LT(got[name], 50.0) << r.err;
+  }
+  EXPECT_NEAR(got["units4"] - got["units0"], std::log2(1e-4), 0.02);
+  EXPECT_NEAR(got["units6"] - got["units0"], std::log2(1e-6), 0.02);
+  // The bars leave rows of the same texture: the same level within the sampling's change.
+  EXPECT_NEAR(got["letterbox"], got["units0"], 0.05);
+}
+
+// An exposure that takes the object's light past what a float holds is refused (an environment
+// of 9e31 at --exposure 30 was written as infinity, shown black, exit 0), and nothing is written.
+TEST_F(ComposeOutputs, AnExposureBeyondFloatsRangeIsRefused) {
+  writeExr(dir_ / "bright-env.exr", 64, 32, [](float* p, int, int) { p[0] = p[1] = p[2] = 9e31f; });
+  const std::string env = " --env " + quote((dir_ / "bright-env.exr").string());
+  const auto r = runCompose(args((dir_ / "over").string()) + env + " --exposure 30", dir_.path());
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_NE(r.err.find("times its exposure (+30.0 stops, --exposure) exceeds what a float holds"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "over.exr"));
+  EXPECT_FALSE(fs::exists(dir_ / "over.jpg"));
+  // The environment itself is fine: matched to the plate automatically, it renders.
+  const auto matched = runCompose(args((dir_ / "matched").string()) + env, dir_.path());
+  EXPECT_EQ(matched.status, 0) << matched.err;
+  EXPECT_TRUE(fs::exists(dir_ / "matched.exr"));
+}
+
 TEST_F(ComposeOutputs, AutoExposureReadsThePlatesGroundNotItsSky) {
   writeExr(dir_ / "input-sky.exr", 320, 240,
            [](float* p, int, int y) { p[0] = p[1] = p[2] = y < 120 ? 0.9f : 0.1f; });
@@ -1733,6 +1782,8 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
        "order=auto estimates Lambertian truncation only"},
       {"--pitch 95", "--pitch must be within"},
       {"--camera-height -1", "--camera-height must be a positive"},
+      // Embree stopped the process (an assertion) on the rays of a scene this small.
+      {"--camera-height 1e-19", "(1 micrometre to 10 km), got 1e-19"},
       {"--focal35 0", "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm"},
       {"--focal35 1e-300", "got 1e-300"},
       {"--env-yaw inf", "--env-yaw must be a finite"},

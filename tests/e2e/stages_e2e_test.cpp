@@ -1607,6 +1607,7 @@ TEST_F(StageCommands, CalibPoseRefusesSizesThatAreNot) {
   for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
            {"--square 0", "--square must be the side of one square in metres"},
            {"--square -0.02", "got -0.02"},
+           {"--square 1e-20", "at least 1e-6 (a micrometre) and less than 1000; got 1e-20"},
            {"--focal35 0",
             "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm, "
             "got 0"},
