@@ -252,8 +252,9 @@ class MergeStage final : public Stage {
   // 7: a photo's missing ISO or f-number taken from the other photos of its bracket; 8: 8-bit
   // photos made linear in the space of their own primaries (Display P3's, not Rec.709's), the
   // photos' space from --env-space; 9: a deep pixel no shot is trusted at bounded and flagged,
-  // ghost suppression's reference agrees with the over-exposed shots
-  static constexpr int kVersion = 9;
+  // ghost suppression's reference agrees with the over-exposed shots; 10: Adobe RGB photos'
+  // camera RGB in linear Adobe RGB, a portrait raw photo's orientation known
+  static constexpr int kVersion = 10;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {
@@ -549,8 +550,9 @@ class ColorStage final : public Stage {
   // colour by its bytes' format, not a name they contradict, a WebP's ICC profile read; 7: of a
   // multi-part OpenEXR the part named as the picture, Nuke's long channel names (rgba.red, alpha);
   // 8: a Radiance picture's mantissas decoded as the format defines them (half a step up);
-  // 9: a cube's faces made linear before they are resampled to a lat-long map
-  static constexpr int kColorVersion = 9;
+  // 9: a cube's faces made linear before they are resampled to a lat-long map; 10: Adobe RGB's
+  // primaries known exactly (they were taken as adapted to the interchange white)
+  static constexpr int kColorVersion = 10;
 
   void keys(Context& ctx) const override {
     if (ctx.mayNeed(kPlateLinear)) {
@@ -797,18 +799,9 @@ std::string toWorkingSpace(Image& image, const std::filesystem::path& file,
 
 color::InputSpace inputSpaceOf(const color::ColorConfig& colors, const std::filesystem::path& file,
                                const ingest::CaptureInfo& info) {
-  color::InputSpace s =
-      colors.inputSpace(ingest::nameForRules(file, info.format), info.fileColorSpace,
-                        info.colorSpaceByConvention, info.integerSamples());
-  if (!info.iccProfile.empty() && s.how == "as the file says")
-    s.how = "by its ICC profile '" + info.iccProfile + "'";
-  if (info.exifUncalibrated) {
-    s.how +=
-        "; its EXIF says the colour space is uncalibrated (65535), as cameras set to Adobe "
-        "RGB write: give the space (such as 'Adobe RGB (1998)') if it is not this one";
-    s.assumed = true;
-  }
-  return s;
+  return color::photoInputSpace(colors, ingest::nameForRules(file, info.format),
+                                info.fileColorSpace, info.colorSpaceByConvention,
+                                info.integerSamples(), info.iccProfile, info.exifUncalibrated);
 }
 
 std::unique_ptr<Stage> makeIngestStage() {

@@ -84,7 +84,8 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       ->capture_default_str();
   command.add_option("--jpeg-quality", params.jpegQuality, "JPEG quality")->capture_default_str();
   command.add_flag("--tiff", params.writeTiff16,
-                   "Also write 16-bit linear TIFFs (capture-tiff.json)");
+                   "Also write 16-bit linear TIFFs, described by capture-tiff.json (by "
+                   "capture.json with --no-jpeg)");
   command.add_flag("--no-jpeg", o->noJpeg, "Write no JPEGs (with --tiff)");
   command
       .add_option("--shake", params.shakePixels, "Hand-held shift per shot, up to this many pixels")

@@ -195,6 +195,7 @@ double maxDifference(const glm::dmat3& a, const glm::dmat3& b) {
 
 constexpr Chromaticities kP3D65 = {0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290};
 constexpr Chromaticities kRec2020 = {0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290};
+constexpr Chromaticities kAdobeRgb = {0.64, 0.33, 0.21, 0.71, 0.15, 0.06, 0.3127, 0.3290};
 // CIE XYZ as RGB: its primaries are the XYZ axes, and (1, 1, 1) is the equal-energy white E, so
 // that the matrix OpenEXR makes of them is the identity.
 constexpr Chromaticities kXyzChromaticities = {1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0 / 3.0, 1.0 / 3.0};
@@ -700,7 +701,8 @@ std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& spa
   // Configs publish these matrices to 4-7 digits and differ in how they derive the ACES white
   // (up to 2e-4 here); a different set of primaries differs by more than 1e-2.
   for (const Chromaticities& known :
-       {kRec709Chromaticities, kAcesAp1Chromaticities, kAcesAp0Chromaticities, kP3D65, kRec2020}) {
+       {kRec709Chromaticities, kAcesAp1Chromaticities, kAcesAp0Chromaticities, kP3D65, kRec2020,
+        kAdobeRgb}) {
     const glm::dmat3 adapted = bradford(known[6], known[7], whiteX, whiteY) * xyzFromRgb(known);
     if (maxDifference(adapted, xyz) < 1e-3) return known;
   }
@@ -733,7 +735,7 @@ bool ColorConfig::samePrimaries(const std::string& from, const std::string& to) 
 std::string ColorConfig::linearSpaceWithPrimariesOf(const std::string& space) const {
   const std::string resolved = resolve(space, "a colour space");
   if (isLinearOrData(resolved)) return isData(resolved) ? std::string() : resolved;
-  for (const Chromaticities* known : {&kRec709Chromaticities, &kP3D65, &kRec2020,
+  for (const Chromaticities* known : {&kRec709Chromaticities, &kP3D65, &kAdobeRgb, &kRec2020,
                                       &kAcesAp1Chromaticities, &kAcesAp0Chromaticities}) {
     const std::string linear = spaceWithChromaticities(*known);
     if (!linear.empty() && samePrimaries(resolved, linear)) return linear;
@@ -863,6 +865,21 @@ Image ColorConfig::toDisplay(Image&& image, const std::string& display,
   }
   out.colorSpace = display + "/" + view;
   return out;
+}
+
+InputSpace photoInputSpace(const ColorConfig& colors, const std::filesystem::path& file,
+                           const std::string& declared, bool declaredByConvention, bool integerData,
+                           const std::string& iccProfile, bool exifUncalibrated) {
+  InputSpace s = colors.inputSpace(file, declared, declaredByConvention, integerData);
+  if (!iccProfile.empty() && s.how == "as the file says")
+    s.how = "by its ICC profile '" + iccProfile + "'";
+  if (exifUncalibrated) {
+    s.how +=
+        "; its EXIF says the colour space is uncalibrated (65535), as cameras set to Adobe "
+        "RGB write: give the space (such as 'Adobe RGB (1998)') if it is not this one";
+    s.assumed = true;
+  }
+  return s;
 }
 
 }  // namespace compose::color

@@ -160,4 +160,12 @@ class ColorConfig {
   std::shared_ptr<const Impl> impl_;
 };
 
+// ColorConfig::inputSpace() for a photo (`file` as named for the config's file rules): the ICC
+// profile it embeds named in `how` when that is what declared its space, and a camera's EXIF
+// colour space "uncalibrated" (65535, as cameras set to Adobe RGB write) made a guess that says
+// so.
+InputSpace photoInputSpace(const ColorConfig& colors, const std::filesystem::path& file,
+                           const std::string& declared, bool declaredByConvention, bool integerData,
+                           const std::string& iccProfile, bool exifUncalibrated);
+
 }  // namespace compose::color

@@ -68,8 +68,10 @@ void addAttribute(const OIIO::ParamValue& p, std::vector<ImageAttribute>& out) {
 
 class OiioReader final : public Reader {
  public:
+  // `orientation`: the EXIF orientation of a picture the reader gives unturned although its
+  // header says 1 (a camera raw file: raw:flip), 0 to take the header's.
   OiioReader(std::unique_ptr<OIIO::ImageInput> input,
-             std::unique_ptr<OIIO::Filesystem::IOMemReader> proxy)
+             std::unique_ptr<OIIO::Filesystem::IOMemReader> proxy, int orientation = 0)
       : input_(std::move(input)), proxy_(std::move(proxy)) {
     const OIIO::ImageSpec& spec = input_->spec();
     header_.width = spec.width;
@@ -82,6 +84,11 @@ class OiioReader final : public Reader {
     header_.eightBit = spec.format == OIIO::TypeDesc::UINT8;
     for (int c = 0; c < spec.nchannels; ++c) header_.channelNames.push_back(spec.channel_name(c));
     for (const OIIO::ParamValue& p : spec.extra_attribs) addAttribute(p, header_.attributes);
+    if (orientation > 1) {
+      std::erase_if(header_.attributes,
+                    [](const ImageAttribute& a) { return a.name == "Orientation"; });
+      header_.attributes.push_back({"Orientation", orientation});
+    }
   }
   const Header& header() const override { return header_; }
 
@@ -137,6 +144,22 @@ class OiioModule final : public Module {
       error = oneLine(OIIO::geterror());
       if (error.empty()) error = "unknown reason";
       return nullptr;
+    }
+    // A camera raw file held as a portrait: LibRaw turns the picture itself and OpenImageIO then
+    // says Orientation 1 (the turn in raw:flip, LibRaw's code). Read unturned instead and told
+    // its EXIF orientation, as a JPEG is, so that what follows the sensor (a lens calibration's
+    // size, compose:sensorOrientation) knows it was turned: a portrait raw was taken for a
+    // sensor of the other shape and its lens file refused.
+    if (std::string(input->format_name()) == "raw") {
+      // LibRaw's flip from EXIF's orientation o is "50132467"[o & 7]; the inverse.
+      static constexpr int kExifFromFlip[8] = {1, 2, 4, 3, 5, 8, 6, 7};
+      const int flip = input->spec().get_int_attribute("raw:flip", 0);
+      if (flip > 0 && flip < 8) {
+        OIIO::ImageSpec unturned = config;
+        unturned.attribute("raw:user_flip", 0);
+        if (auto again = OIIO::ImageInput::open(path, &unturned))
+          return std::make_unique<OiioReader>(std::move(again), nullptr, kExifFromFlip[flip]);
+      }
     }
     return std::make_unique<OiioReader>(std::move(input), nullptr);
   }

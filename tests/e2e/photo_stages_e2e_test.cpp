@@ -273,6 +273,54 @@ TEST_F(PhotoStages, ACameraRawFileIsReadWithItsExifAndDevelopedToLinearLight) {
   EXPECT_EQ(exr.info.fileColorSpace, "ACEScg");
 }
 
+// A raw photo held as a portrait (its IFD0 Orientation 6 or 8): read turned upright, as
+// OpenImageIO develops it, and known to be turned, as a JPEG's EXIF orientation is (LibRaw turned
+// it and OpenImageIO said Orientation 1: the sensor's shape was taken for the other one, the
+// camera's lens file refused, and merge wrote no compose:sensorOrientation).
+TEST_F(PhotoStages, APortraitRawPhotoIsTurnedAndKnownToBe) {
+  const fs::path raw = pipeline::samplesDirectory() / "raw" / "IMG_5952.CR2";
+  ASSERT_TRUE(fs::exists(raw)) << "sample raw photo missing (samples/fetch.sh)";
+  std::ifstream in(raw, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 16u);
+  ASSERT_EQ(std::string(bytes.data(), 2), "II") << "a little-endian TIFF";
+  auto u16 = [&](size_t at) {
+    return unsigned(uint8_t(bytes[at])) | unsigned(uint8_t(bytes[at + 1])) << 8;
+  };
+  auto u32 = [&](size_t at) { return size_t(u16(at)) | size_t(u16(at + 2)) << 16; };
+  const size_t ifd = u32(4);
+  size_t orientationAt = 0;
+  for (unsigned e = 0; e < u16(ifd); ++e)
+    if (u16(ifd + 2 + 12 * e) == 0x0112) orientationAt = ifd + 2 + 12 * e + 8;
+  ASSERT_NE(orientationAt, 0u) << "IFD0 has an Orientation entry";
+  const ingest::LoadedImage upright = ingest::readImage(raw);
+  for (const int orientation : {6, 8}) {
+    SCOPED_TRACE(orientation);
+    bytes[orientationAt] = char(orientation);
+    const fs::path turned = dir_ / ("portrait" + std::to_string(orientation) + ".CR2");
+    std::ofstream(turned, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+    const ingest::LoadedImage img = ingest::readImage(turned);
+    EXPECT_EQ(img.info.orientation, orientation);
+    EXPECT_EQ(img.info.fileWidth, 3522);  // the sensor's shape
+    ASSERT_EQ(img.image.width, 2348);
+    ASSERT_EQ(img.image.height, 3522);
+    // Turned the way the tag says: the top left of the upright picture is at the top right (6,
+    // turned a quarter clockwise) or the bottom left (8).
+    const int x = orientation == 6 ? 2348 - 1 - 40 : 40, y = orientation == 6 ? 60 : 3522 - 1 - 60;
+    for (int c = 0; c < 3; ++c)
+      EXPECT_FLOAT_EQ(img.image.at(x, y)[c], upright.image.at(60, 40)[c]) << "channel " << c;
+    if (orientation != 6) continue;  // merged once: a raw file takes seconds to develop
+    const CommandRun m =
+        compose("merge --out " + q(dir_ / ("merged" + std::to_string(orientation) + ".exr")) + " " +
+                    q(turned),
+                dir_);
+    ASSERT_EQ(m.status, 0) << m.err;
+    const ingest::LoadedImage merged =
+        ingest::readImage(dir_ / ("merged" + std::to_string(orientation) + ".exr"));
+    EXPECT_EQ(merged.info.sensorOrientation, orientation);
+  }
+}
+
 // `color --from` says which space the input was read as (it named the working space instead).
 TEST(ColorCommand, SaysTheSpaceGivenWithFrom) {
   TempDir dir;

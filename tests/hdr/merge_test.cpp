@@ -420,6 +420,97 @@ TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
   EXPECT_EQ(merged.views[0].stats.saturated, 16 * 8);
 }
 
+// The space a photo declares, as ingest reads it: Adobe RGB's primaries are the camera's RGB (they
+// were taken for Rec.709's: red 9.5 % off), and a space the config does not know (a ProPhoto RGB
+// profile) or a camera's EXIF "uncalibrated" (65535) is said in a note (they passed in silence).
+TEST(Merge, APhotosDeclaredSpaceIsUsedOrItsGuessSaid) {
+  TempDir dir;
+  auto params = smallCaptureParams(3);
+  params.width = 96;
+  params.height = 72;
+  params.views = 1;
+  const auto env = loadSampleEnvironment("courtyard");
+  const auto on = captureOnDisk(env, params, dir / "capture");
+  const auto colors = color::ColorConfig::builtin();
+  auto merged = [&](const std::function<void(ingest::CaptureInfo&)>& tag) {
+    ingest::Capture capture = on.capture;
+    auto photos = on.photos;
+    for (auto& shot : capture.views[0].shots) {
+      shot.colorSpace.clear();  // as photos named on the command line: their files say
+      tag(shot.info);
+    }
+    for (auto& photo : photos[0]) tag(photo.info);
+    CaptureMergeOptions options;
+    options.responseFolder = dir / "responses";
+    return mergeCapture(capture, photos, options, colors);
+  };
+  auto said = [](const CaptureMergeResult& r, const std::string& text) {
+    for (const std::string& n : r.notes)
+      if (n.find(text) != std::string::npos) return true;
+    return false;
+  };
+  const CaptureMergeResult plain = merged([](ingest::CaptureInfo&) {});
+  EXPECT_FALSE(said(plain, "give --input-space")) << "a camera's sRGB JPEG is no guess";
+  const CaptureMergeResult adobe = merged([](ingest::CaptureInfo& info) {
+    info.fileColorSpace = info.iccProfile = "Adobe RGB (1998)";
+    info.colorSpaceByConvention = false;
+  });
+  EXPECT_NE(adobe.linearisation.find("camera RGB taken as Linear Adobe RGB (1998)"),
+            std::string::npos)
+      << adobe.linearisation << " / " << plain.linearisation;
+  const CaptureMergeResult prophoto = merged([](ingest::CaptureInfo& info) {
+    info.fileColorSpace = info.iccProfile = "ProPhoto RGB";
+    info.colorSpaceByConvention = false;
+  });
+  EXPECT_TRUE(said(prophoto, "the file says 'ProPhoto RGB', which the config does not know"));
+  EXPECT_TRUE(said(prophoto, "give --input-space to say which it is"));
+  const CaptureMergeResult uncalibrated =
+      merged([](ingest::CaptureInfo& info) { info.exifUncalibrated = true; });
+  EXPECT_TRUE(said(uncalibrated, "uncalibrated (65535), as cameras set to Adobe RGB write"));
+}
+
+// What a user gives by hand is used, but what contradicts the photos is said or refused: a
+// response file of another camera is noted (it was applied in silence), and exposures given as
+// equal for shots 2 stops apart are refused (--exposures 1,1,16 passed with warnings).
+TEST(Merge, AResponseOfAnotherCameraAndEqualExposuresForUnequalShots) {
+  TempDir dir;
+  auto params = smallCaptureParams(3);
+  params.width = 96;
+  params.height = 72;
+  params.views = 1;
+  const auto env = loadSampleEnvironment("courtyard");
+  const auto on = captureOnDisk(env, params, dir / "capture");
+  const auto colors = color::ColorConfig::builtin();
+  ResponseCurve other = ResponseCurve::srgb();
+  other.make = "Canon";
+  other.model = "EOS 5D";
+  writeResponse(dir / "canon.json", other);
+  CaptureMergeOptions options;
+  options.responseFolder = dir / "responses";
+  options.response = ResponseMode::File;
+  options.responseFile = dir / "canon.json";
+  const CaptureMergeResult given = mergeCapture(on.capture, on.photos, options, colors);
+  bool said = false;
+  for (const std::string& n : given.notes)
+    said = said || n.find(
+                       "is of 'Canon EOS 5D', the photos of 'compose virtual camera': used "
+                       "as given") != std::string::npos;
+  EXPECT_TRUE(said);
+  ResponseCurve same = other;
+  same.make = "compose";
+  same.model = "virtual camera";
+  writeResponse(dir / "same.json", same);
+  options.responseFile = dir / "same.json";
+  for (const std::string& n : mergeCapture(on.capture, on.photos, options, colors).notes)
+    EXPECT_EQ(n.find("used as given"), std::string::npos) << n;
+
+  ingest::Capture equal = on.capture;
+  ingest::setExposures(equal.views[0], {1.0, 1.0, 16.0}, "--exposures");
+  options.response = ResponseMode::ColorSpace;
+  COMPOSE_EXPECT_ERROR(mergeCapture(equal, on.photos, options, colors),
+                       "are given exposures 0.00 stops apart (--exposures) but");
+}
+
 TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {
   // Linear 16-bit data, no JPEG: only noise and quantisation remain.
   constexpr double kMedianError = 0.01;
