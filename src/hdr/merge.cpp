@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <tuple>
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/photo.hpp>
@@ -126,9 +127,66 @@ Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
     std::vector<cv::Mat> gray(n);
     for (size_t i = 0; i < n; ++i) cv::cvtColor(wrap(*codes[i]), gray[i], cv::COLOR_RGB2GRAY);
     auto mtb = cv::createAlignMTB(bits, 4, true);
+    // The share of the pixels both bitmaps trust (outside the band around their medians) whose
+    // bits differ, shot `i` shifted by s: AlignMTB's own measure.
+    auto differ = [](const cv::Mat& tb0, const cv::Mat& eb0, const cv::Mat& tb1, const cv::Mat& eb1,
+                     cv::Point s) {
+      const int w = tb0.cols, h = tb0.rows;
+      const int x0 = std::max(0, s.x), y0 = std::max(0, s.y);
+      const int x1 = std::min(w, w + s.x), y1 = std::min(h, h + s.y);
+      if (2 * (x1 - x0) < w || 2 * (y1 - y0) < h) return 2.0;  // less than half overlaps
+      const cv::Rect at0(x0, y0, x1 - x0, y1 - y0), at1(x0 - s.x, y0 - s.y, x1 - x0, y1 - y0);
+      cv::Mat trusted, diff;
+      cv::bitwise_and(eb0(at0), eb1(at1), trusted);
+      cv::bitwise_xor(tb0(at0), tb1(at1), diff);
+      cv::bitwise_and(diff, trusted, diff);
+      const int valid = cv::countNonZero(trusted);
+      return valid < 64 ? 2.0 : double(cv::countNonZero(diff)) / valid;
+    };
+    // The best shift within `radius` of `around` on images scaled down by `factor`, and its
+    // share of differing bits.
+    auto search = [&](const cv::Mat& g0, const cv::Mat& g1, int factor, cv::Point around,
+                      int radius) -> std::pair<cv::Point, double> {
+      cv::Mat a = g0, b = g1;
+      if (factor > 1) {
+        cv::resize(g0, a, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
+        cv::resize(g1, b, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
+      }
+      cv::Mat tb0, eb0, tb1, eb1;
+      mtb->computeBitmaps(a, tb0, eb0);
+      mtb->computeBitmaps(b, tb1, eb1);
+      cv::Point best = around;
+      double least = differ(tb0, eb0, tb1, eb1, around);
+      for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx) {
+          const cv::Point s(around.x + dx, around.y + dy);
+          const double d = differ(tb0, eb0, tb1, eb1, s);
+          if (d < least) least = d, best = s;
+        }
+      return {best, least};
+    };
     for (size_t i = 0; i < n; ++i) {
       if (i == pivot) continue;
-      const cv::Point s = mtb->calculateShift(gray[pivot], gray[i]);
+      const cv::Point byPyramid = mtb->calculateShift(gray[pivot], gray[i]);
+      // AlignMTB decides level by level from its pyramid's coarsest image, a few pixels across,
+      // searching one pixel each way at each level, and a wrong turn there is not undone (a
+      // detailed view of 320 x 240 pixels shaken by 10 px came out 6.5 px off, 15.6 px at 20).
+      // The same measure on its bitmaps is searched over the whole range on the shots scaled to
+      // about 200 pixels high, then two pixels each way at each finer level; AlignMTB's own
+      // answer stays where it explains the shots as well at full size.
+      int factor = 1;
+      while (std::min(gray[i].cols, gray[i].rows) / (2 * factor) >= 200) factor *= 2;
+      cv::Point s(0, 0);
+      int radius = (maxShift + factor - 1) / factor;
+      double least = 0.0;
+      for (;; factor /= 2) {
+        std::tie(s, least) = search(gray[pivot], gray[i], factor, s, radius);
+        if (factor == 1) break;
+        s *= 2;
+        radius = 2;
+      }
+      if (byPyramid != s && search(gray[pivot], gray[i], 1, byPyramid, 0).second <= least)
+        s = byPyramid;
       out.found[i] = {s.x, s.y};
       if (std::abs(s.x) <= maxShift && std::abs(s.y) <= maxShift) out.shifts[i] = {s.x, s.y};
     }

@@ -503,12 +503,28 @@ TEST(Merge, AResponseOfAnotherCameraAndEqualExposuresForUnequalShots) {
   options.responseFile = dir / "same.json";
   for (const std::string& n : mergeCapture(on.capture, on.photos, options, colors).notes)
     EXPECT_EQ(n.find("used as given"), std::string::npos) << n;
+  ResponseCurve makeOnly = other;  // a file that names the make alone: no contradiction
+  makeOnly.make = "COMPOSE";
+  makeOnly.model.clear();
+  writeResponse(dir / "make.json", makeOnly);
+  options.responseFile = dir / "make.json";
+  for (const std::string& n : mergeCapture(on.capture, on.photos, options, colors).notes)
+    EXPECT_EQ(n.find("used as given"), std::string::npos) << n;
 
   ingest::Capture equal = on.capture;
   ingest::setExposures(equal.views[0], {1.0, 1.0, 16.0}, "--exposures");
   options.response = ResponseMode::ColorSpace;
   COMPOSE_EXPECT_ERROR(mergeCapture(equal, on.photos, options, colors),
                        "are given exposures 0.00 stops apart (--exposures) but");
+  // A third-stop bracket: the longer shots are brighter, as they should be (it was refused).
+  TempDir thirds;
+  auto close = params;
+  close.evStep = 1.0 / 3.0;
+  const auto near = captureOnDisk(env, close, thirds / "capture");
+  CaptureMergeOptions plain;
+  plain.responseFolder = thirds / "responses";
+  plain.response = ResponseMode::ColorSpace;
+  EXPECT_NO_THROW(mergeCapture(near.capture, near.photos, plain, colors));
 }
 
 TEST(Merge, SixteenBitLinearTiffsMergeByOurOwnWeights) {
@@ -578,6 +594,42 @@ TEST(Merge, HandHeldShiftsUpToTwentyPixelsAreAlignedWithinOnePixel) {
               worst);
   EXPECT_GT(largest, 10.0) << "the test needs real shake";
   EXPECT_LE(worst, kAlignment);
+
+  // Small detailed views (a ring of four, 320 x 240) shaken by up to 10 and 20 px: every shift
+  // up to 20 px within a pixel. AlignMTB's pyramid alone, deciding on images a few pixels
+  // across, put the brightest shot of one view 6.5 px off at 10 px of shake, and at 20 px one
+  // shot 15.6 px off.
+  for (const auto& [shake, seed] : {std::pair{10.0, uint64_t(1)}, std::pair{20.0, uint64_t(3)}}) {
+    TempDir ring;
+    auto small = smallCaptureParams(3, seed);
+    small.views = 4;
+    small.width = 320;
+    small.height = 240;
+    small.shakePixels = shake;
+    auto shaken = captureOnDisk(env, small, ring / "capture");
+    CaptureMergeOptions aligned;
+    aligned.responseFolder = ring / "responses";
+    aligned.merge.align = true;
+    const CaptureMergeResult m = mergeCapture(shaken.capture, shaken.photos, aligned, colors);
+    double ringWorst = 0.0;
+    int counted = 0;
+    for (size_t v = 0; v < m.views.size(); ++v) {
+      const auto& shots = shaken.simulated.views[v].shots;
+      for (size_t i = 0; i < shots.size(); ++i) {
+        const glm::dvec2 want = shots[1].shift - shots[i].shift;
+        if (std::max(std::abs(want.x), std::abs(want.y)) > 20.0) continue;
+        const auto got = m.views[v].stats.shifts[i];
+        ringWorst = std::max({ringWorst, std::abs(got[0] - want.x), std::abs(got[1] - want.y)});
+        ++counted;
+      }
+    }
+    std::printf(
+        "[ figures ] ring of 320 x 240 views shaken by up to %.0f px: %d shifts up to 20 px, "
+        "worst error %.2f px\n",
+        shake, counted, ringWorst);
+    EXPECT_GE(counted, 8);
+    EXPECT_LE(ringWorst, kAlignment) << "shake " << shake;
+  }
 }
 
 TEST(Merge, GhostSuppressionKeepsTheReferenceShotWhereSomethingMoved) {
