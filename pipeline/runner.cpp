@@ -197,12 +197,12 @@ Planned planJob(Context& ctx, bool load, const RunRequest& request) {
           p.replay[i] = notesKeptIn(entry.meta());
         } else {
           ctx.runNote("the cache entry " + entry.path().string() + " (stage " + stage.name() +
-                      ") does not fit this job" + why + ": ignored, computed again and rewritten");
+                      ") does not fit this job" + why + ": ignored and computed again");
           entry.clear();  // rewritten from nothing of what it held
         }
       } else if (!entry.problem().empty()) {
         ctx.runNote("the cache entry " + entry.path().string() + " (stage " + stage.name() + ") " +
-                    entry.problem() + ": ignored, computed again and rewritten");
+                    entry.problem() + ": ignored and computed again");
       }
       r.seconds += secondsSince(start);
       if (reused) {
@@ -239,21 +239,9 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
     }
   // A cache folder the run could not write (read-only): it would say so, and cache nothing.
   std::string unwritable;
-  if (!job.cache.empty()) {
-    fs::path folder = job.cache / "stages";
-    std::error_code ec;
-    // The nearest folder that exists: the current one above a relative path's first folder.
-    while (!fs::exists(folder, ec)) {
-      if (!folder.has_parent_path() || folder.parent_path() == folder) {
-        folder = folder.is_relative() ? fs::path(".") : fs::path();
-        break;
-      }
-      folder = folder.parent_path();
-    }
-    if (!folder.empty() && ::access(folder.c_str(), W_OK | X_OK) != 0)
-      unwritable = "; not cached: the cache folder " + (job.cache / "stages").string() +
-                   " cannot be written (" + std::strerror(errno) + ")";
-  }
+  if (!job.cache.empty())
+    if (const std::string problem = cacheFolderProblem(job.cache / "stages"); !problem.empty())
+      unwritable = "; not cached: " + problem;
   for (size_t i = 0; i < p.records.size(); ++i) {
     StageRecord& r = p.records[i];
     r.seconds = 0.0;
@@ -262,10 +250,15 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
       if (p.entries[i] && !unwritable.empty()) {
         r.reason += unwritable;
       } else if (p.entries[i]) {
-        if (!p.problems[i].empty())
+        if (!p.problems[i].empty()) {
+          // Only a file is replaced (a folder or a pipe where the entry goes stays).
+          std::error_code ec;
+          const fs::file_status s = fs::symlink_status(p.entries[i]->path(), ec);
           r.reason += "; its cache entry " + p.entries[i]->path().string() + " " + p.problems[i] +
-                      ": computed again and rewritten";
-        else
+                      (fs::is_regular_file(s) ? ": computed again and rewritten"
+                                              : ": computed again, not cached (only a file "
+                                                "there can be replaced)");
+        } else
           r.reason += "; cached in " + p.entries[i]->path().string();
       }
     }
@@ -365,8 +358,13 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   for (const auto& [why, names] : unstored) {
     std::string which;
     for (const std::string& n : names) which += (which.empty() ? "" : ", ") + n;
-    ctx.runNote("the cache folder " + (job.cache / "stages").string() + " cannot be written (" +
-                why + "): the outputs of " + which + " were not cached");
+    // The folder itself, or only these entries (a folder or a pipe where an entry goes).
+    const std::string problem = cacheFolderProblem(job.cache / "stages");
+    if (!problem.empty())
+      ctx.runNote(problem + ": the outputs of " + which + " were not cached");
+    else
+      ctx.runNote("the cache entries of " + which + " could not be written (" + why +
+                  "): their outputs were not cached");
   }
   result.stages = std::move(p.records);
   result.notes = std::move(ctx.notes);

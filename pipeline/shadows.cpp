@@ -13,6 +13,7 @@
 #include "lighting/lighting_cache.h"
 #include "lighting/sh.h"
 #include "lighting/sources.h"
+#include "pipeline/stage_util.h"
 
 namespace compose::pipeline {
 
@@ -323,8 +324,10 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
       if (cache.store(key, description, state, &problem)) {
         out.reason += ", cached in " + cache.pathFor(key).string();
       } else {
-        out.notes.push_back("the visibility pass was not cached (" + problem +
-                            "): " + cache.folder().string());
+        const std::string folder = cacheFolderProblem(cache.folder());
+        out.notes.push_back(
+            "the visibility pass was not cached (" +
+            (folder.empty() ? problem + "): " + cache.folder().string() : folder + ")"));
       }
     }
   } else {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "core/channels.h"
 #include "core/error.h"
@@ -105,6 +106,37 @@ void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::s
               "the file changed while compose ran (it is not the file whose bytes keyed the "
               "cache: replaced or rewritten since): nothing made from it was kept; run again",
               file);
+}
+
+// Why the cache folder `folder` cannot hold entries, or empty when it can: the nearest part of
+// its path that is there is a file, a link to nothing (a share not mounted), or cannot be
+// written. (A file there was said as "Permission denied" by --explain and "Not a directory" by
+// the run; a link to nothing as "File exists", and --explain promised caching.)
+std::string cacheFolderProblem(const std::filesystem::path& folder) {
+  namespace fs = std::filesystem;
+  fs::path at = folder;
+  std::error_code ec;
+  while (!fs::exists(fs::symlink_status(at, ec))) {
+    if (!at.has_parent_path() || at.parent_path() == at) {
+      at = at.is_relative() ? fs::path(".") : fs::path();
+      break;
+    }
+    at = at.parent_path();
+  }
+  if (at.empty()) return {};
+  if (fs::is_symlink(fs::symlink_status(at, ec)) && !fs::exists(fs::status(at, ec))) {
+    const fs::path target = fs::read_symlink(at, ec);
+    return "the cache folder " + folder.string() + " cannot be made: " + at.string() +
+           " is a link to " + (ec ? std::string("something") : target.string()) +
+           ", which is not there";
+  }
+  if (!fs::is_directory(fs::status(at, ec)))
+    return "the cache folder " + folder.string() + " cannot be made: " + at.string() +
+           " is a file, not a folder";
+  if (::access(at.c_str(), W_OK | X_OK) != 0)
+    return "the cache folder " + folder.string() + " cannot be written (" + std::strerror(errno) +
+           ")";
+  return {};
 }
 
 std::string fileIdentity(const std::filesystem::path& file) {

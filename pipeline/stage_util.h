@@ -31,6 +31,10 @@ void requireUnchangedSinceHashed(const std::filesystem::path& file, const std::s
 // the command is set up or loaded): fileIdentity() before reading it, requireSameFile() after
 // hashing it throws compose::Error (stage `stage`) when the file at the path is not the one read.
 std::string fileIdentity(const std::filesystem::path& file);
+// Why the cache folder `folder` cannot hold entries, or empty when it can: the nearest part of
+// its path that is there is a file, a link to nothing (a share not mounted), or cannot be
+// written.
+std::string cacheFolderProblem(const std::filesystem::path& folder);
 void requireSameFile(const std::filesystem::path& file, const std::string& identity,
                      const std::string& stage);
 

@@ -189,7 +189,7 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
       fs::file_time_type oldest = fs::file_time_type::max(), newest = fs::file_time_type::min();
     };
     std::map<std::string, Group> groups;
-    Group total;
+    Group total, leftovers;  // entries; temporaries of runs that stopped (not entries)
     size_t failed = 0;
     for (size_t i = 0; i < entries.size(); ++i) {
       const Entry& e = entries[i];
@@ -201,6 +201,12 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
           ++failed;
           removed = false;  // said as kept: it is there still
         }
+      }
+      if (e.orphan) {
+        ++leftovers.count;
+        leftovers.bytes += e.bytes;
+        if (removed) ++leftovers.removed, leftovers.removedBytes += e.bytes;
+        continue;
       }
       for (Group* g : {&groups[e.group], &total}) {
         ++g->count;
@@ -224,8 +230,17 @@ Runner setupCache(CLI::App& cmd, const Globals& globals) {
                   megabytes(total.bytes).c_str());
       for (const std::string& link : links) std::printf("  (%s)\n", link.c_str());
       if (running > 0)
-        std::printf("  (%zu entr%s being written by running jobs: not counted, not removed)\n",
-                    running, running == 1 ? "y" : "ies");
+        std::printf(
+            "  (%zu entr%s being written by running jobs, or left within the last minute by one "
+            "that stopped: not counted, not removed)\n",
+            running, running == 1 ? "y" : "ies");
+      if (leftovers.count > 0)
+        std::printf(
+            "  (%zu unfinished entr%s left by runs that stopped, %s: %s)\n", leftovers.count,
+            leftovers.count == 1 ? "y" : "ies", megabytes(leftovers.bytes).c_str(),
+            leftovers.removed == leftovers.count ? (o->dryRun ? "would be removed" : "removed")
+            : pruning                            ? "not all could be removed"
+                      : "compose cache --max-size or --older-than removes them");
       if (pruning) {
         std::printf("%s %zu entries (%s); %zu kept (%s)\n", o->dryRun ? "would remove" : "removed",
                     total.removed, megabytes(total.removedBytes).c_str(),

@@ -1299,12 +1299,28 @@ TEST_F(StageCommands, TheCacheCommandRemovesOldEntriesOnly) {
       ("0123456789abcdef0123456789abcdee.stage.partial-" + std::to_string(::getpid()) + "-0");
   compose::testing::writeText(writing, "being written");
   fs::last_write_time(writing, old);
+  // One left by a run that was killed (no such process, written long ago): not an entry (it was
+  // listed as one), said as a leftover and removed by pruning.
+  const fs::path left = cache / "stages" / "precompute" /
+                        "0123456789abcdef0123456789abcded.stage.partial-2147483646-0";
+  compose::testing::writeText(left, "");
+  fs::last_write_time(left, old);
+  r = run("cache --cache " + quote(cache), dir_.path());
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("(1 unfinished entry left by runs that stopped, 0.0 MB: compose cache "
+                       "--max-size or --older-than removes them)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_TRUE(fs::exists(left));
   r = run("cache --cache " + quote(cache) + " --max-size 0", dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_TRUE(fs::exists(writing));
-  EXPECT_NE(r.out.find("(1 entry being written by running jobs: not counted, not removed)"),
+  EXPECT_FALSE(fs::exists(left));
+  EXPECT_NE(r.out.find("(1 entry being written by running jobs, or left within the last minute "
+                       "by one that stopped: not counted, not removed)"),
             std::string::npos)
       << r.out;
+  EXPECT_NE(r.out.find("left by runs that stopped, 0.0 MB: removed)"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("removed 1 entries"), std::string::npos) << r.out;
   EXPECT_TRUE(fs::exists(cache / "stages" / "precompute" / "notes.txt"));
   EXPECT_FALSE(
