@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/json_number.h"
 #include "core/limits.h"
+#include "core/numbers.h"
 #include "core/output_files.h"
 
 namespace compose::calib {
@@ -165,8 +166,8 @@ void Board::validate() const {
   // At a micrometre or less the scene's lengths reach the tracer's limits (Embree refuses rays
   // whose object-space directions are that long, and stopped the process).
   if (!(square >= 1e-6) || !std::isfinite(square))
-    throw Error(kStage, "the chessboard's square size must be at least 1e-6, got " +
-                            std::to_string(square));
+    throw Error(kStage,
+                "the chessboard's square size must be at least 1e-6, got " + numberText(square));
 }
 
 void CalibrationParams::validate() const {
@@ -226,7 +227,8 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
   };
   LensCalibration out;
   std::vector<std::vector<cv::Point2f>> imagePoints;
-  size_t repeated = 0;  // photos of a view another photo shows
+  size_t repeated = 0;      // photos of a view another photo shows
+  bool largerSaid = false;  // a board larger than --board found in a photo used
   for (size_t i = 0; i < photos.size(); ++i) {
     report(progress, "calib", double(i) / double(photos.size() + 1));
     auto corners =
@@ -257,9 +259,12 @@ LensCalibration calibrateLens(const std::vector<CalibrationPhoto>& photos, const
       out.used.push_back(photos[i].file);
       imagePoints.push_back(std::move(corners));
       // A board with a row or a column more also holds the one asked for: OpenCV finds part of
-      // it, and the calibration is plausible but not what the photos show. Checked once.
-      if (out.used.size() == 1) {
+      // it, and the calibration is plausible but not what the photos show. Checked on the first
+      // three photos used until one shows it (on the first alone, --board 7x6 for the 9x6 board
+      // of the opencv-doc photos passed unsaid: left01 shows no 8x6 OpenCV finds).
+      if (!largerSaid && out.used.size() <= 3) {
         if (const auto larger = largerBoard(grey8(*photos[i].image), board)) {
+          largerSaid = true;
           out.notes.push_back(photos[i].file.filename().string() + " shows a board of " +
                               std::to_string(larger->width) + "x" + std::to_string(larger->height) +
                               " inner corners, more than --board " + board.name() +

@@ -69,8 +69,10 @@ void Placement::validate() const {
     throw UsageError("--place must be within [0,1] x [0,1] of the plate, got " + givenText(p.x) +
                      "," + givenText(p.y));
   }
-  if (!(heightFraction > 0.0 && heightFraction <= 10.0)) {
-    throw UsageError("--scale must be in (0, 10], got " + givenText(heightFraction));
+  // Below a millionth of the plate's height the object's lengths reach the tracer's limits
+  // (Embree stopped the process at 1e-18); it would cover no pixel anyway.
+  if (!(heightFraction >= 1e-6 && heightFraction <= 10.0)) {
+    throw UsageError("--scale must be in [1e-6, 10], got " + givenText(heightFraction));
   }
   if (!std::isfinite(yawDegrees)) throw UsageError("--yaw must be a finite number of degrees");
 }
@@ -144,7 +146,8 @@ double sizedExtent(const glm::dvec3& lo, const glm::dvec3& hi, bool* flat) {
   const double height = hi.y - lo.y;
   const double size = std::max({hi.x - lo.x, height, hi.z - lo.z});
   COMPOSE_CHECK(size > 0.0);
-  const bool isFlat = !(height >= 0.01 * size);
+  // Bounds are floats: a mesh 0.01 high and 1 wide is 0.00999999978 high.
+  const bool isFlat = !(height >= 0.01 * size * (1.0 - 1e-6));
   if (flat) *flat = isFlat;
   return isFlat ? size : height;
 }

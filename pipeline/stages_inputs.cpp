@@ -150,7 +150,11 @@ class IngestStage final : public Stage {
         ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
         if (!ctx.planning &&
             !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
-          ctx.note("the object as read was not cached (" + problem + ")");
+          ctx.note("the object as read was not cached (" +
+                   (cacheFolderProblem(job.cache / "meshes").empty()
+                        ? problem
+                        : cacheFolderProblem(job.cache / "meshes")) +
+                   ")");
       }
       for (const std::string& n : ctx.meshSummary->notes) ctx.note(n);
     }
@@ -348,8 +352,8 @@ class StitchStage final : public Stage {
   // 2: the 35 mm focal length derived where EXIF rounds it; 3: float TIFFs linear, a Radiance
   // header applied, a lens mirrored for EXIF orientations 2, 4, 5 and 7; 4: a wide hole filled
   // from its rim; 5: a photo's colour by its bytes' format, not a name they contradict; 6: the
-  // photos' space from --env-space
-  static constexpr int kVersion = 6;
+  // photos' space from --env-space; 7: a portrait raw photo turned by its orientation as read
+  static constexpr int kVersion = 7;
 
   std::string name() const override { return "stitch"; }
   std::string summary() const override {

@@ -47,6 +47,7 @@ struct ExposureMatch {
   double plateKey = 0.0;      // log-average of the plate's luminance (of its ground)
   double groundShare = 0.0;   // of the plate's pixels, the share whose rays look below the horizon
   bool wholePlate = false;    // too little ground in view: the key is the whole plate's
+  bool black = false;         // every pixel matched is black: the key is the floor
   double cardRadiance = 0.0;  // 0.18 × E(up)/π (environment units)
   bool nothingVisible = false;  // every pixel of the plate transparent: no key, scale 1
 };
@@ -114,8 +115,9 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
     ++count[0];
     if (s.ground) logSum[1] += v, ++count[1];
   }
-  const int use = count[1] > 0 && visible[1] >= visible[0] / 100 ? 1 : 0;
-  m.plateKey = count[use] > 0 ? std::exp(logSum[use] / double(count[use])) : floor;
+  const int use = visible[1] > 0 && visible[1] >= visible[0] / 100 ? 1 : 0;
+  m.black = count[use] == 0;
+  m.plateKey = m.black ? floor : std::exp(logSum[use] / double(count[use]));
   m.groundShare = double(visible[1]) / double(visible[0]);
   m.wholePlate = use == 0;
   m.cardRadiance = cardRadiance;
@@ -581,7 +583,9 @@ class CompositeStage final : public Stage {
             "stops too %s here; give compose render and compose composite the same --plate-space",
             std::log2(double(object.exposure)), reading(object.layerPlateSpace).c_str(),
             reading(ctx.job.plateSpace).c_str(),
-            object.layerPlateSpace == ctx.job.plateSpace ? " (another colour config)" : "",
+            object.layerPlateSpace == ctx.job.plateSpace
+                ? " (decoded otherwise: another colour config, a file rule, or another version)"
+                : "",
             std::log2(here.scale), std::abs(off), off > 0.0 ? "dark" : "bright"));
       }
     }
@@ -826,7 +830,7 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
       object.exposureMatchedToPlate = true;
       note = format(
           "auto exposure: %+.2f stops: a mid-grey card on the ground, lit by the environment "
-          "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s; "
+          "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s%s; "
           "override with --exposure",
           std::log2(match.scale), match.cardRadiance, match.plateKey,
           match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
@@ -834,6 +838,9 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
               ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
                     .c_str()
               : "",
+          match.black ? " (black there: no light to match, the level taken is a floor of 1e-4 "
+                        "of the plate's median, or 1e-4 where the whole plate is black)"
+                      : "",
           ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
               ? (" (not from EXIF: " + why + ")").c_str()
               : "");
@@ -856,8 +863,15 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
       peak = std::max(peak, std::abs(r.aovs.pixels[i * size_t(r.aovs.channels) + c]));
   }
   constexpr double kLargest = double(std::numeric_limits<float>::max());
-  if (!(std::isfinite(object.exposure) && object.exposure > 0.0f) ||
-      !(double(peak) * double(object.exposure) <= kLargest)) {
+  if (!(object.exposure > 0.0f)) {
+    throw Error("render",
+                format("the object's exposure (%s) is below what a float holds: %s",
+                       ctx.job.exposureStops ? "--exposure" : "chosen automatically",
+                       ctx.job.exposureStops ? "raise --exposure"
+                                             : "give --exposure, or bring the plate and the "
+                                               "environment to comparable units"));
+  }
+  if (!std::isfinite(object.exposure) || !(double(peak) * double(object.exposure) <= kLargest)) {
     throw Error("render",
                 format("the object's light (up to %g in the environment's units) times its "
                        "exposure (%+.1f stops%s) exceeds what a float holds (%g): %s",

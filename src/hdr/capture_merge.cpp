@@ -29,6 +29,11 @@ std::string lowerTrimmed(const std::string& s) {
   return out;
 }
 
+// Two makes (or models) of a camera that may be the same: equal as compared, or one not known.
+bool sameCamera(const std::string& a, const std::string& b) {
+  return a.empty() || b.empty() || lowerTrimmed(a) == lowerTrimmed(b);
+}
+
 bool isEightBit(const ingest::CaptureInfo& info) {
   return info.sampleType == "uint8";
 }
@@ -91,9 +96,11 @@ void checkBrightnessOrder(const ingest::View& view,
       if (vb > va + tolerance) ++brighter;
       if (vb < va - tolerance) ++darker;
     }
-    if (stops < 0.5) {
-      // Given (nearly) the same exposure: one cannot be brighter almost everywhere (--exposures
-      // 1,1,16 for shots 2 stops apart passed with a warning).
+    if (stops < 1.0 / 6.0) {
+      // Given the same exposure (within a sixth of a stop, as merging takes exposures as equal):
+      // one cannot be brighter almost everywhere (--exposures 1,1,16 for shots 2 stops apart
+      // passed with a warning). Closer than half a stop but apart (a third-stop bracket), the
+      // longer shot is rightly brighter, and nothing is said either way.
       const size_t more = std::max(brighter, darker), less = std::min(brighter, darker);
       if (2 * more < sampled || more < 20 * less) continue;
       const ingest::Shot& bright = brighter > darker ? b : a;
@@ -107,6 +114,7 @@ void checkBrightnessOrder(const ingest::View& view,
                     100.0 * double(more) / double(sampled), 100.0 * double(less) / double(sampled));
       throw Error(kStage, text, dim.file);
     }
+    if (stops < 0.5) continue;  // too close for brightness to tell their order reliably
     if (darker <= brighter || darker * 200 < sampled) continue;
     char text[400];
     std::snprintf(text, sizeof text,
@@ -249,6 +257,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
   std::vector<std::vector<std::string>> spaces(capture.views.size());
   std::vector<char> eightBit(capture.views.size(), 0);
   std::string firstEightBitSpace, deepByRule, guessed;
+  fs::path deepByRuleFile, guessedFile;  // the photos those notes name
   for (size_t v = 0; v < capture.views.size(); ++v) {
     const ingest::View& view = capture.views[v];
     COMPOSE_CHECK(photos[v].size() == view.shots.size());
@@ -284,28 +293,31 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         space = chosen.space;
         // A guess, or a space the file names that the config does not know (a ProPhoto RGB
         // TIFF, decoded as sRGB in silence: 12.6 % off), is said once, as compose color says it.
-        if (chosen.assumed && guessed.empty())
+        if (chosen.assumed && guessed.empty()) {
+          guessedFile = shot.file;
           guessed = shot.file.filename().string() + " read as '" + space + "' (" + chosen.how +
                     "); give " + options.inputSpaceOption + " to say which it is";
+        }
         // Deeper integer photos (16-bit TIFF, PNG) whose file names no colour space: decoded
         // by the config's rules, which a linear file (a raw converter's linear output) defeats.
         if (!eightBit[v] && shot.info.integerSamples() && deepByRule.empty() &&
-            shot.info.iccProfile.empty() && !colors.isLinearOrData(space))
+            shot.info.iccProfile.empty() && !colors.isLinearOrData(space)) {
+          deepByRuleFile = shot.file;
           deepByRule =
               "16-bit photos such as " + shot.file.filename().string() + " read as '" + space +
               "' by the config's rules (the files name no colour space); linear ones "
               "(a raw converter's linear output) need " +
               options.inputSpaceOption + " '" + linearSpaceFor(colors, space, "", nullptr) +
               "' or a capture description that says so";
+        }
       }
       spaces[v].push_back(space);
       if (eightBit[v] && firstEightBitSpace.empty()) firstEightBitSpace = space;
     }
   }
-  if (!deepByRule.empty())
-    result.notes.push_back(deepByRule);
-  else if (!guessed.empty())
-    result.notes.push_back(guessed);
+  if (!deepByRule.empty()) result.notes.push_back(deepByRule);
+  // A photo the note above names is said there; a guess about another one on its own.
+  if (!guessed.empty() && guessedFile != deepByRuleFile) result.notes.push_back(guessed);
   for (size_t v = 0; v < photos.size(); ++v)
     for (const ingest::LoadedImage& photo : photos[v])
       for (const std::string& note : photo.notes)
@@ -456,11 +468,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         // Given by name, it is used; but a curve of another camera is said (it was applied in
         // silence).
         const ResponseCurve& r = result.response;
-        const bool named = !r.make.empty() || !r.model.empty();
-        const bool photosNamed = !capture.cameraMake.empty() || !capture.cameraModel.empty();
-        if (named && photosNamed &&
-            (lowerTrimmed(r.make) != lowerTrimmed(capture.cameraMake) ||
-             lowerTrimmed(r.model) != lowerTrimmed(capture.cameraModel))) {
+        if (!sameCamera(r.make, capture.cameraMake) || !sameCamera(r.model, capture.cameraModel)) {
           result.notes.push_back("the response in " + options.responseFile.string() + " is of '" +
                                  r.make + (r.make.empty() ? "" : " ") + r.model +
                                  "', the photos of '" + camera +
@@ -489,10 +497,8 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
         bool foreign = false;
         if (!cached.empty() && fs::exists(cached, ec)) {
           kept = readResponse(cached);
-          auto same = [](const std::string& a, const std::string& b) {
-            return a.empty() || b.empty() || lowerTrimmed(a) == lowerTrimmed(b);
-          };
-          if (!same(kept->make, capture.cameraMake) || !same(kept->model, capture.cameraModel)) {
+          if (!sameCamera(kept->make, capture.cameraMake) ||
+              !sameCamera(kept->model, capture.cameraModel)) {
             result.notes.push_back("the response in " + cached.string() + " is stored for '" +
                                    kept->make + " " + kept->model + "', not for '" + camera +
                                    "': not used; a curve is recovered from these photos and not "

@@ -160,6 +160,12 @@ TEST(Chessboard, ABoardSizeThatIsPartOfThePhotosBoardIsNoted) {
   };
   EXPECT_TRUE(noted(calibrateLens(photosOf(files, images), Board::parse("8x6"), {})));
   EXPECT_FALSE(noted(calibrateLens(photosOf(files, images), Board::parse("9x6"), {})));
+  // Two columns short: the first photo used shows no 8x6 OpenCV finds, the second does (it
+  // was checked on the first alone, and 7x6 passed unsaid).
+  bool larger = false;
+  for (const std::string& n : calibrateLens(photosOf(files, images), Board::parse("7x6"), {}).notes)
+    larger = larger || n.find("inner corners, more than --board 7x6 says") != std::string::npos;
+  EXPECT_TRUE(larger);
 }
 
 TEST(Chessboard, WrongBoardSizeNamesTheBoardAndThePhotos) {

@@ -195,6 +195,9 @@ TEST(PlateCamera, AFlatObjectIsSizedByItsLargestExtent) {
   EXPECT_TRUE(flat);
   EXPECT_EQ(sizedExtent({-1, 0, -1}, {1, 0.04, 1}, &flat), 0.04);
   EXPECT_FALSE(flat);
+  // Exactly 1 % as a mesh's float bounds hold it (0.00999999978): not flat.
+  EXPECT_EQ(sizedExtent({0, 0, 0}, {1, double(0.01f), 1}, &flat), double(0.01f));
+  EXPECT_FALSE(flat);
   EXPECT_DOUBLE_EQ(scaleOf(2e-5), scaleOf(0.0));
   EXPECT_NEAR(scaleOf(0.04) / scaleOf(1.0), 1.0 / 0.04, 1e-9);
   EXPECT_NEAR(scaleOf(0.0) / scaleOf(1.0), 1.0 / 2.0, 1e-9);

@@ -1143,6 +1143,19 @@ TEST_F(ComposeOutputs, AutoExposureFollowsAFloatPlatesUnitsAndSkipsBlack) {
   EXPECT_NEAR(got["units6"] - got["units0"], std::log2(1e-6), 0.02);
   // The bars leave rows of the same texture: the same level within the sampling's change.
   EXPECT_NEAR(got["letterbox"], got["units0"], 0.05);
+  // A black ground (the sky 0.2): matched to a floor below the sky's level, and the note says
+  // so (it was matched to the sky, "the whole plate's: almost none of it lies below the
+  // horizon").
+  writeExr(dir_ / "black-ground.exr", 320, 240,
+           [](float* p, int, int y) { p[0] = p[1] = p[2] = y < 120 ? 0.2f : 0.0f; });
+  const auto black =
+      runCompose(args((dir_ / "out-black").string(), "black-ground.exr") + linear, dir_.path());
+  ASSERT_EQ(black.status, 0) << black.err;
+  EXPECT_NE(black.err.find("below the horizon (47 % of the plate) (black there: no light to "
+                           "match"),
+            std::string::npos)
+      << black.err;
+  EXPECT_LT(stops(black.err), got["units0"] - 5.0) << black.err;
 }
 
 // An exposure that takes the object's light past what a float holds is refused (an environment
@@ -1756,8 +1769,8 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
   const std::pair<const char*, const char*> cases[] = {
       {"--samples 0", "--samples must be in 1..64"},
       {"--samples 65", "--samples must be in 1..64"},
-      {"--scale 0", "--scale must be in (0, 10]"},
-      {"--scale 10.0000001", "--scale must be in (0, 10], got 10.0000001"},
+      {"--scale 0", "--scale must be in [1e-6, 10]"},
+      {"--scale 10.0000001", "--scale must be in [1e-6, 10], got 10.0000001"},
       {"--threads 99999999999",
        "--threads cannot take '99999999999': not a number of the kind it takes, or out of its "
        "range"},
@@ -1784,6 +1797,7 @@ TEST(ComposeUsage, OutOfRangeValuesExitTwoBeforeReadingFiles) {
       {"--camera-height -1", "--camera-height must be a positive"},
       // Embree stopped the process (an assertion) on the rays of a scene this small.
       {"--camera-height 1e-19", "(1 micrometre to 10 km), got 1e-19"},
+      {"--scale 1e-18", "--scale must be in [1e-6, 10], got 1e-18"},
       {"--focal35 0", "--focal35 must be a 35 mm equivalent focal length of 1 to 10000 mm"},
       {"--focal35 1e-300", "got 1e-300"},
       {"--env-yaw inf", "--env-yaw must be a finite"},
