@@ -247,13 +247,20 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
     r.seconds = 0.0;
     if (r.state == StageState::Run) {
       r.reason = stages()[i]->summary();
+      // A stage's own folder may be a link too (compose cache lists "stages/render" so).
+      const std::string own = p.entries[i] && unwritable.empty()
+                                  ? cacheFolderProblem(p.entries[i]->path().parent_path())
+                                  : std::string();
       if (p.entries[i] && !unwritable.empty()) {
         r.reason += unwritable;
+      } else if (!own.empty()) {
+        r.reason += "; not cached: " + own;
       } else if (p.entries[i]) {
         if (!p.problems[i].empty()) {
-          // Only a file is replaced (a folder or a pipe where the entry goes stays).
+          // Only a file is replaced, or a link to one (a folder or a pipe where the entry goes
+          // stays).
           std::error_code ec;
-          const fs::file_status s = fs::symlink_status(p.entries[i]->path(), ec);
+          const fs::file_status s = fs::status(p.entries[i]->path(), ec);
           r.reason += "; its cache entry " + p.entries[i]->path().string() + " " + p.problems[i] +
                       (fs::is_regular_file(s) ? ": computed again and rewritten"
                                               : ": computed again, not cached (only a file "
@@ -358,8 +365,11 @@ ComposeResult runCompose(const ComposeJob& job, const color::ColorConfig& colors
   for (const auto& [why, names] : unstored) {
     std::string which;
     for (const std::string& n : names) which += (which.empty() ? "" : ", ") + n;
-    // The folder itself, or only these entries (a folder or a pipe where an entry goes).
-    const std::string problem = cacheFolderProblem(job.cache / "stages");
+    // The folder itself, a stage's folder, or only these entries (a folder or a pipe where an
+    // entry goes).
+    std::string problem = cacheFolderProblem(job.cache / "stages");
+    for (size_t k = 0; k < names.size() && problem.empty(); ++k)
+      problem = cacheFolderProblem(job.cache / "stages" / names[k]);
     if (!problem.empty())
       ctx.runNote(problem + ": the outputs of " + which + " were not cached");
     else

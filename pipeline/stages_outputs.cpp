@@ -47,7 +47,8 @@ struct ExposureMatch {
   double plateKey = 0.0;      // log-average of the plate's luminance (of its ground)
   double groundShare = 0.0;   // of the plate's pixels, the share whose rays look below the horizon
   bool wholePlate = false;    // too little ground in view: the key is the whole plate's
-  bool black = false;         // every pixel matched is black: the key is the floor
+  bool blackGround = false;   // the ground in view is black: the key is the whole plate's
+  bool black = false;         // the whole plate is black: the key is the floor
   double cardRadiance = 0.0;  // 0.18 × E(up)/π (environment units)
   bool nothingVisible = false;  // every pixel of the plate transparent: no key, scale 1
 };
@@ -115,11 +116,15 @@ ExposureMatch autoExposure(const Image& plateLinear, const calib::PlateCamera& c
     ++count[0];
     if (s.ground) logSum[1] += v, ++count[1];
   }
-  const int use = visible[1] > 0 && visible[1] >= visible[0] / 100 ? 1 : 0;
+  int use = visible[1] > 0 && visible[1] >= visible[0] / 100 ? 1 : 0;
+  // A ground with no light to match (a letterbox bar across it, black codes): the whole plate's
+  // level, and the note says why. (Matched to the floor there, the object was 12 stops dark.)
+  m.blackGround = use == 1 && count[1] == 0;
+  if (m.blackGround) use = 0;
   m.black = count[use] == 0;
   m.plateKey = m.black ? floor : std::exp(logSum[use] / double(count[use]));
   m.groundShare = double(visible[1]) / double(visible[0]);
-  m.wholePlate = use == 0;
+  m.wholePlate = use == 0 && !m.blackGround;
   m.cardRadiance = cardRadiance;
   if (m.cardRadiance > 0.0 && m.plateKey > 0.0) m.scale = m.plateKey / m.cardRadiance;
   return m;
@@ -833,14 +838,17 @@ void chooseExposure(Context& ctx, RenderedObject& object) {
           "(%.4g in the environment's units), matched to the plate's log-average (%.4g)%s%s%s; "
           "override with --exposure",
           std::log2(match.scale), match.cardRadiance, match.plateKey,
-          match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
+          match.blackGround  ? ""
+          : match.wholePlate ? " (the whole plate's: almost none of it lies below the horizon)"
           : match.groundShare < 0.999
               ? format(" below the horizon (%.0f %% of the plate)", 100.0 * match.groundShare)
                     .c_str()
               : "",
-          match.black ? " (black there: no light to match, the level taken is a floor of 1e-4 "
-                        "of the plate's median, or 1e-4 where the whole plate is black)"
-                      : "",
+          match.black ? " (the plate is black: no light to match, the level taken is a floor)"
+          : match.blackGround
+              ? " (the whole plate's: the ground in view is black, a letterbox bar or "
+                "codes of 0)"
+              : "",
           ctx.artefacts.capture || ctx.artefacts.plate->info.relativeExposure()
               ? (" (not from EXIF: " + why + ")").c_str()
               : "");

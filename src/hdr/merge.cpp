@@ -121,6 +121,11 @@ Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
   if (n < 2) return out;
   int bits = 1;
   while ((1 << bits) - 1 < maxShift) ++bits;
+  // AlignMTB's pyramid halves the shots `bits` - 1 times; below a few pixels OpenCV throws
+  // (--max-shift 32 on a 200 x 60 bracket, 128 on 320 x 240): its coarsest level is kept at 8
+  // pixels or more (the search below covers the whole range anyway).
+  const int shortest = std::min(codes[0]->width, codes[0]->height);
+  while (bits > 1 && (shortest >> (bits - 1)) < 8) --bits;
   const size_t pivot = n / 2;
   OpenCvClock opencv;
   opencv([&] {
@@ -140,8 +145,11 @@ Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
       cv::bitwise_and(eb0(at0), eb1(at1), trusted);
       cv::bitwise_xor(tb0(at0), tb1(at1), diff);
       cv::bitwise_and(diff, trusted, diff);
+      // Too few trusted pixels measure nothing (a dark, plain overlap): not a candidate.
       const int valid = cv::countNonZero(trusted);
-      return valid < 64 ? 2.0 : double(cv::countNonZero(diff)) / valid;
+      return valid < std::max(64, (x1 - x0) * (y1 - y0) / 16)
+                 ? 2.0
+                 : double(cv::countNonZero(diff)) / valid;
     };
     // The best shift within `radius` of `around` on images scaled down by `factor`, and its
     // share of differing bits.
@@ -174,8 +182,13 @@ Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
       // The same measure on its bitmaps is searched over the whole range on the shots scaled to
       // about 200 pixels high, then two pixels each way at each finer level; AlignMTB's own
       // answer stays where it explains the shots as well at full size.
+      // (And smaller while the range is more than 32 steps there, down to 64 pixels: the search
+      // grows with the square of the range; --max-shift 511 took 8 s on a 1024 x 768 bracket.)
       int factor = 1;
-      while (std::min(gray[i].cols, gray[i].rows) / (2 * factor) >= 200) factor *= 2;
+      const int side = std::min(gray[i].cols, gray[i].rows);
+      while (side / (2 * factor) >= 200 ||
+             ((maxShift + factor - 1) / factor > 32 && side / (2 * factor) >= 64))
+        factor *= 2;
       cv::Point s(0, 0);
       int radius = (maxShift + factor - 1) / factor;
       double least = 0.0;
@@ -185,7 +198,7 @@ Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
         s *= 2;
         radius = 2;
       }
-      if (byPyramid != s && search(gray[pivot], gray[i], 1, byPyramid, 0).second <= least)
+      if (byPyramid != s && search(gray[pivot], gray[i], 1, byPyramid, 0).second < least)
         s = byPyramid;
       out.found[i] = {s.x, s.y};
       if (std::abs(s.x) <= maxShift && std::abs(s.y) <= maxShift) out.shifts[i] = {s.x, s.y};
@@ -296,7 +309,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     for (size_t i = 0; i < n; ++i) {
       if (!alignment.refused(i)) continue;
       result.notes.push_back(
-          name(i) + ": AlignMTB found a shift of (" + std::to_string(alignment.found[i][0]) + ", " +
+          name(i) + ": the best shift found is (" + std::to_string(alignment.found[i][0]) + ", " +
           std::to_string(alignment.found[i][1]) + ") pixels, beyond --max-shift " +
           std::to_string(params.maxShift) +
           ": not shifted (too little detail in it to align on?); give a larger --max-shift if "
@@ -318,7 +331,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       list += (list.empty() ? "" : ", ") + name(i) + " (" + std::to_string(result.shifts[i][0]) +
               ", " + std::to_string(result.shifts[i][1]) + ")";
     }
-    result.notes.push_back("aligned to " + name(n / 2) + " (AlignMTB), shifts in pixels: " + list);
+    result.notes.push_back("aligned to " + name(n / 2) +
+                           " (median-threshold bitmaps), shifts in pixels: " + list);
   }
   report(progress, kStage, 0.2);
 

@@ -5,9 +5,10 @@
 // throws compose::Error (stage "merge") naming the file.
 //
 // What happens, in order:
-//  1. Optional alignment (MergeParams::align): OpenCV's AlignMTB (median-threshold bitmaps,
-//     Ward 2003) finds the integer translation of every shot relative to the middle exposure and
-//     shifts it; pixels a shot does not cover after shifting are ignored for that shot.
+//  1. Optional alignment (MergeParams::align): the integer translation of every shot relative to
+//     the middle exposure, by OpenCV's AlignMTB (median-threshold bitmaps, Ward 2003) and a
+//     coarse-to-fine search of the same measure over the whole range (alignBracket); each shot is
+//     shifted, and pixels a shot does not cover after shifting are ignored for that shot.
 //  2. Merging. 8-bit input goes through OpenCV's MergeDebevec (log-domain average with
 //     triangular weights) or MergeRobertson with the camera's response curve. Input deeper than
 //     8 bits (16-bit TIFF, float) is merged by our own weighted average of already linear values:
@@ -85,11 +86,12 @@ struct MergeInput {
   std::optional<Alignment> alignment;
 };
 
-// AlignMTB's translations of each image of a bracket onto the middle one (index n / 2): shifted
-// by (dx, dy), image i's pixel (x, y) moves to (x + dx, y + dy) (cv::AlignMTB::shiftMat). A shift
-// beyond `maxShift` in either direction is not applied: AlignMTB searches a power-of-two range
-// and, on a shot with little detail (the darkest exposure of a plain floor), can land anywhere in
-// it. Time inside OpenCV is added to *openCvSeconds when given.
+// The translations of each image of a bracket onto the middle one (index n / 2), by AlignMTB's
+// measure (median-threshold bitmaps): shifted by (dx, dy), image i's pixel (x, y) moves to
+// (x + dx, y + dy) (cv::AlignMTB::shiftMat). A shift beyond `maxShift` in either direction is not
+// applied: AlignMTB's own pyramid searches a power-of-two range and, on a shot with little detail
+// (the darkest exposure of a plain floor), can land anywhere in it. Time inside OpenCV is added
+// to *openCvSeconds when given.
 Alignment alignBracket(const std::vector<const Codes8*>& codes, int maxShift,
                        double* openCvSeconds = nullptr);
 

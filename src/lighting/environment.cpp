@@ -67,10 +67,6 @@ bool SanitizeReport::take(const float src[3], float dst[3], float& bad) {
       negative = true;
       if (!keepNegative) v = 0.0f;
     }
-    // Below float's normal range (1.2e-38) no light is worth what it costs: arithmetic on
-    // subnormal numbers is many times slower (a map's background of 1e-39 took the lighting's
-    // projection 5 times as long, the self-shadowing twice).
-    if (std::fpclassify(v) == FP_SUBNORMAL) v = 0.0f;
     dst[c] = v;
   }
   if (negative) ++negativeTexels;

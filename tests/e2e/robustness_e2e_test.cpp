@@ -430,6 +430,18 @@ TEST_F(Robustness, ACachePathThatIsAFileOrALinkToNothingIsSaidAsSuch) {
   EXPECT_NE(r.err.find("the cache entries of render could not be written ("), std::string::npos)
       << r.err;
   EXPECT_EQ(r.err.find("the cache folder"), std::string::npos) << r.err;
+  // One stage's folder a link to nothing (moved to a disk not mounted): said for that stage.
+  fs::remove_all(dir / "cache" / "stages" / "render");
+  fs::create_directory_symlink(dir / "gone", dir / "cache" / "stages" / "render");
+  const std::string stageLink = (dir / "cache" / "stages" / "render").string() + " is a link to " +
+                                (dir / "gone").string() + ", which is not there";
+  explain = run("stage", "--explain");
+  EXPECT_NE(explain.out.find("not cached: the cache folder"), std::string::npos) << explain.out;
+  EXPECT_NE(explain.out.find(stageLink), std::string::npos) << explain.out;
+  r = run("stage");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find(stageLink + ": the outputs of render were not cached"), std::string::npos)
+      << r.err;
 }
 
 TEST_F(Robustness, AReadOnlyCacheFolderIsANoteAndTheRunGoesOn) {

@@ -617,7 +617,7 @@ TEST(Merge, HandHeldShiftsUpToTwentyPixelsAreAlignedWithinOnePixel) {
       const auto& shots = shaken.simulated.views[v].shots;
       for (size_t i = 0; i < shots.size(); ++i) {
         const glm::dvec2 want = shots[1].shift - shots[i].shift;
-        if (std::max(std::abs(want.x), std::abs(want.y)) > 20.0) continue;
+        if (i == 1 || std::max(std::abs(want.x), std::abs(want.y)) > 20.0) continue;
         const auto got = m.views[v].stats.shifts[i];
         ringWorst = std::max({ringWorst, std::abs(got[0] - want.x), std::abs(got[1] - want.y)});
         ++counted;
@@ -627,8 +627,25 @@ TEST(Merge, HandHeldShiftsUpToTwentyPixelsAreAlignedWithinOnePixel) {
         "[ figures ] ring of 320 x 240 views shaken by up to %.0f px: %d shifts up to 20 px, "
         "worst error %.2f px\n",
         shake, counted, ringWorst);
-    EXPECT_GE(counted, 8);
+    EXPECT_GE(counted, 4);
     EXPECT_LE(ringWorst, kAlignment) << "shake " << shake;
+  }
+  // A strip of 200 x 60 pixels at the default --max-shift 32, and 160 x 120 at 64: AlignMTB's
+  // pyramid went below a few pixels and OpenCV threw (-215 !fixedSize()).
+  for (const auto& [w, h, range] : {std::tuple{200, 60, 32}, std::tuple{160, 120, 64}}) {
+    TempDir strip;
+    auto narrow = smallCaptureParams(3, 2);
+    narrow.views = 1;
+    narrow.width = w;
+    narrow.height = h;
+    narrow.shakePixels = 5.0;
+    auto shot = captureOnDisk(env, narrow, strip / "capture");
+    CaptureMergeOptions aligned;
+    aligned.responseFolder = strip / "responses";
+    aligned.response = ResponseMode::ColorSpace;
+    aligned.merge.align = true;
+    aligned.merge.maxShift = range;
+    EXPECT_NO_THROW(mergeCapture(shot.capture, shot.photos, aligned, colors)) << w << "x" << h;
   }
 }
 
