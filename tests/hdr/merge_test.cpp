@@ -330,68 +330,25 @@ TEST(Merge, TheShotsOfABracketAreTurnedAsItsFirstSays) {
             "bracket's first photo says (a bracket is one frame of the sensor)");
 }
 
-// A 16-bit bracket whose longer shots clip red alone (a tungsten lamp, a sunset): clipping is
-// judged on the values as stored, channel by channel. Judged after the conversion to the
-// working space (Rec. 709 (1, 0.3, 0.1) is about (0.72, 0.35, 0.14) in ACEScg, below any
-// threshold) the clipped shots took their full weight and red came out 37 % low.
-TEST(Merge, ADeepShotClippedInOneChannelIsNotTrusted) {
-  for (const bool encoded : {false, true}) {
-    SCOPED_TRACE(encoded ? "sRGB-encoded 16-bit" : "linear 16-bit");
-    TempDir dir;
-    const glm::vec3 radiance(2.0f, 0.3f, 0.1f);  // linear Rec. 709
-    const double exposures[3] = {0.25, 1.0, 4.0};
-    auto srgb = [](float v) {
-      return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
-    };
-    std::vector<ingest::Shot> shots;
-    for (int k = 0; k < 3; ++k) {
-      Image shot(16, 8, 3, {"R", "G", "B"});
-      for (size_t i = 0; i < shot.pixelCount(); ++i)
-        for (int c = 0; c < 3; ++c) {
-          const float v = std::min(1.0f, radiance[c] * float(exposures[k]));
-          shot.pixels[3 * i + size_t(c)] = encoded ? srgb(v) : v;
-        }
-      ingest::WriteOptions options;
-      options.depth = ingest::WriteOptions::Depth::UInt16;
-      const auto file = dir / ("s" + std::to_string(k) + ".tif");
-      ingest::writeImage(file, shot, options);
-      shots.push_back(ingest::scanShots({file}).front());
-    }
-    ingest::Capture capture;
-    capture.views.push_back({"view", shots, {}});
-    ingest::setExposures(capture.views[0], {0.25, 1.0, 4.0}, "test");
-    std::vector<std::vector<ingest::LoadedImage>> photos(1);
-    for (const ingest::Shot& s : capture.views[0].shots)
-      photos[0].push_back(ingest::readImage(s.file));
-    const auto colors = color::ColorConfig::builtin();
-    CaptureMergeOptions options;
-    options.responseFolder = dir / "responses";
-    options.inputSpace = encoded ? "sRGB - Texture" : "lin_rec709";
-    const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
-    Image truth(1, 1, 3, {"R", "G", "B"});
-    for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
-    truth.colorSpace = "lin_rec709";
-    colors.convert(truth, colors.workingSpace());
-    const float* m = merged.views[0].radiance.at(8, 4);
-    for (int c = 0; c < 3; ++c)
-      EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
-  }
-}
-
-// A pixel that no shot of a 16-bit bracket can be trusted at although not every shot reads as
-// over-exposed: the shortest shot just below its clip level as stored (64240 of 65535, where the
-// weight has fallen to 0), the longer ones clipped. It is bounded by the shortest shot and flagged
-// as clipped (it was written as black, unflagged).
-TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
-  TempDir dir;
+// A 16 x 8 bracket of one radiance (linear Rec.709) as 16-bit TIFFs at exposures 1/4, 1 and 4,
+// clipped at full scale, linear or sRGB-encoded, merged; with the truth in the working space.
+struct DeepBracket {
+  CaptureMergeResult merged;
+  Image truth;
+};
+DeepBracket mergeDeepBracket(const TempDir& dir, const glm::vec3& radiance, bool encoded) {
   const double exposures[3] = {0.25, 1.0, 4.0};
-  const glm::vec3 radiance(float(64240.0 / 65535.0 / 0.25), 0.3f, 0.1f);  // linear Rec. 709
+  auto srgb = [](float v) {
+    return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+  };
   std::vector<ingest::Shot> shots;
   for (int k = 0; k < 3; ++k) {
     Image shot(16, 8, 3, {"R", "G", "B"});
     for (size_t i = 0; i < shot.pixelCount(); ++i)
-      for (int c = 0; c < 3; ++c)
-        shot.pixels[3 * i + size_t(c)] = std::min(1.0f, radiance[c] * float(exposures[k]));
+      for (int c = 0; c < 3; ++c) {
+        const float v = std::min(1.0f, radiance[c] * float(exposures[k]));
+        shot.pixels[3 * i + size_t(c)] = encoded ? srgb(v) : v;
+      }
     ingest::WriteOptions options;
     options.depth = ingest::WriteOptions::Depth::UInt16;
     const auto file = dir / ("s" + std::to_string(k) + ".tif");
@@ -407,17 +364,42 @@ TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
   const auto colors = color::ColorConfig::builtin();
   CaptureMergeOptions options;
   options.responseFolder = dir / "responses";
-  options.inputSpace = "lin_rec709";
-  const CaptureMergeResult merged = mergeCapture(capture, photos, options, colors);
-  Image truth(1, 1, 3, {"R", "G", "B"});
-  for (int c = 0; c < 3; ++c) truth.pixels[size_t(c)] = radiance[c];
-  truth.colorSpace = "lin_rec709";
-  colors.convert(truth, colors.workingSpace());
-  const float* m = merged.views[0].radiance.at(8, 4);
+  options.inputSpace = encoded ? "sRGB - Texture" : "lin_rec709";
+  DeepBracket out{mergeCapture(capture, photos, options, colors), Image(1, 1, 3, {"R", "G", "B"})};
+  for (int c = 0; c < 3; ++c) out.truth.pixels[size_t(c)] = radiance[c];
+  out.truth.colorSpace = "lin_rec709";
+  colors.convert(out.truth, colors.workingSpace());
+  return out;
+}
+
+// A 16-bit bracket whose longer shots clip red alone (a tungsten lamp, a sunset): clipping is
+// judged on the values as stored, channel by channel. Judged after the conversion to the
+// working space (Rec. 709 (1, 0.3, 0.1) is about (0.72, 0.35, 0.14) in ACEScg, below any
+// threshold) the clipped shots took their full weight and red came out 37 % low.
+TEST(Merge, ADeepShotClippedInOneChannelIsNotTrusted) {
+  for (const bool encoded : {false, true}) {
+    SCOPED_TRACE(encoded ? "sRGB-encoded 16-bit" : "linear 16-bit");
+    TempDir dir;
+    const DeepBracket b = mergeDeepBracket(dir, glm::vec3(2.0f, 0.3f, 0.1f), encoded);
+    const float* m = b.merged.views[0].radiance.at(8, 4);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(m[c] / b.truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
+  }
+}
+
+// A pixel that no shot of a 16-bit bracket can be trusted at although not every shot reads as
+// over-exposed: the shortest shot just below its clip level as stored (64240 of 65535, where the
+// weight has fallen to 0), the longer ones clipped. It is bounded by the shortest shot and flagged
+// as clipped (it was written as black, unflagged).
+TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
+  TempDir dir;
+  const DeepBracket b =
+      mergeDeepBracket(dir, glm::vec3(float(64240.0 / 65535.0 / 0.25), 0.3f, 0.1f), false);
+  const float* m = b.merged.views[0].radiance.at(8, 4);
   EXPECT_EQ(m[3], 1.0f) << "flagged as clipped";
   for (int c = 0; c < 3; ++c)
-    EXPECT_NEAR(m[c] / truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
-  EXPECT_EQ(merged.views[0].stats.saturated, 16 * 8);
+    EXPECT_NEAR(m[c] / b.truth.pixels[size_t(c)], 1.0f, 0.01f) << "channel " << c;
+  EXPECT_EQ(b.merged.views[0].stats.saturated, 16 * 8);
 }
 
 // The space a photo declares, as ingest reads it: Adobe RGB's primaries are the camera's RGB (they
