@@ -700,9 +700,8 @@ std::optional<Chromaticities> ColorConfig::chromaticities(const std::string& spa
   // A well-known set, adapted the way the config adapts (Bradford to the interchange white).
   // Configs publish these matrices to 4-7 digits and differ in how they derive the ACES white
   // (up to 2e-4 here); a different set of primaries differs by more than 1e-2.
-  for (const Chromaticities& known :
-       {kRec709Chromaticities, kAcesAp1Chromaticities, kAcesAp0Chromaticities, kP3D65, kRec2020,
-        kAdobeRgb}) {
+  for (const Chromaticities& known : {kRec709Chromaticities, kAcesAp1Chromaticities,
+                                      kAcesAp0Chromaticities, kP3D65, kRec2020, kAdobeRgb}) {
     const glm::dmat3 adapted = bradford(known[6], known[7], whiteX, whiteY) * xyzFromRgb(known);
     if (maxDifference(adapted, xyz) < 1e-3) return known;
   }

@@ -402,17 +402,22 @@ TEST(Merge, ADeepPixelNoShotIsTrustedAtIsBoundedAndFlagged) {
   EXPECT_EQ(b.merged.views[0].stats.saturated, 16 * 8);
 }
 
+// One small view of the courtyard, three exposures `evStep` stops apart, written and read back.
+compose::testing::CaptureOnDisk smallCourtyardCapture(const TempDir& dir, double evStep = 2.0) {
+  auto params = smallCaptureParams(3);
+  params.evStep = evStep;
+  params.width = 96;
+  params.height = 72;
+  params.views = 1;
+  return captureOnDisk(loadSampleEnvironment("courtyard"), params, dir / "capture");
+}
+
 // The space a photo declares, as ingest reads it: Adobe RGB's primaries are the camera's RGB (they
 // were taken for Rec.709's: red 9.5 % off), and a space the config does not know (a ProPhoto RGB
 // profile) or a camera's EXIF "uncalibrated" (65535) is said in a note (they passed in silence).
 TEST(Merge, APhotosDeclaredSpaceIsUsedOrItsGuessSaid) {
   TempDir dir;
-  auto params = smallCaptureParams(3);
-  params.width = 96;
-  params.height = 72;
-  params.views = 1;
-  const auto env = loadSampleEnvironment("courtyard");
-  const auto on = captureOnDisk(env, params, dir / "capture");
+  const auto on = smallCourtyardCapture(dir);
   const auto colors = color::ColorConfig::builtin();
   auto merged = [&](const std::function<void(ingest::CaptureInfo&)>& tag) {
     ingest::Capture capture = on.capture;
@@ -456,12 +461,7 @@ TEST(Merge, APhotosDeclaredSpaceIsUsedOrItsGuessSaid) {
 // equal for shots 2 stops apart are refused (--exposures 1,1,16 passed with warnings).
 TEST(Merge, AResponseOfAnotherCameraAndEqualExposuresForUnequalShots) {
   TempDir dir;
-  auto params = smallCaptureParams(3);
-  params.width = 96;
-  params.height = 72;
-  params.views = 1;
-  const auto env = loadSampleEnvironment("courtyard");
-  const auto on = captureOnDisk(env, params, dir / "capture");
+  const auto on = smallCourtyardCapture(dir);
   const auto colors = color::ColorConfig::builtin();
   ResponseCurve other = ResponseCurve::srgb();
   other.make = "Canon";
@@ -500,9 +500,7 @@ TEST(Merge, AResponseOfAnotherCameraAndEqualExposuresForUnequalShots) {
                        "are given exposures 0.00 stops apart (--exposures) but");
   // A third-stop bracket: the longer shots are brighter, as they should be (it was refused).
   TempDir thirds;
-  auto close = params;
-  close.evStep = 1.0 / 3.0;
-  const auto near = captureOnDisk(env, close, thirds / "capture");
+  const auto near = smallCourtyardCapture(thirds, 1.0 / 3.0);
   CaptureMergeOptions plain;
   plain.responseFolder = thirds / "responses";
   plain.response = ResponseMode::ColorSpace;
