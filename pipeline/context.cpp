@@ -8,6 +8,7 @@
 #include "calib/chessboard.h"
 #include "calib/lens.h"
 #include "core/error.h"
+#include "core/numbers.h"
 #include "pipeline/stage_util.h"
 
 namespace compose::pipeline {

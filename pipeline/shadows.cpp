@@ -298,7 +298,7 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     const size_t base = out.points.count();
     render::GroundContact ground;
     if (plan.ground) ground = render::groundContact(mesh, scene, plan.groundParams);
-    transfer = render::computeRefinedTransfer(mesh, out.points, transferParams, plan.refine,
+    transfer = render::computeRefinedTransfer(mesh, scene, out.points, transferParams, plan.refine,
                                               progress, &ground);
     char line[320];
     std::snprintf(line, sizeof line,
@@ -311,10 +311,11 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
     if (convex) out.reason += " (closed and convex: no rays to the object itself)";
     if (!ground.empty()) {
       std::snprintf(line, sizeof line,
-                    ", the ground beneath it from %zu points (%dx%d near it, %dx%d around; %lld "
-                    "rays)",
-                    ground.nodes(), ground.fine.columns, ground.fine.rows, ground.coarse.columns,
-                    ground.coarse.rows, static_cast<long long>(ground.rays));
+                    ", the ground beneath it from %zu points (%dx%d near it, %dx%d around less "
+                    "the %zu within the first; %lld rays)",
+                    ground.nodes() - ground.filled, ground.fine.columns, ground.fine.rows,
+                    ground.coarse.columns, ground.coarse.rows, ground.filled,
+                    static_cast<long long>(ground.rays));
       out.reason += line;
     }
     std::string problem;

@@ -418,8 +418,9 @@ class ShadowsStage final : public Stage {
   // object left out of the interpolation; 10: triangles' grid points on the smooth surface of
   // the vertex normals; 11: that lift bounded and checked for parts in the way; 12: keyed by
   // every shadow parameter (sh's and ao's grid, the boundary rays and the refinement's budget
-  // reused the shadows of other values)
-  static constexpr int kVersion = 12;
+  // reused the shadows of other values); 13: each grid node's lighting moments dotted with the
+  // transfer, then interpolated (the same sum in another order: last-bit differences)
+  static constexpr int kVersion = 13;
 
   std::string name() const override { return "shadows"; }
   std::string summary() const override {

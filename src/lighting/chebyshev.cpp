@@ -638,16 +638,47 @@ glm::vec3 ChebLocalLighting::irradiance(const glm::vec3& n) const {
   return e;
 }
 
-void ChebLocalLighting::lightMoments(double latitude, double longitude, float* out) const {
+namespace {
+
+// Σ x_i y_i over n floats, in eight running sums (vectorised: a single sum would have to keep
+// its order).
+float innerProduct(const float* x, const float* y, size_t n) {
+  float sums[8] = {};
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    for (size_t j = 0; j < 8; ++j) sums[j] += x[i + j] * y[i + j];
+  float sum = 0.0f;
+  for (; i < n; ++i) sum += x[i] * y[i];
+  for (const float s : sums) sum += s;
+  return sum;
+}
+
+}  // namespace
+
+glm::vec3 ChebLocalLighting::shade(double latitude, double longitude, const float* b,
+                                   int stride) const {
   COMPOSE_CHECK(!table_.empty());
+  const size_t k = size_t(params_.order), kk = k * k;
+  COMPOSE_CHECK(size_t(stride) >= k);
   size_t nodes[4];
   float w[4];
   grid_.interpolationAt(latitude, longitude, nodes, w);
-  std::fill(out, out + stride_, 0.0f);
+  glm::vec3 e(0.0f);
   for (int q = 0; q < 4; ++q) {
+    if (w[q] == 0.0f) continue;
     const float* node = table_.data() + nodes[q] * stride_;
-    for (size_t i = 0; i < stride_; ++i) out[i] += w[q] * node[i];
+    for (int c = 0; c < 3; ++c) {
+      const float* a = node + size_t(c) * kk;
+      float sum = 0.0f;
+      if (size_t(stride) == k) {
+        sum = innerProduct(a, b, kk);
+      } else {
+        for (size_t m = 0; m < k; ++m) sum += innerProduct(a + m * k, b + m * size_t(stride), k);
+      }
+      e[c] += w[q] * sum;
+    }
   }
+  return e;
 }
 
 size_t ChebLocalLighting::floatsStored() const {

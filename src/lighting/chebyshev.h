@@ -142,12 +142,12 @@ class ChebLocalLighting final : public ChebBase {
   int order() const { return params_.order; }
   int samples() const { return params_.samples; }
   bool lambertian() const { return params_.brdf == "lambert"; }
-  // The lighting moments a_mn (k x k per channel, channel-major: out[c k² + m k + n]) at the
-  // normal with this latitude and longitude, in the tangent frame of that longitude
-  // (east = (cos φ, 0, -sin φ), north = n x east), interpolated between grid nodes. For a
-  // Lambertian surface E = Σ a_mn b_mn with b the moments of the BRDF side (1, or a visibility
-  // mask). Needs project().
-  void lightMoments(double latitude, double longitude, float* out) const;
+  // E = Σ_mn a_mn b_mn per channel for a Lambertian surface whose normal has this latitude and
+  // longitude: a the lighting moments (k x k per channel) there, in the tangent frame of that
+  // longitude (east = (cos φ, 0, -sin φ), north = n x east), b the moments of the BRDF side (1,
+  // or a visibility mask) of order >= k, its row m starting at b + m * stride. Each grid node's
+  // moments are dotted with b, then interpolated as the moments would be. Needs project().
+  glm::vec3 shade(double latitude, double longitude, const float* b, int stride) const;
 
   // Oren–Nayar BRDF times π/ρ for local angles (θi, φi) and (θo, φo); 1 for sigma = 0.
   static double orenNayar(double sigma, double thetaIn, double phiIn, double thetaOut,

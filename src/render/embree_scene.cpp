@@ -16,6 +16,7 @@ namespace compose::render {
 struct EmbreeScene::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
+  bool filtered = false;  // cutoutFilter decides the hits
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
     if (device) rtcReleaseDevice(device);
@@ -198,6 +199,7 @@ EmbreeScene::EmbreeScene(const std::vector<glm::vec3>& positions,
     rtcSetGeometryUserData(geom, const_cast<Mesh*>(cutouts));
     rtcSetGeometryIntersectFilterFunction(geom, &cutoutFilter);
     rtcSetGeometryOccludedFilterFunction(geom, &cutoutFilter);
+    impl_->filtered = true;
   }
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl_->scene, geom);
@@ -334,13 +336,16 @@ void EmbreeScene::transmittanceStream(const glm::vec3& o, const glm::vec3* d, si
   thread_local std::vector<RTCRay> rays;
   thread_local std::vector<float> counted;
   streamRays(o, d, count, tnear, tfar, true, rays);
-  counted.assign(count * kCounted, -1.0f);
   std::fill(transmitted, transmitted + count, 1.0f);
   TransmitContext context;
   rtcInitIntersectContext(&context.base);
   if (coherent) context.base.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   context.transmitted = transmitted;
-  context.counted = counted.data();
+  context.counted = nullptr;
+  if (impl_->filtered) {  // only the filter counts layers
+    counted.assign(count * kCounted, -1.0f);
+    context.counted = counted.data();
+  }
   rtcOccluded1M(impl_->scene, &context.base, rays.data(), unsigned(count), sizeof(RTCRay));
   for (size_t i = 0; i < count; ++i)
     if (rays[i].tfar < 0.0f) transmitted[i] = 0.0f;

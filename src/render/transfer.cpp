@@ -352,6 +352,13 @@ VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress, const GroundContact* ground) {
   const EmbreeScene scene(mesh);
+  return computeRefinedTransfer(mesh, scene, points, params, refine, progress, ground);
+}
+
+VertexTransfer computeRefinedTransfer(const Mesh& mesh, const EmbreeScene& scene,
+                                      SurfacePoints& points, const TransferParams& params,
+                                      const RefineParams& refine, const Progress& progress,
+                                      const GroundContact* ground) {
   keepLiftsClear(mesh, scene, points);
   // One progress for both passes: the first to 85 %, the refinement's (at most as many points,
   // usually a few per cent) after it.
@@ -488,11 +495,26 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   nodes.size = size;
   nodes.centre = 0.5f * (lo + hi);
   nodes.radius = 0.5f * glm::length(hi - lo);
+  // A coarse node whose four cells lie inside the fine grid is never read (openAt() takes the
+  // fine grid there): it is filled from the fine grid instead of traced.
+  auto hidden = [&](float x, float z) {
+    if (out.fine.columns < 2 || out.fine.rows < 2) return false;  // no fine grid
+    const float reach = 1.01f * out.coarse.step;
+    const float x1 = out.fine.x0 + float(out.fine.columns - 1) * out.fine.step;
+    const float z1 = out.fine.z0 + float(out.fine.rows - 1) * out.fine.step;
+    return x - reach > out.fine.x0 && x + reach < x1 && z - reach > out.fine.z0 && z + reach < z1;
+  };
+  std::vector<uint32_t> filled;  // coarse nodes (their index in coarse.open) not traced
   for (const GroundGridLevel* level : {&out.fine, &out.coarse}) {
     for (int b = 0; b < level->rows; ++b)
-      for (int a = 0; a < level->columns; ++a)
-        nodes.positions.emplace_back(level->x0 + float(a) * level->step, out.height,
-                                     level->z0 + float(b) * level->step);
+      for (int a = 0; a < level->columns; ++a) {
+        const float x = level->x0 + float(a) * level->step, z = level->z0 + float(b) * level->step;
+        if (level == &out.coarse && hidden(x, z)) {
+          filled.push_back(uint32_t(b * level->columns + a));
+          continue;
+        }
+        nodes.positions.emplace_back(x, out.height, z);
+      }
   }
   nodes.normals.assign(nodes.positions.size(), glm::vec3(0.0f, 1.0f, 0.0f));
   TransferParams tp;
@@ -502,11 +524,26 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   const VertexTransfer t = computeTransfer(mesh, scene, nodes, tp);
   const size_t fineCount = size_t(out.fine.columns) * size_t(out.fine.rows);
   out.fine.open.assign(t.ao.begin(), t.ao.begin() + ptrdiff_t(fineCount));
-  out.coarse.open.assign(t.ao.begin() + ptrdiff_t(fineCount), t.ao.end());
+  out.coarse.open.assign(size_t(out.coarse.columns) * size_t(out.coarse.rows), 0.0f);
+  size_t traced = fineCount, skipped = 0;
+  for (size_t i = 0; i < out.coarse.open.size(); ++i) {
+    if (skipped < filled.size() && filled[skipped] == i) {
+      ++skipped;
+      continue;
+    }
+    out.coarse.open[i] = t.ao[traced++];
+  }
+  COMPOSE_CHECK(traced == t.ao.size() && skipped == filled.size());
+  out.filled = filled.size();
   // A node that sees no sky at all is under the object (or shut in by it): no ray that misses
   // the object reaches it. 0 marks it; a node that sees a little keeps that (> 0).
   for (GroundGridLevel* level : {&out.fine, &out.coarse})
     for (float& v : level->open) v = v > 0.0f ? std::max(v, 1e-6f) : 0.0f;
+  for (const uint32_t i : filled) {
+    const int a = int(i % uint32_t(out.coarse.columns)), b = int(i / uint32_t(out.coarse.columns));
+    out.coarse.open[i] = out.fine.at(out.coarse.x0 + float(a) * out.coarse.step,
+                                     out.coarse.z0 + float(b) * out.coarse.step);
+  }
   out.rays = t.rays;
   return out;
 }
@@ -811,6 +848,12 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     probes[size_t(b)] = batchIndexOf[size_t(i * s + j)];
   }
   const uint64_t fullRow = s == 64 ? ~uint64_t(0) : (uint64_t(1) << s) - 1u;
+  // Each cell's row and column (a division per ray otherwise).
+  std::vector<uint8_t> rowOf(cells), columnOf(cells);
+  for (size_t c = 0; c < cells; ++c) {
+    rowOf[c] = uint8_t(c / size_t(s));
+    columnOf[c] = uint8_t(c % size_t(s));
+  }
   // The object's bounding sphere, in its own coordinates.
   const glm::dvec3 centre = 0.5 * (glm::dvec3(mesh.boundsMin()) + glm::dvec3(mesh.boundsMax()));
   const double radius =
@@ -904,7 +947,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.visible[size_t(cell)] += share * weight;
           if (ground) sc.visibleSelf[size_t(cell)] += share;
           if (nsh == 1)
-            sc.shSum[0] += y00 * double(cosT) * double(share * weight) * omega[size_t(cell / s)];
+            sc.shSum[0] += y00 * double(cosT) * double(share * weight) * omega[rowOf[size_t(cell)]];
         };
         // Traces sc.batch (any length) as one stream; calls answer(index, through), `through`
         // what the ray carries through the object: 0 where it is blocked, 1 where nothing is in
@@ -943,7 +986,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         std::fill(sc.firstThrough.begin(), sc.firstThrough.end(), 1.0f);
         std::fill(sc.dimmed.begin(), sc.dimmed.end(), uint64_t(0));
         for (const int cell : firstPassOrder) {
-          const int i = cell / s, j = cell % s;
+          const int i = rowOf[size_t(cell)], j = columnOf[size_t(cell)];
           const uint32_t at = firstSample + uint32_t(cell);
           const float u = hash01(2 * at), w = hash01(2 * at + 1);
           const float cosT = cosineAt(i, u);
@@ -966,8 +1009,9 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         traceBatch([&](size_t index, float through) {
           const int cell = sc.batchCell[index];
           sc.firstThrough[size_t(cell)] = through;
-          if (through < 0.5f) sc.occluded[size_t(cell / s)] |= uint64_t(1) << (cell % s);
-          if (through < 0.9f) sc.dimmed[size_t(cell / s)] |= uint64_t(1) << (cell % s);
+          const uint64_t bit = uint64_t(1) << columnOf[size_t(cell)];
+          if (through < 0.5f) sc.occluded[rowOf[size_t(cell)]] |= bit;
+          if (through < 0.9f) sc.dimmed[rowOf[size_t(cell)]] |= bit;
         });
         // Inside another part of the object (transfer.h)? Every first ray blocked, and most of
         // 16 of them, spread over the hemisphere, by a surface met from behind.
@@ -1066,6 +1110,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           float* gi = projected + size_t(i * k);
           for (int j = 0; j < s; ++j) {
             const float fj = f[j];
+            if (fj == 0.0f) continue;  // hidden: adds nothing
             const float* q = basisColumns.data() + size_t(j * k);
             for (int m = 0; m < k; ++m) gi[m] += fj * q[m];
           }
@@ -1298,6 +1343,9 @@ SourceVisibility traceSources(const SurfacePoints& points, const EmbreeScene& sc
             (bits[0] * 0x9E3779B1u) ^ (bits[1] * 0x85EBCA77u) ^ (bits[2] * 0xC2B2AE3Du);
         for (const uint32_t i : sourceOrder) {
           const SourceFrame& f = frames[i];
+          // Wholly below the point's horizon (its centre lower than its radius): no ray of it
+          // would be traced, and it gives no light.
+          if (glm::dot(n, f.centre) < -sinRadius[i]) continue;
           // A source wholly outside the cone (its centre further from the axis than the cone's
           // half-angle plus its radius) and wholly above the horizon (its centre higher than its
           // radius) is seen whole, as each of its rays would say, without making them.
@@ -1494,19 +1542,10 @@ VertexIrradiance shadeVertices(const SurfacePoints& points, const glm::mat3& env
         glm::vec3 shadowed(0.0f);
         switch (method) {
           case ShadowMethod::Chebyshev: {
-            const int k = cheb->order(), K = p.order;
-            const size_t kk = size_t(k) * size_t(k);
-            float a[3 * 32 * 32];  // k <= 32 (ChebParams)
+            const int K = p.order;
             const double lat = std::asin(std::clamp(nObj.y, -1.0, 1.0));
-            cheb->lightMoments(lat, longitudeOf(nObj) + yaw, a);
-            const float* b = in.transfer->cheb.data() + v * size_t(K) * size_t(K);
-            for (int m = 0; m < k; ++m) {
-              for (int n = 0; n < k; ++n) {
-                const float bv = b[m * K + n];
-                const size_t i = size_t(m * k + n);
-                shadowed += bv * glm::vec3(a[i], a[kk + i], a[2 * kk + i]);
-              }
-            }
+            shadowed = cheb->shade(lat, longitudeOf(nObj) + yaw,
+                                   in.transfer->cheb.data() + v * size_t(K) * size_t(K), K);
             break;
           }
           case ShadowMethod::Harmonics: {

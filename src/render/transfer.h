@@ -215,6 +215,7 @@ struct GroundContact {
   GroundGridLevel fine, coarse;          // fine may be empty (a coarse step already fine enough)
   float centreX = 0.0f, centreZ = 0.0f;  // the footprint's centre
   int64_t rays = 0;
+  size_t filled = 0;  // coarse nodes inside the fine grid: filled from it, not traced
   bool empty() const { return coarse.empty(); }
   size_t nodes() const { return fine.open.size() + coarse.open.size(); }
   // open(g) at the plane point (x, height, z); 1 for a point that is not finite.
@@ -263,6 +264,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const SurfacePoints& points,
 VertexTransfer computeRefinedTransfer(const Mesh& mesh, SurfacePoints& points,
                                       const TransferParams& params, const RefineParams& refine,
                                       const Progress& progress = {},
+                                      const GroundContact* ground = nullptr);
+// The same with the mesh's own scene (as computeTransfer's), instead of building one.
+VertexTransfer computeRefinedTransfer(const Mesh& mesh, const EmbreeScene& scene,
+                                      SurfacePoints& points, const TransferParams& params,
+                                      const RefineParams& refine, const Progress& progress = {},
                                       const GroundContact* ground = nullptr);
 
 // True when the mesh is closed and convex: every edge joins exactly two triangles and no

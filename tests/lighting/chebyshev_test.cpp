@@ -12,6 +12,7 @@
 #include "lighting/lighting_cache.h"
 #include "lighting/monte_carlo.h"
 #include "lighting/sh.h"
+#include "lighting/tchebichef.h"
 #include "test_util.h"
 
 namespace compose::lighting {
@@ -117,6 +118,50 @@ TEST(Chebyshev, LocalBasisMatchesTheExactReference) {
   EXPECT_NEAR(snrDb(*k3, exact, normals), localDb, 0.01);
   RecordProperty("local_db", std::to_string(localDb));
   RecordProperty("sh9_db", std::to_string(shDb));
+}
+
+// Shading from visibility moments (the self-shadowing's product): a point that sees its whole
+// hemisphere gets the unshadowed irradiance, and moments of a higher order than the lighting's
+// give what their leading k x k block gives, at any point of the normal grid or between.
+TEST(ChebLocalLighting, ShadingFromMomentsOfFullVisibilityIsTheIrradiance) {
+  const Environment env = sunAndSky(256, 200.0f);
+  ChebParams params;
+  params.order = 4;
+  params.samples = 12;
+  ChebLocalLighting lighting(params);
+  lighting.project(env);
+  constexpr int kTransferOrder = 6;
+  const TchebichefBasis basis(params.samples, kTransferOrder);
+  const std::vector<double> ones(size_t(params.samples) * size_t(params.samples), 1.0);
+  const std::vector<double> full = moments2d(basis, basis, ones, kTransferOrder);
+  const std::vector<float> wide(full.begin(), full.end());  // 6 x 6
+  // A random visibility mask's moments, and their leading 4 x 4 block.
+  std::mt19937 rng(7);
+  std::vector<double> mask(ones.size());
+  for (double& v : mask) v = double(rng() % 2);
+  const std::vector<double> masked = moments2d(basis, basis, mask, kTransferOrder);
+  const std::vector<float> maskWide(masked.begin(), masked.end());
+  std::vector<float> leading;
+  for (int m = 0; m < params.order; ++m)
+    for (int n = 0; n < params.order; ++n)
+      leading.push_back(maskWide[size_t(m * kTransferOrder + n)]);
+  std::uniform_real_distribution<double> lat(-1.5, 1.5), lon(-3.1, 3.1);
+  for (int i = 0; i < 40; ++i) {
+    const double a = lat(rng), b = lon(rng);
+    const glm::vec3 n(float(std::cos(a) * std::sin(b)), float(std::sin(a)),
+                      float(std::cos(a) * std::cos(b)));
+    const glm::vec3 expected = lighting.irradiance(n);
+    const glm::vec3 fromWide = lighting.shade(a, b, wide.data(), kTransferOrder);
+    const glm::vec3 maskedWide = lighting.shade(a, b, maskWide.data(), kTransferOrder);
+    const glm::vec3 maskedLeading = lighting.shade(a, b, leading.data(), params.order);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(fromWide[c], expected[c], 1e-4f * expected[c] + 1e-6f) << i << " " << c;
+      EXPECT_NEAR(maskedWide[c], maskedLeading[c], 1e-5f * expected[c] + 1e-7f) << i << " " << c;
+    }
+  }
+  // Nothing visible: no light.
+  const std::vector<float> none(wide.size(), 0.0f);
+  EXPECT_EQ(lighting.shade(0.3, 1.0, none.data(), kTransferOrder), glm::vec3(0.0f));
 }
 
 TEST(Chebyshev, CoefficientAndStorageAccounting) {

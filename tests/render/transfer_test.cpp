@@ -5,6 +5,7 @@
 #include <map>
 #include <mutex>
 #include <numbers>
+#include <random>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
@@ -1170,6 +1171,51 @@ TEST(GroundContact, TheGroundBesideASphereSeesWhatItsFormFactorLeaves) {
       const float gx = float(x * std::cos(angle)), gz = float(x * std::sin(angle));
       // Beyond the grid (from 5 radii) the tail is under 0.01: 0.002 tells its fall-off.
       EXPECT_NEAR(ground.openAt(gx, gz), sphereOpen(x), x > 5.0 ? 0.002 : 0.01) << "at " << x;
+    }
+  }
+}
+
+// The coarse grid's nodes more than a step inside the fine grid are not traced (filled from the
+// fine grid): no point outside the fine grid reads them, so they can be anything.
+TEST(GroundContact, CoarseNodesInsideTheFineGridAreNeverRead) {
+  const Mesh sphere = uvSphere(24, 48);
+  const EmbreeScene scene(sphere.positions, sphere.indices);
+  const GroundContact ground = groundContact(sphere, scene);
+  ASSERT_FALSE(ground.fine.empty());
+  const GroundGridLevel& fine = ground.fine;
+  const float fx1 = fine.x0 + float(fine.columns - 1) * fine.step;
+  const float fz1 = fine.z0 + float(fine.rows - 1) * fine.step;
+  GroundContact poisoned = ground;
+  size_t inside = 0;
+  for (int b = 0; b < ground.coarse.rows; ++b)
+    for (int a = 0; a < ground.coarse.columns; ++a) {
+      const float x = ground.coarse.x0 + float(a) * ground.coarse.step;
+      const float z = ground.coarse.z0 + float(b) * ground.coarse.step;
+      const float reach = 1.01f * ground.coarse.step;
+      if (x - reach > fine.x0 && x + reach < fx1 && z - reach > fine.z0 && z + reach < fz1) {
+        poisoned.coarse.open[size_t(b) * size_t(ground.coarse.columns) + size_t(a)] = NAN;
+        ++inside;
+      }
+    }
+  EXPECT_GT(inside, 100u);
+  EXPECT_EQ(ground.filled, inside);  // exactly those were filled instead of traced
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-6.0f, 6.0f);
+  int outside = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const float x = u(rng), z = u(rng);
+    if (fine.contains(x, z)) continue;
+    ++outside;
+    const float expected = ground.openAt(x, z), got = poisoned.openAt(x, z);
+    ASSERT_TRUE(std::isfinite(got)) << x << ", " << z;
+    ASSERT_EQ(got, expected) << x << ", " << z;
+  }
+  EXPECT_GT(outside, 10000);
+  // Inside the fine grid the filled nodes hold the fine grid's values.
+  for (int i = 0; i < 200; ++i) {
+    const float x = 0.5f * u(rng), z = 0.5f * u(rng);
+    if (fine.contains(x, z)) {
+      EXPECT_TRUE(std::isfinite(ground.coarse.at(x, z)));
     }
   }
 }
