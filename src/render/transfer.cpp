@@ -423,9 +423,9 @@ float GroundGridLevel::at(float x, float z) const {
   const float weight[4] = {(1.0f - u) * (1.0f - w), u * (1.0f - w), (1.0f - u) * w, u * w};
   float sum = 0.0f, total = 0.0f;
   for (int i = 0; i < 4; ++i) {
-    if (value[i] <= 0.0f) continue;  // covered by the object
-    sum += weight[i] * value[i];
-    total += weight[i];
+    const bool uncovered = value[i] > 0.0f;  // 0: covered by the object
+    sum += uncovered ? weight[i] * value[i] : 0.0f;
+    total += uncovered ? weight[i] : 0.0f;
   }
   return total > 0.0f ? sum / total : 0.0f;
 }
@@ -790,6 +790,11 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
   std::vector<float> basisColumns(basisRows.size());      // the same transposed, s x k
   for (int m = 0; m < k; ++m)
     for (int j = 0; j < s; ++j) basisColumns[size_t(j * k + m)] = basisRows[size_t(m * s + j)];
+  // A row of wholly visible cells projects onto the columns' sums (added in the same order as
+  // the projection below adds them: the same floats).
+  std::vector<float> columnSums(static_cast<size_t>(k), 0.0f);
+  for (int j = 0; j < s; ++j)
+    for (int m = 0; m < k; ++m) columnSums[size_t(m)] += 1.0f * basisColumns[size_t(j * k + m)];
   double y00 = 0.0;  // the constant SH basis function
   lighting::evalSh(0, glm::dvec3(0.0, 1.0, 0.0), &y00);
   // Cell boundaries: altitude θ_i = iπ/(2s) (as the cheb-local grid), azimuth φ_j = 2πj/s.
@@ -864,7 +869,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
   // Per-thread scratch, so that no point allocates.
   struct Scratch {
     std::vector<float> visible;             // per cell: the visible fraction
-    std::vector<double> y, shSum;           // SH basis values (CellHarmonics); band 0 integral
+    std::vector<double> y;                  // SH basis values (CellHarmonics)
     std::vector<double> shLocal, shValues;  // CellHarmonics::transfer's scratch
     std::vector<float> cosines;             // the first pass' cos θ per cell
     std::vector<uint8_t> stratum;       // the first pass' ray's stratum a·r + b within its cell
@@ -884,7 +889,6 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     Scratch sc;
     sc.visible.resize(cells);
     sc.y.resize(size_t(nsh));
-    sc.shSum.resize(size_t(nsh));
     sc.shLocal.resize(size_t(nsh));
     sc.shValues.resize(size_t(params.shBands + 1) * size_t(CellHarmonics::kDirections));
     sc.cosines.resize(cells);
@@ -899,10 +903,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     sc.dimmed.resize(size_t(s));
     sc.projected.resize(size_t(s) * size_t(k));
     const size_t most = cells * size_t(r) * size_t(r);
-    sc.batch.reserve(most);
-    sc.through.reserve(most);
-    sc.batchCell.reserve(most);
-    sc.batchCos.reserve(most);
+    sc.batch.resize(most);
+    sc.through.resize(most);
+    sc.batchCell.resize(most);
+    sc.batchCos.resize(most);
     return sc;
   });
 
@@ -918,7 +922,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         const glm::vec3 origin = points.origin(v, lift);
         std::fill(sc.visible.begin(), sc.visible.end(), 0.0f);
         if (ground) std::fill(sc.visibleSelf.begin(), sc.visibleSelf.end(), 0.0f);
-        std::fill(sc.shSum.begin(), sc.shSum.end(), 0.0);
+        double shBand0 = 0.0;  // the band-0 SH integral, without CellHarmonics
         int64_t traced = 0;
         // The jitter depends on where the point is, not on its index: a point shared by two
         // triangles' grids gets the same answer on both.
@@ -947,19 +951,22 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           sc.visible[size_t(cell)] += share * weight;
           if (ground) sc.visibleSelf[size_t(cell)] += share;
           if (nsh == 1)
-            sc.shSum[0] += y00 * double(cosT) * double(share * weight) * omega[rowOf[size_t(cell)]];
+            shBand0 += y00 * double(cosT) * double(share * weight) * omega[rowOf[size_t(cell)]];
         };
-        // Traces sc.batch (any length) as one stream; calls answer(index, through), `through`
-        // what the ray carries through the object: 0 where it is blocked, 1 where nothing is in
-        // the way, 1 - alpha through each semi-transparent layer.
+        // The rays of one trace call: the first `batched` of sc.batch, batchCell and batchCos
+        // (sized for the most a point can have).
+        size_t batched = 0;
+        // Traces them as one stream; calls answer(index, through), `through` what the ray
+        // carries through the object: 0 where it is blocked, 1 where nothing is in the way,
+        // 1 - alpha through each semi-transparent layer.
         auto traceBatch = [&](auto&& answer) {
-          sc.through.assign(sc.batch.size(), 1.0f);
           if (params.selfOcclusion) {
-            scene.transmittanceStream(origin, sc.batch.data(), sc.batch.size(), tnear,
-                                      sc.through.data());
-            traced += int64_t(sc.batch.size());
+            scene.transmittanceStream(origin, sc.batch.data(), batched, tnear, sc.through.data());
+            traced += int64_t(batched);
+          } else {
+            std::fill(sc.through.begin(), sc.through.begin() + ptrdiff_t(batched), 1.0f);
           }
-          for (size_t b = 0; b < sc.batch.size(); ++b) answer(b, sc.through[b]);
+          for (size_t b = 0; b < batched; ++b) answer(b, sc.through[b]);
         };
 
         // A point outside the object's bounding sphere (a ground point) can only be shadowed
@@ -978,8 +985,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
                                         : -2.0;  // the cone covers the whole row
 
         // Pass 1: one jittered ray per cell.
-        sc.batch.clear();
-        sc.batchCell.clear();
+        batched = 0;
         const uint32_t firstSample = sample;
         sample += uint32_t(s * s);
         std::fill(sc.occluded.begin(), sc.occluded.end(), uint64_t(0));
@@ -1000,8 +1006,8 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
                                rowSin[size_t(i)] * colSin[size_t(j)], rowCos[size_t(i)]);
             if (glm::dot(c, axisLocal) < sc.coneCos[size_t(i)]) continue;
           }
-          sc.batch.push_back(ground ? sc.directions[size_t(cell)] : direction(j, cosT, w));
-          sc.batchCell.push_back(cell);
+          sc.batch[batched] = ground ? sc.directions[size_t(cell)] : direction(j, cosT, w);
+          sc.batchCell[batched++] = cell;
         }
         // For finding shadow edges a cell is blocked when its ray carries less than half, and
         // dimmed when it carries less than 0.9 (behind a faint semi-transparent surface): a
@@ -1015,7 +1021,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         });
         // Inside another part of the object (transfer.h)? Every first ray blocked, and most of
         // 16 of them, spread over the hemisphere, by a surface met from behind.
-        if (params.selfOcclusion && sc.batch.size() == cells && cells >= 16 &&
+        if (params.selfOcclusion && batched == cells && cells >= 16 &&
             std::all_of(sc.firstThrough.begin(), sc.firstThrough.end(),
                         [](float f) { return f == 0.0f; })) {
           glm::vec3 origins[16], directions[16];
@@ -1048,9 +1054,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         auto rotateDown = [&](uint64_t x) {  // bit j to j - 1, bit 0 to s - 1
           return ((x >> 1) | (x << (s - 1))) & fullRow;
         };
-        sc.batch.clear();
-        sc.batchCell.clear();
-        sc.batchCos.clear();
+        batched = 0;
         const float share = 1.0f / float(r * r);
         for (int i = 0; i < s; ++i) {
           const uint64_t row = sc.occluded[size_t(i)], dim = sc.dimmed[size_t(i)];
@@ -1079,10 +1083,10 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
               for (int b = 0; b < r; ++b, ++sample) {
                 if (a * r + b == own) continue;
                 const float cosT = cosineAt(i, (float(a) + hash01(2 * sample)) / float(r));
-                sc.batch.push_back(
-                    direction(j, cosT, (float(b) + hash01(2 * sample + 1)) / float(r)));
-                sc.batchCell.push_back(cell);
-                sc.batchCos.push_back(cosT);
+                sc.batch[batched] =
+                    direction(j, cosT, (float(b) + hash01(2 * sample + 1)) / float(r));
+                sc.batchCell[batched] = cell;
+                sc.batchCos[batched++] = cosT;
               }
             }
           }
@@ -1103,11 +1107,27 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
         }
         // The k x k moments (tchebichef.h's moments2d, in float without allocating): first
         // along the azimuth, then along the altitude.
+        // Rows wholly hidden (nothing to add) and rows wholly visible (the column sums) are
+        // not projected cell by cell.
         float* projected = sc.projected.data();
-        std::fill(sc.projected.begin(), sc.projected.end(), 0.0f);
+        uint64_t hiddenRows = 0;
         for (int i = 0; i < s; ++i) {
           const float* f = sc.visible.data() + size_t(i * s);
           float* gi = projected + size_t(i * k);
+          bool hidden = true, open = true;
+          for (int j = 0; j < s; ++j) {
+            hidden = hidden && f[j] == 0.0f;
+            open = open && f[j] == 1.0f;
+          }
+          if (hidden) {
+            hiddenRows |= uint64_t(1) << i;
+            continue;
+          }
+          if (open) {
+            std::copy(columnSums.begin(), columnSums.end(), gi);
+            continue;
+          }
+          std::fill(gi, gi + k, 0.0f);
           for (int j = 0; j < s; ++j) {
             const float fj = f[j];
             if (fj == 0.0f) continue;  // hidden: adds nothing
@@ -1121,6 +1141,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           float* tm = moments + size_t(m * k);
           std::fill(tm, tm + k, 0.0f);
           for (int i = 0; i < s; ++i) {
+            if ((hiddenRows >> i) & 1u) continue;
             const float pi = p[i];
             const float* gi = projected + size_t(i * k);
             for (int c = 0; c < k; ++c) tm[c] += pi * gi[c];
@@ -1130,8 +1151,7 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
           cellHarmonics->transfer(sc.visible.data(), cells, east, north, n, sc.shLocal.data(),
                                   sc.shValues.data(), sc.y.data(), &out.sh[v * size_t(nsh)]);
         } else {
-          for (int c = 0; c < nsh; ++c)
-            out.sh[v * size_t(nsh) + size_t(c)] = float(sc.shSum[size_t(c)]);
+          out.sh[v * size_t(nsh)] = float(shBand0);  // nsh == 1
         }
         out.ao[v] = float(ao / kPi);
         if (ground) {
