@@ -313,8 +313,8 @@ ShadowResult computeSelfShadowing(const render::Mesh& mesh, const render::Embree
       std::snprintf(line, sizeof line,
                     ", the ground beneath it from %zu points (%dx%d near it, %dx%d around less "
                     "the %zu within the first; %lld rays)",
-                    ground.nodes() - ground.filled, ground.fine.columns, ground.fine.rows,
-                    ground.coarse.columns, ground.coarse.rows, ground.filled,
+                    ground.nodes() - ground.filled.size(), ground.fine.columns, ground.fine.rows,
+                    ground.coarse.columns, ground.coarse.rows, ground.filled.size(),
                     static_cast<long long>(ground.rays));
       out.reason += line;
     }

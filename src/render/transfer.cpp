@@ -495,10 +495,12 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
   nodes.size = size;
   nodes.centre = 0.5f * (lo + hi);
   nodes.radius = 0.5f * glm::length(hi - lo);
-  // A coarse node whose four cells lie inside the fine grid is never read (openAt() takes the
-  // fine grid there): it is filled from the fine grid instead of traced.
-  auto hidden = [&](float x, float z) {
+  // A coarse node off the coarse grid's border whose four cells lie inside the fine grid is never
+  // read (openAt() takes the fine grid there; a point beyond the coarse grid reads its border):
+  // it is filled from the fine grid instead of traced.
+  auto hidden = [&](int a, int b, float x, float z) {
     if (out.fine.columns < 2 || out.fine.rows < 2) return false;  // no fine grid
+    if (a == 0 || b == 0 || a == out.coarse.columns - 1 || b == out.coarse.rows - 1) return false;
     const float reach = 1.01f * out.coarse.step;
     const float x1 = out.fine.x0 + float(out.fine.columns - 1) * out.fine.step;
     const float z1 = out.fine.z0 + float(out.fine.rows - 1) * out.fine.step;
@@ -509,7 +511,7 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
     for (int b = 0; b < level->rows; ++b)
       for (int a = 0; a < level->columns; ++a) {
         const float x = level->x0 + float(a) * level->step, z = level->z0 + float(b) * level->step;
-        if (level == &out.coarse && hidden(x, z)) {
+        if (level == &out.coarse && hidden(a, b, x, z)) {
           filled.push_back(uint32_t(b * level->columns + a));
           continue;
         }
@@ -534,12 +536,12 @@ GroundContact groundContact(const Mesh& mesh, const EmbreeScene& scene,
     out.coarse.open[i] = t.ao[traced++];
   }
   COMPOSE_CHECK(traced == t.ao.size() && skipped == filled.size());
-  out.filled = filled.size();
   // A node that sees no sky at all is under the object (or shut in by it): no ray that misses
   // the object reaches it. 0 marks it; a node that sees a little keeps that (> 0).
   for (GroundGridLevel* level : {&out.fine, &out.coarse})
     for (float& v : level->open) v = v > 0.0f ? std::max(v, 1e-6f) : 0.0f;
-  for (const uint32_t i : filled) {
+  out.filled = std::move(filled);
+  for (const uint32_t i : out.filled) {
     const int a = int(i % uint32_t(out.coarse.columns)), b = int(i / uint32_t(out.coarse.columns));
     out.coarse.open[i] = out.fine.at(out.coarse.x0 + float(a) * out.coarse.step,
                                      out.coarse.z0 + float(b) * out.coarse.step);

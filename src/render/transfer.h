@@ -215,7 +215,9 @@ struct GroundContact {
   GroundGridLevel fine, coarse;          // fine may be empty (a coarse step already fine enough)
   float centreX = 0.0f, centreZ = 0.0f;  // the footprint's centre
   int64_t rays = 0;
-  size_t filled = 0;  // coarse nodes inside the fine grid: filled from it, not traced
+  // Coarse nodes (indices into coarse.open) inside the fine grid, never read: filled from it
+  // instead of traced.
+  std::vector<uint32_t> filled;
   bool empty() const { return coarse.empty(); }
   size_t nodes() const { return fine.open.size() + coarse.open.size(); }
   // open(g) at the plane point (x, height, z); 1 for a point that is not finite.

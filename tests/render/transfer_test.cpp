@@ -1175,48 +1175,48 @@ TEST(GroundContact, TheGroundBesideASphereSeesWhatItsFormFactorLeaves) {
   }
 }
 
-// The coarse grid's nodes more than a step inside the fine grid are not traced (filled from the
-// fine grid): no point outside the fine grid reads them, so they can be anything.
+// The coarse grid's nodes more than a step inside the fine grid, off its border, are not traced
+// but filled from the fine grid: no point outside the fine grid reads them (those beyond the
+// coarse grid read its border), so any value there leaves openAt() as it is. Also where the
+// fine grid reaches past the coarse one (a short reach, a coarse grid of few nodes).
 TEST(GroundContact, CoarseNodesInsideTheFineGridAreNeverRead) {
   const Mesh sphere = uvSphere(24, 48);
   const EmbreeScene scene(sphere.positions, sphere.indices);
-  const GroundContact ground = groundContact(sphere, scene);
-  ASSERT_FALSE(ground.fine.empty());
-  const GroundGridLevel& fine = ground.fine;
-  const float fx1 = fine.x0 + float(fine.columns - 1) * fine.step;
-  const float fz1 = fine.z0 + float(fine.rows - 1) * fine.step;
-  GroundContact poisoned = ground;
-  size_t inside = 0;
-  for (int b = 0; b < ground.coarse.rows; ++b)
-    for (int a = 0; a < ground.coarse.columns; ++a) {
-      const float x = ground.coarse.x0 + float(a) * ground.coarse.step;
-      const float z = ground.coarse.z0 + float(b) * ground.coarse.step;
-      const float reach = 1.01f * ground.coarse.step;
-      if (x - reach > fine.x0 && x + reach < fx1 && z - reach > fine.z0 && z + reach < fz1) {
-        poisoned.coarse.open[size_t(b) * size_t(ground.coarse.columns) + size_t(a)] = NAN;
-        ++inside;
-      }
+  GroundContactParams wide;
+  wide.reach = 0.1f;
+  wide.resolution = 16;
+  for (const GroundContactParams& params : {GroundContactParams{}, wide}) {
+    SCOPED_TRACE(params.key());
+    const GroundContact ground = groundContact(sphere, scene, params);
+    ASSERT_FALSE(ground.fine.empty());
+    const GroundGridLevel& fine = ground.fine;
+    const GroundGridLevel& coarse = ground.coarse;
+    const bool fineInside = fine.x0 > coarse.x0 && fine.z0 > coarse.z0;
+    if (params.resolution == 128) {
+      EXPECT_TRUE(fineInside);
+      EXPECT_GT(ground.filled.size(), 1000u);  // 16 % of the coarse nodes
+    } else {
+      EXPECT_FALSE(fineInside);  // the case the border rule is for
     }
-  EXPECT_GT(inside, 100u);
-  EXPECT_EQ(ground.filled, inside);  // exactly those were filled instead of traced
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-6.0f, 6.0f);
-  int outside = 0;
-  for (int i = 0; i < 20000; ++i) {
-    const float x = u(rng), z = u(rng);
-    if (fine.contains(x, z)) continue;
-    ++outside;
-    const float expected = ground.openAt(x, z), got = poisoned.openAt(x, z);
-    ASSERT_TRUE(std::isfinite(got)) << x << ", " << z;
-    ASSERT_EQ(got, expected) << x << ", " << z;
-  }
-  EXPECT_GT(outside, 10000);
-  // Inside the fine grid the filled nodes hold the fine grid's values.
-  for (int i = 0; i < 200; ++i) {
-    const float x = 0.5f * u(rng), z = 0.5f * u(rng);
-    if (fine.contains(x, z)) {
-      EXPECT_TRUE(std::isfinite(ground.coarse.at(x, z)));
+    GroundContact poisoned = ground;
+    for (const uint32_t i : ground.filled) {
+      const int a = int(i % uint32_t(coarse.columns)), b = int(i / uint32_t(coarse.columns));
+      EXPECT_TRUE(a > 0 && b > 0 && a < coarse.columns - 1 && b < coarse.rows - 1) << a << " " << b;
+      // Filled with the fine grid's value there.
+      EXPECT_EQ(coarse.open[i],
+                fine.at(coarse.x0 + float(a) * coarse.step, coarse.z0 + float(b) * coarse.step));
+      poisoned.coarse.open[i] = 1e6f;
     }
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> u(-8.0f, 8.0f);
+    int outside = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const float x = u(rng), z = u(rng);
+      if (fine.contains(x, z)) continue;
+      ++outside;
+      ASSERT_EQ(poisoned.openAt(x, z), ground.openAt(x, z)) << x << ", " << z;
+    }
+    EXPECT_GT(outside, 5000);
   }
 }
 
