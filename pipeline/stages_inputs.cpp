@@ -149,12 +149,11 @@ class IngestStage final : public Stage {
         render::addBackSides(*ctx.artefacts.mesh);
         ctx.meshSummary = summarize(*ctx.artefacts.mesh, job.creaseDegrees);
         if (!ctx.planning &&
-            !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem))
-          ctx.note("the object as read was not cached (" +
-                   (cacheFolderProblem(job.cache / "meshes").empty()
-                        ? problem
-                        : cacheFolderProblem(job.cache / "meshes")) +
+            !storeMesh(job.cache, contentKey, *ctx.artefacts.mesh, *ctx.meshSummary, problem)) {
+          const std::string folder = cacheFolderProblem(job.cache / "meshes");
+          ctx.note("the object as read was not cached (" + (folder.empty() ? problem : folder) +
                    ")");
+        }
       }
       for (const std::string& n : ctx.meshSummary->notes) ctx.note(n);
     }
