@@ -33,7 +33,10 @@ namespace compose::render {
 
 namespace {
 
-// The tangent frame of a normal (transfer.h): east along increasing longitude.
+// A vector whose resize() leaves new elements uninitialised (core/buffer.h).
+template <class T>
+using Uncleared = std::vector<T, DefaultInitAllocator<T>>;
+
 // The indices of `points` along a Morton (Z-order) curve through their bounding box, so that
 // consecutive indices are near each other.
 std::vector<uint32_t> spatialOrder(const std::vector<glm::vec3>& points) {
@@ -61,6 +64,7 @@ std::vector<uint32_t> spatialOrder(const std::vector<glm::vec3>& points) {
   return order;
 }
 
+// The tangent frame of a normal (transfer.h): east along increasing longitude.
 void tangentFrame(const glm::dvec3& n, glm::dvec3& east, glm::dvec3& north) {
   const double h = std::sqrt(n.x * n.x + n.z * n.z);
   east = h > 1e-6 ? glm::dvec3(n.z / h, 0.0, -n.x / h) : glm::dvec3(1.0, 0.0, 0.0);
@@ -882,10 +886,13 @@ VertexTransfer computeTransfer(const Mesh& mesh, const EmbreeScene& scene,
     std::vector<float> firstThrough;  // per cell: what its first ray carries through the object
     std::vector<uint64_t> dimmed;     // per row: bit j set when that ray lost more than a tenth
     std::vector<float> projected;     // s x k: the visible fractions projected on the columns
-    std::vector<glm::vec3> batch;     // rays of one trace call
-    std::vector<float> through;       // their answers: what each carries through the object
-    std::vector<int> batchCell;
-    std::vector<float> batchCos;
+    // Rays of one trace call and their answers (what each carries through the object), sized
+    // for the most a point can have (cells x r², 24 MB at s = 64, r = 16) but not cleared: only
+    // the pages written are touched.
+    Uncleared<glm::vec3> batch;
+    Uncleared<float> through;
+    Uncleared<int> batchCell;
+    Uncleared<float> batchCos;
   };
   tbb::enumerable_thread_specific<Scratch> scratch([&] {
     Scratch sc;
