@@ -538,7 +538,10 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
     expectNothingWritten();
   }
   // Light too dim for single precision (a uniform 1e-30, a subnormal 1e-44) rendered the object
-  // black while the exposure note said it matched the plate: refused. 1e-20 still renders.
+  // black while the exposure note said it matched the plate: refused. 1e-20 still renders (on a
+  // small grey plate, which keeps the test quick).
+  const fs::path plate = dir_ / "input-plate.png";
+  writePixels(plate, 96, 64, 3, OIIO::TypeDesc::UINT8, std::vector<float>(96 * 64 * 3, 0.4f));
   for (const float value : {1e-30f, 1e-44f, 1e-20f}) {
     const fs::path env = dir_ / "input-dim.exr";
     {
@@ -547,10 +550,10 @@ TEST_F(ComposeErrors, AnEnvironmentWithoutLightIsANamedError) {
     }
     const bool dim = value < 1e-20f;
     // The one that renders is self-shadowed from a coarser visibility grid than the default's.
-    const auto r = runCompose(
-        base((samples_ / "meadow.jpg").string(), (samples_ / "monkey.obj").string()) + " --env " +
-            quote(env.string()) + (dim ? "" : " --shadow-params order=4,grid=4"),
-        dir_.path());
+    const auto r =
+        runCompose(base(plate.string(), (samples_ / "monkey.obj").string()) + " --env " +
+                       quote(env.string()) + (dim ? "" : " --shadow-params order=4,grid=4"),
+                   dir_.path());
     EXPECT_EQ(r.status, dim ? 1 : 0) << value << ": " << r.err;
     EXPECT_EQ(r.err.find("too dim to light anything in single precision") != std::string::npos, dim)
         << r.err;
@@ -631,7 +634,7 @@ TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
   const auto composite = [&](const std::string& options, const std::string& out) {
     const auto r = runCompose("--plate " + quote((dir_ / "input-plate.png").string()) +
                                   " --object " + quote((samples_ / "monkey.obj").string()) +
-                                  " --scale 0.8 --shadows off --no-cache --out " +
+                                  " --scale 0.8 --shadows off --no-shadow --no-cache --out " +
                                   quote((dir_ / out).string()) + options,
                               dir_.path());
     EXPECT_EQ(r.status, 0) << r.err;
@@ -684,12 +687,13 @@ TEST_F(ComposeErrors, AHoldoutHoldsOutTheObjectAndShadowPartsToo) {
         ramp[size_t(y) * w + x] = std::clamp(float(x - 30) / 36.0f, 0.0f, 1.0f);
     writePixels(dir_ / "input-mask.exr", w, h, 1, OIIO::TypeDesc::FLOAT, ramp);
   }
-  const auto r = runCompose("--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
-                                quote((samples_ / "monkey.obj").string()) +
-                                " --scale 0.7 --samples 1 --depth float --no-cache --holdout " +
-                                quote((dir_ / "input-mask.exr").string()) + " --out " +
-                                quote((dir_ / "held").string()),
-                            dir_.path());
+  const auto r =
+      runCompose("--plate " + quote((dir_ / "input-plate.png").string()) + " --object " +
+                     quote((samples_ / "monkey.obj").string()) +
+                     " --scale 0.7 --samples 1 --depth float --no-cache --holdout " +
+                     quote((dir_ / "input-mask.exr").string()) +
+                     " --shadow-params order=4,grid=4 --out " + quote((dir_ / "held").string()),
+                 dir_.path());
   ASSERT_EQ(r.status, 0) << r.err;
   // Each part over the whole frame (1 outside its data window for the shadow, 0 for the object).
   auto in = OIIO::ImageInput::open((dir_ / "held.exr").string());

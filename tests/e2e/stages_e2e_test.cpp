@@ -267,7 +267,7 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   const fs::path linearLayer = dir_ / "linear layer.exr";
   const RunResult linearRender =
       run("render --plate " + quote(plate_) + linear + " " + objectOptions() + " --lighting-file " +
-              quote(light) + " --out " + quote(linearLayer) + " --no-cache",
+              quote(light) + " --out " + quote(linearLayer) + " --cache " + quote(dir_ / "cache2"),
           dir_.path());
   ASSERT_EQ(linearRender.status, 0) << linearRender.err;
   auto stops = [](const std::string& err, const std::string& before) {
@@ -622,7 +622,7 @@ TEST_F(StageCommands, ALightingFileServesRendersWithFewerShadowsAndKeepsItsWarni
   const fs::path light = dir_ / "l.lighting";
   const std::string warning = "times as bright below its horizon as above it";
   const RunResult pre = run("precompute --env " + quote(flipped) +
-                                " --shadow-params order=8,grid=8,refine=0.1,ground=off --out " +
+                                " --shadow-params order=4,grid=4,refine=0.1,ground=off --out " +
                                 quote(light) + " --no-cache",
                             dir_.path());
   ASSERT_EQ(pre.status, 0) << pre.err;
@@ -985,7 +985,7 @@ TEST_F(StageCommands, ALayerSavedAgainByAnotherToolIsReadAsItsFileHoldsIt) {
   const fs::path light = dir_ / "forest.lighting", layer = dir_ / "monkey.exr";
   const std::string cache = " --cache " + quote(dir_ / "cache");
   ASSERT_EQ(run("-q precompute --env " + quote(smallEnvironment()) +
-                    " --shadow-params order=4,grid=8 --out " + quote(light) + cache,
+                    " --shadow-params order=4,grid=4 --out " + quote(light) + cache,
                 dir_.path())
                 .status,
             0);
@@ -1494,8 +1494,8 @@ TEST_F(StageCommands, AReusedRenderNamesTheMeshGiven) {
   fs::copy_file(samples_ / "monkey.obj", dir_ / "moved" / "second.obj");
   auto compose = [&](const fs::path& mesh, const std::string& name) {
     return run("--plate " + quote(plate_) + " --object " + quote(mesh) + " --samples 1 --env " +
-                   quote(samples_ / "forest.exr") + " --out " + quote(dir_ / name) + " --cache " +
-                   quote(dir_ / "cache"),
+                   quote(samples_ / "forest.exr") + " --shadow-params order=4,grid=4 --out " +
+                   quote(dir_ / name) + " --cache " + quote(dir_ / "cache"),
                dir_.path());
   };
   auto meshOf = [](const fs::path& exr) {
