@@ -226,9 +226,14 @@ bool StageCache::write() const {
   const std::string text = header.dump();
   const auto sum = checksum(text, arrays_);
   static std::atomic<int> serial{0};
-  removeStalePartials(path_.parent_path(), path_.filename().string() + ".partial-");
-  fs::path temp = path_;
-  temp += ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(serial++);
+  // A file the user named is written through a hidden temporary beside it (".NAME.partial-PID-N",
+  // as OutputFiles writes the images): a run killed while writing it leaves nothing in view. A
+  // cache entry's temporary keeps the entry's name (KEY.stage.partial-PID-N: compose cache lists
+  // it as one).
+  const std::string prefix = (anyKey_ ? "." : "") + path_.filename().string() + ".partial-";
+  removeStalePartials(path_.parent_path(), prefix);
+  const fs::path temp =
+      path_.parent_path() / (prefix + std::to_string(::getpid()) + "-" + std::to_string(serial++));
   {
     errno = 0;
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);

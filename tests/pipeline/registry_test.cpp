@@ -561,6 +561,24 @@ TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {
   EXPECT_TRUE(reopened.open());
   StageCache wrongStage = StageCache::atFile(dir / "mine.lighting", "render");
   EXPECT_FALSE(wrongStage.open());
+  // Written through a hidden temporary beside it: one left by a run killed while writing it (no
+  // such process, a minute old) is removed by the next write, and nothing else is left in view
+  // (a killed precompute left "mine.lighting.partial-PID-N" beside the user's files).
+  const fs::path folder = dir / "named";
+  fs::create_directories(folder);
+  const fs::path left = folder / ".mine.lighting.partial-2147483646-0";
+  {
+    std::ofstream out(left);
+    out << "killed while writing";
+  }
+  fs::last_write_time(left, fs::file_time_type::clock::now() - std::chrono::minutes(2));
+  StageCache again = StageCache::atFile(folder / "mine.lighting", "precompute");
+  again.put("a", {2.0f});
+  ASSERT_TRUE(again.write());
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(folder))
+    names.push_back(e.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"mine.lighting"});
 }
 
 // The output's header says when worldToNDC is not the whole lens: a distorted one keeps its
