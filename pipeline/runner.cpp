@@ -246,7 +246,7 @@ std::vector<StageRecord> plan(const ComposeJob& job, const color::ColorConfig& c
     StageRecord& r = p.records[i];
     r.seconds = 0.0;
     if (r.state == StageState::Run) {
-      r.reason = stages()[i]->summary();
+      r.reason = stages()[i]->planned(ctx);
       // A stage's own folder may be a link too (compose cache lists "stages/render" so).
       const std::string own = p.entries[i] && unwritable.empty()
                                   ? cacheFolderProblem(p.entries[i]->path().parent_path())

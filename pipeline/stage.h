@@ -58,6 +58,9 @@ class Stage {
 
   virtual std::string name() const = 0;
   virtual std::string summary() const = 0;
+  // What the stage will do for this job, for --explain, once prepare() has run: by default the
+  // summary (ingest names the files it will read).
+  virtual std::string planned(const Context& /*context*/) const { return summary(); }
   virtual std::vector<std::string> inputs() const = 0;   // artefact names (context.h)
   virtual std::vector<std::string> outputs() const = 0;  // artefact names
   // The inputs one output is made from (by default all of them): the colour stage's plate does

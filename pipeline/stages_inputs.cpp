@@ -105,6 +105,29 @@ class IngestStage final : public Stage {
     return "read the plate, the object, and the environment (an image, cube faces, or a capture "
            "description of photos)";
   }
+  // The files this job reads, by name, and what the environment is (--explain said "the plate,
+  // the object, and the environment (an image, cube faces, or a capture description of photos)"
+  // whatever the job read).
+  std::string planned(const Context& ctx) const override {
+    const ComposeJob& job = ctx.job;
+    std::vector<std::string> files;
+    if (ctx.mayNeed(kPlate) && !job.plate.empty())
+      files.push_back("the plate " + job.plate.filename().string());
+    if (ctx.mayNeed(kMesh) && !job.object.empty()) {
+      files.push_back("the object " + job.object.filename().string());
+      if (ctx.meshSummary)
+        files.back() += " (" + plural(ctx.meshSummary->triangles, "triangle") + ")";
+    }
+    const EnvironmentInput& env = ctx.environmentInput;
+    if ((ctx.mayNeed(kEnvironmentFile) || ctx.mayNeed(kCapture)) && !env.path.empty())
+      files.push_back("the environment " + env.path.filename().string() + " (" + env.describe() +
+                      ")");
+    if (files.empty()) return summary();
+    std::string text = "read " + files.front();
+    for (size_t i = 1; i < files.size(); ++i)
+      text += (i + 1 == files.size() ? " and " : ", ") + files[i];
+    return text;
+  }
   std::vector<std::string> inputs() const override { return {}; }
   std::vector<std::string> outputs() const override {
     return {kPlate, kMesh, kEnvironmentFile, kCapture};

@@ -1427,6 +1427,11 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
   EXPECT_NE(r.out.find("render     skipped not needed"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("merge      skipped the environment is an image"), std::string::npos)
       << r.out;
+  // Ingest names what it will read (it said "the plate, the object, and the environment (an
+  // image, cube faces, or a capture description of photos)" whatever the job read).
+  EXPECT_NE(r.out.find("ingest     run     read the environment forest.exr (one image)\n"),
+            std::string::npos)
+      << r.out;
   EXPECT_FALSE(fs::exists(dir_ / "l.lighting"));
   // The one-shot command's --explain reads the mesh and writes nothing, not even to the cache.
   const fs::path cache = dir_ / "explain-cache";
@@ -1435,6 +1440,12 @@ TEST_F(StageCommands, ExplainSaysWhatEachCommandRuns) {
           dir_.path());
   ASSERT_EQ(one.status, 0) << one.err;
   EXPECT_TRUE(!fs::exists(cache) || fs::is_empty(cache)) << "--explain wrote into the cache";
+  EXPECT_NE(one.out.find("ingest     run     read the plate plate.jpg, the object monkey.obj ("),
+            std::string::npos)
+      << one.out;
+  EXPECT_NE(one.out.find(" triangles) and the environment forest.exr (one image)\n"),
+            std::string::npos)
+      << one.out;
 
   // A holdout of another size than the plate: --explain says so, as the run would (it approved
   // the job, which then failed when the plate was read).
