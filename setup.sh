@@ -31,7 +31,7 @@ SANITIZE_DIR=${COMPOSE_SANITIZE_BUILD_DIR:-build-sanitize}
 # small inputs (tests/e2e/robustness_e2e_test.cpp runs the whole command; FromPhotos.FromLatLong
 # the photo stages; GroundShadow.MatchesRayTracingAndFollowsTheSun the ground's refinement, which
 # the two ground tests left out check against a ratio computed at every third pixel, and the third,
-# GroundShadow.ASmallObjectsShadowIsThePixelsAverage, against 64 rays' shading per pixel: 107 s
+# GroundShadow.ASmallObjectsShadowIsThePixelsAverage, against 8 x 8 points shaded per pixel: 107 s
 # of the sanitizer suite's 704 s, 9 s in Release). The Release
 # suite runs them all. COMPOSE_SANITIZE_EXCLUDE= (empty) runs everything under the sanitizers too.
 # CTest's names of parameterised tests end in a comment ("  # GetParam() = ..."): a name is

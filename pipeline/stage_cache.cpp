@@ -227,8 +227,8 @@ bool StageCache::write() const {
   const auto sum = checksum(text, arrays_);
   static std::atomic<int> serial{0};
   // A file the user named is written through a hidden temporary beside it (".NAME.partial-PID-N",
-  // as OutputFiles writes the images): a run killed while writing it leaves nothing in view. A
-  // cache entry's temporary keeps the entry's name (KEY.stage.partial-PID-N: compose cache lists
+  // hidden as OutputFiles' temporaries are): a run killed while writing it leaves nothing in view.
+  // A cache entry's temporary keeps the entry's name (KEY.stage.partial-PID-N: compose cache lists
   // it as one).
   const std::string prefix = (anyKey_ ? "." : "") + path_.filename().string() + ".partial-";
   removeStalePartials(path_.parent_path(), prefix);

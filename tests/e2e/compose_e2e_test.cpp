@@ -634,7 +634,7 @@ TEST_F(ComposeErrors, AHoldoutPutsThePlateInFrontWhereItIsWhite) {
   const auto composite = [&](const std::string& options, const std::string& out) {
     const auto r = runCompose("--plate " + quote((dir_ / "input-plate.png").string()) +
                                   " --object " + quote((samples_ / "monkey.obj").string()) +
-                                  " --scale 0.8 --shadows off --no-shadow --no-cache --out " +
+                                  " --scale 0.8 --shadows off --no-cache --out " +
                                   quote((dir_ / out).string()) + options,
                               dir_.path());
     EXPECT_EQ(r.status, 0) << r.err;

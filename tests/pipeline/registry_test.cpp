@@ -562,7 +562,7 @@ TEST(StageCacheFile, RoundTripsAndRefusesDamagedEntries) {
   StageCache wrongStage = StageCache::atFile(dir / "mine.lighting", "render");
   EXPECT_FALSE(wrongStage.open());
   // Written through a hidden temporary beside it: one left by a run killed while writing it (no
-  // such process, a minute old) is removed by the next write, and nothing else is left in view
+  // such process, over a minute old) is removed by the next write, and nothing else is left in view
   // (a killed precompute left "mine.lighting.partial-PID-N" beside the user's files).
   const fs::path folder = dir / "named";
   fs::create_directories(folder);
