@@ -615,20 +615,13 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       out.files.push_back(view.shots[s].file);
     }
     input.alignment = alignments[v];
+    if (input.eightBit) input.scale = result.unitScale;
     const Progress viewProgress = [&](std::string_view stage, double f) {
       report(progress, stage, (double(v) + f) / double(views));
     };
     out.stats = mergeBracket(input, options.merge, progress ? viewProgress : Progress{});
     out.radiance = std::move(out.stats.radiance);
     out.stats.radiance = Image();
-    if (input.eightBit) {
-      const int ch = out.radiance.channels;
-      parallelFor(0, out.radiance.height, [&](int64_t y) {
-        float* p = out.radiance.row(int(y)).data();
-        for (int x = 0; x < out.radiance.width; ++x, p += ch)
-          for (int c = 0; c < 3; ++c) p[c] = float(p[c] * result.unitScale[size_t(c)]);
-      });
-    }
     out.radiance.colorSpace = input.eightBit ? linearSpace : working;
     colors.convert(out.radiance, working);
     result.openCvSeconds += out.stats.openCvSeconds;

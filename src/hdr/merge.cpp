@@ -364,7 +364,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
 
   // 3. Per-pixel pass: clipping, uncovered borders, and (own path) the weighted merge.
   Image& out = result.radiance;
-  out = Image(width, height, 4, {"R", "G", "B", "clipped"});
+  out = Image::unfilled(width, height, 4, {"R", "G", "B", "clipped"});
   const ResponseCurve* curve = input.response;
   const size_t pivot = n / 2;
   std::vector<float> logExposure(n);
@@ -385,6 +385,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       for (int z = 0; z < kCodes; ++z)
         logInverse[size_t(c * kCodes + z)] = std::log(curve->inverse[size_t(c)][size_t(z)]);
   }
+  const float scale[3] = {float(input.scale[0]), float(input.scale[1]), float(input.scale[2])};
+  const bool scaled = scale[0] != 1.0f || scale[1] != 1.0f || scale[2] != 1.0f;
   bool unshifted = true;
   for (const auto& s : result.shifts) unshifted = unshifted && s[0] == 0 && s[1] == 0;
   parallelFor(0, height, [&](int64_t yy) {
@@ -394,10 +396,39 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     std::vector<const uint8_t*> rowCodes(n);
     for (size_t i = 0; i < n; ++i) rowCodes[i] = codePtr[i]->data() + size_t(y) * size_t(width) * 3;
     const float* mergedRow = useOpenCvMerge ? merged.ptr<float>(y) : nullptr;
+    // MergeDebevec gives codes 0 and 255 a small but non-zero weight, and their log values (a
+    // bound, not a measurement) pull the average: a pixel with such a code, or one that a shot
+    // does not cover (a border an alignment shift left), is redone with the same log-domain
+    // average without them, per channel. `codeOf(i)`: shot i's three codes here, or null where it
+    // does not cover the pixel. After MergeDebevec a channel that every shot covers and none has
+    // at 0 or 255 keeps OpenCV's value, the same average; after MergeRobertson, whose average is
+    // another, every channel is redone, so that the three agree.
+    auto redo = [&](auto&& codeOf, bool anyUncovered, float* o) {
+      for (size_t i = 0; i < n; ++i) {
+        const uint8_t* z = codeOf(i);
+        weight[i] = z ? (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f : 0.0f;
+      }
+      for (int c = 0; c < 3; ++c) {
+        bool redone = anyUncovered || params.method != MergeMethod::Debevec;
+        for (size_t i = 0; i < n && !redone; ++i) {
+          const uint8_t* z = codeOf(i);
+          redone = z[c] == 0 || z[c] == kCodes - 1;
+        }
+        if (!redone) continue;
+        float sum = 0.0f, total = 0.0f;
+        for (size_t i = 0; i < n; ++i) {
+          const uint8_t* z = codeOf(i);
+          if (!z || z[c] == 0 || z[c] == kCodes - 1) continue;
+          sum += weight[i] * (logInverse[size_t(c * kCodes + z[c])] - logExposure[i]);
+          total += weight[i];
+        }
+        if (total > 0.0f) o[c] = std::exp(sum / total);
+      }
+    };
     for (int x = 0; x < width; ++x) {
       if (useOpenCvMerge && unshifted) {
-        // The common case first, cheaply: OpenCV's value stands unless some shot is clipped
-        // everywhere, or has a code of 0 or 255.
+        // The common case first, cheaply: OpenCV's value stands, redone where a shot has a code
+        // of 0 or 255; a pixel clipped or black in every shot goes on below.
         bool everyOver = true, everyDark = true, hard = false;
         for (size_t i = 0; i < n; ++i) {
           const uint8_t* z = rowCodes[i] + 3 * x;
@@ -406,12 +437,13 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           everyDark = everyDark && hi <= loCode;
           hard = hard || lo == 0 || hi == kCodes - 1;
         }
-        if (!everyOver && !everyDark && !hard) {
+        if (!everyOver && !everyDark) {
           float* o = out.at(x, y);
           o[0] = mergedRow[3 * x];
           o[1] = mergedRow[3 * x + 1];
           o[2] = mergedRow[3 * x + 2];
           o[3] = 0.0f;
+          if (hard) redo([&](size_t i) { return rowCodes[i] + 3 * x; }, false, o);
           continue;
         }
       }
@@ -458,21 +490,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         o[1] = m[1];
         o[2] = m[2];
         if (!anyUncovered && !anyHardClip) continue;
-        // MergeDebevec gives codes 0 and 255 a small but non-zero weight, and their log values
-        // (a bound, not a measurement) pull the average: redo such pixels, and borders a shift
-        // left uncovered, with the same log-domain average without them, per channel.
-        for (int c = 0; c < 3; ++c) {
-          float sum = 0.0f, total = 0.0f;
-          for (size_t i = 0; i < n; ++i) {
-            if (!covered[i]) continue;
-            const uint8_t* z = shots[i].codeAt(x, y);
-            if (z[c] == 0 || z[c] == kCodes - 1) continue;
-            const float w = (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f;
-            sum += w * (logInverse[size_t(c * kCodes + z[c])] - logExposure[i]);
-            total += w;
-          }
-          if (total > 0.0f) o[c] = std::exp(sum / total);
-        }
+        redo([&](size_t i) { return covered[i] ? shots[i].codeAt(x, y) : nullptr; }, anyUncovered,
+             o);
         continue;
       }
       // Own weighted merge (deeper input, ghost suppression, or borders a shift left uncovered).
@@ -568,6 +587,12 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         o[3] = 1.0f;
         saturatedRows[size_t(y)]++;
       }
+    }
+    if (scaled) {
+      // The caller's unit, while the row is still in cache.
+      float* o = out.at(0, y);
+      for (int x = 0; x < width; ++x, o += 4)
+        for (int c = 0; c < 3; ++c) o[c] *= scale[c];
     }
   });
   for (int y = 0; y < height; ++y) {

@@ -84,6 +84,8 @@ struct MergeInput {
   // Optional, with MergeParams::align: the alignment alignBracket() found already, used instead
   // of searching again.
   std::optional<Alignment> alignment;
+  // Multiplies the radiance written, per channel (a capture's unit: capture_merge.h, Units).
+  std::array<double, 3> scale{1.0, 1.0, 1.0};
 };
 
 // The translations of each image of a bracket onto the middle one (index n / 2), by AlignMTB's
