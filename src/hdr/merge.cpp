@@ -385,8 +385,8 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       for (int z = 0; z < kCodes; ++z)
         logInverse[size_t(c * kCodes + z)] = std::log(curve->inverse[size_t(c)][size_t(z)]);
   }
-  const float scale[3] = {float(input.scale[0]), float(input.scale[1]), float(input.scale[2])};
-  const bool scaled = scale[0] != 1.0f || scale[1] != 1.0f || scale[2] != 1.0f;
+  const std::array<double, 3>& scale = input.scale;
+  const bool scaled = scale[0] != 1.0 || scale[1] != 1.0 || scale[2] != 1.0;
   bool unshifted = true;
   for (const auto& s : result.shifts) unshifted = unshifted && s[0] == 0 && s[1] == 0;
   parallelFor(0, height, [&](int64_t yy) {
@@ -403,16 +403,18 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
     // does not cover the pixel. After MergeDebevec a channel that every shot covers and none has
     // at 0 or 255 keeps OpenCV's value, the same average; after MergeRobertson, whose average is
     // another, every channel is redone, so that the three agree.
-    auto redo = [&](auto&& codeOf, bool anyUncovered, float* o) {
+    auto redo = [&](auto&& codeOf, float* o) {
+      bool anyUncovered = false;
       for (size_t i = 0; i < n; ++i) {
         const uint8_t* z = codeOf(i);
         weight[i] = z ? (triangle(z[0]) + triangle(z[1]) + triangle(z[2])) / 3.0f : 0.0f;
+        anyUncovered = anyUncovered || !z;
       }
       for (int c = 0; c < 3; ++c) {
         bool redone = anyUncovered || params.method != MergeMethod::Debevec;
         for (size_t i = 0; i < n && !redone; ++i) {
           const uint8_t* z = codeOf(i);
-          redone = z[c] == 0 || z[c] == kCodes - 1;
+          redone = !z || z[c] == 0 || z[c] == kCodes - 1;
         }
         if (!redone) continue;
         float sum = 0.0f, total = 0.0f;
@@ -443,7 +445,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
           o[1] = mergedRow[3 * x + 1];
           o[2] = mergedRow[3 * x + 2];
           o[3] = 0.0f;
-          if (hard) redo([&](size_t i) { return rowCodes[i] + 3 * x; }, false, o);
+          if (hard) redo([&](size_t i) { return rowCodes[i] + 3 * x; }, o);
           continue;
         }
       }
@@ -490,11 +492,10 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
         o[1] = m[1];
         o[2] = m[2];
         if (!anyUncovered && !anyHardClip) continue;
-        redo([&](size_t i) { return covered[i] ? shots[i].codeAt(x, y) : nullptr; }, anyUncovered,
-             o);
+        redo([&](size_t i) { return covered[i] ? shots[i].codeAt(x, y) : nullptr; }, o);
         continue;
       }
-      // Own weighted merge (deeper input, ghost suppression, or borders a shift left uncovered).
+      // Own weighted merge (deeper input, ghost suppression, or a single photo).
       for (size_t i = 0; i < n; ++i) {
         weight[i] = 0.0f;
         if (!covered[i]) continue;
@@ -561,7 +562,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       }
       double sum[3] = {0, 0, 0}, total = 0.0;
       if (input.eightBit && !params.deghost) {
-        // Borders of an aligned OpenCV merge: the same log-domain average as MergeDebevec.
+        // A single 8-bit photo: the same log-domain average as MergeDebevec.
         for (size_t i = 0; i < n; ++i) {
           if (weight[i] <= 0.0f) continue;
           for (int c = 0; c < 3; ++c)
@@ -592,7 +593,7 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
       // The caller's unit, while the row is still in cache.
       float* o = out.at(0, y);
       for (int x = 0; x < width; ++x, o += 4)
-        for (int c = 0; c < 3; ++c) o[c] *= scale[c];
+        for (int c = 0; c < 3; ++c) o[c] = float(o[c] * scale[size_t(c)]);
     }
   });
   for (int y = 0; y < height; ++y) {

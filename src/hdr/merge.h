@@ -22,8 +22,9 @@
 //     the mask channel "clipped" and counted; its value comes from the shortest exposure
 //     (over-exposed: a lower bound) or the longest (under-exposed: an upper bound).
 //
-// Units: radiance = linear / relative exposure, with "linear" in the response curve's unit (see
-// hdr/response.h), so every view merged with the same curve shares one exposure scale.
+// Units: radiance = linear / relative exposure (times MergeInput::scale), with "linear" in the
+// response curve's unit (see hdr/response.h), so every view merged with the same curve shares one
+// exposure scale.
 #pragma once
 
 #include <array>
@@ -84,7 +85,8 @@ struct MergeInput {
   // Optional, with MergeParams::align: the alignment alignBracket() found already, used instead
   // of searching again.
   std::optional<Alignment> alignment;
-  // Multiplies the radiance written, per channel (a capture's unit: capture_merge.h, Units).
+  // Multiplies the radiance written, per channel of R, G and B (not "clipped"): a capture's unit
+  // (capture_merge.h, Units).
   std::array<double, 3> scale{1.0, 1.0, 1.0};
 };
 

@@ -88,6 +88,53 @@ TEST(Merge, SyntheticBracketMergesBackToItsRadiance) {
   }
 }
 
+// A pixel with a code of 0 or 255 in some shot is Debevec's log-domain average without those
+// shots, channel by channel (MergeDebevec gives them a small weight, and their value is a bound),
+// and the capture's unit multiplies R, G and B, not the mask.
+TEST(Merge, ClippedCodesLeaveTheAverageAndTheUnitScalesColourOnly) {
+  // From 2^-8 to 2^4: the long shot clips, the short one is black, over most of the ramp.
+  const SyntheticBracket b = syntheticBracket(256, 4, {0.25, 1.0, 4.0}, 12.0, -8.0);
+  const ResponseCurve srgb = ResponseCurve::srgb();
+  const MergeResult plain = mergeBracket(inputOf(b, &srgb), {});
+  MergeInput scaledInput = inputOf(b, &srgb);
+  scaledInput.scale = {2.0, 3.0, 4.0};
+  const MergeResult scaled = mergeBracket(scaledInput, {});
+  int redone = 0;
+  for (size_t i = 0; i < b.radiance.pixelCount(); ++i) {
+    const float* m = plain.radiance.pixels.data() + i * 4;
+    const float* s = scaled.radiance.pixels.data() + i * 4;
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(s[c], m[c] * scaledInput.scale[size_t(c)], 1e-6 * std::abs(s[c]));
+    EXPECT_EQ(s[3], m[3]);
+    if (m[3] > 0.0f) continue;
+    // The reference: the triangle weights (their mean over the channels) and logs of every shot
+    // whose code in this channel is neither 0 nor 255.
+    bool clipped = false;
+    for (int c = 0; c < 3; ++c) {
+      double sum = 0.0, total = 0.0;
+      for (size_t j = 0; j < b.images.size(); ++j) {
+        const float* v = b.images[j].pixels.data() + i * 3;
+        int z[3];
+        double w = 0.0;
+        for (int k = 0; k < 3; ++k) {
+          z[k] = int(std::lround(v[k] * 255.0));
+          w += z[k] < 128 ? z[k] + 1 : 256 - z[k];
+        }
+        if (z[c] == 0 || z[c] == 255) {
+          clipped = true;
+          continue;
+        }
+        sum += w / 3.0 * std::log(srgb.inverse[size_t(c)][size_t(z[c])] / b.exposures[j]);
+        total += w / 3.0;
+      }
+      ASSERT_GT(total, 0.0);
+      EXPECT_NEAR(m[c], std::exp(sum / total), 1e-4 * m[c]) << "pixel " << i << " channel " << c;
+    }
+    redone += clipped;
+  }
+  EXPECT_GT(redone, 100);  // the ramp's pixels with a clipped code that the merge kept
+}
+
 TEST(Merge, PixelsClippedInEveryShotAreFlaggedCountedAndBounded) {
   // From 2^-12 (black in the longest shot) to 2^4 (white in the shortest).
   const SyntheticBracket b = syntheticBracket(256, 4, {0.25, 1.0, 4.0}, 16.0, -12.0);
