@@ -364,7 +364,15 @@ MergeResult mergeBracket(const MergeInput& input, const MergeParams& params,
 
   // 3. Per-pixel pass: clipping, uncovered borders, and (own path) the weighted merge.
   Image& out = result.radiance;
+  // Every sample is written below; the frame's pages are first touched here, by every thread in
+  // one pass over its rows. (Left to the per-pixel pass, those first touches cost more: on three
+  // aligned 12 MP shots, whose pixels all take the general path, 0.52-0.54 s of plumbing against
+  // 0.46 s; zeroed by one thread, 0.48 s.)
   out = Image::unfilled(width, height, 4, {"R", "G", "B", "clipped"});
+  parallelFor(0, height, [&](int64_t y) {
+    const std::span<float> row = out.row(int(y));
+    std::fill(row.begin(), row.end(), 0.0f);
+  });
   const ResponseCurve* curve = input.response;
   const size_t pivot = n / 2;
   std::vector<float> logExposure(n);
