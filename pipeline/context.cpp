@@ -239,4 +239,10 @@ lighting::CaptureProxy Context::captureProxy() const {
   return pipeline::captureProxy(job);
 }
 
+glm::dvec3 Context::objectCentre() {
+  COMPOSE_CHECK(meshSummary.has_value());
+  const glm::dvec3 middle = 0.5 * glm::dvec3(meshSummary->boundsMin + meshSummary->boundsMax);
+  return glm::dvec3(geometry().worldFromObject * glm::dvec4(middle, 1.0));
+}
+
 }  // namespace compose::pipeline

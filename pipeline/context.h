@@ -164,6 +164,13 @@ class Context {
   // Read from a lighting file (compose render), which carries it for the environment it was made
   // from; worked out from the environment otherwise.
   std::optional<EnvironmentExif> environmentExif;
+  // Where a lighting file made with parallax sees the environment from (compose precompute
+  // --room or --env-radius: the object's centre as it placed it), and the surroundings it took.
+  struct LightingViewpoint {
+    glm::dvec3 point{0.0};
+    std::string surroundings;
+  };
+  std::optional<LightingViewpoint> lightingViewpoint;
   std::map<std::string, Hash128> keys;  // per artefact
   std::set<std::string> needed;         // artefacts some running stage consumes
   std::set<std::string> reachable;      // artefacts the wanted ones may be made from
@@ -221,6 +228,9 @@ class Context {
   const render::EmbreeScene& objectScene();
   // The proxy of the surroundings (distant when the job describes none).
   lighting::CaptureProxy captureProxy() const;
+  // The centre of the object's bounding box in the world (needs the geometry): where parallax
+  // sees the environment from.
+  glm::dvec3 objectCentre();
 
  private:
   std::optional<Geometry> geometry_;

@@ -143,7 +143,7 @@ std::string drawnShadowParams(const ComposeJob& job, const std::string& params) 
 
 }  // namespace
 
-void savePrecompute(const Context& ctx, const fs::path& file) {
+void savePrecompute(Context& ctx, const fs::path& file) {
   // The lighting file never replaces what it was made from.
   std::error_code ec;
   if (fs::exists(file, ec)) {
@@ -158,6 +158,13 @@ void savePrecompute(const Context& ctx, const fs::path& file) {
   }
   StageCache entry = StageCache::atFile(file, "precompute");
   entry.meta()["parameters"] = lightingParameters(ctx.job);
+  // With parallax the lighting is the environment as seen from the object's centre: a render
+  // that places the object elsewhere is told.
+  if (const lighting::CaptureProxy proxy = ctx.captureProxy();
+      proxy.shape != lighting::CaptureProxy::Shape::Distant) {
+    const glm::dvec3 c = ctx.objectCentre();
+    entry.meta()["parallax"] = {{"seenFrom", {c.x, c.y, c.z}}, {"surroundings", proxy.describe()}};
+  }
   entry.meta()["environment"] = fs::absolute(ctx.environmentInput.path).string();
   // The working space its numbers are in: a render under another colour config must not read
   // them as its own.
@@ -266,6 +273,22 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
       text("whose", exif.whose);
     }
     ctx.environmentExif = exif;
+    if (const auto parallax = made.find("parallax"); parallax != made.end()) {
+      const auto from = parallax->is_object() ? parallax->find("seenFrom") : parallax->end();
+      bool valid = from != parallax->end() && from->is_array() && from->size() == 3;
+      for (size_t i = 0; valid && i < 3; ++i)
+        valid = (*from)[i].is_number() && std::isfinite((*from)[i].get<double>());
+      if (!valid)
+        throw Error("render",
+                    "the lighting file's parallax (where it sees the environment from) is damaged",
+                    file);
+      Context::LightingViewpoint v;
+      v.point =
+          glm::dvec3((*from)[0].get<double>(), (*from)[1].get<double>(), (*from)[2].get<double>());
+      if (const auto s = parallax->find("surroundings"); s != parallax->end() && s->is_string())
+        v.surroundings = s->get<std::string>();
+      ctx.lightingViewpoint = v;
+    }
     // What compose precompute said of the lighting's sources, said again for this render.
     if (const auto n = made.find("notes"); n != made.end() && n->is_array())
       for (const nlohmann::json& said : *n)
@@ -305,6 +328,25 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
   if (!object.exposureChosen) chooseExposure(ctx, object);  // for the plate it is rendered on
   const render::RenderOutput& r = object.output;
   const Geometry& g = ctx.geometry();
+  // A lighting file made with parallax holds the light where it placed the object: said when
+  // this render places it elsewhere (by more than a thousandth of its size).
+  if (ctx.lightingViewpoint) {
+    const glm::dvec3 centre = ctx.objectCentre();
+    const glm::dvec3 extent = glm::dmat3(g.worldFromObject) *
+                              glm::dvec3(ctx.meshSummary->boundsMax - ctx.meshSummary->boundsMin);
+    const double away = glm::length(centre - ctx.lightingViewpoint->point);
+    if (away > 1e-3 * glm::length(extent)) {
+      const glm::dvec3& p = ctx.lightingViewpoint->point;
+      ctx.note(format(
+          "warning: the lighting file sees the environment (%s) from (%.3f, %.3f, %.3f), where its "
+          "precompute placed the object; this render places the object's centre at (%.3f, %.3f, "
+          "%.3f), %.3g m away: it is lit as from there. For the light where it stands now, "
+          "precompute again with this placement (the same --plate, --place, --scale, --yaw and "
+          "camera options)",
+          ctx.lightingViewpoint->surroundings.c_str(), p.x, p.y, p.z, centre.x, centre.y, centre.z,
+          away));
+    }
+  }
   const std::vector<std::string>& aovNames = render::aovChannelNames();
   const int channels = 4 + int(aovNames.size());
   // Channels named as in the one-shot command's object part (Nuke's layer.channel).

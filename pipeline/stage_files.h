@@ -24,7 +24,7 @@ namespace compose::pipeline {
 
 // Writes the precompute stage's outputs (lighting, and shadow lighting if the run made it) with
 // the parameters they were made with. Throws compose::Error naming the file if it cannot.
-void savePrecompute(const Context& ctx, const std::filesystem::path& file);
+void savePrecompute(Context& ctx, const std::filesystem::path& file);
 
 // Reads a file savePrecompute() wrote: sets the job's lighting basis and parameters (and shadow
 // parameters) to those the file was made with, and returns the input that restores the outputs.

@@ -330,8 +330,7 @@ class PrecomputeStage final : public Stage {
       // Parallax: the environment as seen from the object's centre.
       const Geometry& g = ctx.geometry();
       const MeshSummary& mesh = *ctx.meshSummary;
-      const glm::dvec3 centre(g.worldFromObject *
-                              glm::dvec4(0.5 * glm::dvec3(mesh.boundsMin + mesh.boundsMax), 1.0));
+      const glm::dvec3 centre = ctx.objectCentre();
       lighting::CaptureProxy placed = proxy;
       placed.environmentFromWorld = glm::dmat3(g.envFromWorld);
       environment = lighting::CaptureVolumeSource(environment, placed).at(glm::vec3(centre));

@@ -113,7 +113,7 @@ void ComposeOptions::addShadows(CLI::App& app, bool parameters) {
                "No shadow on the plate's ground (the object's own shadowing stays)");
 }
 
-void ComposeOptions::addObject(CLI::App& app) {
+void ComposeOptions::addObject(CLI::App& app, bool shading) {
   app.add_option("--object", job.object,
                  "Mesh to insert: glTF 2.0 (.gltf, .glb), Wavefront OBJ (with its .mtl "
                  "materials) or Geomview bicubic patches (.bez)");
@@ -143,6 +143,7 @@ void ComposeOptions::addObject(CLI::App& app) {
                  "Plate pose over a chessboard (JSON from compose calib pose): the object stands "
                  "on the board's plane, the camera where the pose puts it (replaces "
                  "--camera-height and --pitch; lengths in the board's square units)");
+  if (!shading) return;
   app.add_option("--albedo", albedo,
                  "Object albedo, one value or R,G,B in the working space, instead of the "
                  "mesh's materials and vertex colours [default: the materials, else 0.5]");

@@ -170,21 +170,49 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
       "Project an environment onto the lighting basis (the pipeline's precompute stage) and split "
       "off its brightest sources for the shadows; write both to a lighting file for compose "
       "render. The file fixes the basis, its parameters, the shadow parameters and the "
-      "environment's turn (--env-yaw).\n\n"
+      "environment's turn (--env-yaw).\n"
+      "With parallax (--room or --env-radius) the environment is seen from the object's centre: "
+      "give the plate and the object with the placement compose render will take (--plate, "
+      "--object, --place, --scale, --yaw, camera options); a render that places the object "
+      "elsewhere says so.\n\n"
       "Example:\n"
       "  compose precompute --env forest.exr --out forest.lighting\n"
       "  compose render --plate plate.jpg --object bunny.obj --lighting-file forest.lighting "
       "--out bunny.exr\n"
-      "  compose composite --plate plate.jpg --layer bunny.exr --out final");
-  // Parallax (--room, --env-radius) is resolved at the object's position, which precompute does
-  // not know: the one-shot command and compose run take it.
-  o->addEnvironment(cmd, false);
+      "  compose composite --plate plate.jpg --layer bunny.exr --out final\n"
+      "  compose precompute --env room.exr --room 5,3,4 --plate plate.jpg --object bunny.obj "
+      "--place 0.4,0.8 --out room.lighting");
+  o->addEnvironment(cmd, true);
   o->addLighting(cmd);
   o->addShadows(cmd, true);
+  // The object's placement, for parallax alone.
+  o->addPlate(cmd);
+  o->addObject(cmd, false);
   o->addRun(cmd);
   cmd.add_option("--out", *out, "Lighting file to write")->required();
   return [o, out, &cmd, &globals]() -> int {
     o->apply(cmd);
+    // Parallax sees the environment from the object's centre, which the plate and the
+    // placement put somewhere; without parallax the lighting does not depend on them.
+    const bool parallax = o->job.room || o->job.environmentRadius;
+    if (parallax && (o->job.plate.empty() || o->job.object.empty()))
+      throw UsageError(
+          std::string(o->job.room ? "--room" : "--env-radius") +
+          ": with parallax the environment is seen from the object's centre; give the plate and "
+          "the object (--plate, --object) with the placement compose render will take (--place, "
+          "--scale, --yaw, camera options)");
+    if (!parallax) {
+      for (const char* name :
+           {"--plate", "--plate-space", "--object", "--crease", "--place", "--scale", "--yaw",
+            "--focal35", "--camera-height", "--pitch", "--calib", "--pose"}) {
+        const CLI::Option* option = cmd.get_option_no_throw(name);
+        if (option != nullptr && option->count() > 0)
+          throw UsageError(std::string(name) +
+                           " places the object for parallax (--room or --env-radius); without "
+                           "it the lighting file does not depend on where the object stands: "
+                           "leave it out");
+      }
+    }
     OutputFiles::check(*out, "precompute");
     // A lighting file is not an image: an image's name would mislead every tool that opens it.
     if (ingest::looksLikeImageFile(*out))
@@ -227,6 +255,10 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
     request.targets = {pipeline::artefact::kLighting};
     if (o->job.shadows || o->job.groundShadow)
       request.targets.push_back(pipeline::artefact::kShadowLighting);
+    // Parallax places the object: the plate's camera and the mesh's bounds.
+    if (parallax)
+      request.targets.insert(request.targets.end(),
+                             {pipeline::artefact::kPlate, pipeline::artefact::kMesh});
     const fs::path file = *out;
     request.finish = [file](pipeline::Context& ctx) { pipeline::savePrecompute(ctx, file); };
     request.outputFiles = {file};

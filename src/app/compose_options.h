@@ -26,7 +26,9 @@ struct ComposeOptions {
   void addEnvironment(CLI::App& app, bool parallax = true);
   void addLighting(CLI::App& app);                  // --lighting, --lighting-params
   void addShadows(CLI::App& app, bool parameters);  // --shadows, --no-shadow [, --shadow-params]
-  void addObject(CLI::App& app);  // --object, --crease, placement, camera, shading
+  // --object, --crease, placement, camera, and with `shading` --albedo, --exposure, --samples,
+  // --sampling.
+  void addObject(CLI::App& app, bool shading = true);
   void addOutput(CLI::App& app);  // --out BASE, --display, --view, --holdout
   void addRun(CLI::App& app);     // --cache, --no-cache, --threads, --timings, --explain
 

@@ -724,9 +724,7 @@ TEST_F(StageCommands, AnOptionOnlyTheOneShotCommandHasIsRefused) {
       {"render --plate " + quote(plate_) + " " + objectOptions() +
            " --lighting-file missing.lighting --env " + quote(samples_ / "sunset.exr") + out,
        "--env"},
-      {"precompute --env " + quote(samples_ / "forest.exr") + " --object " +
-           quote(samples_ / "monkey.obj") + out,
-       "--object"},
+      {"precompute --env " + quote(samples_ / "forest.exr") + " --albedo 0.3" + out, "--albedo"},
       {"convert missing.exr --to cube --scale 3" + out, "--scale"},
   };
   for (const auto& c : cases) {
@@ -1143,6 +1141,101 @@ TEST_F(StageCommands, ALayerSavedAgainByAnotherToolIsReadAsItsFileHoldsIt) {
   EXPECT_NE(singular.err.find("the layer's worldFromCamera is not a placement"), std::string::npos)
       << singular.err;
   EXPECT_FALSE(fs::exists(dir_ / "out" / "singular.exr"));
+}
+
+// Parallax stage by stage: compose precompute given --room and the object's placement sees the
+// environment from the object's centre, as the one-shot command does, and the chained stages give
+// the one-shot command's files bit for bit (precompute took no --room, and a render from a lighting
+// file lit the object as from the capture point); the lighting differs from the distant one. A
+// render that places the object elsewhere than the lighting file did is told, with the distance;
+// precompute with parallax and no placement, or a placement without parallax, is refused (exit 2).
+TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
+  const std::string env = " --env " + quote(smallEnvironment());
+  const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
+  const std::string room = " --room 8,4,40 --capture-at 2,1.5,-3";
+  const std::string placed = " --plate " + quote(plate_) + " " + objectOptions();
+  const RunResult one = run("-q" + placed + env + room + lighting + " --out " +
+                                quote(dir_ / "one" / "compose") + " --no-cache",
+                            dir_.path());
+  ASSERT_EQ(one.status, 0) << one.err;
+
+  const fs::path light = dir_ / "room.lighting", layer = dir_ / "monkey.exr";
+  // The placement options render takes, less its shading ones (--samples).
+  std::string placement = placed;
+  placement.erase(placement.find(" --samples 2"), std::string(" --samples 2").size());
+  const RunResult pre = run(
+      "precompute" + env + room + lighting + placement + " --out " + quote(light) + " --no-cache",
+      dir_.path());
+  ASSERT_EQ(pre.status, 0) << pre.err;
+  EXPECT_NE(pre.err.find("parallax: the environment as seen from the object's centre"),
+            std::string::npos)
+      << pre.err;
+  const RunResult ren = run("render" + placed + " --lighting-file " + quote(light) + " --out " +
+                                quote(layer) + " --no-cache",
+                            dir_.path());
+  ASSERT_EQ(ren.status, 0) << ren.err;
+  EXPECT_EQ(ren.err.find("warning: the lighting file sees the environment"), std::string::npos)
+      << ren.err;
+  const RunResult comp = run("-q composite --plate " + quote(plate_) + " --layer " + quote(layer) +
+                                 " --out " + quote(dir_ / "two" / "compose") + " --no-cache",
+                             dir_.path());
+  ASSERT_EQ(comp.status, 0) << comp.err;
+  const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
+  ASSERT_EQ(a.size(), 3u);  // composite, object, shadow
+  expectSameParts(a, readParts(dir_ / "two" / "compose.exr"));
+
+  // The same stages without parallax light the object otherwise.
+  const fs::path distant = dir_ / "distant.lighting", distantLayer = dir_ / "distant.exr";
+  ASSERT_EQ(run("-q precompute" + env + lighting + " --out " + quote(distant) + " --no-cache",
+                dir_.path())
+                .status,
+            0);
+  ASSERT_EQ(run("-q render" + placed + " --lighting-file " + quote(distant) + " --out " +
+                    quote(distantLayer) + " --no-cache",
+                dir_.path())
+                .status,
+            0);
+  const std::vector<Part> near = readParts(layer), far = readParts(distantLayer);
+  ASSERT_FALSE(near.empty());
+  ASSERT_EQ(near[0].pixels.size(), far[0].pixels.size());
+  const auto red = std::find(near[0].channels.begin(), near[0].channels.end(), "object.R");
+  ASSERT_NE(red, near[0].channels.end());
+  double differs = 0.0, total = 0.0;
+  for (size_t k = size_t(red - near[0].channels.begin()); k < near[0].pixels.size();
+       k += near[0].channels.size()) {
+    differs += std::abs(near[0].pixels[k] - far[0].pixels[k]);
+    total += std::abs(far[0].pixels[k]);
+  }
+  EXPECT_GT(differs, 0.01 * total) << "parallax changed the object's light by less than 1 %";
+
+  // Moved: the render says the lighting file's point is not where the object stands.
+  const RunResult moved =
+      run("render" + placed + " --place 0.3,0.8 --lighting-file " + quote(light) + " --out " +
+              quote(dir_ / "moved.exr") + " --no-cache",
+          dir_.path());
+  ASSERT_EQ(moved.status, 0) << moved.err;
+  EXPECT_NE(moved.err.find("warning: the lighting file sees the environment (room 8 x 4 x 40 m"),
+            std::string::npos)
+      << moved.err;
+  EXPECT_NE(moved.err.find("precompute again with this placement"), std::string::npos) << moved.err;
+
+  // Parallax needs the placement; a placement means nothing without parallax.
+  const RunResult bare =
+      run("precompute" + env + room + " --out " + quote(dir_ / "x.lighting"), dir_.path());
+  EXPECT_EQ(bare.status, 2) << bare.err;
+  EXPECT_NE(bare.err.find("--room: with parallax the environment is seen from the object's "
+                          "centre; give the plate and the object"),
+            std::string::npos)
+      << bare.err;
+  const RunResult unplaced =
+      run("precompute" + env + " --object " + quote(samples_ / "monkey.obj") + " --out " +
+              quote(dir_ / "x.lighting"),
+          dir_.path());
+  EXPECT_EQ(unplaced.status, 2) << unplaced.err;
+  EXPECT_NE(unplaced.err.find("--object places the object for parallax (--room or --env-radius)"),
+            std::string::npos)
+      << unplaced.err;
+  EXPECT_FALSE(fs::exists(dir_ / "x.lighting"));
 }
 
 // precompute never replaces its environment, refuses options that would change nothing in its
