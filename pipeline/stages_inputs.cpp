@@ -279,8 +279,9 @@ class MergeStage final : public Stage {
   // photos made linear in the space of their own primaries (Display P3's, not Rec.709's), the
   // photos' space from --env-space; 9: a deep pixel no shot is trusted at bounded and flagged,
   // ghost suppression's reference agrees with the over-exposed shots; 10: Adobe RGB photos'
-  // camera RGB in linear Adobe RGB, a portrait raw photo's orientation known
-  static constexpr int kVersion = 10;
+  // camera RGB in linear Adobe RGB, a portrait raw photo's orientation known; 11: one recovered
+  // tone curve for the three channels
+  static constexpr int kVersion = 11;
 
   std::string name() const override { return "merge"; }
   std::string summary() const override {

@@ -23,7 +23,7 @@ struct MergeOptions {
   // Float radiance: ZIP is smaller than PIZ on it and as fast to write.
   std::string compression = "zip";
   std::string depth = "float";
-  bool align = false, deghost = false, noRefit = false;
+  bool align = false, deghost = false, noRefit = false, curvePerChannel = false;
   hdr::CaptureMergeOptions merge;
 };
 
@@ -139,6 +139,10 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
   command.add_flag("--no-refit", o->noRefit,
                    "Debevec: keep OpenCV's fit from --samples patches instead of solving it again "
                    "over every smooth patch");
+  command.add_flag("--curve-per-channel", o->curvePerChannel,
+                   "Recover a response curve per channel, each from its own pixels, instead of one "
+                   "tone curve for the three (as a camera's JPEG engine applies one after white "
+                   "balance): for a film scan, or a camera with a curve per channel");
   command
       .add_option("--refit-smoothness", o->merge.recovery.refitSmoothness,
                   "Debevec: smoothness of the fit over every patch, relative to the data")
@@ -162,8 +166,8 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
       throw UsageError(
           "--ghost-stops is the ghost suppression's threshold: it goes with --deghost");
     if (o->response != "auto" && o->response != "recover") {
-      for (const char* option :
-           {"--recovery", "--samples", "--lambda", "--no-refit", "--refit-smoothness"}) {
+      for (const char* option : {"--recovery", "--samples", "--lambda", "--no-refit",
+                                 "--refit-smoothness", "--curve-per-channel"}) {
         if (command.count(option)) {
           throw UsageError(std::string(option) +
                            " is for recovering a response, which --response " + o->response +
@@ -221,6 +225,7 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     }
     m.merge.align = o->align;
     m.recovery.refit = !o->noRefit;
+    m.recovery.sharedCurve = !o->curvePerChannel;
     m.merge.deghost = o->deghost;
     if (!o->responseDir.empty()) m.responseFolder = o->responseDir;
     asUsage([&] { m.validate(); });

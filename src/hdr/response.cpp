@@ -380,9 +380,30 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
       }
     }
     if (pooled.size() < 2) return;
+    // Below the lowest code the bins reach (the light the lowest trusted code says, a quarter of
+    // it through the next shot: about code 4 of an sRGB curve; higher where the darkest bins
+    // hold too few pixels), the curve goes on as the power of the code that joins the lowest bin
+    // to the one three codes above it, instead of the fit's extrapolation by smoothness (forest,
+    // 3 exposures: the bins reached blue code 5.5, and the fit was 15 % off at code 5).
+    double power = 0.0;
+    if (low) {
+      const Point& a = pooled.front();
+      size_t k = 1;
+      while (k + 1 < pooled.size() && pooled[k].code < a.code + 3.0) ++k;
+      const Point& b = pooled[k];
+      if (a.code > 0.0 && b.code > a.code)
+        power = (b.logLight - a.logLight) / (std::log(b.code) - std::log(a.code));
+      if (!(power > 0.0) || !std::isfinite(power)) power = 0.0;
+    }
     // Invert: the light at which the mean code is z, for the end's codes the bins reach.
     const int from = low ? 1 : kHighEnd - kBlend, to = low ? kLowEnd + kBlend : 254;
     for (int z = from; z <= to; ++z) {
+      if (power > 0.0 && z < pooled.front().code) {
+        inv[size_t(z)] =
+            float(std::exp(pooled.front().logLight +
+                           power * (std::log(double(z)) - std::log(pooled.front().code))));
+        continue;
+      }
       size_t k = 1;
       while (k < pooled.size() && pooled[k].code < z) ++k;
       if (k == pooled.size() || pooled[k - 1].code > z) continue;  // not reached
@@ -400,6 +421,53 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
                                           : std::exp(w * fitted + (1.0 - w) * std::log(kept)));
     }
   });
+}
+
+// One curve for the three channels (RecoveryParams::sharedCurve): at every code, the mean of the
+// channels' logarithms, each weighted by the pixels of every shot that show the code in it, so
+// that a channel whose photos hardly reach a code takes its shape there from those that do. The
+// curves are 1 at code 128: the mean keeps that, and the channels' scales (white balance) are
+// what they were. Measured on the virtual camera (six 384 x 288 views of each sample HDRI, 3 and 5
+// exposures): response RMS over codes 5-250 0.53-1.53 % -> 0.27-1.00 %, largest deviation at
+// codes 16-224 1.34-3.00 % -> 0.9-1.4 % (each channel's ripple with the brackets' period is its
+// own, and the mean evens it out); sunset, 3 exposures, whose red photos hold 452 pixels at code
+// 5 against blue's 1785: 23.9 % -> 10.5 % off there.
+void shareCurve(ResponseCurve& curve, const std::vector<const BracketCodes*>& used) {
+  // The pixels counted: every one, or every stride-th of more than about 2 M (three 12 MP shots
+  // counted whole took a fifth of the merge's own time).
+  size_t pixels = 0;
+  for (const BracketCodes* b : used)
+    for (const Codes8* image : b->images) pixels += size_t(image->width) * size_t(image->height);
+  const size_t stride = std::max<size_t>(1, pixels / (size_t(2) << 20));
+  std::array<std::array<double, kCodes>, 3> count{};
+  for (const BracketCodes* b : used) {
+    for (const Codes8* image : b->images) {
+      const uint8_t* codes = image->data();
+      const size_t values = size_t(image->width) * size_t(image->height) * 3;
+      for (size_t i = 0; i < values; i += 3 * stride)
+        for (size_t c = 0; c < 3; ++c) count[c][codes[i + c]] += 1.0;
+    }
+  }
+  std::vector<float> shared(kCodes, 0.0f);
+  for (size_t z = 0; z < size_t(kCodes); ++z) {
+    double sum = 0.0, weight = 0.0, plain = 0.0, channels = 0.0;
+    for (size_t c = 0; c < 3; ++c) {
+      const double v = double(curve.inverse[c][z]);
+      if (!(v > 0.0) || !std::isfinite(v)) continue;
+      sum += count[c][z] * std::log(v);
+      weight += count[c][z];
+      plain += std::log(v);
+      channels += 1.0;
+    }
+    if (!(weight > 0.0)) {  // no photo shows the code: the channels' plain mean
+      sum = plain;
+      weight = channels;
+    }
+    if (!(weight > 0.0)) continue;
+    shared[z] = float(std::exp(sum / weight));
+  }
+  makeMonotone(shared);
+  for (auto& ch : curve.inverse) ch = shared;
 }
 
 }  // namespace
@@ -656,13 +724,15 @@ ResponseCurve recoverResponse(const std::vector<BracketCodes>& brackets,
     refineEnds(curve, used, first.exposures);
     for (auto& ch : curve.inverse) makeMonotone(ch);
   }
+  if (params.sharedCurve) shareCurve(curve, used);
   curve.method = methodName(params.method);
   curve.created = utcNow();
   size_t photos = 0;
   for (const BracketCodes* b : used) photos += b->images.size();
-  curve.source = "recovered (" + std::string(curve.method) + ") from " + std::to_string(photos) +
-                 " photos in " + std::to_string(used.size()) +
-                 (used.size() == 1 ? " view" : " views");
+  curve.source =
+      "recovered (" + std::string(curve.method) + ") from " + std::to_string(photos) +
+      " photos in " + std::to_string(used.size()) + (used.size() == 1 ? " view" : " views") +
+      (params.sharedCurve ? ", one curve for the three channels" : ", a curve per channel");
   if (params.method == RecoveryMethod::Debevec && params.refit) {
     std::string kept;
     size_t most = 0;

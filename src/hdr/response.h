@@ -83,6 +83,11 @@ struct RecoveryParams {
   // The ends of the range (codes up to 32, from 224) refitted by regressing the code on the light
   // that the trusted middle of the next shot says the pixel got (response.cpp, refineEnds).
   bool refineEnds = true;
+  // One tone curve for the three channels, as a camera's JPEG engine applies one to them after
+  // white balance: at every code, the mean of the channels' curves (each 1 at code 128),
+  // weighted by the pixels that show the code in each (response.cpp, shareCurve). Off: a curve
+  // per channel, each from its own pixels alone (a film scan, a camera with a curve per channel).
+  bool sharedCurve = true;
   void validate() const;  // compose::Error (stage "merge")
 };
 

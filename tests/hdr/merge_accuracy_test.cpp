@@ -20,9 +20,10 @@ using compose::testing::loadSampleEnvironment;
 using compose::testing::smallCaptureParams;
 using compose::testing::TempDir;
 
-// The thresholds. The response's 2 % is checked as the RMS over codes 5..250; the largest
-// deviation over codes 16..224 is held under 3.5 % (with brackets a fixed ratio apart the photos
-// fix the curve only up to a ripple of that period, see hdr/response.h). At the ends of the range
+// The thresholds. The response's 2 % is checked as the RMS over codes 5..250 and as the
+// largest deviation over codes 16..224 (measured 0.86-1.36 % with one curve for the three
+// channels; 1.34-3.00 % with a curve per channel, whose ripple with the brackets' period, see
+// hdr/response.h, the three channels' mean evens out). At the ends of the range
 // the photos themselves do not hold the simulated curve: averaged over every pixel that got the
 // same true light, their codes say a curve that departs from it by several per cent (JPEG's
 // rounding of colour, chroma subsampling and ringing at few codes; the shoulder's compressed
@@ -30,7 +31,7 @@ using compose::testing::TempDir;
 // printed with that "photos' own" curve's and held within kEndsMargin of it.
 constexpr double kMedianRadianceError = 0.03;  // 3 % median relative error
 constexpr double kResponseRms = 0.02;          // 2 % RMS over codes 5..250
-constexpr double kResponseMiddleMax = 0.035;   // at every code 16..224: measured 1.4-3.0 %
+constexpr double kResponseMiddleMax = 0.02;    // at every code 16..224: measured 0.86-1.36 %
 constexpr double kEndsMargin = 0.08;           // measured: at most 6.6 % beyond the photos' own
 constexpr int kMiddleFirst = 16, kMiddleLast = 224;
 constexpr int kFirstCode = 5, kLastCode = 250;
@@ -154,7 +155,7 @@ void responseError(const compose::testing::CaptureOnDisk& on, const ResponseCurv
 Figures mergeAndCompare(const std::string& envName, int brackets,
                         RecoveryMethod recovery = RecoveryMethod::Debevec,
                         MergeMethod method = MergeMethod::Debevec, bool refineEnds = true,
-                        bool refit = true) {
+                        bool refit = true, bool sharedCurve = true) {
   TempDir dir;
   const auto env = loadSampleEnvironment(envName);
   auto on = captureOnDisk(env, smallCaptureParams(brackets), dir / "capture");
@@ -165,6 +166,7 @@ Figures mergeAndCompare(const std::string& envName, int brackets,
   options.recovery.method = recovery;
   options.recovery.refineEnds = refineEnds;
   options.recovery.refit = refit;
+  options.recovery.sharedCurve = sharedCurve;
   options.merge.method = method;
   const CaptureMergeResult merged = mergeCapture(on.capture, on.photos, options, colors);
 
@@ -301,6 +303,15 @@ TEST(MergeAccuracyEnds, TheEndsOfTheRangeAreRefittedFromTheAdjacentShot) {
   EXPECT_LE(refined.medianError, fitted.medianError * 1.02);
 }
 
+// Below the lowest code the refit's bins reach (the forest's blue, 3 exposures: code 5.5, its
+// darkest bins holding too few pixels), the curve follows the power of the code the lowest bins
+// show, not the fit's extrapolation by smoothness: measured 2.78 % at worst over codes 5-250,
+// 10.72 % with the fit's (15.1 % at blue code 5 with a curve per channel).
+TEST(MergeAccuracyEnds, CodesBelowTheBinsFollowThePowerOfTheLowestBins) {
+  const Figures f = mergeAndCompare("forest", 3);
+  EXPECT_LT(f.responseMax, 0.05);
+}
+
 INSTANTIATE_TEST_SUITE_P(SampleHdris, MergeAccuracy,
                          ::testing::Combine(::testing::Values("courtyard", "forest", "interior",
                                                               "sunset"),
@@ -316,12 +327,16 @@ INSTANTIATE_TEST_SUITE_P(SampleHdris, MergeAccuracy,
 // samples' is not: on sunset 3.36 -> 2.13 %, and 1.97 -> 2.03 % for the same capture taken
 // through an optics blur 3 % wider (σ 0.600 -> 0.617 pixels); on courtyard 1.90 -> 2.02 % and
 // 2.00 -> 2.01 %. It may be behind the samples' there by up to two tenths of a percentage point
-// (0.12 measured), not more.
+// (0.12 measured), not more. The fits are compared channel by channel (a curve per channel):
+// the three channels' mean evens out the samples' wandering as well (courtyard, 3 exposures, one
+// curve: 0.77 % from the samples, 1.36 % from every patch; RMS 0.38 and 0.35 %).
 TEST(MergeAccuracyRefit, EveryPatchLowersTheRmsWithoutLosingTheMiddleOfTheRange) {
   for (const auto& [env, brackets] : {std::pair<std::string, int>{"sunset", 5}, {"courtyard", 3}}) {
-    const Figures samples = mergeAndCompare(env, brackets, RecoveryMethod::Debevec,
-                                            MergeMethod::Debevec, true, /*refit=*/false);
-    const Figures every = mergeAndCompare(env, brackets);
+    const Figures samples =
+        mergeAndCompare(env, brackets, RecoveryMethod::Debevec, MergeMethod::Debevec, true,
+                        /*refit=*/false, /*sharedCurve=*/false);
+    const Figures every = mergeAndCompare(env, brackets, RecoveryMethod::Debevec,
+                                          MergeMethod::Debevec, true, true, /*sharedCurve=*/false);
     std::printf(
         "[ figures ] %s %d exposures, OpenCV's samples -> every patch: largest deviation at codes "
         "%d-%d %.2f %% -> %.2f %%, RMS %.2f %% -> %.2f %%, radiance median %.2f %% -> %.2f %%\n",
@@ -337,8 +352,9 @@ TEST(MergeAccuracyRefit, EveryPatchLowersTheRmsWithoutLosingTheMiddleOfTheRange)
 
 // Robertson's method on the same captures. Its merge (MergeRobertson) with the recovered curve
 // meets the same thresholds. Its recovery (CalibrateRobertson, every pixel, 30 iterations) is
-// measured 2-3 times less accurate than Debevec's here (radiance 3.5-5.3 % median, response RMS
-// 4.2-7.6 %; more iterations drift further: 11.3 % on the courtyard at 200), which is why Debevec
+// measured 2-3 times less accurate than Debevec's here (radiance 3.3-4.0 % median, response RMS
+// 3.5-6.3 % with one curve for the three channels, 3.5-5.3 % and 4.2-7.6 % with a curve per
+// channel; more iterations drift further: 11.3 % on the courtyard at 200), which is why Debevec
 // is the default: it is held to what it measures, with a margin, so that a regression still fails.
 constexpr double kRobertsonRadianceError = 0.065;
 constexpr double kRobertsonResponseRms = 0.09;

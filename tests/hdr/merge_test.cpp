@@ -242,6 +242,34 @@ TEST(Response, PhotosWithoutMidTonesAreANamedErrorNotACrash) {
   }
 }
 
+// One tone curve for the three channels by default (the mean of the channels' curves weighted by
+// the pixels that show each code), a curve per channel on request; the curve's source says which.
+TEST(Response, OneCurveForTheThreeChannelsOrOnePerChannel) {
+  const SyntheticBracket b = syntheticBracket(384, 96, {1.0 / 16.0, 1.0 / 4.0, 1.0, 4.0});
+  std::vector<Codes8> codes;
+  for (const Image& img : b.images) codes.push_back(toCodes8(img));
+  BracketCodes bracket;
+  for (const Codes8& c : codes) bracket.images.push_back(&c);
+  bracket.exposures = b.exposures;
+  const ResponseCurve shared = recoverResponse({bracket}, {});
+  EXPECT_EQ(shared.inverse[0], shared.inverse[1]);
+  EXPECT_EQ(shared.inverse[0], shared.inverse[2]);
+  EXPECT_NE(shared.source.find("one curve for the three channels"), std::string::npos)
+      << shared.source;
+  RecoveryParams separate;
+  separate.sharedCurve = false;
+  const ResponseCurve own = recoverResponse({bracket}, separate);
+  EXPECT_NE(own.inverse[0], own.inverse[2]);
+  EXPECT_NE(own.source.find("a curve per channel"), std::string::npos) << own.source;
+  // The shared curve lies between the channels' own at every code (a weighted mean of them).
+  for (int z = 1; z < 255; ++z) {
+    const float lo = std::min({own.inverse[0][z], own.inverse[1][z], own.inverse[2][z]});
+    const float hi = std::max({own.inverse[0][z], own.inverse[1][z], own.inverse[2][z]});
+    EXPECT_GE(shared.inverse[0][z], lo * (1.0f - 1e-5f)) << z;
+    EXPECT_LE(shared.inverse[0][z], hi * (1.0f + 1e-5f)) << z;
+  }
+}
+
 TEST(Response, FilesRoundTripAndBadOnesAreRefused) {
   TempDir dir;
   ResponseCurve c = ResponseCurve::srgb();
