@@ -180,9 +180,16 @@ void savePrecompute(Context& ctx, const fs::path& file) {
   // What the run said of what the lighting is made from (the environment's file, a merge's
   // clipped pixels, a map upside down), for compose render to say again; not what it said of its
   // own caching.
+  // (With parallax the run read the object's mesh to place it: what reading it said is the
+  // render's to say, of the mesh it reads.)
   std::vector<std::string> said;
-  for (size_t n = 0; n < ctx.notes.size(); ++n)
-    if (!ctx.runNotes.count(n)) said.push_back(ctx.notes[n]);
+  for (size_t n = 0; n < ctx.notes.size(); ++n) {
+    if (ctx.runNotes.count(n)) continue;
+    if (ctx.meshSummary && std::find(ctx.meshSummary->notes.begin(), ctx.meshSummary->notes.end(),
+                                     ctx.notes[n]) != ctx.meshSummary->notes.end())
+      continue;
+    said.push_back(ctx.notes[n]);
+  }
   entry.meta()["notes"] = said;
   if (!findStage("precompute").store(ctx, entry)) {
     if (!entry.error().empty())
@@ -285,8 +292,13 @@ StageInput precomputeInput(const fs::path& file, ComposeJob& job) {
       Context::LightingViewpoint v;
       v.point =
           glm::dvec3((*from)[0].get<double>(), (*from)[1].get<double>(), (*from)[2].get<double>());
-      if (const auto s = parallax->find("surroundings"); s != parallax->end() && s->is_string())
-        v.surroundings = s->get<std::string>();
+      const auto s = parallax->find("surroundings");
+      if (s == parallax->end() || !s->is_string())
+        throw Error("render",
+                    "the lighting file's parallax (the surroundings it sees the environment in) "
+                    "is damaged",
+                    file);
+      v.surroundings = s->get<std::string>();
       ctx.lightingViewpoint = v;
     }
     // What compose precompute said of the lighting's sources, said again for this render.

@@ -142,7 +142,9 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
   command.add_flag("--curve-per-channel", o->curvePerChannel,
                    "Recover a response curve per channel, each from its own pixels, instead of one "
                    "tone curve for the three (as a camera's JPEG engine applies one after white "
-                   "balance): for a film scan, or a camera with a curve per channel");
+                   "balance): for a film scan, or a camera with a curve per channel (a recovery "
+                   "option: with --response auto it applies when no curve is stored for the "
+                   "camera)");
   command
       .add_option("--refit-smoothness", o->merge.recovery.refitSmoothness,
                   "Debevec: smoothness of the fit over every patch, relative to the data")

@@ -181,7 +181,9 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
       "--out bunny.exr\n"
       "  compose composite --plate plate.jpg --layer bunny.exr --out final\n"
       "  compose precompute --env room.exr --room 5,3,4 --plate plate.jpg --object bunny.obj "
-      "--place 0.4,0.8 --out room.lighting");
+      "--place 0.4,0.8 --out room.lighting\n"
+      "  compose render --plate plate.jpg --object bunny.obj --place 0.4,0.8 --lighting-file "
+      "room.lighting --out bunny.exr");
   o->addEnvironment(cmd, true);
   o->addLighting(cmd);
   o->addShadows(cmd, true);
@@ -195,7 +197,9 @@ Runner setupPrecompute(CLI::App& cmd, const Globals& globals) {
     // Parallax sees the environment from the object's centre, which the plate and the
     // placement put somewhere; without parallax the lighting does not depend on them.
     const bool parallax = o->job.room || o->job.environmentRadius;
-    if (parallax && (o->job.plate.empty() || o->job.object.empty()))
+    // (Both given: the job's own check says to give one.)
+    if (parallax && !(o->job.room && o->job.environmentRadius) &&
+        (o->job.plate.empty() || o->job.object.empty()))
       throw UsageError(
           std::string(o->job.room ? "--room" : "--env-radius") +
           ": with parallax the environment is seen from the object's centre; give the plate and "

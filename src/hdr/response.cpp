@@ -304,7 +304,8 @@ std::vector<double> refitFromPatches(const Patches& patches, const std::vector<d
 // is in the code, and the mean of a noisy, rounded code follows the noiseless curve wherever the
 // noise spans a code or more. Bins of 2 % of light with at least kMinCount pixels are kept, made
 // non-decreasing (pooling adjacent violators) and inverted; over kBlend codes towards the trusted
-// range the fit is blended into the curve, and codes the bins do not reach keep it.
+// range the fit is blended into the curve; below the lowest code the bins reach the curve goes on
+// as the power of the code they show there, and other codes the bins do not reach keep the fit.
 void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& used,
                 const std::vector<double>& exposures) {
   constexpr int kTrustedLow = 16, kTrustedHigh = 240;  // where the fit is within about 1 %
@@ -380,25 +381,27 @@ void refineEnds(ResponseCurve& curve, const std::vector<const BracketCodes*>& us
       }
     }
     if (pooled.size() < 2) return;
-    // Below the lowest code the bins reach (the light the lowest trusted code says, a quarter of
-    // it through the next shot: about code 4 of an sRGB curve; higher where the darkest bins
+    // Below the lowest code the bins reach (the light the lowest trusted code says, through the
+    // exposure ratio: about code 4 of an sRGB curve 2 EV apart; higher where the darkest bins
     // hold too few pixels), the curve goes on as the power of the code that joins the lowest bin
     // to the one three codes above it, instead of the fit's extrapolation by smoothness (forest,
-    // 3 exposures: the bins reached blue code 5.5, and the fit was 15 % off at code 5).
+    // 3 exposures: the bins reached blue code 5.5, and the fit was 15 % off at code 5). Not into
+    // the trusted range, and only for a power a camera's toe has (1 for a linear toe, 2.2-2.4
+    // for a gamma) joining bins at least two codes apart.
     double power = 0.0;
     if (low) {
       const Point& a = pooled.front();
       size_t k = 1;
       while (k + 1 < pooled.size() && pooled[k].code < a.code + 3.0) ++k;
       const Point& b = pooled[k];
-      if (a.code > 0.0 && b.code > a.code)
+      if (a.code > 0.0 && b.code >= a.code + 2.0)
         power = (b.logLight - a.logLight) / (std::log(b.code) - std::log(a.code));
-      if (!(power > 0.0) || !std::isfinite(power)) power = 0.0;
+      if (!(power >= 0.5 && power <= 4.0)) power = 0.0;
     }
     // Invert: the light at which the mean code is z, for the end's codes the bins reach.
     const int from = low ? 1 : kHighEnd - kBlend, to = low ? kLowEnd + kBlend : 254;
     for (int z = from; z <= to; ++z) {
-      if (power > 0.0 && z < pooled.front().code) {
+      if (power > 0.0 && z < pooled.front().code && z < kTrustedLow) {
         inv[size_t(z)] =
             float(std::exp(pooled.front().logLight +
                            power * (std::log(double(z)) - std::log(pooled.front().code))));

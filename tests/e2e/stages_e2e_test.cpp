@@ -1227,6 +1227,14 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
                           "centre; give the plate and the object"),
             std::string::npos)
       << bare.err;
+  const RunResult sphere = run("precompute" + env + " --env-radius 12 --plate " + quote(plate_) +
+                                   " --out " + quote(dir_ / "x.lighting"),
+                               dir_.path());
+  EXPECT_EQ(sphere.status, 2) << sphere.err;
+  EXPECT_NE(sphere.err.find("--env-radius: with parallax the environment is seen from the "
+                            "object's centre"),
+            std::string::npos)
+      << sphere.err;
   const RunResult unplaced =
       run("precompute" + env + " --object " + quote(samples_ / "monkey.obj") + " --out " +
               quote(dir_ / "x.lighting"),
