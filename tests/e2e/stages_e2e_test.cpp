@@ -28,6 +28,7 @@
 #include "ingest/exr_io.h"
 #include "ingest/image_io.h"
 #include "pipeline/compose_job.h"
+#include "pipeline/stage_cache.h"
 #include "test_util.h"
 
 namespace compose {
@@ -1218,6 +1219,30 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
             std::string::npos)
       << moved.err;
   EXPECT_NE(moved.err.find("precompute again with this placement"), std::string::npos) << moved.err;
+
+  // A lighting file whose record of the point is damaged is refused, naming it, and no layer is
+  // written.
+  {
+    const fs::path damaged = dir_ / "damaged.lighting";
+    pipeline::StageCache made = pipeline::StageCache::atFile(light, "precompute");
+    ASSERT_TRUE(made.open());
+    pipeline::StageCache forged = pipeline::StageCache::atFile(damaged, "precompute");
+    for (const char* name : {"lighting", "shadowBasis", "sources"})
+      forged.put(name, made.get(name));
+    forged.meta() = made.meta();
+    ASSERT_TRUE(forged.meta().contains("parallax"));
+    forged.meta()["parallax"]["seenFrom"][1] = "high";
+    ASSERT_TRUE(forged.write());
+    const RunResult r = run("render" + placed + " --lighting-file " + quote(damaged) + " --out " +
+                                quote(dir_ / "damaged.exr") + " --no-cache",
+                            dir_.path());
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_NE(r.err.find("the lighting file's parallax (where it sees the environment from) is "
+                         "damaged"),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "damaged.exr"));
+  }
 
   // Parallax needs the placement; a placement means nothing without parallax.
   const RunResult bare =
