@@ -1155,30 +1155,33 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
   const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
   const std::string room = " --room 8,4,40 --capture-at 2,1.5,-3";
   const std::string placed = " --plate " + quote(plate_) + " " + objectOptions();
-  const RunResult one = run("-q" + placed + env + room + lighting + " --out " +
-                                quote(dir_ / "one" / "compose") + " --no-cache",
-                            dir_.path());
+  // Every run shares a cache: the renders after the first reuse its visibility pass (the
+  // lighting file's lighting is keyed by the file, and the render made from it again).
+  const std::string cache = " --cache " + quote(dir_ / "cache");
+  const RunResult one = run(
+      "-q" + placed + env + room + lighting + " --out " + quote(dir_ / "one" / "compose") + cache,
+      dir_.path());
   ASSERT_EQ(one.status, 0) << one.err;
 
   const fs::path light = dir_ / "room.lighting", layer = dir_ / "monkey.exr";
   // The placement options render takes, less its shading ones (--samples).
   std::string placement = placed;
   placement.erase(placement.find(" --samples 2"), std::string(" --samples 2").size());
-  const RunResult pre = run(
-      "precompute" + env + room + lighting + placement + " --out " + quote(light) + " --no-cache",
-      dir_.path());
+  const RunResult pre =
+      run("precompute" + env + room + lighting + placement + " --out " + quote(light) + cache,
+          dir_.path());
   ASSERT_EQ(pre.status, 0) << pre.err;
   EXPECT_NE(pre.err.find("parallax: the environment as seen from the object's centre"),
             std::string::npos)
       << pre.err;
-  const RunResult ren = run("render" + placed + " --lighting-file " + quote(light) + " --out " +
-                                quote(layer) + " --no-cache",
-                            dir_.path());
+  const RunResult ren =
+      run("render" + placed + " --lighting-file " + quote(light) + " --out " + quote(layer) + cache,
+          dir_.path());
   ASSERT_EQ(ren.status, 0) << ren.err;
   EXPECT_EQ(ren.err.find("warning: the lighting file sees the environment"), std::string::npos)
       << ren.err;
   const RunResult comp = run("-q composite --plate " + quote(plate_) + " --layer " + quote(layer) +
-                                 " --out " + quote(dir_ / "two" / "compose") + " --no-cache",
+                                 " --out " + quote(dir_ / "two" / "compose") + cache,
                              dir_.path());
   ASSERT_EQ(comp.status, 0) << comp.err;
   const std::vector<Part> a = readParts(dir_ / "one" / "compose.exr");
@@ -1187,12 +1190,11 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
 
   // The same stages without parallax light the object otherwise.
   const fs::path distant = dir_ / "distant.lighting", distantLayer = dir_ / "distant.exr";
-  ASSERT_EQ(run("-q precompute" + env + lighting + " --out " + quote(distant) + " --no-cache",
-                dir_.path())
+  ASSERT_EQ(run("-q precompute" + env + lighting + " --out " + quote(distant) + cache, dir_.path())
                 .status,
             0);
   ASSERT_EQ(run("-q render" + placed + " --lighting-file " + quote(distant) + " --out " +
-                    quote(distantLayer) + " --no-cache",
+                    quote(distantLayer) + cache,
                 dir_.path())
                 .status,
             0);
@@ -1210,10 +1212,9 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_GT(differs, 0.01 * total) << "parallax changed the object's light by less than 1 %";
 
   // Moved: the render says the lighting file's point is not where the object stands.
-  const RunResult moved =
-      run("render" + placed + " --place 0.3,0.8 --lighting-file " + quote(light) + " --out " +
-              quote(dir_ / "moved.exr") + " --no-cache",
-          dir_.path());
+  const RunResult moved = run("render" + placed + " --place 0.3,0.8 --lighting-file " +
+                                  quote(light) + " --out " + quote(dir_ / "moved.exr") + cache,
+                              dir_.path());
   ASSERT_EQ(moved.status, 0) << moved.err;
   EXPECT_NE(moved.err.find("warning: the lighting file sees the environment (room 8 x 4 x 40 m"),
             std::string::npos)
@@ -1234,7 +1235,7 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
     forged.meta()["parallax"]["seenFrom"][1] = "high";
     ASSERT_TRUE(forged.write());
     const RunResult r = run("render" + placed + " --lighting-file " + quote(damaged) + " --out " +
-                                quote(dir_ / "damaged.exr") + " --no-cache",
+                                quote(dir_ / "damaged.exr") + cache,
                             dir_.path());
     EXPECT_EQ(r.status, 1) << r.err;
     EXPECT_NE(r.err.find("the lighting file's parallax (where it sees the environment from) is "
