@@ -113,6 +113,12 @@ class StageCommands : public ::testing::Test {
     }
     return small;
   }
+  // Self-shadowing as cheap as it comes (order 4 on 4x4 cells, 16 sources, no refinement, no
+  // ground beneath the object), for the tests of how the stages chain and reuse their files
+  // rather than of the shadows: a third of the default's time under the sanitizers. Each
+  // parameter differs from its default, so a file that dropped one would be seen.
+  static constexpr const char* kQuickShadows =
+      " --shadow-params order=4,grid=4,refine=0,sources=16,ground=off";
   // The options the one-shot and the stages share, the monkey facing the camera at 2x2 samples.
   std::string objectOptions() const {
     return "--object " + quote(samples_ / "monkey.obj") + " --samples 2 --scale 0.4 --yaw 20";
@@ -133,7 +139,7 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
   // The environment turned: the lighting file carries the turn to the render (it was dropped,
   // and the chained stages lit the object with the map unturned).
   const std::string env = " --env " + quote(samples_ / "forest.exr") + " --env-yaw 70";
-  const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
+  const std::string lighting = std::string(" --lighting-params order=4") + kQuickShadows;
   const RunResult one =
       run("-q --plate " + quote(plate_) + " " + objectOptions() + env + lighting + " --out " +
               quote(dir_ / "one" / "compose") + " --cache " + quote(dir_ / "cache1"),
@@ -362,8 +368,8 @@ TEST_F(StageCommands, ChainedByHandGivesTheOneShotFilesBitForBit) {
 // shows the object's colour where it covers the plate.
 TEST_F(StageCommands, ANewExposureReusesTheRender) {
   const std::string job = "--plate " + quote(plate_) + " " + objectOptions() + " --env " +
-                          quote(samples_ / "forest.exr") +
-                          " --lighting-params order=4 --shadow-params order=4,grid=4";
+                          quote(samples_ / "forest.exr") + " --lighting-params order=4" +
+                          kQuickShadows;
   auto renderLine = [](const RunResult& r) {
     const size_t at = r.err.find("compose: render ");
     return at == std::string::npos ? std::string() : r.err.substr(at, r.err.find('\n', at) - at);
@@ -472,7 +478,7 @@ TEST_F(StageCommands, ANewExposureReusesTheRender) {
 // with another focal length in EXIF renders again.
 TEST_F(StageCommands, AnotherTakeFromTheSameCameraReusesTheRenderAndTheGroundShadow) {
   const std::string job = objectOptions() + " --env " + quote(samples_ / "forest.exr") +
-                          " --lighting-params order=4 --shadow-params order=4,grid=4";
+                          " --lighting-params order=4" + kQuickShadows;
   auto line = [](const RunResult& r, const std::string& stage) {
     const size_t at = r.err.find("compose: " + stage + " ");
     return at == std::string::npos ? std::string() : r.err.substr(at, r.err.find('\n', at) - at);
@@ -542,7 +548,7 @@ TEST_F(StageCommands, ATexturedObjectChainedByHandWithAGivenExposure) {
   const fs::path mesh = fs::path(COMPOSE_TEST_DATA_DIR) / "suzanne_checker.obj";
   ASSERT_TRUE(fs::exists(mesh)) << mesh;
   const std::string env = " --env " + quote(samples_ / "forest.exr");
-  const std::string lighting = " --lighting-params order=4 --shadow-params order=4,grid=4";
+  const std::string lighting = std::string(" --lighting-params order=4") + kQuickShadows;
   const std::string object =
       " --object " + quote(mesh) + " --samples 2 --scale 0.4 --yaw 20 --exposure 0.3";
   const RunResult one =
@@ -1152,7 +1158,7 @@ TEST_F(StageCommands, ALayerSavedAgainByAnotherToolIsReadAsItsFileHoldsIt) {
 // precompute with parallax and no placement, or a placement without parallax, is refused (exit 2).
 TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
   const std::string env = " --env " + quote(smallEnvironment());
-  const std::string lighting = " --lighting-params order=4 --shadow-params order=8,grid=8";
+  const std::string lighting = std::string(" --lighting-params order=4") + kQuickShadows;
   const std::string room = " --room 8,4,40 --capture-at 2,1.5,-3";
   const std::string placed = " --plate " + quote(plate_) + " " + objectOptions();
   // Every run shares a cache: the renders after the first reuse its visibility pass (the
