@@ -228,6 +228,9 @@ Runner setupMerge(CLI::App& command, const Globals& globals) {
     m.merge.align = o->align;
     m.recovery.refit = !o->noRefit;
     m.recovery.sharedCurve = !o->curvePerChannel;
+    for (const char* option : {"--recovery", "--samples", "--lambda", "--no-refit",
+                               "--refit-smoothness", "--curve-per-channel"})
+      if (command.count(option)) m.recoveryOptions.push_back(option);
     m.merge.deghost = o->deghost;
     if (!o->responseDir.empty()) m.responseFolder = o->responseDir;
     asUsage([&] { m.validate(); });

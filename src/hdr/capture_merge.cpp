@@ -520,6 +520,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
           // if it explains them clearly better (by a quarter; noise and movement make the shots
           // disagree as much through either); the stored one is kept as it is.
           const double stored = responseDisagreement(result.response, brackets);
+          bool storedUsed = true;
           if (std::isfinite(stored) && stored > kStoredResponseTolerance) {
             const ResponseCurve storedCurve = result.response;
             const std::vector<std::string> notesBefore = result.notes;
@@ -530,6 +531,7 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
             const double fresh = responseDisagreement(result.response, brackets);
             char text[512];
             if (fresh < 0.75 * stored) {
+              storedUsed = false;
               std::snprintf(
                   text, sizeof text,
                   "the stored response of %s does not fit these photos (their exposures "
@@ -561,6 +563,18 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
                                      " (" + cached.string() +
                                      "), checked against a recovery from them";
             }
+          }
+          // Options for a recovery that did not make the curve used: said, not dropped silently.
+          if (storedUsed && !options.recoveryOptions.empty()) {
+            std::string given;
+            for (const std::string& o : options.recoveryOptions)
+              given += (given.empty() ? "" : ", ") + o;
+            result.notes.push_back(
+                given + (options.recoveryOptions.size() == 1 ? " was" : " were") +
+                " not applied: the stored response of " + camera + " (" + cached.string() +
+                ") was used, not a curve recovered from these photos (--response recover "
+                "recovers one with " +
+                (options.recoveryOptions.size() == 1 ? "it" : "them") + ")");
           }
         } else {
           recover();

@@ -54,7 +54,10 @@ struct CaptureMergeOptions {
   std::string inputSpace;  // colour space of the photos; empty: from the files / description
   std::string inputSpaceOption = "--input-space";  // the option that gave it, for messages
   std::string linearSpace;  // the camera's linear RGB for 8-bit photos; empty: linearSpaceFor()
-  void validate() const;    // compose::Error (stage "merge")
+  // The recovery options given by name (e.g. "--curve-per-channel"): with ResponseMode::Auto and
+  // a stored curve used, a note says they were not applied.
+  std::vector<std::string> recoveryOptions;
+  void validate() const;  // compose::Error (stage "merge")
 };
 
 struct MergedView {

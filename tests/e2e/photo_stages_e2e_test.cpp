@@ -140,6 +140,25 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
     ASSERT_EQ(again.status, 0) << again.err;
     EXPECT_NE(again.err.find("recovery skipped"), std::string::npos) << again.err;
     EXPECT_TRUE(fs::exists(dir / "one.exr"));
+    EXPECT_EQ(again.err.find("not applied"), std::string::npos) << again.err;
+    // Recovery options with the stored curve used are said not to apply (they were dropped
+    // without a word); with --response recover they do, and nothing is said.
+    const std::string bracket =
+        q(shot("yaw000_1.jpg")) + " " + q(shot("yaw000_2.jpg")) + " " + q(shot("yaw000_3.jpg"));
+    const CommandRun options = compose(
+        "merge --curve-per-channel --lambda 20 --out " + q(dir / "two.exr") + " " + bracket, dir);
+    ASSERT_EQ(options.status, 0) << options.err;
+    EXPECT_NE(
+        options.err.find("--lambda, --curve-per-channel were not applied: the stored response "
+                         "of compose virtual camera ("),
+        std::string::npos)
+        << options.err;
+    const CommandRun recovered =
+        compose("merge --response recover --curve-per-channel --response-dir " +
+                    q(dir / "other_responses") + " --out " + q(dir / "three.exr") + " " + bracket,
+                dir);
+    ASSERT_EQ(recovered.status, 0) << recovered.err;
+    EXPECT_EQ(recovered.err.find("not applied"), std::string::npos) << recovered.err;
 
     // Half floats, PIZ, on request: the same radiance within half's precision.
     const CommandRun half = compose("merge --depth half --compression piz --out " +
