@@ -236,7 +236,19 @@ const render::EmbreeScene& Context::objectScene() {
 }
 
 lighting::CaptureProxy Context::captureProxy() const {
-  return pipeline::captureProxy(job);
+  lighting::CaptureProxy proxy = pipeline::captureProxy(job);
+  proxy.unit = lengthUnit();
+  return proxy;
+}
+
+const std::string& Context::lengthUnit() const {
+  if (!lengthUnit_) {
+    // calib pose writes a square of 1 when --square is not given: lengths in squares.
+    lengthUnit_ = !job.poseFile.empty() && calib::readPose(job.poseFile).board.square == 1.0
+                      ? "squares"
+                      : "m";
+  }
+  return *lengthUnit_;
 }
 
 glm::dvec3 Context::objectCentre() {

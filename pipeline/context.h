@@ -226,8 +226,11 @@ class Context {
   const render::Mesh& mesh();
   // The object's ray-tracing scene, built on first use (object space).
   const render::EmbreeScene& objectScene();
-  // The proxy of the surroundings (distant when the job describes none).
+  // The proxy of the surroundings (distant when the job describes none), in the world's unit.
   lighting::CaptureProxy captureProxy() const;
+  // The world's unit of length, for what is said: metres, or with a pose file whose board's
+  // squares were not measured (calib pose without --square), the squares.
+  const std::string& lengthUnit() const;
   // The centre of the object's bounding box in the world (needs the geometry): where parallax
   // sees the environment from.
   glm::dvec3 objectCentre();
@@ -236,6 +239,7 @@ class Context {
   std::optional<Geometry> geometry_;
   Geometry makeGeometry(int plateWidth, int plateHeight, const ingest::CaptureInfo& info);
   std::unique_ptr<render::EmbreeScene> objectScene_;
+  mutable std::optional<std::string> lengthUnit_;
 };
 
 }  // namespace compose::pipeline

@@ -352,11 +352,11 @@ void saveObjectLayer(Context& ctx, const fs::path& file, const std::string& comp
       ctx.note(format(
           "warning: the lighting file sees the environment (%s) from (%.3f, %.3f, %.3f), where its "
           "precompute placed the object; this render places the object's centre at (%.3f, %.3f, "
-          "%.3f), %.3g m away: it is lit as from there. For the light where it stands now, "
+          "%.3f), %.3g %s away: it is lit as from there. For the light where it stands now, "
           "precompute again with this placement (the same --plate, --place, --scale, --yaw and "
           "camera options)",
           ctx.lightingViewpoint->surroundings.c_str(), p.x, p.y, p.z, centre.x, centre.y, centre.z,
-          away));
+          away, ctx.lengthUnit().c_str()));
     }
   }
   const std::vector<std::string>& aovNames = render::aovChannelNames();

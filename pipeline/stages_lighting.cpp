@@ -84,6 +84,7 @@ void hashProxy(const Context& ctx, Hash128& h) {
   hashVector(h, proxy.boxMin);
   hashVector(h, proxy.boxMax);
   h.number(proxy.radius);
+  h.bytes(proxy.unit);           // said in the stage's notes
   h.combine(ctx.geometryKey());  // the object's centre
 }
 
@@ -335,8 +336,8 @@ class PrecomputeStage final : public Stage {
       placed.environmentFromWorld = glm::dmat3(g.envFromWorld);
       environment = lighting::CaptureVolumeSource(environment, placed).at(glm::vec3(centre));
       ctx.note(format("parallax: the environment as seen from the object's centre (%.2f, %.2f, "
-                      "%.2f) m; surroundings: ",
-                      centre.x, centre.y, centre.z) +
+                      "%.2f) %s; surroundings: ",
+                      centre.x, centre.y, centre.z, ctx.lengthUnit().c_str()) +
                proxy.describe());
       // The object is inside the surroundings, or it would show through their walls. Its
       // corners are taken a millionth of its size towards its centre: it stands on the floor

@@ -78,12 +78,14 @@ void ComposeOptions::addEnvironment(CLI::App& app, bool parallax) {
   app.add_option(
       "--room", room,
       "Parallax: the environment is a room of W,H,D metres (floor on the ground, centred "
-      "below the plate camera) instead of infinitely distant");
+      "below the plate camera; with --pose, the pose's units and its board's centre) instead "
+      "of infinitely distant");
   app.add_option("--env-radius", envRadius,
                  "Parallax: the environment is a sphere of this radius (metres) around the capture "
                  "point");
   app.add_option("--capture-at", captureAt,
-                 "Where the environment was captured, X,Y,Z metres [default: the plate camera]");
+                 "Where the environment was captured, X,Y,Z metres (with --pose, the pose's units "
+                 "and frame) [default: the plate camera]");
 }
 
 void ComposeOptions::addLighting(CLI::App& app) {

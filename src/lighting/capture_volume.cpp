@@ -100,12 +100,12 @@ std::string CaptureProxy::describe() const {
     case Shape::Distant:
       return "infinitely distant";
     case Shape::Box:
-      std::snprintf(s, sizeof s, "room %g x %g x %g m, captured at (%g, %g, %g)",
-                    boxMax.x - boxMin.x, boxMax.y - boxMin.y, boxMax.z - boxMin.z, capturePoint.x,
-                    capturePoint.y, capturePoint.z);
+      std::snprintf(s, sizeof s, "room %g x %g x %g %s, captured at (%g, %g, %g)",
+                    boxMax.x - boxMin.x, boxMax.y - boxMin.y, boxMax.z - boxMin.z, unit.c_str(),
+                    capturePoint.x, capturePoint.y, capturePoint.z);
       return s;
     case Shape::Sphere:
-      std::snprintf(s, sizeof s, "sphere of radius %g m around (%g, %g, %g)", radius,
+      std::snprintf(s, sizeof s, "sphere of radius %g %s around (%g, %g, %g)", radius, unit.c_str(),
                     capturePoint.x, capturePoint.y, capturePoint.z);
       return s;
   }

@@ -17,6 +17,8 @@
 // returned by at() are in the environment's frame, like the distant one.
 #pragma once
 
+#include <string>
+
 #include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
 
@@ -31,6 +33,7 @@ struct CaptureProxy {
   double radius = 0.0;                  // Sphere, metres, centred on the capture point
   glm::dvec3 capturePoint{0.0};         // where the environment was captured, world metres
   glm::dmat3 environmentFromWorld{1.0};
+  std::string unit = "m";  // the world's unit of length, for describe()
 
   // compose::Error (stage "lighting") on an empty box, a capture point outside it, a radius <= 0
   // or non-finite numbers.

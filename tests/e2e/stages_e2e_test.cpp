@@ -1759,6 +1759,29 @@ TEST_F(StageCommands, APlatePoseStandsTheObjectOnTheBoardsPlane) {
             std::string::npos)
       << framing.err;
   EXPECT_FALSE(fs::exists(dir_ / "tall" / "compose.exr"));
+
+  // Parallax with a pose: lengths are the pose's, metres for a board measured with --square,
+  // squares for one that was not (a square of 1). The notes said metres for both.
+  calib::PlatePose squares = pose;
+  squares.board.square = 1.0;
+  squares.worldFromCamera =
+      glm::inverse(glm::lookAt(eye / 0.025, glm::dvec3(0.0), glm::dvec3(0, 1, 0)));
+  calib::writePose(dir_ / "squares.json", squares);
+  for (const auto& [file, room, unit] : std::vector<std::tuple<fs::path, std::string, std::string>>{
+           {poseFile, " --room 2,1,2 --capture-at 0,0.3,0", "m"},
+           {dir_ / "squares.json", " --room 80,40,80 --capture-at 0,12,0", "squares"}}) {
+    const RunResult seen =
+        run("--plate " + quote(plate_) + " --object " + quote(dir_ / "box.obj") + " --pose " +
+                quote(file) + " --place " + place + " --scale 0.2 --samples 1 --shadows off" +
+                " --env " + quote(smallEnvironment()) + room + " --no-cache --out " +
+                quote(dir_ / ("parallax_" + unit) / "compose"),
+            dir_.path());
+    ASSERT_EQ(seen.status, 0) << seen.err;
+    EXPECT_NE(seen.err.find(") " + unit + "; surroundings: room "), std::string::npos) << seen.err;
+    const std::string size = unit == "m" ? "2 x 1 x 2 m" : "80 x 40 x 80 squares";
+    EXPECT_NE(seen.err.find("surroundings: room " + size + ", captured at"), std::string::npos)
+        << seen.err;
+  }
 }
 
 // Zero is a value, not the default: calib pose took --square 0 and --focal35 0 as "not given".
