@@ -188,7 +188,10 @@ void validate(const ComposeJob& job) {
         "--capture-at needs --room or --env-radius (a distant environment has no "
         "position)");
   try {
-    captureProxy(job).validate();
+    lighting::CaptureProxy proxy = captureProxy(job);
+    // The pose file is not read here: its unit is named as such.
+    if (!job.poseFile.empty()) proxy.unit = "the pose's units";
+    proxy.validate();
   } catch (const UsageError&) {
     throw;
   } catch (const Error& e) {

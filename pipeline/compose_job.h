@@ -110,10 +110,12 @@ struct ComposeJob {
   // W x H x D metres standing on the ground, centred below the plate camera (x in [-W/2, W/2],
   // y in [0, H], z in [-D/2, D/2]), or a sphere of `environmentRadius` metres around the capture
   // point. Neither: the environment is infinitely distant. The object is then lit by the
-  // environment as seen from its centre.
+  // environment as seen from its centre. With a pose file, lengths are the pose's and the
+  // world's origin is the board's centre (calib/chessboard.h).
   std::optional<glm::dvec3> room;
   std::optional<double> environmentRadius;
-  // Where the environment was captured, world metres; default: the plate camera's position.
+  // Where the environment was captured, in the world (metres, or the pose's units); default: the
+  // plate camera's position.
   std::optional<glm::dvec3> captureAt;
 };
 

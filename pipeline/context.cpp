@@ -237,16 +237,19 @@ const render::EmbreeScene& Context::objectScene() {
 
 lighting::CaptureProxy Context::captureProxy() const {
   lighting::CaptureProxy proxy = pipeline::captureProxy(job);
-  proxy.unit = lengthUnit();
+  if (proxy.shape != lighting::CaptureProxy::Shape::Distant) proxy.unit = lengthUnit();
   return proxy;
 }
 
 const std::string& Context::lengthUnit() const {
   if (!lengthUnit_) {
     // calib pose writes a square of 1 when --square is not given: lengths in squares.
-    lengthUnit_ = !job.poseFile.empty() && calib::readPose(job.poseFile).board.square == 1.0
-                      ? "squares"
-                      : "m";
+    bool squares = false;
+    if (!job.poseFile.empty()) {
+      squares = calib::readPose(job.poseFile).board.square == 1.0;
+      requireUnchangedSinceHashed(job.poseFile, "camera");
+    }
+    lengthUnit_ = squares ? "squares" : "m";
   }
   return *lengthUnit_;
 }

@@ -229,7 +229,8 @@ class Context {
   // The proxy of the surroundings (distant when the job describes none), in the world's unit.
   lighting::CaptureProxy captureProxy() const;
   // The world's unit of length, for what is said: metres, or with a pose file whose board's
-  // squares were not measured (calib pose without --square), the squares.
+  // squares were not measured (calib pose without --square), the squares. Read once, on the
+  // thread that runs the stages (as geometry() is).
   const std::string& lengthUnit() const;
   // The centre of the object's bounding box in the world (needs the geometry): where parallax
   // sees the environment from.

@@ -84,7 +84,9 @@ void hashProxy(const Context& ctx, Hash128& h) {
   hashVector(h, proxy.boxMin);
   hashVector(h, proxy.boxMax);
   h.number(proxy.radius);
-  h.bytes(proxy.unit);           // said in the stage's notes
+  // Said in the stage's notes: entries made when every unit was said as metres are not reused
+  // (the pose file's bytes are in the geometry's key already).
+  h.bytes(proxy.unit);
   h.combine(ctx.geometryKey());  // the object's centre
 }
 
@@ -148,65 +150,70 @@ class PrecomputeStage final : public Stage {
   }
   std::vector<std::string> outputs() const override { return {kLighting, kShadowLighting}; }
   std::vector<StageParameter> parameters() const override {
-    return {{"lighting",
-             "the lighting basis: " +
-                 [] {
-                   std::string names;
-                   for (const auto& n : lighting::lightingNames())
-                     names += (names.empty() ? "" : ", ") + n;
-                   return names;
-                 }(),
-             [](const ComposeJob& j) { return nlohmann::json(j.lighting); },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (!v.is_string()) throw UsageError("lighting must be a basis name (a string)");
-               j.lighting = v.get<std::string>();
-             }},
-            {"lighting-params", "the basis' parameters, key=value,...",
-             [](const ComposeJob& j) { return nlohmann::json(j.lightingParams); },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (!v.is_string()) throw UsageError("lighting-params must be a string");
-               j.lightingParams = v.get<std::string>();
-             }},
-            {"env-yaw", "turn of the environment about the vertical, degrees",
-             [](const ComposeJob& j) { return nlohmann::json(j.environmentYawDegrees); },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (!v.is_number()) throw UsageError("env-yaw must be a number of degrees");
-               j.environmentYawDegrees = v.get<double>();
-             }},
-            {"room", "parallax: a room of [W, H, D] metres around the plate camera, or null",
-             [](const ComposeJob& j) {
-               return j.room ? nlohmann::json({j.room->x, j.room->y, j.room->z})
-                             : nlohmann::json(nullptr);
-             },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (v.is_null()) return j.room.reset();
-               if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
-                   !v[2].is_number())
-                 throw UsageError("room must be [W, H, D] in metres");
-               j.room = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
-             }},
-            {"env-radius", "parallax: a sphere of this radius (metres), or null",
-             [](const ComposeJob& j) {
-               return j.environmentRadius ? nlohmann::json(*j.environmentRadius)
-                                          : nlohmann::json(nullptr);
-             },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (v.is_null()) return j.environmentRadius.reset();
-               if (!v.is_number()) throw UsageError("env-radius must be a number of metres");
-               j.environmentRadius = v.get<double>();
-             }},
-            {"capture-at", "where the environment was captured, [X, Y, Z] metres, or null",
-             [](const ComposeJob& j) {
-               return j.captureAt ? nlohmann::json({j.captureAt->x, j.captureAt->y, j.captureAt->z})
-                                  : nlohmann::json(nullptr);
-             },
-             [](ComposeJob& j, const nlohmann::json& v) {
-               if (v.is_null()) return j.captureAt.reset();
-               if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
-                   !v[2].is_number())
-                 throw UsageError("capture-at must be [X, Y, Z] in metres");
-               j.captureAt = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
-             }}};
+    return {
+        {"lighting",
+         "the lighting basis: " +
+             [] {
+               std::string names;
+               for (const auto& n : lighting::lightingNames())
+                 names += (names.empty() ? "" : ", ") + n;
+               return names;
+             }(),
+         [](const ComposeJob& j) { return nlohmann::json(j.lighting); },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (!v.is_string()) throw UsageError("lighting must be a basis name (a string)");
+           j.lighting = v.get<std::string>();
+         }},
+        {"lighting-params", "the basis' parameters, key=value,...",
+         [](const ComposeJob& j) { return nlohmann::json(j.lightingParams); },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (!v.is_string()) throw UsageError("lighting-params must be a string");
+           j.lightingParams = v.get<std::string>();
+         }},
+        {"env-yaw", "turn of the environment about the vertical, degrees",
+         [](const ComposeJob& j) { return nlohmann::json(j.environmentYawDegrees); },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (!v.is_number()) throw UsageError("env-yaw must be a number of degrees");
+           j.environmentYawDegrees = v.get<double>();
+         }},
+        {"room",
+         "parallax: a room of [W, H, D] metres around the plate camera (the pose's units "
+         "around its board with a pose), or null",
+         [](const ComposeJob& j) {
+           return j.room ? nlohmann::json({j.room->x, j.room->y, j.room->z})
+                         : nlohmann::json(nullptr);
+         },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (v.is_null()) return j.room.reset();
+           if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+               !v[2].is_number())
+             throw UsageError("room must be [W, H, D] in metres");
+           j.room = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+         }},
+        {"env-radius", "parallax: a sphere of this radius (metres, or the pose's units), or null",
+         [](const ComposeJob& j) {
+           return j.environmentRadius ? nlohmann::json(*j.environmentRadius)
+                                      : nlohmann::json(nullptr);
+         },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (v.is_null()) return j.environmentRadius.reset();
+           if (!v.is_number()) throw UsageError("env-radius must be a number of metres");
+           j.environmentRadius = v.get<double>();
+         }},
+        {"capture-at",
+         "where the environment was captured, [X, Y, Z] metres (the pose's units and frame "
+         "with a pose), or null",
+         [](const ComposeJob& j) {
+           return j.captureAt ? nlohmann::json({j.captureAt->x, j.captureAt->y, j.captureAt->z})
+                              : nlohmann::json(nullptr);
+         },
+         [](ComposeJob& j, const nlohmann::json& v) {
+           if (v.is_null()) return j.captureAt.reset();
+           if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+               !v[2].is_number())
+             throw UsageError("capture-at must be [X, Y, Z] in metres");
+           j.captureAt = glm::dvec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+         }}};
   }
 
   // The bright sources split off for the shadows. 2: none from a map whose texels span more than

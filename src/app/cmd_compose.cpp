@@ -81,8 +81,8 @@ void ComposeOptions::addEnvironment(CLI::App& app, bool parallax) {
       "below the plate camera; with --pose, the pose's units and its board's centre) instead "
       "of infinitely distant");
   app.add_option("--env-radius", envRadius,
-                 "Parallax: the environment is a sphere of this radius (metres) around the capture "
-                 "point");
+                 "Parallax: the environment is a sphere of this radius (metres; with --pose, the "
+                 "pose's units) around the capture point");
   app.add_option("--capture-at", captureAt,
                  "Where the environment was captured, X,Y,Z metres (with --pose, the pose's units "
                  "and frame) [default: the plate camera]");

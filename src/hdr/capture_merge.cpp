@@ -569,12 +569,16 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
             std::string given;
             for (const std::string& o : options.recoveryOptions)
               given += (given.empty() ? "" : ", ") + o;
-            result.notes.push_back(
-                given + (options.recoveryOptions.size() == 1 ? " was" : " were") +
-                " not applied: the stored response of " + camera + " (" + cached.string() +
-                ") was used, not a curve recovered from these photos (--response recover "
-                "recovers one with " +
-                (options.recoveryOptions.size() == 1 ? "it" : "them") + ")");
+            const bool one = options.recoveryOptions.size() == 1;
+            result.notes.push_back(given + (one ? " was" : " were") +
+                                   " not applied: the curve used is the stored "
+                                   "response of " +
+                                   camera + " (" + cached.string() + "), not one recovered with " +
+                                   (one ? "it" : "them") +
+                                   " (--response recover recovers one with " +
+                                   (one ? "it" : "them") +
+                                   " and stores it for the camera in place of this one; "
+                                   "with --response-dir another folder, this one stays)");
           }
         } else {
           recover();
@@ -586,6 +590,13 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
       }
     }
     result.linearisation += "; camera RGB taken as " + linearSpace + " (" + why + ")";
+  } else if (!options.recoveryOptions.empty()) {
+    // 16-bit and float photos are linear already: no curve is recovered.
+    std::string given;
+    for (const std::string& o : options.recoveryOptions) given += (given.empty() ? "" : ", ") + o;
+    result.notes.push_back(given + (options.recoveryOptions.size() == 1 ? " was" : " were") +
+                           " not applied: the photos are 16-bit or float, linear already, and no "
+                           "response is recovered for them");
   }  // the aligned copies were for recovery only: the merge shifts the shots itself
 
   // The unit of 8-bit views: middle grey as the sRGB curve decodes it (capture_merge.h, Units).

@@ -34,13 +34,14 @@ void CaptureProxy::validate() const {
   };
   if (!finite(capturePoint) || !within(capturePoint))
     throw Error("lighting",
-                "the capture point must be finite, each of its coordinates within 1000 km of the "
-                "ground point below the plate camera");
+                "the capture point must be finite, each of its coordinates within 1e6 (1000 km in "
+                "metres) of the world's origin (the ground point below the plate camera, or the "
+                "board's centre with --pose)");
   if ((shape == Shape::Box && (!within(boxMin) || !within(boxMax))) ||
       (shape == Shape::Sphere && radius > kLargest)) {
     throw Error("lighting",
-                "surroundings reaching more than 1000 km from the ground point below the plate "
-                "camera: use a distant environment (no --room, no --env-radius)");
+                "surroundings reaching more than 1e6 (1000 km in metres) from the world's origin: "
+                "use a distant environment (no --room, no --env-radius)");
   }
   switch (shape) {
     case Shape::Distant:
@@ -54,20 +55,19 @@ void CaptureProxy::validate() const {
         char s[640];
         std::snprintf(s, sizeof s,
                       "the capture point (%g, %g, %g) is not inside the room (x %g..%g, y %g..%g, "
-                      "z %g..%g m): parallax needs the camera inside (without --capture-at it is "
+                      "z %g..%g %s): parallax needs the camera inside (without --capture-at it is "
                       "the plate camera's position: give a taller or larger room, or "
                       "--capture-at)",
                       capturePoint.x, capturePoint.y, capturePoint.z, boxMin.x, boxMax.x, boxMin.y,
-                      boxMax.y, boxMin.z, boxMax.z);
+                      boxMax.y, boxMin.z, boxMax.z, unit.c_str());
         throw Error("lighting", s);
       }
       return;
     case Shape::Sphere:
       if (!(radius > 0.0) || !std::isfinite(radius))
         throw Error("lighting",
-                    "the environment's radius (--env-radius) must be a positive number of metres, "
-                    "got " +
-                        numberText(radius));
+                    "the environment's radius (--env-radius) must be a positive number (of " +
+                        unit + "), got " + numberText(radius));
       // As for a room: the photos were taken above the ground the object stands on.
       if (capturePoint.y < 0.0) {
         char s[200];

@@ -29,11 +29,12 @@ namespace compose::lighting {
 
 struct CaptureProxy {
   enum class Shape { Distant, Box, Sphere } shape = Shape::Distant;
-  glm::dvec3 boxMin{0.0}, boxMax{0.0};  // Box, world metres
-  double radius = 0.0;                  // Sphere, metres, centred on the capture point
-  glm::dvec3 capturePoint{0.0};         // where the environment was captured, world metres
+  // In the world's unit of length (`unit`): metres, or a pose file's (calib/chessboard.h).
+  glm::dvec3 boxMin{0.0}, boxMax{0.0};  // Box
+  double radius = 0.0;                  // Sphere, centred on the capture point
+  glm::dvec3 capturePoint{0.0};         // where the environment was captured
   glm::dmat3 environmentFromWorld{1.0};
-  std::string unit = "m";  // the world's unit of length, for describe()
+  std::string unit = "m";  // the world's unit of length, for describe() and errors
 
   // compose::Error (stage "lighting") on an empty box, a capture point outside it, a radius <= 0
   // or non-finite numbers.

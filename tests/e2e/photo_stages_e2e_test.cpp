@@ -13,6 +13,7 @@
 
 #include "command_util.h"
 #include "core/channels.h"
+#include "hdr/response.h"
 #include "ingest/capture.h"
 #include "ingest/exr_io.h"
 #include "ingest/image_io.h"
@@ -149,8 +150,8 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
         "merge --curve-per-channel --lambda 20 --out " + q(dir / "two.exr") + " " + bracket, dir);
     ASSERT_EQ(options.status, 0) << options.err;
     EXPECT_NE(
-        options.err.find("--lambda, --curve-per-channel were not applied: the stored response "
-                         "of compose virtual camera ("),
+        options.err.find("--lambda, --curve-per-channel were not applied: the curve used is the "
+                         "stored response of compose virtual camera ("),
         std::string::npos)
         << options.err;
     const CommandRun recovered =
@@ -159,6 +160,14 @@ TEST_F(PhotoStages, IngestThenMergeAsAPhotographerWould) {
                 dir);
     ASSERT_EQ(recovered.status, 0) << recovered.err;
     EXPECT_EQ(recovered.err.find("not applied"), std::string::npos) << recovered.err;
+    // ... and --curve-per-channel took effect: the curve stored there differs between channels
+    // (one shared curve, as the stored one is, has the three alike).
+    const hdr::ResponseCurve perChannel =
+        hdr::readResponse(dir / "other_responses" / "compose_virtual_camera.json");
+    const hdr::ResponseCurve shared =
+        hdr::readResponse(dir / "responses" / "compose_virtual_camera.json");
+    EXPECT_EQ(shared.inverse[0], shared.inverse[2]);
+    EXPECT_NE(perChannel.inverse[0], perChannel.inverse[2]);
 
     // Half floats, PIZ, on request: the same radiance within half's precision.
     const CommandRun half = compose("merge --depth half --compression piz --out " +
@@ -762,6 +771,13 @@ TEST_F(PhotoStages, MergedViewsKeepTheLensAndDeepPhotosSayTheirSpace) {
   };
   r = compose("merge --out " + q(dir / "tif.exr") + " " + tiffs("px"), dir);
   ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("not applied"), std::string::npos) << r.err;
+  // A recovery option for photos no curve is recovered for: said (it was dropped without a word).
+  r = compose("merge --lambda 20 --out " + q(dir / "lambda.exr") + " " + tiffs("px"), dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("--lambda was not applied: the photos are 16-bit or float, linear already"),
+            std::string::npos)
+      << r.err;
   // 16-bit photos given exposures in the reverse order: refused.
   r = compose("merge --exposures 16,4,1 --out " + q(dir / "reversed.exr") + " " + tiffs("px"), dir);
   EXPECT_FAILS_WITH(r, 1, "px_2.tif is given 2.0 stops more exposure than px_3.tif");

@@ -143,7 +143,7 @@ TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   COMPOSE_EXPECT_ERROR(s.validate(), "radius (--env-radius) must be a positive number");
   // Beyond 1000 km the surroundings are distant (and at 1e308 the projections overflowed).
   s.radius = 1e308;
-  COMPOSE_EXPECT_ERROR(s.validate(), "more than 1000 km from the ground point");
+  COMPOSE_EXPECT_ERROR(s.validate(), "more than 1e6 (1000 km in metres) from the world's origin");
   s.radius = 5e5;
   EXPECT_NO_THROW(s.validate());
   // A sphere's capture point below the ground is refused, as a room's is (it was taken).
@@ -151,10 +151,10 @@ TEST(CaptureVolume, RejectsACapturePointOutsideTheRoom) {
   COMPOSE_EXPECT_ERROR(s.validate(), "the capture point (0, -3, 0) is below the ground");
   p = room();
   p.boxMax.x = 1e308;
-  COMPOSE_EXPECT_ERROR(p.validate(), "more than 1000 km from the ground point");
+  COMPOSE_EXPECT_ERROR(p.validate(), "more than 1e6 (1000 km in metres) from the world's origin");
   p = room();
   p.capturePoint.x = -1e300;
-  COMPOSE_EXPECT_ERROR(p.validate(), "within 1000 km");
+  COMPOSE_EXPECT_ERROR(p.validate(), "within 1e6 (1000 km in metres)");
 }
 
 }  // namespace
