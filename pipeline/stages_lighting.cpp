@@ -144,6 +144,15 @@ class PrecomputeStage final : public Stage {
     return "project the environment onto the lighting basis (Chebyshev moments by default), and "
            "split off its brightest sources for the shadows";
   }
+  // With parallax, what the environment is seen as (--explain said nothing of it).
+  std::string planned(const Context& ctx) const override {
+    const lighting::CaptureProxy proxy = ctx.captureProxy();
+    if (proxy.shape == lighting::CaptureProxy::Shape::Distant) return summary();
+    return "project the environment as seen from the object's centre (parallax: " +
+           proxy.describe() +
+           ") onto the lighting basis (Chebyshev moments by default), and split off its "
+           "brightest sources for the shadows";
+  }
   std::vector<std::string> inputs() const override { return {kEnvironment, kPlate, kMesh}; }
   std::vector<std::string> inputsFor(const std::string&) const override {
     return {kEnvironment};  // plate and mesh only place the object for parallax; always read

@@ -1184,6 +1184,16 @@ TEST_F(StageCommands, ParallaxChainedByHandGivesTheOneShotFilesBitForBit) {
   EXPECT_NE(pre.err.find("parallax: the environment as seen from the object's centre"),
             std::string::npos)
       << pre.err;
+  // --explain says so too (it said only "project the environment onto the lighting basis").
+  const RunResult plan = run("precompute --explain" + env + room + lighting + placement +
+                                 " --out " + quote(dir_ / "plan.lighting") + " --no-cache",
+                             dir_.path());
+  ASSERT_EQ(plan.status, 0) << plan.err;
+  EXPECT_NE(plan.out.find("precompute run     project the environment as seen from the object's "
+                          "centre (parallax: room 8 x 4 x 40 m, captured at (2, 1.5, -3))"),
+            std::string::npos)
+      << plan.out;
+  EXPECT_FALSE(fs::exists(dir_ / "plan.lighting"));
   const RunResult ren =
       run("render" + placed + " --lighting-file " + quote(light) + " --out " + quote(layer) + cache,
           dir_.path());
