@@ -127,6 +127,14 @@ void checkBrightnessOrder(const ingest::View& view,
   }
 }
 
+// The recovery options given ("--lambda, --curve-per-channel") and the verb that goes with them,
+// for the notes that say they were not applied.
+std::string notAppliedOptions(const std::vector<std::string>& options) {
+  std::string given;
+  for (const std::string& o : options) given += (given.empty() ? "" : ", ") + o;
+  return given + (options.size() == 1 ? " was" : " were") + " not applied";
+}
+
 }  // namespace
 
 void CaptureMergeOptions::validate() const {
@@ -566,12 +574,9 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
           }
           // Options for a recovery that did not make the curve used: said, not dropped silently.
           if (storedUsed && !options.recoveryOptions.empty()) {
-            std::string given;
-            for (const std::string& o : options.recoveryOptions)
-              given += (given.empty() ? "" : ", ") + o;
             const bool one = options.recoveryOptions.size() == 1;
-            result.notes.push_back(given + (one ? " was" : " were") +
-                                   " not applied: the curve used is the stored "
+            result.notes.push_back(notAppliedOptions(options.recoveryOptions) +
+                                   ": the curve used is the stored "
                                    "response of " +
                                    camera + " (" + cached.string() + "), not one recovered with " +
                                    (one ? "it" : "them") +
@@ -592,10 +597,8 @@ CaptureMergeResult mergeCapture(const ingest::Capture& capture,
     result.linearisation += "; camera RGB taken as " + linearSpace + " (" + why + ")";
   } else if (!options.recoveryOptions.empty()) {
     // 16-bit and float photos are linear already: no curve is recovered.
-    std::string given;
-    for (const std::string& o : options.recoveryOptions) given += (given.empty() ? "" : ", ") + o;
-    result.notes.push_back(given + (options.recoveryOptions.size() == 1 ? " was" : " were") +
-                           " not applied: the photos are 16-bit or float, linear already, and no "
+    result.notes.push_back(notAppliedOptions(options.recoveryOptions) +
+                           ": the photos are 16-bit or float, linear already, and no "
                            "response is recovered for them");
   }  // the aligned copies were for recovery only: the merge shifts the shots itself
 
