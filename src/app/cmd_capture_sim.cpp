@@ -20,7 +20,7 @@ struct SimOptions {
   capture::VirtualCameraParams params;
   std::filesystem::path env, out;
   std::string size = "1024x768", lens = "rectilinear", curve = "filmic", whiteBalance, envSpace;
-  std::string exposure, seed = "1";
+  std::string exposure, seed = "1", chroma = "4:2:0";
   bool noNoise = false, noJpeg = false, omit35 = false, truthImages = false;
   std::string compression = "zip";
 };
@@ -83,6 +83,11 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
                   "rays do not integrate is added to it)")
       ->capture_default_str();
   command.add_option("--jpeg-quality", params.jpegQuality, "JPEG quality")->capture_default_str();
+  command
+      .add_option("--jpeg-chroma", o->chroma,
+                  "JPEG chroma: 4:2:0 (half resolution both ways, as most cameras write it) or "
+                  "4:4:4 (full resolution, as some cameras do at their finest setting)")
+      ->capture_default_str();
   command.add_flag("--tiff", params.writeTiff16,
                    "Also write 16-bit linear TIFFs, described by capture-tiff.json (by "
                    "capture.json with --no-jpeg)");
@@ -145,6 +150,11 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
       p.whiteBalance = glm::dvec3(parseColour(o->whiteBalance, "--white-balance"));
     p.noise = !o->noNoise;
     p.writeJpeg = !o->noJpeg;
+    if (o->chroma != "4:2:0" && o->chroma != "4:4:4")
+      throw UsageError("--jpeg-chroma must be 4:2:0 or 4:4:4, got '" + o->chroma + "'");
+    if (command.count("--jpeg-chroma") && o->noJpeg)
+      throw UsageError("--jpeg-chroma is for the JPEGs: it does not go with --no-jpeg");
+    p.jpegFullChroma = o->chroma == "4:4:4";
     p.write35mm = !o->omit35;
     asUsage([&] { p.validate(); });
     const color::ColorConfig colors = color::ColorConfig::fromEnvironment();

@@ -572,6 +572,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
       ingest::WriteOptions w;
       w.attributes = ingest::exifAttributes(s.exif);
       w.jpegQuality = p.jpegQuality;
+      w.jpegFullChroma = p.jpegFullChroma;
       nlohmann::ordered_json js;
       if (p.writeJpeg) {
         const fs::path dst = absolute / (s.stem + ".jpg");
@@ -661,6 +662,7 @@ CaptureFiles writeCapture(const fs::path& folder, const SimulatedCapture& cap,
   truth["blurPixels"] = p.blurPixels;
   truth["blurAppliedPixels"] = appliedBlur(p.blurPixels, cap.supersample);
   truth["jpegQuality"] = p.jpegQuality;
+  truth["jpegChroma"] = p.jpegFullChroma ? "4:4:4" : "4:2:0";
   truth["lens"] = files.lens.filename().string();
   truth["views"] = truthViews;
   files.truth = absolute / "truth.json";

@@ -19,7 +19,9 @@
 //     electrons at s = 1, s' = s + sqrt(s F + r²) / F · n, n ~ N(0, 1) from a counter-based
 //     generator keyed by (seed, view, shot, pixel, channel), so results do not depend on threads.
 //  4. Clipping to [0, 1], the response curve v = f(s') (see CameraCurve), 8-bit quantisation
-//     (round(255 v)), JPEG compression (quality `jpegQuality`, 4:2:0 as OpenImageIO writes it).
+//     (round(255 v)), JPEG compression (quality `jpegQuality`; chroma at half resolution both
+//     ways, 4:2:0, as OpenImageIO and most cameras write it, or at full resolution, 4:4:4, with
+//     `jpegFullChroma`, as some cameras do at their finest setting).
 //     Optional 16-bit TIFFs hold s' itself (linear, as a raw converter would write), quantised to
 //     16 bits, without the curve.
 //
@@ -113,6 +115,7 @@ struct VirtualCameraParams {
   std::optional<int> supersample;
   double blurPixels = 0.6;  // σ of the optics' Gaussian point-spread function, pixels
   int jpegQuality = 95;
+  bool jpegFullChroma = false;  // 4:4:4 instead of 4:2:0
   bool writeJpeg = true;
   bool writeTiff16 = false;
   double shakePixels = 0.0;

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include <OpenImageIO/imageio.h>
+#include <nlohmann/json.hpp>
 
 #include "command_util.h"
 #include "core/channels.h"
@@ -735,6 +736,34 @@ TEST_F(PhotoStages, TheVirtualCameraTakesACubeMap) {
   double sum = 0.0;
   for (size_t i = 0; i < a.pixels.size(); ++i) sum += std::abs(a.pixels[i] - b.pixels[i]);
   EXPECT_LT(sum / double(a.pixels.size()), 0.01) << "mean code difference (of 1)";
+}
+
+// The virtual camera's JPEGs keep their chroma at half resolution both ways (4:2:0), as most
+// cameras write them, or at full resolution with --jpeg-chroma 4:4:4; the truth file says which.
+TEST_F(PhotoStages, TheVirtualCameraWritesTheChromaAskedFor) {
+  TempDir dir;
+  const std::string common = "capture-sim --env " +
+                             q(pipeline::samplesDirectory() / "interior.exr") +
+                             " --size 64x48 --views 1 --brackets 2 --seed 3 --no-noise";
+  for (const std::string chroma : {"4:2:0", "4:4:4"}) {
+    const fs::path out = dir / (chroma == "4:2:0" ? "default" : "full");
+    const std::string option = chroma == "4:2:0" ? "" : " --jpeg-chroma " + chroma;
+    const CommandRun r = compose(common + option + " --out " + q(out), dir);
+    ASSERT_EQ(r.status, 0) << r.err;
+    for (const char* photo : {"yaw000_1.jpg", "yaw000_2.jpg"}) {
+      auto in = OIIO::ImageInput::open((out / photo).string());
+      ASSERT_TRUE(in) << photo;
+      EXPECT_EQ(in->spec().get_string_attribute("jpeg:subsampling"), chroma) << photo;
+    }
+    const auto truth = nlohmann::json::parse(slurp(out / "truth.json"));
+    EXPECT_EQ(truth.value("jpegChroma", ""), chroma);
+  }
+  EXPECT_FAILS_WITH(compose(common + " --jpeg-chroma 4:2:2 --out " + q(dir / "c"), dir), 2,
+                    "--jpeg-chroma must be 4:2:0 or 4:4:4, got '4:2:2'");
+  EXPECT_FAILS_WITH(
+      compose(common + " --tiff --no-jpeg --jpeg-chroma 4:4:4 --out " + q(dir / "c"), dir), 2,
+      "--jpeg-chroma is for the JPEGs: it does not go with --no-jpeg");
+  EXPECT_FALSE(fs::exists(dir / "c"));
 }
 
 // A merged view keeps its photos' lens (EXIF focal length, 35 mm equivalent, focal plane): a stitch
