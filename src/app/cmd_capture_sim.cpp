@@ -152,8 +152,9 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
     p.writeJpeg = !o->noJpeg;
     if (o->chroma != "4:2:0" && o->chroma != "4:4:4")
       throw UsageError("--jpeg-chroma must be 4:2:0 or 4:4:4, got '" + o->chroma + "'");
-    if (command.count("--jpeg-chroma") && o->noJpeg)
-      throw UsageError("--jpeg-chroma is for the JPEGs: it does not go with --no-jpeg");
+    for (const char* option : {"--jpeg-quality", "--jpeg-chroma"})
+      if (command.count(option) && o->noJpeg)
+        throw UsageError(std::string(option) + " is for the JPEGs: it does not go with --no-jpeg");
     p.jpegFullChroma = o->chroma == "4:4:4";
     p.write35mm = !o->omit35;
     asUsage([&] { p.validate(); });
@@ -225,11 +226,15 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
                    p.fovDegrees, sim.lens.fx, sim.middleExposureTime, p.fNumber, p.iso, p.evStep);
       std::fprintf(stderr,
                    "compose: response %s; noise %s; seed %llu; %d x %d rays per pixel%s, blur "
-                   "sigma %.3g px\n",
+                   "sigma %.3g px%s\n",
                    p.curve.describe().c_str(), p.noise ? "on" : "off",
                    static_cast<unsigned long long>(p.seed), sim.supersample, sim.supersample,
                    p.supersample ? "" : " (automatic)",
-                   capture::appliedBlur(p.blurPixels, sim.supersample));
+                   capture::appliedBlur(p.blurPixels, sim.supersample),
+                   p.writeJpeg ? ("; JPEG quality " + std::to_string(p.jpegQuality) + ", " +
+                                  (p.jpegFullChroma ? "4:4:4" : "4:2:0") + " chroma")
+                                     .c_str()
+                               : "");
       if (sanitize.negativeTexels > 0)
         std::fprintf(stderr, "compose: note: %lld negative texels of the environment set to 0\n",
                      static_cast<long long>(sanitize.negativeTexels));

@@ -20,8 +20,8 @@
 //     generator keyed by (seed, view, shot, pixel, channel), so results do not depend on threads.
 //  4. Clipping to [0, 1], the response curve v = f(s') (see CameraCurve), 8-bit quantisation
 //     (round(255 v)), JPEG compression (quality `jpegQuality`; chroma at half resolution both
-//     ways, 4:2:0, as OpenImageIO and most cameras write it, or at full resolution, 4:4:4, with
-//     `jpegFullChroma`, as some cameras do at their finest setting).
+//     ways, 4:2:0, libjpeg's default and what most cameras write, or at full resolution, 4:4:4,
+//     with `jpegFullChroma`, as some cameras do at their finest setting).
 //     Optional 16-bit TIFFs hold s' itself (linear, as a raw converter would write), quantised to
 //     16 bits, without the curve.
 //

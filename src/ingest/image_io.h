@@ -240,7 +240,7 @@ struct WriteOptions {
     Float
   } depth = Depth::Auto;  // Auto: half for EXR, 8 bit otherwise
   int jpegQuality = 95;
-  // JPEG only: chroma at full resolution (4:4:4) instead of OpenImageIO's and cameras' 4:2:0, for
+  // JPEG only: chroma at full resolution (4:4:4) instead of libjpeg's and most cameras' 4:2:0, for
   // a picture whose colour edges must stay where they are (a composite over a photo).
   bool jpegFullChroma = false;
   int alphaChannel = -1;  // index of the alpha channel, or -1

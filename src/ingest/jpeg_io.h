@@ -8,7 +8,8 @@
 //  * A file libjpeg had to give up on part-way (a truncated JPEG: "Premature end of JPEG file")
 //    or that it found damaged, even where it could go on (corrupt entropy data), is an error,
 //    not a picture with a grey bottom: OpenImageIO's reader reports the same warnings as errors.
-//  * Writing: quality as asked (baseline tables), libjpeg's default 4:2:0 chroma subsampling,
+//  * Writing: quality as asked (baseline tables), libjpeg's default 4:2:0 chroma subsampling or
+//    full-resolution chroma (4:4:4, `fullChroma`),
 //    a JFIF header and, when there are any, the EXIF attributes in an APP1 segment.
 //
 // Errors throw compose::Error with the stage and the file.

@@ -750,6 +750,7 @@ TEST_F(PhotoStages, TheVirtualCameraWritesTheChromaAskedFor) {
     const std::string option = chroma == "4:2:0" ? "" : " --jpeg-chroma " + chroma;
     const CommandRun r = compose(common + option + " --out " + q(out), dir);
     ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.err.find("JPEG quality 95, " + chroma + " chroma"), std::string::npos) << r.err;
     for (const char* photo : {"yaw000_1.jpg", "yaw000_2.jpg"}) {
       auto in = OIIO::ImageInput::open((out / photo).string());
       ASSERT_TRUE(in) << photo;
@@ -763,6 +764,9 @@ TEST_F(PhotoStages, TheVirtualCameraWritesTheChromaAskedFor) {
   EXPECT_FAILS_WITH(
       compose(common + " --tiff --no-jpeg --jpeg-chroma 4:4:4 --out " + q(dir / "c"), dir), 2,
       "--jpeg-chroma is for the JPEGs: it does not go with --no-jpeg");
+  EXPECT_FAILS_WITH(
+      compose(common + " --tiff --no-jpeg --jpeg-quality 80 --out " + q(dir / "c"), dir), 2,
+      "--jpeg-quality is for the JPEGs: it does not go with --no-jpeg");
   EXPECT_FALSE(fs::exists(dir / "c"));
 }
 
