@@ -224,17 +224,17 @@ Runner setupCaptureSim(CLI::App& command, const Globals& globals) {
                    p.brackets == 1 ? "" : "s", p.width, p.height,
                    p.projection == calib::Projection::Rectilinear ? "rectilinear" : "fisheye",
                    p.fovDegrees, sim.lens.fx, sim.middleExposureTime, p.fNumber, p.iso, p.evStep);
+      const std::string jpegs = p.writeJpeg
+                                    ? "; JPEG quality " + std::to_string(p.jpegQuality) + ", " +
+                                          (p.jpegFullChroma ? "4:4:4" : "4:2:0") + " chroma"
+                                    : "";
       std::fprintf(stderr,
                    "compose: response %s; noise %s; seed %llu; %d x %d rays per pixel%s, blur "
                    "sigma %.3g px%s\n",
                    p.curve.describe().c_str(), p.noise ? "on" : "off",
                    static_cast<unsigned long long>(p.seed), sim.supersample, sim.supersample,
                    p.supersample ? "" : " (automatic)",
-                   capture::appliedBlur(p.blurPixels, sim.supersample),
-                   p.writeJpeg ? ("; JPEG quality " + std::to_string(p.jpegQuality) + ", " +
-                                  (p.jpegFullChroma ? "4:4:4" : "4:2:0") + " chroma")
-                                     .c_str()
-                               : "");
+                   capture::appliedBlur(p.blurPixels, sim.supersample), jpegs.c_str());
       if (sanitize.negativeTexels > 0)
         std::fprintf(stderr, "compose: note: %lld negative texels of the environment set to 0\n",
                      static_cast<long long>(sanitize.negativeTexels));
